@@ -1,0 +1,136 @@
+"""MuJoCo peer: a tree of ball-jointed bodies in generalized coordinates (no constraint solver at all).
+
+Each free mass is a body whose frame sits on its parent mass (the joint) and whose point mass sits at the
+child end of the link (inertial pos), so the link length is exact by construction: zero constraint residual.
+Integrator RK4 with a fixed timestep (the knob); contacts disabled; mj_step(nstep=n) keeps the loop in C.
+
+What differs / what it cannot model:
+- A point mass has no rotational inertia; MuJoCo needs positive inertia on moving bodies, so each body gets an
+  isotropic inertia eps*m*R^2 (eps = 1e-12) about the mass: a relative perturbation of 1e-12 of the dynamics.
+- Only trees hanging from anchored masses: every free mass has exactly one path to one anchor (links = free
+  masses, each component with one anchor). Closed loops (four_bar, net, truss, tetrahedron) would need
+  equality constraints, which in MuJoCo are soft (solref/solimp regularised) and only of the connect/weld kind
+  (coincident points), not a distance between two masses: not a faithful rigid link, so not modelled.
+"""
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from .base import Method, RunResult, Timer, Unsupported, n_steps
+
+EPS_INERTIA = 1e-12
+
+
+def _f(x) -> str:
+    return f"{float(x):.17g}"
+
+
+def _tree(spec):
+    """Parent of each free mass along the unique path to its anchor, in breadth-first order."""
+    if spec.L != int(np.sum(spec.free)):
+        raise Unsupported(f"mujoco: {spec.L} links for {int(np.sum(spec.free))} free masses: "
+                          "not a tree hanging from anchors (closed loop or floating body)")
+    adj = [[] for _ in range(spec.K)]
+    for a, b in zip(spec.k1, spec.k2):
+        adj[a].append(b)
+        adj[b].append(a)
+    parent = {}
+    order = []
+    q = deque(int(k) for k in np.flatnonzero(spec.fixed))
+    seen = set(q)
+    while q:
+        k = q.popleft()
+        for c in adj[k]:
+            if c in seen:
+                if parent.get(k) != c and not (spec.fixed[c] and spec.fixed[k]):
+                    raise Unsupported("mujoco: closed loop in the link graph (needs soft equality constraints)")
+                continue
+            if spec.fixed[c]:
+                continue
+            seen.add(c)
+            parent[c] = k
+            order.append(c)
+            q.append(c)
+    if len(order) != int(np.sum(spec.free)):
+        raise Unsupported("mujoco: some free masses are not connected to an anchor (floating body)")
+    return parent, order
+
+
+class MujocoRK4(Method):
+    knob = "dt"
+    order = 4
+
+    def __init__(self, integrator: str = "RK4"):
+        self.integrator = integrator
+        self.name = f"mujoco-{integrator.lower()}"
+        self.order = 4 if integrator == "RK4" else 1
+
+    def available(self):
+        try:
+            import mujoco  # noqa: F401
+            return True, ""
+        except ImportError as e:
+            return False, f"mujoco not installed ({e})"
+
+    def check_scene(self, spec):
+        _tree(spec)
+
+    def _xml(self, spec, dt, parent, order):
+        children = {}
+        for c in order:
+            children.setdefault(parent[c], []).append(c)
+
+        def body(c, indent):
+            p = parent[c]
+            r = spec.X0[c] - spec.X0[p]
+            rel = spec.X0[p] - (spec.X0[parent[p]] if p in parent else 0.0)
+            pos = rel if p in parent else spec.X0[p]
+            inertia = EPS_INERTIA * spec.mass[c] * float(r @ r)
+            s = (f'{indent}<body name="b{c}" pos="{_f(pos[0])} {_f(pos[1])} {_f(pos[2])}">\n'
+                 f'{indent}  <joint name="j{c}" type="ball" damping="0" armature="0"/>\n'
+                 f'{indent}  <inertial pos="{_f(r[0])} {_f(r[1])} {_f(r[2])}" mass="{_f(spec.mass[c])}" '
+                 f'diaginertia="{_f(inertia)} {_f(inertia)} {_f(inertia)}"/>\n')
+            for g in children.get(c, []):
+                s += body(g, indent + "  ")
+            return s + f"{indent}</body>\n"
+
+        g = spec.gravity
+        roots = [c for c in order if not (parent[c] in parent)]
+        return (f'<mujoco><option timestep="{_f(dt)}" integrator="{self.integrator}" '
+                f'gravity="{_f(g[0])} {_f(g[1])} {_f(g[2])}"><flag contact="disable"/></option>'
+                f'<compiler angle="radian" inertiafromgeom="false" autolimits="true"/>'
+                f"<worldbody>\n" + "".join(body(c, "  ") for c in roots) + "</worldbody></mujoco>")
+
+    def run(self, spec, t_end, dt):
+        import mujoco
+        n, dt = n_steps(t_end, dt)
+        with Timer() as setup:
+            parent, order = _tree(spec)
+            # nested body frames: a body sits on its parent mass; the XML gives its pos relative to the parent body
+            # frame, whose origin is the grandparent mass (or the world for children of anchors)
+            m = mujoco.MjModel.from_xml_string(self._xml(spec, dt, parent, order))
+            d = mujoco.MjData(m)
+            omega = {}
+            for c in order:   # body angular velocity carrying the mass velocity (perpendicular to the link)
+                p = parent[c]
+                r = spec.X0[c] - spec.X0[p]
+                omega[c] = np.cross(r, spec.U0[c] - spec.U0[p]) / float(r @ r)
+            for c in order:
+                jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"j{c}")
+                adr = m.jnt_dofadr[jid]
+                w_parent = omega.get(parent[c], np.zeros(3))
+                d.qvel[adr:adr + 3] = omega[c] - w_parent   # frames start aligned with the world: local == world
+            mujoco.mj_forward(m, d)
+            bid = {c: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"b{c}") for c in order}
+        with Timer() as tm:
+            mujoco.mj_step(m, d, nstep=n)
+        X = spec.X0.copy()
+        U = np.zeros_like(spec.U0)
+        jacp = np.zeros((3, m.nv))
+        for c in order:
+            X[c] = d.xipos[bid[c]]
+            mujoco.mj_jac(m, d, jacp, None, X[c], bid[c])
+            U[c] = jacp @ d.qvel
+        return RunResult(X, U, tm.seconds, setup.seconds, steps=n)
