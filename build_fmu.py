@@ -34,7 +34,6 @@ HERE = Path(__file__).resolve().parent
 FMU_SRC = HERE / "fmu_src"
 sys.path.insert(0, str(FMU_SRC))
 
-INTEGRATORS = ["rattle", "yoshida4", "yoshida6", "yoshida8", "dopri5", "dop853"]
 COMPONENTS = {"pd_controller": "pd_controller.py", "spring_damper": "spring_damper.py"}
 
 
@@ -196,20 +195,29 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
     from linknet_fmu.layout import Layout
 
     scene_path = Path(scene_path)
-    raw = json.loads(scene_path.read_text())
+    try:
+        raw = json.loads(scene_path.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise SystemExit(f"build_fmu: cannot read scene {scene_path}: {e}")
     fmu_opts = raw.pop("fmu", {}) if isinstance(raw, dict) else {}  # optional FMU section of a scene file
-    scene = ln.Scene.from_dict(raw)
-    name = getattr(scene, "name", None) or raw.get("name") or scene_path.stem
+    if isinstance(raw, dict):
+        raw.setdefault("name", scene_path.stem)
+    try:
+        scene = ln.Scene.from_dict(raw, source=str(scene_path))
+    except ln.LinknetError as e:
+        raise SystemExit(f"build_fmu: {e}")
+    name = scene.name
     ident = _identifier(str(name))
+    integrators = sorted(ln.METHODS)
     integrator = integrator or fmu_opts.get("integrator", "rattle")
-    if integrator not in INTEGRATORS:
-        raise SystemExit(f"build_fmu: unknown integrator {integrator!r}; choose one of {', '.join(INTEGRATORS)}")
+    if integrator not in integrators:
+        raise SystemExit(f"build_fmu: unknown integrator {integrator!r}; choose one of {', '.join(integrators)}")
     cfg = dict(
         model_identifier=ident,
         description=(f"linknet network '{name}': {scene.K} point masses, {scene.L} rigid links. "
                      "Inputs F[k,i] (N) are held constant over each communication step."),
         integrator=integrator,
-        integrators=INTEGRATORS,
+        integrators=integrators,
         step=float(step if step is not None else fmu_opts.get("step", 1e-3)),
         tolerance=float(tolerance if tolerance is not None else fmu_opts.get("tolerance", 1e-8)),
         inputs=_parse_masses(inputs if inputs is not None else fmu_opts.get("inputs"), scene),
@@ -258,7 +266,10 @@ def build_component_fmu(component: str, out=None, link_python=True, quiet=False)
     out = Path(out) if out else Path(f"{component}.fmu")
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="linknet_stage_") as stage:
-        built = _pythonfmu_build(script, Path(stage), [])
+        stage = Path(stage)
+        shutil.copytree(FMU_SRC / "linknet_fmu", stage / "linknet_fmu",
+                        ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        built = _pythonfmu_build(script, stage / "out", [stage / "linknet_fmu"])
         shutil.move(str(built), out)
     with zipfile.ZipFile(out) as z:
         xml = z.read("modelDescription.xml")
@@ -276,7 +287,8 @@ def main(argv=None):
     p.add_argument("scene", nargs="?", help="scene JSON file (models/*.json)")
     p.add_argument("--component", choices=sorted(COMPONENTS), help="build a composition helper FMU instead")
     p.add_argument("-o", "--output", help="FMU file to write (default: <model name>.fmu)")
-    p.add_argument("--integrator", choices=INTEGRATORS, help="default integrator (FMU parameter 'integrator')")
+    p.add_argument("--integrator", help="default integrator (FMU parameter 'integrator'): rattle (default), "
+                   "yoshida4/6/8, suzuki4 (fixed step), dopri5, dop853 (adaptive)")
     p.add_argument("--step", type=float, help="internal step of fixed-step integrators (parameter 'step')")
     p.add_argument("--tolerance", type=float, help="relative tolerance of adaptive integrators")
     p.add_argument("--inputs", help="expose force inputs only for these masses (1-based numbers or names, comma-separated)")

@@ -27,7 +27,6 @@ from pythonfmu.enums import Fmi2Status
 
 import linknet_core as ln
 from linknet_fmu.layout import Layout
-from linknet_fmu import scene_params
 
 CONFIG_FILE = "linknet_fmu.json"
 SCENE_FILE = "linknet_scene.json"
@@ -85,8 +84,10 @@ class LinknetNetwork(Fmi2Slave):
 
     def _make_simulator(self, scene):
         method = self._integrator
-        kwargs = dict(dt=float(self._real[self._layout.step_vr]),
-                      rtol=float(self._real[self._layout.tolerance_vr]))
+        if ln.METHODS[method].adaptive:
+            kwargs = dict(rtol=float(self._real[self._layout.tolerance_vr]))
+        else:
+            kwargs = dict(dt=float(self._real[self._layout.step_vr]))
         self._sim = ln.Simulator(scene, method=method, **kwargs)
         self._scene = scene
         self._F = np.zeros((scene.K, 3))
@@ -199,7 +200,7 @@ class LinknetNetwork(Fmi2Slave):
         lay = self._layout
         mass = np.asarray(self._scene0.mass, dtype=float).copy()
         mass[lay.free_indices] = self._real[lay.M_vr]
-        scene = scene_params.with_parameters(self._scene0, mass=mass, length=self._real[lay.R_vr].copy(),
+        scene = self._scene0.with_parameters(mass=mass, length=self._real[lay.R_vr].copy(),
                                              gravity=self._real[lay.g_vr].copy())
         self._make_simulator(scene)
 
@@ -228,17 +229,15 @@ class LinknetNetwork(Fmi2Slave):
         if not math.isfinite(t) or abs(t - t_fmu) > 1e-9 * max(1.0, abs(t_fmu)):
             self._error(f"doStep refused: currentCommunicationPoint t={t!r} differs from the FMU's time {t_fmu!r}")
             return False
-        snapshot = self._sim.get_state()
         try:
+            # Simulator.advance leaves the state at t when it raises (the step can be retried
+            # after fmi2SetFMUstate or with other inputs)
             self._sim.advance(t + h, self._F)
         except ln.LinknetError as e:
-            self._sim.set_state(snapshot)  # stay at the last good communication point
-            self._broken = f"the solver cannot continue from t={t!r} with h={h!r}: {e}"
-            self._error(self._broken)
+            self._error(f"doStep from t={t!r} with h={h!r} failed: {e}")
             return False
         st = self._sim.state
         if not (np.all(np.isfinite(st.X)) and np.all(np.isfinite(st.U))):
-            self._sim.set_state(snapshot)
             self._broken = f"the state became non-finite during [{t!r}, {t + h!r}]"
             self._error(self._broken)
             return False

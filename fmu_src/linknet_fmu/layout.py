@@ -23,6 +23,8 @@ TYPES = {
     "Acceleration": ("Acceleration", "m/s2"),
     "Time": ("Time", "s"),
     "Tolerance": ("Tolerance", "1"),
+    "Stiffness": ("TranslationalSpringConstant", "N/m"),
+    "Damping": ("TranslationalDampingConstant", "N.s/m"),
 }
 
 # unit -> SI base-unit exponents (UnitDefinitions)
@@ -34,6 +36,8 @@ UNITS = {
     "m/s2": dict(m=1, s=-2),
     "s": dict(s=1),
     "1": dict(),
+    "N/m": dict(kg=1, s=-2),
+    "N.s/m": dict(kg=1, s=-1),
 }
 
 

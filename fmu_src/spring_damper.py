@@ -1,0 +1,91 @@
+"""pythonfmu slave: a linear spring-damper between two masses of two different FMUs.
+
+    n = (xb - xa)/|xb - xa|,  f = k (|xb - xa| - d0) + c n.(vb - va)
+    Fa = f n (force on end a),  Fb = -f n (force on end b)
+
+the same law as linknet_core's scene springs (forces.spring_forces), so a composition of
+two network FMUs through this FMU converges to the monolithic scene with that spring.
+Outputs have direct feedthrough from the four inputs.
+"""
+import linknet_fmu.libpython_global  # noqa: F401  first: C hosts need libpython's symbols global
+
+import math
+
+from pythonfmu import Fmi2Slave, Fmi2Causality, Fmi2Variability, Fmi2Initial, Real
+from pythonfmu.enums import Fmi2Status
+
+DESCRIPTION = ("linear spring-damper between two points: Fa = (k (|xb-xa| - d0) + c n.(vb-va)) n, Fb = -Fa, "
+               "n = (xb-xa)/|xb-xa| (direct feedthrough)")
+AXES = ("x", "y", "z")
+DEFAULT_EXPERIMENT = dict(startTime=0.0, stopTime=2.0, stepSize=1e-3)
+_IN = {"xa": "Position", "va": "Velocity", "xb": "Position", "vb": "Velocity"}
+DECLARED_TYPES = {**{f"{n}[{i}]": t for n, t in _IN.items() for i in (1, 2, 3)},
+                  **{f"{n}[{i}]": "Force" for n in ("Fa", "Fb") for i in (1, 2, 3)},
+                  "stiffness": "Stiffness", "rest_length": "Length", "damping": "Damping"}
+_ALL_INPUTS = [f"{n}[{i}]" for n in _IN for i in (1, 2, 3)]
+OUTPUT_DEPENDENCIES = {f"{n}[{i}]": list(_ALL_INPUTS) for n in ("Fa", "Fb") for i in (1, 2, 3)}
+
+
+class SpringDamper(Fmi2Slave):
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.description = DESCRIPTION
+        self.values = {name: 0.0 for name in DECLARED_TYPES}
+        self.values.update(stiffness=100.0, rest_length=1.0, damping=0.0)
+        self.bad = {}
+        words = {"xa": "position of end a", "va": "velocity of end a", "xb": "position of end b",
+                 "vb": "velocity of end b", "Fa": "force on end a", "Fb": "force on end b",
+                 "stiffness": "stiffness (>= 0)", "rest_length": "rest length (>= 0)", "damping": "damping (>= 0)"}
+        for name in DECLARED_TYPES:
+            base = name.split("[")[0]
+            axis = f", {AXES[int(name[-2]) - 1]}" if "[" in name else ""
+            if base in _IN:
+                kind = dict(causality=Fmi2Causality.input, variability=Fmi2Variability.continuous)
+            elif base in ("Fa", "Fb"):
+                kind = dict(causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
+                            initial=Fmi2Initial.calculated)
+            else:
+                kind = dict(causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable,
+                            initial=Fmi2Initial.exact)
+            self.register_variable(Real(name, description=words[base] + axis,
+                                        getter=(lambda n=name: self._get(n)),
+                                        setter=(lambda value, n=name: self._set(n, value)), **kind))
+
+    def _force_on_a(self):
+        v = self.values
+        d = [v[f"xb[{i}]"] - v[f"xa[{i}]"] for i in (1, 2, 3)]
+        dist = math.sqrt(sum(c * c for c in d))
+        if dist == 0.0:
+            return [0.0, 0.0, 0.0]  # no direction when the ends coincide (as in linknet_core)
+        n = [c / dist for c in d]
+        rate = sum(n[i - 1] * (v[f"vb[{i}]"] - v[f"va[{i}]"]) for i in (1, 2, 3))
+        f = v["stiffness"] * (dist - v["rest_length"]) + v["damping"] * rate
+        return [f * c for c in n]
+
+    def _get(self, name):
+        if name[:2] in ("Fa", "Fb"):
+            F = self._force_on_a()[int(name[3]) - 1]
+            return F if name[1] == "a" else -F
+        return self.values[name]
+
+    def _set(self, name, value):
+        if name[:2] in ("Fa", "Fb"):
+            self.log(f"{name} is an output and cannot be set", Fmi2Status.error)
+            return
+        if not math.isfinite(value) or (name in ("stiffness", "rest_length", "damping") and value < 0):
+            self.bad[name] = f"= {value!r} is out of range"
+            self.log(f"{name} {self.bad[name]}; the next doStep is refused", Fmi2Status.error)
+            return
+        self.bad.pop(name, None)
+        self.values[name] = float(value)
+
+    def do_step(self, current_time, step_size):
+        if self.bad:
+            for name, why in self.bad.items():
+                self.log(f"doStep refused: {name} {why}", Fmi2Status.error)
+            return False
+        if not (math.isfinite(step_size) and step_size > 0):
+            self.log(f"doStep refused: step size {step_size!r} must be > 0", Fmi2Status.error)
+            return False
+        return True
