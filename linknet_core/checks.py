@@ -1,0 +1,557 @@
+"""``linknet check SCENE``: the solver's numeric tension system against the symbolic derivation.
+
+Every check compares two independent paths: the numeric assembly of the solver (``Dynamics``:
+index-array assembly of (25)-(26)) and the casadi derivation of :mod:`linknet_core.symbolic`, which
+differentiates the constraints (11) twice in time by AD (12)-(13) and substitutes (9)/(14). The theory
+checks (symmetry, positive semidefiniteness, self-stresses, existence) use the constraint Jacobian G
+obtained by AD of (11), never the solver's own matrices, as the reference.
+
+States: ``--samples`` random states on the manifold (positions satisfy (11), obtained by Gauss-Newton
+projection of random perturbations of the scene's configuration; velocities satisfy (12), by projection
+onto null(G)) and as many off the manifold (positions perturbed by a few per cent of the link lengths,
+arbitrary velocities). Random input forces on every free mass.
+
+The numeric side is anything with the ``Dynamics`` methods used here (``forces``, ``tension_matrix``,
+``tension_rhs``, ``tensions``, ``accelerations``, ``link_forces``, optionally
+``check_consistent_velocities``), so the checker itself can be tested with a deliberately wrong assembly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .symbolic import SymbolicTensionSystem, sign_pattern
+
+__all__ = ["CheckResult", "run_checks", "add_arguments", "main", "sample_states", "taut_string_scene"]
+
+# tolerances, relative to the scale of the compared quantity (round-off is ~1e-16 relative)
+RTOL_EXACT = 1e-11       # same formula, different arithmetic order
+RTOL_SOLVE = 1e-13       # times cond(A) for solved quantities (tensions, accelerations)
+RTOL_NULL = 1e-9         # eigenvalue threshold of the null space, relative to the largest
+
+
+@dataclass
+class CheckResult:
+    name: str
+    passed: bool
+    discrepancy: float           # the largest relative discrepancy found
+    tolerance: float
+    detail: str = ""
+    extra: dict = field(default_factory=dict)
+
+    def line(self) -> str:
+        tag = "PASS" if self.passed else "FAIL"
+        return f"{tag}  {self.name:<48s} max discrepancy {self.discrepancy:9.2e} (tol {self.tolerance:.0e})" + \
+            (f"\n      {self.detail}" if self.detail else "")
+
+
+# ------------------------------------------------------------------------------------------------
+# sampling
+# ------------------------------------------------------------------------------------------------
+
+def _project_positions(sym: SymbolicTensionSystem, x, tol=1e-14, max_iter=60):
+    """Gauss-Newton onto (11): x <- x - G^+ g (minimum-norm step). Returns x or None."""
+    R = sym._R
+    for _ in range(max_iter):
+        g = np.asarray(sym.constraint_fn(x)).ravel()        # (|D|^2 - R^2)/(2R) ~ |D| - R
+        if np.max(np.abs(g) / R) <= tol:
+            return x
+        G = sym.G(sym.full_positions(x)).toarray()
+        # G = d(-g)/dx, so the Newton step for g(x + dx) = 0 is dx = G^+ g
+        dx = np.linalg.lstsq(G, g, rcond=None)[0]
+        x = x + dx
+    g = np.asarray(sym.constraint_fn(x)).ravel()
+    return x if np.max(np.abs(g) / R) <= 1e3 * tol else None
+
+
+def _null_projector_apply(G, v):
+    """v minus its component in range(G^T): the part satisfying G v = 0 (12)."""
+    if G.shape[0] == 0:
+        return v
+    z = np.linalg.lstsq(G, G @ v, rcond=None)[0]
+    return v - z
+
+
+def sample_states(scene, sym: SymbolicTensionSystem, n, rng, on_manifold=True):
+    """n states (X, U, F_input) as (K,3) arrays; on the manifold (11)-(12) or deliberately off it."""
+    R = np.asarray(scene.length, float)
+    ell = float(np.median(R)) if R.size else 1.0
+    speed = ell  # 1 link length per second
+    mass_free = np.asarray(scene.mass, float)[sym.free]
+    g = float(np.linalg.norm(scene.gravity)) or 9.81
+    x0 = sym.reduce_positions(scene.X0)
+    out = []
+    attempts = 0
+    while len(out) < n and attempts < 20 * n:
+        attempts += 1
+        sigma = 0.3 * ell / (1 + attempts // n)              # smaller kicks if projection keeps failing
+        x = x0 + sigma * rng.standard_normal(x0.size)
+        if on_manifold:
+            x = _project_positions(sym, x)
+            if x is None:
+                continue
+            X = sym.full_positions(x)
+            G = sym.G(X).toarray()
+            u = _null_projector_apply(G, speed * rng.standard_normal(x0.size))
+        else:
+            xp = _project_positions(sym, x)
+            x = (xp if xp is not None else x) + 0.05 * ell * rng.standard_normal(x0.size)
+            X = sym.full_positions(x)
+            u = speed * rng.standard_normal(x0.size)
+        U = sym.expand(u)
+        Fin = sym.expand((np.repeat(mass_free, sym.dim) * g) * rng.standard_normal(x0.size))
+        out.append((X, U, Fin))
+    if len(out) < n and on_manifold:
+        # the manifold may be (locally) a single point (e.g. a taut string): use the scene's own state
+        X = np.array(scene.X0, float)
+        G = sym.G(X).toarray()
+        while len(out) < n:
+            u = _null_projector_apply(G, speed * rng.standard_normal(x0.size))
+            Fin = sym.expand((np.repeat(mass_free, sym.dim) * g) * rng.standard_normal(x0.size))
+            out.append((X, sym.expand(u), Fin))
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# helpers
+# ------------------------------------------------------------------------------------------------
+
+def _dense(M):
+    return M.toarray() if hasattr(M, "toarray") else np.asarray(M, float)
+
+
+def _rel(diff, scale):
+    return float(diff) / max(float(scale), 1e-300)
+
+
+def _force_scale(sym, X, U, F):
+    """Scale of the terms of B (26): |dU|^2/R and E.(F/M)."""
+    k1, k2, R, im = sym._k1, sym._k2, sym._R, sym._inv_mass
+    dU = U[k2] - U[k1]
+    a = F * im[:, None]
+    return max(float(np.max(np.einsum("ij,ij->i", dU, dU) / R, initial=0.0)),
+               float(np.max(np.abs(a[k1]).sum(1) + np.abs(a[k2]).sum(1), initial=0.0)) * float(
+                   np.max(np.linalg.norm(X[k2] - X[k1], axis=1) / R, initial=1.0)), 1e-300)
+
+
+def _nullspace(A, rtol=RTOL_NULL):
+    w, V = np.linalg.eigh(A)
+    wmax = max(float(np.abs(w).max(initial=0.0)), 1e-300)
+    keep = w <= rtol * wmax
+    return w, V[:, keep], wmax
+
+
+def _self_stress_quadratic(sym, X, N):
+    """For a (35)-violating velocity: max over self-stresses n and U in null(G) of sum_l n_l |dU_l|^2 / R_l.
+
+    Returns (value, U) with |U| = 1 in the reduced coordinates, or (0, None). At regular points of the
+    manifold this vanishes (consistent accelerations exist); at singular points (a taut string) it does not.
+    """
+    if N.shape[1] == 0:
+        return 0.0, None
+    G = sym.G(X).toarray()
+    _, s, vt = np.linalg.svd(G, full_matrices=True)
+    rank = int(np.sum(s > 1e-10 * (s[0] if s.size else 1)))
+    Z = vt[rank:].T                                     # basis of null(G): velocities satisfying (12)
+    if Z.shape[1] == 0:
+        return 0.0, None
+    # difference operator D: (L*d) x n, rows U_k2 - U_k1 restricted to free coordinates
+    d, L = sym.dim, sym.L
+    col = sym._col_of
+    Dm = np.zeros((L * d, sym.n))
+    for side, kk, sign in ((0, sym._k2, 1.0), (1, sym._k1, -1.0)):  # setup-size dense build
+        c = col[kk]
+        for l in np.flatnonzero(c >= 0):
+            Dm[l * d:(l + 1) * d, c[l] * d:(c[l] + 1) * d] += sign * np.eye(d)
+    DZ = Dm @ Z
+    best, best_u = 0.0, None
+    for i in range(N.shape[1]):
+        wgt = np.repeat(N[:, i] / sym._R, d)
+        H = DZ.T @ (wgt[:, None] * DZ)
+        ev, evec = np.linalg.eigh(H)
+        j = int(np.argmax(np.abs(ev)))
+        if abs(ev[j]) > best:
+            best, best_u = abs(float(ev[j])), Z @ evec[:, j]
+    return best, best_u
+
+
+def taut_string_scene():
+    """The case of the seed's acknowledgment: a string fixed at both ends, pulled straight.
+
+    Two links of length 1 between anchors 2 apart: the only position is straight, velocities with the
+    middle mass moving sideways satisfy (12) but admit no consistent accelerations (35).
+    """
+    from .scene import Scene
+
+    return Scene.from_dict({
+        "name": "taut_string",
+        "masses": [{"name": "left", "position": [0, 0, 0], "fixed": True},
+                   {"name": "middle", "mass": 1.0, "position": [1, 0, 0]},
+                   {"name": "right", "position": [2, 0, 0], "fixed": True}],
+        "links": [{"a": "left", "b": "middle", "length": 1.0}, {"a": "middle", "b": "right", "length": 1.0}],
+    })
+
+
+def _default_dynamics(scene):
+    from .dynamics import Dynamics
+
+    return Dynamics(scene)
+
+
+# ------------------------------------------------------------------------------------------------
+# the checks
+# ------------------------------------------------------------------------------------------------
+
+def run_checks(scene, samples=5, seed=0, dynamics=None, dynamics_factory=None, sym=None):
+    """Run every check on ``scene``; returns a list of :class:`CheckResult`.
+
+    ``dynamics``: the numeric side (default ``Dynamics(scene)``); ``dynamics_factory(scene)`` makes the
+    numeric side for the reference taut-string scene of the existence check (default: same class).
+    """
+    factory = dynamics_factory or _default_dynamics
+    dyn = dynamics if dynamics is not None else factory(scene)
+    sym = sym or SymbolicTensionSystem(scene)
+    rng = np.random.default_rng(seed)
+    on = sample_states(scene, sym, samples, rng, on_manifold=True)
+    off = sample_states(scene, sym, samples, rng, on_manifold=False)
+    Ffn = sym.forces_function()
+    results = [
+        _check_forces(scene, sym, dyn, Ffn, on + off),
+        _check_on_manifold(scene, sym, dyn, on),
+        _check_off_manifold(scene, sym, dyn, off),
+        _check_symmetry_sign(scene, sym, dyn, on + off),
+        _check_gmg_psd(scene, sym, dyn, on + off),
+    ]
+    null_result, null_info = _check_null_space(scene, sym, dyn, on)
+    results.append(null_result)
+    results.append(_check_existence(scene, sym, dyn, on, null_info, factory))
+    results.append(_check_accelerations(scene, sym, dyn, Ffn, on))
+    return results
+
+
+def _check_forces(scene, sym, dyn, Ffn, states):
+    worst = 0.0
+    for X, U, Fin in states:
+        Fn = np.asarray(dyn.forces(X, U, Fin), float)
+        Fs = sym.expand(np.asarray(Ffn(sym.reduce_positions(X), sym.reduce(U), sym.reduce(Fin))).ravel())
+        scale = np.abs(Fs).max() + np.abs(Fin).max()
+        worst = max(worst, _rel(np.abs(Fn[sym.free] - Fs[sym.free]).max(initial=0.0), scale))
+    return CheckResult("external forces F_k of (9) numeric = symbolic", worst <= RTOL_EXACT, worst, RTOL_EXACT,
+                       "gravity, constant forces, drag, spring-dampers and inputs on the free masses")
+
+
+def _check_on_manifold(scene, sym, dyn, states):
+    worstA = worstB = 0.0
+    for X, U, Fin in states:
+        F = np.asarray(dyn.forces(X, U, Fin), float)
+        An = _dense(dyn.tension_matrix(X))
+        As = sym.A(X).toarray()
+        worstA = max(worstA, _rel(np.abs(An - As).max(initial=0.0), np.abs(As).max(initial=0.0)))
+        Bn = np.asarray(dyn.tension_rhs(X, U, F), float)
+        Bs = sym.B(X, U, F)
+        worstB = max(worstB, _rel(np.abs(Bn - Bs).max(initial=0.0), _force_scale(sym, X, U, F)))
+    worst = max(worstA, worstB)
+    return CheckResult("A and B numeric = symbolic on the manifold", worst <= RTOL_EXACT, worst, RTOL_EXACT,
+                       f"A: {worstA:.2e}, B: {worstB:.2e} relative, over {len(states)} states satisfying (11)-(12)")
+
+
+def _check_off_manifold(scene, sym, dyn, states):
+    """Off (11) the seed's (25) and G M^-1 G^T differ on the diagonal; find which one the solver uses."""
+    to_gmg = to_25 = diag_gap = norm_gap = worstB = 0.0
+    for X, U, Fin in states:
+        An = _dense(dyn.tension_matrix(X))
+        Ag = sym.A(X).toarray()                    # AD of (11)-(13): = G M^-1 G^T at any X
+        A25 = sym.A25(X).toarray()                 # literal (25) with diagonal 1/M_k1 + 1/M_k2
+        scale = np.abs(Ag).max(initial=0.0)
+        to_gmg = max(to_gmg, _rel(np.abs(An - Ag).max(initial=0.0), scale))
+        to_25 = max(to_25, _rel(np.abs(An - A25).max(initial=0.0), scale))
+        diag_gap = max(diag_gap, _rel(np.abs(np.diag(Ag) - np.diag(A25)).max(initial=0.0), scale))
+        E = (X[sym._k2] - X[sym._k1]) / sym._R[:, None]
+        norm_gap = max(norm_gap, float(np.abs(np.einsum("ij,ij->i", E, E) - 1).max(initial=0.0)))
+        F = np.asarray(dyn.forces(X, U, Fin), float)
+        worstB = max(worstB, _rel(np.abs(np.asarray(dyn.tension_rhs(X, U, F)) - sym.B(X, U, F)).max(initial=0.0),
+                                  _force_scale(sym, X, U, F)))
+    uses_gmg = to_gmg <= RTOL_EXACT
+    uses_25 = to_25 <= RTOL_EXACT
+    if uses_gmg:
+        which = ("the solver uses G M^-1 G^T (diagonal |E_l|^2 (1/M_k1+1/M_k2)), the documented choice: it is what "
+                 "AD of (11)-(13) gives at any X, so the accelerations satisfy the twice-differentiated "
+                 "constraint (13) exactly even where the integrator is slightly off (11), and A stays G M^-1 G^T "
+                 "(PSD, null space = self-stresses)")
+    elif uses_25:
+        which = ("the solver uses the seed's (25) diagonal 1/M_k1+1/M_k2 off the manifold, not G M^-1 G^T as the "
+                 "architecture prescribes: its accelerations then violate (13) off (11)")
+    else:
+        which = "the solver's A matches neither G M^-1 G^T nor the seed's (25) off the manifold"
+    detail = (f"(25) vs G M^-1 G^T: diagonal differs by up to {diag_gap:.2e} relative (| |E_l|^2 - 1 | up to "
+              f"{norm_gap:.2e}); solver vs G M^-1 G^T {to_gmg:.2e}, vs (25) {to_25:.2e}; B vs (26) {worstB:.2e}. "
+              + which)
+    passed = uses_gmg and worstB <= RTOL_EXACT
+    return CheckResult("off the manifold: solver's A is G M^-1 G^T", passed, max(to_gmg, worstB), RTOL_EXACT,
+                       detail, {"diag_gap": diag_gap, "uses": "GMG" if uses_gmg else ("25" if uses_25 else "?")})
+
+
+def _check_symmetry_sign(scene, sym, dyn, states):
+    S, shared = sign_pattern(sym._k1, sym._k2)
+    sym_S = int(np.abs(S - S.T).max(initial=0))                      # (23)
+    sym_M = int(np.abs(shared - shared.T).max(initial=0))            # (24): same shared vertex
+    im = sym._inv_mass
+    Minv = np.where(shared >= 0, im[np.maximum(shared, 0)], 0.0)     # 1/M(l,l') (22), 0 at anchors
+    offdiag = ~np.eye(sym.L, dtype=bool)
+    worst_sym = worst_pattern = 0.0
+    wrong_signs = 0
+    first_wrong = None
+    for X, U, Fin in states:
+        An = _dense(dyn.tension_matrix(X))
+        scale = max(np.abs(An).max(initial=0.0), 1e-300)
+        worst_sym = max(worst_sym, np.abs(An - An.T).max(initial=0.0) / scale)
+        E = (X[sym._k2] - X[sym._k1]) / sym._R[:, None]
+        EE = E @ E.T
+        expected = S * EE * Minv                                       # off-diagonal of (25)
+        diff = np.abs(An - expected) * offdiag
+        worst_pattern = max(worst_pattern, diff.max(initial=0.0) / scale)
+        # sign pattern: sign(A_ll') must be S(l,l') sign(E_l . E_l') wherever that product is clearly non-zero
+        clear = offdiag & (np.abs(expected) > 1e-8 * scale)
+        bad = clear & (np.sign(An) != np.sign(expected))
+        if bad.any():
+            wrong_signs += int(bad.sum())
+            if first_wrong is None:
+                l, lp = np.argwhere(bad)[0]
+                first_wrong = (int(l), int(lp), int(S[l, lp]))
+    worst = max(worst_sym, worst_pattern)
+    passed = worst <= RTOL_EXACT and sym_S == 0 and sym_M == 0 and wrong_signs == 0
+    detail = (f"S(l,l')=S(l',l) {'holds' if sym_S == 0 else 'FAILS'}, M(l,l')=M(l',l) "
+              f"{'holds' if sym_M == 0 else 'FAILS'}; |A-A^T| {worst_sym:.2e}; off-diagonal vs "
+              f"S(l,l') E_l.E_l'/M(l,l') {worst_pattern:.2e}; entries with the wrong sign: {wrong_signs}")
+    if first_wrong is not None:
+        l, lp, s = first_wrong
+        detail += f" (first: {scene.link_label(l)} / {scene.link_label(lp)}, S = {s:+d})" \
+            if hasattr(scene, "link_label") else f" (first: links {l + 1}/{lp + 1}, S = {s:+d})"
+    return CheckResult("symmetry (23)-(24) and sign pattern S (21)", passed, worst, RTOL_EXACT, detail)
+
+
+def _check_gmg_psd(scene, sym, dyn, states):
+    worst = 0.0
+    min_eig = 0.0
+    im_red = np.repeat(sym._inv_mass[sym.free], sym.dim)
+    for X, U, Fin in states:
+        An = _dense(dyn.tension_matrix(X))
+        G = sym.G(X).toarray()                       # AD of (11), not the solver's Jacobian
+        GMG = (G * im_red) @ G.T
+        scale = max(np.abs(GMG).max(initial=0.0), 1e-300)
+        worst = max(worst, np.abs(An - GMG).max(initial=0.0) / scale)
+        w = np.linalg.eigvalsh(0.5 * (An + An.T))
+        min_eig = min(min_eig, float(w.min(initial=0.0)) / max(float(np.abs(w).max(initial=0.0)), 1e-300))
+    psd = min_eig >= -RTOL_EXACT
+    passed = worst <= RTOL_EXACT and psd
+    return CheckResult("A = G M^-1 G^T and A positive semidefinite", passed, max(worst, -min_eig), RTOL_EXACT,
+                       f"|A - G M^-1 G^T| {worst:.2e} relative (G by AD of (11)); smallest eigenvalue / largest "
+                       f"{min_eig:.2e}" + ("" if psd else " -> A is NOT positive semidefinite"))
+
+
+def _weights(sym):
+    """1/M of the free coordinates: the W of A = G W G^T."""
+    return np.repeat(sym._inv_mass[sym.free], sym.dim)
+
+
+def _check_null_space(scene, sym, dyn, states):
+    """(27) => (31): every null vector of A is a self-stress; forces do not depend on the solution.
+
+    Null vectors are eigenvectors of A with eigenvalue below RTOL_NULL * lambda_max. For such an n,
+    (30) reads n^T A n = sum_k |f_k(n)|^2 / M_k with f(n) = G^T n the force of the self-stress on the
+    masses; the check measures |W^1/2 G^T n| / sqrt(lambda_max) with G by AD of (11), which (31) says is
+    zero and which is at most sqrt(RTOL_NULL) at a sampled state that is singular only to within the
+    projection's round-off (redundant links make (11) overdetermined: a Gauss-Newton projection leaves
+    positions ~sqrt(eps) off the exactly singular configuration).
+    """
+    tol = np.sqrt(RTOL_NULL)
+    worst31 = worst_force = worst_minnorm = 0.0
+    max_force_abs = 0.0
+    dims = []
+    info = []
+    W = _weights(sym)
+    for X, U, Fin in states:
+        An = _dense(dyn.tension_matrix(X))
+        w, N, wmax = _nullspace(0.5 * (An + An.T))
+        ws = np.linalg.eigvalsh(sym.A(X).toarray())
+        dims.append((N.shape[1], int(np.sum(ws <= RTOL_NULL * max(ws.max(initial=0.0), 1e-300)))))
+        info.append((N, wmax))
+        if N.shape[1] == 0:
+            continue
+        G = sym.G(X).toarray()
+        f_null = G.T @ N                                   # force of each self-stress on the free masses
+        worst31 = max(worst31, float(np.sqrt((W[:, None] * f_null ** 2).sum(0)).max() / np.sqrt(wmax)))
+        max_force_abs = max(max_force_abs, float(np.abs(f_null).max()))
+        T1 = np.asarray(dyn.tensions(X, U, Fin), float)
+        c = np.cos(np.arange(1, N.shape[1] + 1) * 1.7) * (1 + np.abs(T1).max())   # some other solution
+        T2 = T1 + N @ c
+        df = (np.asarray(dyn.link_forces(X, T2)) - np.asarray(dyn.link_forces(X, T1)))[sym.free].ravel()
+        # in the reduced coordinates: df_j . basis, weighted by 1/M
+        df_r = (df.reshape(-1, 3) @ sym.basis).ravel()
+        worst_force = max(worst_force, float(np.sqrt((W * df_r ** 2).sum()) / (np.sqrt(wmax) * np.linalg.norm(c))))
+        worst_minnorm = max(worst_minnorm, float(np.abs(N.T @ T1).max() / max(np.abs(T1).max(), 1e-300)))
+    dims_ok = all(a == b for a, b in dims)
+    nullity = sorted({a for a, _ in dims})
+    if max(nullity, default=0) == 0:
+        detail = "A is regular at every sampled state: no self-stress, tensions unique"
+    else:
+        detail = (f"dim null(A) {nullity} equals that of G M^-1 G^T (AD): {'yes' if dims_ok else 'NO'}; (31) "
+                  f"|M^-1/2 G^T n|/sqrt(lambda_max) {worst31:.2e} (largest force of a unit self-stress "
+                  f"{max_force_abs:.1e} N); link forces for T and T + self-stresses differ by {worst_force:.2e} "
+                  f"(same scale); the solver's T has a self-stress component {worst_minnorm:.2e} (minimum norm)")
+    worst = max(worst31, worst_force)
+    passed = dims_ok and worst <= tol and worst_minnorm <= 1e-6
+    return CheckResult("null(A) = self-stresses (31), forces unique", passed, worst, tol, detail), info
+
+
+def _violating_velocity(sym, X, N):
+    """A unit velocity satisfying (12) at X for which (35) has no solution, or None."""
+    q, u_bad = _self_stress_quadratic(sym, X, N)
+    if u_bad is None or q <= 1e-8 / sym._R.min():
+        return None
+    return sym.expand(u_bad)
+
+
+def _check_existence(scene, sym, dyn, states, nulls, factory):
+    """(32)-(36): B is orthogonal to null(A) when (35) can hold; a (35)-violating state is reported.
+
+    B = w + b_F with w_l = |dU_l|^2 / R_l and b_F = E_l.(F_k2/M_k2 - F_k1/M_k1). (33): N^T b_F = 0 for
+    any forces. (34)-(36): N^T w = 0 exactly when consistent accelerations (35) exist (w in range(G)).
+    """
+    tol_F = np.sqrt(RTOL_NULL)
+    worst_F = worst_consistent = 0.0
+    n_with_null = n_consistent = n_inconsistent = 0
+    W = _weights(sym)
+    for (X, U, Fin), (N, wmax) in zip(states, nulls):
+        if N.shape[1] == 0:
+            continue
+        n_with_null += 1
+        F = np.asarray(dyn.forces(X, U, Fin), float)
+        B = np.asarray(dyn.tension_rhs(X, U, F), float)
+        dU = U[sym._k2] - U[sym._k1]
+        w = np.einsum("ij,ij->i", dU, dU) / sym._R
+        bF = B - w
+        Fr = sym.reduce(F)
+        worst_F = max(worst_F, float(np.abs(N.T @ bF).max() / max(np.sqrt(wmax * (W * Fr ** 2).sum()), 1e-300)))
+        r_w = float(np.abs(N.T @ w).max() / max(np.abs(w).max(initial=0.0), 1e-300))
+        if r_w <= 1e-6:
+            n_consistent += 1
+            worst_consistent = max(worst_consistent, float(np.abs(N.T @ B).max() / max(np.abs(B).max(), 1e-300)))
+        else:
+            n_inconsistent += 1
+    # a state that violates (35): at the scene's own (exact) configuration if it admits one
+    X0 = np.array(scene.X0, float)
+    A0 = _dense(dyn.tension_matrix(X0))
+    _, N0, _ = _nullspace(0.5 * (A0 + A0.T))
+    U_bad = _violating_velocity(sym, X0, N0)
+    if U_bad is not None:
+        vscene, vdyn, vsym, Xv, Uv = scene, dyn, sym, X0, U_bad
+        where = f"{getattr(scene, 'name', 'this scene')} at its initial positions"
+    else:
+        vscene = taut_string_scene()
+        vdyn = factory(vscene)
+        vsym = SymbolicTensionSystem(vscene)
+        Xv = np.array(vscene.X0, float)
+        Uv = np.zeros_like(Xv)
+        Uv[1] = [0.0, 1.0, 0.0]                        # sideways: satisfies (12), violates (35)
+        where = "the reference taut string (this scene's initial positions admit no (35)-violating velocity)"
+    Av = _dense(vdyn.tension_matrix(Xv))
+    _, Nv, _ = _nullspace(0.5 * (Av + Av.T))
+    Bv = np.asarray(vdyn.tension_rhs(Xv, Uv, np.asarray(vdyn.forces(Xv, Uv, np.zeros_like(Xv)), float)), float)
+    v12 = float(np.abs(np.asarray(vsym.velocity_constraint_fn(vsym.reduce_positions(Xv), vsym.reduce(Uv)))).max())
+    violation = float(np.abs(Nv.T @ Bv).max(initial=0.0) / max(np.abs(Bv).max(initial=0.0), 1e-300))
+    detected = violation > 1e-6 and v12 <= 1e-12
+    refused = None
+    if hasattr(vdyn, "check_consistent_velocities"):
+        from .errors import ConsistencyError
+
+        try:
+            vdyn.check_consistent_velocities(Xv, Uv)
+            refused = False
+        except ConsistencyError:
+            refused = True
+    passed = worst_F <= tol_F and worst_consistent <= 1e-6 and detected and refused is not False
+    detail = (f"{n_with_null} sampled state(s) with self-stress: (33) N^T b_F {worst_F:.2e} (scaled); (35) holds at "
+              f"{n_consistent}, and there |N^T B|/|B| = {worst_consistent:.2e}; (35) fails at {n_inconsistent} "
+              f"(velocities in null(G) at singular positions). Violating state on {where}: (12) residual "
+              f"{v12:.1e}, |N^T B|/|B| = {violation:.2e} -> (35) violation {'REPORTED' if detected else 'NOT detected'}")
+    if refused is not None:
+        detail += ("; the solver refuses it with ConsistencyError" if refused else
+                   "; the solver's check_consistent_velocities ACCEPTS it")
+    return CheckResult("existence (32)-(36) and hypothesis (35)", passed, max(worst_F, worst_consistent), tol_F,
+                       detail)
+
+
+def _check_accelerations(scene, sym, dyn, Ffn, states):
+    worst_acc = worst_T = 0.0
+    worst_cond = 1.0
+    for X, U, Fin in states:
+        acc_n, T_n = dyn.accelerations(X, U, Fin)
+        acc_n = np.asarray(acc_n, float)
+        Fs = sym.expand(np.asarray(Ffn(sym.reduce_positions(X), sym.reduce(U), sym.reduce(Fin))).ravel())
+        acc_s, T_s = sym.solve(X, U, Fs)
+        As = sym.A(X).toarray()
+        w = np.linalg.eigvalsh(As)
+        pos = w[w > RTOL_NULL * max(w.max(initial=0.0), 1e-300)]
+        cond = float(pos.max() / pos.min()) if pos.size else 1.0
+        worst_cond = max(worst_cond, cond)
+        scale = max(np.abs(acc_s).max(initial=0.0), np.abs(Fs * sym._inv_mass[:, None]).max(initial=0.0), 1e-300)
+        worst_acc = max(worst_acc, np.abs(acc_n - acc_s).max() / scale / cond)
+        anchored = np.abs(acc_n[sym.fixed]).max(initial=0.0)
+        worst_acc = max(worst_acc, anchored / scale)
+        worst_T = max(worst_T, np.abs(np.asarray(T_n) - T_s).max(initial=0.0) / max(np.abs(T_s).max(initial=0.0),
+                                                                                   1e-300) / cond)
+    worst = max(worst_acc, worst_T)
+    return CheckResult("accelerations (9) and tensions: solver = symbolic", worst <= RTOL_SOLVE * 1e2, worst,
+                       RTOL_SOLVE * 1e2,
+                       f"differences divided by cond(A) (up to {worst_cond:.1e}): accelerations {worst_acc:.2e}, "
+                       f"minimum-norm tensions {worst_T:.2e}; symbolic side: AD system, dense pseudo-inverse")
+
+
+# ------------------------------------------------------------------------------------------------
+# command line
+# ------------------------------------------------------------------------------------------------
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scene", nargs="+", help="scene JSON file(s), e.g. models/chain_10.json")
+    parser.add_argument("--samples", type=int, default=5,
+                        help="random states on the manifold, and as many off it (default 5)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+
+
+def main(args) -> int:
+    from .scene import load_scene
+
+    if args.samples < 1:
+        print("linknet check: --samples must be at least 1", file=sys.stderr)
+        return 2
+    failed = 0
+    for path in args.scene:
+        t0 = time.perf_counter()
+        try:
+            scene = load_scene(path)
+        except ValueError as exc:
+            print(f"linknet check: {exc}", file=sys.stderr)
+            return 2
+        n_fixed = int(np.count_nonzero(np.asarray(scene.inv_mass) == 0))
+        print(f"{path}: K={scene.K} masses ({n_fixed} anchored), L={scene.L} links; {args.samples} states on and "
+              f"{args.samples} off the manifold, seed {args.seed}")
+        results = run_checks(scene, samples=args.samples, seed=args.seed)
+        for r in results:
+            print(r.line())
+        bad = sum(not r.passed for r in results)
+        failed += bad
+        print(f"{'all checks passed' if not bad else f'{bad} check(s) FAILED'} in "
+              f"{time.perf_counter() - t0:.2f} s\n")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":  # python -m linknet_core.checks SCENE
+    p = argparse.ArgumentParser(prog="linknet check")
+    add_arguments(p)
+    sys.exit(main(p.parse_args()))
