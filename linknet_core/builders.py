@@ -1,0 +1,231 @@
+"""Parametric scenes for the families users need: pendulums, chains and ropes, nets and cloth, closed
+loops, rigid polyhedra, redundant trusses. Each returns a validated :class:`Scene` (``scene.save(path)``
+writes its JSON)."""
+from __future__ import annotations
+
+import math
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from .scene import Scene
+
+G_EARTH = (0.0, 0.0, -9.81)
+
+
+def _mass(name, position, mass=None, velocity=None, fixed=False):
+    entry = {"name": name, "position": [float(v) for v in position]}
+    if fixed:
+        entry["fixed"] = True
+    else:
+        entry["mass"] = float(mass)
+        if velocity is not None and np.any(np.asarray(velocity) != 0):
+            entry["velocity"] = [float(v) for v in velocity]
+    return entry
+
+
+def pendulum(length=1.0, mass=1.0, angle_deg=90.0, gravity=G_EARTH, name="pendulum") -> Scene:
+    """A point mass on a rigid rod from a pivot at the origin, released at rest ``angle_deg`` from the
+    downward vertical (90: horizontal), in the x-z plane."""
+    a = math.radians(angle_deg)
+    bob = (length * math.sin(a), 0.0, -length * math.cos(a))
+    return Scene.from_dict({
+        "name": name, "description": f"simple pendulum, L = {length} m, released at rest {angle_deg} deg from vertical",
+        "gravity": list(gravity),
+        "masses": [_mass("pivot", (0, 0, 0), fixed=True), _mass("bob", bob, mass)],
+        "links": [{"a": "pivot", "b": "bob", "length": length}]})
+
+
+def chain(n_links: int, total_length=1.0, total_mass=1.0, shape="horizontal", anchor="start",
+          gravity=G_EARTH, points: Sequence[Sequence[float]] | None = None, name=None,
+          tip_mass: float | None = None, masses: Sequence[float] | None = None) -> Scene:
+    """A chain (rope) of ``n_links`` equal rigid links with ``n_links + 1`` point masses.
+
+    shape: 'horizontal' (released from the +x axis: a whipping chain), 'hanging' (straight down, static),
+    or 'points' with ``points`` giving every mass position (any shape; lengths from the points).
+    anchor: 'start' (mass 1 fixed), 'both' (first and last fixed), or 'none' (free rope).
+    ``masses`` gives every free mass individually (mass ratios); ``tip_mass`` overrides the last one.
+    """
+    n = int(n_links)
+    if n < 1:
+        raise ValueError("a chain needs at least one link")
+    h = total_length / n
+    if shape == "horizontal":
+        pos = np.column_stack([np.arange(n + 1) * h, np.zeros(n + 1), np.zeros(n + 1)])
+    elif shape == "hanging":
+        pos = np.column_stack([np.zeros(n + 1), np.zeros(n + 1), -np.arange(n + 1) * h])
+    elif shape == "points":
+        pos = np.asarray(points, float)
+        if pos.shape != (n + 1, 3):
+            raise ValueError(f"points must have shape ({n + 1}, 3)")
+    else:
+        raise ValueError(f"unknown chain shape {shape!r}")
+    node_mass = np.full(n + 1, total_mass / (n + 1)) if masses is None else np.asarray(masses, float)
+    if tip_mass is not None:
+        node_mass = node_mass.copy()
+        node_mass[-1] = tip_mass
+    fixed = np.zeros(n + 1, bool)
+    if anchor in ("start", "both"):
+        fixed[0] = True
+    if anchor == "both":
+        fixed[-1] = True
+    entries = [_mass(f"m{i}", pos[i], node_mass[i], fixed=fixed[i]) for i in range(n + 1)]
+    links = [{"a": i + 1, "b": i + 2} if shape == "points" else {"a": i + 1, "b": i + 2, "length": h}
+             for i in range(n)]
+    return Scene.from_dict({"name": name or f"chain_{n}",
+                            "description": f"chain of {n} rigid links, {shape}, anchor {anchor}",
+                            "gravity": list(gravity), "masses": entries, "links": links})
+
+
+def double_pendulum(l1=1.0, l2=1.0, m1=1.0, m2=1.0, gravity=G_EARTH, name="double_pendulum") -> Scene:
+    """Two rods released from the horizontal (the issue's example scene)."""
+    return Scene.from_dict({
+        "name": name, "description": "double pendulum released from horizontal", "gravity": list(gravity),
+        "masses": [_mass("pivot", (0, 0, 0), fixed=True), _mass("a", (l1, 0, 0), m1),
+                   _mass("b", (l1 + l2, 0, 0), m2)],
+        "links": [{"a": "pivot", "b": "a", "length": l1}, {"a": "a", "b": "b", "length": l2}]})
+
+
+def net(n: int, m: int, spacing=0.1, total_mass=1.0, anchors: str | Iterable[tuple[int, int]] = "opposite_corners",
+        gravity=G_EARTH, name=None, diagonals=False) -> Scene:
+    """An n x m net (cloth) of masses in the horizontal x-y plane, joined to their grid neighbours.
+
+    anchors: 'opposite_corners' (first and last mass), 'corners' (the two corners of the first row: that
+    row is then a taut string, a state of self-stress), 'four_corners', 'edge' (the whole first row), 'none',
+    or a list of (i, j) grid indices. ``diagonals`` adds both diagonals of every cell (a
+    redundant, shear-stiff cloth).
+    """
+    ii, jj = np.meshgrid(np.arange(n), np.arange(m), indexing="ij")
+    idx = lambda i, j: i * m + j  # noqa: E731
+    if anchors == "opposite_corners":
+        anchor_set = {(0, 0), (n - 1, m - 1)}
+    elif anchors == "corners":
+        anchor_set = {(0, 0), (0, m - 1)}
+    elif anchors == "four_corners":
+        anchor_set = {(0, 0), (0, m - 1), (n - 1, 0), (n - 1, m - 1)}
+    elif anchors == "edge":
+        anchor_set = {(0, j) for j in range(m)}
+    elif anchors == "none":
+        anchor_set = set()
+    else:
+        anchor_set = {tuple(a) for a in anchors}
+    mass_each = total_mass / (n * m)
+    entries = [_mass(f"n{i}_{j}", (j * spacing, i * spacing, 0.0), mass_each, fixed=(i, j) in anchor_set)
+               for i in range(n) for j in range(m)]
+    links = []
+    for i in range(n):
+        for j in range(m):
+            if j + 1 < m:
+                links.append({"a": idx(i, j) + 1, "b": idx(i, j + 1) + 1, "length": spacing})
+            if i + 1 < n:
+                links.append({"a": idx(i, j) + 1, "b": idx(i + 1, j) + 1, "length": spacing})
+            if diagonals and i + 1 < n and j + 1 < m:
+                d = spacing * math.sqrt(2.0)
+                links.append({"a": idx(i, j) + 1, "b": idx(i + 1, j + 1) + 1, "length": d})
+                links.append({"a": idx(i, j + 1) + 1, "b": idx(i + 1, j) + 1, "length": d})
+    links = [l for l in links if not ((divmod(l["a"] - 1, m) in anchor_set) and (divmod(l["b"] - 1, m) in anchor_set))]
+    return Scene.from_dict({"name": name or f"net_{n}x{m}",
+                            "description": f"{n} x {m} net, spacing {spacing} m, anchors {anchors}",
+                            "gravity": list(gravity), "masses": entries, "links": links})
+
+
+def four_bar(ground=1.0, crank=0.3, coupler=1.0, rocker=0.6, crank_angle_deg=60.0, crank_speed=2.0,
+             mass_b=1.0, mass_c=1.0, gravity=G_EARTH, name="four_bar") -> Scene:
+    """Planar four-bar linkage in the x-z plane: pivots A (origin) and D (ground, 0, 0), crank A-B,
+    coupler B-C, rocker C-D (a closed loop through the ground). The crank turns at ``crank_speed`` rad/s;
+    the velocity of C is the consistent one (both constraints (12) hold exactly)."""
+    th = math.radians(crank_angle_deg)
+    A = np.zeros(3)
+    D = np.array([ground, 0.0, 0.0])
+    B = A + crank * np.array([math.cos(th), 0.0, math.sin(th)])
+    # C: intersection of circle(B, coupler) and circle(D, rocker) in the x-z plane, upper branch
+    d = np.linalg.norm(D - B)
+    if d > coupler + rocker or d < abs(coupler - rocker):
+        raise ValueError("these link lengths cannot close the loop at this crank angle")
+    a = (coupler ** 2 - rocker ** 2 + d ** 2) / (2 * d)
+    hgt = math.sqrt(max(coupler ** 2 - a ** 2, 0.0))
+    e = (D - B) / d
+    perp = np.array([-e[2], 0.0, e[0]])
+    C = B + a * e + hgt * perp
+    if C[2] < B[2] + a * e[2]:
+        C = B + a * e - hgt * perp
+    UB = crank_speed * crank * np.array([-math.sin(th), 0.0, math.cos(th)])
+    # U_C in the plane with (U_C - U_B).(C - B) = 0 and U_C.(C - D) = 0
+    M2 = np.array([[(C - B)[0], (C - B)[2]], [(C - D)[0], (C - D)[2]]])
+    rhs = np.array([UB @ (C - B), 0.0])
+    ucx, ucz = np.linalg.solve(M2, rhs)
+    UC = np.array([ucx, 0.0, ucz])
+    return Scene.from_dict({
+        "name": name, "description": "planar four-bar linkage (closed loop through the ground)",
+        "gravity": list(gravity),
+        "masses": [_mass("A", A, fixed=True), _mass("B", B, mass_b, UB), _mass("C", C, mass_c, UC),
+                   _mass("D", D, fixed=True)],
+        "links": [{"a": "A", "b": "B"}, {"a": "B", "b": "C"}, {"a": "C", "b": "D"}]})
+
+
+def tetrahedron(edge=1.0, mass=1.0, spin=(0.0, 0.0, 10.0), velocity=(0.0, 0.0, 0.0), gravity=(0.0, 0.0, 0.0),
+                name="spinning_tetrahedron") -> Scene:
+    """Regular tetrahedron of 4 masses and 6 links, centroid at the origin, apex on the +z axis, spinning
+    with angular velocity ``spin`` (rad/s) about its centroid. About the z axis (a 3-fold axis through the
+    apex) the base links carry T = M w^2 a / 3 and the side links none."""
+    r = edge / math.sqrt(3.0)  # circumradius of the base triangle
+    h = edge * math.sqrt(2.0 / 3.0)
+    base = [np.array([r * math.cos(t), r * math.sin(t), 0.0]) for t in (0.0, 2 * math.pi / 3, 4 * math.pi / 3)]
+    apex = np.array([0.0, 0.0, h])
+    pts = np.array(base + [apex])
+    pts -= pts.mean(axis=0)
+    w = np.asarray(spin, float)
+    entries = [_mass(nm, p, mass, np.cross(w, p) + np.asarray(velocity, float))
+               for nm, p in zip(("b1", "b2", "b3", "apex"), pts)]
+    links = [{"a": a, "b": b} for a, b in (("b1", "b2"), ("b2", "b3"), ("b3", "b1"),
+                                          ("b1", "apex"), ("b2", "apex"), ("b3", "apex"))]
+    return Scene.from_dict({"name": name, "description": f"regular tetrahedron, edge {edge} m, spin {list(w)} rad/s",
+                            "gravity": list(gravity), "masses": entries, "links": links})
+
+
+def redundant_truss(bays=2, bay_length=1.0, mass=1.0, gravity=G_EARTH, name="redundant_truss") -> Scene:
+    """A cantilevered triangular-prism truss: three anchors on the wall x = 0, then ``bays`` bays each
+    with 3 longitudinal links, a triangle and both diagonals of its 3 side faces. 12 links per bay on 3
+    masses (9 degrees of freedom): 3 states of self-stress per bay, so A of (25) is singular."""
+    tri = [np.array([0.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.5, 0.8])]
+    entries = [_mass(f"w{i}", p, fixed=True) for i, p in enumerate(tri)]
+    links = []
+    for b in range(1, bays + 1):
+        for i, p in enumerate(tri):
+            entries.append(_mass(f"n{b}_{i}", p + np.array([b * bay_length, 0.0, 0.0]), mass))
+        prev = [f"w{i}" for i in range(3)] if b == 1 else [f"n{b - 1}_{i}" for i in range(3)]
+        cur = [f"n{b}_{i}" for i in range(3)]
+        for i in range(3):
+            links.append({"a": prev[i], "b": cur[i]})  # longitudinal
+            links.append({"a": cur[i], "b": cur[(i + 1) % 3]})  # triangle
+            links.append({"a": prev[i], "b": cur[(i + 1) % 3]})  # both diagonals of the side face
+            links.append({"a": prev[(i + 1) % 3], "b": cur[i]})
+    return Scene.from_dict({"name": name, "description": f"cantilevered prism truss, {bays} bays, both diagonals per face",
+                            "gravity": list(gravity), "masses": entries, "links": links})
+
+
+def taut_string(speed=1.0, mass=1.0, name="taut_string") -> Scene:
+    """A mass between two anchors on two collinear links (a taut string), moving sideways at ``speed``.
+
+    The velocity satisfies (12), yet admits no consistent accelerations (35): the self-stress T1 = T2 is
+    not orthogonal to |dU|^2/R. This is the seed's acknowledgment case; loading it must fail (speed != 0).
+    """
+    return Scene.from_dict({
+        "name": name, "description": "taut string: violates hypothesis (35) when the middle mass moves sideways",
+        "masses": [_mass("left", (0, 0, 0), fixed=True), _mass("middle", (1, 0, 0), mass, (0, speed, 0)),
+                   _mass("right", (2, 0, 0), fixed=True)],
+        "links": [{"a": "left", "b": "middle"}, {"a": "middle", "b": "right"}]})
+
+
+def shipped_scenes() -> dict[str, Scene]:
+    """The scenes in models/ (regenerate with ``python models/generate.py``)."""
+    return {
+        "pendulum": pendulum(),
+        "double_pendulum": double_pendulum(),
+        "chain_10": chain(10),
+        "chain_100": chain(100),
+        "four_bar": four_bar(),
+        "spinning_tetrahedron": tetrahedron(),
+        "redundant_truss": redundant_truss(),
+        "net_10x10": net(10, 10),
+    }

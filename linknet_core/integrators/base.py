@@ -1,0 +1,77 @@
+"""What every integrator is: a small unit defined by its method.
+
+An integrator advances ``(t, X, U)`` of one scene, with the input forces held constant, from the current
+time to a target time. Fixed-step methods split the interval into equal steps no longer than ``dt``
+(so any target, however close, is hit exactly); adaptive ones choose their steps to meet ``rtol``/``atol``.
+Adding a method means adding a subclass; nothing else changes.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..dynamics import Dynamics
+from ..errors import SolverError
+from ..state import State
+
+
+@dataclass
+class StepStats:
+    steps: int = 0
+    rejected: int = 0
+
+    def as_dict(self) -> dict:
+        return {"steps": self.steps, "rejected": self.rejected}
+
+
+class Integrator:
+    name = "abstract"
+    order = 0
+    symplectic = False
+    adaptive = False
+    guarantees = ""
+
+    def __init__(self, dynamics: Dynamics):
+        self.dyn = dynamics
+        self.stats = StepStats()
+
+    # snapshot of whatever the integrator carries between calls (step-size guess, ...)
+    def internals(self) -> dict:
+        return {"stats": self.stats.as_dict()}
+
+    def set_internals(self, data: dict) -> None:
+        self.stats = StepStats(**data["stats"])
+
+    def advance(self, state: State, t_target: float, F_input: np.ndarray | None, max_steps: int) -> None:
+        raise NotImplementedError
+
+
+class FixedStepIntegrator(Integrator):
+    """Equal steps no longer than ``dt`` that land exactly on the target time."""
+
+    def __init__(self, dynamics: Dynamics, dt: float):
+        super().__init__(dynamics)
+        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+            raise SolverError(f"dt must be a positive finite step in seconds, got {dt!r}")
+        self.dt = float(dt)
+
+    def step(self, X, U, h, F_input):
+        raise NotImplementedError
+
+    def advance(self, state, t_target, F_input, max_steps):
+        span = t_target - state.t
+        n = max(1, math.ceil(span / self.dt * (1 - 1e-12)))
+        if n > max_steps:
+            raise SolverError(f"reaching t = {t_target} needs {n} steps of dt = {self.dt}, more than the "
+                              f"limit of {max_steps}; raise max_steps or the step")
+        h = span / n
+        X, U = state.X, state.U
+        t0 = state.t
+        for i in range(n):
+            X, U = self.step(X, U, h, F_input)
+        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
+            raise SolverError(f"the state became non-finite between t = {t0} and t = {t_target}")
+        state.X, state.U, state.t = X, U, t_target
+        self.stats.steps += n

@@ -1,0 +1,178 @@
+"""Explicit embedded Runge-Kutta on the index-1 formulation, projected onto the constraint manifolds.
+
+The index-1 ODE is dX/dt = U (10), dU/dt = accelerations with the tensions of (25)-(26) (9). It keeps
+(13) exactly but lets (11) and (12) drift, so after every accepted step the positions are projected onto
+(11) and the velocities onto (12) (mass-metric orthogonal projections). The projection does not lower
+the order of the method. The step size is controlled by the embedded error estimate to meet
+``rtol``/``atol`` (SI units; atol defaults to rtol). A method is defined by its tableau only; the
+tableaux are those of scipy's RK45 (Dormand-Prince 5(4)) and DOP853 (Hairer's 8(5,3)).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.integrate._ivp import dop853_coefficients as _dop853
+from scipy.integrate._ivp.rk import RK45 as _RK45
+
+from ..errors import SolverError
+from .base import Integrator
+
+SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
+
+
+class ProjectedRungeKutta(Integrator):
+    adaptive = True
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    E: np.ndarray
+    error_estimator_order: int
+    n_stages: int
+
+    def __init__(self, dynamics, rtol: float = 1e-8, atol: float | None = None, h0: float | None = None):
+        super().__init__(dynamics)
+        for name, value in (("rtol", rtol), ("atol", atol)):
+            if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise SolverError(f"{name} must be a positive finite tolerance, got {value!r}")
+        if rtol < 1e-15:
+            raise SolverError(f"rtol = {rtol!r} is below what double precision can deliver (1e-15)")
+        self.rtol = float(rtol)
+        self.atol = float(atol if atol is not None else rtol)
+        self.h = h0  # next step size; None until the first step is chosen
+        self.free = dynamics.scene.free_indices
+
+    def internals(self) -> dict:
+        out = super().internals()
+        out["h"] = self.h
+        return out
+
+    def set_internals(self, data: dict) -> None:
+        super().set_internals(data)
+        self.h = data["h"]
+
+    # ---- one attempted step ------------------------------------------------------------------
+    def _f(self, X, U, F_input):
+        acc, _ = self.dyn.accelerations(X, U, F_input)
+        return U, acc
+
+    def _attempt(self, X, U, h, k0, F_input):
+        s = self.n_stages
+        KX = np.empty((s + 1,) + X.shape)
+        KU = np.empty((s + 1,) + U.shape)
+        KX[0], KU[0] = k0
+        for i in range(1, s):
+            a = self.A[i, :i]
+            Xi = X + h * np.tensordot(a, KX[:i], axes=1)
+            Ui = U + h * np.tensordot(a, KU[:i], axes=1)
+            KX[i], KU[i] = self._f(Xi, Ui, F_input)
+        X_new = X + h * np.tensordot(self.B, KX[:s], axes=1)
+        U_new = U + h * np.tensordot(self.B, KU[:s], axes=1)
+        KX[s], KU[s] = self._f(X_new, U_new, F_input)
+        return X_new, U_new, KX, KU
+
+    def _scale(self, X, U, X_new, U_new):
+        y = np.concatenate([X[self.free].ravel(), U[self.free].ravel()])
+        y_new = np.concatenate([X_new[self.free].ravel(), U_new[self.free].ravel()])
+        return self.atol + self.rtol * np.maximum(np.abs(y), np.abs(y_new))
+
+    def _stage_errors(self, KX, KU, weights):
+        return np.concatenate([np.tensordot(weights, KX, axes=1)[self.free].ravel(),
+                               np.tensordot(weights, KU, axes=1)[self.free].ravel()])
+
+    def error_norm(self, KX, KU, h, scale) -> float:
+        err = h * self._stage_errors(KX, KU, self.E) / scale
+        return float(np.sqrt(np.mean(err ** 2)))
+
+    def _initial_step(self, X, U, k0, F_input, span):
+        """Hairer-Wanner's starting step (as scipy's select_initial_step)."""
+        scale = self._scale(X, U, X, U)
+        y = np.concatenate([X[self.free].ravel(), U[self.free].ravel()])
+        f0 = np.concatenate([k0[0][self.free].ravel(), k0[1][self.free].ravel()])
+        d0 = np.sqrt(np.mean((y / scale) ** 2))
+        d1 = np.sqrt(np.mean((f0 / scale) ** 2))
+        h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+        h0 = min(h0, span)
+        k1 = self._f(X + h0 * k0[0], U + h0 * k0[1], F_input)
+        f1 = np.concatenate([k1[0][self.free].ravel(), k1[1][self.free].ravel()])
+        d2 = np.sqrt(np.mean(((f1 - f0) / scale) ** 2)) / h0
+        if d1 <= 1e-15 and d2 <= 1e-15:
+            h1 = max(1e-6, h0 * 1e-3)
+        else:
+            h1 = (0.01 / max(d1, d2)) ** (1.0 / (self.error_estimator_order + 1))
+        return min(100 * h0, h1, span)
+
+    # ---- driver ------------------------------------------------------------------------------
+    def advance(self, state, t_target, F_input, max_steps):
+        dyn = self.dyn
+        X, U, t = state.X, state.U, state.t
+        k0 = self._f(X, U, F_input)
+        if self.h is None:
+            self.h = self._initial_step(X, U, k0, F_input, t_target - t)
+        exponent = -1.0 / (self.error_estimator_order + 1)
+        steps = 0
+        while t < t_target:
+            remaining = t_target - t
+            h = min(self.h, remaining)
+            if h < remaining < 1.1 * h:  # avoid a sliver of a last step: split the rest in two
+                h = 0.5 * remaining
+            if h <= 16 * np.spacing(max(abs(t), 1.0)) and h < remaining:
+                raise SolverError(f"step size underflow at t = {t}: the tolerance rtol = {self.rtol} cannot be "
+                                  "met (singular configuration or discontinuous input?)")
+            X_new, U_new, KX, KU = self._attempt(X, U, h, k0, F_input)
+            err = self.error_norm(KX, KU, h, self._scale(X, U, X_new, U_new))
+            if not math.isfinite(err):
+                self.stats.rejected += 1
+                self.h = h * MIN_FACTOR
+                continue
+            if err <= 1.0:
+                X_new, _ = dyn.project_positions(X_new, tol=1e-14)
+                U_new = dyn.project_velocities(X_new, U_new)
+                t = t_target if h == remaining else t + h
+                X, U = X_new, U_new
+                k0 = self._f(X, U, F_input)
+                factor = MAX_FACTOR if err == 0 else min(MAX_FACTOR, SAFETY * err ** exponent)
+                # a step shortened only to land on t_target says nothing against the longer step
+                self.h = max(self.h, h * factor) if h < self.h else h * factor
+                steps += 1
+                self.stats.steps += 1
+                if steps > max_steps:
+                    raise SolverError(f"more than {max_steps} steps between t = {state.t} and t = {t_target}; "
+                                      "raise max_steps or the tolerance")
+            else:
+                self.stats.rejected += 1
+                self.h = h * max(MIN_FACTOR, SAFETY * err ** exponent)
+        state.X, state.U, state.t = X, U, t_target
+
+
+class DOPRI5(ProjectedRungeKutta):
+    name = "dopri5"
+    order = 5
+    error_estimator_order = 4
+    n_stages = _RK45.n_stages
+    A, B, C, E = _RK45.A, _RK45.B, _RK45.C, _RK45.E
+    guarantees = ("order 5, adaptive (Dormand-Prince 5(4)); after every step positions are projected onto (11) "
+                  "and velocities onto (12); not symplectic: energy error follows the tolerance and may drift")
+
+
+class DOP853(ProjectedRungeKutta):
+    name = "dop853"
+    order = 8
+    error_estimator_order = 7
+    n_stages = _dop853.N_STAGES
+    A = _dop853.A[:_dop853.N_STAGES, :_dop853.N_STAGES]
+    B = _dop853.B
+    C = _dop853.C[:_dop853.N_STAGES]
+    E3 = _dop853.E3
+    E5 = _dop853.E5
+    guarantees = ("order 8, adaptive (Hairer's DOP853 with its 5th/3rd-order error estimate); projected onto (11) "
+                  "and (12) after every step; not symplectic: energy error follows the tolerance")
+
+    def error_norm(self, KX, KU, h, scale) -> float:
+        # Hairer's combined estimate, as in scipy's DOP853
+        err5 = self._stage_errors(KX, KU, self.E5) / scale
+        err3 = self._stage_errors(KX, KU, self.E3) / scale
+        e5, e3 = float(np.dot(err5, err5)), float(np.dot(err3, err3))
+        if e5 == 0.0 and e3 == 0.0:
+            return 0.0
+        return abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * scale.size)

@@ -1,0 +1,383 @@
+"""The immutable description of a rigid-link network (like MuJoCo's mjModel).
+
+A scene holds topology, masses, link lengths, force elements and the initial state. It never changes
+during a simulation: the mutable state lives in :class:`linknet_core.state.State`.
+
+Numbering: masses k = 1..K and links l = 1..L in file order (1-based in files and messages, 0-based in
+the arrays). Link l joins k1(l) and k2(l) (seed eq. (5)) and has length R_l (6).
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import SceneError
+
+_MASS_KEYS = {"name", "mass", "position", "velocity", "fixed", "force", "drag"}
+_LINK_KEYS = {"a", "b", "length", "name"}
+_SPRING_KEYS = {"a", "b", "stiffness", "rest_length", "damping", "name"}
+_SCENE_KEYS = {"name", "description", "gravity", "masses", "links", "springs", "options"}
+
+
+def _frozen(array) -> np.ndarray:
+    out = np.array(array, dtype=float, copy=True)
+    out.setflags(write=False)
+    return out
+
+
+def _frozen_bool(array) -> np.ndarray:
+    out = np.array(array, dtype=bool, copy=True)
+    out.setflags(write=False)
+    return out
+
+
+def _frozen_int(array) -> np.ndarray:
+    out = np.array(array, dtype=np.int64, copy=True)
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True)
+class Springs:
+    """Linear spring-dampers between two masses: F = (k (d - d0) + c d') along the axis."""
+
+    a: np.ndarray  # (S,) 0-based mass index
+    b: np.ndarray  # (S,)
+    stiffness: np.ndarray  # (S,) N/m
+    rest_length: np.ndarray  # (S,) m
+    damping: np.ndarray  # (S,) N s/m
+    names: tuple[str, ...] = ()
+
+    @property
+    def count(self) -> int:
+        return int(self.a.shape[0])
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Immutable description of a network of point masses joined by rigid links."""
+
+    name: str
+    mass_names: tuple[str, ...]
+    mass: np.ndarray  # (K,) kg; inf for anchored masses
+    fixed: np.ndarray  # (K,) bool
+    k1: np.ndarray  # (L,) 0-based index of the first end of each link (5)
+    k2: np.ndarray  # (L,) second end
+    length: np.ndarray  # (L,) R_l (6)
+    link_names: tuple[str, ...]
+    gravity: np.ndarray  # (3,) m/s^2
+    force: np.ndarray  # (K,3) constant external force per mass, N
+    drag: np.ndarray  # (K,) viscous drag coefficient, N s/m (force = -drag * U)
+    springs: Springs
+    X0: np.ndarray  # (K,3) initial positions
+    U0: np.ndarray  # (K,3) initial velocities
+    description: str = ""
+    options: dict = field(default_factory=dict)
+
+    # ---- derived, read-only views -------------------------------------------------------------
+    @property
+    def K(self) -> int:
+        return int(self.mass.shape[0])
+
+    @property
+    def L(self) -> int:
+        return int(self.k1.shape[0])
+
+    @property
+    def inv_mass(self) -> np.ndarray:
+        """1/M_k, zero for anchored masses (they take no acceleration)."""
+        inv = np.where(self.fixed, 0.0, 1.0 / np.where(self.fixed, 1.0, self.mass))
+        inv.setflags(write=False)
+        return inv
+
+    @property
+    def free_indices(self) -> np.ndarray:
+        return np.flatnonzero(~self.fixed)
+
+    @property
+    def fixed_indices(self) -> np.ndarray:
+        return np.flatnonzero(self.fixed)
+
+    def mass_label(self, k: int) -> str:
+        """Human label of 0-based mass k: 'mass 3 ("b")'."""
+        return f'mass {k + 1} ("{self.mass_names[k]}")'
+
+    def link_label(self, l: int) -> str:
+        a, b = int(self.k1[l]), int(self.k2[l])
+        return f'link {l + 1} ({self.mass_names[a]}-{self.mass_names[b]})'
+
+    # ---- construction ------------------------------------------------------------------------
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], *, source: str = "scene") -> "Scene":
+        return _parse_scene(data, source)
+
+    def to_dict(self) -> dict[str, Any]:
+        masses = []
+        for k in range(self.K):
+            entry: dict[str, Any] = {"name": self.mass_names[k], "position": self.X0[k].tolist()}
+            if self.fixed[k]:
+                entry["fixed"] = True
+            else:
+                entry["mass"] = float(self.mass[k])
+                if np.any(self.U0[k] != 0):
+                    entry["velocity"] = self.U0[k].tolist()
+            if np.any(self.force[k] != 0):
+                entry["force"] = self.force[k].tolist()
+            if self.drag[k] != 0:
+                entry["drag"] = float(self.drag[k])
+            masses.append(entry)
+        links = [
+            {"a": int(self.k1[l]) + 1, "b": int(self.k2[l]) + 1, "length": float(self.length[l])}
+            for l in range(self.L)
+        ]
+        out: dict[str, Any] = {"name": self.name}
+        if self.description:
+            out["description"] = self.description
+        if np.any(self.gravity != 0):
+            out["gravity"] = self.gravity.tolist()
+        out["masses"] = masses
+        out["links"] = links
+        s = self.springs
+        if s.count:
+            out["springs"] = [
+                {"a": int(s.a[i]) + 1, "b": int(s.b[i]) + 1, "stiffness": float(s.stiffness[i]),
+                 "rest_length": float(s.rest_length[i]), "damping": float(s.damping[i])}
+                for i in range(s.count)
+            ]
+        if self.options:
+            out["options"] = dict(self.options)
+        return out
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n")
+
+    def with_state(self, X0=None, U0=None) -> "Scene":
+        """A copy of this scene with another initial state (the description is otherwise shared)."""
+        import dataclasses
+
+        return dataclasses.replace(
+            self,
+            X0=self.X0 if X0 is None else _frozen(np.asarray(X0, float).reshape(self.K, 3)),
+            U0=self.U0 if U0 is None else _frozen(np.asarray(U0, float).reshape(self.K, 3)),
+        )
+
+    def with_parameters(self, mass=None, length=None, gravity=None) -> "Scene":
+        """A copy with changed masses (free masses only), link lengths or gravity, validated again."""
+        data = self.to_dict()
+        if mass is not None:
+            mass = np.asarray(mass, float)
+            for k, entry in enumerate(data["masses"]):
+                if not self.fixed[k]:
+                    entry["mass"] = float(mass[k])
+        if length is not None:
+            for l, entry in enumerate(data["links"]):
+                entry["length"] = float(np.asarray(length, float)[l])
+        if gravity is not None:
+            data["gravity"] = np.asarray(gravity, float).tolist()
+        return Scene.from_dict(data, source=self.name)
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read a scene JSON file and validate it (errors name the mass or link and the rule broken)."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise SceneError(f"cannot read scene file {path}: {exc.strerror}") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise SceneError(f"{path}: not valid JSON: {exc}") from None
+    data.setdefault("name", path.stem)
+    return Scene.from_dict(data, source=str(path))
+
+
+# ---- parsing and validation ----------------------------------------------------------------------
+
+def _vector(value, what: str, source: str, default=None) -> np.ndarray:
+    if value is None:
+        if default is None:
+            raise SceneError(f"{source}: {what} is missing")
+        return np.array(default, float)
+    try:
+        vec = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise SceneError(f"{source}: {what} must be a list of 3 numbers, got {value!r}") from None
+    if vec.shape != (3,):
+        raise SceneError(f"{source}: {what} must have 3 components, got {value!r}")
+    if not np.all(np.isfinite(vec)):
+        raise SceneError(f"{source}: {what} must be finite (no NaN or infinity), got {value!r}")
+    return vec
+
+
+def _number(value, what: str, source: str, *, positive=False, nonnegative=False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(f"{source}: {what} must be a number, got {value!r}")
+    x = float(value)
+    if not math.isfinite(x):
+        raise SceneError(f"{source}: {what} must be finite, got {value!r}")
+    if positive and not x > 0:
+        raise SceneError(f"{source}: {what} must be positive, got {value!r}")
+    if nonnegative and x < 0:
+        raise SceneError(f"{source}: {what} must not be negative, got {value!r}")
+    return x
+
+
+def _check_keys(entry: dict, allowed: set, what: str, source: str) -> None:
+    unknown = set(entry) - allowed
+    if unknown:
+        raise SceneError(f"{source}: {what} has unknown field(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+
+
+def _parse_scene(data: dict, source: str) -> Scene:
+    if not isinstance(data, dict):
+        raise SceneError(f"{source}: a scene must be a JSON object")
+    _check_keys(data, _SCENE_KEYS, "the scene", source)
+    masses = data.get("masses")
+    if not isinstance(masses, list) or not masses:
+        raise SceneError(f"{source}: 'masses' must be a non-empty list")
+    links = data.get("links", [])
+    if not isinstance(links, list):
+        raise SceneError(f"{source}: 'links' must be a list")
+
+    K = len(masses)
+    names: list[str] = []
+    index_of: dict[str, int] = {}
+    mass = np.empty(K)
+    fixed = np.zeros(K, bool)
+    X0 = np.empty((K, 3))
+    U0 = np.zeros((K, 3))
+    force = np.zeros((K, 3))
+    drag = np.zeros(K)
+    for k, entry in enumerate(masses):
+        if not isinstance(entry, dict):
+            raise SceneError(f"{source}: mass {k + 1} must be an object")
+        _check_keys(entry, _MASS_KEYS, f"mass {k + 1}", source)
+        name = str(entry.get("name", f"m{k + 1}"))
+        label = f'mass {k + 1} ("{name}")'
+        if name in index_of:
+            raise SceneError(f"{source}: {label} repeats the name of mass {index_of[name] + 1}; names must be unique")
+        index_of[name] = k
+        names.append(name)
+        fixed[k] = bool(entry.get("fixed", False))
+        X0[k] = _vector(entry.get("position"), f"{label} position", source)
+        if fixed[k]:
+            mass[k] = math.inf
+            if "mass" in entry:  # an anchored mass may carry a nominal mass; it never moves
+                _number(entry["mass"], f"{label} mass", source, positive=True)
+            if "velocity" in entry and np.any(_vector(entry["velocity"], f"{label} velocity", source) != 0):
+                raise SceneError(f"{source}: {label} is fixed (anchored) and cannot have a non-zero velocity")
+        else:
+            if "mass" not in entry:
+                raise SceneError(f"{source}: {label} is free but has no 'mass' value (give one or set \"fixed\": true)")
+            mass[k] = _number(entry["mass"], f"{label} mass", source, positive=True)
+            U0[k] = _vector(entry.get("velocity"), f"{label} velocity", source, default=[0, 0, 0])
+        force[k] = _vector(entry.get("force"), f"{label} force", source, default=[0, 0, 0])
+        drag[k] = _number(entry.get("drag", 0.0), f"{label} drag", source, nonnegative=True)
+
+    def resolve(ref, what: str) -> int:
+        if isinstance(ref, bool):
+            raise SceneError(f"{source}: {what} must be a mass name or a 1-based index, got {ref!r}")
+        if isinstance(ref, int):
+            if not 1 <= ref <= K:
+                raise SceneError(f"{source}: {what} refers to mass index {ref}, but masses are numbered 1..{K}")
+            return ref - 1
+        if isinstance(ref, str):
+            if ref not in index_of:
+                raise SceneError(f"{source}: {what} refers to unknown mass {ref!r}")
+            return index_of[ref]
+        raise SceneError(f"{source}: {what} must be a mass name or a 1-based index, got {ref!r}")
+
+    L = len(links)
+    k1 = np.empty(L, np.int64)
+    k2 = np.empty(L, np.int64)
+    length = np.empty(L)
+    link_names: list[str] = []
+    seen_pairs: dict[tuple[int, int], int] = {}
+    for l, entry in enumerate(links):
+        if not isinstance(entry, dict):
+            raise SceneError(f"{source}: link {l + 1} must be an object")
+        _check_keys(entry, _LINK_KEYS, f"link {l + 1}", source)
+        if "a" not in entry or "b" not in entry:
+            raise SceneError(f"{source}: link {l + 1} needs both ends 'a' and 'b'")
+        a = resolve(entry["a"], f"link {l + 1} end 'a'")
+        b = resolve(entry["b"], f"link {l + 1} end 'b'")
+        label = f"link {l + 1} ({names[a]}-{names[b]})"
+        if a == b:  # the seed assumes the two ends of a link are different masses (before (17))
+            raise SceneError(f"{source}: {label} joins mass {a + 1} to itself; a link must join two different masses")
+        pair = (min(a, b), max(a, b))
+        if pair in seen_pairs:  # the seed assumes at most one link per pair of masses (before (17))
+            raise SceneError(
+                f"{source}: {label} joins the same pair of masses as link {seen_pairs[pair] + 1}; "
+                "at most one link may join a pair")
+        seen_pairs[pair] = l
+        if fixed[a] and fixed[b]:
+            raise SceneError(f"{source}: {label} joins two anchored masses; such a link carries no information")
+        k1[l], k2[l] = a, b
+        distance = float(np.linalg.norm(X0[b] - X0[a]))
+        if "length" in entry:
+            length[l] = _number(entry["length"], f"{label} length", source, positive=True)
+        else:
+            if not distance > 0:
+                raise SceneError(f"{source}: {label} has no length and its ends coincide, so the default "
+                                 "(initial distance) would be zero")
+            length[l] = distance
+        link_names.append(str(entry.get("name", f"l{l + 1}")))
+
+    springs_data = data.get("springs", [])
+    if not isinstance(springs_data, list):
+        raise SceneError(f"{source}: 'springs' must be a list")
+    S = len(springs_data)
+    sa = np.empty(S, np.int64)
+    sb = np.empty(S, np.int64)
+    stiffness = np.empty(S)
+    rest = np.empty(S)
+    damping = np.empty(S)
+    spring_names = []
+    for s, entry in enumerate(springs_data):
+        if not isinstance(entry, dict):
+            raise SceneError(f"{source}: spring {s + 1} must be an object")
+        _check_keys(entry, _SPRING_KEYS, f"spring {s + 1}", source)
+        if "a" not in entry or "b" not in entry:
+            raise SceneError(f"{source}: spring {s + 1} needs both ends 'a' and 'b'")
+        sa[s] = resolve(entry["a"], f"spring {s + 1} end 'a'")
+        sb[s] = resolve(entry["b"], f"spring {s + 1} end 'b'")
+        if sa[s] == sb[s]:
+            raise SceneError(f"{source}: spring {s + 1} joins mass {sa[s] + 1} to itself")
+        stiffness[s] = _number(entry.get("stiffness", 0.0), f"spring {s + 1} stiffness", source, nonnegative=True)
+        damping[s] = _number(entry.get("damping", 0.0), f"spring {s + 1} damping", source, nonnegative=True)
+        d0 = float(np.linalg.norm(X0[sb[s]] - X0[sa[s]]))
+        rest[s] = _number(entry.get("rest_length", d0), f"spring {s + 1} rest_length", source, nonnegative=True)
+        spring_names.append(str(entry.get("name", f"s{s + 1}")))
+
+    gravity = _vector(data.get("gravity"), "gravity", source, default=[0, 0, 0])
+    options = data.get("options", {})
+    if not isinstance(options, dict):
+        raise SceneError(f"{source}: 'options' must be an object")
+    if not np.any(~fixed):
+        raise SceneError(f"{source}: every mass is anchored; there is nothing to simulate")
+
+    return Scene(
+        name=str(data.get("name", "scene")),
+        description=str(data.get("description", "")),
+        mass_names=tuple(names),
+        mass=_frozen(mass),
+        fixed=_frozen_bool(fixed),
+        k1=_frozen_int(k1),
+        k2=_frozen_int(k2),
+        length=_frozen(length),
+        link_names=tuple(link_names),
+        gravity=_frozen(gravity),
+        force=_frozen(force),
+        drag=_frozen(drag),
+        springs=Springs(_frozen_int(sa), _frozen_int(sb), _frozen(stiffness), _frozen(rest), _frozen(damping),
+                        tuple(spring_names)),
+        X0=_frozen(X0),
+        U0=_frozen(U0),
+        options=dict(options),
+    )

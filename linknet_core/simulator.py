@@ -1,0 +1,269 @@
+"""Driving a simulation: the stepping interface (used by the FMU) and whole runs (``simulate``)."""
+from __future__ import annotations
+
+import copy
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .dynamics import Dynamics
+from .errors import SceneError, SolverError
+from .forces import kinetic_energy
+from .integrators import make_integrator
+from .scene import Scene
+from .state import State
+
+DEFAULT_LENGTH_TOL = 1e-6  # relative violation of (11) accepted in a scene's initial positions
+
+
+@dataclass
+class InitialReport:
+    """What was done to the scene's initial state before the run."""
+
+    worst_length_error: float  # relative, before any projection
+    positions_projected: bool
+    velocity_correction: float  # max |dU| removed to satisfy (12), m/s
+    velocity_correction_mass: int  # 0-based mass where it was largest (-1 if none)
+
+    def lines(self, scene: Scene) -> list[str]:
+        out = []
+        if self.positions_projected:
+            out.append(f"initial positions projected onto the link lengths (worst error was "
+                       f"{self.worst_length_error:.3g} relative)")
+        if self.velocity_correction > 0:
+            out.append(f"initial velocities projected onto (12): largest correction {self.velocity_correction:.3g} m/s "
+                       f"at {scene.mass_label(self.velocity_correction_mass)}")
+        return out
+
+
+def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: bool | None = None,
+                          length_tol: float = DEFAULT_LENGTH_TOL):
+    """Validate and make consistent the scene's initial state.
+
+    * positions must satisfy every link length (11) to ``length_tol`` relative, unless projection is
+      asked for (argument, or ``"options": {"project_initial_positions": true}`` in the scene);
+    * velocities are projected onto (12) and the correction is reported;
+    * hypothesis (35) is checked: velocities that admit no consistent accelerations are refused.
+    """
+    if project_positions is None:
+        project_positions = bool(scene.options.get("project_initial_positions", False))
+    X, U = np.array(scene.X0), np.array(scene.U0)
+    if scene.L == 0:
+        return X, U, InitialReport(0.0, False, 0.0, -1)
+    d = X[scene.k2] - X[scene.k1]
+    rel = np.abs(np.sqrt(np.einsum("ij,ij->i", d, d)) / scene.length - 1.0)
+    worst = float(rel.max())
+    projected = False
+    if worst > length_tol:
+        if not project_positions:
+            idx = np.argsort(-rel)[:5]
+            listing = "; ".join(
+                f"{scene.link_label(int(l))}: distance {np.linalg.norm(d[l]):.6g} m vs length {scene.length[l]:.6g} m"
+                for l in idx if rel[l] > length_tol)
+            raise SceneError(
+                f"{scene.name}: initial positions violate the link lengths by up to {worst:.3g} relative "
+                f"(tolerance {length_tol:g}). Worst links: {listing}. Fix the positions or the lengths, or opt in "
+                "to projecting them (--project-initial, or \"options\": {\"project_initial_positions\": true}).")
+        try:
+            X, _ = dyn.project_positions(X, tol=1e-14, max_iter=200)
+        except SolverError as exc:
+            raise SceneError(f"{scene.name}: the initial positions cannot be projected onto the link lengths: {exc}") from None
+        projected = True
+    U_projected = dyn.project_velocities(X, U)
+    correction = np.linalg.norm(U_projected - U, axis=1)
+    worst_mass = int(np.argmax(correction)) if correction.size else -1
+    dv = float(correction.max()) if correction.size else 0.0
+    if dv <= 1e-14 * max(1.0, float(np.abs(U).max())):
+        dv, worst_mass = 0.0, -1
+    dyn.check_consistent_velocities(X, U_projected)
+    return X, U_projected, InitialReport(worst, projected, dv, worst_mass)
+
+
+class Simulator:
+    """One scene, one integrator, one state: the stepping interface.
+
+    ``advance(t_next, F_input)`` integrates from the current time to ``t_next`` with the input forces
+    held constant (zero-order hold), which is exactly what an FMI co-simulation step does.
+    """
+
+    def __init__(self, scene: Scene, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
+                 atol: float | None = None, *, project_initial: bool | None = None,
+                 length_tol: float = DEFAULT_LENGTH_TOL, max_steps_per_call: int = 100_000_000,
+                 dynamics: Dynamics | None = None):
+        self.scene = scene
+        self.dyn = dynamics or Dynamics(scene)
+        self.method = method
+        self.integrator = make_integrator(method, self.dyn, dt=dt, rtol=rtol, atol=atol)
+        X0, U0, self.initial_report = prepare_initial_state(scene, self.dyn, project_positions=project_initial,
+                                                            length_tol=length_tol)
+        self._initial = State(0.0, X0, U0)
+        self._initial_internals = copy.deepcopy(self.integrator.internals())
+        self.max_steps_per_call = max_steps_per_call
+        self.state = self._initial.copy()
+
+    # ---- stepping ----------------------------------------------------------------------------
+    def check_input(self, F_input) -> np.ndarray | None:
+        """Validate an input force array (K,3); rows of anchored masses are ignored."""
+        if F_input is None:
+            return None
+        F = np.asarray(F_input, dtype=float)
+        if F.shape != (self.scene.K, 3):
+            raise SolverError(f"input forces must have shape ({self.scene.K}, 3), got {F.shape}")
+        bad = ~np.isfinite(F)
+        bad[self.scene.fixed] = False
+        if bad.any():
+            k, i = np.argwhere(bad)[0]
+            raise SolverError(f"input force F[{k + 1},{i + 1}] on {self.scene.mass_label(int(k))} is {F[k, i]}: "
+                              "forces must be finite")
+        return F
+
+    def advance(self, t_next: float, F_input=None) -> None:
+        F = self.check_input(F_input)
+        t_next = float(t_next)
+        if not math.isfinite(t_next) or not t_next > self.state.t:
+            raise SolverError(f"cannot advance from t = {self.state.t} to t = {t_next}: the target must be later "
+                              "and finite")
+        before = (self.state.copy(), copy.deepcopy(self.integrator.internals()))
+        try:
+            self.integrator.advance(self.state, t_next, F, self.max_steps_per_call)
+        except Exception:
+            # leave the simulator where it was, so a caller can retry with other settings
+            self.state, internals = before
+            self.integrator.set_internals(internals)
+            raise
+
+    def outputs(self, F_input=None) -> dict:
+        """Positions, velocities, tensions (with direct feedthrough of F_input, since B of (26) contains F)
+        and the force the network exerts on each anchored mass."""
+        F = self.check_input(F_input)
+        X, U = self.state.X, self.state.U
+        T = self.dyn.tensions(X, U, F)
+        Freact = self.dyn.link_forces(X, T)[self.scene.fixed]
+        return {"t": self.state.t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": Freact}
+
+    # ---- snapshots ---------------------------------------------------------------------------
+    def get_state(self) -> dict:
+        """Everything needed to continue bit-identically: time, positions, velocities, integrator internals."""
+        return {"state": self.state.copy(), "integrator": copy.deepcopy(self.integrator.internals()),
+                "rhs_evaluations": self.dyn.rhs_evaluations}
+
+    def set_state(self, snapshot: dict) -> None:
+        self.state = snapshot["state"].copy()
+        self.integrator.set_internals(copy.deepcopy(snapshot["integrator"]))
+        self.dyn.rhs_evaluations = snapshot.get("rhs_evaluations", self.dyn.rhs_evaluations)
+
+    def reset(self) -> None:
+        self.state = self._initial.copy()
+        self.integrator.set_internals(copy.deepcopy(self._initial_internals))
+
+
+@dataclass
+class Result:
+    scene: Scene
+    method: str
+    t: np.ndarray
+    X: np.ndarray
+    U: np.ndarray
+    T: np.ndarray
+    energy: np.ndarray
+    residual: np.ndarray  # max relative violation of (11) per sample
+    velocity_residual: np.ndarray  # max violation of (12) per sample, m/s
+    kinetic: np.ndarray  # kinetic energy per sample
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def energy_scale(self) -> float:
+        """|E(0)| or the largest kinetic energy of the run, whichever is larger (the potential's zero is arbitrary)."""
+        return max(abs(float(self.energy[0])), float(np.max(self.kinetic)), 1e-300)
+
+    @property
+    def energy_drift(self) -> float:
+        """(E(t_end) - E(0)) / energy_scale. Work of input forces and dissipation show up here too."""
+        return float(self.energy[-1] - self.energy[0]) / self.energy_scale
+
+    def save_npz(self, path) -> None:
+        np.savez_compressed(
+            path, t=self.t, X=self.X, U=self.U, T=self.T, energy=self.energy, residual=self.residual,
+            velocity_residual=self.velocity_residual, mass_names=np.array(self.scene.mass_names),
+            k1=self.scene.k1 + 1, k2=self.scene.k2 + 1, method=self.method)
+
+    def summary(self) -> str:
+        s = self.stats
+        return (f"{self.scene.name}: K={self.scene.K} masses, L={self.scene.L} links, solver {s.get('structure')}, "
+                f"method {self.method}\n"
+                f"  t_end = {self.t[-1]:g} s, steps = {s.get('steps')} (rejected {s.get('rejected', 0)}), "
+                f"wall time = {s.get('wall_time', 0):.3f} s\n"
+                f"  final energy drift = {self.energy_drift:.3e} (relative), max constraint residual = "
+                f"{float(self.residual.max()):.3e} (relative), max velocity residual = "
+                f"{float(self.velocity_residual.max()):.3e} m/s\n"
+                f"  max tension = {float(np.max(self.T)) if self.T.size else 0.0:.6g} N, "
+                f"min tension = {float(np.min(self.T)) if self.T.size else 0.0:.6g} N")
+
+
+def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
+             atol: float | None = None, n_out: int | None = None, output_dt: float | None = None,
+             forces=None, progress: bool | None = None, project_initial: bool | None = None) -> Result:
+    """Simulate ``scene`` from t = 0 to ``t_end``.
+
+    ``forces``: None, a (K,3) array held constant, or a callable ``f(t) -> (K,3)`` evaluated at each
+    output time and held until the next (piecewise constant, as an FMI master does). Outputs are taken
+    at ``n_out`` equally spaced times (default 201) or every ``output_dt``.
+    """
+    if not (isinstance(t_end, (int, float)) and math.isfinite(t_end) and t_end > 0):
+        raise SolverError(f"t_end must be a positive finite time, got {t_end!r}")
+    sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial)
+    if output_dt is not None:
+        n = max(1, int(round(t_end / output_dt)))
+        times = np.linspace(0.0, t_end, n + 1)
+    else:
+        times = np.linspace(0.0, t_end, (n_out or 201))
+    if callable(forces):
+        force_at = forces
+    else:
+        constant = None if forces is None else np.asarray(forces, float)
+        force_at = lambda t: constant  # noqa: E731
+    n = times.size
+    K, L = scene.K, scene.L
+    X = np.empty((n, K, 3))
+    U = np.empty((n, K, 3))
+    T = np.empty((n, L))
+    energy = np.empty(n)
+    kinetic = np.empty(n)
+    residual = np.empty(n)
+    vres = np.empty(n)
+    show = progress if progress is not None else False
+    start = time.perf_counter()
+    last_print = start
+    for i, t in enumerate(times):
+        if i > 0:
+            sim.advance(t, force_at(times[i - 1]))
+        F_now = force_at(t) if i < n - 1 else force_at(times[i - 1] if i > 0 else t)
+        out = sim.outputs(F_now)
+        X[i], U[i], T[i] = out["X"], out["U"], out["T"]
+        energy[i] = sim.dyn.energy(out["X"], out["U"])
+        kinetic[i] = kinetic_energy(scene, out["U"])
+        residual[i] = sim.dyn.constraint_residual(out["X"])
+        vres[i] = sim.dyn.velocity_residual(out["X"], out["U"])
+        now = time.perf_counter()
+        if show is not False and (show is True or now - start > 2.0) and (now - last_print > 0.2 or i == n - 1):
+            _progress_bar(i + 1, n, now - start)
+            last_print = now
+    wall = time.perf_counter() - start
+    if show is not False and wall > 2.0:
+        sys.stderr.write("\n")
+    stats = dict(sim.integrator.stats.as_dict(), wall_time=wall, rhs_evaluations=sim.dyn.rhs_evaluations,
+                 structure=sim.dyn.structure.kind, method=method, dt=dt, rtol=rtol,
+                 initial=sim.initial_report.lines(scene))
+    return Result(scene, method, times, X, U, T, energy, residual, vres, kinetic, stats)
+
+
+def _progress_bar(done: int, total: int, elapsed: float) -> None:
+    width = 30
+    frac = done / total
+    eta = elapsed / frac - elapsed if frac > 0 else 0.0
+    bar = "#" * int(width * frac) + "-" * (width - int(width * frac))
+    sys.stderr.write(f"\r[{bar}] {100 * frac:5.1f}%  {elapsed:6.1f} s elapsed, ~{eta:5.1f} s left")
+    sys.stderr.flush()

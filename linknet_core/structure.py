@@ -1,0 +1,246 @@
+"""Structure of a scene, analysed once: which tension solver it needs, and its rigidity.
+
+The tension matrix A (seed (25)) couples two links only when they share a *free* mass (an anchored mass
+has 1/M = 0, so the term S(l,l')/M(l,l') of (25) vanishes there). Cutting the graph at the anchors
+therefore tells the solver what it faces:
+
+* chain     - the cut graph is a union of paths: A is tridiagonal in path order, O(L);
+* tree      - the cut graph is a forest: eliminating links from the leaves inwards creates no fill, O(L);
+* general   - loops among free masses: sparse LDL^T with a minimum-degree ordering computed once;
+* redundant - the links admit states of self-stress (A singular, the homogeneous solutions of (27),
+              equivalently (31)): minimum-norm tensions by a rank-revealing path.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components, breadth_first_order
+
+from .scene import Scene
+
+DENSE_RANK_LIMIT = 4_000_000  # entries of C; above it, rank is estimated from the LDL pivots
+
+
+@dataclass(frozen=True)
+class LinkPairs:
+    """Pairs of links that share a free mass, with the sign S(l, l') of (21) (+1 on the diagonal).
+
+    ``first[p] <= second[p]``; each link appears twice on the diagonal (once per free end), so that
+    summing ``sign * inv_mass[mass] * (E_first . E_second)`` over the pairs assembles A of (25).
+    """
+
+    first: np.ndarray
+    second: np.ndarray
+    mass: np.ndarray
+    sign: np.ndarray
+
+
+def link_pairs(scene: Scene) -> LinkPairs:
+    """All (l, l', k) with links l, l' incident to the same free mass k (setup, not per step)."""
+    L = scene.L
+    links = np.concatenate([np.arange(L), np.arange(L)])
+    masses = np.concatenate([scene.k1, scene.k2])
+    # sigma = +1 at the k1 end and -1 at the k2 end, so sigma_l * sigma_l' = (-1)^(i+j) of (21)
+    sigma = np.concatenate([np.ones(L), -np.ones(L)])
+    keep = ~scene.fixed[masses]
+    links, masses, sigma = links[keep], masses[keep], sigma[keep]
+    order = np.lexsort((links, masses))
+    links, masses, sigma = links[order], masses[order], sigma[order]
+    starts = np.flatnonzero(np.r_[True, masses[1:] != masses[:-1]])
+    degree = np.diff(np.r_[starts, masses.size])
+    out_first, out_second, out_mass, out_sign = [], [], [], []
+    for d in np.unique(degree):  # vectorised per degree value: no loop per mass
+        group_starts = starts[degree == d]
+        idx = group_starts[:, None] + np.arange(d)[None, :]
+        i, j = np.triu_indices(d)  # includes i == j: the diagonal contributions (18)
+        a, b = links[idx[:, i]], links[idx[:, j]]
+        out_first.append(np.minimum(a, b).ravel())
+        out_second.append(np.maximum(a, b).ravel())
+        out_mass.append(np.repeat(masses[group_starts], i.size))
+        out_sign.append((sigma[idx[:, i]] * sigma[idx[:, j]]).ravel())
+    if not out_first:
+        empty = np.zeros(0, np.int64)
+        return LinkPairs(empty, empty, empty, np.zeros(0))
+    return LinkPairs(np.concatenate(out_first), np.concatenate(out_second), np.concatenate(out_mass),
+                     np.concatenate(out_sign))
+
+
+def _cut_graph(scene: Scene):
+    """Masses-and-links graph with every link end at an anchor given its own node."""
+    K, L = scene.K, scene.L
+    free_ids = -np.ones(K, np.int64)
+    free_ids[scene.free_indices] = np.arange(scene.free_indices.size)
+    n_free = scene.free_indices.size
+    ends = []
+    next_id = n_free
+    node_of_end = np.empty((L, 2), np.int64)
+    for side, kk in enumerate((scene.k1, scene.k2)):
+        ids = free_ids[kk].copy()
+        anchored = scene.fixed[kk]
+        ids[anchored] = next_id + np.arange(int(anchored.sum()))
+        next_id += int(anchored.sum())
+        node_of_end[:, side] = ids
+        ends.append(ids)
+    n_nodes = next_id
+    graph = sp.coo_matrix((np.ones(L), (node_of_end[:, 0], node_of_end[:, 1])), shape=(n_nodes, n_nodes)).tocsr()
+    return graph, node_of_end, n_free
+
+
+@dataclass
+class Structure:
+    """What the solver was chosen from (computed once per scene)."""
+
+    kind: str  # 'chain' | 'tree' | 'general' | 'redundant'
+    topology: str  # 'chain' | 'tree' | 'general' (ignoring redundancy)
+    ordering: np.ndarray  # elimination order of the links
+    max_free_degree: int
+    closed_loops: int  # independent loops of the graph with all anchors merged into one ground node
+    self_stresses: int  # states of self-stress at the initial configuration, L - rank(G)
+    rank_G: int
+    rank_exact: bool  # False where rank was estimated from LDL pivots (very large scenes)
+    planar_normal: np.ndarray | None = None  # unit normal when every mass and force stays in one plane
+    notes: list = field(default_factory=list)
+
+
+def _tree_ordering(scene: Scene, graph, node_of_end, n_free) -> np.ndarray:
+    """Leaves-first order of the links in a forest: no fill in the LDL^T of A."""
+    sym = (graph + graph.T).tocsr()
+    n_nodes = sym.shape[0]
+    n_comp, labels = connected_components(sym, directed=False)
+    degree = np.diff(sym.indptr)
+    depth = np.full(n_nodes, -1, np.int64)
+    # root each component at a leaf so that chains come out in path order (tridiagonal A)
+    for c in range(n_comp):  # setup only: one BFS per component
+        members = np.flatnonzero(labels == c)
+        leaves = members[degree[members] <= 1]
+        root = int(leaves[0]) if leaves.size else int(members[0])
+        order, pred = breadth_first_order(sym, root, directed=False, return_predecessors=True)
+        # depth by walking the BFS order: parents come before children (setup, once per scene)
+        depth[root] = 0
+        for node in order[1:]:
+            depth[node] = depth[pred[node]] + 1
+    link_depth = np.maximum(depth[node_of_end[:, 0]], depth[node_of_end[:, 1]])
+    return np.argsort(-link_depth, kind="stable")
+
+
+def _min_degree_ordering(A_pattern: sp.csr_matrix) -> np.ndarray:
+    """Fill-reducing ordering: SuperLU's minimum degree on A + A^T, or RCM, whichever fills less."""
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+    from scipy.sparse.linalg import splu
+
+    from .ldl import elimination_tree
+
+    n = A_pattern.shape[0]
+    candidates = [np.asarray(reverse_cuthill_mckee(A_pattern.tocsr(), symmetric_mode=True), np.int64)]
+    try:
+        pattern = A_pattern.tocsc().astype(float)
+        pattern = pattern + sp.identity(n, format="csc") * n  # diagonally dominant: no pivoting
+        lu = splu(pattern, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        candidates += [np.asarray(lu.perm_c, np.int64), np.argsort(lu.perm_c).astype(np.int64)]
+    except Exception:  # noqa: BLE001 - the RCM ordering is a valid fallback
+        pass
+    best, best_fill = None, None
+    for perm in candidates:
+        upper = sp.triu(A_pattern[perm][:, perm], format="csc")
+        upper.sort_indices()
+        _, Lnz = elimination_tree(n, upper.indptr.astype(np.int64), upper.indices.astype(np.int64))
+        fill = int(Lnz.sum())
+        if best_fill is None or fill < best_fill:
+            best, best_fill = perm, fill
+    return best
+
+
+def constraint_jacobian(scene: Scene, X: np.ndarray, free_only: bool = True) -> sp.csr_matrix:
+    """C (L x 3K, or L x 3K_free) with row l = +E_l at k1(l) and -E_l at k2(l) (see (9), (12))."""
+    E = (X[scene.k2] - X[scene.k1]) / scene.length[:, None]
+    L = scene.L
+    rows = np.repeat(np.arange(L), 6)
+    cols = np.concatenate([3 * scene.k1[:, None] + np.arange(3), 3 * scene.k2[:, None] + np.arange(3)], axis=1).ravel()
+    vals = np.concatenate([E, -E], axis=1).ravel()
+    C = sp.csr_matrix((vals, (rows, cols)), shape=(L, 3 * scene.K))
+    if free_only:
+        free_cols = (3 * scene.free_indices[:, None] + np.arange(3)).ravel()
+        C = C[:, free_cols]
+    return C
+
+
+def rank_and_nullspace(scene: Scene, X: np.ndarray, rtol: float = 1e-9):
+    """Rank of C (free columns) and an orthonormal basis of the self-stresses (null space of C^T).
+
+    Self-stresses are the T~ of (27)/(31): link tensions in equilibrium with no external load.
+    """
+    C = constraint_jacobian(scene, X).toarray()
+    if C.size == 0:
+        return 0, np.zeros((scene.L, scene.L))
+    U, s, _ = np.linalg.svd(C, full_matrices=True)
+    tol = rtol * (s[0] if s.size else 0.0)
+    rank = int(np.sum(s > tol))
+    return rank, U[:, rank:]
+
+
+def planar_normal(scene: Scene, tol: float = 1e-12) -> np.ndarray | None:
+    """Normal of the plane holding every mass, velocity, gravity and constant force, if there is one."""
+    X = scene.X0
+    origin = X.mean(axis=0)
+    vectors = np.vstack([X - origin, scene.U0, scene.gravity[None, :], scene.force])
+    scale = max(np.abs(vectors).max(), 1e-300)
+    _, s, vt = np.linalg.svd(vectors / scale, full_matrices=True)
+    if s.size >= 3 and s[2] <= tol * max(s[0], 1e-300):
+        return vt[2]
+    return None
+
+
+def analyse(scene: Scene) -> Structure:
+    """Classify the scene once, from its topology and its initial configuration."""
+    graph, node_of_end, n_free = _cut_graph(scene)
+    n_nodes = graph.shape[0]
+    n_comp, _ = connected_components(graph, directed=False)
+    is_forest = scene.L == n_nodes - n_comp
+    free_degree = np.bincount(np.concatenate([scene.k1, scene.k2]), minlength=scene.K)[scene.free_indices]
+    max_free_degree = int(free_degree.max()) if free_degree.size else 0
+    # loops with all anchors merged into one ground node (closed kinematic loops through the ground)
+    ground_ids = np.where(scene.fixed, scene.free_indices.size, -1)
+    ground_ids[scene.free_indices] = np.arange(scene.free_indices.size)
+    n_ground_nodes = scene.free_indices.size + (1 if scene.fixed.any() else 0)
+    g = sp.coo_matrix((np.ones(scene.L), (ground_ids[scene.k1], ground_ids[scene.k2])),
+                      shape=(n_ground_nodes, n_ground_nodes))
+    n_comp_ground, _ = connected_components(g, directed=False)
+    closed_loops = int(scene.L - n_ground_nodes + n_comp_ground)
+
+    if is_forest:
+        topology = "chain" if max_free_degree <= 2 else "tree"
+        ordering = _tree_ordering(scene, graph, node_of_end, n_free)
+    else:
+        topology = "general"
+        pairs = link_pairs(scene)
+        pattern = sp.coo_matrix((np.ones(pairs.first.size), (pairs.first, pairs.second)),
+                                shape=(scene.L, scene.L)).tocsr()
+        pattern = ((pattern + pattern.T) != 0).astype(float)
+        ordering = _min_degree_ordering(pattern)
+
+    notes = []
+    if scene.L * 3 * n_free <= DENSE_RANK_LIMIT:
+        rank, _ = rank_and_nullspace(scene, scene.X0)
+        rank_exact = True
+    else:
+        rank = _rank_from_pivots(scene, ordering)
+        rank_exact = False
+        notes.append("rank of G estimated from the LDL^T pivots (scene too large for a dense SVD)")
+    self_stresses = scene.L - rank
+    kind = "redundant" if self_stresses > 0 else topology
+    return Structure(kind=kind, topology=topology, ordering=np.asarray(ordering, np.int64),
+                     max_free_degree=max_free_degree, closed_loops=closed_loops,
+                     self_stresses=int(self_stresses), rank_G=int(rank), rank_exact=rank_exact,
+                     planar_normal=planar_normal(scene), notes=notes)
+
+
+def _rank_from_pivots(scene: Scene, ordering: np.ndarray) -> int:
+    from .tensions import TensionAssembly
+
+    assembly = TensionAssembly(scene, ordering)
+    E = (scene.X0[scene.k2] - scene.X0[scene.k1]) / scene.length[:, None]
+    ldl = assembly.new_factorisation()
+    ldl.factor(assembly.upper_values(E))
+    return int(scene.L - np.count_nonzero(ldl.Dinv == 0.0))
