@@ -3,9 +3,10 @@
 Written from the seed directly, independently of linknet_core, so that the references it produces are an
 independent check of linknet (not linknet checked against itself):
   tensions from (25)-(26)  A T = B,  accelerations from (9),  dX/dt = U (10).
-Off the constraint manifold the diagonal of A is taken as |E_l|^2 (1/M_k1 + 1/M_k2), i.e. A = C M^-1 C^T with
-C row l = +E_l at k1, -E_l at k2, which is what differentiating (11) twice gives exactly (13); on the manifold
-it equals (25). Constraint drift is not corrected: that is what makes it the *naive* baseline.
+A is assembled entry by entry as in (25): diagonal (1/M_k1 + 1/M_k2) |E_l|^2 and, for links l, l' sharing
+the mass k = k_i(l) = k_j(l'), the entry S(l,l') (E_l . E_l') / M(l,l') with S = (-1)^(i+j) (21)-(22).
+Off the constraint manifold the diagonal carries |E_l|^2 (= 1 on it): that is what differentiating (11)
+twice gives exactly (13). Constraint drift is not corrected: that is what makes it the *naive* baseline.
 
 Where A is singular (redundant links) the minimum-norm tensions are used (the seed (27)-(36) proves any
 solution gives the same forces).
@@ -31,16 +32,50 @@ class Index1System:
         self.g_acc = np.where(spec.fixed[:, None], 0.0, spec.gravity[None, :])  # F_k / M_k for gravity
         self.dense = self.L <= DENSE_MAX_LINKS
         L, K = self.L, self.K
-        # sparsity pattern of C (L x 3K): row l, columns 3*k1+d (+E) and 3*k2+d (-E)
-        rows = np.repeat(np.arange(L), 6)
-        cols = np.concatenate([3 * self.k1[:, None] + np.arange(3), 3 * self.k2[:, None] + np.arange(3)],
-                              axis=1).ravel()
-        self._C = sp.csr_matrix((np.ones(6 * L), (rows, cols)), shape=(L, 3 * K))
-        # the csr ordering is row-major with sorted columns; remember where each (l, slot) lands
-        probe = sp.csr_matrix((np.arange(6 * L, dtype=float) + 1, (rows, cols)), shape=(L, 3 * K))
-        self._perm = (probe.data - 1).astype(np.int64)
-        self._invm3 = np.repeat(self.invm, 3)
+        # pairs (l, l') of distinct links sharing a mass k, with S(l,l') = (-1)^(i+j)  (19)-(22)
+        ends = np.concatenate([self.k1, self.k2])
+        link = np.concatenate([np.arange(L), np.arange(L)])
+        side = np.concatenate([np.zeros(L, int), np.ones(L, int)])
+        order = np.argsort(ends, kind="stable")
+        ends, link, side = ends[order], link[order], side[order]
+        starts = np.searchsorted(ends, np.arange(K + 1))
+        pl, pm, pk, ps = [], [], [], []
+        for k in range(K):   # once per scene, not per step
+            s, e = starts[k], starts[k + 1]
+            if e - s < 2:
+                continue
+            ll, ss = link[s:e], side[s:e]
+            a, b = np.meshgrid(np.arange(e - s), np.arange(e - s), indexing="ij")
+            m = a != b
+            pl.append(ll[a[m]]); pm.append(ll[b[m]]); pk.append(np.full(m.sum(), k))
+            ps.append(np.where(ss[a[m]] == ss[b[m]], 1.0, -1.0))
+        cat = (lambda xs, dt: np.concatenate(xs).astype(dt) if xs else np.zeros(0, dt))
+        self.pl, self.pm, self.pk = cat(pl, np.int64), cat(pm, np.int64), cat(pk, np.int64)
+        self.pcoef = cat(ps, float) * self.invm[self.pk]          # S(l,l') / M(l,l')
+        self.dcoef = self.invm[self.k1] + self.invm[self.k2]       # 1/M_k1 + 1/M_k2   (18)
+        # incidence D (K x L): link force on mass k is sum_l T_l E_l (delta(k,k1) - delta(k,k2))  (9)
+        self.D = sp.csr_matrix((np.concatenate([np.ones(L), -np.ones(L)]),
+                                (np.concatenate([self.k1, self.k2]), np.concatenate([np.arange(L)] * 2))),
+                               shape=(K, L))
+        if not self.dense:
+            rows = np.concatenate([np.arange(L), self.pl])
+            cols = np.concatenate([np.arange(L), self.pm])
+            probe = sp.csc_matrix((np.arange(len(rows), dtype=float) + 1, (rows, cols)), shape=(L, L))
+            self._pattern = probe
+            self._perm = (probe.data - 1).astype(np.int64)
         self.redundant = self._is_redundant()
+
+    def _assemble(self, E):
+        diag = self.dcoef * np.einsum("ij,ij->i", E, E)
+        off = self.pcoef * np.einsum("ij,ij->i", E[self.pl], E[self.pm])
+        if self.dense:
+            A = np.zeros((self.L, self.L))
+            A[self.pl, self.pm] = off
+            A[np.arange(self.L), np.arange(self.L)] = diag
+            return A
+        A = self._pattern.copy()
+        A.data = np.concatenate([diag, off])[self._perm]
+        return A
 
     def _is_redundant(self) -> bool:
         if self.L == 0:
@@ -50,49 +85,35 @@ class Index1System:
             s = np.linalg.svd(A, compute_uv=False)
             return bool(s[-1] <= 1e-10 * s[0])
         try:
-            spla.splu(A.tocsc()).solve(np.ones(self.L))
+            spla.splu(A).solve(np.ones(self.L))
             return False
         except RuntimeError:
             return True
 
-    def _C_of(self, E):
-        data = np.concatenate([E, -E], axis=1).ravel()
-        C = self._C.copy()
-        C.data = data[self._perm]
-        return C
-
     def tension_matrix(self, X):
-        E = (X[self.k2] - X[self.k1]) / self.R[:, None]
-        C = self._C_of(E)
-        A = (C.multiply(self._invm3[None, :]) @ C.T)
-        return A.toarray() if self.dense else A.tocsc()
+        return self._assemble((X[self.k2] - X[self.k1]) / self.R[:, None])
 
-    def tensions(self, X, U):
+    def tensions(self, X, U, E=None):
         if self.L == 0:
             return np.zeros(0)
-        E = (X[self.k2] - X[self.k1]) / self.R[:, None]
+        if E is None:
+            E = (X[self.k2] - X[self.k1]) / self.R[:, None]
         dU = U[self.k2] - U[self.k1]
         # (26): B_l = |U_k2 - U_k1|^2 / R_l + E_l . (F_k2/M_k2 - F_k1/M_k1)
         B = np.einsum("ij,ij->i", dU, dU) / self.R + np.einsum("ij,ij->i", E, self.g_acc[self.k2] - self.g_acc[self.k1])
-        C = self._C_of(E)
-        A = C.multiply(self._invm3[None, :]) @ C.T
+        A = self._assemble(E)
         if self.dense:
-            A = A.toarray()
             if self.redundant:
                 return np.linalg.lstsq(A, B, rcond=1e-12)[0]
             return sla.solve(A, B, assume_a="pos", check_finite=False)
         if self.redundant:
             return spla.lsqr(A, B, atol=1e-15, btol=1e-15, iter_lim=20 * self.L)[0]
-        return spla.spsolve(A.tocsc(), B)
+        return spla.spsolve(A, B)
 
     def accelerations(self, X, U):
-        T = self.tensions(X, U)
         E = (X[self.k2] - X[self.k1]) / self.R[:, None]
-        f = np.zeros((self.K, 3))
-        # (9): link l pulls k1 along +E_l and k2 along -E_l when T_l > 0
-        np.add.at(f, self.k1, T[:, None] * E)
-        np.add.at(f, self.k2, -T[:, None] * E)
-        return self.g_acc + self.invm[:, None] * f, T
+        T = self.tensions(X, U, E)
+        return self.g_acc + self.invm[:, None] * (self.D @ (T[:, None] * E)), T
 
     def rhs(self, t, y):
         K = self.K

@@ -5,8 +5,11 @@ child end of the link (inertial pos), so the link length is exact by constructio
 Integrator RK4 with a fixed timestep (the knob); contacts disabled; mj_step(nstep=n) keeps the loop in C.
 
 What differs / what it cannot model:
-- A point mass has no rotational inertia; MuJoCo needs positive inertia on moving bodies, so each body gets an
-  isotropic inertia eps*m*R^2 (eps = 1e-12) about the mass: a relative perturbation of 1e-12 of the dynamics.
+- A point mass has no rotational inertia; MuJoCo needs positive inertia on moving bodies (> mjMINVAL = 1e-15),
+  so each body gets an isotropic inertia eps*m*R^2 (eps = 1e-12) about the mass: a relative perturbation of
+  1e-12 of the dynamics. To keep eps*m*R^2 above mjMINVAL for small links and masses (chain_1000: m R^2 ~ 1e-9)
+  the model is built in scaled units, length unit = median link length, mass unit = median free mass (time
+  unchanged, gravity scaled accordingly): an exact change of units, undone on the way out.
 - Only trees hanging from anchored masses: every free mass has exactly one path to one anchor (links = free
   masses, each component with one anchor). Closed loops (four_bar, net, truss, tetrahedron) would need
   equality constraints, which in MuJoCo are soft (solref/solimp regularised) and only of the connect/weld kind
@@ -106,6 +109,12 @@ class MujocoRK4(Method):
     def run(self, spec, t_end, dt):
         import mujoco
         n, dt = n_steps(t_end, dt)
+        from dataclasses import replace
+        lam = float(np.median(spec.length))
+        mu = float(np.median(spec.mass[spec.free]))
+        spec_si = spec
+        spec = replace(spec, mass=spec.mass / mu, X0=spec.X0 / lam, U0=spec.U0 / lam, length=spec.length / lam,
+                       gravity=spec.gravity / lam)
         with Timer() as setup:
             parent, order = _tree(spec)
             # nested body frames: a body sits on its parent mass; the XML gives its pos relative to the parent body
@@ -133,4 +142,6 @@ class MujocoRK4(Method):
             X[c] = d.xipos[bid[c]]
             mujoco.mj_jac(m, d, jacp, None, X[c], bid[c])
             U[c] = jacp @ d.qvel
+        X, U = X * lam, U * lam
+        X[spec_si.fixed] = spec_si.X0[spec_si.fixed]
         return RunResult(X, U, tm.seconds, setup.seconds, steps=n)

@@ -1,0 +1,58 @@
+"""Reference solutions at error <= 1e-12 m, computed independently of linknet_core and cached.
+
+Method: scipy's DOP853 on the index-1 formulation written from the seed (benchmarks.index1), at two
+tolerances, rtol = 1e-13 (check) and rtol = 2.5e-14 (reference, near scipy's floor of 100 eps).
+The reference is accepted when the two agree to `AGREE` (1e-12 m) in every mass position; the measured
+difference is stored with the reference and reported, and errors below 10x that difference are treated as
+unresolved (the reference cannot tell them apart). The constraint residual of the reference is stored too:
+the index-1 formulation does not enforce (11), so a small residual is a further independent check.
+
+Cache: docs/benchmarks/references/<scene>-<digest>-t<t_end>.npz; the digest covers every number in the scene,
+so a changed model is recomputed, never silently reused.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from .index1 import Index1System
+from .scene_spec import SceneSpec
+
+CACHE_DIR = Path(__file__).resolve().parent.parent / "docs" / "benchmarks" / "references"
+RTOL_CHECK = 1e-13
+RTOL_REF = 2.5e-14
+AGREE = 1e-12
+
+
+def _solve(spec: SceneSpec, t_end: float, rtol: float):
+    sys = Index1System(spec)
+    t0 = time.perf_counter()
+    sol = solve_ivp(sys.rhs, (0.0, t_end), sys.y0(), method="DOP853", rtol=rtol, atol=rtol * 1e-3)
+    if sol.status != 0:
+        raise RuntimeError(f"reference for {spec.name} failed: {sol.message}")
+    X, U = sys.split(sol.y[:, -1])
+    return X, U, time.perf_counter() - t0, len(sol.t) - 1
+
+
+def reference(spec: SceneSpec, t_end: float, cache: bool = True, log=print) -> dict:
+    path = CACHE_DIR / f"{spec.name}-{spec.digest()}-t{t_end:g}.npz"
+    if cache and path.exists():
+        d = np.load(path)
+        return {k: (d[k] if d[k].ndim else d[k].item()) for k in d.files} | {"path": str(path), "cached": True}
+    log(f"  reference {spec.name} t_end={t_end}: DOP853 rtol={RTOL_CHECK:g} and {RTOL_REF:g} ...")
+    Xc, Uc, sc, _ = _solve(spec, t_end, RTOL_CHECK)
+    X, U, s, steps = _solve(spec, t_end, RTOL_REF)
+    diff = float(np.max(np.linalg.norm(X - Xc, axis=1)))
+    out = {"X": X, "U": U, "agreement": diff, "verified": diff <= AGREE, "rtol_ref": RTOL_REF,
+           "rtol_check": RTOL_CHECK, "seconds": s + sc, "steps": steps,
+           "residual": spec.constraint_residual(X),
+           "energy_drift": abs(spec.energy(X, U) - spec.energy(spec.X0, spec.U0)) / spec.energy_scale()}
+    log(f"    agreement {diff:.3g} m ({'verified' if diff <= AGREE else 'NOT verified'}), "
+        f"residual {out['residual']:.3g}, {out['seconds']:.1f} s")
+    if cache:
+        CACHE_DIR.mkdir(parents=True, exist_ok=True)
+        np.savez(path, **out)
+    return out | {"path": str(path), "cached": False}

@@ -1,0 +1,406 @@
+"""Work-precision benchmark: wall time against error, linknet's integrators side by side with peers.
+
+    python -m benchmarks.work_precision            # full run, writes docs/benchmarks/
+    python -m benchmarks.work_precision --quick    # CI-sized run (< 3 min), writes docs/benchmarks/quick/
+
+For each scene: an independent reference (benchmarks.reference, verified by two tolerances agreeing), then
+every method over a sweep of its accuracy knob (dt for fixed-step methods, rtol for adaptive ones), from
+coarse to fine, until the error reaches the reference floor or one run exceeds the time budget.
+Per run: error = max over masses |X_k(t_end) - X_ref,k(t_end)| [m], the max relative constraint residual
+| |X_k2-X_k1|/R - 1 |, the relative energy drift |E(t_end)-E(0)| / E_scale, wall time of the integration
+only (model construction timed separately), steps.
+Outputs: results.json, results.md (per scene and error level 1e-3/1e-6/1e-9 m the fastest time of every
+method and the ratio linknet-best / best-other), <scene>.png work-precision plots, with machine/versions/date.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import time
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+if __package__ in (None, ""):   # `python benchmarks/work_precision.py`
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+    __package__ = "benchmarks"
+
+from .peers.base import Unsupported  # noqa: E402
+from .reference import reference  # noqa: E402
+from .scene_spec import SceneSpec, load_json  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+MODELS = ROOT / "models"
+LEVELS = (1e-3, 1e-6, 1e-9)
+
+# scene -> simulated time [s]. 2 s for every scene (the peers' orientation figures in issue 6 are for 2 s)
+# except the 1000-link whip, whose reference alone costs minutes at 2 s.
+SCENES = {
+    "pendulum": 2.0, "double_pendulum": 2.0, "chain_10": 2.0, "chain_100": 2.0, "chain_1000": 1.0,
+    "net_10x10": 2.0, "four_bar": 2.0, "spinning_tetrahedron": 2.0, "redundant_truss": 2.0,
+}
+QUICK_SCENES = ("pendulum", "double_pendulum", "four_bar", "spinning_tetrahedron", "chain_10")
+
+# knob sweeps, coarse to fine. Fixed steps as divisors of t_end so every run lands on t_end exactly.
+FULL_DT = [0.02 / 2 ** i for i in range(0, 15)]          # 2e-2 ... 1.2e-6
+FULL_RTOL = [10.0 ** -e for e in range(2, 14)]           # 1e-2 ... 1e-13
+QUICK_DT = [0.01, 0.005, 0.0025, 0.00125]
+QUICK_RTOL = [1e-4, 1e-6, 1e-8]
+
+
+# ------------------------------------------------------------------------------------------------ scenes
+def load_benchmark_scene(name: str) -> SceneSpec:
+    """models/<name>.json through linknet_core when it imports (so the benchmark sees exactly what linknet
+    sees), else through the plain JSON reader; chain_1000 from linknet_core.builders."""
+    try:
+        import linknet_core as ln
+    except Exception:
+        ln = None
+    path = MODELS / f"{name}.json"
+    if path.exists():
+        spec = SceneSpec.from_core(ln.load_scene(path)) if ln is not None else load_json(path)
+        return spec if spec.name == name else _renamed(spec, name)
+    if name == "chain_1000":
+        return _chain_1000(ln)
+    raise FileNotFoundError(f"benchmark scene {name!r}: {path} does not exist")
+
+
+def _renamed(spec, name):
+    from dataclasses import replace
+    return replace(spec, name=name)
+
+
+def _chain_1000(ln) -> SceneSpec:
+    """A 1000-link chain released from horizontal: linknet_core.builders.chain(1000) with the same total
+    length and total mass as models/chain_100.json (= builders.chain(100))."""
+    if ln is None or not hasattr(ln, "builders"):
+        raise FileNotFoundError("chain_1000 needs linknet_core.builders.chain")
+    kw = {}
+    if (MODELS / "chain_100.json").exists():
+        ref = load_benchmark_scene("chain_100")
+        kw = {"total_length": float(ref.length.sum()), "total_mass": float(ref.mass[ref.free].sum()) * 1001 / 1000}
+    return _renamed(SceneSpec.from_core(ln.builders.chain(1000, **kw)), "chain_1000")
+
+
+# ------------------------------------------------------------------------------------------------ methods
+def all_methods(quick: bool):
+    from .peers.ase_peer import ASEVelocityVerlet
+    from .peers.exudyn_peer import ExudynGenAlpha
+    from .peers.linknet_methods import LinknetMethod, linknet_method_names
+    from .peers.mujoco_peer import MujocoRK4
+    from .peers.openmm_peer import OpenMMVerlet
+    from .peers.scipy_baseline import ScipyIVP
+    methods = [LinknetMethod(m) for m in linknet_method_names()]
+    methods += [ScipyIVP("RK45"), ScipyIVP("DOP853")]
+    methods += [OpenMMVerlet("Reference")]
+    if not quick:
+        methods += [OpenMMVerlet("CPU")]
+    methods += [ExudynGenAlpha(), MujocoRK4()]
+    if not quick:   # ASE's link-by-link Python RATTLE needs ~3 ms per step even on a pendulum
+        methods += [ASEVelocityVerlet()]
+    return methods
+
+
+# ------------------------------------------------------------------------------------------------ runs
+def _measure(method, spec, t_end, knob, repeat_below: float):
+    """One run; runs shorter than `repeat_below` seconds are repeated (up to 5 in all) and the fastest kept."""
+    best = method.run(spec, t_end, knob)
+    total = best.seconds
+    for _ in range(4):
+        if total >= repeat_below or best.seconds >= repeat_below / 5:
+            break
+        r = method.run(spec, t_end, knob)
+        total += r.seconds
+        if r.seconds < best.seconds:
+            best = r
+    return best
+
+
+def sweep(method, spec, t_end, ref, *, quick: bool, run_budget: float, sweep_budget: float, log=print):
+    rows = []
+    try:
+        method.check_scene(spec)
+    except Unsupported as e:
+        return [{"status": "unsupported", "message": str(e)}]
+    knobs = (QUICK_DT if quick else FULL_DT) if method.knob == "dt" else (QUICK_RTOL if quick else FULL_RTOL)
+    floor = max(10 * float(ref["agreement"]), 1e-13)
+    spent, failures = 0.0, 0
+    for knob in knobs:
+        row = {"knob": method.knob, "value": knob}
+        try:
+            r = _measure(method, spec, t_end, knob, repeat_below=0.0 if quick else 0.2)
+        except Exception as e:   # a failing run is a result, not a crash of the benchmark
+            failures += 1
+            row |= {"status": "failed", "message": f"{type(e).__name__}: {e}"[:300]}
+            rows.append(row)
+            log(f"    {method.name:28s} {method.knob}={knob:<9.3g} FAILED {row['message'][:100]}")
+            if failures >= 3:   # three failures in a row: the method cannot do this scene
+                break
+            continue
+        failures = 0
+        err = float(np.max(np.linalg.norm(r.X - ref["X"], axis=1)))
+        finite = bool(np.all(np.isfinite(r.X)))
+        row |= {"status": "ok" if finite else "nonfinite", "seconds": r.seconds,
+                "setup_seconds": r.setup_seconds, "steps": int(r.steps),
+                "error": err if finite else None,
+                "resolved": bool(err >= floor),
+                "residual": spec.constraint_residual(r.X) if finite else None,
+                "energy_drift": (abs(spec.energy(r.X, r.U) - spec.energy(spec.X0, spec.U0)) / spec.energy_scale()
+                                 if (finite and r.U is not None) else None),
+                "info": {k: v for k, v in r.info.items() if isinstance(v, (int, float, str))}}
+        rows.append(row)
+        spent += r.seconds
+        log(f"    {method.name:28s} {method.knob}={knob:<9.3g} err={err:9.3e} res={row['residual']:8.1e} "
+            f"dE={row['energy_drift'] if row['energy_drift'] is not None else float('nan'):8.1e} "
+            f"t={r.seconds * 1e3:10.3f} ms steps={r.steps}")
+        if not finite or err < floor or r.seconds > run_budget or spent > sweep_budget:
+            break
+    return rows
+
+
+def fastest_at(rows, level):
+    ok = [r for r in rows if r.get("status") == "ok" and r["error"] is not None and r["error"] <= level]
+    return min(ok, key=lambda r: r["seconds"]) if ok else None
+
+
+def summarize(scene_result):
+    """Per error level: fastest time of every method, linknet's best, the best of the others, the ratio."""
+    out = {}
+    methods = scene_result["methods"]
+    for level in LEVELS:
+        per = {}
+        for name, m in methods.items():
+            best = fastest_at(m["runs"], level)
+            if best is not None:
+                per[name] = {"seconds": best["seconds"], "knob": best["value"], "error": best["error"]}
+        lk = {n: v for n, v in per.items() if methods[n]["family"] == "linknet"}
+        other = {n: v for n, v in per.items() if methods[n]["family"] != "linknet"}
+        bl = min(lk, key=lambda n: lk[n]["seconds"]) if lk else None
+        bo = min(other, key=lambda n: other[n]["seconds"]) if other else None
+        out[f"{level:g}"] = {"per_method": per, "linknet_best": bl, "other_best": bo,
+                             "ratio": (lk[bl]["seconds"] / other[bo]["seconds"]) if (bl and bo) else None}
+    return out
+
+
+# ------------------------------------------------------------------------------------------------ report
+def _versions():
+    v = {"python": sys.version.split()[0]}
+    for mod in ("numpy", "scipy", "numba", "openmm", "exudyn", "mujoco", "ase", "matplotlib"):
+        try:
+            v[mod] = __import__(mod).__version__
+        except Exception:
+            v[mod] = None
+    try:
+        v["linknet_commit"] = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                                             text=True, timeout=10).stdout.strip() or None
+    except Exception:
+        v["linknet_commit"] = None
+    return v
+
+
+def _machine():
+    cpu = platform.processor()
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    mem = None
+    try:
+        mem = round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30, 1)
+    except (ValueError, OSError):
+        pass
+    return {"platform": platform.platform(), "cpu": cpu, "cores": os.cpu_count(), "memory_GiB": mem}
+
+
+def _fmt_t(s):
+    return "—" if s is None else (f"{s * 1e3:.3g} ms" if s < 1 else f"{s:.3g} s")
+
+
+def write_markdown(results, path: Path):
+    meta = results["meta"]
+    lines = [f"# Work-precision benchmark{' (quick)' if meta['quick'] else ''}", "",
+             f"Generated {meta['date']} by `{meta['command']}` in {meta['total_seconds']:.0f} s.  ",
+             f"Machine: {meta['machine']['cpu']}, {meta['machine']['cores']} cores, "
+             f"{meta['machine']['memory_GiB']} GiB; {meta['machine']['platform']}.  ",
+             "Versions: " + ", ".join(f"{k} {v}" for k, v in meta["versions"].items() if v) + ".", "",
+             "Error = max over masses |X_k(t_end) − X_ref,k(t_end)|. Each cell is the fastest wall time (integration "
+             "only, one core, in-process) among the method's runs whose error is at or below the level; — means "
+             "no run reached it (or the method cannot model the scene: see the notes). Ratio = linknet's best ÷ the "
+             "best of all other methods (peers and scipy baselines); below 1 linknet is faster.", ""]
+    for sname, sres in results["scenes"].items():
+        ref = sres["reference"]
+        lines += [f"## {sname}", "",
+                  f"K = {sres['K']}, L = {sres['L']}, t_end = {sres['t_end']} s. Reference: DOP853 rtol "
+                  f"{ref['rtol_ref']:g} vs {ref['rtol_check']:g} agree to {ref['agreement']:.2g} m "
+                  f"({'verified ≤ 1e-12' if ref['verified'] else 'NOT verified to 1e-12'}), residual "
+                  f"{ref['residual']:.2g}.", ""]
+        summ = sres["summary"]
+        hdr = "| method | " + " | ".join(f"≤ {lv:g} m" for lv in LEVELS) + " | best error reached | max residual | max energy drift |"
+        lines += [hdr, "|" + "---|" * (len(LEVELS) + 4)]
+        for mname, m in sres["methods"].items():
+            oks = [r for r in m["runs"] if r.get("status") == "ok"]
+            if not oks:
+                msg = (m["runs"][0].get("message", "") if m["runs"] else m.get("message", "")) or "no successful run"
+                lines.append(f"| {mname} | " + " | ".join("—" for _ in LEVELS) + f" | n/a: {msg[:120]} | | |")
+                continue
+            cells = []
+            for lv in LEVELS:
+                p = summ[f"{lv:g}"]["per_method"].get(mname)
+                cells.append(_fmt_t(p["seconds"]) if p else "—")
+            best = min(r["error"] for r in oks)
+            resid = max(r["residual"] for r in oks)
+            drifts = [r["energy_drift"] for r in oks if r["energy_drift"] is not None]
+            lines.append(f"| {mname} | " + " | ".join(cells) + f" | {best:.2e} | {resid:.1e} | "
+                         f"{(max(drifts) if drifts else float('nan')):.1e} |")
+        rcells = []
+        for lv in LEVELS:
+            s = summ[f"{lv:g}"]
+            rcells.append("—" if s["ratio"] is None else f"**{s['ratio']:.3g}** ({s['linknet_best']} / {s['other_best']})")
+        lines += ["| **ratio linknet-best / best other** | " + " | ".join(rcells) + " | | | |", ""]
+        if sres.get("plot"):
+            lines += [f"![{sname}]({Path(sres['plot']).name})", ""]
+    if results.get("notes"):
+        lines += ["## Notes on the peers", ""] + [f"- {n}" for n in results["notes"]] + [""]
+    path.write_text("\n".join(lines))
+
+
+def plot_scene(sname, sres, path: Path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(7.5, 5.5))
+    style = {"linknet": "-", "baseline": "--", "peer": ":"}
+    for mname, m in sres["methods"].items():
+        pts = sorted((r["error"], r["seconds"]) for r in m["runs"] if r.get("status") == "ok" and r["error"] > 0)
+        if not pts:
+            continue
+        e, t = zip(*pts)
+        ax.loglog(e, t, style[m["family"]], marker="o", ms=3, label=mname)
+    for lv in LEVELS:
+        ax.axvline(lv, color="0.85", lw=0.8, zorder=0)
+    ax.axvline(max(10 * sres["reference"]["agreement"], 1e-13), color="r", lw=0.6, ls="--", label="reference floor")
+    ax.set_xlabel("error max_k |X_k(t_end) - X_ref,k(t_end)|  [m]")
+    ax.set_ylabel("wall time [s]")
+    ax.set_title(f"{sname}: K={sres['K']}, L={sres['L']}, t_end={sres['t_end']} s")
+    ax.invert_xaxis()
+    ax.grid(True, which="major", alpha=0.3)
+    ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+PEER_NOTES = [
+    "Timing: wall time of the integration only, model construction excluded (OpenMM Context creation, Exudyn "
+    "Assemble, MuJoCo compile, linknet Simulator construction, scipy RHS setup); runs under 0.2 s are repeated "
+    "and the fastest kept.",
+    "scipy-RK45 / scipy-DOP853: solve_ivp on the unprojected index-1 formulation (seed (9),(25),(26)), "
+    "atol = 1e-3·rtol; the constraint drift is not corrected (naive baseline).",
+    "OpenMM VerletIntegrator (leapfrog) with constraint tolerance 1e-12; anchored masses are particles of mass "
+    "1e20 (OpenMM refuses constraints on massless particles); initial velocity given at -dt/2 from the exact "
+    "initial accelerations. Units m→nm, s→ps, kg→amu are exact (kJ/mol = amu nm²/ps²).",
+    "Exudyn generalized-alpha, spectral radius 0.9 (Exudyn's default; 1.0 fails on the whipping chain), index-3 "
+    "constraints, full Newton to 1e-12; fixed step.",
+    "MuJoCo RK4 on ball-jointed bodies: exact link lengths by construction, point masses given inertia "
+    "1e-12·m·R²; only trees hanging from anchors (no faithful rigid distance constraint for closed loops: "
+    "MuJoCo's equality constraints are soft and of connect/weld type).",
+    "ASE VelocityVerlet + FixBondLengths (RATTLE, link-by-link Python loop, tolerance 1e-13); anchored masses "
+    "of mass 1e20.",
+]
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="CI-sized run: few scenes, few settings")
+    ap.add_argument("--scenes", nargs="*", help="subset of scenes")
+    ap.add_argument("--methods", nargs="*", help="subset of methods (names as in the table)")
+    ap.add_argument("--out", type=Path, help="output folder (default docs/benchmarks, or docs/benchmarks/quick)")
+    ap.add_argument("--models", type=Path, help="folder of scene JSON files (default models/)")
+    ap.add_argument("--no-cache", action="store_true", help="recompute references even if cached")
+    ap.add_argument("--run-budget", type=float, help="stop a sweep after a run longer than this [s]")
+    args = ap.parse_args(argv)
+    quick = args.quick
+    if args.models:
+        global MODELS
+        MODELS = args.models
+    out = args.out or (ROOT / "docs" / "benchmarks" / ("quick" if quick else ""))
+    out.mkdir(parents=True, exist_ok=True)
+    run_budget = args.run_budget or (2.0 if quick else 10.0)
+    sweep_budget = 4.0 if quick else 60.0
+    scenes = args.scenes or (list(QUICK_SCENES) if quick else list(SCENES))
+    t_start = time.perf_counter()
+    methods = all_methods(quick)
+    if args.methods:
+        methods = [m for m in methods if m.name in args.methods]
+    results = {"meta": {}, "scenes": {}, "notes": list(PEER_NOTES), "unavailable": {}}
+    for m in methods:
+        ok, why = m.available()
+        if not ok:
+            results["unavailable"][m.name] = why
+            print(f"  {m.name}: unavailable: {why}")
+    methods = [m for m in methods if m.name not in results["unavailable"]]
+    for sname in scenes:
+        t_end = SCENES[sname]
+        try:
+            spec = load_benchmark_scene(sname)
+        except Exception as e:
+            print(f"[{sname}] cannot load: {e}")
+            results["scenes"][sname] = {"error": str(e)}
+            continue
+        print(f"[{sname}] K={spec.K} L={spec.L} t_end={t_end}")
+        ref = reference(spec, t_end, cache=not args.no_cache)
+        sres = {"K": spec.K, "L": spec.L, "t_end": t_end, "digest": spec.digest(),
+                "reference": {k: ref[k] for k in ("agreement", "verified", "rtol_ref", "rtol_check", "residual",
+                                                  "energy_drift", "seconds", "steps")}, "methods": {}}
+        sres["reference"] = {k: (v.item() if hasattr(v, "item") else v) for k, v in sres["reference"].items()}
+        for m in methods:
+            try:
+                runs = sweep(m, spec, t_end, ref, quick=quick, run_budget=run_budget, sweep_budget=sweep_budget)
+            except Exception as e:   # never lose the other methods' results to one adapter's bug
+                traceback.print_exc()
+                runs = [{"status": "failed", "message": f"{type(e).__name__}: {e}"}]
+            sres["methods"][m.name] = {"family": m.family, "knob": m.knob, "order": m.order, "runs": runs}
+        sres["summary"] = summarize(sres)
+        try:
+            p = out / f"{sname}.png"
+            plot_scene(sname, sres, p)
+            sres["plot"] = str(p)
+        except Exception as e:
+            print(f"  plot failed: {e}")
+        results["scenes"][sname] = sres
+    results["meta"] = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                       "command": "python -m benchmarks.work_precision" + (" --quick" if quick else "")
+                       + (" --scenes " + " ".join(args.scenes) if args.scenes else ""),
+                       "quick": quick, "machine": _machine(), "versions": _versions(),
+                       "total_seconds": time.perf_counter() - t_start}
+    (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
+    write_markdown({k: v for k, v in results.items()} | {"scenes": {k: v for k, v in results["scenes"].items()
+                                                                    if "methods" in v}}, out / "results.md")
+    print(f"wrote {out / 'results.json'} and {out / 'results.md'} in {results['meta']['total_seconds']:.0f} s")
+    return results
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.bool_):
+        return bool(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    raise TypeError(type(o))
+
+
+if __name__ == "__main__":
+    main()
