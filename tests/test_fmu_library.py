@@ -1,0 +1,102 @@
+"""FMU results equal the library's (linknet_core) for the same scene, inputs and solver settings.
+
+FMU clients run in subprocesses (fmu_harness.run_client); references are computed here with
+linknet_core directly, so the two paths share no FMI code.
+"""
+import numpy as np
+import pytest
+
+from fmu_harness import FMU_CLIENT_LIB, MODELS, build_cached, run_client  # first: repo on sys.path
+import linknet_core as ln
+
+H, T_END = 0.01, 0.5
+TIP = 10  # 0-based index of chain_10's tip mass (F[11,3] in the FMU)
+
+
+def tip_force(t):
+    """A step of 2 N at t = 0.1 s plus a 3 Hz sine of 0.5 N (z component of the tip force)."""
+    return (2.0 if t >= 0.1 - 1e-12 else 0.0) + 0.5 * np.sin(2 * np.pi * 3 * t)
+
+
+@pytest.fixture(scope="module")
+def fmu_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("fmus_lib")
+
+
+def _library_reference(scene, method, **settings):
+    """Library run with the same piecewise-constant force (held over each communication step)."""
+    times = np.array([n * H for n in range(int(round(T_END / H)) + 1)])
+
+    def forces(t):
+        F = np.zeros((scene.K, 3))
+        F[TIP, 2] = tip_force(times[int(round(t / H))])
+        return F
+
+    res = ln.simulate(scene, T_END, method=method, output_dt=H, forces=forces, **settings)
+    # An FMI master reads outputs after doStep, before it sets the next input: the tensions it
+    # sees at t_n carry the force held over the step that ended there (direct feedthrough).
+    dyn = ln.Dynamics(scene)
+    T_held = np.array([dyn.tensions(res.X[n], res.U[n], forces(times[max(n - 1, 0)])) for n in range(len(times))])
+    return res, T_held
+
+
+@pytest.mark.parametrize("method,settings,fmu_opts", [
+    ("rattle", dict(dt=1e-3), dict(step=1e-3)),
+    ("dop853", dict(rtol=1e-9), dict(integrator="dop853", tolerance=1e-9)),
+])
+def test_simulate_fmu_with_time_varying_force_matches_library(method, settings, fmu_opts, fmu_dir):
+    fmu = build_cached(fmu_dir, str(MODELS / "chain_10.json"), **fmu_opts)
+    scene = ln.load_scene(MODELS / "chain_10.json")
+    out = run_client(f"""
+import fmpy
+h, t_end = {H!r}, {T_END!r}
+times = np.array([n * h for n in range(int(round(t_end / h)) + 1)])
+step_sine = lambda t: (2.0 if t >= 0.1 - 1e-12 else 0.0) + 0.5 * np.sin(2 * np.pi * 3 * t)
+signal = np.array([(t, step_sine(t)) for t in times], dtype=[('time', float), ('F[11,3]', float)])
+names = [f'X[{{k}},{{i}}]' for k in range(1, 12) for i in (1, 2, 3)] + \\
+        [f'U[{{k}},{{i}}]' for k in range(1, 12) for i in (1, 2, 3)] + [f'T[{{l}}]' for l in range(1, 11)] + \\
+        ['Freact[1,1]', 'Freact[1,2]', 'Freact[1,3]']
+res = fmpy.simulate_fmu({str(fmu)!r}, stop_time=t_end, output_interval=h, input=signal, output=names)
+save(t=res['time'], X=np.stack([res[n] for n in names[:33]], 1).reshape(-1, 11, 3),
+     U=np.stack([res[n] for n in names[33:66]], 1).reshape(-1, 11, 3),
+     T=np.stack([res[n] for n in names[66:76]], 1), Freact=np.stack([res[n] for n in names[76:]], 1))
+""", fmu_dir / f"client_lib_{method}")
+    ref, T_held = _library_reference(scene, method, **settings)
+    np.testing.assert_allclose(out["t"], ref.t, rtol=0, atol=1e-12)
+    # same solver, same held inputs, same communication points: agreement to round-off
+    np.testing.assert_allclose(out["X"], ref.X, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(out["U"], ref.U, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(out["T"], T_held, rtol=1e-9, atol=1e-9)
+    # the force on the anchor is the link forces' reaction, from the library's own C^T T
+    dyn = ln.Dynamics(scene)
+    Freact = np.array([dyn.link_forces(ref.X[n], T_held[n])[0] for n in range(len(ref.t))])
+    np.testing.assert_allclose(out["Freact"], Freact, rtol=1e-9, atol=1e-9)
+    assert np.ptp(out["X"][:, TIP, 2]) > 0.05  # the run is not trivial: the tip moved
+
+
+def test_direct_feedthrough_is_as_declared(fmu_dir):
+    """Setting F changes T at once (B of (26) contains F) and leaves X and U alone, as the
+    ModelStructure says; the new T equals the library's tensions for that force."""
+    fmu = build_cached(fmu_dir, str(MODELS / "chain_10.json"), step=1e-3)
+    out = run_client(f"""
+{FMU_CLIENT_LIB}
+f = Fmu({str(fmu)!r})
+f.init()
+t = 0.0
+for n in range(20):
+    f.step(t, 0.01); t += 0.01
+X_names, U_names, T_names = f.names('X'), f.names('U'), f.names('T')
+before = f.get(X_names + U_names + T_names)
+f.set({{'F[11,3]': 3.0, 'F[5,1]': -1.0}})
+after = f.get(X_names + U_names + T_names)
+save(before=before, after=after, t=t)
+""", fmu_dir / "client_feedthrough")
+    n_xu = 66
+    np.testing.assert_array_equal(out["after"][:n_xu], out["before"][:n_xu])
+    assert np.max(np.abs(out["after"][n_xu:] - out["before"][n_xu:])) > 0.1
+    scene = ln.load_scene(MODELS / "chain_10.json")
+    X = out["after"][:33].reshape(11, 3)
+    U = out["after"][33:66].reshape(11, 3)
+    F = np.zeros((11, 3))
+    F[10, 2], F[4, 0] = 3.0, -1.0
+    np.testing.assert_allclose(out["after"][n_xu:], ln.Dynamics(scene).tensions(X, U, F), rtol=1e-12, atol=1e-12)
