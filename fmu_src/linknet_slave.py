@@ -19,6 +19,7 @@ import json
 import math
 import os
 import pickle
+import sys
 
 import numpy as np
 
@@ -80,7 +81,11 @@ class LinknetNetwork(Fmi2Slave):
 
     # ------------------------------------------------------------------ helpers
     def _error(self, msg, status=Fmi2Status.error):
-        self.log(f"{self.instance_name}: {msg}", status)
+        msg = f"{self.instance_name}: {msg}"
+        self.log(msg, status)
+        # pythonfmu 0.7.0 forwards log messages only when the host instantiated with
+        # loggingOn=true; errors also go to stderr so they are never silent.
+        sys.stderr.write(f"[linknet FMU error] {msg}\n")
 
     def _make_simulator(self, scene):
         method = self._integrator

@@ -110,7 +110,7 @@ class Fmu:
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
                                modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
-        self.slave.instantiate(callbacks=CALLBACKS)
+        self.slave.instantiate(callbacks=CALLBACKS, loggingOn=True)  # pythonfmu logs nothing otherwise
     def init(self, start=None, strings=None):
         self.slave.setupExperiment(startTime=0.0)
         self.slave.enterInitializationMode()

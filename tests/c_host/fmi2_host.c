@@ -93,7 +93,7 @@ int main(int argc, char **argv) {
     DoStep_t do_step = (DoStep_t)sym(lib, "fmi2DoStep");
 
     fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
-    fmi2Component c = instantiate("c_host", fmi2CoSimulation, guid, uri, &cb, 0, 0);
+    fmi2Component c = instantiate("c_host", fmi2CoSimulation, guid, uri, &cb, 0, 1);
     if (!c) { fprintf(stderr, "fmi2Instantiate failed\n"); return 4; }
     CHECK(setup(c, 0, 0.0, 0.0, 1, t_end));
     CHECK(enter(c));

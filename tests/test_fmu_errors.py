@@ -1,0 +1,127 @@
+"""Bad input gives fmi2Discard/fmi2Error with a logged message naming the variable, never
+fmi2Fatal or a crash, and the instance stays usable (or is usable again after fmi2Reset).
+Any communication step h > 0 works, down to 1e-13 s."""
+import numpy as np
+import pytest
+
+from fmu_harness import FMU_CLIENT_LIB, MODELS, build_cached, run_client  # first: repo on sys.path
+import linknet_core as ln
+
+
+@pytest.fixture(scope="module")
+def fmu_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("fmus_err")
+
+
+def test_bad_inputs_are_refused_with_named_messages_and_the_instance_recovers(fmu_dir):
+    fmu = build_cached(fmu_dir, str(MODELS / "chain_10.json"), step=1e-3)
+    out = run_client(f"""
+{FMU_CLIENT_LIB}
+import json
+cases = {{}}
+def attempt(label, f, t, h):
+    '''doStep; record the status and the log lines it produced'''
+    LOG.clear()
+    try:
+        f.step(t, h)
+        status = 0
+    except FMICallException as e:
+        status = e.status
+    cases[label] = dict(status=status, log=[m for s, m in LOG], log_status=[s for s, m in LOG])
+    return status
+
+f = Fmu({str(fmu)!r})
+f.init()
+t = 0.0
+attempt('ok', f, t, 0.01); t += 0.01
+for bad in (float('nan'), float('inf')):
+    LOG.clear()
+    f.set({{'F[11,3]': bad}})
+    set_log = list(LOG)
+    attempt(f'force {{bad}}', f, t, 0.01)
+    cases[f'force {{bad}}']['set_log'] = [m for s, m in set_log]
+f.set({{'F[11,3]': 1.0}})
+attempt('after good force', f, t, 0.01); t += 0.01
+attempt('zero step', f, t, 0.0)
+attempt('negative step', f, t, -0.01)
+attempt('wrong time', f, t + 0.5, 0.01)
+attempt('tiny step', f, t, 1e-13); t += 1e-13
+attempt('normal again', f, t, 0.01); t += 0.01
+LOG.clear()
+f.set({{'M[3]': 2.0}})                      # fixed parameter after initialization
+attempt('fixed parameter after init', f, t, 0.01)
+f.set({{'F[11,3]': 1e300}})
+f.slave.reset(); f.init()               # reset clears everything
+t = 0.0
+attempt('after reset', f, t, 0.01); t += 0.01
+f.set({{'F[11,3]': 1e300}})                 # finite but absurd: the solver cannot continue
+attempt('absurd force', f, t, 0.01)
+f.set({{'F[11,3]': 0.0}})
+f.slave.reset(); f.init()
+attempt('after second reset', f, 0.0, 0.01)
+
+g = Fmu({str(fmu)!r}, 'g')                 # parameters out of range before initialization
+g.slave.setupExperiment(startTime=0.0)
+g.slave.enterInitializationMode()
+LOG.clear()
+g.set({{'M[2]': -1.0, 'step': 0.0}})
+g.slave.setString([g.vr['integrator']], ['euler'])
+param_log = [m for s, m in LOG]
+g.slave.exitInitializationMode()
+attempt('bad parameters', g, 0.0, 0.01)
+cases['bad parameters']['set_log'] = param_log
+g.slave.reset(); g.init()
+attempt('bad parameters then reset', g, 0.0, 0.01)
+
+k = Fmu({str(fmu)!r}, 'k')                 # a link length the initial positions violate
+k.init(start={{'R[1]': 0.5}})
+attempt('inconsistent length', k, 0.0, 0.01)
+k.slave.reset(); k.init(start={{'M[3]': 0.2, 'g[3]': -1.62}})
+attempt('valid parameters', k, 0.0, 0.01)
+save(cases=np.array(json.dumps(cases)))
+""", fmu_dir / "client_errors")
+    import json
+    cases = json.loads(str(out["cases"]))
+    DISCARD = 2
+
+    def refused(label, *words):
+        c = cases[label]
+        assert c["status"] == DISCARD, (label, c)
+        text = " ".join(c["log"] + c.get("set_log", []))
+        for w in words:
+            assert w in text, (label, w, text)
+        assert 4 not in c["log_status"]  # never fmi2Fatal
+
+    for label in ("ok", "after good force", "tiny step", "normal again", "after reset",
+                  "after second reset", "bad parameters then reset", "valid parameters"):
+        assert cases[label]["status"] == 0, (label, cases[label])
+    refused("force nan", "F[11,3]", "finite")
+    refused("force inf", "F[11,3]", "finite")
+    refused("zero step", "h=0.0", "> 0")
+    refused("negative step", "h=-0.01")
+    refused("wrong time", "currentCommunicationPoint")
+    refused("fixed parameter after init", "M[3]", "after initialization")
+    refused("absurd force", "doStep")
+    refused("bad parameters", "M[2]", "> 0", "step", "integrator", "euler")
+    refused("inconsistent length", "link 1", "length")
+
+
+def test_variable_and_tiny_communication_steps_match_library(fmu_dir):
+    fmu = build_cached(fmu_dir, str(MODELS / "double_pendulum.json"), integrator="dop853", tolerance=1e-10)
+    steps = [0.05, 1e-13, 0.02, 1e-13, 1e-13, 0.1, 0.003, 1e-9, 0.2]
+    out = run_client(f"""
+{FMU_CLIENT_LIB}
+f = Fmu({str(fmu)!r})
+f.init()
+t = 0.0
+for h in {steps!r}:
+    f.step(t, h); t += h
+save(X=f.get(f.names('X')), T=f.get(f.names('T')), t=t)
+""", fmu_dir / "client_steps")
+    sim = ln.Simulator(ln.load_scene(MODELS / "double_pendulum.json"), method="dop853", rtol=1e-10)
+    t = 0.0
+    for h in steps:
+        sim.advance(t + h)
+        t += h
+    np.testing.assert_allclose(out["X"], sim.state.X.ravel(), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(out["T"], sim.outputs()["T"], rtol=1e-12, atol=1e-12)
