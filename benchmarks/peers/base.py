@@ -28,6 +28,16 @@ class Method:
     knob = "dt"              # 'dt' (fixed step) or 'rtol' (adaptive)
     order = None             # nominal order of convergence in the knob (used by the quick test)
 
+    # Stated accuracy contract checked by tests/test_benchmark_quick.py (never timings):
+    # adaptive methods: error <= RTOL_BOUND_FACTOR * rtol [m] over the 2 s benchmark runs;
+    # fixed-step methods: observed order between successive settings >= ORDER_FRACTION * order.
+    RTOL_BOUND_FACTOR = 1e3
+    ORDER_FRACTION = 0.7
+
+    def error_bound(self, knob_value: float) -> float | None:
+        """Largest error [m] this method promises at this knob value (None: no promise for one run)."""
+        return self.RTOL_BOUND_FACTOR * knob_value if self.knob == "rtol" else None
+
     def available(self) -> tuple[bool, str]:
         return True, ""
 
