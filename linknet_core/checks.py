@@ -54,27 +54,58 @@ class CheckResult:
 # sampling
 # ------------------------------------------------------------------------------------------------
 
-def _project_positions(sym: SymbolicTensionSystem, x, tol=1e-14, max_iter=60):
-    """Gauss-Newton onto (11): x <- x - G^+ g (minimum-norm step). Returns x or None."""
+def _min_norm_solve(G, g):
+    """Minimum-norm z with G z = g (least squares where inconsistent), via G G^T: cheap for sparse G.
+
+    A relative 1e-13 ridge keeps redundant (rank-deficient) G usable; the ridge's bias is far below the
+    projection tolerance because every step is repeated until the residual vanishes.
+    """
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    if G.shape[0] == 0:
+        return np.zeros(G.shape[1])
+    Gs = sp.csr_matrix(G)
+    GG = (Gs @ Gs.T).tocsc()
+    ridge = 1e-13 * max(float(GG.diagonal().sum()) / GG.shape[0], 1e-300)
+    y = spla.splu((GG + ridge * sp.identity(GG.shape[0], format="csc")).tocsc()).solve(np.asarray(g, float))
+    return Gs.T @ y
+
+
+def _project_positions(sym: SymbolicTensionSystem, x, tol=1e-14, max_iter=50):
+    """Gauss-Newton onto (11) with backtracking: x <- x + alpha G^+ g. Returns x or None.
+
+    The backtracking matters near singular configurations (a taut row of a net, a redundant truss),
+    where a full minimum-norm step overshoots along the nearly singular direction.
+    """
     R = sym._R
+
+    def residual(z):
+        g = np.asarray(sym.constraint_fn(z)).ravel()      # (|D|^2 - R^2)/(2R) ~ |D| - R
+        return g, float(np.max(np.abs(g) / R))
+
+    g, r = residual(x)
     for _ in range(max_iter):
-        g = np.asarray(sym.constraint_fn(x)).ravel()        # (|D|^2 - R^2)/(2R) ~ |D| - R
-        if np.max(np.abs(g) / R) <= tol:
+        if r <= tol:
             return x
-        G = sym.G(sym.full_positions(x)).toarray()
         # G = d(-g)/dx, so the Newton step for g(x + dx) = 0 is dx = G^+ g
-        dx = np.linalg.lstsq(G, g, rcond=None)[0]
-        x = x + dx
-    g = np.asarray(sym.constraint_fn(x)).ravel()
-    return x if np.max(np.abs(g) / R) <= 1e3 * tol else None
+        dx = _min_norm_solve(sym.G(sym.full_positions(x)), g)
+        alpha = 1.0
+        while True:
+            g_new, r_new = residual(x + alpha * dx)
+            if r_new < r or alpha < 1e-3:
+                break
+            alpha *= 0.5
+        x, g, r = x + alpha * dx, g_new, r_new
+    return x if r <= 1e3 * tol else None
 
 
 def _null_projector_apply(G, v):
     """v minus its component in range(G^T): the part satisfying G v = 0 (12)."""
     if G.shape[0] == 0:
         return v
-    z = np.linalg.lstsq(G, G @ v, rcond=None)[0]
-    return v - z
+    v = v - _min_norm_solve(G, G @ v)
+    return v - _min_norm_solve(G, G @ v)       # second pass removes the ridge's residue
 
 
 def sample_states(scene, sym: SymbolicTensionSystem, n, rng, on_manifold=True):
@@ -86,27 +117,21 @@ def sample_states(scene, sym: SymbolicTensionSystem, n, rng, on_manifold=True):
     g = float(np.linalg.norm(scene.gravity)) or 9.81
     x0 = sym.reduce_positions(scene.X0)
     out = []
-    attempts = 0
-    while len(out) < n and attempts < 20 * n:
-        attempts += 1
-        sigma = 0.3 * ell / (1 + attempts // n)              # smaller kicks if projection keeps failing
+    failures = 0
+    while len(out) < n and failures < 2 + n:          # a manifold GN cannot reach: give up early
+        sigma = 0.3 * ell / (1 + 3 * failures)               # smaller kicks if projection keeps failing
         x = x0 + sigma * rng.standard_normal(x0.size)
-        if on_manifold:
-            x = _project_positions(sym, x)
-            if x is None:
-                continue
-            X = sym.full_positions(x)
-            G = sym.G(X).toarray()
-            u = _null_projector_apply(G, speed * rng.standard_normal(x0.size))
-        else:
-            xp = _project_positions(sym, x)
-            x = (xp if xp is not None else x) + 0.05 * ell * rng.standard_normal(x0.size)
-            X = sym.full_positions(x)
-            u = speed * rng.standard_normal(x0.size)
+        x = _project_positions(sym, x)
+        if x is None:
+            failures += 1
+            continue
+        X = sym.full_positions(x)
+        G = sym.G(X).toarray()
+        u = _null_projector_apply(G, speed * rng.standard_normal(x0.size))
         U = sym.expand(u)
         Fin = sym.expand((np.repeat(mass_free, sym.dim) * g) * rng.standard_normal(x0.size))
         out.append((X, U, Fin))
-    if len(out) < n and on_manifold:
+    if len(out) < n:
         # the manifold may be (locally) a single point (e.g. a taut string): use the scene's own state
         X = np.array(scene.X0, float)
         G = sym.G(X).toarray()
@@ -114,6 +139,13 @@ def sample_states(scene, sym: SymbolicTensionSystem, n, rng, on_manifold=True):
             u = _null_projector_apply(G, speed * rng.standard_normal(x0.size))
             Fin = sym.expand((np.repeat(mass_free, sym.dim) * g) * rng.standard_normal(x0.size))
             out.append((X, sym.expand(u), Fin))
+    if not on_manifold:
+        # off (11)-(12): positions moved by a few per cent of the link lengths, arbitrary velocities
+        moved = []
+        for X, U, Fin in out:
+            x = sym.reduce_positions(X) + 0.05 * ell * rng.standard_normal(x0.size)
+            moved.append((sym.full_positions(x), sym.expand(speed * rng.standard_normal(x0.size)), Fin))
+        out = moved
     return out
 
 
