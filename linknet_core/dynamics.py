@@ -49,6 +49,8 @@ class Dynamics:
         self._factored_at = np.array(X, copy=True)
 
     def solve(self, X, b) -> np.ndarray:
+        if self.scene.L == 0:
+            return np.zeros(0)
         self.factor(X)
         return self.solver.solve(b)
 
@@ -111,6 +113,8 @@ class Dynamics:
         contracts too slowly (large steps, near-singular configurations) exact Newton with the
         unsymmetric C(X) M^-1 C(X0)^T takes over. Returns (X_projected, iterations).
         """
+        if self.scene.L == 0:
+            return np.array(X, float, copy=True), 0
         X0 = X if direction_at is None else direction_at
         self.factor(X0)
         E0 = self.unit_vectors(X0)
@@ -128,7 +132,25 @@ class Dynamics:
             Xc += self._correction(E0, self.solver.solve(phi))
         else:
             it = max_iter
+        if direction_at is None:
+            return self._project_gauss_newton(X, tol, max_iter, it)
         return self._project_exact_newton(X, X0, E0, tol, max_iter, it)
+
+    def _project_gauss_newton(self, X, tol, max_iter, used):
+        """Projection with the directions updated every iteration (large initial violations)."""
+        Xc = np.array(X, float, copy=True)
+        scale = self._residual_scale(Xc, tol)
+        err = np.inf
+        for it in range(1, max_iter + 1):
+            phi = self.position_residual(Xc)
+            err = float(np.max(np.abs(phi) / scale)) * tol
+            if err <= tol:
+                return Xc, used + it - 1
+            if not np.isfinite(err):
+                break
+            self.factor(Xc)
+            Xc += self._correction(self.unit_vectors(Xc), self.solver.solve(phi))
+        self._raise_not_converged(X, err, used + max_iter)
 
     def _residual_scale(self, X, tol):
         """Per-link |phi| that counts as converged: tol relative to R_l, but never below the round-off
@@ -160,10 +182,14 @@ class Dynamics:
             except RuntimeError:  # singular Newton matrix: minimum-norm Gauss-Newton step
                 mu = np.linalg.lstsq(J.toarray(), phi, rcond=1e-12)[0]
             Xc += self._correction(E0, mu)
+        self._raise_not_converged(X, err, used + max_iter)
+
+    def _raise_not_converged(self, X, err, iterations):
+        R = self.scene.length
         phi = self.position_residual(X)
         worst = int(np.argmax(np.abs(phi) / R))
         raise SolverError(
-            f"position projection onto the link lengths (11) did not converge: after {used + max_iter} iterations "
+            f"position projection onto the link lengths (11) did not converge: after {iterations} iterations "
             f"the residual is {err:.3g} relative; {self.scene.link_label(worst)} was worst before projection "
             f"({abs(phi[worst]) / R[worst]:.3g} relative). Reduce the step (or tighten the tolerance); if the "
             "configuration is singular (a taut string, a loop passing a flat position), no step may be small enough")
@@ -179,6 +205,8 @@ class Dynamics:
 
     def project_velocities(self, X, U):
         """Closest velocities satisfying (12) in the mass metric: U - M^-1 C^T mu with A mu = C U."""
+        if self.scene.L == 0:
+            return np.array(U, float, copy=True)
         self.factor(X)
         mu = self.solver.solve(self.constraint_rows(X, U))
         return U - self._correction(self.unit_vectors(X), mu)

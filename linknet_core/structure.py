@@ -20,7 +20,7 @@ from scipy.sparse.csgraph import connected_components, breadth_first_order
 
 from .scene import Scene
 
-DENSE_RANK_LIMIT = 4_000_000  # entries of C; above it, rank is estimated from the LDL pivots
+DENSE_RANK_LIMIT = 2500  # links; above it, rank is estimated from the LDL pivots
 
 
 @dataclass(frozen=True)
@@ -40,6 +40,9 @@ class LinkPairs:
 def link_pairs(scene: Scene) -> LinkPairs:
     """All (l, l', k) with links l, l' incident to the same free mass k (setup, not per step)."""
     L = scene.L
+    if L == 0:
+        empty = np.zeros(0, np.int64)
+        return LinkPairs(empty, empty, empty, np.zeros(0))
     links = np.concatenate([np.arange(L), np.arange(L)])
     masses = np.concatenate([scene.k1, scene.k2])
     # sigma = +1 at the k1 end and -1 at the k2 end, so sigma_l * sigma_l' = (-1)^(i+j) of (21)
@@ -221,19 +224,32 @@ def analyse(scene: Scene) -> Structure:
         ordering = _min_degree_ordering(pattern)
 
     notes = []
-    if scene.L * 3 * n_free <= DENSE_RANK_LIMIT:
-        rank, _ = rank_and_nullspace(scene, scene.X0)
-        rank_exact = True
+    rank_exact = True
+    if closed_loops == 0:
+        # no loop, even through the ground: peeling links from the free leaves inwards forces every
+        # T~ of (31) to vanish, so there is no self-stress and G has full row rank
+        rank = scene.L
+    elif scene.L <= DENSE_RANK_LIMIT:
+        rank = _dense_rank(scene, ordering)
     else:
         rank = _rank_from_pivots(scene, ordering)
         rank_exact = False
-        notes.append("rank of G estimated from the LDL^T pivots (scene too large for a dense SVD)")
+        notes.append("rank of G estimated from the LDL^T pivots (scene too large for a dense eigen-decomposition)")
     self_stresses = scene.L - rank
     kind = "redundant" if self_stresses > 0 else topology
     return Structure(kind=kind, topology=topology, ordering=np.asarray(ordering, np.int64),
                      max_free_degree=max_free_degree, closed_loops=closed_loops,
                      self_stresses=int(self_stresses), rank_G=int(rank), rank_exact=rank_exact,
                      planar_normal=planar_normal(scene), notes=notes)
+
+
+def _dense_rank(scene: Scene, ordering: np.ndarray, rtol: float = 1e-9) -> int:
+    """rank(G) = rank(A), A = C M^-1 C^T (M^-1 is positive on the free masses): eigenvalues of the L x L A."""
+    from .tensions import TensionAssembly
+
+    E = (scene.X0[scene.k2] - scene.X0[scene.k1]) / scene.length[:, None]
+    w = np.linalg.eigvalsh(TensionAssembly(scene, ordering).matrix(E).toarray())
+    return int(np.sum(w > rtol * max(w.max(), 1e-300)))
 
 
 def _rank_from_pivots(scene: Scene, ordering: np.ndarray) -> int:

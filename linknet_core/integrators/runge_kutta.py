@@ -102,6 +102,13 @@ class ProjectedRungeKutta(Integrator):
             h1 = (0.01 / max(d1, d2)) ** (1.0 / (self.error_estimator_order + 1))
         return min(100 * h0, h1, span)
 
+    def step(self, X, U, h, F_input=None):
+        """One step of size h without error control, then the projections: used to measure the
+        method's order (tests) and available to callers that want a fixed step."""
+        X_new, U_new, _, _ = self._attempt(X, U, h, self._f(X, U, F_input), F_input)
+        X_new, _ = self.dyn.project_positions(X_new, tol=1e-14)
+        return X_new, self.dyn.project_velocities(X_new, U_new)
+
     # ---- driver ------------------------------------------------------------------------------
     def advance(self, state, t_target, F_input, max_steps):
         dyn = self.dyn

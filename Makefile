@@ -1,0 +1,21 @@
+# The two quick-start commands of the README: `make demo` and `make test`.
+PYTHON ?= python3
+
+.PHONY: install demo test bench bench-quick stress
+
+install:
+	$(PYTHON) -m pip install -q -e '.[test]'
+
+demo: install
+	$(PYTHON) examples/demo.py
+
+test: install
+	$(PYTHON) -m pytest -q
+
+bench: install
+	$(PYTHON) -m pip install -q -e '.[bench]'
+	$(PYTHON) -m benchmarks.work_precision
+
+bench-quick: install
+	$(PYTHON) -m pip install -q -e '.[bench]'
+	$(PYTHON) -m benchmarks.work_precision --quick

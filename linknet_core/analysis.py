@@ -1,0 +1,124 @@
+"""Rigidity analysis (``linknet analyze``): Maxwell-Calladine counts at the initial configuration.
+
+With n = 3 K_free velocity unknowns and L links, rank r of the constraint Jacobian G (rows of (12)):
+    degrees of freedom   m = n - r   (first-order motions allowed by the links)
+    states of self-stress s = L - r  (the homogeneous solutions of (27), i.e. the T~ of (31))
+so that n - L = m - s (Maxwell's rule corrected by Calladine). Of the m motions, those that move the
+whole network as a rigid body (allowed by the anchors) are trivial; the rest are internal mechanisms.
+The structure is rigid when there are none.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .dynamics import Dynamics
+from .scene import Scene
+
+
+@dataclass
+class RigidityReport:
+    scene: Scene
+    dyn: Dynamics
+    K: int
+    L: int
+    anchored: list
+    rank_G: int
+    rank_exact: bool
+    dof: int
+    rigid_body_motions: int
+    mechanisms: int
+    self_stresses: int
+    condition_A: float
+    condition_note: str
+
+    @property
+    def rigid(self) -> bool:
+        return self.mechanisms == 0
+
+    def text(self) -> str:
+        st = self.dyn.structure
+        s = self.scene
+        anchored = ", ".join(s.mass_label(k) for k in self.anchored[:8]) or "none"
+        if len(self.anchored) > 8:
+            anchored += f" and {len(self.anchored) - 8} more"
+        solver = self.dyn.solver
+        specialisations = [f"structure class {st.kind} (topology {st.topology}); tension solver {solver.name}"]
+        if hasattr(solver, "ldl"):
+            specialisations.append(f"LDL^T with symbolic analysis once: nnz(L) = {solver.ldl.nnz_L} "
+                                   f"({'no fill, O(L)' if st.topology in ('chain', 'tree') else 'minimum-degree ordering'})")
+        if st.planar_normal is not None:
+            specialisations.append(f"planar scene (normal {np.round(st.planar_normal, 6).tolist()})")
+        if self.anchored:
+            specialisations.append(f"{len(self.anchored)} anchored masses eliminated (1/M = 0)")
+        lines = [
+            f"scene {s.name}: K = {self.K} masses, L = {self.L} links, {s.springs.count} springs",
+            f"anchored masses: {anchored}",
+            f"rank of G: {self.rank_G}{'' if self.rank_exact else ' (estimated from LDL pivots)'} "
+            f"(of {self.L} links, {3 * (self.K - len(self.anchored))} free coordinates)",
+            f"degrees of freedom: {self.dof} = {self.rigid_body_motions} rigid-body motions + {self.mechanisms} "
+            "internal mechanisms",
+            f"states of self-stress: {self.self_stresses}"
+            + (" (redundant links: minimum-norm tensions)" if self.self_stresses else ""),
+            f"Maxwell-Calladine check: 3K_free - L = {3 * (self.K - len(self.anchored)) - self.L} = "
+            f"mechanisms + rigid-body motions - self-stresses = {self.dof - self.self_stresses}",
+            f"rigid: {'yes' if self.rigid else 'no'}" + ("" if self.rigid else f" ({self.mechanisms} mechanisms)"),
+            f"closed loops (anchors merged): {st.closed_loops}",
+            f"condition estimate of A at the initial state: {self.condition_A:.3e} ({self.condition_note})",
+            "solver: " + "; ".join(specialisations),
+        ]
+        lines += [f"note: {n}" for n in st.notes]
+        return "\n".join(lines)
+
+
+def _rigid_body_motions(scene: Scene) -> int:
+    """Dimension of the rigid velocity fields v_k = t + w x X_k that leave the anchors at rest, as seen
+    on the free masses."""
+    X = scene.X0
+
+    def fields(idx):
+        rows = []
+        for k in idx:
+            x = X[k]
+            skew = np.array([[0, x[2], -x[1]], [-x[2], 0, x[0]], [x[1], -x[0], 0]])  # w x x = skew @ w
+            rows.append(np.hstack([np.eye(3), skew]))
+        return np.vstack(rows) if rows else np.zeros((0, 6))
+
+    anchors = scene.fixed_indices
+    basis = np.eye(6)
+    if anchors.size:
+        Ra = fields(anchors)
+        _, sv, vt = np.linalg.svd(Ra)
+        rank = int(np.sum(sv > 1e-10 * max(sv.max(), 1e-300)))
+        basis = vt[rank:].T
+    if basis.shape[1] == 0:
+        return 0
+    Rf = fields(scene.free_indices) @ basis
+    sv = np.linalg.svd(Rf, compute_uv=False)
+    return int(np.sum(sv > 1e-10 * max(sv.max(), 1e-300)))
+
+
+def analyze_scene(scene: Scene) -> RigidityReport:
+    dyn = Dynamics(scene)
+    st = dyn.structure
+    n_free = scene.free_indices.size
+    dof = 3 * n_free - st.rank_G
+    rbm = min(_rigid_body_motions(scene), dof)
+    A = dyn.tension_matrix(scene.X0)
+    if scene.L <= 3000:
+        w = np.linalg.eigvalsh(A.toarray())
+        positive = w[w > 1e-12 * max(w.max(), 1e-300)]
+        cond = float(w.max() / w.min()) if w.min() > 1e-12 * w.max() else float("inf")
+        note = ("exact, 2-norm" if np.isfinite(cond) else
+                f"A singular: {scene.L - positive.size} zero eigenvalues; on range(A): "
+                f"{positive.max() / positive.min():.3e}")
+    else:
+        from scipy.sparse.linalg import eigsh
+
+        hi = eigsh(A, k=1, which="LA", return_eigenvectors=False)[0]
+        lo = eigsh(A, k=1, sigma=0, which="LM", return_eigenvectors=False)[0]
+        cond = float(hi / lo) if lo > 0 else float("inf")
+        note = "extreme eigenvalues by Lanczos"
+    return RigidityReport(scene, dyn, scene.K, scene.L, scene.fixed_indices.tolist(), st.rank_G, st.rank_exact, dof,
+                          rbm, dof - rbm, st.self_stresses, cond, note)

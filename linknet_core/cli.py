@@ -1,0 +1,136 @@
+"""The ``linknet`` command: simulate, analyze, check."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+
+from .errors import LinknetError
+
+
+def _add_simulate(sub):
+    p = sub.add_parser("simulate", help="simulate a scene and write t, X, U, T and diagnostics")
+    p.add_argument("scene", help="scene JSON file")
+    p.add_argument("--t-end", type=float, required=True, help="end time, s")
+    p.add_argument("--method", default=None, help="rattle (default with --dt), yoshida4, suzuki4, yoshida6, yoshida8, "
+                                                 "dopri5, dop853 (default with --rtol)")
+    step = p.add_mutually_exclusive_group()
+    step.add_argument("--dt", type=float, help="step of a fixed-step method, s")
+    step.add_argument("--rtol", type=float, help="tolerance of an adaptive method (SI units; atol defaults to it)")
+    p.add_argument("--atol", type=float, help="absolute tolerance of an adaptive method")
+    p.add_argument("--n-out", type=int, default=201, help="number of output samples (default 201)")
+    p.add_argument("--out", help="write arrays to this .npz")
+    p.add_argument("--plot", help="write a PNG of positions and tensions against time")
+    p.add_argument("--project-initial", action="store_true",
+                   help="project initial positions onto the link lengths instead of refusing them")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _add_analyze(sub):
+    p = sub.add_parser("analyze", help="rigidity and structure of a scene (Maxwell-Calladine counts)")
+    p.add_argument("scene", help="scene JSON file")
+
+
+def _add_check(sub):
+    p = sub.add_parser("check", help="check the numeric tension system against its casadi derivation")
+    from . import checks
+
+    checks.add_arguments(p)
+
+
+def cmd_simulate(args) -> int:
+    from .scene import load_scene
+    from .simulator import simulate
+
+    scene = load_scene(args.scene)
+    method = args.method or ("dop853" if args.rtol is not None else "rattle")
+    dt = args.dt
+    if dt is None and args.rtol is None:
+        from .integrators import METHODS
+
+        if not METHODS[method].adaptive:
+            dt = 1e-3
+    res = simulate(scene, args.t_end, method=method, dt=dt, rtol=args.rtol, atol=args.atol, n_out=args.n_out,
+                   progress=None if not args.no_progress else False, project_initial=args.project_initial or None)
+    if res.stats.get("initial"):
+        for line in res.stats["initial"]:
+            print("note:", line)
+    print(res.summary())
+    if args.out:
+        res.save_npz(args.out)
+        print(f"wrote {args.out}")
+    if args.plot:
+        plot_result(res, args.plot)
+        print(f"wrote {args.plot}")
+    return 0
+
+
+def plot_result(res, path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scene = res.scene
+    fig, axes = plt.subplots(3, 1, figsize=(8, 9), sharex=True)
+    free = scene.free_indices
+    show = free if free.size <= 6 else free[np.linspace(0, free.size - 1, 6).astype(int)]
+    for k in show:
+        axes[0].plot(res.t, res.X[:, k, 0], label=f"x {scene.mass_names[k]}")
+        axes[0].plot(res.t, res.X[:, k, 2], "--", label=f"z {scene.mass_names[k]}")
+    axes[0].set_ylabel("position, m")
+    axes[0].legend(fontsize=7, ncol=3)
+    links = np.arange(scene.L) if scene.L <= 6 else np.linspace(0, scene.L - 1, 6).astype(int)
+    for l in links:
+        axes[1].plot(res.t, res.T[:, l], label=scene.link_label(int(l)))
+    axes[1].set_ylabel("tension T, N")
+    axes[1].legend(fontsize=7, ncol=2)
+    axes[2].semilogy(res.t, np.maximum(res.residual, 1e-17), label="max constraint residual (rel.)")
+    axes[2].semilogy(res.t, np.maximum(np.abs(res.energy - res.energy[0]) / res.energy_scale, 1e-17),
+                     label="|energy error| (rel.)")
+    axes[2].set_xlabel("t, s")
+    axes[2].legend(fontsize=7)
+    fig.suptitle(f"{scene.name}: {res.method}, {res.stats.get('steps')} steps")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def cmd_analyze(args) -> int:
+    from .analysis import analyze_scene
+    from .scene import load_scene
+
+    report = analyze_scene(load_scene(args.scene))
+    print(report.text())
+    return 0
+
+
+def cmd_check(args) -> int:
+    from . import checks
+
+    return int(checks.main(args))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="linknet", description="Networks of point masses joined by rigid links.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_simulate(sub)
+    _add_analyze(sub)
+    _add_check(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handlers = {"simulate": cmd_simulate, "analyze": cmd_analyze, "check": cmd_check}
+    try:
+        return handlers[args.command](args)
+    except LinknetError as exc:
+        print(f"linknet {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
