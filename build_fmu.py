@@ -151,8 +151,12 @@ def rewrite_fmu(fmu: Path, model_description: bytes, link_python: bool) -> str |
             elif link_python and info.filename.startswith("binaries/linux64/") and info.filename.endswith(".so"):
                 so = tmp / Path(info.filename).name
                 so.write_bytes(data)
-                linked = link_libpython(so)
-                data = so.read_bytes()
+                try:
+                    linked = link_libpython(so)
+                    data = so.read_bytes()
+                except (RuntimeError, subprocess.CalledProcessError) as e:
+                    # still a working FMU for Python hosts (fmpy); C hosts would need libpython preloaded
+                    print(f"build_fmu: WARNING: binary not linked to libpython: {e}", file=sys.stderr)
             out.append((info.filename, data))
         with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zout:
             for name, data in out:
