@@ -205,20 +205,22 @@ class _Variant:
         self.free = np.flatnonzero(np.asarray(scene.inv_mass) > 0)
         self.input_masses = input_masses
         self.kernel = _CasadiKernel(so_path, "lnk_rhs", [n, n, n_in], [n, L])
-        self.identity = self.d == 3 and np.array_equal(basis, np.eye(3)) and not np.any(origin)
-        # flat gather indices into (K,3) arrays for the free masses / the input masses
-        self.free_flat = (3 * self.free[:, None] + np.arange(3)).ravel()
-        self.input_flat = (3 * input_masses[:, None] + np.arange(3)).ravel()
+        # axis-aligned basis (identity, or two coordinate axes of a plane with a zero origin in them):
+        # reduction is a gather of flat indices, exact and cheap
+        axes = [int(np.argmax(basis[:, j])) for j in range(self.d)]
+        self.gather = bool(np.array_equal(basis, np.eye(3)[:, axes]) and not np.any(origin[axes]))
+        self.free_flat = (3 * self.free[:, None] + np.asarray(axes)[None, :]).ravel()
+        self.input_flat = (3 * input_masses[:, None] + np.asarray(axes)[None, :]).ravel()
 
     def run(self, X, U, F_input):
         k = self.kernel
         x, u, fin = k.inputs
-        if self.identity:
+        if self.gather:
             np.take(X, self.free_flat, out=x)
             np.take(U, self.free_flat, out=u)
             if fin.size:
                 if F_input is None:
-                    fin[:] = 0.0
+                    fin.fill(0.0)
                 else:
                     np.take(F_input, self.input_flat, out=fin)
         else:
@@ -230,13 +232,21 @@ class _Variant:
         acc_r, T = k.outputs
         return status, acc_r, T
 
+    def expand(self, acc_r, K):
+        acc = np.zeros((K, 3))
+        if self.gather:
+            acc.put(self.free_flat, acc_r)
+        else:
+            acc[self.free] = acc_r.reshape(-1, self.d) @ self.basis.T
+        return acc
+
 
 class CompiledRHS:
     """Compiled right-hand side of one scene: ``accelerations(X, U, F_input) -> (acc (K,3), T (L,))``.
 
     Same contract as ``Dynamics.accelerations``: acc is zero on anchored masses, T > 0 is tension.
-    ``fallback(X, U, F_input)`` (the numeric path) is called when the state leaves the scene's plane
-    and no 3-D kernel may be built, or when the kernel's LDL^T meets a singular A.
+    ``fallback(X, U, F_input)`` (the numeric path) is called when the kernel's LDL^T meets a singular A.
+    A state that leaves a planar scene's plane is handed to a 3-D kernel (generated on first need).
     """
 
     def __init__(self, scene, input_masses=None, fallback=None, plane="auto", cache=None, cc=None):
@@ -254,6 +264,7 @@ class CompiledRHS:
             raise CodegenUnavailable("no C compiler found ($CC, cc, gcc, clang): the numeric path is used")
         self.timings: dict = {}
         self.fallback_calls = 0
+        self.calls_3d = 0
         pl = plane_of(scene) if plane == "auto" else None
         self.plane = pl
         self._variant3 = None
@@ -261,6 +272,9 @@ class CompiledRHS:
             basis, origin, normal = pl
             self._normal = normal
             self._plane_offset = float(origin @ normal)
+            axis = int(np.argmax(np.abs(normal)))
+            self._axis_aligned = bool(normal[axis] == 1.0)
+            self._out_flat = 3 * np.arange(self.K) + axis    # out-of-plane coordinates
             self._primary = self._build(basis, origin)
         else:
             self._primary = self._variant3 = self._build(np.eye(3), np.zeros(3))
@@ -274,8 +288,7 @@ class CompiledRHS:
         d = basis.shape[1]
         n = int(np.count_nonzero(np.asarray(self.scene.inv_mass) > 0)) * d
         if so_path.exists():
-            self.timings.setdefault("cache_hits", 0)
-            self.timings["cache_hits"] += 1
+            self.timings["cache_hits"] = self.timings.get("cache_hits", 0) + 1
         else:
             import time
 
@@ -289,14 +302,18 @@ class CompiledRHS:
                         self.input_masses.size * d)
 
     def _in_plane(self, X, U, F_input) -> bool:
+        if self._axis_aligned:  # exact test: the integrators keep these components exactly constant
+            idx = self._out_flat
+            if (X.take(idx) != self._plane_offset).any() or U.take(idx).any():
+                return False
+            return F_input is None or not F_input.take(idx).any()
         n = self._normal
-        off = X @ n - self._plane_offset
-        scale = 1.0 + float(np.abs(X).max())
-        if np.abs(off).max() > 1e-12 * scale:
+        tol = 1e-12
+        if np.abs(X @ n - self._plane_offset).max() > tol * (1.0 + float(np.abs(X).max())):
             return False
-        if np.abs(U @ n).max() > 1e-12 * (1.0 + float(np.abs(U).max())):
+        if np.abs(U @ n).max() > tol * (1.0 + float(np.abs(U).max())):
             return False
-        if F_input is not None and np.abs(F_input @ n).max() > 1e-12 * (1.0 + float(np.abs(F_input).max())):
+        if F_input is not None and np.abs(F_input @ n).max() > tol * (1.0 + float(np.abs(F_input).max())):
             return False
         return True
 
@@ -315,18 +332,14 @@ class CompiledRHS:
             if self._variant3 is None:
                 self._variant3 = self._build(np.eye(3), np.zeros(3))
             variant = self._variant3
+            self.calls_3d += 1
         status, acc_r, T = variant.run(X, U, F_input)
-        if status != 0 or not (np.isfinite(T).all() and np.isfinite(acc_r).all()):
+        if status != 0 or not np.isfinite(T.sum() + acc_r.sum()):
             if self.fallback is None:
                 raise CodegenUnavailable("the compiled kernel met a singular tension matrix and has no fallback")
             self.fallback_calls += 1
             return self.fallback(X, U, F_input)
-        acc = np.zeros((self.K, 3))
-        if variant.identity:
-            acc.ravel()[variant.free_flat] = acc_r
-        else:
-            acc[variant.free] = acc_r.reshape(-1, variant.d) @ variant.basis.T
-        return acc, T.copy()
+        return variant.expand(acc_r, self.K), T.copy()
 
 
 def compiled_rhs(scene, input_masses=None, fallback=None, required=False, cache=None):
