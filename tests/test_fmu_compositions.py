@@ -21,7 +21,10 @@ from pathlib import Path
 import pd_feedback as pd
 chain, ctrl = pd.build(Path({str(tmp_path)!r}))
 runs = [pd.run(chain, ctrl, h, 1.5) for h in {steps!r}]
-save(max_error=np.array([r['max_error'] for r in runs]), final=np.array([r['final_error'] for r in runs]),
+container = [pd.run_container(chain, ctrl, h, 1.5, Path({str(tmp_path)!r})) for h in {steps!r}]
+save(container_error=np.array([r['max_error'] for r in container]),
+     container_final=np.array([r['final_error'] for r in container]),
+     max_error=np.array([r['max_error'] for r in runs]), final=np.array([r['final_error'] for r in runs]),
      lateral=np.array([r['lateral'] for r in runs]), z=runs[-1]['top'][:, 2], z_pred=runs[-1]['z_pred'],
      target=runs[-1]['target'])
 """, tmp_path / "client_pd")
@@ -33,6 +36,10 @@ save(max_error=np.array([r['max_error'] for r in runs]), final=np.array([r['fina
     predicted = np.exp(-np.pi * 0.5 / np.sqrt(1 - 0.25))  # zeta = 0.5
     assert abs(overshoot - predicted) < 0.01
     assert out["final"][-1] < 1e-3                      # settled at the target
+    # fmpy's container FMU (same explicit coupling) gives the same loop
+    assert 0.9 < _orders(steps, out["container_error"])[0] < 1.1
+    np.testing.assert_allclose(out["container_error"], out["max_error"], rtol=0.02)
+    assert out["container_final"][-1] < 1e-3
 
 
 @pytest.mark.parametrize("which,steps", [("master", [0.02, 0.01, 0.005]), ("ssp", [0.02, 0.01])])

@@ -12,6 +12,14 @@ start, so the chain stays vertical and moves as one rigid body of mass M_total:
 
 which is the controller's prediction, in closed form. The co-simulation (zero-order hold over
 each communication step h) must follow it with an O(h) error and settle at z*.
+
+Two masters: the short loop in `run` (cosim.py), and with --container fmpy's own container FMU
+(fmpy.container_fmu), which wraps the two FMUs and their 9 connections into one FMU that
+fmpy.simulate_fmu runs. Workarounds it needed (fmpy 0.3.32), see `build_container`:
+  * connections of FMI 2 Reals are written with type "Real", which the container binary
+    rejects ("unknown variant `Real`"): rewritten to "Float64" in resources/container.json;
+  * the container's first variable (value reference 0) reads back as time: a "time" variable
+    (causality independent) is put first.
 """
 from __future__ import annotations
 
@@ -84,11 +92,92 @@ def run(chain_fmu, pd_fmu, h: float, t_end: float) -> dict:
                 lateral=float(np.max(np.abs(top[:, :2] - x0[:2]))))
 
 
+def build_container(chain_fmu, pd_fmu, h: float, out: Path) -> Path:
+    """fmpy container FMU of the loop; output z_top (the top mass's z), gains as parameters."""
+    import json
+    import uuid
+    import zipfile
+    from fmpy import read_model_description
+    from fmpy.container_fmu import Configuration
+    from fmpy.container_fmu.cli import create_container_fmu
+    from fmpy.container_fmu.config import Component, Connection
+    from fmpy.model_description import CoSimulation, DefaultExperiment, ModelDescription, ModelVariable, Unknown
+
+    scene = ln.load_scene(HERE / "hanging_chain.json")
+    M, g = float(np.sum(scene.mass)), float(-scene.gravity[2])
+    md_c, md_p = read_model_description(str(chain_fmu)), read_model_description(str(pd_fmu))
+    vc = {v.name: v for v in md_c.modelVariables}
+    vp = {v.name: v for v in md_p.modelVariables}
+    chain = Component(name="chain", filename=Path(chain_fmu), modelDescription=md_c)
+    ctrl = Component(name="pd", filename=Path(pd_fmu), modelDescription=md_p)
+    conns = []
+    for i in (1, 2, 3):
+        conns += [Connection(startElement=chain, startConnectors=[vc[f"X[1,{i}]"]], endElement=ctrl,
+                             endConnectors=[vp[f"x[{i}]"]]),
+                  Connection(startElement=chain, startConnectors=[vc[f"U[1,{i}]"]], endElement=ctrl,
+                             endConnectors=[vp[f"v[{i}]"]]),
+                  Connection(startElement=ctrl, startConnectors=[vp[f"F[{i}]"]], endElement=chain,
+                             endConnectors=[vc[f"F[1,{i}]"]])]
+
+    def parameter(name, value):
+        v = ModelVariable(name=name, type="Real", causality="parameter", variability="tunable", initial="exact")
+        v.start = repr(float(value))
+        return v
+
+    time_var = ModelVariable(name="time", type="Real", causality="independent", variability="continuous")
+    z_top = ModelVariable(name="z_top", type="Real", causality="output", variability="continuous",
+                          initial="calculated", description="z of the chain's top mass (m)")
+    params = {"Kp": parameter("Kp", KP), "Kd": parameter("Kd", 2 * ZETA * np.sqrt(KP * M)),
+              "x_target[3]": parameter("z_target", scene.X0[0, 2] + LIFT), "F_ff[3]": parameter("F_ff_z", M * g)}
+    token = "{" + str(uuid.uuid4()) + "}"
+    md = ModelDescription(fmiVersion="2.0", modelName="pd_loop", instantiationToken=token,
+                          coSimulation=CoSimulation(modelIdentifier="container_fmu", fixedInternalStepSize=h),
+                          modelVariables=[time_var, z_top, *params.values()],
+                          defaultExperiment=DefaultExperiment(startTime="0", stopTime="3", stepSize=repr(h)))
+    md.guid = token  # FMI 2 name of the instantiation token
+    md.outputs = [Unknown(index=2, variable=z_top)]
+    md.initialUnknowns = [Unknown(index=2, variable=z_top)]
+    mapping = {z_top: [(chain, vc["X[1,3]"])], **{v: [(ctrl, vp[name])] for name, v in params.items()}}
+    config = Configuration(parallelDoStep=False, modelDescription=md, components=[chain, ctrl],
+                           connections=conns, variableMappings=mapping)
+    unzipdir = out / "pd_loop_container"
+    unzipdir.mkdir(parents=True, exist_ok=True)
+    fmu = out / "pd_loop_container.fmu"
+    if fmu.exists():
+        fmu.unlink()
+    create_container_fmu(config, unzipdir, fmu)
+    with zipfile.ZipFile(fmu) as z:  # workaround: connection type "Real" -> "Float64"
+        items = [(i.filename, z.read(i)) for i in z.infolist()]
+    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
+        for name, data in items:
+            if name == "resources/container.json":
+                cfg = json.loads(data)
+                for c in cfg["connections"]:
+                    c["variableType"] = {"Real": "Float64", "Integer": "Int32"}.get(c["variableType"], c["variableType"])
+                data = json.dumps(cfg, indent=1).encode()
+            z.writestr(name, data)
+    return fmu
+
+
+def run_container(chain_fmu, pd_fmu, h: float, t_end: float, out: Path) -> dict:
+    import fmpy
+    fmu = build_container(chain_fmu, pd_fmu, h, out)
+    start = time.perf_counter()
+    res = fmpy.simulate_fmu(str(fmu), stop_time=t_end, output_interval=h, output=["z_top"])
+    wall = time.perf_counter() - start
+    scene = ln.load_scene(HERE / "hanging_chain.json")
+    z_pred = predicted_z(res["time"], scene.X0[0, 2], float(np.sum(scene.mass)))
+    return dict(t=res["time"], z=res["z_top"], z_pred=z_pred, wall=wall,
+                max_error=float(np.max(np.abs(res["z_top"] - z_pred))),
+                final_error=float(abs(res["z_top"][-1] - scene.X0[0, 2] - LIFT)))
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--h", type=float, nargs="+", default=[0.004, 0.002, 0.001])
     p.add_argument("--t-end", type=float, default=3.0)
     p.add_argument("--out", default=str(ROOT / "build" / "compositions"))
+    p.add_argument("--container", action="store_true", help="also run the loop as an fmpy container FMU")
     a = p.parse_args(argv)
     chain_fmu, pd_fmu = build(Path(a.out))
     runs = [run(chain_fmu, pd_fmu, h, a.t_end) for h in a.h]
@@ -105,6 +194,11 @@ def main(argv=None) -> int:
         orders = [np.log(runs[i]["max_error"] / runs[i + 1]["max_error"]) / np.log(a.h[i] / a.h[i + 1])
                   for i in range(len(runs) - 1)]
         print("  observed order of the co-simulation error: " + ", ".join(f"{o:.2f}" for o in orders))
+    if a.container:
+        for h in a.h:
+            c = run_container(chain_fmu, pd_fmu, h, a.t_end, Path(a.out))
+            print(f"  fmpy container FMU, h = {h:g} s: max |z - z_predicted| = {c['max_error']:.3e} m, "
+                  f"|z(t_end) - z*| = {c['final_error']:.2e} m, wall {c['wall']:.2f} s")
     try:
         import matplotlib
         matplotlib.use("Agg")
