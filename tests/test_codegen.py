@@ -1,0 +1,131 @@
+"""casadi-generated, compiled right-hand-side kernels against the numeric path of the solver."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import linknet_core as ln
+from linknet_core import codegen
+from linknet_core.checks import sample_states
+from linknet_core.symbolic import SymbolicTensionSystem
+
+MODELS = Path(__file__).resolve().parents[1] / "models"
+SCENES = sorted(MODELS.glob("*.json"))
+
+needs_cc = pytest.mark.skipif(codegen.compiler() is None, reason="no C compiler")
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("linknet-kernels")
+
+
+def _in_plane(scene, dyn, X, U, F):
+    """Move a sampled state into the scene's plane (and back onto (11)-(12)) for the 2-D kernel."""
+    basis, origin, _ = codegen.plane_of(scene)
+    P = basis @ basis.T
+    X, _ = dyn.project_positions((X - origin) @ P + origin)
+    return X, dyn.project_velocities(X, U @ P), F @ P
+
+
+def _agree(kernel, dyn, X, U, F, rtol=1e-10):
+    acc_c, T_c = kernel.accelerations(X, U, F)
+    acc_n, T_n = dyn.accelerations(X, U, F)
+    np.testing.assert_allclose(acc_c, acc_n, rtol=0, atol=rtol * np.abs(acc_n).max())
+    np.testing.assert_allclose(T_c, T_n, rtol=0, atol=rtol * np.abs(T_n).max())
+    assert np.all(acc_c[np.asarray(dyn.scene.fixed)] == 0.0)
+
+
+@needs_cc
+@pytest.mark.parametrize("path", SCENES, ids=[p.stem for p in SCENES])
+def test_generated_kernel_agrees_with_numeric_path(path, cache):
+    scene = ln.load_scene(path)
+    dyn = ln.Dynamics(scene)
+    kernel = codegen.compiled_rhs(scene, cache=cache, fallback=dyn.accelerations)
+    if dyn.structure.kind == "redundant":
+        assert kernel is None  # minimum-norm tensions stay on the rank-revealing numeric path
+        with pytest.raises(codegen.CodegenUnavailable, match="redundant"):
+            codegen.compiled_rhs(scene, cache=cache, required=True)
+        return
+    assert kernel is not None
+    sym = SymbolicTensionSystem(scene)
+    states = sample_states(scene, sym, 3, np.random.default_rng(7))
+    if kernel.plane is not None:
+        states = [_in_plane(scene, dyn, *s) for s in states]
+    for X, U, F in [(np.array(scene.X0), np.array(scene.U0), np.zeros((scene.K, 3)))] + states:
+        _agree(kernel, dyn, X, U, F)
+    assert kernel.fallback_calls == 0 and kernel.calls_3d == 0
+
+
+@needs_cc
+def test_planar_scene_gets_a_2d_kernel_and_leaving_the_plane_uses_3d(cache):
+    scene = ln.load_scene(MODELS / "double_pendulum.json")
+    dyn = ln.Dynamics(scene)
+    kernel = codegen.compiled_rhs(scene, cache=cache)
+    assert kernel.plane is not None and kernel._primary.d == 2
+    n_free = int(np.count_nonzero(~scene.fixed))
+    x, u, fin = kernel._primary.kernel.inputs
+    assert x.size == u.size == fin.size == 2 * n_free       # anchored masses eliminated, 2 coordinates
+    # an out-of-plane velocity: the 3-D kernel takes over, results still equal the numeric path
+    normal = kernel.plane[2]
+    X = np.array(scene.X0)
+    U = dyn.project_velocities(X, np.outer(np.arange(scene.K) % 2, normal) * (~scene.fixed)[:, None])
+    assert np.abs(U @ normal).max() > 0
+    _agree(kernel, dyn, X, U, np.zeros_like(X))
+    assert kernel.calls_3d == 1 and kernel._variant3.d == 3
+
+
+@needs_cc
+def test_kernel_has_input_terms_only_for_input_masses(cache):
+    scene = ln.load_scene(MODELS / "chain_10.json")
+    dyn = ln.Dynamics(scene)
+    tip = scene.K - 1
+    kernel = codegen.compiled_rhs(scene, cache=cache, input_masses=[tip])
+    assert kernel._primary.kernel.inputs[2].size == kernel._primary.d  # one mass' force, nothing else
+    F = np.zeros((scene.K, 3))
+    F[tip] = [1.5, 0.0, -2.0]
+    _agree(kernel, dyn, np.array(scene.X0), np.array(scene.U0), F)
+    F[2, 0] = 1.0
+    with pytest.raises(ValueError, match="mass 3"):
+        kernel.accelerations(scene.X0, scene.U0, F)
+
+
+@needs_cc
+def test_kernels_are_cached_on_disk(cache):
+    scene = ln.load_scene(MODELS / "pendulum.json")
+    first = codegen.compiled_rhs(scene, cache=cache)
+    second = codegen.compiled_rhs(scene, cache=cache)
+    assert "compile_s" not in second.timings and second.timings["cache_hits"] == 1
+    assert second.so_path == first.so_path and Path(second.so_path).exists()
+    # another scene (changed mass) gets another kernel
+    other = codegen.compiled_rhs(scene.with_parameters(mass=np.where(scene.fixed, 1.0, 2.0)), cache=cache)
+    assert other.so_path != first.so_path
+
+
+def test_no_compiler_means_numeric_path(monkeypatch):
+    monkeypatch.setattr(codegen, "compiler", lambda: None)
+    scene = ln.load_scene(MODELS / "pendulum.json")
+    assert codegen.compiled_rhs(scene) is None
+    with pytest.raises(codegen.CodegenUnavailable, match="no C compiler"):
+        codegen.compiled_rhs(scene, required=True)
+
+
+@needs_cc
+def test_singular_state_goes_to_the_fallback(cache):
+    scene = ln.load_scene(MODELS / "pendulum.json")
+    dyn = ln.Dynamics(scene)
+    calls = []
+
+    def fallback(X, U, F):
+        calls.append(1)
+        return np.zeros((scene.K, 3)), np.zeros(scene.L)
+
+    kernel = codegen.compiled_rhs(scene, cache=cache, fallback=fallback)
+    X = np.array(scene.X0)
+    X[~scene.fixed] = X[scene.fixed][0]          # the bob on its pivot: E = 0, A = 0
+    acc, T = kernel.accelerations(X, np.zeros_like(X), None)
+    assert calls and kernel.fallback_calls == 1
+    kernel.fallback = None
+    with pytest.raises(codegen.CodegenUnavailable, match="singular"):
+        kernel.accelerations(X, np.zeros_like(X), None)
+    del dyn
