@@ -234,6 +234,9 @@ class LinknetNetwork(Fmi2Slave):
         if not math.isfinite(t) or abs(t - t_fmu) > 1e-9 * max(1.0, abs(t_fmu)):
             self._error(f"doStep refused: currentCommunicationPoint t={t!r} differs from the FMU's time {t_fmu!r}")
             return False
+        if t + h <= t_fmu:
+            # h > 0 but below half an ulp of t: t + h == t in floating point, nothing to integrate
+            return True
         try:
             # Simulator.advance leaves the state at t when it raises (the step can be retried
             # after fmi2SetFMUstate or with other inputs)
