@@ -92,11 +92,11 @@ class Simulator:
     def __init__(self, scene: Scene, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
                  atol: float | None = None, *, project_initial: bool | None = None,
                  length_tol: float = DEFAULT_LENGTH_TOL, max_steps_per_call: int = 100_000_000,
-                 dynamics: Dynamics | None = None):
+                 dynamics: Dynamics | None = None, backend: str = "auto"):
         self.scene = scene
         self.dyn = dynamics or Dynamics(scene)
         self.method = method
-        self.integrator = make_integrator(method, self.dyn, dt=dt, rtol=rtol, atol=atol)
+        self.integrator = make_integrator(method, self.dyn, dt=dt, rtol=rtol, atol=atol, backend=backend)
         X0, U0, self.initial_report = prepare_initial_state(scene, self.dyn, project_positions=project_initial,
                                                             length_tol=length_tol)
         self._initial = State(0.0, X0, U0)
@@ -205,7 +205,8 @@ class Result:
 
 def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
              atol: float | None = None, n_out: int | None = None, output_dt: float | None = None,
-             forces=None, progress: bool | None = None, project_initial: bool | None = None) -> Result:
+             forces=None, progress: bool | None = None, project_initial: bool | None = None,
+             backend: str = "auto") -> Result:
     """Simulate ``scene`` from t = 0 to ``t_end``.
 
     ``forces``: None, a (K,3) array held constant, or a callable ``f(t) -> (K,3)`` evaluated at each
@@ -214,7 +215,8 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
     """
     if not (isinstance(t_end, (int, float)) and math.isfinite(t_end) and t_end > 0):
         raise SolverError(f"t_end must be a positive finite time, got {t_end!r}")
-    sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial)
+    sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial,
+                    backend=backend)
     if output_dt is not None:
         n = max(1, int(round(t_end / output_dt)))
         times = np.linspace(0.0, t_end, n + 1)

@@ -10,10 +10,11 @@ from .runge_kutta import DOP853, DOPRI5, ProjectedRungeKutta
 METHODS = {cls.name: cls for cls in (Rattle, Yoshida4, Suzuki4, Yoshida6, Yoshida8, DOPRI5, DOP853)}
 
 
-def make_integrator(method: str, dynamics, dt=None, rtol=None, atol=None) -> Integrator:
+def make_integrator(method: str, dynamics, dt=None, rtol=None, atol=None, backend: str = "auto") -> Integrator:
     """Build the integrator ``method`` for one scene's dynamics.
 
-    Fixed-step methods need ``dt``; adaptive ones take ``rtol`` (and optional ``atol``).
+    Fixed-step methods need ``dt``; adaptive ones take ``rtol`` (and optional ``atol``). ``backend``:
+    'auto' runs fixed-step RATTLE methods in the compiled loop where the scene allows, 'numpy' never.
     """
     if method not in METHODS:
         raise SolverError(f"unknown integration method {method!r}; choose one of {sorted(METHODS)}")
@@ -26,7 +27,7 @@ def make_integrator(method: str, dynamics, dt=None, rtol=None, atol=None) -> Int
         raise SolverError(f"method {method!r} has a fixed step: give dt, not rtol/atol")
     if dt is None:
         raise SolverError(f"method {method!r} has a fixed step: give dt (seconds)")
-    return cls(dynamics, dt=dt)
+    return cls(dynamics, dt=dt, backend=backend)
 
 
 __all__ = ["METHODS", "make_integrator", "Integrator", "FixedStepIntegrator", "Rattle", "Composition",

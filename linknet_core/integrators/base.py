@@ -51,14 +51,23 @@ class Integrator:
 class FixedStepIntegrator(Integrator):
     """Equal steps no longer than ``dt`` that land exactly on the target time."""
 
-    def __init__(self, dynamics: Dynamics, dt: float):
+    def __init__(self, dynamics: Dynamics, dt: float, backend: str = "auto"):
         super().__init__(dynamics)
+        if backend not in ("auto", "numpy", "compiled"):
+            raise SolverError(f"backend must be 'auto', 'numpy' or 'compiled', got {backend!r}")
+        self.backend = backend
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             raise SolverError(f"dt must be a positive finite step in seconds, got {dt!r}")
         self.dt = float(dt)
 
     def step(self, X, U, h, F_input):
         raise NotImplementedError
+
+    def _advance_steps(self, X, U, n, h, F_input):
+        """n steps of size h (the numpy path; subclasses may run them in compiled code)."""
+        for _ in range(n):
+            X, U = self.step(X, U, h, F_input)
+        return X, U
 
     def advance(self, state, t_target, F_input, max_steps):
         span = t_target - state.t
@@ -67,10 +76,8 @@ class FixedStepIntegrator(Integrator):
             raise SolverError(f"reaching t = {t_target} needs {n} steps of dt = {self.dt}, more than the "
                               f"limit of {max_steps}; raise max_steps or the step")
         h = span / n
-        X, U = state.X, state.U
         t0 = state.t
-        for i in range(n):
-            X, U = self.step(X, U, h, F_input)
+        X, U = self._advance_steps(state.X, state.U, n, h, F_input)
         if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
             raise SolverError(f"the state became non-finite between t = {t0} and t = {t_target}")
         state.X, state.U, state.t = X, U, t_target

@@ -23,7 +23,7 @@ def _yoshida_symmetric(w: list[float]) -> tuple[float, ...]:
 
 
 class Composition(Rattle):
-    gammas: tuple[float, ...] = (1.0,)
+    """A step is RATTLE steps of gamma_i h in turn (the compiled loop takes the same gammas)."""
 
     def step(self, X, U, h, F_input):
         for g in self.gammas:

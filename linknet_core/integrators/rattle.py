@@ -20,6 +20,25 @@ class Rattle(FixedStepIntegrator):
     guarantees = ("order 2; symplectic and time-reversible (conservative forces); link lengths (11) to "
                   "1e-14 relative and velocity constraints (12) to round-off after every step; bounded energy error")
     position_tol = 1e-14
+    gammas: tuple[float, ...] = (1.0,)
+    compiled_fallbacks = 0  # intervals the compiled loop handed back to the numpy path
+
+    def _advance_steps(self, X, U, n, h, F_input):
+        from .. import compiled
+
+        if self.backend != "numpy" and compiled.supports(self.dyn):
+            if not hasattr(self, "_kernel"):
+                self._kernel = compiled.CompiledRattle(self.dyn)
+            status, X_new, U_new = self._kernel.advance(X, U, n, h, self.gammas, F_input, self.position_tol)
+            if status == compiled.OK:
+                return X_new, U_new
+            # singular configuration or slow projection: the numpy path has the fallbacks
+            self.compiled_fallbacks += 1
+        elif self.backend == "compiled":
+            from ..errors import SolverError
+
+            raise SolverError(f"the compiled loop does not handle {self.dyn.structure.kind} scenes; use backend 'auto'")
+        return super()._advance_steps(X, U, n, h, F_input)
 
     def step(self, X, U, h, F_input):
         dyn = self.dyn
