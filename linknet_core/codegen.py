@@ -250,6 +250,7 @@ class CompiledRHS:
     """
 
     def __init__(self, scene, input_masses=None, fallback=None, plane="auto", cache=None, cc=None):
+        self._init_args = (scene, input_masses, fallback, plane, cache, cc)
         self.scene = scene
         self.K, self.L = int(scene.K), int(scene.L)
         free = np.flatnonzero(np.asarray(scene.inv_mass) > 0)
@@ -278,6 +279,10 @@ class CompiledRHS:
             self._primary = self._build(basis, origin)
         else:
             self._primary = self._variant3 = self._build(np.eye(3), np.zeros(3))
+
+    def __reduce__(self):
+        """Pickle / deepcopy by rebuilding: the kernel itself is reloaded from the disk cache."""
+        return (type(self), self._init_args)
 
     # -- building --
     def _build(self, basis, origin):
