@@ -82,7 +82,7 @@ def _project_positions(sym: SymbolicTensionSystem, x, tol=1e-14, max_iter=50):
 
     def residual(z):
         g = np.asarray(sym.constraint_fn(z)).ravel()      # (|D|^2 - R^2)/(2R) ~ |D| - R
-        return g, float(np.max(np.abs(g) / R))
+        return g, float(np.max(np.abs(g) / R, initial=0.0))
 
     g, r = residual(x)
     for _ in range(max_iter):
@@ -252,6 +252,8 @@ def run_checks(scene, samples=5, seed=0, dynamics=None, dynamics_factory=None, s
     on = sample_states(scene, sym, samples, rng, on_manifold=True)
     off = sample_states(scene, sym, samples, rng, on_manifold=False)
     Ffn = sym.forces_function()
+    if sym.L == 0:  # no links: nothing but the forces (the accelerations are F/M)
+        return [_check_forces(scene, sym, dyn, Ffn, on + off), _check_accelerations(scene, sym, dyn, Ffn, on)]
     results = [
         _check_forces(scene, sym, dyn, Ffn, on + off),
         _check_on_manifold(scene, sym, dyn, on),

@@ -239,7 +239,9 @@ class SymbolicTensionSystem:
             Dsp = self._Xfull[:, b.tolist()] - self._Xfull[:, a.tolist()]
             Vsp = self._Vfull[:, b.tolist()] - self._Vfull[:, a.tolist()]
             dist = ca.sqrt(ca.sum1(Dsp * Dsp))
-            e = Dsp / ca.repmat(dist, d, 1)
+            # coincident ends: no direction, no force (as the numeric force model does)
+            safe = ca.if_else(dist > 0, dist, 1.0)
+            e = Dsp / ca.repmat(safe, d, 1)
             rate = ca.sum1(e * Vsp)
             fs = ca.DM(springs.stiffness).T * (dist - ca.DM(springs.rest_length).T) \
                 + ca.DM(springs.damping).T * rate

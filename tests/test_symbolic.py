@@ -121,6 +121,18 @@ def test_cli_main_prints_one_line_per_check_and_exits_zero(capsys):
     assert out.count("PASS") == 8 and "FAIL" not in out
 
 
+def test_cli_refuses_a_missing_file_and_handles_a_scene_without_links(capsys, tmp_path):
+    parser = argparse.ArgumentParser()
+    checks.add_arguments(parser)
+    assert checks.main(parser.parse_args([str(tmp_path / "missing.json")])) == 2
+    assert "missing.json" in capsys.readouterr().err
+    free = tmp_path / "free.json"
+    free.write_text('{"name": "free", "gravity": [0, 0, -9.81], "masses": ['
+                    '{"name": "a", "mass": 1.0, "position": [0, 0, 0]}, {"name": "b", "mass": 2.0, '
+                    '"position": [1, 0, 0]}], "springs": [{"a": 1, "b": 2, "stiffness": 3.0, "damping": 0.5}]}')
+    assert checks.main(parser.parse_args([str(free), "--samples", "2"])) == 0
+
+
 def test_taut_string_violation_of_35_is_reported():
     """The seed's acknowledgment: velocities satisfying (12) with no consistent accelerations (35)."""
     scene = checks.taut_string_scene()
