@@ -22,6 +22,7 @@ import argparse
 import sys
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -43,9 +44,10 @@ class CheckResult:
     tolerance: float
     detail: str = ""
     extra: dict = field(default_factory=dict)
+    skipped: bool = False
 
     def line(self) -> str:
-        tag = "PASS" if self.passed else "FAIL"
+        tag = "SKIP" if self.skipped else ("PASS" if self.passed else "FAIL")
         return f"{tag}  {self.name:<48s} max discrepancy {self.discrepancy:9.2e} (tol {self.tolerance:.0e})" + \
             (f"\n      {self.detail}" if self.detail else "")
 
@@ -239,7 +241,7 @@ def _default_dynamics(scene):
 # the checks
 # ------------------------------------------------------------------------------------------------
 
-def run_checks(scene, samples=5, seed=0, dynamics=None, dynamics_factory=None, sym=None):
+def run_checks(scene, samples=5, seed=0, dynamics=None, dynamics_factory=None, sym=None, kernel=False):
     """Run every check on ``scene``; returns a list of :class:`CheckResult`.
 
     ``dynamics``: the numeric side (default ``Dynamics(scene)``); ``dynamics_factory(scene)`` makes the
@@ -265,6 +267,8 @@ def run_checks(scene, samples=5, seed=0, dynamics=None, dynamics_factory=None, s
     results.append(null_result)
     results.append(_check_existence(scene, sym, dyn, on, null_info, factory))
     results.append(_check_accelerations(scene, sym, dyn, Ffn, on))
+    if kernel:
+        results.append(_check_kernel(scene, dyn, on))
     return results
 
 
@@ -547,6 +551,31 @@ def _check_accelerations(scene, sym, dyn, Ffn, states):
                        f"minimum-norm tensions {worst_T:.2e}; symbolic side: AD system, dense pseudo-inverse")
 
 
+def _check_kernel(scene, dyn, states):
+    """The casadi-generated compiled kernel (codegen) against the solver's numeric accelerations."""
+    from . import codegen
+
+    name = "generated kernel = numeric accelerations"
+    try:
+        kernel = codegen.compiled_rhs(scene, required=True)
+    except codegen.CodegenUnavailable as exc:
+        return CheckResult(name, True, 0.0, 1e-10, f"no kernel: {exc}", skipped=True)
+    worst = 0.0
+    for X, U, Fin in states:
+        if kernel.plane is not None:  # keep the state in the scene's plane: the 2-D kernel is tested
+            basis, origin, _ = kernel.plane
+            P = basis @ basis.T
+            X = (X - origin) @ P + origin
+            U, Fin = U @ P, Fin @ P
+        acc_c, T_c = kernel.accelerations(X, U, Fin)
+        acc_n, T_n = dyn.accelerations(X, U, Fin)
+        worst = max(worst, np.abs(acc_c - acc_n).max() / max(np.abs(acc_n).max(), 1e-300),
+                    np.abs(T_c - T_n).max(initial=0.0) / max(np.abs(T_n).max(initial=0.0), 1e-300))
+    return CheckResult(name, worst <= 1e-10, worst, 1e-10,
+                       f"{kernel._primary.d}-D kernel {Path(kernel.so_path).name}; "
+                       f"{kernel.fallback_calls} fallback call(s) to the numeric path")
+
+
 # ------------------------------------------------------------------------------------------------
 # command line
 # ------------------------------------------------------------------------------------------------
@@ -556,6 +585,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--samples", type=int, default=5,
                         help="random states on the manifold, and as many off it (default 5)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--kernel", action="store_true",
+                        help="also generate and compile the scene's casadi kernel and compare it (needs a C compiler)")
 
 
 def main(args) -> int:
@@ -575,7 +606,7 @@ def main(args) -> int:
         n_fixed = int(np.count_nonzero(np.asarray(scene.inv_mass) == 0))
         print(f"{path}: K={scene.K} masses ({n_fixed} anchored), L={scene.L} links; {args.samples} states on and "
               f"{args.samples} off the manifold, seed {args.seed}")
-        results = run_checks(scene, samples=args.samples, seed=args.seed)
+        results = run_checks(scene, samples=args.samples, seed=args.seed, kernel=getattr(args, "kernel", False))
         for r in results:
             print(r.line())
         bad = sum(not r.passed for r in results)

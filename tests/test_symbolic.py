@@ -133,6 +133,16 @@ def test_cli_refuses_a_missing_file_and_handles_a_scene_without_links(capsys, tm
     assert checks.main(parser.parse_args([str(free), "--samples", "2"])) == 0
 
 
+def test_kernel_line_of_the_checker(tmp_path, monkeypatch):
+    from linknet_core import codegen
+
+    monkeypatch.setenv("LINKNET_CACHE_DIR", str(tmp_path))
+    scene = ln.load_scene(MODELS / "pendulum.json")
+    line = checks.run_checks(scene, samples=2, seed=0, kernel=True)[-1]
+    assert line.name == "generated kernel = numeric accelerations" and line.passed
+    assert line.skipped == (codegen.compiler() is None)
+
+
 def test_taut_string_violation_of_35_is_reported():
     """The seed's acknowledgment: velocities satisfying (12) with no consistent accelerations (35)."""
     scene = checks.taut_string_scene()
