@@ -10,6 +10,7 @@ Outputs have direct feedthrough from the four inputs.
 import linknet_fmu.libpython_global  # noqa: F401  first: C hosts need libpython's symbols global
 
 import math
+import sys
 
 from pythonfmu import Fmi2Slave, Fmi2Causality, Fmi2Variability, Fmi2Initial, Real
 from pythonfmu.enums import Fmi2Status
@@ -71,21 +72,26 @@ class SpringDamper(Fmi2Slave):
 
     def _set(self, name, value):
         if name[:2] in ("Fa", "Fb"):
-            self.log(f"{name} is an output and cannot be set", Fmi2Status.error)
+            self._error(f"{name} is an output and cannot be set")
             return
         if not math.isfinite(value) or (name in ("stiffness", "rest_length", "damping") and value < 0):
             self.bad[name] = f"= {value!r} is out of range"
-            self.log(f"{name} {self.bad[name]}; the next doStep is refused", Fmi2Status.error)
+            self._error(f"{name} {self.bad[name]}; the next doStep is refused")
             return
         self.bad.pop(name, None)
         self.values[name] = float(value)
 
+    def _error(self, msg):
+        # logged (seen with loggingOn) and on stderr (pythonfmu drops log messages otherwise)
+        self.log(f"{self.instance_name}: {msg}", Fmi2Status.error)
+        sys.stderr.write(f"[linknet FMU error] {self.instance_name}: {msg}\n")
+
     def do_step(self, current_time, step_size):
         if self.bad:
             for name, why in self.bad.items():
-                self.log(f"doStep refused: {name} {why}", Fmi2Status.error)
+                self._error(f"doStep refused: {name} {why}")
             return False
         if not (math.isfinite(step_size) and step_size > 0):
-            self.log(f"doStep refused: step size {step_size!r} must be > 0", Fmi2Status.error)
+            self._error(f"doStep refused: step size {step_size!r} must be > 0")
             return False
         return True

@@ -75,3 +75,45 @@ save(errors=np.array([c.errors(c.master(fmus, h, 1.0), ref) for h in {steps!r}])
 """, tmp_path / "client_coupling_fine")
     orders = _orders(steps, out["errors"])
     assert all(0.9 < o < 1.1 for o in orders), orders
+
+
+def test_component_fmus_follow_their_laws_and_refuse_bad_parameters(tmp_path):
+    """The spring-damper FMU gives linknet_core's spring force (forces.spring_forces) and the PD
+    FMU its control law, for random arguments; bad parameters are refused by name."""
+    from fmu_harness import build_cached, FMU_CLIENT_LIB
+    import linknet_core as ln
+    from linknet_core.forces import spring_forces
+
+    spring = build_cached(tmp_path, "spring_damper")
+    pd = build_cached(tmp_path, "pd_controller")
+    rng = np.random.default_rng(1)
+    args = rng.normal(size=(5, 12))
+    out = run_client(f"""
+{FMU_CLIENT_LIB}
+args = np.array({args.tolist()!r})
+s = Fmu({str(spring)!r}, 'spring'); s.init(start=dict(stiffness=20.0, rest_length=0.7, damping=0.3))
+p = Fmu({str(pd)!r}, 'pd'); p.init(start={{'Kp': 40.0, 'Kd': 3.0, 'x_target[2]': 0.5, 'F_ff[3]': 1.5}})
+fa, fp = [], []
+for a in args:
+    s.set(dict(zip([f'{{n}}[{{i}}]' for n in ('xa', 'va', 'xb', 'vb') for i in (1, 2, 3)], a)))
+    fa.append(s.get(['Fa[1]', 'Fa[2]', 'Fa[3]', 'Fb[1]', 'Fb[2]', 'Fb[3]']))
+    p.set(dict(zip(['x[1]', 'x[2]', 'x[3]', 'v[1]', 'v[2]', 'v[3]'], a[:6])))
+    fp.append(p.get(['F[1]', 'F[2]', 'F[3]']))
+s.set({{'stiffness': -1.0}})
+try:
+    s.step(0.0, 0.01); status = 0
+except FMICallException as e:
+    status = e.status
+save(fa=np.array(fa), fp=np.array(fp), status=status, log=np.array(' '.join(m for _, m in LOG)))
+""", tmp_path / "client_components")
+    scene = ln.Scene.from_dict({"name": "two", "masses": [{"position": [0, 0, 0], "mass": 1.0},
+                                                          {"position": [1, 0, 0], "mass": 1.0}],
+                                "springs": [{"a": 1, "b": 2, "stiffness": 20.0, "rest_length": 0.7, "damping": 0.3}]})
+    for a, f in zip(args, out["fa"]):
+        X = np.array([a[0:3], a[6:9]])
+        U = np.array([a[3:6], a[9:12]])
+        np.testing.assert_allclose(f, spring_forces(scene, X, U).ravel(), rtol=1e-12, atol=1e-12)
+    for a, f in zip(args, out["fp"]):
+        expected = 40.0 * (np.array([0.0, 0.5, 0.0]) - a[:3]) - 3.0 * a[3:6] + np.array([0, 0, 1.5])
+        np.testing.assert_allclose(f, expected, rtol=1e-12, atol=1e-12)
+    assert out["status"] == 2 and "stiffness" in str(out["log"])

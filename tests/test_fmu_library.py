@@ -100,3 +100,25 @@ save(before=before, after=after, t=t)
     F = np.zeros((11, 3))
     F[10, 2], F[4, 0] = 3.0, -1.0
     np.testing.assert_allclose(out["after"][n_xu:], ln.Dynamics(scene).tensions(X, U, F), rtol=1e-12, atol=1e-12)
+
+
+def test_parameters_set_in_the_fmu_give_the_library_scene_with_those_parameters(fmu_dir):
+    """M, R-consistent, g set through fmpy start values = Scene.with_parameters in the library."""
+    fmu = build_cached(fmu_dir, str(MODELS / "double_pendulum.json"), step=1e-3)
+    start = {"M[2]": 2.5, "M[3]": 0.4, "g[1]": 1.0, "g[3]": -1.62}
+    out = run_client(f"""
+import fmpy
+res = fmpy.simulate_fmu({str(fmu)!r}, stop_time=1.0, output_interval=0.05, start_values={start!r},
+                        output=['X[3,1]', 'X[3,3]', 'T[2]'])
+save(x=res['X[3,1]'], z=res['X[3,3]'], T=res['T[2]'])
+""", fmu_dir / "client_params")
+    scene = ln.load_scene(MODELS / "double_pendulum.json")
+    mass = np.array(scene.mass, dtype=float)
+    mass[1], mass[2] = 2.5, 0.4
+    changed = scene.with_parameters(mass=mass, gravity=[1.0, 0.0, -1.62])
+    ref = ln.simulate(changed, 1.0, method="rattle", dt=1e-3, output_dt=0.05)
+    np.testing.assert_allclose(out["x"], ref.X[:, 2, 0], rtol=0, atol=1e-11)
+    np.testing.assert_allclose(out["z"], ref.X[:, 2, 2], rtol=0, atol=1e-11)
+    np.testing.assert_allclose(out["T"], ref.T[:, 1], rtol=1e-9, atol=1e-10)
+    default = ln.simulate(scene, 1.0, method="rattle", dt=1e-3, output_dt=0.05)
+    assert np.max(np.abs(default.X[:, 2, 2] - ref.X[:, 2, 2])) > 0.1  # the parameters mattered
