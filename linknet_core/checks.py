@@ -103,11 +103,18 @@ def _project_positions(sym: SymbolicTensionSystem, x, tol=1e-14, max_iter=50):
 
 
 def _null_projector_apply(G, v):
-    """v minus its component in range(G^T): the part satisfying G v = 0 (12)."""
+    """v minus its component in range(G^T): the part satisfying G v = 0 (12).
+
+    Dense SVD with a relative cut of 1e-12: near-singular positions (a redundant truss a round-off away
+    from its singular configuration) must not keep velocity along their nearly-null rows.
+    """
     if G.shape[0] == 0:
         return v
-    v = v - _min_norm_solve(G, G @ v)
-    return v - _min_norm_solve(G, G @ v)       # second pass removes the ridge's residue
+    Gd = G.toarray() if hasattr(G, "toarray") else np.asarray(G)
+    _, s, vt = np.linalg.svd(Gd, full_matrices=False)
+    rows = vt[s > 1e-12 * (s[0] if s.size else 0.0)]
+    v = v - rows.T @ (rows @ v)
+    return v - rows.T @ (rows @ v)
 
 
 def sample_states(scene, sym: SymbolicTensionSystem, n, rng, on_manifold=True):
@@ -476,7 +483,10 @@ def _check_existence(scene, sym, dyn, states, nulls, factory):
         bF = B - w
         Fr = sym.reduce(F)
         worst_F = max(worst_F, float(np.abs(N.T @ bF).max() / max(np.sqrt(wmax * (W * Fr ** 2).sum()), 1e-300)))
-        r_w = float(np.abs(N.T @ w).max() / max(np.abs(w).max(initial=0.0), 1e-300))
+        # relative to |w|, or to the sampler's velocity scale (1 link length per second) where the
+        # velocities are round-off (a rigid anchored scene: null(G) = {0})
+        w_ref = float(np.median(sym._R))
+        r_w = float(np.abs(N.T @ w).max() / max(np.abs(w).max(initial=0.0), w_ref))
         if r_w <= 1e-6:
             n_consistent += 1
             worst_consistent = max(worst_consistent, float(np.abs(N.T @ B).max() / max(np.abs(B).max(), 1e-300)))
