@@ -30,6 +30,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import json
+import math
 import os
 import shutil
 import subprocess
@@ -50,7 +51,7 @@ __all__ = [
     "plane_of",
 ]
 
-KERNEL_FORMAT = 1  # bump when the generated code changes meaning (invalidates the cache)
+KERNEL_FORMAT = 2  # bump when the generated code changes meaning (invalidates the cache)
 CFLAGS = ["-O2", "-fPIC", "-shared"]
 
 
@@ -118,21 +119,71 @@ def _scene_key(scene, variant: dict) -> str:
 
 
 def build_rhs_function(scene, basis=None, origin=None, input_masses=None, name="lnk_rhs"):
-    """The casadi Function rhs(x, u, fin) -> (acc, T) of one scene (reduced coordinates).
+    """The casadi Function rhs(X, U, F_in) -> (acc, T, flags) of one scene, on full (K,3) arrays.
+
+    X, U, F_in are the row-major flattenings of (K,3) arrays (so numpy buffers are passed as they are);
+    acc is (K,3) flattened, zero on anchored masses. Inside, only the free masses' coordinates in the
+    kept basis are read, only the input masses' forces. ``flags`` (4,) lets the caller validate the
+    call without touching the arrays again:
+
+    * flags[0]: out-of-plane content sum |n.(X_k - o)| + |n.U_k| + |n.F_k| (0 for a 3-D kernel),
+    * flags[1]: sum |F_in| over masses that are not inputs of this kernel (must be 0),
+    * flags[2]: sum(acc) + sum(T), non-finite when the LDL^T met a singular A,
+    * flags[3]: scale sum |X_k - o| + |U_k| + |F_k| for the relative out-of-plane test of tilted planes.
 
     Also returns the symbolic system it was made from.
     """
     sym = SymbolicTensionSystem(scene, basis=basis, origin=origin)
-    Ffn = sym.forces_function(input_masses)
-    x = ca.MX.sym("x", sym.n)
-    u = ca.MX.sym("u", sym.n)
-    fin = ca.MX.sym("fin", Ffn.size1_in(2))
+    K, L, d, nf = sym.K, sym.L, sym.dim, sym.nf
+    free = sym.free
+    inputs = free if input_masses is None else np.asarray(input_masses, np.int64)
+    Ffn = sym.forces_function(inputs)
+    P = sym.basis
+    o = sym.origin
+    Xf = ca.MX.sym("X", 3 * K)
+    Uf = ca.MX.sym("U", 3 * K)
+    Fi = ca.MX.sym("F_in", 3 * K)
+    Xm, Um, Fm = (ca.reshape(v, 3, K) for v in (Xf, Uf, Fi))   # column k = mass k
+    axes = [int(np.argmax(P[:, j])) for j in range(d)]
+    aligned = bool(np.array_equal(P, np.eye(3)[:, axes]) and not np.any(o[axes]))
+
+    def reduce(M, cols, point):
+        if aligned:  # pure gather: exact, no arithmetic
+            return ca.reshape(M[axes, cols.tolist()], d * cols.size, 1)
+        Z = M[:, cols.tolist()]
+        if point:
+            Z = Z - ca.repmat(ca.DM(o), 1, cols.size)
+        return ca.reshape(ca.mtimes(ca.sparsify(ca.DM(P.T)), Z), d * cols.size, 1)
+
+    x = reduce(Xm, free, True)
+    u = reduce(Um, free, False)
+    fin = reduce(Fm, inputs, False) if inputs.size else ca.MX(0, 1)
     F = Ffn(x, u, fin)
     A = sym.A_fn(x)
     B = sym.B_fn(x, u, F)
     T = ca.solve(A, B, "ldl")  # sparse LDL^T on the scene's sparsity, analysed once here
-    acc = sym.acc_fn(x, F, T)
-    return ca.Function(name, [x, u, fin], [acc, T], ["x", "u", "fin"], ["acc", "T"]), sym
+    acc_r = ca.reshape(sym.acc_fn(x, F, T), d, nf)
+    acc3 = acc_r if d == 3 and aligned and axes == [0, 1, 2] else ca.mtimes(ca.sparsify(ca.DM(P)), acc_r)
+    scatter = ca.DM.triplet(list(range(nf)), free.tolist(), [1.0] * nf, nf, K)   # free column j -> mass
+    acc_full = ca.reshape(ca.mtimes(acc3, scatter), 3 * K, 1)
+    if d < 3:
+        normal = np.cross(P[:, 0], P[:, 1])
+        nd = ca.sparsify(ca.DM(normal).T)
+        off_plane = (ca.sum2(ca.fabs(ca.mtimes(nd, Xm) - float(normal @ o)))
+                     + ca.sum2(ca.fabs(ca.mtimes(nd, Um))) + ca.sum2(ca.fabs(ca.mtimes(nd, Fm))))
+        scale = ca.sum1(ca.sum2(ca.fabs(Xm - ca.repmat(ca.DM(o), 1, K)))) + ca.sum1(ca.sum2(ca.fabs(Um))) \
+            + ca.sum1(ca.sum2(ca.fabs(Fm)))
+    else:
+        off_plane = ca.MX(0.0)
+        scale = ca.MX(1.0)
+    others = np.setdiff1d(np.arange(K), inputs)
+    ignored = ca.sum1(ca.sum2(ca.fabs(Fm[:, others.tolist()]))) if others.size else ca.MX(0.0)
+    finite = ca.sum1(ca.reshape(acc_r, d * nf, 1)) + ca.sum1(T)
+    flags = ca.vertcat(off_plane, ignored, finite, scale)
+    # dense outputs: the C function writes every entry of the caller's buffers (structural zeros too)
+    fn = ca.Function(name, [Xf, Uf, Fi], [ca.densify(acc_full), ca.densify(T), ca.densify(flags)],
+                     ["X", "U", "F_in"], ["acc", "T", "flags"])
+    return fn, sym
 
 
 def generate_and_compile(fn: ca.Function, directory: Path, stem: str, cc: str) -> tuple[Path, dict]:
@@ -196,49 +247,21 @@ class _CasadiKernel:
 
 
 class _Variant:
-    """One compiled kernel (planar or 3-D) with the index arrays that feed it."""
+    """One compiled kernel (planar or 3-D): the (K,3) arrays are handed to C by pointer, no copies."""
 
-    def __init__(self, scene, basis, origin, input_masses, so_path, n, L, n_in):
-        self.basis = basis
-        self.origin = origin
-        self.d = basis.shape[1]
-        self.free = np.flatnonzero(np.asarray(scene.inv_mass) > 0)
-        self.input_masses = input_masses
-        self.kernel = _CasadiKernel(so_path, "lnk_rhs", [n, n, n_in], [n, L])
-        # axis-aligned basis (identity, or two coordinate axes of a plane with a zero origin in them):
-        # reduction is a gather of flat indices, exact and cheap
-        axes = [int(np.argmax(basis[:, j])) for j in range(self.d)]
-        self.gather = bool(np.array_equal(basis, np.eye(3)[:, axes]) and not np.any(origin[axes]))
-        self.free_flat = (3 * self.free[:, None] + np.asarray(axes)[None, :]).ravel()
-        self.input_flat = (3 * input_masses[:, None] + np.asarray(axes)[None, :]).ravel()
+    def __init__(self, so_path, K, L, d, aligned):
+        self.d = d
+        self.aligned = aligned
+        self.kernel = _CasadiKernel(so_path, "lnk_rhs", [0, 0, 0], [3 * K, L, 4])
+        self.acc_out, self.T_out, self.flags = self.kernel.outputs
+        self._arg = self.kernel._arg
 
-    def run(self, X, U, F_input):
-        k = self.kernel
-        x, u, fin = k.inputs
-        if self.gather:
-            np.take(X, self.free_flat, out=x)
-            np.take(U, self.free_flat, out=u)
-            if fin.size:
-                if F_input is None:
-                    fin.fill(0.0)
-                else:
-                    np.take(F_input, self.input_flat, out=fin)
-        else:
-            x[:] = ((X[self.free] - self.origin) @ self.basis).ravel()
-            u[:] = (U[self.free] @ self.basis).ravel()
-            if fin.size:
-                fin[:] = 0.0 if F_input is None else (F_input[self.input_masses] @ self.basis).ravel()
-        status = k()
-        acc_r, T = k.outputs
-        return status, acc_r, T
-
-    def expand(self, acc_r, K):
-        acc = np.zeros((K, 3))
-        if self.gather:
-            acc.put(self.free_flat, acc_r)
-        else:
-            acc[self.free] = acc_r.reshape(-1, self.d) @ self.basis.T
-        return acc
+    def run(self, X, U, F):
+        arg = self._arg
+        arg[0] = X.ctypes.data
+        arg[1] = U.ctypes.data
+        arg[2] = F.ctypes.data
+        return self.kernel()
 
 
 class CompiledRHS:
@@ -247,6 +270,7 @@ class CompiledRHS:
     Same contract as ``Dynamics.accelerations``: acc is zero on anchored masses, T > 0 is tension.
     ``fallback(X, U, F_input)`` (the numeric path) is called when the kernel's LDL^T meets a singular A.
     A state that leaves a planar scene's plane is handed to a 3-D kernel (generated on first need).
+    Not thread-safe: one set of output buffers per object.
     """
 
     def __init__(self, scene, input_masses=None, fallback=None, plane="auto", cache=None, cc=None):
@@ -255,9 +279,6 @@ class CompiledRHS:
         self.K, self.L = int(scene.K), int(scene.L)
         free = np.flatnonzero(np.asarray(scene.inv_mass) > 0)
         self.input_masses = free if input_masses is None else np.asarray(input_masses, np.int64)
-        self._input_mask = np.zeros(self.K, bool)
-        self._input_mask[self.input_masses] = True
-        self._check_inputs = not self._input_mask[free].all()
         self.fallback = fallback
         self.cache = Path(cache) if cache is not None else cache_dir() / "kernels"
         self.cc = cc or compiler()
@@ -266,16 +287,14 @@ class CompiledRHS:
         self.timings: dict = {}
         self.fallback_calls = 0
         self.calls_3d = 0
+        self._zeros = np.zeros((self.K, 3))
+        self._zeros.setflags(write=False)
         pl = plane_of(scene) if plane == "auto" else None
         self.plane = pl
         self._variant3 = None
         if pl is not None:
             basis, origin, normal = pl
-            self._normal = normal
-            self._plane_offset = float(origin @ normal)
-            axis = int(np.argmax(np.abs(normal)))
-            self._axis_aligned = bool(normal[axis] == 1.0)
-            self._out_flat = 3 * np.arange(self.K) + axis    # out-of-plane coordinates
+            self._aligned_plane = bool(np.max(np.abs(normal)) == 1.0)
             self._primary = self._build(basis, origin)
         else:
             self._primary = self._variant3 = self._build(np.eye(3), np.zeros(3))
@@ -291,7 +310,8 @@ class CompiledRHS:
         stem = "lnk_" + _scene_key(self.scene, variant)
         so_path = self.cache / f"{stem}.so"
         d = basis.shape[1]
-        n = int(np.count_nonzero(np.asarray(self.scene.inv_mass) > 0)) * d
+        axes = [int(np.argmax(basis[:, j])) for j in range(d)]
+        aligned = bool(np.array_equal(basis, np.eye(3)[:, axes]) and not np.any(np.asarray(origin)[axes]))
         if so_path.exists():
             self.timings["cache_hits"] = self.timings.get("cache_hits", 0) + 1
         else:
@@ -303,48 +323,49 @@ class CompiledRHS:
             so_path, t = generate_and_compile(fn, self.cache, stem, self.cc)
             self.timings.update({"symbolic_s": t1 - t0, **t})
         self.so_path = so_path
-        return _Variant(self.scene, basis, origin, self.input_masses, so_path, n, self.L,
-                        self.input_masses.size * d)
+        variant = _Variant(so_path, self.K, self.L, d, aligned)
+        n_free = int(np.count_nonzero(np.asarray(self.scene.inv_mass) > 0))
+        variant.coordinates = d * n_free                    # symbols of the kernel: free masses only
+        variant.input_coordinates = d * int(self.input_masses.size)
+        return variant
 
-    def _in_plane(self, X, U, F_input) -> bool:
-        if self._axis_aligned:  # exact test: the integrators keep these components exactly constant
-            idx = self._out_flat
-            if (X.take(idx) != self._plane_offset).any() or U.take(idx).any():
-                return False
-            return F_input is None or not F_input.take(idx).any()
-        n = self._normal
-        tol = 1e-12
-        if np.abs(X @ n - self._plane_offset).max() > tol * (1.0 + float(np.abs(X).max())):
-            return False
-        if np.abs(U @ n).max() > tol * (1.0 + float(np.abs(U).max())):
-            return False
-        if F_input is not None and np.abs(F_input @ n).max() > tol * (1.0 + float(np.abs(F_input).max())):
-            return False
-        return True
+    def _left_plane(self, flags) -> bool:
+        if self._aligned_plane:  # exact: integrators keep these components exactly constant
+            return flags[0] != 0.0
+        return flags[0] > 1e-12 * (1.0 + flags[3])
 
     # -- evaluation --
+    def _as_array(self, Z, what):
+        Z = np.ascontiguousarray(Z, dtype=float)
+        if Z.shape != (self.K, 3):
+            raise ValueError(f"{what} must have shape ({self.K}, 3), got {Z.shape}")
+        return Z
+
     def accelerations(self, X, U, F_input=None):
-        X = np.asarray(X, dtype=float)
-        U = np.asarray(U, dtype=float)
-        if F_input is not None:
-            F_input = np.asarray(F_input, dtype=float)
-            if self._check_inputs and np.any(F_input[~self._input_mask]):
-                k = int(np.flatnonzero(np.any(F_input != 0, axis=1) & ~self._input_mask)[0])
-                raise ValueError(f"input force on mass {k + 1}, which this kernel was built without "
-                                 "(not among its input masses)")
+        X = self._as_array(X, "positions X")
+        U = self._as_array(U, "velocities U")
+        F = self._zeros if F_input is None else self._as_array(F_input, "input forces F_input")
         variant = self._primary
-        if self.plane is not None and not self._in_plane(X, U, F_input):
+        status = variant.run(X, U, F)
+        flags = variant.flags
+        if flags[1] != 0.0:
+            others = np.setdiff1d(np.arange(self.K), self.input_masses)
+            k = int(others[np.flatnonzero(np.any(F[others] != 0, axis=1))[0]])
+            raise ValueError(f"input force on mass {k + 1}, which this kernel was built without "
+                             "(not among its input masses)")
+        if variant is not self._variant3 and self._left_plane(flags):
             if self._variant3 is None:
                 self._variant3 = self._build(np.eye(3), np.zeros(3))
             variant = self._variant3
             self.calls_3d += 1
-        status, acc_r, T = variant.run(X, U, F_input)
-        if status != 0 or not np.isfinite(T.sum() + acc_r.sum()):
+            status = variant.run(X, U, F)
+            flags = variant.flags
+        if status != 0 or not math.isfinite(flags[2]):
             if self.fallback is None:
                 raise CodegenUnavailable("the compiled kernel met a singular tension matrix and has no fallback")
             self.fallback_calls += 1
             return self.fallback(X, U, F_input)
-        return variant.expand(acc_r, self.K), T.copy()
+        return variant.acc_out.reshape(self.K, 3).copy(), variant.T_out.copy()
 
 
 def compiled_rhs(scene, input_masses=None, fallback=None, required=False, cache=None):

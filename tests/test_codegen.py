@@ -64,8 +64,12 @@ def test_planar_scene_gets_a_2d_kernel_and_leaving_the_plane_uses_3d(cache):
     kernel = codegen.compiled_rhs(scene, cache=cache)
     assert kernel.plane is not None and kernel._primary.d == 2
     n_free = int(np.count_nonzero(~scene.fixed))
-    x, u, fin = kernel._primary.kernel.inputs
-    assert x.size == u.size == fin.size == 2 * n_free       # anchored masses eliminated, 2 coordinates
+    assert kernel._primary.coordinates == kernel._primary.input_coordinates == 2 * n_free
+    # anchored masses are constants of the code: moving one in the input changes nothing
+    X = np.array(scene.X0)
+    moved = X.copy()
+    moved[scene.fixed] += 0.5 * kernel.plane[0][:, 0]     # within the plane
+    np.testing.assert_array_equal(kernel.accelerations(moved, scene.U0)[0], kernel.accelerations(X, scene.U0)[0])
     # an out-of-plane velocity: the 3-D kernel takes over, results still equal the numeric path
     normal = kernel.plane[2]
     X = np.array(scene.X0)
@@ -81,7 +85,7 @@ def test_kernel_has_input_terms_only_for_input_masses(cache):
     dyn = ln.Dynamics(scene)
     tip = scene.K - 1
     kernel = codegen.compiled_rhs(scene, cache=cache, input_masses=[tip])
-    assert kernel._primary.kernel.inputs[2].size == kernel._primary.d  # one mass' force, nothing else
+    assert kernel._primary.input_coordinates == kernel._primary.d  # one mass' force, nothing else
     F = np.zeros((scene.K, 3))
     F[tip] = [1.5, 0.0, -2.0]
     _agree(kernel, dyn, np.array(scene.X0), np.array(scene.U0), F)
