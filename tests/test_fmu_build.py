@@ -109,3 +109,13 @@ def test_bad_scene_is_refused_with_a_message_naming_the_link(tmp_path):
     path.write_text(json.dumps(bad))
     with pytest.raises(SystemExit, match="link 2"):
         build_fmu.build_scene_fmu(path, tmp_path / "bad.fmu", quiet=True)
+
+
+def test_fmpy_info_shows_units(fmu_dir):
+    import subprocess
+    import sys
+    fmu = build_cached(fmu_dir, str(MODELS / "chain_10.json"))
+    info = subprocess.run([sys.executable, "-m", "fmpy", "info", str(fmu)], capture_output=True, text=True)
+    assert info.returncode == 0, info.stderr
+    lines = {line.split()[0]: line.split() for line in info.stdout.splitlines() if line.strip()[:2] in ("F[", "X[", "T[")}
+    assert "N" in lines["F[11,3]"] and "m" in lines["X[11,3]"] and "N" in lines["T[1]"]
