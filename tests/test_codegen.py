@@ -161,3 +161,41 @@ def test_simulation_through_the_kernel_equals_the_numeric_one(name, cache):
     assert n_c == n_n
     np.testing.assert_allclose(X_c, X_n, rtol=0, atol=1e-11)
     np.testing.assert_allclose(U_c, U_n, rtol=0, atol=1e-10)
+
+
+@needs_cc
+def test_kernel_with_every_force_element_in_a_tilted_plane(cache):
+    """Springs (one to an anchor), drag and constant forces, all in the plane spanned by (1,1,0)/sqrt2 and
+    z: the 2-D kernel works in rotated plane coordinates and matches the numeric path."""
+    e = np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0)
+    z = np.array([0.0, 0.0, 1.0])
+
+    def p(a, b):
+        return (a * e + b * z).tolist()
+
+    masses = [{"name": "pivot", "position": p(0, 0), "fixed": True},
+              {"name": "a", "mass": 1.0, "position": p(1, 0), "drag": 0.2, "force": p(0.5, 0.1)},
+              {"name": "b", "mass": 0.7, "position": p(1, -1), "velocity": p(0.3, 0), "drag": 0.1},
+              {"name": "c", "mass": 1.3, "position": p(2, -1)}]
+    scene = ln.Scene.from_dict({
+        "name": "tilted", "gravity": [0, 0, -9.81], "masses": masses,
+        "links": [{"a": "pivot", "b": "a"}, {"a": "a", "b": "b"}, {"a": "b", "b": "c"}],
+        "springs": [{"a": "pivot", "b": "c", "stiffness": 15.0, "damping": 0.4, "rest_length": 1.0},
+                    {"a": "a", "b": "c", "stiffness": 3.0}]})
+    dyn = ln.Dynamics(scene)
+    kernel = codegen.compiled_rhs(scene, cache=cache, required=True)
+    basis, origin, normal = kernel.plane
+    assert kernel._primary.d == 2 and not kernel._primary.aligned
+    np.testing.assert_allclose(abs(normal @ np.cross(e, z)), 1.0, atol=1e-12)
+    rng = np.random.default_rng(5)
+    X = np.array(scene.X0)
+    for _ in range(3):
+        U = dyn.project_velocities(X, np.outer(rng.standard_normal(scene.K), e) * (~scene.fixed)[:, None])
+        F = np.outer(rng.standard_normal(scene.K), z) * (~scene.fixed)[:, None]
+        _agree(kernel, dyn, X, U, F, rtol=1e-12)
+    assert kernel.calls_3d == 0
+    # a force out of the plane: the 3-D kernel takes over
+    F = np.zeros((scene.K, 3))
+    F[2] = np.cross(e, z)
+    _agree(kernel, dyn, X, np.array(scene.U0), F)
+    assert kernel.calls_3d == 1

@@ -263,3 +263,25 @@ def test_solver_that_accepts_a_35_violation_is_caught():
                                                       dynamics_factory=factory)}
     r = results["existence (32)-(36) and hypothesis (35)"]
     assert not r.passed and "ACCEPTS" in r.detail
+
+
+def _force_element_scene():
+    """A small anchored net with every force element: springs (one to an anchor), drag, constant forces."""
+    masses = [{"name": "a0", "position": [0, 0, 0], "fixed": True},
+              {"name": "a1", "position": [2, 0, 0], "fixed": True}]
+    for i, p in enumerate([[0, 1, 0], [1, 1, 0.2], [2, 1, 0], [1, 2, -0.1]]):
+        masses.append({"name": f"m{i}", "mass": 0.5 + 0.25 * i, "position": p, "drag": 0.1 * i,
+                       "force": [0.2 * i, -0.1, 0.3]})
+    links = [{"a": "a0", "b": "m0"}, {"a": "m0", "b": "m1"}, {"a": "m1", "b": "m2"}, {"a": "m2", "b": "a1"},
+             {"a": "m1", "b": "m3"}]
+    springs = [{"a": "a0", "b": "m3", "stiffness": 20.0, "damping": 0.5, "rest_length": 1.5},
+               {"a": "m0", "b": "m2", "stiffness": 5.0, "damping": 0.2}]
+    return _scene(masses, links, gravity=(0, 0, -9.81), springs=springs)
+
+
+def test_every_check_passes_with_springs_drag_and_constant_forces():
+    scene = _force_element_scene()
+    results = checks.run_checks(scene, samples=3, seed=2)
+    assert all(r.passed for r in results), "\n".join(r.line() for r in results if not r.passed)
+    forces = next(r for r in results if r.name.startswith("external forces"))
+    assert forces.discrepancy < 1e-13
