@@ -6,7 +6,9 @@ For one scene, :func:`compiled_rhs` generates C code for
 
 from the symbolic derivation of :mod:`linknet_core.symbolic`, compiles it with the system's C compiler,
 caches the shared library on disk and calls it through ctypes (no casadi in the call path, no Python
-loop, preallocated buffers). The kernel contains only what the scene needs:
+loop; the caller's (K,3) arrays are passed by pointer, and the gather of the free coordinates, the
+scatter of the accelerations and the input validation happen in the generated code). The kernel
+contains only what the scene needs:
 
 * anchored masses are eliminated (their positions are constants of the code, 1/M = 0 terms vanish),
 * only the masses named as force inputs get an input term (default: every free mass),
