@@ -470,7 +470,7 @@ def _check_existence(scene, sym, dyn, states, nulls, factory):
     """
     tol_F = np.sqrt(RTOL_NULL)
     worst_F = worst_consistent = 0.0
-    n_with_null = n_consistent = n_inconsistent = 0
+    n_with_null = n_consistent = n_inconsistent = n_accepted = 0
     W = _weights(sym)
     for (X, U, Fin), (N, wmax) in zip(states, nulls):
         if N.shape[1] == 0:
@@ -492,6 +492,14 @@ def _check_existence(scene, sym, dyn, states, nulls, factory):
             worst_consistent = max(worst_consistent, float(np.abs(N.T @ B).max() / max(np.abs(B).max(), 1e-300)))
         else:
             n_inconsistent += 1
+            if hasattr(dyn, "check_consistent_velocities"):
+                from .errors import ConsistencyError
+
+                try:
+                    dyn.check_consistent_velocities(X, U)
+                    n_accepted += 1
+                except ConsistencyError:
+                    pass
     # a state that violates (35): at the scene's own (exact) configuration if it admits one
     X0 = np.array(scene.X0, float)
     A0 = _dense(dyn.tension_matrix(X0))
@@ -526,7 +534,10 @@ def _check_existence(scene, sym, dyn, states, nulls, factory):
     passed = worst_F <= tol_F and worst_consistent <= 1e-6 and detected and refused is not False
     detail = (f"{n_with_null} sampled state(s) with self-stress: (33) N^T b_F {worst_F:.2e} (scaled); (35) holds at "
               f"{n_consistent}, and there |N^T B|/|B| = {worst_consistent:.2e}; (35) fails at {n_inconsistent} "
-              f"(velocities in null(G) at singular positions). Violating state on {where}: (12) residual "
+              f"(velocities in null(G) at singular positions"
+              + (f"; the solver's check_consistent_velocities accepts {n_accepted} of them: its singularity cut "
+                 "differs from this check's" if n_accepted else "")
+              + f"). Violating state on {where}: (12) residual "
               f"{v12:.1e}, |N^T B|/|B| = {violation:.2e} -> (35) violation {'REPORTED' if detected else 'NOT detected'}")
     if refused is not None:
         detail += ("; the solver refuses it with ConsistencyError" if refused else
