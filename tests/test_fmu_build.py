@@ -119,3 +119,18 @@ def test_fmpy_info_shows_units(fmu_dir):
     assert info.returncode == 0, info.stderr
     lines = {line.split()[0]: line.split() for line in info.stdout.splitlines() if line.strip()[:2] in ("F[", "X[", "T[")}
     assert "N" in lines["F[11,3]"] and "m" in lines["X[11,3]"] and "N" in lines["T[1]"]
+
+
+def test_scene_file_fmu_section_selects_masses_and_integrator(tmp_path):
+    scene = json.loads((MODELS / "chain_10.json").read_text())
+    scene["fmu"] = {"inputs": [11], "outputs": ["m10"], "integrator": "dop853", "tolerance": 1e-9}
+    path = tmp_path / "chain_10_tip.json"
+    path.write_text(json.dumps(scene))
+    fmu = build_fmu.build_scene_fmu(path, tmp_path / "tip.fmu", quiet=True)
+    assert validate_fmu(str(fmu)) == []
+    md = read_model_description(str(fmu))
+    names = [v.name for v in md.modelVariables]
+    start = {v.name: v.start for v in md.modelVariables}
+    assert [n for n in names if n.startswith(("F[", "X["))] == ["F[11,1]", "F[11,2]", "F[11,3]",
+                                                                 "X[11,1]", "X[11,2]", "X[11,3]"]
+    assert start["integrator"] == "dop853" and float(start["tolerance"]) == 1e-9
