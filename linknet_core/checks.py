@@ -204,11 +204,15 @@ def _self_stress_quadratic(sym, X, N):
     # difference operator D: (L*d) x n, rows U_k2 - U_k1 restricted to free coordinates
     d, L = sym.dim, sym.L
     col = sym._col_of
-    Dm = np.zeros((L * d, sym.n))
-    for side, kk, sign in ((0, sym._k2, 1.0), (1, sym._k1, -1.0)):  # setup-size dense build
-        c = col[kk]
-        for l in np.flatnonzero(c >= 0):
-            Dm[l * d:(l + 1) * d, c[l] * d:(c[l] + 1) * d] += sign * np.eye(d)
+    rows, cols, vals = [], [], []
+    for kk, sign in ((sym._k2, 1.0), (sym._k1, -1.0)):
+        keep = np.flatnonzero(col[kk] >= 0)
+        rows.append((keep[:, None] * d + np.arange(d)).ravel())
+        cols.append((col[kk][keep][:, None] * d + np.arange(d)).ravel())
+        vals.append(np.full(keep.size * d, sign))
+    import scipy.sparse as sp
+
+    Dm = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(L * d, sym.n))
     DZ = Dm @ Z
     best, best_u = 0.0, None
     for i in range(N.shape[1]):
