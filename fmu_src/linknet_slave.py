@@ -272,9 +272,15 @@ class LinknetNetwork(Fmi2Slave):
             if not isinstance(state, dict) or state.get("format") != STATE_FORMAT:
                 self._error("setFMUstate: not a state saved by this FMU")
                 return
+            lay = self._layout
+            params = np.concatenate([lay.M_vr, lay.R_vr, lay.g_vr, [lay.tolerance_vr, lay.step_vr]])
+            same_setup = (state["integrator"] == self._integrator
+                          and np.array_equal(state["real"][params], self._real[params]))
             self._real = state["real"].copy()
             self._integrator = state["integrator"]
-            self._make_simulator(state["scene"])
+            if not same_setup:  # otherwise keep the simulator (building one analyses the structure)
+                self._make_simulator(state["scene"])
+            self._F[lay.input_masses] = self._real[lay.F_vr]
             self._sim.set_state(copy.deepcopy(state["sim"]))
             self._bad = dict(state["bad"])
             self._broken = state["broken"]
