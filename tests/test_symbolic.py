@@ -143,6 +143,17 @@ def test_kernel_line_of_the_checker(tmp_path, monkeypatch):
     assert line.skipped == (codegen.compiler() is None)
 
 
+def test_blas_is_single_threaded_during_the_checks_and_restored_after():
+    import scipy.linalg  # noqa: F401 - loads scipy's own OpenBLAS too
+
+    ctx = checks.single_threaded_blas()
+    with ctx:
+        during = ctx.thread_counts()
+        before = [previous for _, _, previous in ctx._restore]
+    assert all(n == 1 for n in during)
+    assert ctx.thread_counts() == before
+
+
 def test_taut_string_violation_of_35_is_reported():
     """The seed's acknowledgment: velocities satisfying (12) with no consistent accelerations (35)."""
     scene = checks.taut_string_scene()
