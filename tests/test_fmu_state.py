@@ -44,15 +44,21 @@ g.slave.setFMUstate(g.slave.deSerializeFMUstate(blob))
 _, replay_g = run(g, t_save, 15)
 f.slave.freeFMUstate(state)
 
-f.slave.reset()                        # reset and reuse: same run again from t = 0
+f.slave.terminate()                    # terminate, reset and reuse: same run again from t = 0
+f.slave.reset()
 f.init()
 _, again = run(f, 0.0, 15)
-save(first=first, cont=cont, replay=replay, replay_g=replay_g, again=again, nbytes=len(blob))
+g.slave.terminate()
+g.slave.freeInstance()                 # freeing one instance leaves the other working
+_, after_free = run(f, 15 * 0.013, 3)
+save(first=first, cont=cont, replay=replay, replay_g=replay_g, again=again, after_free=after_free,
+     nbytes=len(blob))
 """, fmu_dir / f"client_state_{'_'.join(opts)}")
     assert np.ptp(out["cont"][:, 32]) > 1e-3  # the tip moves during the replayed span
     np.testing.assert_array_equal(out["replay"], out["cont"])
     np.testing.assert_array_equal(out["replay_g"], out["cont"])
     np.testing.assert_array_equal(out["again"], out["first"])
+    assert np.all(np.isfinite(out["after_free"]))
 
 
 def test_two_instances_and_two_scenes_in_one_process_are_independent(fmu_dir):
