@@ -322,7 +322,11 @@ class CompiledRHS:
             t0 = time.perf_counter()
             fn, _ = build_rhs_function(self.scene, basis=basis, origin=origin, input_masses=self.input_masses)
             t1 = time.perf_counter()
-            so_path, t = generate_and_compile(fn, self.cache, stem, self.cc)
+            try:
+                so_path, t = generate_and_compile(fn, self.cache, stem, self.cc)
+            except OSError as exc:
+                raise CodegenUnavailable(f"cannot write the kernel cache {self.cache} (set LINKNET_CACHE_DIR): "
+                                         f"{exc}") from None
             self.timings.update({"symbolic_s": t1 - t0, **t})
         self.so_path = so_path
         variant = _Variant(so_path, self.K, self.L, d, aligned)

@@ -115,6 +115,16 @@ def test_no_compiler_means_numeric_path(monkeypatch):
 
 
 @needs_cc
+def test_unwritable_cache_means_numeric_path(tmp_path):
+    blocker = tmp_path / "not-a-directory"
+    blocker.write_text("")
+    scene = ln.load_scene(MODELS / "pendulum.json")
+    assert codegen.compiled_rhs(scene, cache=blocker / "kernels") is None
+    with pytest.raises(codegen.CodegenUnavailable, match="LINKNET_CACHE_DIR"):
+        codegen.compiled_rhs(scene, cache=blocker / "kernels", required=True)
+
+
+@needs_cc
 def test_singular_state_goes_to_the_fallback(cache):
     scene = ln.load_scene(MODELS / "pendulum.json")
     dyn = ln.Dynamics(scene)
