@@ -130,6 +130,9 @@ class LinknetNetwork(Fmi2Slave):
 
     # ------------------------------------------------------------------ FMI: values
     def get_real(self, vrs):
+        if self._parameters_dirty and not self._initialized:
+            # initial unknowns read in initialization mode: T depends on M, R, g (ModelStructure)
+            self._apply_parameters_safely()
         if self._outputs_stale:
             self._refresh_outputs()
         try:
@@ -191,12 +194,15 @@ class LinknetNetwork(Fmi2Slave):
     # ------------------------------------------------------------------ FMI: life cycle
     def exit_initialization_mode(self):
         """Rebuild the simulator if parameters changed; errors surface at the next doStep."""
+        self._apply_parameters_safely()
+        self._initialized = True
+
+    def _apply_parameters_safely(self):
         try:
             self._apply_parameters()
         except Exception as e:
             self._broken = f"the parameters do not define a valid scene: {e}"
             self._error(self._broken)
-        self._initialized = True
 
     def _apply_parameters(self):
         if not self._parameters_dirty:
@@ -208,6 +214,7 @@ class LinknetNetwork(Fmi2Slave):
         scene = self._scene0.with_parameters(mass=mass, length=self._real[lay.R_vr].copy(),
                                              gravity=self._real[lay.g_vr].copy())
         self._make_simulator(scene)
+        self._broken = None  # parameters are applied before initialization ends: an earlier failure is gone
 
     def do_step(self, current_time, step_size):
         try:

@@ -89,7 +89,12 @@ X_names, U_names, T_names = f.names('X'), f.names('U'), f.names('T')
 before = f.get(X_names + U_names + T_names)
 f.set({{'F[11,3]': 3.0, 'F[5,1]': -1.0}})
 after = f.get(X_names + U_names + T_names)
-save(before=before, after=after, t=t)
+g = Fmu({str(fmu)!r}, 'init_mode')      # initial unknowns in initialization mode follow the parameters
+g.slave.setupExperiment(startTime=0.0)
+g.slave.enterInitializationMode()
+g.set({{'g[1]': 4.0, 'M[11]': 0.5, 'F[11,3]': 1.0}})
+T_init = g.get(T_names)
+save(before=before, after=after, t=t, T_init=T_init)
 """, fmu_dir / "client_feedthrough")
     n_xu = 66
     np.testing.assert_array_equal(out["after"][:n_xu], out["before"][:n_xu])
@@ -100,6 +105,14 @@ save(before=before, after=after, t=t)
     F = np.zeros((11, 3))
     F[10, 2], F[4, 0] = 3.0, -1.0
     np.testing.assert_allclose(out["after"][n_xu:], ln.Dynamics(scene).tensions(X, U, F), rtol=1e-12, atol=1e-12)
+    mass = np.array(scene.mass, dtype=float)
+    mass[10] = 0.5
+    changed = scene.with_parameters(mass=mass, gravity=[4.0, 0.0, -9.81])
+    F0 = np.zeros((11, 3))
+    F0[10, 2] = 1.0
+    T0 = ln.Dynamics(changed).tensions(changed.X0, changed.U0, F0)
+    assert np.max(np.abs(T0)) > 1.0  # g along the chain: the links are loaded
+    np.testing.assert_allclose(out["T_init"], T0, rtol=1e-12, atol=1e-12)
 
 
 def test_parameters_set_in_the_fmu_give_the_library_scene_with_those_parameters(fmu_dir):
