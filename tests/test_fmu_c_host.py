@@ -69,3 +69,19 @@ def test_unlinked_binary_fails_in_c_host_which_is_what_the_link_fixes(host, tmp_
     unz = _extract(fmu, d / "pendulum_unzipped")
     proc = run_host([str(host), str(unz), md.coSimulation.modelIdentifier, md.guid, "0.1", "0.01"], env=_clean_env())
     assert proc.returncode == 3 and "undefined symbol" in proc.stderr  # pythonfmu 0.7.0 as shipped
+
+
+def test_c_host_runs_component_fmu(host, tmp_path_factory):
+    """The spring-damper helper FMU (defaults k = 100 N/m, d0 = 1 m) in the C host: ends 2 m apart
+    along x give Fa = +100 N x (pulling a towards b), Fb = -Fa."""
+    d = tmp_path_factory.mktemp("fmus_c_component")
+    fmu = build_cached(d, "spring_damper")
+    md = read_model_description(str(fmu))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    unz = _extract(fmu, d / "sd_unzipped")
+    proc = run_host([str(host), str(unz), md.coSimulation.modelIdentifier, md.guid, "0.02", "0.01",
+                     f"in:{vr['xb[1]']}=2.0", f"out:{vr['Fa[1]']}", f"out:{vr['Fb[1]']}", f"out:{vr['Fa[2]']}"],
+                    env=_clean_env())
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    rows = np.array([[float(x) for x in line.split(",")] for line in proc.stdout.split()])
+    np.testing.assert_allclose(rows[:, 1:], [[100.0, -100.0, 0.0]] * 3, rtol=1e-15)
