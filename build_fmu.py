@@ -228,7 +228,10 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
         outputs=_parse_masses(outputs if outputs is not None else fmu_opts.get("outputs"), scene),
         version="1",
     )
-    layout = Layout.from_scene(scene, cfg["inputs"], cfg["outputs"])
+    try:
+        layout = Layout.from_scene(scene, cfg["inputs"], cfg["outputs"])
+    except ValueError as e:
+        raise SystemExit(f"build_fmu: {scene.name}: {e}")
     out = Path(out) if out else Path(f"{ident}.fmu")
     out.parent.mkdir(parents=True, exist_ok=True)
 

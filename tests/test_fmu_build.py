@@ -134,3 +134,10 @@ def test_scene_file_fmu_section_selects_masses_and_integrator(tmp_path):
     assert [n for n in names if n.startswith(("F[", "X["))] == ["F[11,1]", "F[11,2]", "F[11,3]",
                                                                  "X[11,1]", "X[11,2]", "X[11,3]"]
     assert start["integrator"] == "dop853" and float(start["tolerance"]) == 1e-9
+
+
+def test_force_input_on_an_anchored_mass_is_refused_by_name(tmp_path):
+    with pytest.raises(SystemExit, match="mass 1 cannot take a force input"):
+        build_fmu.build_scene_fmu(MODELS / "chain_10.json", tmp_path / "x.fmu", inputs="1", quiet=True)
+    with pytest.raises(SystemExit, match="no mass 'nope'"):
+        build_fmu.build_scene_fmu(MODELS / "chain_10.json", tmp_path / "x.fmu", outputs="nope", quiet=True)
