@@ -136,6 +136,8 @@ class LinknetNetwork(Fmi2Slave):
         if self._outputs_stale:
             self._refresh_outputs()
         try:
+            if len(vrs) and min(vrs) < 0:  # numpy would wrap a negative index around
+                raise IndexError
             return self._real[vrs].tolist()
         except (IndexError, TypeError):
             self._error(f"getReal: unknown value reference in {list(vrs)!r}")
@@ -162,6 +164,8 @@ class LinknetNetwork(Fmi2Slave):
                 continue
             # parameter
             if self._initialized:
+                if value == self._real[vr]:
+                    continue  # re-setting the current value changes nothing (some masters do)
                 self._bad[var.name] = "is a fixed parameter and cannot be changed after initialization"
                 self._error(f"{var.name} {self._bad[var.name]} (value {value!r} rejected)")
                 continue
