@@ -25,6 +25,9 @@ def _add_simulate(sub):
     p.add_argument("--project-initial", action="store_true",
                    help="project initial positions onto the link lengths instead of refusing them")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--rhs-kernel", choices=["numpy", "casadi"], default="numpy",
+                   help="right-hand side of the Runge-Kutta methods: numpy, or a casadi-generated C kernel "
+                        "specialised to the scene (compiled once, cached)")
 
 
 def _add_analyze(sub):
@@ -52,7 +55,8 @@ def cmd_simulate(args) -> int:
         if not METHODS[method].adaptive:
             dt = 1e-3
     res = simulate(scene, args.t_end, method=method, dt=dt, rtol=args.rtol, atol=args.atol, n_out=args.n_out,
-                   progress=None if not args.no_progress else False, project_initial=args.project_initial or None)
+                   progress=None if not args.no_progress else False, project_initial=args.project_initial or None,
+                   rhs_kernel=args.rhs_kernel)
     if res.stats.get("initial"):
         for line in res.stats["initial"]:
             print("note:", line)

@@ -92,9 +92,9 @@ class Simulator:
     def __init__(self, scene: Scene, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
                  atol: float | None = None, *, project_initial: bool | None = None,
                  length_tol: float = DEFAULT_LENGTH_TOL, max_steps_per_call: int = 100_000_000,
-                 dynamics: Dynamics | None = None, backend: str = "auto"):
+                 dynamics: Dynamics | None = None, backend: str = "auto", rhs_kernel: str = "numpy"):
         self.scene = scene
-        self.dyn = dynamics or Dynamics(scene)
+        self.dyn = dynamics or Dynamics(scene, rhs_kernel=rhs_kernel)
         self.method = method
         self.integrator = make_integrator(method, self.dyn, dt=dt, rtol=rtol, atol=atol, backend=backend)
         X0, U0, self.initial_report = prepare_initial_state(scene, self.dyn, project_positions=project_initial,
@@ -206,7 +206,7 @@ class Result:
 def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
              atol: float | None = None, n_out: int | None = None, output_dt: float | None = None,
              forces=None, progress: bool | None = None, project_initial: bool | None = None,
-             backend: str = "auto") -> Result:
+             backend: str = "auto", rhs_kernel: str = "numpy") -> Result:
     """Simulate ``scene`` from t = 0 to ``t_end``.
 
     ``forces``: None, a (K,3) array held constant, or a callable ``f(t) -> (K,3)`` evaluated at each
@@ -216,7 +216,7 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
     if not (isinstance(t_end, (int, float)) and math.isfinite(t_end) and t_end > 0):
         raise SolverError(f"t_end must be a positive finite time, got {t_end!r}")
     sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial,
-                    backend=backend)
+                    backend=backend, rhs_kernel=rhs_kernel)
     if output_dt is not None:
         n = max(1, int(round(t_end / output_dt)))
         times = np.linspace(0.0, t_end, n + 1)
@@ -257,7 +257,7 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
     if show is not False and wall > 2.0:
         sys.stderr.write("\n")
     stats = dict(sim.integrator.stats.as_dict(), wall_time=wall, rhs_evaluations=sim.dyn.rhs_evaluations,
-                 structure=sim.dyn.structure.kind, method=method, dt=dt, rtol=rtol,
+                 structure=sim.dyn.structure.kind, method=method, dt=dt, rtol=rtol, rhs_kernel=sim.dyn.rhs_kernel,
                  initial=sim.initial_report.lines(scene))
     return Result(scene, method, times, X, U, T, energy, residual, vres, kinetic, stats)
 

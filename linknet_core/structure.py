@@ -21,6 +21,10 @@ from scipy.sparse.csgraph import connected_components, breadth_first_order
 from .scene import Scene
 
 DENSE_RANK_LIMIT = 2500  # links; above it, rank is estimated from the LDL pivots
+# One cut decides "singular" everywhere (rank, self-stresses, minimum-norm solve, hypothesis (35)): an
+# eigenvalue of A = C M^-1 C^T below SINGULAR_RCOND times the largest is zero. In terms of singular values
+# of C that is sqrt(SINGULAR_RCOND) = 1e-5 relative.
+SINGULAR_RCOND = 1e-10
 
 
 @dataclass(frozen=True)
@@ -169,7 +173,7 @@ def constraint_jacobian(scene: Scene, X: np.ndarray, free_only: bool = True) -> 
     return C
 
 
-def rank_and_nullspace(scene: Scene, X: np.ndarray, rtol: float = 1e-9):
+def rank_and_nullspace(scene: Scene, X: np.ndarray, rtol: float = SINGULAR_RCOND ** 0.5):
     """Rank of C (free columns) and an orthonormal basis of the self-stresses (null space of C^T).
 
     Self-stresses are the T~ of (27)/(31): link tensions in equilibrium with no external load.
@@ -243,7 +247,7 @@ def analyse(scene: Scene) -> Structure:
                      planar_normal=planar_normal(scene), notes=notes)
 
 
-def _dense_rank(scene: Scene, ordering: np.ndarray, rtol: float = 1e-9) -> int:
+def _dense_rank(scene: Scene, ordering: np.ndarray, rtol: float = SINGULAR_RCOND) -> int:
     """rank(G) = rank(A), A = C M^-1 C^T (M^-1 is positive on the free masses): eigenvalues of the L x L A."""
     from .tensions import TensionAssembly
 

@@ -19,7 +19,7 @@ import scipy.sparse as sp
 
 from .ldl import SymbolicLDL
 from .scene import Scene
-from .structure import Structure, link_pairs
+from .structure import SINGULAR_RCOND, Structure, link_pairs
 
 DENSE_MIN_NORM_LIMIT = 2500  # links; above it the redundant path uses MINRES (min-norm from x0 = 0)
 
@@ -168,7 +168,7 @@ class MinNormSolver(TensionSolver):
         self.scene = scene
         self.structure = structure
         self.assembly = assembly or TensionAssembly(scene, structure.ordering)
-        self.rcond = 1e-10
+        self.rcond = SINGULAR_RCOND
         self._dense = scene.L <= DENSE_MIN_NORM_LIMIT
         self.rank = None
 

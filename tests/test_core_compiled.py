@@ -41,3 +41,13 @@ def test_redundant_scenes_take_the_numpy_path():
     assert sim.state.t == 0.01
     with pytest.raises(ln.SolverError, match="does not handle redundant scenes"):
         ln.Simulator(scene, dt=1e-3, backend="compiled").advance(0.01)
+
+
+def test_casadi_rhs_kernel_gives_the_numpy_trajectory():
+    scene = builders.shipped_scenes()["double_pendulum"]
+    a = ln.simulate(scene, 0.5, method="dop853", rtol=1e-10, n_out=3)
+    b = ln.simulate(scene, 0.5, method="dop853", rtol=1e-10, n_out=3, rhs_kernel="casadi")
+    if b.stats["rhs_kernel"] != "casadi":
+        pytest.skip("no C compiler: the casadi kernel could not be built")
+    assert a.stats["steps"] == b.stats["steps"]
+    assert np.max(np.abs(a.X - b.X)) < 1e-12
