@@ -68,7 +68,11 @@ class Dynamics:
 
     def link_forces(self, X, T) -> np.ndarray:
         """C^T T: the force the links exert on each mass, sum_l T_l E_l (delta_k,k1 - delta_k,k2) of (9)."""
-        f = T[:, None] * self.unit_vectors(X)
+        return self._scatter(self.unit_vectors(X), T)
+
+    def _scatter(self, E, weights) -> np.ndarray:
+        """C^T w for C built from unit vectors E: +w_l E_l on k1(l), -w_l E_l on k2(l)."""
+        f = weights[:, None] * E
         K = self.scene.K
         out = np.empty((K, 3))
         for d in range(3):  # three bincounts, not a loop over links
@@ -135,39 +139,36 @@ class Dynamics:
         X0 = X if direction_at is None else direction_at
         self.factor(X0)
         E0 = self.unit_vectors(X0)
-        Xc = np.array(X, float, copy=True)
-        scale = self._residual_scale(Xc, tol)
-        previous = np.inf
-        for it in range(1, max_iter + 1):
-            phi = self.position_residual(Xc)
-            err = float(np.max(np.abs(phi) / scale)) * tol
-            if err <= tol:
-                return Xc, it - 1
-            if not np.isfinite(err) or (it > 3 and err > 0.3 * previous):
-                break  # slow or no contraction: exact Newton below
-            previous = err
-            Xc += self._correction(E0, self.solver.solve(phi))
-        else:
-            it = max_iter
+        Xc, used, err, ok = self._newton(X, tol, max_iter, lambda Xc, phi: self._correction(E0, self.solver.solve(phi)),
+                                         give_up_when_slow=True)
+        if ok:
+            return Xc, used
         if direction_at is None:
-            return self._project_gauss_newton(X, tol, max_iter, it)
-        return self._project_exact_newton(X, X0, E0, tol, max_iter, it)
+            fallback = self._gauss_newton_step  # large initial violations: directions updated every iteration
+        else:
+            fallback = lambda Xc, phi: self._exact_newton_step(Xc, phi, E0)  # noqa: E731 - RATTLE's own directions
+        Xc, more, err, ok = self._newton(X, tol, max_iter, fallback, give_up_when_slow=False)
+        if ok:
+            self.exact_newton_projections += direction_at is not None
+            return Xc, used + more
+        self._raise_not_converged(X, err, used + more)
 
-    def _project_gauss_newton(self, X, tol, max_iter, used):
-        """Projection with the directions updated every iteration (large initial violations)."""
+    def _newton(self, X, tol, max_iter, correction, give_up_when_slow):
+        """Iterate X += correction(X, phi(X)) until every |phi_l| is within tol (relative, see
+        _residual_scale). Returns (X, iterations, error, converged)."""
         Xc = np.array(X, float, copy=True)
         scale = self._residual_scale(Xc, tol)
-        err = np.inf
+        previous = err = np.inf
         for it in range(1, max_iter + 1):
             phi = self.position_residual(Xc)
             err = float(np.max(np.abs(phi) / scale)) * tol
             if err <= tol:
-                return Xc, used + it - 1
-            if not np.isfinite(err):
-                break
-            self.factor(Xc)
-            Xc += self._correction(self.unit_vectors(Xc), self.solver.solve(phi))
-        self._raise_not_converged(X, err, used + max_iter)
+                return Xc, it - 1, err, True
+            if not np.isfinite(err) or (give_up_when_slow and it > 3 and err > 0.3 * previous):
+                return Xc, it, err, False
+            previous = err
+            Xc += correction(Xc, phi)
+        return Xc, max_iter, err, False
 
     def _residual_scale(self, X, tol):
         """Per-link |phi| that counts as converged: tol relative to R_l, but never below the round-off
@@ -176,30 +177,22 @@ class Dynamics:
         size = np.abs(X[self._k1]).max(axis=1) + np.abs(X[self._k2]).max(axis=1)
         return R * tol + 8 * np.finfo(float).eps * size
 
-    def _project_exact_newton(self, X, X0, E0, tol, max_iter, used):
+    def _gauss_newton_step(self, Xc, phi):
+        self.factor(Xc)
+        return self._correction(self.unit_vectors(Xc), self.solver.solve(phi))
+
+    def _exact_newton_step(self, Xc, phi, E0):
+        """Newton with the exact unsymmetric matrix C(Xc) M^-1 C(X0)^T of RATTLE's position stage."""
         from scipy.sparse.linalg import splu
 
-        R = self.scene.length
-        Xc = np.array(X, float, copy=True)
-        scale = self._residual_scale(Xc, tol)
-        err = np.inf
-        for it in range(1, max_iter + 1):
-            phi = self.position_residual(Xc)
-            err = float(np.max(np.abs(phi) / scale)) * tol
-            if err <= tol:
-                self.exact_newton_projections += 1
-                return Xc, used + it - 1
-            if not np.isfinite(err):
-                break
-            J = self.solver.assembly.matrix(self.unit_vectors(Xc), E0)
-            try:
-                if self.structure.kind == "redundant":
-                    raise RuntimeError("singular by construction")
-                mu = splu(J.tocsc()).solve(phi)
-            except RuntimeError:  # singular Newton matrix: minimum-norm Gauss-Newton step
-                mu = np.linalg.lstsq(J.toarray(), phi, rcond=1e-12)[0]
-            Xc += self._correction(E0, mu)
-        self._raise_not_converged(X, err, used + max_iter)
+        J = self.solver.assembly.matrix(self.unit_vectors(Xc), E0)
+        try:
+            if self.structure.kind == "redundant":
+                raise RuntimeError("singular by construction")
+            mu = splu(J.tocsc()).solve(phi)
+        except RuntimeError:  # singular Newton matrix: minimum-norm Gauss-Newton step
+            mu = np.linalg.lstsq(J.toarray(), phi, rcond=1e-12)[0]
+        return self._correction(E0, mu)
 
     def _raise_not_converged(self, X, err, iterations):
         R = self.scene.length
@@ -213,12 +206,7 @@ class Dynamics:
 
     def _correction(self, E, mu) -> np.ndarray:
         """M^-1 C^T mu with C taken from unit vectors E."""
-        f = mu[:, None] * E
-        K = self.scene.K
-        out = np.empty((K, 3))
-        for d in range(3):
-            out[:, d] = np.bincount(self._k1, f[:, d], K) - np.bincount(self._k2, f[:, d], K)
-        return out * self._inv_mass3
+        return self._scatter(E, mu) * self._inv_mass3
 
     def project_velocities(self, X, U):
         """Closest velocities satisfying (12) in the mass metric: U - M^-1 C^T mu with A mu = C U."""
