@@ -65,7 +65,7 @@ def quick_dts(order):
     """Three steps per method in --quick, coarser for higher orders so that every method is measured in its
     asymptotic range above the reference floor (the quick test checks convergence orders)."""
     top = {2: 0.01, 3: 0.02, 4: 0.02}.get(order, 0.04)
-    return [top, top / 2, top / 4]
+    return [top / 2 ** i for i in range(6)]   # the sweep stops after three successful runs
 
 
 # ------------------------------------------------------------------------------------------------ scenes
@@ -158,7 +158,7 @@ def sweep(method, spec, t_end, ref, *, quick: bool, run_budget: float, sweep_bud
             row |= {"status": "failed", "message": f"{type(e).__name__}: {e}"[:300]}
             rows.append(row)
             log(f"    {method.name:28s} {method.knob}={knob:<9.3g} FAILED {row['message'][:100]}")
-            if failures >= 3:   # three failures in a row: the method cannot do this scene
+            if failures >= 5:   # five failures in a row: the method cannot do this scene
                 break
             continue
         failures = 0
@@ -178,8 +178,11 @@ def sweep(method, spec, t_end, ref, *, quick: bool, run_budget: float, sweep_bud
             f"dE={row['energy_drift'] if row['energy_drift'] is not None else float('nan'):8.1e} "
             f"t={r.seconds * 1e3:10.3f} ms steps={r.steps}")
         n_ok = sum(1 for x in rows if x.get("status") == "ok")
-        if not finite or err < floor:
+        if not finite or err < floor or (quick and n_ok >= 3):
             break
+        errs = [x["error"] for x in rows if x.get("status") == "ok"]
+        if len(errs) >= 3 and errs[-1] > errs[-2] > errs[-3]:
+            break   # past the method's round-off floor: finer settings only add error
         if (r.seconds > run_budget or spent > sweep_budget) and (n_ok >= min_runs or r.seconds > 6 * run_budget):
             break
     return rows
