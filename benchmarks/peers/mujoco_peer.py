@@ -61,6 +61,18 @@ def _tree(spec):
     return parent, order
 
 
+def _is_rigid_cluster(spec) -> bool:
+    if np.any(spec.fixed) or spec.K < 3:
+        return False
+    X = spec.X0
+    E = (X[spec.k2] - X[spec.k1]) / spec.length[:, None]
+    C = np.zeros((spec.L, 3 * spec.K))
+    for l in range(spec.L):   # setup only
+        C[l, 3 * spec.k1[l]:3 * spec.k1[l] + 3] = E[l]
+        C[l, 3 * spec.k2[l]:3 * spec.k2[l] + 3] = -E[l]
+    return int(np.linalg.matrix_rank(C, tol=1e-9)) == 3 * spec.K - 6
+
+
 class MujocoRK4(Method):
     knob = "dt"
     order = 4
@@ -78,7 +90,46 @@ class MujocoRK4(Method):
             return False, f"mujoco not installed ({e})"
 
     def check_scene(self, spec):
-        _tree(spec)
+        if not _is_rigid_cluster(spec):
+            _tree(spec)
+
+    def _run_rigid(self, spec, t_end, dt):
+        """The whole scene is one rigid body: a free joint, exact mass properties of the point masses."""
+        import mujoco
+        n, dt = n_steps(t_end, dt)
+        with Timer() as setup:
+            m = spec.mass
+            M = float(m.sum())
+            com = (m[:, None] * spec.X0).sum(axis=0) / M
+            r = spec.X0 - com
+            inertia = np.sum(m[:, None, None] * (np.einsum("ij,ij->i", r, r)[:, None, None] * np.eye(3)
+                                                 - np.einsum("ij,ik->ijk", r, r)), axis=0)
+            if np.linalg.eigvalsh(inertia)[0] < 1e-9 * np.trace(inertia):   # collinear masses: keep it positive
+                inertia += EPS_INERTIA * np.trace(inertia) * np.eye(3)
+            v_com = (m[:, None] * spec.U0).sum(axis=0) / M
+            # angular velocity from the angular momentum: L = I w (exact for a rigid motion)
+            Lmom = np.sum(m[:, None] * np.cross(r, spec.U0 - v_com), axis=0)
+            w = np.linalg.solve(inertia, Lmom)
+            g = spec.gravity
+            fi = " ".join(_f(v) for v in (inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1],
+                                          inertia[0, 2], inertia[1, 2]))
+            xml = (f'<mujoco><option timestep="{_f(dt)}" integrator="{self.integrator}" '
+                   f'gravity="{_f(g[0])} {_f(g[1])} {_f(g[2])}"><flag contact="disable"/></option>'
+                   f'<worldbody><body name="rigid" pos="{_f(com[0])} {_f(com[1])} {_f(com[2])}">'
+                   f'<freejoint name="free"/><inertial pos="0 0 0" mass="{_f(M)}" fullinertia="{fi}"/>'
+                   f'</body></worldbody></mujoco>')
+            model = mujoco.MjModel.from_xml_string(xml)
+            d = mujoco.MjData(model)
+            d.qvel[:3] = v_com
+            d.qvel[3:6] = w   # free joint: angular velocity in the body frame, aligned with the world at t=0
+            mujoco.mj_forward(model, d)
+        with Timer() as tm:
+            mujoco.mj_step(model, d, nstep=n)
+        R = d.xmat[1].reshape(3, 3)
+        X = d.xpos[1] + r @ R.T
+        wb = d.qvel[3:6]
+        U = d.qvel[:3] + np.cross(R @ wb, r @ R.T)
+        return RunResult(X, U, tm.seconds, setup.seconds, steps=n, info={"model": "one free rigid body"})
 
     def _xml(self, spec, dt, parent, order):
         children = {}
@@ -108,6 +159,8 @@ class MujocoRK4(Method):
 
     def run(self, spec, t_end, dt):
         import mujoco
+        if _is_rigid_cluster(spec):
+            return self._run_rigid(spec, t_end, dt)
         n, dt = n_steps(t_end, dt)
         from dataclasses import replace
         lam = float(np.median(spec.length))
