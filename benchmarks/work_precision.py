@@ -158,7 +158,7 @@ def sweep(method, spec, t_end, ref, *, quick: bool, run_budget: float, sweep_bud
             row |= {"status": "failed", "message": f"{type(e).__name__}: {e}"[:300]}
             rows.append(row)
             log(f"    {method.name:28s} {method.knob}={knob:<9.3g} FAILED {row['message'][:100]}")
-            if failures >= 5:   # five failures in a row: the method cannot do this scene
+            if failures >= 8:   # eight in a row (a 256x smaller step): the method cannot do this scene
                 break
             continue
         failures = 0
@@ -349,6 +349,8 @@ def main(argv=None):
     ap.add_argument("--methods", nargs="*", help="subset of methods (names as in the table)")
     ap.add_argument("--out", type=Path, help="output folder (default docs/benchmarks, or docs/benchmarks/quick)")
     ap.add_argument("--models", type=Path, help="folder of scene JSON files (default models/)")
+    ap.add_argument("--merge", action="store_true",
+                    help="update an existing results.json in --out: rerun only the given scenes/methods")
     ap.add_argument("--no-cache", action="store_true", help="recompute references even if cached")
     ap.add_argument("--run-budget", type=float, help="stop a sweep after a run longer than this [s]")
     args = ap.parse_args(argv)
@@ -366,6 +368,11 @@ def main(argv=None):
     if args.methods:
         methods = [m for m in methods if m.name in args.methods]
     results = {"meta": {}, "scenes": {}, "notes": list(PEER_NOTES), "unavailable": {}}
+    previous = None
+    if args.merge and (out / "results.json").exists():
+        previous = json.loads((out / "results.json").read_text())
+        results["scenes"] = previous["scenes"]
+        results["unavailable"] = previous.get("unavailable", {})
     for m in methods:
         ok, why = m.available()
         if not ok:
@@ -382,9 +389,13 @@ def main(argv=None):
             continue
         print(f"[{sname}] K={spec.K} L={spec.L} t_end={t_end}")
         ref = reference(spec, t_end, cache=not args.no_cache)
+        kept = {}
+        if previous and sname in previous["scenes"] and previous["scenes"][sname].get("digest") == spec.digest():
+            kept = {n: m for n, m in previous["scenes"][sname]["methods"].items()
+                    if n not in {m_.name for m_ in methods}}
         sres = {"K": spec.K, "L": spec.L, "t_end": t_end, "digest": spec.digest(),
                 "reference": {k: ref[k] for k in ("agreement", "verified", "rtol_ref", "rtol_check", "residual",
-                                                  "energy_drift", "seconds", "steps")}, "methods": {}}
+                                                  "energy_drift", "seconds", "steps")}, "methods": dict(kept)}
         sres["reference"] = {k: (v.item() if hasattr(v, "item") else v) for k, v in sres["reference"].items()}
         for m in methods:
             try:
@@ -393,6 +404,9 @@ def main(argv=None):
                 traceback.print_exc()
                 runs = [{"status": "failed", "message": f"{type(e).__name__}: {e}"}]
             sres["methods"][m.name] = {"family": m.family, "knob": m.knob, "order": m.order, "runs": runs}
+        order = [m_.name for m_ in all_methods(quick)]
+        sres["methods"] = dict(sorted(sres["methods"].items(),
+                                      key=lambda kv: order.index(kv[0]) if kv[0] in order else len(order)))
         sres["summary"] = summarize(sres)
         try:
             p = out / f"{sname}.png"
@@ -401,11 +415,16 @@ def main(argv=None):
         except Exception as e:
             print(f"  plot failed: {e}")
         results["scenes"][sname] = sres
+    if previous:   # keep the scenes that were not rerun, in the benchmark's order
+        results["scenes"] = {n: results["scenes"][n] for n in SCENES if n in results["scenes"]}
     results["meta"] = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                        "command": "python -m benchmarks.work_precision" + (" --quick" if quick else "")
                        + (" --scenes " + " ".join(args.scenes) if args.scenes else ""),
                        "quick": quick, "machine": _machine(), "versions": _versions(),
-                       "total_seconds": time.perf_counter() - t_start}
+                       "total_seconds": time.perf_counter() - t_start
+                       + (previous["meta"].get("total_seconds", 0) if previous else 0)}
+    if previous:
+        results["meta"]["merged_from"] = previous["meta"].get("merged_from", []) + [previous["meta"]["date"]]
     (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
     write_markdown({k: v for k, v in results.items()} | {"scenes": {k: v for k, v in results["scenes"].items()
                                                                     if "methods" in v}}, out / "results.md")
