@@ -95,8 +95,9 @@ def _run(scene, t_end, method, max_steps, **kw):
 def case_mass_ratios(quick=True):
     """Criterion: on chains with mass ratios 1e-6..1e6 DOP853 (rtol=1e-8) either completes -- with relative
     constraint residual <= 1e-10 at every output, finite tensions, and within its stated bound 1e3*rtol =
-    1e-5 m of the fine RATTLE reference (dt=1e-5, a different algorithm: position-level constraint solve),
-    i.e. it never reports success with a wrong answer -- or stops with a clear SolverError (step budget).
+    1e-5 m of an independent reference (scipy DOP853 on the unprojected index-1 equations when it finishes
+    within its budget, else a fine RATTLE, dt=1e-5: a position-level constraint solve), i.e. it never
+    reports success with a wrong answer -- or stops with a clear SolverError (step budget).
     The four non-stiff chains must complete. graded_up (1e-6 kg next to the pivot under a 1e6 kg tip) is
     stiff: string modes of the light links under ~1e7 N tension near 1e7 rad/s, beyond explicit methods.
     The scipy index-1 solution is reported alongside (it drifts with large mass ratios)."""
@@ -107,23 +108,31 @@ def case_mass_ratios(quick=True):
     for name, scene in mass_ratio_scenes(10 if quick else 30).items():
         te = 1e-3 if name == "graded_up" else t_end
         m = {"t_end_s": te}
+        # two independent references: scipy DOP853 on the unprojected index-1 equations (rtol 1e-10, within
+        # a right-hand-side budget) and a fine RATTLE (dt = 1e-5; its error grows like (w dt)^2 for the fast
+        # string modes). The index-1 one is used when it completes, else RATTLE.
+        refs = {}
+        try:
+            refs["scipy_index1"] = _independent_reference(scene, te, rtol=1e-10, max_rhs=30_000 if quick else 300_000)
+        except _Budget as e:
+            m["scipy_index1_reference"] = str(e)
         try:
             ref_sim, m["rattle_reference"] = _run(scene, te, "rattle", 10**8, dt=1e-5)
-            Xref = ref_sim.state.X
+            refs["rattle_dt1e-5"] = ref_sim.state.X
         except ln.LinknetError as e:
             m["rattle_reference"] = {"outcome": "stopped", "message": f"{type(e).__name__}: {e}"[:300]}
-            Xref = None
         try:
             sim, r = _run(scene, te, "dop853", max_steps, rtol=1e-8)
-            if Xref is not None:
-                r["error_vs_rattle_reference_m"] = float(np.linalg.norm(sim.state.X - Xref, axis=1).max())
-                ok &= r["error_vs_rattle_reference_m"] <= 1e-5
+            for k, Xr in refs.items():
+                r[f"error_vs_{k}_m"] = float(np.linalg.norm(sim.state.X - Xr, axis=1).max())
+            if refs:
+                used = "scipy_index1" if "scipy_index1" in refs else "rattle_dt1e-5"
+                r["reference_used"] = used
+                r["error_vs_reference_m"] = r[f"error_vs_{used}_m"]
+                ok &= r["error_vs_reference_m"] <= 1e-5
+            else:
+                r["reference_used"] = "none completed: answer unverified"
             ok &= r["max_residual"] <= 1e-10 and r["tensions_finite"]
-            try:
-                Xs = _independent_reference(scene, te, rtol=1e-10, max_rhs=30_000 if quick else 300_000)
-                r["difference_to_scipy_index1_m"] = float(np.linalg.norm(sim.state.X - Xs, axis=1).max())
-            except _Budget as e:
-                r["difference_to_scipy_index1_m"] = str(e)
             m["dop853"] = r
         except ln.LinknetError as e:
             m["dop853"] = {"outcome": "stopped", "message": f"{type(e).__name__}: {e}"[:300]}
