@@ -158,7 +158,7 @@ def sweep(method, spec, t_end, ref, *, quick: bool, run_budget: float, sweep_bud
             row |= {"status": "failed", "message": f"{type(e).__name__}: {e}"[:300]}
             rows.append(row)
             log(f"    {method.name:28s} {method.knob}={knob:<9.3g} FAILED {row['message'][:100]}")
-            if failures >= 8:   # eight in a row (a 256x smaller step): the method cannot do this scene
+            if failures >= 12:   # twelve in a row (a 4096x smaller step): the method cannot do this scene
                 break
             continue
         failures = 0
@@ -174,8 +174,10 @@ def sweep(method, spec, t_end, ref, *, quick: bool, run_budget: float, sweep_bud
                 "info": {k: v for k, v in r.info.items() if isinstance(v, (int, float, str))}}
         rows.append(row)
         spent += r.seconds
-        log(f"    {method.name:28s} {method.knob}={knob:<9.3g} err={err:9.3e} res={row['residual']:8.1e} "
-            f"dE={row['energy_drift'] if row['energy_drift'] is not None else float('nan'):8.1e} "
+        nan = float("nan")
+        log(f"    {method.name:28s} {method.knob}={knob:<9.3g} err={err:9.3e} "
+            f"res={row['residual'] if row['residual'] is not None else nan:8.1e} "
+            f"dE={row['energy_drift'] if row['energy_drift'] is not None else nan:8.1e} "
             f"t={r.seconds * 1e3:10.3f} ms steps={r.steps}")
         n_ok = sum(1 for x in rows if x.get("status") == "ok")
         if not finite or err < floor or (quick and n_ok >= 3):
