@@ -53,9 +53,9 @@ QUICK_SCENES = ("pendulum", "double_pendulum", "four_bar", "spinning_tetrahedron
 
 # knob sweeps, coarse to fine. Fixed steps as divisors of t_end so every run lands on t_end exactly.
 def full_dts(order):
-    """Fixed steps for the full sweep, from a coarse start that depends on the order, halving 16 times."""
+    """Fixed steps for the full sweep, from a coarse start that depends on the order, halving 20 times."""
     top = {2: 0.02, 3: 0.04, 4: 0.04}.get(order, 0.1)
-    return [top / 2 ** i for i in range(0, 17)]
+    return [top / 2 ** i for i in range(0, 21)]
 FULL_RTOL = [10.0 ** -e for e in range(2, 14)]           # 1e-2 ... 1e-13
 QUICK_RTOL = [1e-4, 1e-6, 1e-8]
 MIN_RUNS = {"linknet": 6, "baseline": 3, "peer": 3}   # full mode: settings run even past the time budget
@@ -149,7 +149,13 @@ def sweep(method, spec, t_end, ref, *, quick: bool, run_budget: float, sweep_bud
     min_runs = 2 if quick else MIN_RUNS.get(method.family, 3)
     floor = max(10 * float(ref["agreement"]), 1e-13)
     spent, failures = 0.0, 0
-    for knob in knobs:
+    i = -1
+    while i + 1 < len(knobs):
+        # after a failure (step too coarse for the scene) jump a factor 4 instead of 2, until the first success
+        i += 2 if (failures and not any(x.get("status") == "ok" for x in rows) and not quick) else 1
+        if i >= len(knobs):
+            break
+        knob = knobs[i]
         row = {"knob": method.knob, "value": knob}
         try:
             r = _measure(method, spec, t_end, knob, repeat_below=0.0 if quick else 0.2)
@@ -158,7 +164,7 @@ def sweep(method, spec, t_end, ref, *, quick: bool, run_budget: float, sweep_bud
             row |= {"status": "failed", "message": f"{type(e).__name__}: {e}"[:300]}
             rows.append(row)
             log(f"    {method.name:28s} {method.knob}={knob:<9.3g} FAILED {row['message'][:100]}")
-            if failures >= 12:   # twelve in a row (a 4096x smaller step): the method cannot do this scene
+            if failures >= 8:   # eight in a row (a 4^7x smaller step): the method cannot do this scene
                 break
             continue
         failures = 0
@@ -353,10 +359,13 @@ def main(argv=None):
     ap.add_argument("--models", type=Path, help="folder of scene JSON files (default models/)")
     ap.add_argument("--merge", action="store_true",
                     help="update an existing results.json in --out: rerun only the given scenes/methods")
+    ap.add_argument("--render", type=Path, help="only rewrite results.md and the plots from this results JSON")
     ap.add_argument("--no-cache", action="store_true", help="recompute references even if cached")
     ap.add_argument("--run-budget", type=float, help="stop a sweep after a run longer than this [s]")
     args = ap.parse_args(argv)
     quick = args.quick
+    if args.render:
+        return render(args.render, args.out or args.render.parent)
     if args.models:
         global MODELS
         MODELS = args.models
@@ -417,6 +426,7 @@ def main(argv=None):
         except Exception as e:
             print(f"  plot failed: {e}")
         results["scenes"][sname] = sres
+        (out / "results.partial.json").write_text(json.dumps(results, indent=1, default=_json_default))
     if previous:   # keep the scenes that were not rerun, in the benchmark's order
         results["scenes"] = {n: results["scenes"][n] for n in SCENES if n in results["scenes"]}
     results["meta"] = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
@@ -430,7 +440,28 @@ def main(argv=None):
     (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
     write_markdown({k: v for k, v in results.items()} | {"scenes": {k: v for k, v in results["scenes"].items()
                                                                     if "methods" in v}}, out / "results.md")
+    (out / "results.partial.json").unlink(missing_ok=True)
     print(f"wrote {out / 'results.json'} and {out / 'results.md'} in {results['meta']['total_seconds']:.0f} s")
+    return results
+
+
+def render(path: Path, out: Path):
+    """Rewrite results.json / results.md / plots from a (possibly partial) results file."""
+    results = json.loads(Path(path).read_text())
+    for sname, sres in results["scenes"].items():
+        if "methods" not in sres:
+            continue
+        sres["summary"] = summarize(sres)
+        p = out / f"{sname}.png"
+        plot_scene(sname, sres, p)
+        sres["plot"] = str(p)
+    if not results.get("meta"):
+        results["meta"] = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                           "command": "python -m benchmarks.work_precision (interrupted; rendered from partial results)",
+                           "quick": False, "machine": _machine(), "versions": _versions(), "total_seconds": float("nan")}
+    (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
+    write_markdown(results | {"scenes": {k: v for k, v in results["scenes"].items() if "methods" in v}},
+                   out / "results.md")
     return results
 
 

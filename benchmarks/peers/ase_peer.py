@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Method, RunResult, Timer, n_steps
+from .base import Method, RunResult, Timer, Unsupported, n_steps
 
 ANCHOR_MASS = 1e20
 
@@ -21,6 +21,13 @@ class ASEVelocityVerlet(Method):
     name = "ase-rattle-verlet"
     knob = "dt"
     order = 2
+
+    MAX_LINKS = 24
+
+    def check_scene(self, spec):
+        if spec.L > self.MAX_LINKS:
+            raise Unsupported(f"ase: not run above {self.MAX_LINKS} links: FixBondLengths iterates link by link in "
+                              "Python (~1 ms per step for 10 links, and it fails to converge on chain_10)")
 
     def available(self):
         try:
