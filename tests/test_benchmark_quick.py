@@ -14,7 +14,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import sys
+from pathlib import Path
+
 import pytest
+
+# the benchmarks package lives at the repository root, beside tests/ (pytest run from anywhere)
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks import work_precision as wp
 from benchmarks.index1 import Index1System

@@ -7,7 +7,13 @@ RATTLE steps, chain_100 whip, 100 x 100 net, 100000-link chain) run in `python -
 """
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import pytest
+
+# the benchmarks package lives at the repository root, beside tests/ (pytest run from anywhere)
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 pytest.importorskip("linknet_core")
 
