@@ -173,12 +173,16 @@ def sweep(method, spec, t_end, ref, *, quick: bool, run_budget: float, sweep_bud
         row |= {"status": "ok" if finite else "nonfinite", "seconds": r.seconds,
                 "setup_seconds": r.setup_seconds, "steps": int(r.steps),
                 "error": err if finite else None,
-                "resolved": bool(err >= floor),
+                "resolved": bool(finite and err >= floor),
                 "residual": spec.constraint_residual(r.X) if finite else None,
                 "energy_drift": (abs(spec.energy(r.X, r.U) - spec.energy(spec.X0, spec.U0)) / spec.energy_scale()
                                  if (finite and r.U is not None) else None),
                 "info": {k: v for k, v in r.info.items() if isinstance(v, (int, float, str))}}
         rows.append(row)
+        if not finite:   # blew up at this setting: a failure, try finer
+            row["status"], row["message"] = "failed", "non-finite state at t_end"
+            failures += 1
+            continue
         spent += r.seconds
         nan = float("nan")
         log(f"    {method.name:28s} {method.knob}={knob:<9.3g} err={err:9.3e} "
@@ -186,7 +190,7 @@ def sweep(method, spec, t_end, ref, *, quick: bool, run_budget: float, sweep_bud
             f"dE={row['energy_drift'] if row['energy_drift'] is not None else nan:8.1e} "
             f"t={r.seconds * 1e3:10.3f} ms steps={r.steps}")
         n_ok = sum(1 for x in rows if x.get("status") == "ok")
-        if not finite or err < floor or (quick and n_ok >= 3):
+        if err < floor or (quick and n_ok >= 3):
             break
         errs = [x["error"] for x in rows if x.get("status") == "ok"]
         if len(errs) >= 3 and errs[-1] > errs[-2] > errs[-3]:
