@@ -486,8 +486,31 @@ def write_markdown(results, path):
              f"Generated {results['date']} by `{results['command']}`.", ""]
     for c in results["cases"]:
         lines += [f"## {c['case']}: {'PASS' if c['passed'] else 'FAIL'} ({c['seconds']:.1f} s)", "",
+                  *( [f"Run by `{c['command']}` on {c['date']}.", ""] if c.get("command") else []),
                   f"Criterion: {c['criterion']}", "", "```json", json.dumps(c["measured"], indent=1, default=str), "```", ""]
     path.write_text("\n".join(lines))
+
+
+def combine(out: Path):
+    """One stress.json / stress.md from the per-case runs (cases were run separately to fit the machine)."""
+    newest = {}
+    for f in sorted(out.glob("stress_*.json")):
+        if f.name.startswith("stress_quick"):
+            continue
+        r = json.loads(f.read_text())
+        for c in r["cases"]:
+            c["command"] = r["command"]
+            c["date"] = r["date"]
+            if c["case"] not in newest or c["date"] >= newest[c["case"]]["date"]:
+                newest[c["case"]] = c
+    results = {"date": max((c["date"] for c in newest.values()), default=""), "quick": False,
+               "command": "python -m benchmarks.stress --case <name> (per case; see each case) then --combine",
+               "cases": [newest[n] for n in CASES if n in newest]}
+    (out / "stress.json").write_text(json.dumps(results, indent=1, default=str))
+    write_markdown(results, out / "stress.md")
+    print(f"wrote {out / 'stress.json'}: " + ", ".join(f"{c['case']} {'PASS' if c['passed'] else 'FAIL'}"
+                                                      for c in results["cases"]))
+    return results
 
 
 def main(argv=None):
@@ -495,7 +518,11 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--case", nargs="*", choices=list(CASES))
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--combine", action="store_true",
+                    help="gather the newest result of every case from stress_*.json in --out into stress.json/.md")
     args = ap.parse_args(argv)
+    if args.combine:
+        return combine(args.out or (ROOT / "docs" / "benchmarks"))
     import datetime as _dt
     results = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "quick": args.quick,
                "command": "python -m benchmarks.stress" + (" --quick" if args.quick else "")

@@ -316,7 +316,9 @@ def plot_scene(sname, sres, path: Path):
     fig, ax = plt.subplots(figsize=(7.5, 5.5))
     style = {"linknet": "-", "baseline": "--", "peer": ":"}
     for mname, m in sres["methods"].items():
-        pts = sorted((r["error"], r["seconds"]) for r in m["runs"] if r.get("status") == "ok" and r["error"] > 0)
+        # in sweep order (coarse to fine), so a curve bending back shows round-off or a costly coarse step
+        pts = [(r["error"], r["seconds"]) for r in sorted((r for r in m["runs"] if r.get("status") == "ok"
+                                                           and r["error"] > 0), key=lambda r: -r["value"])]
         if not pts:
             continue
         e, t = zip(*pts)
