@@ -9,11 +9,9 @@ FMU state is just the variable values.
 """
 import linknet_fmu.libpython_global  # noqa: F401  first: C hosts need libpython's symbols global
 
-import math
-import sys
-
 from pythonfmu import Fmi2Slave, Fmi2Causality, Fmi2Variability, Fmi2Initial, Real
-from pythonfmu.enums import Fmi2Status
+
+from linknet_fmu.component import GuardedComponent
 
 DESCRIPTION = "PD position controller: F = Kp (x_target - x) - Kd v + F_ff (direct feedthrough from x, v)"
 AXES = ("x", "y", "z")
@@ -24,7 +22,9 @@ DECLARED_TYPES = {**{f"x[{i}]": "Position" for i in (1, 2, 3)}, **{f"v[{i}]": "V
 OUTPUT_DEPENDENCIES = {f"F[{i}]": [f"x[{i}]", f"v[{i}]"] for i in (1, 2, 3)}
 
 
-class PDController(Fmi2Slave):
+class PDController(GuardedComponent, Fmi2Slave):
+    OUTPUT_PREFIXES = ("F[",)
+    NON_NEGATIVE = ("Kp", "Kd")
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -57,29 +57,3 @@ class PDController(Fmi2Slave):
             v = self.values
             return (v["Kp"] * (v[f"x_target[{i}]"] - v[f"x[{i}]"]) - v["Kd"] * v[f"v[{i}]"] + v[f"F_ff[{i}]"])
         return self.values[name]
-
-    def _set(self, name, value):
-        if name.startswith("F["):
-            self._error(f"{name} is an output and cannot be set")
-            return
-        if not math.isfinite(value) or (name in ("Kp", "Kd") and value < 0):
-            self.bad[name] = f"= {value!r} is out of range ({'finite, >= 0' if name in ('Kp', 'Kd') else 'finite'})"
-            self._error(f"{name} {self.bad[name]}; the next doStep is refused")
-            return
-        self.bad.pop(name, None)
-        self.values[name] = float(value)
-
-    def _error(self, msg):
-        # logged (seen with loggingOn) and on stderr (pythonfmu drops log messages otherwise)
-        self.log(f"{self.instance_name}: {msg}", Fmi2Status.error)
-        sys.stderr.write(f"[linknet FMU error] {self.instance_name}: {msg}\n")
-
-    def do_step(self, current_time, step_size):
-        if self.bad:
-            for name, why in self.bad.items():
-                self._error(f"doStep refused: {name} {why}")
-            return False
-        if not (math.isfinite(step_size) and step_size > 0):
-            self._error(f"doStep refused: step size {step_size!r} must be > 0")
-            return False
-        return True

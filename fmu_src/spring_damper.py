@@ -10,10 +10,10 @@ Outputs have direct feedthrough from the four inputs.
 import linknet_fmu.libpython_global  # noqa: F401  first: C hosts need libpython's symbols global
 
 import math
-import sys
 
 from pythonfmu import Fmi2Slave, Fmi2Causality, Fmi2Variability, Fmi2Initial, Real
-from pythonfmu.enums import Fmi2Status
+
+from linknet_fmu.component import GuardedComponent
 
 DESCRIPTION = ("linear spring-damper between two points: Fa = (k (|xb-xa| - d0) + c n.(vb-va)) n, Fb = -Fa, "
                "n = (xb-xa)/|xb-xa| (direct feedthrough)")
@@ -27,7 +27,9 @@ _ALL_INPUTS = [f"{n}[{i}]" for n in _IN for i in (1, 2, 3)]
 OUTPUT_DEPENDENCIES = {f"{n}[{i}]": list(_ALL_INPUTS) for n in ("Fa", "Fb") for i in (1, 2, 3)}
 
 
-class SpringDamper(Fmi2Slave):
+class SpringDamper(GuardedComponent, Fmi2Slave):
+    OUTPUT_PREFIXES = ("Fa", "Fb")
+    NON_NEGATIVE = ("stiffness", "rest_length", "damping")
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -69,29 +71,3 @@ class SpringDamper(Fmi2Slave):
             F = self._force_on_a()[int(name[3]) - 1]
             return F if name[1] == "a" else -F
         return self.values[name]
-
-    def _set(self, name, value):
-        if name[:2] in ("Fa", "Fb"):
-            self._error(f"{name} is an output and cannot be set")
-            return
-        if not math.isfinite(value) or (name in ("stiffness", "rest_length", "damping") and value < 0):
-            self.bad[name] = f"= {value!r} is out of range"
-            self._error(f"{name} {self.bad[name]}; the next doStep is refused")
-            return
-        self.bad.pop(name, None)
-        self.values[name] = float(value)
-
-    def _error(self, msg):
-        # logged (seen with loggingOn) and on stderr (pythonfmu drops log messages otherwise)
-        self.log(f"{self.instance_name}: {msg}", Fmi2Status.error)
-        sys.stderr.write(f"[linknet FMU error] {self.instance_name}: {msg}\n")
-
-    def do_step(self, current_time, step_size):
-        if self.bad:
-            for name, why in self.bad.items():
-                self._error(f"doStep refused: {name} {why}")
-            return False
-        if not (math.isfinite(step_size) and step_size > 0):
-            self._error(f"doStep refused: step size {step_size!r} must be > 0")
-            return False
-        return True
