@@ -193,7 +193,7 @@ def sweep(method, spec, t_end, ref, *, quick: bool, run_budget: float, sweep_bud
         if err < floor or (quick and n_ok >= 3):
             break
         errs = [x["error"] for x in rows if x.get("status") == "ok"]
-        if len(errs) >= 3 and errs[-1] > errs[-2] > errs[-3]:
+        if len(errs) >= 3 and errs[-1] > errs[-2] > errs[-3] and errs[-3] < 1e-6:
             break   # past the method's round-off floor: finer settings only add error
         if (r.seconds > run_budget or spent > sweep_budget) and (n_ok >= min_runs or r.seconds > 6 * run_budget):
             break

@@ -6,10 +6,11 @@ Integrator RK4 with a fixed timestep (the knob); contacts disabled; mj_step(nste
 
 What differs / what it cannot model:
 - A point mass has no rotational inertia; MuJoCo needs positive inertia on moving bodies (> mjMINVAL = 1e-15),
-  so each body gets an isotropic inertia eps*m*R^2 (eps = 1e-9) about the mass: a relative perturbation of
-  1e-9 of the dynamics, which bounds MuJoCo's attainable error near 1e-9 m. With eps = 1e-12 MuJoCo warns
-  "Inertia matrix is too close to singular" on chain_30 and chain_100 and its answer is off by 0.44-0.49 m
-  at t = 0.3 s (measured); eps = 1e-9 gives 1.8e-10 and 6.4e-10 m there. To keep eps*m*R^2 above mjMINVAL for small links and masses (chain_1000: m R^2 ~ 1e-9)
+  so each body gets an isotropic inertia eps*m*R^2 about the mass: a relative perturbation eps of the dynamics,
+  which bounds MuJoCo's attainable error. The spin of the first link then has inertia ~eps/N^3 of the chain's
+  (N bodies deep), so eps = max(1e-12, 1e-15 N^3): 1e-12 up to N = 10, 1e-9 for chain_100, 1e-6 for
+  chain_1000. Measured: with eps = 1e-12 MuJoCo warns "Inertia matrix is too close to singular" on chain_30
+  and chain_100 and is off by 0.44-0.49 m at t = 0.3 s; eps = 1e-9 gives 1.8e-10 and 6.4e-10 m there. To keep eps*m*R^2 above mjMINVAL for small links and masses (chain_1000: m R^2 ~ 1e-9)
   the model is built in scaled units, length unit = median link length, mass unit = median free mass (time
   unchanged, gravity scaled accordingly): an exact change of units, undone on the way out.
 - Only trees hanging from anchored masses: every free mass has exactly one path to one anchor (links = free
@@ -25,7 +26,7 @@ import numpy as np
 
 from .base import Method, RunResult, Timer, Unsupported, n_steps
 
-EPS_INERTIA = 1e-9
+EPS_INERTIA = 1e-12
 
 
 def _f(x) -> str:
@@ -143,7 +144,7 @@ class MujocoRK4(Method):
             r = spec.X0[c] - spec.X0[p]
             rel = spec.X0[p] - (spec.X0[parent[p]] if p in parent else 0.0)
             pos = rel if p in parent else spec.X0[p]
-            inertia = EPS_INERTIA * spec.mass[c] * float(r @ r)
+            inertia = self._eps * spec.mass[c] * float(r @ r)
             s = (f'{indent}<body name="b{c}" pos="{_f(pos[0])} {_f(pos[1])} {_f(pos[2])}">\n'
                  f'{indent}  <joint name="j{c}" type="ball" damping="0" armature="0"/>\n'
                  f'{indent}  <inertial pos="{_f(r[0])} {_f(r[1])} {_f(r[2])}" mass="{_f(spec.mass[c])}" '
@@ -172,6 +173,10 @@ class MujocoRK4(Method):
                        gravity=spec.gravity / lam)
         with Timer() as setup:
             parent, order = _tree(spec)
+            depth = {}
+            for c in order:   # breadth-first: parents first
+                depth[c] = depth.get(parent[c], 0) + 1
+            self._eps = max(EPS_INERTIA, 1e-15 * max(depth.values()) ** 3)
             # nested body frames: a body sits on its parent mass; the XML gives its pos relative to the parent body
             # frame, whose origin is the grandparent mass (or the world for children of anchors)
             m = mujoco.MjModel.from_xml_string(self._xml(spec, dt, parent, order))
@@ -199,4 +204,4 @@ class MujocoRK4(Method):
             U[c] = jacp @ d.qvel
         X, U = X * lam, U * lam
         X[spec_si.fixed] = spec_si.X0[spec_si.fixed]
-        return RunResult(X, U, tm.seconds, setup.seconds, steps=n)
+        return RunResult(X, U, tm.seconds, setup.seconds, steps=n, info={"inertia_eps": self._eps})
