@@ -92,9 +92,18 @@ class MujocoRK4(Method):
         except ImportError as e:
             return False, f"mujoco not installed ({e})"
 
+    MAX_DEPTH = 400
+
     def check_scene(self, spec):
         if not _is_rigid_cluster(spec):
-            _tree(spec)
+            parent, order = _tree(spec)
+            depth = {}
+            for c in order:
+                depth[c] = depth.get(parent[c], 0) + 1
+            if max(depth.values()) > self.MAX_DEPTH:
+                raise Unsupported(f"mujoco: {max(depth.values())} nested bodies; MuJoCo's XML parser stops at "
+                                  "XML_ELEMENT_DEPTH_EXCEEDED (measured on chain_1000); building the model through "
+                                  "MjSpec instead is not done here")
 
     def _run_rigid(self, spec, t_end, dt):
         """The whole scene is one rigid body: a free joint, exact mass properties of the point masses."""
@@ -155,6 +164,8 @@ class MujocoRK4(Method):
 
         g = spec.gravity
         roots = [c for c in order if not (parent[c] in parent)]
+        import sys
+        sys.setrecursionlimit(max(sys.getrecursionlimit(), 4 * len(order) + 1000))   # chain_1000 nests 1000 deep
         return (f'<mujoco><option timestep="{_f(dt)}" integrator="{self.integrator}" '
                 f'gravity="{_f(g[0])} {_f(g[1])} {_f(g[2])}"><flag contact="disable"/></option>'
                 f'<compiler angle="radian" inertiafromgeom="false" autolimits="true"/>'
