@@ -68,6 +68,8 @@ class OpenMMVerlet(Method):
             st = ctx.getState(getPositions=True, getVelocities=True)
             X = np.asarray(st.getPositions(asNumpy=True)._value, dtype=float)
             Uh = np.asarray(st.getVelocities(asNumpy=True)._value, dtype=float)
+        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Uh))):
+            raise RuntimeError("openmm: non-finite positions or velocities at t_end")
         acc1, _ = Index1System(spec).accelerations(X, Uh)
         U = Uh + 0.5 * dt * acc1
         U[spec.fixed] = 0.0
