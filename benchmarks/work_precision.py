@@ -267,14 +267,15 @@ def write_markdown(results, path: Path):
              f"Generated {meta['date']} by `{meta['command']}` in {meta['total_seconds']:.0f} s.  ",
              f"Machine: {meta['machine']['cpu']}, {meta['machine']['cores']} cores, "
              f"{meta['machine']['memory_GiB']} GiB; {meta['machine']['platform']}.  ",
-             "Versions: " + ", ".join(f"{k} {v}" for k, v in meta["versions"].items() if v) + ".", "",
+             "Versions: " + ", ".join(f"{k} {v}" for k, v in meta["versions"].items() if v) + ".",
+             *([f"Note: {meta['note']}."] if meta.get("note") else []), "",
              "Error = max over masses |X_k(t_end) − X_ref,k(t_end)|. Each cell is the fastest wall time (integration "
              "only, one core, in-process) among the method's runs whose error is at or below the level; — means "
              "no run reached it (or the method cannot model the scene: see the notes). Ratio = linknet's best ÷ the "
              "best of all other methods (peers and scipy baselines); below 1 linknet is faster.", ""]
     for sname, sres in results["scenes"].items():
         ref = sres["reference"]
-        lines += [f"## {sname}", "",
+        lines += [f"## {sname}", "", *([f"({sres['note']}.)", ""] if sres.get("note") else []),
                   f"K = {sres['K']}, L = {sres['L']}, t_end = {sres['t_end']} s. Reference: DOP853 rtol "
                   f"{ref['rtol_ref']:g} vs {ref['rtol_check']:g} agree to {ref['agreement']:.2g} m "
                   f"({'verified ≤ 1e-12' if ref['verified'] else 'NOT verified to 1e-12'}), residual "
@@ -286,7 +287,8 @@ def write_markdown(results, path: Path):
         for mname, m in sres["methods"].items():
             oks = [r for r in m["runs"] if r.get("status") == "ok"]
             if not oks:
-                msg = (m["runs"][0].get("message", "") if m["runs"] else m.get("message", "")) or "no successful run"
+                msg = (m["runs"][-1].get("message", "") if m["runs"] else m.get("message", "")) or "no successful run"
+                msg = " ".join(msg.split()).replace("|", "/")
                 lines.append(f"| {mname} | " + " | ".join("—" for _ in LEVELS) + f" | n/a: {msg[:120]} | | | |")
                 continue
             cells = []
@@ -302,7 +304,7 @@ def write_markdown(results, path: Path):
         for lv in LEVELS:
             s = summ[f"{lv:g}"]
             rcells.append("—" if s["ratio"] is None else f"**{s['ratio']:.3g}** ({s['linknet_best']} / {s['other_best']})")
-        lines += ["| **ratio linknet-best / best other** | " + " | ".join(rcells) + " | | | | |", ""]
+        lines += ["| **ratio linknet-best / best other** | " + " | ".join(rcells) + " | | | | |"[:-2], ""]
         if sres.get("plot"):
             lines += [f"![{sname}]({Path(sres['plot']).name})", ""]
     if results.get("notes"):
