@@ -181,7 +181,7 @@ def rank_and_nullspace(scene: Scene, X: np.ndarray, rtol: float = SINGULAR_RCOND
     C = constraint_jacobian(scene, X).toarray()
     if C.size == 0:
         return 0, np.zeros((scene.L, scene.L))
-    U, s, _ = np.linalg.svd(C, full_matrices=True)
+    U, s, _ = np.linalg.svd(C, full_matrices=True)  # full U: its trailing columns are the null space of C^T
     tol = rtol * (s[0] if s.size else 0.0)
     rank = int(np.sum(s > tol))
     return rank, U[:, rank:]
@@ -193,9 +193,10 @@ def planar_normal(scene: Scene, tol: float = 1e-12) -> np.ndarray | None:
     origin = X.mean(axis=0)
     vectors = np.vstack([X - origin, scene.U0, scene.gravity[None, :], scene.force])
     scale = max(np.abs(vectors).max(), 1e-300)
-    _, s, vt = np.linalg.svd(vectors / scale, full_matrices=True)
-    if s.size >= 3 and s[2] <= tol * max(s[0], 1e-300):
-        return vt[2]
+    # eigen-decomposition of the 3 x 3 Gram matrix: O(K) memory (an SVD with full_matrices would build (3K)^2)
+    w, V = np.linalg.eigh((vectors / scale).T @ (vectors / scale))
+    if w[0] <= tol ** 2 * max(w[2], 1e-300):
+        return V[:, 0]
     return None
 
 

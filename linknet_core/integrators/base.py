@@ -71,7 +71,9 @@ class FixedStepIntegrator(Integrator):
 
     def advance(self, state, t_target, F_input, max_steps):
         span = t_target - state.t
-        n = max(1, math.ceil(span / self.dt * (1 - 1e-12)))
+        ratio = span / self.dt
+        # a whole number of steps up to round-off in t (which grows with t) is that number, not one more
+        n = max(1, round(ratio) if abs(ratio - round(ratio)) <= 1e-9 * max(ratio, 1.0) else math.ceil(ratio))
         if n > max_steps:
             raise SolverError(f"reaching t = {t_target} needs {n} steps of dt = {self.dt}, more than the "
                               f"limit of {max_steps}; raise max_steps or the step")
