@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import ConsistencyError, SolverError
-from .forces import external_forces, kinetic_energy, potential_energy
+from .forces import external_forces, kinetic_energy, potential_energy, scatter_add
 from .scene import Scene
 from .structure import SINGULAR_RCOND, Structure, analyse
 from .tensions import TensionSolver, make_solver, rhs, unit_vectors
@@ -53,18 +53,13 @@ class Dynamics:
         """B of (26) for total external forces F."""
         return rhs(self.scene, X, U, F)
 
-    def factor(self, X) -> None:
-        """Factor A(X) unless the last factorisation was at this very configuration."""
+    def factor(self, X, E=None) -> None:
+        """Factor A(X) unless the last factorisation was at this very configuration (E: unit vectors at X,
+        when the caller has them already)."""
         if self._factored_at is not None and np.array_equal(self._factored_at, X):
             return
-        self.solver.factor(self.unit_vectors(X))
+        self.solver.factor(self.unit_vectors(X) if E is None else E)
         self._factored_at = np.array(X, copy=True)
-
-    def solve(self, X, b) -> np.ndarray:
-        if self.scene.L == 0:
-            return np.zeros(0)
-        self.factor(X)
-        return self.solver.solve(b)
 
     def link_forces(self, X, T) -> np.ndarray:
         """C^T T: the force the links exert on each mass, sum_l T_l E_l (delta_k,k1 - delta_k,k2) of (9)."""
@@ -74,23 +69,26 @@ class Dynamics:
         """C^T w for C built from unit vectors E: +w_l E_l on k1(l), -w_l E_l on k2(l)."""
         f = weights[:, None] * E
         K = self.scene.K
-        out = np.empty((K, 3))
-        for d in range(3):  # three bincounts, not a loop over links
-            out[:, d] = np.bincount(self._k1, f[:, d], K) - np.bincount(self._k2, f[:, d], K)
-        return out
+        return scatter_add(K, self._k1, f) - scatter_add(K, self._k2, f)
 
-    def constraint_rows(self, X, V) -> np.ndarray:
+    def constraint_rows(self, X, V, E=None) -> np.ndarray:
         """(C V)_l = E_l . (V_k1 - V_k2) for a field V on the masses."""
-        E = self.unit_vectors(X)
+        if E is None:
+            E = self.unit_vectors(X)
         return np.einsum("ij,ij->i", E, V[self._k1] - V[self._k2])
 
     # ---- the physics ----------------------------------------------------------------------------
-    def tensions(self, X, U, F_input=None, F=None) -> np.ndarray:
+    def tensions(self, X, U, F_input=None, F=None, E=None) -> np.ndarray:
         """Tensions T solving (25) with right-hand side (26); minimum-norm where A is singular."""
         if F is None:
             F = self.forces(X, U, F_input)
-        B = rhs(self.scene, X, U, F)
-        return self.solve(X, B)
+        if self.scene.L == 0:
+            return np.zeros(0)
+        if E is None:
+            E = self.unit_vectors(X)
+        B = rhs(self.scene, X, U, F, E)
+        self.factor(X, E)
+        return self.solver.solve(B)
 
     def accelerations(self, X, U, F_input=None):
         """(dU/dt of (9), T): accelerations of every mass (zero on anchored ones) and the tensions."""
@@ -100,9 +98,10 @@ class Dynamics:
         return self._accelerations_numpy(X, U, F_input)
 
     def _accelerations_numpy(self, X, U, F_input=None):
+        E = self.unit_vectors(X)  # once per evaluation: B, A and the link forces all use it
         F = self.forces(X, U, F_input)
-        T = self.tensions(X, U, F=F)
-        acc = (F + self.link_forces(X, T)) * self._inv_mass3
+        T = self.tensions(X, U, F=F, E=E)
+        acc = (F + self._scatter(E, T)) * self._inv_mass3
         if not np.all(np.isfinite(acc)):
             raise SolverError("non-finite accelerations: the state or the forces contain NaN or infinity")
         return acc, T
@@ -137,8 +136,8 @@ class Dynamics:
         if self.scene.L == 0:
             return np.array(X, float, copy=True), 0
         X0 = X if direction_at is None else direction_at
-        self.factor(X0)
         E0 = self.unit_vectors(X0)
+        self.factor(X0, E0)
         Xc, used, err, ok = self._newton(X, tol, max_iter, lambda Xc, phi: self._correction(E0, self.solver.solve(phi)),
                                          give_up_when_slow=True)
         if ok:
@@ -178,8 +177,9 @@ class Dynamics:
         return R * tol + 8 * np.finfo(float).eps * size
 
     def _gauss_newton_step(self, Xc, phi):
-        self.factor(Xc)
-        return self._correction(self.unit_vectors(Xc), self.solver.solve(phi))
+        E = self.unit_vectors(Xc)
+        self.factor(Xc, E)
+        return self._correction(E, self.solver.solve(phi))
 
     def _exact_newton_step(self, Xc, phi, E0):
         """Newton with the exact unsymmetric matrix C(Xc) M^-1 C(X0)^T of RATTLE's position stage."""
@@ -212,9 +212,10 @@ class Dynamics:
         """Closest velocities satisfying (12) in the mass metric: U - M^-1 C^T mu with A mu = C U."""
         if self.scene.L == 0:
             return np.array(U, float, copy=True)
-        self.factor(X)
-        mu = self.solver.solve(self.constraint_rows(X, U))
-        return U - self._correction(self.unit_vectors(X), mu)
+        E = self.unit_vectors(X)
+        self.factor(X, E)
+        mu = self.solver.solve(self.constraint_rows(X, U, E))
+        return U - self._correction(E, mu)
 
     # ---- hypothesis (35) ------------------------------------------------------------------------
     def check_consistent_velocities(self, X, U, rtol=1e-8) -> None:

@@ -9,7 +9,7 @@ import numpy as np
 from .scene import Scene
 
 
-def _accumulate(K: int, index: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+def scatter_add(K: int, index: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     """Sum rows of ``vectors`` (n,3) into K rows by ``index`` (bincount per component, no loop per item)."""
     out = np.empty((K, 3))
     for d in range(3):
@@ -28,7 +28,7 @@ def spring_forces(scene: Scene, X: np.ndarray, U: np.ndarray) -> np.ndarray:
         n = np.where(dist[:, None] > 0, d / dist[:, None], 0.0)  # no direction when the ends coincide
     rate = np.einsum("ij,ij->i", n, U[s.b] - U[s.a])
     f = (s.stiffness * (dist - s.rest_length) + s.damping * rate)[:, None] * n
-    return _accumulate(scene.K, s.a, f) - _accumulate(scene.K, s.b, f)
+    return scatter_add(scene.K, s.a, f) - scatter_add(scene.K, s.b, f)
 
 
 def external_forces(scene: Scene, X: np.ndarray, U: np.ndarray, F_input: np.ndarray | None = None) -> np.ndarray:

@@ -143,6 +143,9 @@ class SymbolicLDL:
         return self.singular_column < 0
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        x = np.array(b, dtype=float, copy=True)
+        return self.solve_in_place(np.array(b, dtype=float, copy=True))
+
+    def solve_in_place(self, x: np.ndarray) -> np.ndarray:
+        """Overwrite the float64 contiguous x (holding b) with the solution, and return it."""
         ldl_solve(self.n, self.Lp, self.Li, self.Lx, self.Dinv, x)
         return x

@@ -147,7 +147,7 @@ class SparseLDLSolver(TensionSolver):
         if self._singular:
             return self._fallback.solve(b)
         order = self.assembly.ordering
-        x = self.ldl.solve(b[order])
+        x = self.ldl.solve_in_place(np.ascontiguousarray(b[order], dtype=float))  # b[order] is already a copy
         out = np.empty_like(x)
         out[order] = x
         return out

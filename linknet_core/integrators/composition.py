@@ -5,7 +5,6 @@ size h is RATTLE steps of gamma_i h in turn. Yoshida (1990) and Suzuki (1990) gi
 """
 from __future__ import annotations
 
-import numpy as np
 
 from .rattle import Rattle
 

@@ -8,7 +8,6 @@ symplectic (the system is not Hamiltonian then anyway).
 """
 from __future__ import annotations
 
-import numpy as np
 
 from .base import FixedStepIntegrator
 
