@@ -293,6 +293,15 @@ def _parse_scene(data: dict, source: str) -> Scene:
             return index_of[ref]
         raise SceneError(f"{source}: {what} must be a mass name or a 1-based index, got {ref!r}")
 
+    def two_ends(entry, what: str, allowed: set) -> tuple[int, int]:
+        """The two mass indices a link or spring joins, with its fields checked."""
+        if not isinstance(entry, dict):
+            raise SceneError(f"{source}: {what} must be an object")
+        _check_keys(entry, allowed, what, source)
+        if "a" not in entry or "b" not in entry:
+            raise SceneError(f"{source}: {what} needs both ends 'a' and 'b'")
+        return resolve(entry["a"], f"{what} end 'a'"), resolve(entry["b"], f"{what} end 'b'")
+
     L = len(links)
     k1 = np.empty(L, np.int64)
     k2 = np.empty(L, np.int64)
@@ -300,13 +309,7 @@ def _parse_scene(data: dict, source: str) -> Scene:
     link_names: list[str] = []
     seen_pairs: dict[tuple[int, int], int] = {}
     for l, entry in enumerate(links):
-        if not isinstance(entry, dict):
-            raise SceneError(f"{source}: link {l + 1} must be an object")
-        _check_keys(entry, _LINK_KEYS, f"link {l + 1}", source)
-        if "a" not in entry or "b" not in entry:
-            raise SceneError(f"{source}: link {l + 1} needs both ends 'a' and 'b'")
-        a = resolve(entry["a"], f"link {l + 1} end 'a'")
-        b = resolve(entry["b"], f"link {l + 1} end 'b'")
+        a, b = two_ends(entry, f"link {l + 1}", _LINK_KEYS)
         label = f"link {l + 1} ({names[a]}-{names[b]})"
         if a == b:  # the seed assumes the two ends of a link are different masses (before (17))
             raise SceneError(f"{source}: {label} joins mass {a + 1} to itself; a link must join two different masses")
@@ -340,13 +343,7 @@ def _parse_scene(data: dict, source: str) -> Scene:
     damping = np.empty(S)
     spring_names = []
     for s, entry in enumerate(springs_data):
-        if not isinstance(entry, dict):
-            raise SceneError(f"{source}: spring {s + 1} must be an object")
-        _check_keys(entry, _SPRING_KEYS, f"spring {s + 1}", source)
-        if "a" not in entry or "b" not in entry:
-            raise SceneError(f"{source}: spring {s + 1} needs both ends 'a' and 'b'")
-        sa[s] = resolve(entry["a"], f"spring {s + 1} end 'a'")
-        sb[s] = resolve(entry["b"], f"spring {s + 1} end 'b'")
+        sa[s], sb[s] = two_ends(entry, f"spring {s + 1}", _SPRING_KEYS)
         if sa[s] == sb[s]:
             raise SceneError(f"{source}: spring {s + 1} joins mass {sa[s] + 1} to itself")
         stiffness[s] = _number(entry.get("stiffness", 0.0), f"spring {s + 1} stiffness", source, nonnegative=True)

@@ -242,8 +242,9 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
     for i, t in enumerate(times):
         if i > 0:
             sim.advance(t, force_at(times[i - 1]))
-        F_now = force_at(t) if i < n - 1 else force_at(times[i - 1] if i > 0 else t)
-        out = sim.outputs(F_now)
+        # tensions feel the input directly: report them with the input of the step starting at t_i,
+        # and at the last sample with the input of the step that ended there
+        out = sim.outputs(force_at(times[min(i, n - 2)]))
         X[i], U[i], T[i] = out["X"], out["U"], out["T"]
         energy[i] = sim.dyn.energy(out["X"], out["U"])
         kinetic[i] = kinetic_energy(scene, out["U"])

@@ -115,19 +115,20 @@ def _tree_ordering(scene: Scene, graph, node_of_end, n_free) -> np.ndarray:
     """Leaves-first order of the links in a forest: no fill in the LDL^T of A."""
     sym = (graph + graph.T).tocsr()
     n_nodes = sym.shape[0]
-    n_comp, labels = connected_components(sym, directed=False)
+    _, labels = connected_components(sym, directed=False)
     degree = np.diff(sym.indptr)
-    depth = np.full(n_nodes, -1, np.int64)
-    # root each component at a leaf so that chains come out in path order (tridiagonal A)
-    for c in range(n_comp):  # setup only: one BFS per component
-        members = np.flatnonzero(labels == c)
-        leaves = members[degree[members] <= 1]
-        root = int(leaves[0]) if leaves.size else int(members[0])
-        order, pred = breadth_first_order(sym, root, directed=False, return_predecessors=True)
-        # depth by walking the BFS order: parents come before children (setup, once per scene)
-        depth[root] = 0
-        for node in order[1:]:
-            depth[node] = depth[pred[node]] + 1
+    # root each component at a leaf (every tree has one) so that chains come out in path order
+    # (tridiagonal A); one BFS from a virtual node joined to all the roots covers the whole forest
+    leaves = np.flatnonzero(degree <= 1)
+    _, first = np.unique(labels[leaves], return_index=True)
+    roots = leaves[first]
+    virtual = n_nodes
+    extra = sp.coo_matrix((np.ones(roots.size), (np.full(roots.size, virtual), roots)), shape=(n_nodes + 1, n_nodes + 1))
+    forest = (sp.block_diag([sym, sp.csr_matrix((1, 1))]) + extra + extra.T).tocsr()
+    order, pred = breadth_first_order(forest, virtual, directed=False, return_predecessors=True)
+    depth = np.zeros(n_nodes + 1, np.int64)
+    for node in order[1:]:  # parents come before children in BFS order (setup, once per scene)
+        depth[node] = depth[pred[node]] + 1
     link_depth = np.maximum(depth[node_of_end[:, 0]], depth[node_of_end[:, 1]])
     return np.argsort(-link_depth, kind="stable")
 
