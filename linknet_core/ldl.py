@@ -13,6 +13,17 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numba.core.cpu import CPUTargetOptions
+
+# Decorator of the compiled building blocks that never allocate (here and in linknet_core.compiled): cached,
+# inlined into their callers, and compiled without numba's reference counting. With it, every call passing
+# arrays costs two atomic operations per array, more than a small scene's whole right-hand side.
+# error_model='numpy': a division by zero gives inf/nan as in C (the kernels check for non-finite values)
+# instead of raising.
+if hasattr(CPUTargetOptions, "_nrt"):
+    kernel = njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+else:  # a numba without the option: the same code, with reference counting
+    kernel = njit(cache=True, error_model="numpy", forceinline=True)
 
 
 @njit(cache=True)
@@ -41,11 +52,20 @@ def ldl_factor(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, pivot_tol):
     Returns -1 on success, or the 0-based column whose pivot fell below pivot_tol * its diagonal
     entry (the matrix is singular or nearly so: redundant links at this configuration).
     """
-    y_vals = np.zeros(n)
-    y_markers = np.zeros(n, np.bool_)
-    y_idx = np.empty(n, np.int64)
-    elim_buffer = np.empty(n, np.int64)
-    next_space = Lp[:n].copy()
+    return ldl_factor_work(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, pivot_tol, np.zeros(n),
+                           np.zeros(n, np.bool_), np.empty(n, np.int64), np.empty(n, np.int64),
+                           np.empty(n, np.int64))
+
+
+@kernel
+def ldl_factor_work(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, pivot_tol, y_vals, y_markers, y_idx, elim_buffer,
+                    next_space):
+    """:func:`ldl_factor` with caller-owned work arrays (length n), for kernels that factor every step.
+
+    ``y_vals`` must be all zero and ``y_markers`` all False on entry; the factorisation leaves them so.
+    """
+    for i in range(n):
+        next_space[i] = Lp[i]
     bad = -1
     for k in range(n):
         nnz_y = 0
@@ -95,7 +115,7 @@ def ldl_factor(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, pivot_tol):
     return bad
 
 
-@njit(cache=True)
+@kernel
 def ldl_solve(n, Lp, Li, Lx, Dinv, x):
     """Solve L D L^T x = b in place (x holds b on entry)."""
     for i in range(n):

@@ -14,7 +14,8 @@ def make_integrator(method: str, dynamics, dt=None, rtol=None, atol=None, backen
     """Build the integrator ``method`` for one scene's dynamics.
 
     Fixed-step methods need ``dt``; adaptive ones take ``rtol`` (and optional ``atol``). ``backend``:
-    'auto' runs fixed-step RATTLE methods in the compiled loop where the scene allows, 'numpy' never.
+    'auto' runs whole intervals in the compiled kernels (RATTLE and its compositions, the projected
+    Runge-Kutta methods) where the scene allows, 'compiled' insists on it, 'numpy' never.
     """
     if method not in METHODS:
         raise SolverError(f"unknown integration method {method!r}; choose one of {sorted(METHODS)}")
@@ -22,7 +23,7 @@ def make_integrator(method: str, dynamics, dt=None, rtol=None, atol=None, backen
     if cls.adaptive:
         if dt is not None:
             raise SolverError(f"method {method!r} chooses its own steps: give rtol (and atol), not dt")
-        return cls(dynamics, rtol=1e-8 if rtol is None else rtol, atol=atol)
+        return cls(dynamics, rtol=1e-8 if rtol is None else rtol, atol=atol, backend=backend)
     if rtol is not None or atol is not None:
         raise SolverError(f"method {method!r} has a fixed step: give dt, not rtol/atol")
     if dt is None:

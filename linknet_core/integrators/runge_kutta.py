@@ -6,6 +6,12 @@ The index-1 ODE is dX/dt = U (10), dU/dt = accelerations with the tensions of (2
 the order of the method. The step size is controlled by the embedded error estimate to meet
 ``rtol``/``atol`` (SI units; atol defaults to rtol). A method is defined by its tableau only; the
 tableaux are those of scipy's RK45 (Dormand-Prince 5(4)) and DOP853 (Hairer's 8(5,3)).
+
+``backend``: 'compiled' runs each interval between two output points in one numba call
+(:mod:`linknet_core.compiled_rk`, the same algorithm on the same tableau); 'auto' does so for the scenes
+the compiled kernels handle (non-redundant) when the right-hand side is the stock numeric one; 'numpy'
+never. Where the compiled kernel meets a singular configuration it hands the rest of the interval to the
+numpy path.
 """
 from __future__ import annotations
 
@@ -22,16 +28,26 @@ SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 
 
 class ProjectedRungeKutta(Integrator):
+    """A method is its tableau: A, B (n_stages), the error weights (n_stages + 1 each, the last for the
+    right-hand side at the new point) and which error norm combines them ('rms': the RMS norm of
+    h * sum E_i k_i; 'hairer': DOP853's combined 5th/3rd-order estimate from two weight vectors)."""
+
     adaptive = True
     A: np.ndarray
     B: np.ndarray
     C: np.ndarray
-    E: np.ndarray
+    error_weights: tuple
+    error_norm_kind = "rms"
     error_estimator_order: int
     n_stages: int
+    compiled_fallbacks = 0  # intervals the compiled kernel handed (in part) to the numpy path
 
-    def __init__(self, dynamics, rtol: float = 1e-8, atol: float | None = None, h0: float | None = None):
+    def __init__(self, dynamics, rtol: float = 1e-8, atol: float | None = None, h0: float | None = None,
+                 backend: str = "auto"):
         super().__init__(dynamics)
+        if backend not in ("auto", "numpy", "compiled"):
+            raise SolverError(f"backend must be 'auto', 'numpy' or 'compiled', got {backend!r}")
+        self.backend = backend
         for name, value in (("rtol", rtol), ("atol", atol)):
             if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise SolverError(f"{name} must be a positive finite tolerance, got {value!r}")
@@ -81,7 +97,15 @@ class ProjectedRungeKutta(Integrator):
                                np.tensordot(weights, KU, axes=1)[self.free].ravel()])
 
     def error_norm(self, KX, KU, h, scale) -> float:
-        err = h * self._stage_errors(KX, KU, self.E) / scale
+        if self.error_norm_kind == "hairer":
+            # Hairer's combined estimate, as in scipy's DOP853
+            err5 = self._stage_errors(KX, KU, self.error_weights[0]) / scale
+            err3 = self._stage_errors(KX, KU, self.error_weights[1]) / scale
+            e5, e3 = float(np.dot(err5, err5)), float(np.dot(err3, err3))
+            if e5 == 0.0 and e3 == 0.0:
+                return 0.0
+            return abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * scale.size)
+        err = h * self._stage_errors(KX, KU, self.error_weights[0]) / scale
         return float(np.sqrt(np.mean(err ** 2)))
 
     def _initial_step(self, X, U, k0, F_input, span):
@@ -109,23 +133,95 @@ class ProjectedRungeKutta(Integrator):
         X_new, _ = self.dyn.project_positions(X_new, tol=1e-14)
         return X_new, self.dyn.project_velocities(X_new, U_new)
 
+    # ---- compiled path ----------------------------------------------------------------------------
+    def compiled_available(self) -> bool:
+        """Whether this integrator runs its intervals in the compiled kernel."""
+        from .. import compiled
+        from ..dynamics import Dynamics
+
+        if self.backend == "numpy":
+            return False
+        # the kernel re-implements Dynamics' right-hand side: a casadi kernel or an overridden accelerations()
+        # was asked for explicitly, so 'auto' leaves it to them
+        stock = self.dyn.rhs_kernel == "numpy" and type(self.dyn).accelerations is Dynamics.accelerations
+        ok = compiled.supports(self.dyn) and stock
+        if self.backend == "compiled" and not ok:
+            why = (f"{self.dyn.structure.kind} scenes" if not compiled.supports(self.dyn)
+                   else "a right-hand side other than the stock numeric one")
+            raise SolverError(f"the compiled Runge-Kutta kernel does not handle {why}; use backend 'auto'")
+        return ok
+
+    def _compiled_kernel(self):
+        if getattr(self, "_kernel", None) is None:
+            from ..compiled_rk import HAIRER_ERROR, RMS_ERROR, CompiledRungeKutta
+
+            kind = {"rms": RMS_ERROR, "hairer": HAIRER_ERROR}[self.error_norm_kind]
+            self._kernel = CompiledRungeKutta(self.dyn, self.A, self.B, self.error_weights, kind,
+                                              self.error_estimator_order)
+        return self._kernel
+
+    def fixed_steps(self, X, U, h, n, F_input=None):
+        """n steps of size h without error control, each followed by the projections (order measurements);
+        in the compiled kernel when available, else by :meth:`step`. Returns (X, U)."""
+        if self.compiled_available():
+            from ..compiled_rk import OK
+
+            status, X_new, U_new, *_ = self._compiled_kernel().advance(
+                X, U, 0.0, n * h, h, F_input, self.rtol, self.atol, n, (SAFETY, MIN_FACTOR, MAX_FACTOR), n_fixed=n)
+            if status == OK:
+                return X_new, U_new
+        for _ in range(n):
+            X, U = self.step(X, U, h, F_input)
+        return X, U
+
     # ---- driver ------------------------------------------------------------------------------
     def advance(self, state, t_target, F_input, max_steps):
-        dyn = self.dyn
         X, U, t = state.X, state.U, state.t
+        steps = 0
+        if self.compiled_available():
+            from .. import compiled_rk as ck
+
+            status, X, U, t, self.h, steps, rejected, n_rhs = self._compiled_kernel().advance(
+                X, U, t, t_target, self.h, F_input, self.rtol, self.atol, max_steps, (SAFETY, MIN_FACTOR, MAX_FACTOR))
+            self.stats.steps += steps
+            self.stats.rejected += rejected
+            self.dyn.rhs_evaluations += n_rhs
+            if status == ck.OK:
+                state.X, state.U, state.t = X, U, t_target
+                return
+            if status == ck.STEP_UNDERFLOW:
+                raise self._underflow(t)
+            if status == ck.TOO_MANY_STEPS:
+                raise self._too_many(max_steps, state.t, t_target)
+            # a singular configuration, a slow projection or non-finite values: the numpy path takes the
+            # rest of the interval from the last accepted step (and has the fallbacks, or the error message)
+            self.compiled_fallbacks += 1
+        self._advance_numpy(state, X, U, t, t_target, F_input, max_steps, steps)
+
+    def _underflow(self, t):
+        return SolverError(f"step size underflow at t = {t}: the tolerance rtol = {self.rtol} cannot be "
+                           "met (singular configuration or discontinuous input?)")
+
+    @staticmethod
+    def _too_many(max_steps, t_start, t_target):
+        return SolverError(f"more than {max_steps} steps between t = {t_start} and t = {t_target}; "
+                           "raise max_steps or the tolerance")
+
+    def _advance_numpy(self, state, X, U, t, t_target, F_input, max_steps, steps):
+        """From (X, U) at t to t_target on the numpy path; ``steps`` already taken in this interval."""
+        dyn = self.dyn
+        t_start = state.t
         k0 = self._f(X, U, F_input)
         if self.h is None:
             self.h = self._initial_step(X, U, k0, F_input, t_target - t)
         exponent = -1.0 / (self.error_estimator_order + 1)
-        steps = 0
         while t < t_target:
             remaining = t_target - t
             h = min(self.h, remaining)
             if h < remaining < 1.1 * h:  # avoid a sliver of a last step: split the rest in two
                 h = 0.5 * remaining
             if h <= 16 * np.spacing(max(abs(t), 1.0)) and h < remaining:
-                raise SolverError(f"step size underflow at t = {t}: the tolerance rtol = {self.rtol} cannot be "
-                                  "met (singular configuration or discontinuous input?)")
+                raise self._underflow(t)
             X_new, U_new, KX, KU = self._attempt(X, U, h, k0, F_input)
             err = self.error_norm(KX, KU, h, self._scale(X, U, X_new, U_new))
             if not math.isfinite(err):
@@ -137,15 +233,15 @@ class ProjectedRungeKutta(Integrator):
                 U_new = dyn.project_velocities(X_new, U_new)
                 t = t_target if h == remaining else t + h
                 X, U = X_new, U_new
-                k0 = self._f(X, U, F_input)
                 factor = MAX_FACTOR if err == 0 else min(MAX_FACTOR, SAFETY * err ** exponent)
                 # a step shortened only to land on t_target says nothing against the longer step
                 self.h = max(self.h, h * factor) if h < self.h else h * factor
                 steps += 1
                 self.stats.steps += 1
                 if steps > max_steps:
-                    raise SolverError(f"more than {max_steps} steps between t = {state.t} and t = {t_target}; "
-                                      "raise max_steps or the tolerance")
+                    raise self._too_many(max_steps, t_start, t_target)
+                if t < t_target:  # the first stage of the next step (none after the last one)
+                    k0 = self._f(X, U, F_input)
             else:
                 self.stats.rejected += 1
                 self.h = h * max(MIN_FACTOR, SAFETY * err ** exponent)
@@ -157,7 +253,8 @@ class DOPRI5(ProjectedRungeKutta):
     order = 5
     error_estimator_order = 4
     n_stages = _RK45.n_stages
-    A, B, C, E = _RK45.A, _RK45.B, _RK45.C, _RK45.E
+    A, B, C = _RK45.A, _RK45.B, _RK45.C
+    error_weights = (_RK45.E,)
     guarantees = ("order 5, adaptive (Dormand-Prince 5(4)); after every step positions are projected onto (11) "
                   "and velocities onto (12); not symplectic: energy error follows the tolerance and may drift")
 
@@ -170,16 +267,7 @@ class DOP853(ProjectedRungeKutta):
     A = _dop853.A[:_dop853.N_STAGES, :_dop853.N_STAGES]
     B = _dop853.B
     C = _dop853.C[:_dop853.N_STAGES]
-    E3 = _dop853.E3
-    E5 = _dop853.E5
+    error_weights = (_dop853.E5, _dop853.E3)
+    error_norm_kind = "hairer"
     guarantees = ("order 8, adaptive (Hairer's DOP853 with its 5th/3rd-order error estimate); projected onto (11) "
                   "and (12) after every step; not symplectic: energy error follows the tolerance")
-
-    def error_norm(self, KX, KU, h, scale) -> float:
-        # Hairer's combined estimate, as in scipy's DOP853
-        err5 = self._stage_errors(KX, KU, self.E5) / scale
-        err3 = self._stage_errors(KX, KU, self.E3) / scale
-        e5, e3 = float(np.dot(err5, err5)), float(np.dot(err3, err3))
-        if e5 == 0.0 and e3 == 0.0:
-            return 0.0
-        return abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * scale.size)
