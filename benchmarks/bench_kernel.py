@@ -1,0 +1,334 @@
+"""Issue 6: is linknet's compiled kernel near the machine's limit?
+
+Part 1 - right-hand side vs plain C. One evaluation of the right-hand side for a chain with one anchored end
+(external forces = gravity, A of (25) tridiagonal and B of (26), the tension solve, accelerations (9)), timed
+for chains of 10, 100, 1000 and 10000 links:
+
+* C: benchmarks/c_reference/chain_rhs.c, plain C (Thomas elimination), compiled here with the system C
+  compiler (``cc -O2 -shared -fPIC``, no -march, no -ffast-math), loaded with ctypes, N evaluations in a loop
+  inside C (one ctypes call per timing);
+* linknet: the compiled right-hand side the compiled integrators call (linknet_core.compiled.accelerations,
+  on the path the scene gets: tridiagonal for chains; the general sparse LDL^T path is timed too, for
+  comparison), N evaluations in a numba loop (compiled.accelerations_repeated), same inputs.
+
+Before timing, the C result, the compiled one and the numpy Dynamics.accelerations are checked to agree to
+round-off. Inputs: a random-walk chain (random link directions and masses, total length and mass 1) with
+random velocities projected onto (12), so that every term of (25)-(26) is exercised.
+
+Part 2 (``--integrators``) - adaptive Runge-Kutta, numpy vs compiled: time per step and total time of one
+``Simulator.advance(2.0)`` for several scenes and tolerances.
+
+    python -m benchmarks.bench_kernel [--quick] [--integrators] [--out DIR]
+
+Writes DIR/kernel.json and DIR/kernel.md (default docs/benchmarks, or docs/benchmarks/quick with --quick).
+Measures only; asserts nothing but the agreement of the three implementations.
+"""
+from __future__ import annotations
+
+import argparse
+import ctypes
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import linknet_core as ln
+from linknet_core import builders, compiled
+
+ROOT = Path(__file__).resolve().parent.parent
+C_SOURCE = Path(__file__).resolve().parent / "c_reference" / "chain_rhs.c"
+C_FLAGS = ["-O2", "-shared", "-fPIC"]
+SIZES = (10, 100, 1000, 10000)
+AGREEMENT_TOL = 1e-9  # relative (to the largest entry) agreement demanded of the three implementations
+
+_P = ctypes.POINTER(ctypes.c_double)
+
+
+class CUnavailable(RuntimeError):
+    pass
+
+
+def c_compiler() -> str | None:
+    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
+        if name and shutil.which(name):
+            return name
+    return None
+
+
+def build_c_reference(workdir: Path | None = None):
+    """Compile chain_rhs.c into a shared library and load it; returns (library, compiler command line)."""
+    cc = c_compiler()
+    if cc is None:
+        raise CUnavailable("no C compiler (cc, gcc or clang) on PATH")
+    workdir = Path(workdir or tempfile.mkdtemp(prefix="linknet_c_reference_"))
+    lib_path = workdir / "chain_rhs.so"
+    cmd = [cc, *C_FLAGS, "-o", str(lib_path), str(C_SOURCE)]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise CUnavailable(f"{' '.join(cmd)} failed:\n{proc.stderr}")
+    lib = ctypes.CDLL(str(lib_path))
+    lib.chain_rhs.restype = None
+    lib.chain_rhs.argtypes = [ctypes.c_int] + [_P] * 12
+    lib.chain_rhs_repeat.restype = ctypes.c_double
+    lib.chain_rhs_repeat.argtypes = [ctypes.c_long, ctypes.c_int] + [_P] * 12
+    version = subprocess.run([cc, "--version"], capture_output=True, text=True).stdout.splitlines()
+    return lib, " ".join([cc, *C_FLAGS]), (version[0] if version else cc)
+
+
+def random_chain_state(n_links: int, seed: int = 0):
+    """A chain anchored at its first mass in a random-walk shape, random masses, consistent random velocities."""
+    rng = np.random.default_rng(seed)
+    steps = rng.normal(size=(n_links, 3))
+    steps *= (1.0 / n_links) / np.linalg.norm(steps, axis=1)[:, None]
+    points = np.vstack([np.zeros(3), np.cumsum(steps, axis=0)])
+    masses = rng.uniform(0.5, 1.5, n_links + 1)
+    masses /= masses.sum()
+    scene = builders.chain(n_links, shape="points", points=points, masses=masses, name=f"chain_{n_links}_walk")
+    dyn = ln.Dynamics(scene)
+    U = rng.normal(size=points.shape) * (~scene.fixed)[:, None]
+    U = dyn.project_velocities(scene.X0, U)
+    return scene, dyn, np.ascontiguousarray(scene.X0, np.float64), np.ascontiguousarray(U, np.float64)
+
+
+class CChain:
+    """The C kernel's arrays for one chain (masses 0..n, mass 0 anchored, link l joins l and l+1)."""
+
+    def __init__(self, lib, scene, X, U):
+        if not (np.array_equal(scene.k1, np.arange(scene.L)) and np.array_equal(scene.k2, np.arange(1, scene.L + 1))
+                and scene.fixed[0] and not scene.fixed[1:].any()):
+            raise ValueError("the C reference takes a chain k1 = l, k2 = l + 1 anchored at mass 0 only")
+        n = scene.L
+        self.lib, self.n = lib, n
+        self.arrays = [X, U, np.ascontiguousarray(scene.length, np.float64),
+                       np.ascontiguousarray(np.where(scene.fixed, 0.0, scene.mass), np.float64),
+                       np.ascontiguousarray(scene.inv_mass, np.float64), np.ascontiguousarray(scene.gravity, np.float64),
+                       np.zeros((n + 1, 3)), np.zeros(n), np.zeros((n, 3)), np.zeros((n + 1, 3)), np.zeros(n),
+                       np.zeros(n)]
+        self.pointers = [a.ctypes.data_as(_P) for a in self.arrays]
+
+    def evaluate(self):
+        self.lib.chain_rhs(self.n, *self.pointers)
+        return self.arrays[6].copy(), self.arrays[7].copy()
+
+    def run(self, n_evals: int) -> float:
+        """Seconds for n_evals evaluations in a loop inside C."""
+        start = time.perf_counter()
+        self.lib.chain_rhs_repeat(n_evals, self.n, *self.pointers)
+        return time.perf_counter() - start
+
+
+class LinknetChain:
+    """linknet's compiled right-hand side for one scene (chain path, or the general sparse path)."""
+
+    def __init__(self, dyn, X, U, use_chain):
+        self.kernel = compiled.CompiledScene(dyn, use_chain=use_chain)
+        self.X, self.U = X, U
+        self.F_base = self.kernel.base_forces(None)
+        self.acc = np.zeros((dyn.scene.K, 3))
+        self.T = np.zeros(dyn.scene.L)
+        self.run(2)  # compile (or load from the cache) outside the timing
+
+    def evaluate(self):
+        status, acc, T = self.kernel.accelerations(self.X, self.U)
+        if status != compiled.OK:
+            raise RuntimeError(f"compiled right-hand side returned status {status}")
+        return acc, T
+
+    def run(self, n_evals: int) -> float:
+        k = self.kernel
+        start = time.perf_counter()
+        compiled.accelerations_repeated(n_evals, self.X, self.U, self.F_base, k.scene, k.system, self.acc, self.T)
+        return time.perf_counter() - start
+
+
+def _relative(a, b):
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
+def _time_per_eval(runner, budget: float, repeats: int) -> float:
+    """Best of ``repeats`` timings of N evaluations, N chosen so that one timing takes about ``budget`` s."""
+    n = 1
+    while True:
+        elapsed = runner.run(n)
+        if elapsed >= 0.02 or n >= 10 ** 9:
+            break
+        n *= 10
+    n = max(1, int(n * budget / max(elapsed, 1e-9)))
+    return min(runner.run(n) for _ in range(repeats)) / n
+
+
+def kernel_table(sizes=SIZES, budget=0.2, repeats=5, log=print):
+    lib, flags, compiler = build_c_reference()
+    rows = []
+    for n in sizes:
+        scene, dyn, X, U = random_chain_state(n)
+        c_kernel = CChain(lib, scene, X, U)
+        chain_path = LinknetChain(dyn, X, U, use_chain=True)
+        general_path = LinknetChain(dyn, X, U, use_chain=False)
+        acc_np, T_np = dyn.accelerations(X, U)
+        acc_c, T_c = c_kernel.evaluate()
+        agreement = {}
+        for label, (acc, T) in (("c", (acc_c, T_c)), ("linknet_chain", chain_path.evaluate()),
+                                ("linknet_general", general_path.evaluate())):
+            agreement[label] = {"acc_vs_numpy": _relative(acc, acc_np), "T_vs_numpy": _relative(T, T_np),
+                                "acc_vs_c": _relative(acc, acc_c), "T_vs_c": _relative(T, T_c)}
+        worst = max(v for d in agreement.values() for v in d.values())
+        if not worst <= AGREEMENT_TOL:
+            raise RuntimeError(f"chain of {n} links: the implementations disagree ({agreement}); not timing")
+        # interleave the timings so that a change in the machine's load hits all three alike
+        t_c, t_chain, t_general = [], [], []
+        for _ in range(repeats):
+            t_c.append(_time_per_eval(c_kernel, budget, 1))
+            t_chain.append(_time_per_eval(chain_path, budget, 1))
+            t_general.append(_time_per_eval(general_path, budget, 1))
+        row = {"links": n, "c_ns": 1e9 * min(t_c), "linknet_ns": 1e9 * min(t_chain),
+               "linknet_general_ns": 1e9 * min(t_general), "agreement": agreement, "worst_disagreement": worst}
+        row["ratio"] = row["linknet_ns"] / row["c_ns"]
+        row["ratio_general"] = row["linknet_general_ns"] / row["c_ns"]
+        row["linknet_ns_per_link"] = row["linknet_ns"] / n
+        row["c_ns_per_link"] = row["c_ns"] / n
+        rows.append(row)
+        log(f"{n:>6} links: C {row['c_ns']:>12.0f} ns  linknet {row['linknet_ns']:>12.0f} ns  ratio "
+            f"{row['ratio']:5.2f}  ({row['linknet_ns_per_link']:.1f} ns/link; general sparse path "
+            f"{row['linknet_general_ns']:.0f} ns, ratio {row['ratio_general']:.2f}); agreement {worst:.1e}")
+    return {"compiler": compiler, "flags": flags, "rows": rows}
+
+
+# ------------------------------------------------------------------------------------------------ part 2
+INTEGRATOR_SCENES = {
+    "pendulum": builders.pendulum,
+    "double_pendulum": builders.double_pendulum,
+    "chain_10": lambda: builders.chain(10),
+    "chain_100": lambda: builders.chain(100),
+    "net_10x10": lambda: builders.net(10, 10),
+}
+
+
+def _time_advance(scene, method, rtol, backend, t_end, repeats, numpy_budget):
+    sim = ln.Simulator(scene, method=method, rtol=rtol, backend=backend)
+    sim.advance(1e-3)  # compile / warm up outside the timing
+    best = None
+    for i in range(repeats):
+        sim.reset()
+        sim.integrator.stats = type(sim.integrator.stats)()
+        start = time.perf_counter()
+        sim.advance(t_end)
+        elapsed = time.perf_counter() - start
+        best = elapsed if best is None else min(best, elapsed)
+        if elapsed > numpy_budget:
+            break
+    stats = sim.integrator.stats.as_dict()
+    return {"seconds": best, "steps": stats["steps"], "rejected": stats["rejected"],
+            "us_per_step": 1e6 * best / max(stats["steps"], 1), "X": sim.state.X}
+
+
+def integrator_table(t_end=2.0, quick=False, log=print):
+    rows = []
+    methods = ("dopri5", "dop853")
+    scenes = ["pendulum", "double_pendulum", "chain_10"] if quick else list(INTEGRATOR_SCENES)
+    for name in scenes:
+        scene = INTEGRATOR_SCENES[name]()
+        for method in methods:
+            for rtol in (1e-6, 1e-10):
+                r = {"scene": name, "method": method, "rtol": rtol}
+                for backend in ("numpy", "compiled"):
+                    out = _time_advance(scene, method, rtol, backend, t_end, repeats=1 if backend == "numpy" else 5,
+                                        numpy_budget=1.0)
+                    r[backend] = {k: v for k, v in out.items() if k != "X"}
+                    r[backend + "_X"] = out["X"]
+                r["speedup"] = r["numpy"]["seconds"] / r["compiled"]["seconds"]
+                r["max_position_difference_m"] = float(np.max(np.abs(r.pop("numpy_X") - r.pop("compiled_X"))))
+                rows.append(r)
+                log(f"{name:>16} {method:>6} rtol {rtol:.0e}: numpy {r['numpy']['steps']:>6} steps "
+                    f"{1e3 * r['numpy']['seconds']:>10.2f} ms ({r['numpy']['us_per_step']:8.1f} us/step) | compiled "
+                    f"{r['compiled']['steps']:>6} steps {1e3 * r['compiled']['seconds']:>9.3f} ms "
+                    f"({r['compiled']['us_per_step']:7.2f} us/step) | x{r['speedup']:.0f}, |dX| "
+                    f"{r['max_position_difference_m']:.1e} m")
+    return {"t_end": t_end, "rows": rows}
+
+
+# ------------------------------------------------------------------------------------------------ output
+def write_outputs(out: Path, result: dict) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "kernel.json").write_text(json.dumps(result, indent=1, sort_keys=True))
+    meta = result["meta"]
+    lines = ["# Compiled kernel vs plain C (issue 6)", "",
+             f"`{meta['command']}` on {meta['machine']} ({meta['cpus']} CPUs), Python {meta['python']}, "
+             f"numba {meta['numba']}.", ""]
+    k = result.get("kernel")
+    if k:
+        lines += [
+            "## Right-hand side of a chain with one anchored end",
+            "",
+            "One evaluation: gravity, A of (25) (tridiagonal) and B of (26), the tension solve, accelerations (9). "
+            f"C: `benchmarks/c_reference/chain_rhs.c` built with `{k['flags']}` ({k['compiler']}), N evaluations "
+            "in a loop inside C. linknet: `linknet_core.compiled.accelerations` (the right-hand side the compiled "
+            "integrators call; tridiagonal path chosen for chains), N evaluations in a numba loop. Best of "
+            f"{meta['repeats']} interleaved timings. Inputs: random-walk chain, random masses, random velocities "
+            "projected onto (12). Before timing the three implementations (C, compiled, numpy) agree to the "
+            "relative difference in the last column.",
+            "",
+            "| links | C ns/eval | linknet ns/eval | ratio | linknet ns/link | C ns/link | general sparse path ns/eval "
+            "(ratio) | agreement |",
+            "|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for r in k["rows"]:
+            lines.append(f"| {r['links']} | {r['c_ns']:.0f} | {r['linknet_ns']:.0f} | {r['ratio']:.2f} | "
+                         f"{r['linknet_ns_per_link']:.1f} | {r['c_ns_per_link']:.1f} | {r['linknet_general_ns']:.0f} "
+                         f"({r['ratio_general']:.2f}) | {r['worst_disagreement']:.0e} |")
+        lines.append("")
+    it = result.get("integrators")
+    if it:
+        lines += [
+            f"## Adaptive Runge-Kutta, numpy vs compiled: one `Simulator.advance({it['t_end']:g})`",
+            "",
+            "Wall time of one call covering the whole run (compiled: best of 5; numpy: one run), after a warm-up "
+            "call. |dX|: largest difference of the final positions of the two paths (same steps; chaotic scenes "
+            "amplify round-off).",
+            "",
+            "| scene | method | rtol | steps (rejected) numpy / compiled | numpy ms | numpy us/step | compiled ms "
+            "| compiled us/step | speed-up | abs(dX) m |",
+            "|---|---|---:|---|---:|---:|---:|---:|---:|---:|"]
+        for r in it["rows"]:
+            n, c = r["numpy"], r["compiled"]
+            lines.append(f"| {r['scene']} | {r['method']} | {r['rtol']:.0e} | {n['steps']} ({n['rejected']}) / "
+                         f"{c['steps']} ({c['rejected']}) | {1e3 * n['seconds']:.2f} | {n['us_per_step']:.1f} | "
+                         f"{1e3 * c['seconds']:.3f} | {c['us_per_step']:.2f} | {r['speedup']:.0f} | "
+                         f"{r['max_position_difference_m']:.0e} |")
+        lines.append("")
+    (out / "kernel.md").write_text("\n".join(lines))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="short timings (and fewer integrator scenes)")
+    ap.add_argument("--integrators", action="store_true", help="also part 2: adaptive Runge-Kutta numpy vs compiled")
+    ap.add_argument("--no-kernel", action="store_true", help="skip part 1")
+    ap.add_argument("--out", type=Path, help="output folder (default docs/benchmarks, or docs/benchmarks/quick)")
+    args = ap.parse_args(argv)
+    import numba
+
+    repeats = 3 if args.quick else 5
+    result = {"meta": {"command": "python -m benchmarks.bench_kernel " + " ".join(argv if argv is not None
+                                                                                  else sys.argv[1:]),
+                       "machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
+                       "python": platform.python_version(), "numba": numba.__version__, "repeats": repeats,
+                       "quick": args.quick}}
+    if not args.no_kernel:
+        result["kernel"] = kernel_table(budget=0.05 if args.quick else 0.2, repeats=repeats)
+    if args.integrators:
+        result["integrators"] = integrator_table(quick=args.quick)
+    out = args.out or (ROOT / "docs" / "benchmarks" / ("quick" if args.quick else ""))
+    write_outputs(out, result)
+    print(f"wrote {out / 'kernel.json'} and {out / 'kernel.md'}")
+    return result
+
+
+if __name__ == "__main__":
+    main()
