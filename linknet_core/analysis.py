@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .dynamics import Dynamics
+from .rigid import Specialisation, choose_specialisation
 from .scene import Scene
 
 
@@ -32,6 +33,7 @@ class RigidityReport:
     self_stresses: int
     condition_A: float
     condition_note: str
+    specialisation: Specialisation  # the path a Simulator takes for this scene (linknet_core.rigid)
 
     @property
     def rigid(self) -> bool:
@@ -68,6 +70,7 @@ class RigidityReport:
             f"condition estimate of A at the initial state: {self.condition_A:.3e} ({self.condition_note})",
             "solver: " + "; ".join(specialisations),
         ]
+        lines.append(f"specialisation: {self.specialisation.text()}")
         lines += [f"note: {n}" for n in st.notes]
         return "\n".join(lines)
 
@@ -121,4 +124,4 @@ def analyze_scene(scene: Scene) -> RigidityReport:
         cond = float(hi / lo) if lo > 0 else float("inf")
         note = "extreme eigenvalues by Lanczos"
     return RigidityReport(scene, dyn, scene.K, scene.L, scene.fixed_indices.tolist(), st.rank_G, st.rank_exact, dof,
-                          rbm, dof - rbm, st.self_stresses, cond, note)
+                          rbm, dof - rbm, st.self_stresses, cond, note, choose_specialisation(scene, dyn))

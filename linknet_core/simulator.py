@@ -13,6 +13,7 @@ from .dynamics import Dynamics
 from .errors import SceneError, SolverError
 from .forces import kinetic_energy
 from .integrators import make_integrator
+from .rigid import build_path, choose_specialisation
 from .scene import Scene
 from .state import State
 
@@ -87,18 +88,31 @@ class Simulator:
 
     ``advance(t_next, F_input)`` integrates from the current time to ``t_next`` with the input forces
     held constant (zero-order hold), which is exactly what an FMI co-simulation step does.
+
+    ``specialise`` (default True): a static scene (0 degrees of freedom) or a scene of free rigid bodies
+    takes the specialised path of :mod:`linknet_core.rigid`, chosen once here and reported in
+    ``specialisation`` and ``summary()``; False (or an explicit ``backend`` naming a point-mass loop)
+    keeps the point-mass path.
     """
 
     def __init__(self, scene: Scene, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
                  atol: float | None = None, *, project_initial: bool | None = None,
                  length_tol: float = DEFAULT_LENGTH_TOL, max_steps_per_call: int = 100_000_000,
-                 dynamics: Dynamics | None = None, backend: str = "auto", rhs_kernel: str = "numpy"):
+                 dynamics: Dynamics | None = None, backend: str = "auto", rhs_kernel: str = "numpy",
+                 specialise: bool = True):
         self.scene = scene
         self.dyn = dynamics or Dynamics(scene, rhs_kernel=rhs_kernel)
         self.method = method
         self.integrator = make_integrator(method, self.dyn, dt=dt, rtol=rtol, atol=atol, backend=backend)
         X0, U0, self.initial_report = prepare_initial_state(scene, self.dyn, project_positions=project_initial,
                                                             length_tol=length_tol)
+        # structure specialisation, chosen once (linknet_core.rigid): static scenes and free rigid bodies
+        # skip the point-mass machinery; the specialised path stands in for the integrator
+        self.specialisation = choose_specialisation(scene, self.dyn, method, backend=backend, enabled=specialise)
+        self._tensions = self.dyn.tensions
+        if self.specialisation.kind != "none":
+            self.integrator, (X0, U0) = build_path(self.specialisation, self.dyn, method, dt, X0, U0)
+            self._tensions = self.integrator.tensions
         self._initial = State(0.0, X0, U0)
         self._initial_internals = copy.deepcopy(self.integrator.internals())
         self.max_steps_per_call = max_steps_per_call
@@ -140,7 +154,7 @@ class Simulator:
         and the force the network exerts on each anchored mass."""
         F = self.check_input(F_input)
         X, U = self.state.X, self.state.U
-        T = self.dyn.tensions(X, U, F)
+        T = self._tensions(X, U, F)
         Freact = self.dyn.link_forces(X, T)[self.scene.fixed]
         return {"t": self.state.t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": Freact}
 
@@ -158,6 +172,13 @@ class Simulator:
     def reset(self) -> None:
         self.state = self._initial.copy()
         self.integrator.set_internals(copy.deepcopy(self._initial_internals))
+
+    def summary(self) -> str:
+        """Scene, method and the specialisation chosen for it (and why)."""
+        lines = [f"{self.scene.name}: K={self.scene.K} masses, L={self.scene.L} links, method {self.method}, "
+                 f"solver {self.dyn.structure.kind}",
+                 f"  specialisation: {self.specialisation.text()}"]
+        return "\n".join(lines + [f"  note: {n}" for n in self.specialisation.notes])
 
 
 @dataclass
@@ -194,6 +215,7 @@ class Result:
         s = self.stats
         return (f"{self.scene.name}: K={self.scene.K} masses, L={self.scene.L} links, solver {s.get('structure')}, "
                 f"method {self.method}\n"
+                f"  specialisation: {s.get('specialisation', 'none')}\n"
                 f"  t_end = {self.t[-1]:g} s, steps = {s.get('steps')} (rejected {s.get('rejected', 0)}), "
                 f"wall time = {s.get('wall_time', 0):.3f} s\n"
                 f"  final energy drift = {self.energy_drift:.3e} (relative), max constraint residual = "
@@ -206,7 +228,7 @@ class Result:
 def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
              atol: float | None = None, n_out: int | None = None, output_dt: float | None = None,
              forces=None, progress: bool | None = None, project_initial: bool | None = None,
-             backend: str = "auto", rhs_kernel: str = "numpy") -> Result:
+             backend: str = "auto", rhs_kernel: str = "numpy", specialise: bool = True) -> Result:
     """Simulate ``scene`` from t = 0 to ``t_end``.
 
     ``forces``: None, a (K,3) array held constant, or a callable ``f(t) -> (K,3)`` evaluated at each
@@ -216,7 +238,7 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
     if not (isinstance(t_end, (int, float)) and math.isfinite(t_end) and t_end > 0):
         raise SolverError(f"t_end must be a positive finite time, got {t_end!r}")
     sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial,
-                    backend=backend, rhs_kernel=rhs_kernel)
+                    backend=backend, rhs_kernel=rhs_kernel, specialise=specialise)
     if output_dt is not None:
         n = max(1, int(round(t_end / output_dt)))
         times = np.linspace(0.0, t_end, n + 1)
@@ -259,7 +281,8 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
         sys.stderr.write("\n")
     stats = dict(sim.integrator.stats.as_dict(), wall_time=wall, rhs_evaluations=sim.dyn.rhs_evaluations,
                  structure=sim.dyn.structure.kind, method=method, dt=dt, rtol=rtol, rhs_kernel=sim.dyn.rhs_kernel,
-                 initial=sim.initial_report.lines(scene))
+                 initial=sim.initial_report.lines(scene) + sim.specialisation.notes,
+                 specialisation=sim.specialisation.text())
     return Result(scene, method, times, X, U, T, energy, residual, vres, kinetic, stats)
 
 

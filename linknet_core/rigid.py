@@ -1,0 +1,462 @@
+"""Structure specialisation, chosen once per scene (issue 6: skip what a scene doesn't need).
+
+Two classes of scenes pay the full point-mass machinery of (9), (25)-(26) for nothing:
+
+* **static**: the free masses admit no motion at all, rank G = 3 K_free at the initial state (0 degrees of
+  freedom in ``linknet analyze``). Infinitesimal rigidity implies rigidity, so the positions stay X0 and
+  the only velocity satisfying (12) is U = 0. ``advance`` moves t only. The tensions are the
+  minimum-norm solution of the static balance C^T T + F = 0 ((9) with dU/dt = 0), which is what (25)-(26)
+  give at U = 0: A T = B reads C M^-1 (C^T T + F) = 0 there, and C M^-1 has full column rank.
+
+* **free rigid bodies**: every connected component of the link graph is free (no anchored mass), rigid
+  (rank G_c = 3 n_c - 6: no internal mechanism) and has >= 3 non-collinear masses (a full inertia
+  tensor). Each component moves as one rigid body (:mod:`linknet_core.rigid_kernels`), driven by the
+  resultant and moment of the external forces F_k of (9); springs, dampers, drag and inputs between or on
+  masses are allowed. Anchored masses joined by no link (spring attachment points) are allowed too. The
+  tensions at an output are the minimum-norm solution of C^T T = M a - F, with a_k the rigid-body
+  accelerations a_c + alpha x rho_k + w x (w x rho_k) ((9) solved for the link forces); unique when the
+  body has no redundant link (31). Fixed-step methods only: rattle is the base step, suzuki4 and
+  yoshida4/6/8 compose it with the step fractions of :mod:`linknet_core.integrators.composition`.
+  Adaptive methods keep the point-mass path.
+
+Everything else takes the point-mass path, with the reason reported.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from .dynamics import Dynamics
+from .errors import SolverError
+from .forces import external_forces, has_velocity_dependent_forces
+from .integrators import METHODS
+from .integrators.base import FixedStepIntegrator, Integrator
+from .scene import Scene
+from .structure import constraint_jacobian
+
+STATIC, RIGID, NONE = "static", "rigid", "none"
+TOP_TOL = 1e-12  # principal moments equal to this (relative) make a spherical or symmetric top (exact flows)
+COLLINEAR_TOL = 1e-10  # smallest principal moment below this times the largest: the masses lie on a line
+DENSE_LIMIT = 3000  # links of one body (or unknowns of a static scene) for a dense pseudo-inverse
+RESHAPE_TOL = 1e-13  # initial link lengths are made exact below this relative error before a body is frozen
+TOP_NAMES = ("spherical top", "symmetric top", "asymmetric top")
+
+
+@dataclass
+class Specialisation:
+    """The path a scene takes, chosen once at construction, with what it means or why there is none."""
+
+    kind: str  # 'static' | 'rigid' | 'none'
+    reason: str  # 'none': why not; otherwise a description
+    bodies: "BodyLayout | None" = None
+    notes: list = field(default_factory=list)
+
+    def text(self) -> str:
+        if self.kind == STATIC:
+            return f"static (0 dof): {self.reason}"
+        if self.kind == RIGID:
+            return f"free rigid bodies: {self.bodies.count} ({self.reason})"
+        return f"none: {self.reason}"
+
+
+@dataclass(frozen=True)
+class BodyLayout:
+    """Which masses form which body (topology only; the geometry is fixed when a simulation starts)."""
+
+    count: int
+    body_of: np.ndarray  # (K,) body index of each mass, -1 for anchored masses joined by no link
+    links_of: list  # per body: its link indices
+    masses_of: list  # per body: its mass indices
+
+
+def _components(scene: Scene):
+    """Connected components of the link graph over all K masses (springs do not join them)."""
+    graph = sp.coo_matrix((np.ones(scene.L), (scene.k1, scene.k2)), shape=(scene.K, scene.K))
+    return connected_components(graph, directed=False)
+
+
+def _principal_moments(scene: Scene, X: np.ndarray, body_of: np.ndarray, count: int):
+    """Per body: mass, centre of mass, inertia tensor about it and its eigen-decomposition (ascending)."""
+    inside = body_of >= 0
+    idx, m, Xb = body_of[inside], scene.mass[inside], X[inside]
+    body_mass = np.bincount(idx, weights=m, minlength=count)
+    c = np.stack([np.bincount(idx, weights=m * Xb[:, d], minlength=count) for d in range(3)], axis=1)
+    c /= body_mass[:, None]
+    rho = Xb - c[idx]
+    # I = sum m (|rho|^2 1 - rho rho^T), six bincounts
+    outer = -m[:, None, None] * rho[:, :, None] * rho[:, None, :]
+    outer += (m * np.einsum("ij,ij->i", rho, rho))[:, None, None] * np.eye(3)[None]
+    inertia = np.stack([np.bincount(idx, weights=outer[:, i, j], minlength=count)
+                        for i in range(3) for j in range(3)], axis=1).reshape(count, 3, 3)
+    moments, axes = np.linalg.eigh(inertia)
+    return body_mass, c, moments, axes
+
+
+def free_rigid_bodies(scene: Scene, dyn: Dynamics) -> tuple[BodyLayout | None, str]:
+    """The body layout if the scene is a set of free rigid bodies, else None and the reason."""
+    st = dyn.structure
+    n_comp, labels = _components(scene)
+    linked = np.zeros(scene.K, bool)
+    linked[scene.k1] = True
+    linked[scene.k2] = True
+    loose = np.flatnonzero(~linked & ~scene.fixed)
+    if loose.size:
+        return None, f"{scene.mass_label(int(loose[0]))} is a free particle joined by no link (not a rigid body)"
+    anchored = np.flatnonzero(linked & scene.fixed)
+    if anchored.size:
+        return None, (f"{scene.mass_label(int(anchored[0]))} is anchored and linked: its component is not a free "
+                      "rigid body")
+    comp_ids = np.unique(labels[linked])
+    body_index = -np.ones(n_comp, np.int64)
+    body_index[comp_ids] = np.arange(comp_ids.size)
+    body_of = np.where(linked, body_index[labels], -1)
+    B = int(comp_ids.size)
+    size = np.bincount(body_of[linked], minlength=B)
+    small = np.flatnonzero(size < 3)
+    if small.size:
+        k = int(np.flatnonzero(body_of == small[0])[0])
+        return None, (f"the component of {scene.mass_label(k)} has {size[small[0]]} masses: a rigid body needs "
+                      ">= 3 non-collinear ones")
+    _, _, moments, _ = _principal_moments(scene, scene.X0, body_of, B)
+    flat = np.flatnonzero(moments[:, 0] <= COLLINEAR_TOL * moments[:, 2])
+    if flat.size:
+        k = int(np.flatnonzero(body_of == flat[0])[0])
+        return None, f"the masses of the component of {scene.mass_label(k)} are collinear (no full inertia tensor)"
+    if not st.rank_exact:
+        return None, "rank of G only estimated (scene too large): rigidity of the components not established"
+    # each component has rank G_c <= 3 n_c - 6, so the total decides for all of them
+    rigid_rank = 3 * int(scene.free_indices.size) - 6 * B
+    if st.rank_G < rigid_rank:
+        return None, (f"{rigid_rank - st.rank_G} internal mechanism(s): rank G = {st.rank_G} < 3 K_free - 6 bodies "
+                      f"= {rigid_rank}")
+    links_of = _group(body_of[scene.k1], B)
+    masses_of = _group(np.where(linked, body_of, B), B + 1)[:B]
+    biggest = max(links.size for links in links_of)
+    if biggest > DENSE_LIMIT:
+        return None, f"a body of {biggest} links exceeds the dense tension operator's limit of {DENSE_LIMIT}"
+    return BodyLayout(B, body_of, links_of, masses_of), ""
+
+
+def _group(labels: np.ndarray, n: int) -> list:
+    """Indices i with labels[i] == g, for g = 0..n-1 (one stable sort, no scan per group)."""
+    order = np.argsort(labels, kind="stable")
+    return np.split(order, np.cumsum(np.bincount(labels, minlength=n))[:-1])
+
+
+def choose_specialisation(scene: Scene, dyn: Dynamics, method: str | None = None, backend: str = "auto",
+                          enabled: bool = True) -> Specialisation:
+    """The specialisation of ``scene`` for ``method`` (None: report what each kind of method gets)."""
+    if not enabled:
+        return Specialisation(NONE, "specialise=False: the point-mass path was asked for")
+    if backend != "auto":
+        return Specialisation(NONE, f"backend {backend!r} names an implementation of the point-mass loop")
+    st = dyn.structure
+    n_free = int(scene.free_indices.size)
+    if scene.L and st.rank_exact and st.rank_G == 3 * n_free:
+        if 3 * n_free > DENSE_LIMIT and scene.L > DENSE_LIMIT:
+            note = "sparse normal equations"
+        else:
+            note = "dense pseudo-inverse"
+        return Specialisation(STATIC, f"the {n_free} free masses cannot move (rank G = 3 K_free = {3 * n_free}): "
+                                      "X = X0, U = 0, advance moves t only; tensions the minimum-norm solution of "
+                                      f"C^T T + F = 0 ({note}, factored once)")
+    bodies, why = free_rigid_bodies(scene, dyn)
+    if bodies is None:
+        if not scene.L:
+            return Specialisation(NONE, "no links")
+        dof = 3 * n_free - st.rank_G
+        return Specialisation(NONE, f"not static ({dof} degrees of freedom) and not free rigid bodies: {why}")
+    adaptive = sorted(name for name, cls in METHODS.items() if cls.adaptive)
+    if method is not None and METHODS[method].adaptive:
+        counted = _count(bodies.count, "free rigid body", "free rigid bodies")
+        return Specialisation(NONE, f"{counted}, but the adaptive method {method} keeps the point-mass path "
+                                    "(the rigid-body path is fixed-step)")
+    _, _, moments, _ = _principal_moments(scene, scene.X0, bodies.body_of, bodies.count)
+    kinds = _top_kinds(moments)
+    counts = np.bincount(kinds, minlength=3)
+    described = ", ".join(_count(n, TOP_NAMES[i], TOP_NAMES[i] + "s") for i, n in enumerate(counts) if n)
+    how = ("c, v, quaternion and body angular momentum per body; kick, drift, free rotation (exact for "
+           "spherical and symmetric tops, DLM splitting otherwise), kick")
+    if method is None:
+        how += f"; fixed-step methods only, {'/'.join(adaptive)} keep the point-mass path"
+    return Specialisation(RIGID, f"{described}; {how}", bodies)
+
+
+def _count(n: int, one: str, many: str) -> str:
+    return f"{n} {one if n == 1 else many}"
+
+
+def _top_kinds(moments: np.ndarray) -> np.ndarray:
+    scale = TOP_TOL * moments[:, 2]
+    spherical = moments[:, 2] - moments[:, 0] <= scale
+    symmetric = (moments[:, 1] - moments[:, 0] <= scale) | (moments[:, 2] - moments[:, 1] <= scale)
+    return np.where(spherical, 0, np.where(symmetric, 1, 2)).astype(np.int64)
+
+
+# ---- the static path ---------------------------------------------------------------------------------
+
+class StaticPath(Integrator):
+    """0 degrees of freedom: nothing moves, ``advance`` only moves t; tensions from the static balance."""
+
+    def __init__(self, dynamics: Dynamics, method: str, X0: np.ndarray):
+        super().__init__(dynamics)
+        cls = METHODS[method]
+        self.name, self.order, self.symplectic, self.adaptive = cls.name, cls.order, cls.symplectic, cls.adaptive
+        self.guarantees = "exact: a static scene has no motion to integrate"
+        scene = dynamics.scene
+        self.X0 = np.array(X0, float)
+        self.U0 = np.zeros_like(self.X0)
+        self._free = scene.free_indices
+        Cf = constraint_jacobian(scene, self.X0)  # L x 3 K_free, full column rank
+        n = Cf.shape[1]
+        if n <= DENSE_LIMIT or scene.L <= DENSE_LIMIT:
+            self._P = np.linalg.pinv(Cf.toarray().T, rcond=1e-12)  # T = P (-F): minimum norm
+            self._solve = lambda rhs: self._P @ rhs
+        else:
+            from scipy.sparse.linalg import splu
+
+            # min-norm T = C (C^T C)^-1 (-F): C^T C is SPD because C has full column rank
+            lu = splu((Cf.T @ Cf).tocsc())
+            self._solve = lambda rhs: Cf @ lu.solve(rhs)
+
+    def advance(self, state, t_target, F_input, max_steps) -> None:
+        state.t = t_target
+
+    def tensions(self, X, U, F_input=None) -> np.ndarray:
+        """Minimum-norm T of C^T T + F = 0 on the free masses, F the external forces of (9) at (X, U)."""
+        F = external_forces(self.dyn.scene, X, U, F_input)
+        return self._solve(-F[self._free].ravel())
+
+
+# ---- the free-rigid-body path ------------------------------------------------------------------------
+
+def _quaternions(R: np.ndarray) -> np.ndarray:
+    """Unit quaternions (w, x, y, z) of rotation matrices R (B,3,3), Shepperd's branch-by-largest."""
+    t = np.trace(R, axis1=1, axis2=2)
+    d0, d1, d2 = R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]
+    branch = np.argmax(np.stack([t, d0, d1, d2], axis=1), axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = 2.0 * np.sqrt(np.maximum(1.0 + np.choose(branch, [t, d0 - d1 - d2, d1 - d0 - d2, d2 - d0 - d1]), 0.0))
+        a, b, c = R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]
+        e, f, g = R[:, 0, 1] + R[:, 1, 0], R[:, 0, 2] + R[:, 2, 0], R[:, 1, 2] + R[:, 2, 1]
+        q = np.stack([
+            np.choose(branch, [s / 4, a / s, b / s, c / s]),
+            np.choose(branch, [a / s, s / 4, e / s, f / s]),
+            np.choose(branch, [b / s, e / s, s / 4, g / s]),
+            np.choose(branch, [c / s, f / s, g / s, s / 4])], axis=1)
+    return q / np.linalg.norm(q, axis=1)[:, None]
+
+
+class RigidBodyPath(FixedStepIntegrator):
+    """Fixed-step integration of free rigid bodies: the step is a composition (gammas of ``method``) of the
+    base step of :func:`linknet_core.rigid_kernels.rigid_advance`, whole intervals in one compiled call."""
+
+    def __init__(self, dynamics: Dynamics, method: str, dt: float, bodies: BodyLayout, X0, U0):
+        super().__init__(dynamics, dt=dt)
+        from . import rigid_kernels
+
+        self._kernels = rigid_kernels
+        cls = METHODS[method]
+        self.name, self.order, self.symplectic = cls.name, cls.order, cls.symplectic
+        self.gammas = np.asarray(cls.gammas, float)
+        self.guarantees = (f"order {cls.order} ({'base step' if cls.gammas == (1.0,) else 'composition'} of the "
+                           "rigid-body kick-drift-rotate-kick); symplectic and time-reversible for conservative "
+                           "forces; link lengths kept to round-off by construction")
+        scene = dynamics.scene
+        self.bodies = bodies
+        self.notes: list[str] = []
+        X0, U0 = np.array(X0, float), np.array(U0, float)
+        if dynamics.constraint_residual(X0) > RESHAPE_TOL:
+            # a body is frozen in its initial shape: make the link lengths exact first, as RATTLE's first
+            # position stage would
+            X0, _ = dynamics.project_positions(X0, tol=1e-14)
+            U0 = dynamics.project_velocities(X0, U0)
+            self.notes.append("initial positions projected onto the exact link lengths before freezing the bodies")
+        self.initial_state = (X0, U0)
+        B = bodies.count
+        body_of = bodies.body_of
+        self._inside = body_of >= 0
+        self.body_mass, c, moments, axes = _principal_moments(scene, X0, body_of, B)
+        self.kind = _top_kinds(moments)
+        # body frames: principal axes (right-handed); a symmetric top's distinct axis is the third;
+        # a spherical top keeps the space axes
+        first_pair_equal = moments[:, 1] - moments[:, 0] <= TOP_TOL * moments[:, 2]
+        perm = np.where((self.kind == 1) & ~first_pair_equal, 1, 0)
+        order = np.array([[0, 1, 2], [1, 2, 0]])[perm]  # cyclic: keeps the handedness
+        frames = np.take_along_axis(axes, order[:, None, :], axis=2)
+        self.inertia = np.take_along_axis(moments, order, axis=1)
+        symmetric = self.kind == 1  # the kernel's exact flow needs I_1 = I_2 exactly
+        self.inertia[symmetric, :2] = self.inertia[symmetric, :2].mean(axis=1)[:, None]
+        frames[self.kind == 0] = np.eye(3)
+        self.inertia[self.kind == 0] = moments[self.kind == 0].mean(axis=1)[:, None]
+        flip = np.linalg.det(frames) < 0
+        frames[flip, :, 0] *= -1.0
+        q0 = _quaternions(frames)
+        R0 = np.empty((B, 3, 3))
+        rigid_kernels.rotation_matrices(q0, R0)
+        rho = X0[self._inside] - c[body_of[self._inside]]
+        self.r = np.zeros_like(X0)  # body-frame positions, in the frame of exactly the matrix the kernel uses
+        self.r[self._inside] = np.einsum("kji,kj->ki", R0[body_of[self._inside]], rho)
+        self.r.setflags(write=False)
+        # scene arrays for the kernel (the force model is compiled.external_forces, shared with the RATTLE loop)
+        s = scene.springs
+        free_mass = np.where(scene.fixed, 0.0, scene.mass)
+        self._F_scene = free_mass[:, None] * scene.gravity[None, :] + scene.force
+        self._force_args = (np.ascontiguousarray(scene.drag), s.a, s.b, np.ascontiguousarray(s.stiffness),
+                            np.ascontiguousarray(s.rest_length), np.ascontiguousarray(s.damping),
+                            np.ascontiguousarray(scene.fixed))
+        self._velocity_dependent = has_velocity_dependent_forces(scene)
+        self._tension_operator = self._build_tension_operator(scene)
+        self._set_bodies(*self._fit(X0, U0))
+        self._last = (X0.copy(), U0.copy())
+
+    # ---- body state <-> mass state ---------------------------------------------------------------
+    def _fit(self, X, U):
+        """Body state (c, v, q, Pi) of a mass state: centre of mass and momentum, the rotation that best
+        maps r onto X - c (Kabsch, mass-weighted) and the angular momentum about c in the body frame."""
+        scene = self.dyn.scene
+        B, idx = self.bodies.count, self.bodies.body_of[self._inside]
+        m = scene.mass[self._inside]
+        Xi, Ui, r = X[self._inside], U[self._inside], self.r[self._inside]
+
+        def per_body(values):
+            flat = values.reshape(values.shape[0], -1)
+            return np.stack([np.bincount(idx, weights=flat[:, j], minlength=B) for j in range(flat.shape[1])],
+                            axis=1).reshape((B,) + values.shape[1:])
+
+        c = per_body(m[:, None] * Xi) / self.body_mass[:, None]
+        v = per_body(m[:, None] * Ui) / self.body_mass[:, None]
+        rho = Xi - c[idx]
+        H = per_body(m[:, None, None] * rho[:, :, None] * r[:, None, :])
+        W, _, Vt = np.linalg.svd(H)
+        d = np.sign(np.linalg.det(W @ Vt))
+        W[:, :, 2] *= d[:, None]
+        q = _quaternions(W @ Vt)
+        R = np.empty((B, 3, 3))
+        self._kernels.rotation_matrices(q, R)
+        L = per_body(m[:, None] * np.cross(rho, Ui - v[idx]))
+        Pi = np.einsum("bji,bj->bi", R, L)
+        return c, v, q, Pi
+
+    def _set_bodies(self, c, v, q, Pi):
+        self._c, self._v, self._q, self._Pi = (np.ascontiguousarray(a, dtype=float) for a in (c, v, q, Pi))
+
+    def _sync(self, X, U):
+        """Follow a state set from outside (not produced by this path): refit the bodies to it."""
+        if not (np.array_equal(X, self._last[0]) and np.array_equal(U, self._last[1])):
+            self._set_bodies(*self._fit(X, U))
+            self._last = (np.array(X, float), np.array(U, float))
+
+    # ---- stepping -------------------------------------------------------------------------------
+    def _advance_steps(self, X, U, n, h, F_input):
+        self._sync(X, U)
+        F_base = self._F_scene if F_input is None else self._F_scene + F_input
+        c, v, q, Pi = (a.copy() for a in (self._c, self._v, self._q, self._Pi))
+        Xw = np.array(X, float, order="C")
+        Uw = np.array(U, float, order="C")
+        status = self._kernels.rigid_advance(c, v, q, Pi, int(n), float(h), self.gammas, self.kind, self.inertia,
+                                             self.body_mass, self.bodies.body_of, self.r, Xw, Uw,
+                                             np.ascontiguousarray(F_base, dtype=float), *self._force_args,
+                                             self._velocity_dependent)
+        if status == self._kernels.KICK_NOT_CONVERGED:
+            raise SolverError(f"the implicit half kick of the rigid bodies did not converge with h = {h:.3g} s: the "
+                              "drag or spring damping is too stiff for this step; reduce dt")
+        if status == self._kernels.OK:  # (a non-finite state is refused by the caller, which restores us)
+            self._set_bodies(c, v, q, Pi)
+            self._last = (Xw.copy(), Uw.copy())
+        return Xw, Uw
+
+    def internals(self) -> dict:
+        out = super().internals()
+        out["bodies"] = {"c": self._c.copy(), "v": self._v.copy(), "q": self._q.copy(), "Pi": self._Pi.copy(),
+                         "X": self._last[0].copy(), "U": self._last[1].copy()}
+        return out
+
+    def set_internals(self, data: dict) -> None:
+        super().set_internals(data)
+        b = data["bodies"]
+        self._set_bodies(b["c"], b["v"], b["q"], b["Pi"])
+        self._last = (np.array(b["X"]), np.array(b["U"]))
+
+    # ---- tensions -------------------------------------------------------------------------------
+    def _build_tension_operator(self, scene: Scene) -> sp.csr_matrix:
+        """P (L x 3K) with T = P b the minimum-norm solution of C_body^T T = b, b the body-frame link forces
+        on the masses; C_body is fixed (E_l = (r_k2 - r_k1) / R_l), so P is computed once per body."""
+        rows, cols, vals = [], [], []
+        for links, masses in zip(self.bodies.links_of, self.bodies.masses_of):  # setup: once per body
+            local = -np.ones(scene.K, np.int64)
+            local[masses] = np.arange(masses.size)
+            E = (self.r[scene.k2[links]] - self.r[scene.k1[links]]) / scene.length[links][:, None]
+            Ct = np.zeros((3 * masses.size, links.size))
+            j = np.arange(links.size)
+            for d in range(3):
+                Ct[3 * local[scene.k1[links]] + d, j] = E[:, d]
+                Ct[3 * local[scene.k2[links]] + d, j] = -E[:, d]
+            P = np.linalg.pinv(Ct, rcond=1e-12)
+            cols_b = (3 * masses[:, None] + np.arange(3)).ravel()
+            rows.append(np.repeat(links, cols_b.size))
+            cols.append(np.tile(cols_b, links.size))
+            vals.append(P.ravel())
+        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                             shape=(scene.L, 3 * scene.K))
+
+    def accelerations(self, X, U, F_input=None) -> np.ndarray:
+        """Rigid-body accelerations a_k = a_c + alpha x rho_k + w x (w x rho_k) (space frame; 0 off the bodies),
+        with alpha from Euler's equations I dw/dt = tau - w x (I w) in the body frame."""
+        self._sync(X, U)
+        scene = self.dyn.scene
+        F = external_forces(scene, X, U, F_input)
+        a_body = self._body_frame_accelerations(X, F)
+        R = self._rotations()
+        idx = self.bodies.body_of[self._inside]
+        acc = np.zeros_like(X)
+        acc[self._inside] = np.einsum("kij,kj->ki", R[idx], a_body)
+        return acc
+
+    def _rotations(self) -> np.ndarray:
+        R = np.empty((self.bodies.count, 3, 3))
+        self._kernels.rotation_matrices(self._q, R)
+        return R
+
+    def _body_frame_accelerations(self, X, F):
+        B, idx = self.bodies.count, self.bodies.body_of[self._inside]
+        R = self._rotations()
+        Fi = F[self._inside]
+        rho = X[self._inside] - self._c[idx]
+        f = np.stack([np.bincount(idx, weights=Fi[:, d], minlength=B) for d in range(3)], axis=1)
+        moment = np.cross(rho, Fi)
+        tau = np.stack([np.bincount(idx, weights=moment[:, d], minlength=B) for d in range(3)], axis=1)
+        w = self._Pi / self.inertia
+        alpha = (np.einsum("bji,bj->bi", R, tau) - np.cross(w, self._Pi)) / self.inertia
+        r = self.r[self._inside]
+        a_c = np.einsum("bji,bj->bi", R, f / self.body_mass[:, None])
+        wi = w[idx]
+        return a_c[idx] + np.cross(alpha[idx], r) + np.cross(wi, np.cross(wi, r))
+
+    def tensions(self, X, U, F_input=None) -> np.ndarray:
+        """Minimum-norm T of C^T T = M a - F: the link forces that give the masses their rigid-body
+        accelerations under the external forces F of (9)."""
+        self._sync(X, U)
+        scene = self.dyn.scene
+        F = external_forces(scene, X, U, F_input)
+        R = self._rotations()
+        idx = self.bodies.body_of[self._inside]
+        b = np.zeros_like(X)
+        F_body = np.einsum("kji,kj->ki", R[idx], F[self._inside])
+        b[self._inside] = scene.mass[self._inside][:, None] * self._body_frame_accelerations(X, F) - F_body
+        return self._tension_operator @ b.ravel()
+
+
+def build_path(spec: Specialisation, dyn: Dynamics, method: str, dt: float | None, X0, U0):
+    """The integrator-like object of a specialisation and the initial state it starts from."""
+    if spec.kind == STATIC:
+        path = StaticPath(dyn, method, X0)
+        return path, (path.X0, path.U0)
+    if spec.kind == RIGID:
+        path = RigidBodyPath(dyn, method, dt, spec.bodies, X0, U0)
+        spec.notes.extend(path.notes)
+        return path, path.initial_state
+    raise ValueError(f"no path for specialisation {spec.kind!r}")
