@@ -12,7 +12,8 @@ for chains of 10, 100, 1000 and 10000 links:
   comparison), N evaluations in a numba loop (compiled.accelerations_repeated), same inputs.
 
 Before timing, the C result, the compiled one and the numpy Dynamics.accelerations are checked to agree to
-round-off. Inputs: a random-walk chain (random link directions and masses, total length and mass 1) with
+round-off. Times are CPU time of this process (time.process_time: robust to other processes on a shared
+machine), best of several interleaved timings. Inputs: a random-walk chain (random link directions and masses, total length and mass 1) with
 random velocities projected onto (12), so that every term of (25)-(26) is exercised.
 
 Part 2 (``--integrators``) - adaptive Runge-Kutta, numpy vs compiled: time per step and total time of one
@@ -118,10 +119,10 @@ class CChain:
         return self.arrays[6].copy(), self.arrays[7].copy()
 
     def run(self, n_evals: int) -> float:
-        """Seconds for n_evals evaluations in a loop inside C."""
-        start = time.perf_counter()
+        """CPU seconds for n_evals evaluations in a loop inside C."""
+        start = time.process_time()
         self.lib.chain_rhs_repeat(n_evals, self.n, *self.pointers)
-        return time.perf_counter() - start
+        return time.process_time() - start
 
 
 class LinknetChain:
@@ -143,9 +144,9 @@ class LinknetChain:
 
     def run(self, n_evals: int) -> float:
         k = self.kernel
-        start = time.perf_counter()
+        start = time.process_time()
         compiled.accelerations_repeated(n_evals, self.X, self.U, self.F_base, k.scene, k.system, self.acc, self.T)
-        return time.perf_counter() - start
+        return time.process_time() - start
 
 
 def _relative(a, b):

@@ -32,7 +32,7 @@ PIVOT_TOL = 1e-11  # as SymbolicLDL: a pivot below this times its diagonal entry
 EPS = 2.220446049250313e-16
 
 # The entry points take a scene and its tension system as two tuples, built once per scene by CompiledScene:
-#   scene  = (k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free)
+#   scene  = (k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free)
 #   system = (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
 #           chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
 #           next_space, solve_work)
@@ -76,14 +76,14 @@ def external_forces(X, U, F_base, drag, sa, sb, sk, sr, sc, fixed, F):
 
 
 @kernel
-def unit_vectors(X, k1, k2, R, E):
-    """E_l of (8)."""
+def unit_vectors(X, k1, k2, inv_R, E):
+    """E_l of (8) (inv_R = 1/R_l: a multiplication is several times cheaper than a division)."""
     for l in range(k1.shape[0]):
         a, b = k1[l], k2[l]
-        r = R[l]
-        E[l, 0] = (X[b, 0] - X[a, 0]) / r
-        E[l, 1] = (X[b, 1] - X[a, 1]) / r
-        E[l, 2] = (X[b, 2] - X[a, 2]) / r
+        r = inv_R[l]
+        E[l, 0] = (X[b, 0] - X[a, 0]) * r
+        E[l, 1] = (X[b, 1] - X[a, 1]) * r
+        E[l, 2] = (X[b, 2] - X[a, 2]) * r
 
 
 @kernel
@@ -134,6 +134,178 @@ def solve_chain(b, chain_order, chain_sub, Dinv, w, out):
     for i in range(n - 2, -1, -1):
         w[i] = w[i] * Dinv[i] - chain_sub[i + 1] * w[i + 1]
         out[chain_order[i]] = w[i]
+
+
+@kernel
+def tensions_chain(X, U, F, k1, k2, inv_R, inv_m, chain_order, chain_diag_weight, chain_off_weight, chain_sub, D, Dinv,
+                   w, E, T, refactor):
+    """The tensions of (25)-(26) for a chain in two sweeps along the path: the unit vectors (8), A's entries,
+    its LDL^T pivots (unless ``refactor`` is False: the factorisation at X is there already), B of (26) and the
+    forward substitution in one; the back substitution in the other. Returns -1 or the first position whose
+    pivot vanished."""
+    L = chain_order.shape[0]
+    bad = -1
+    previous = 0
+    for i in range(L):
+        l = chain_order[i]
+        a, b = k1[l], k2[l]
+        r = inv_R[l]
+        e0 = (X[b, 0] - X[a, 0]) * r
+        e1 = (X[b, 1] - X[a, 1]) * r
+        e2 = (X[b, 2] - X[a, 2]) * r
+        E[l, 0] = e0
+        E[l, 1] = e1
+        E[l, 2] = e2
+        ia, ib = inv_m[a], inv_m[b]
+        du0 = U[b, 0] - U[a, 0]
+        du1 = U[b, 1] - U[a, 1]
+        du2 = U[b, 2] - U[a, 2]
+        # B_l of (26): |U_k2 - U_k1|^2 / R_l + E_l . (F_k2/M_k2 - F_k1/M_k1)
+        rhs = ((du0 * du0 + du1 * du1 + du2 * du2) * r + e0 * (F[b, 0] * ib - F[a, 0] * ia)
+               + e1 * (F[b, 1] * ib - F[a, 1] * ia) + e2 * (F[b, 2] * ib - F[a, 2] * ia))
+        if refactor:
+            diag = chain_diag_weight[i] * (e0 * e0 + e1 * e1 + e2 * e2)
+            dk = diag
+            wt = chain_off_weight[i]
+            if wt != 0.0:
+                off = wt * (E[previous, 0] * e0 + E[previous, 1] * e1 + E[previous, 2] * e2)
+                m = off * Dinv[i - 1]
+                chain_sub[i] = m
+                dk -= m * off
+            else:
+                chain_sub[i] = 0.0
+            D[i] = dk
+            if dk > PIVOT_TOL * abs(diag):
+                Dinv[i] = 1.0 / dk
+            else:
+                Dinv[i] = 0.0
+                if bad == -1:
+                    bad = i
+        if i > 0:
+            rhs -= chain_sub[i] * w[i - 1]
+        w[i] = rhs
+        previous = l
+    if bad >= 0:
+        return bad
+    x = 0.0
+    for i in range(L - 1, -1, -1):
+        if i == L - 1:
+            x = w[i] * Dinv[i]
+        else:
+            x = w[i] * Dinv[i] - chain_sub[i + 1] * x
+        T[chain_order[i]] = x
+    return -1
+
+
+@kernel
+def project_positions_chain(Xc, E_dir, k1, k2, R, inv_R, inv_m, chain_order, chain_sub, Dinv, w, inv_scale, tol,
+                            max_iter):
+    """:func:`project_positions` for a chain, each Newton iteration in two sweeps along the path: the residuals
+    of (11), the convergence test and the forward substitution in one; the back substitution, each
+    multiplier applied to the positions as soon as it is known, in the other."""
+    L = chain_order.shape[0]
+    for l in range(L):  # per-link floor from the starting point, as Dynamics._residual_scale
+        a, b = k1[l], k2[l]
+        size = (max(abs(Xc[a, 0]), abs(Xc[a, 1]), abs(Xc[a, 2]))
+                + max(abs(Xc[b, 0]), abs(Xc[b, 1]), abs(Xc[b, 2])))
+        inv_scale[l] = 1.0 / (R[l] * tol + 8.0 * EPS * size)
+    previous = 1e300
+    for it in range(max_iter):
+        worst = 0.0
+        for i in range(L):
+            l = chain_order[i]
+            a, b = k1[l], k2[l]
+            d0 = Xc[b, 0] - Xc[a, 0]
+            d1 = Xc[b, 1] - Xc[a, 1]
+            d2 = Xc[b, 2] - Xc[a, 2]
+            phi = (d0 * d0 + d1 * d1 + d2 * d2 - R[l] * R[l]) * (0.5 * inv_R[l])
+            r = abs(phi) * inv_scale[l]
+            if not (r <= worst):
+                worst = r
+            if i > 0:
+                phi -= chain_sub[i] * w[i - 1]
+            w[i] = phi
+        if worst <= 1.0:
+            return True
+        if not (worst < 1e300) or (it > 2 and worst > 0.3 * previous):
+            return False
+        previous = worst
+        x = 0.0
+        for i in range(L - 1, -1, -1):
+            if i == L - 1:
+                x = w[i] * Dinv[i]
+            else:
+                x = w[i] * Dinv[i] - chain_sub[i + 1] * x
+            l = chain_order[i]
+            a, b = k1[l], k2[l]
+            fa, fb = x * inv_m[a], x * inv_m[b]
+            Xc[a, 0] += fa * E_dir[l, 0]
+            Xc[a, 1] += fa * E_dir[l, 1]
+            Xc[a, 2] += fa * E_dir[l, 2]
+            Xc[b, 0] -= fb * E_dir[l, 0]
+            Xc[b, 1] -= fb * E_dir[l, 1]
+            Xc[b, 2] -= fb * E_dir[l, 2]
+    return False
+
+
+@kernel
+def project_velocities_chain(X, U, E, k1, k2, inv_R, inv_m, chain_order, chain_diag_weight, chain_off_weight,
+                             chain_sub, D, Dinv, w):
+    """:func:`project_velocities` for a chain in two sweeps along the path: unit vectors, A's entries and
+    pivots, C U and the forward substitution in one; the back substitution with the correction of U in the
+    other. Returns OK or SINGULAR."""
+    L = chain_order.shape[0]
+    bad = -1
+    previous = 0
+    for i in range(L):
+        l = chain_order[i]
+        a, b = k1[l], k2[l]
+        r = inv_R[l]
+        e0 = (X[b, 0] - X[a, 0]) * r
+        e1 = (X[b, 1] - X[a, 1]) * r
+        e2 = (X[b, 2] - X[a, 2]) * r
+        E[l, 0] = e0
+        E[l, 1] = e1
+        E[l, 2] = e2
+        rhs = e0 * (U[a, 0] - U[b, 0]) + e1 * (U[a, 1] - U[b, 1]) + e2 * (U[a, 2] - U[b, 2])
+        diag = chain_diag_weight[i] * (e0 * e0 + e1 * e1 + e2 * e2)
+        dk = diag
+        wt = chain_off_weight[i]
+        if wt != 0.0:
+            off = wt * (E[previous, 0] * e0 + E[previous, 1] * e1 + E[previous, 2] * e2)
+            m = off * Dinv[i - 1]
+            chain_sub[i] = m
+            dk -= m * off
+            rhs -= m * w[i - 1]
+        else:
+            chain_sub[i] = 0.0
+        D[i] = dk
+        if dk > PIVOT_TOL * abs(diag):
+            Dinv[i] = 1.0 / dk
+        else:
+            Dinv[i] = 0.0
+            if bad == -1:
+                bad = i
+        w[i] = rhs
+        previous = l
+    if bad >= 0:
+        return SINGULAR
+    x = 0.0
+    for i in range(L - 1, -1, -1):
+        if i == L - 1:
+            x = w[i] * Dinv[i]
+        else:
+            x = w[i] * Dinv[i] - chain_sub[i + 1] * x
+        l = chain_order[i]
+        a, b = k1[l], k2[l]
+        fa, fb = x * inv_m[a], x * inv_m[b]
+        U[a, 0] -= fa * E[l, 0]
+        U[a, 1] -= fa * E[l, 1]
+        U[a, 2] -= fa * E[l, 2]
+        U[b, 0] += fb * E[l, 0]
+        U[b, 1] += fb * E[l, 1]
+        U[b, 2] += fb * E[l, 2]
+    return OK
 
 
 @kernel
@@ -201,7 +373,7 @@ def add_correction(E, mu, k1, k2, inv_m, scale, V):
 
 
 @kernel
-def accelerations(X, U, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
+def accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
                   pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree, chain_order,
                   chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer, next_space,
                   solve_work, E, F, B, acc, T, refactor):
@@ -214,8 +386,12 @@ def accelerations(X, U, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, s
     K = X.shape[0]
     L = k1.shape[0]
     external_forces(X, U, F_base, drag, sa, sb, sk, sr, sc, fixed, F)
-    if L > 0:
-        unit_vectors(X, k1, k2, R, E)
+    if L > 0 and use_chain:
+        if tensions_chain(X, U, F, k1, k2, inv_R, inv_m, chain_order, chain_diag_weight, chain_off_weight, chain_sub, D,
+                          Dinv, solve_work, E, T, refactor) >= 0:
+            return SINGULAR
+    elif L > 0:
+        unit_vectors(X, k1, k2, inv_R, E)
         if refactor and factor_tension_matrix(E, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot,
                                               Ap, Ai, Lp, Li, Lx, D, Dinv, etree, chain_order, chain_diag_weight,
                                               chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
@@ -228,7 +404,7 @@ def accelerations(X, U, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, s
             du0 = U[b, 0] - U[a, 0]
             du1 = U[b, 1] - U[a, 1]
             du2 = U[b, 2] - U[a, 2]
-            B[l] = ((du0 * du0 + du1 * du1 + du2 * du2) / R[l]
+            B[l] = ((du0 * du0 + du1 * du1 + du2 * du2) * inv_R[l]
                     + E[l, 0] * (F[b, 0] * ib - F[a, 0] * ia) + E[l, 1] * (F[b, 1] * ib - F[a, 1] * ia)
                     + E[l, 2] * (F[b, 2] * ib - F[a, 2] * ia))
         solve_tension_system(B, T, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li,
@@ -262,24 +438,27 @@ def accelerations(X, U, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, s
 
 
 @kernel
-def project_positions(Xc, E_dir, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
+def project_positions(Xc, E_dir, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
                       pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree, chain_order,
                       chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
-                      next_space, solve_work, mu, phi, scale, tol, max_iter):
+                      next_space, solve_work, mu, phi, inv_scale, tol, max_iter):
     """Move Xc onto (11) along M^-1 C(E_dir)^T mu, in place: simplified Newton with A(E_dir), already factored.
 
     The same iteration and stopping rule as Dynamics.project_positions (tolerance tol relative to R_l, never
     below the round-off floor of |X_k2 - X_k1|; give up when it contracts too slowly). Scratch: mu, phi,
-    scale (L,). Returns True if it converged.
+    inv_scale (L,). Returns True if it converged.
     """
     L = k1.shape[0]
     if L == 0:
         return True
+    if use_chain:
+        return project_positions_chain(Xc, E_dir, k1, k2, R, inv_R, inv_m, chain_order, chain_sub, Dinv, solve_work,
+                                       inv_scale, tol, max_iter)
     for l in range(L):  # per-link floor from the starting point, as Dynamics._residual_scale
         a, b = k1[l], k2[l]
         size = (max(abs(Xc[a, 0]), abs(Xc[a, 1]), abs(Xc[a, 2]))
                 + max(abs(Xc[b, 0]), abs(Xc[b, 1]), abs(Xc[b, 2])))
-        scale[l] = R[l] * tol + 8.0 * EPS * size
+        inv_scale[l] = 1.0 / (R[l] * tol + 8.0 * EPS * size)
     previous = 1e300
     for it in range(max_iter):
         worst = 0.0
@@ -288,8 +467,8 @@ def project_positions(Xc, E_dir, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, 
             d0 = Xc[b, 0] - Xc[a, 0]
             d1 = Xc[b, 1] - Xc[a, 1]
             d2 = Xc[b, 2] - Xc[a, 2]
-            phi[l] = (d0 * d0 + d1 * d1 + d2 * d2 - R[l] * R[l]) / (2.0 * R[l])
-            r = abs(phi[l]) / scale[l]
+            phi[l] = (d0 * d0 + d1 * d1 + d2 * d2 - R[l] * R[l]) * (0.5 * inv_R[l])
+            r = abs(phi[l]) * inv_scale[l]
             if not (r <= worst):
                 worst = r
         if worst <= 1.0:
@@ -305,7 +484,7 @@ def project_positions(Xc, E_dir, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, 
 
 
 @kernel
-def project_velocities(X, U, E, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
+def project_velocities(X, U, E, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
                        pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree, chain_order,
                        chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
                        next_space, solve_work, mu, rhs):
@@ -317,7 +496,10 @@ def project_velocities(X, U, E, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, s
     L = k1.shape[0]
     if L == 0:
         return OK
-    unit_vectors(X, k1, k2, R, E)
+    if use_chain:
+        return project_velocities_chain(X, U, E, k1, k2, inv_R, inv_m, chain_order, chain_diag_weight, chain_off_weight,
+                                        chain_sub, D, Dinv, solve_work)
+    unit_vectors(X, k1, k2, inv_R, E)
     if factor_tension_matrix(E, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li,
                              Lx, D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
                              y_vals, y_markers, y_idx, elim_buffer, next_space, solve_work) >= 0:
@@ -335,13 +517,13 @@ def project_velocities(X, U, E, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, s
 @njit(cache=True)
 def accelerations_once(X, U, F_base, scene, system, acc, T):
     """One evaluation of :func:`accelerations` from the scene and system tuples (returns its status)."""
-    k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
+    k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
     (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
      chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
      next_space, solve_work) = system
     K, L = X.shape[0], k1.shape[0]
-    return accelerations(X, U, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
-                         pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
+    return accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
+                         ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
                          chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx,
                          elim_buffer, next_space, solve_work, np.empty((L, 3)), np.empty((K, 3)), np.empty(L),
                          acc, T, True)
@@ -354,29 +536,29 @@ def rattle_advance(X, U, n_steps, h, gammas, F_base, scene, system, tol, max_ite
     Returns (status, completed steps). On a non-zero status X and U are partially advanced: the caller
     restores its copy and takes the numpy path.
     """
-    k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
+    k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
     (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
      chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
      next_space, solve_work) = system
     K, L = X.shape[0], k1.shape[0]
     E0, E1, F, Uh, Xc = np.empty((L, 3)), np.empty((L, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3))
     mu, phi, scale = np.empty(L), np.empty(L), np.empty(L)
-    return _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
-                         use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
-                         Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
+    return _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc,
+                         free, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
+                         D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
                          y_markers, y_idx, elim_buffer, next_space, solve_work, E0, E1, F, Uh, Xc, mu, phi, scale, tol,
                          max_iter)
 
 
 @kernel
-def _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
-                  ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
-                  chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx,
+def _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
+                  use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
+                  etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx,
                   elim_buffer, next_space, solve_work, E0, E1, F, Uh, Xc, mu, phi, scale, tol, max_iter):
     """The step loop of :func:`rattle_advance` (scratch: E0, E1 (L,3); F, Uh, Xc (K,3); mu, phi, scale (L,))."""
     K = X.shape[0]
     L = k1.shape[0]
-    unit_vectors(X, k1, k2, R, E0)
+    unit_vectors(X, k1, k2, inv_R, E0)
     if L > 0 and factor_tension_matrix(E0, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai,
                                        Lp, Li, Lx, D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight,
                                        chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer, next_space,
@@ -392,7 +574,7 @@ def _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_m, fixed, dra
                     Uh[k, d] = U[k, d] + 0.5 * hs * inv_m[k] * F[k, d]
                     Xc[k, d] = X[k, d] + hs * Uh[k, d]
             # position stage: Xc + M^-1 C(X)^T mu on (11), simplified Newton with A(X) factored
-            if not project_positions(Xc, E0, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
+            if not project_positions(Xc, E0, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
                                      ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
                                      Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
                                      y_vals, y_markers, y_idx, elim_buffer, next_space, solve_work, mu, phi, scale, tol,
@@ -407,7 +589,7 @@ def _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_m, fixed, dra
                 for d in range(3):
                     U[k, d] = Uh[k, d] + 0.5 * hs * inv_m[k] * F[k, d]
                     X[k, d] = Xc[k, d]
-            if project_velocities(X, U, E1, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
+            if project_velocities(X, U, E1, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
                                   ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
                                   Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
                                   y_markers, y_idx, elim_buffer, next_space, solve_work, mu, phi) != OK:
@@ -424,26 +606,26 @@ def _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_m, fixed, dra
 def accelerations_repeated(n_evals, X, U, F_base, scene, system, acc, T):
     """n_evals evaluations of :func:`accelerations` in a row at the same state (benchmarks: the right-hand
     side the compiled integrators call, timed without the Python call). Returns a checksum."""
-    k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
+    k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
     (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
      chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
      next_space, solve_work) = system
     K, L = X.shape[0], k1.shape[0]
     E, F, B = np.empty((L, 3)), np.empty((K, 3)), np.empty(L)
-    return _accelerations_loop(n_evals, X, U, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
+    return _accelerations_loop(n_evals, X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                                use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
                                D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
                                y_markers, y_idx, elim_buffer, next_space, solve_work, E, F, B, acc, T)
 
 
 @kernel
-def _accelerations_loop(n_evals, X, U, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
-                        ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
-                        chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx,
-                        elim_buffer, next_space, solve_work, E, F, B, acc, T):
+def _accelerations_loop(n_evals, X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
+                        use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
+                        Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers,
+                        y_idx, elim_buffer, next_space, solve_work, E, F, B, acc, T):
     checksum = 0.0
     for i in range(n_evals):
-        accelerations(X, U, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
+        accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
                       pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree, chain_order,
                       chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
                       next_space, solve_work, E, F, B, acc, T, True)
@@ -496,7 +678,7 @@ class CompiledScene:
         i8 = lambda a: np.ascontiguousarray(a, np.int64)  # noqa: E731
         self.dyn = dyn
         self.K, self.L = scene.K, scene.L
-        self.scene = (i8(scene.k1), i8(scene.k2), f8(scene.length), f8(scene.inv_mass),
+        self.scene = (i8(scene.k1), i8(scene.k2), f8(scene.length), f8(1.0 / scene.length), f8(scene.inv_mass),
                       np.ascontiguousarray(scene.fixed, np.bool_), f8(scene.drag), i8(s.a), i8(s.b), f8(s.stiffness),
                       f8(s.rest_length), f8(s.damping), i8(scene.free_indices))
         chain = chain_elimination(scene, asm) if dyn.structure.kind == "chain" else None

@@ -150,7 +150,7 @@ def rk_advance(X, U, t, t_target, h_next, F_base, scene, system, AB, E1, E2, err
     measurements). On return X, U hold the last accepted state. Returns (status, t, h_next, accepted
     steps, rejected steps, right-hand side evaluations).
     """
-    k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
+    k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
     (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
      chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
      next_space, solve_work) = system
@@ -159,7 +159,7 @@ def rk_advance(X, U, t, t_target, h_next, F_base, scene, system, AB, E1, E2, err
     Xs, Us, Xn, Un = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3))
     acc, acc1, F, E = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((L, 3))
     T, Bv, mu, phi, scale = np.zeros(L), np.empty(L), np.empty(L), np.empty(L), np.empty(L)
-    return _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
+    return _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                      use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
                      etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx,
                      elim_buffer, next_space, solve_work, AB, E1, E2, error_kind, exponent, rtol, atol, max_steps,
@@ -168,8 +168,8 @@ def rk_advance(X, U, t, t_target, h_next, F_base, scene, system, AB, E1, E2, err
 
 
 @kernel
-def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
-              ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
+def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
+              use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
               chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
               next_space, solve_work, AB, E1, E2, error_kind, exponent, rtol, atol, max_steps, n_fixed, safety,
               min_factor, max_factor, projection_tol, KX, KU, Xs, Us, Xn, Un, acc, acc1, T, E, F, Bv, mu, phi, scale):
@@ -180,10 +180,10 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_m, fixed, drag, 
     n_rhs = 1
     steps = 0
     rejected = 0
-    status = accelerations(X, U, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
-                           pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
-                           chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx,
-                           elim_buffer, next_space, solve_work, E, F, Bv, acc, T, True)
+    status = accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
+                           ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
+                           etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers,
+                           y_idx, elim_buffer, next_space, solve_work, E, F, Bv, acc, T, True)
     if status != OK:
         return status, t, h_next, steps, rejected, n_rhs
     _store(KX, 0, U)
@@ -195,9 +195,9 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_m, fixed, drag, 
                 Xs[k, d] = X[k, d] + h0 * U[k, d]
                 Us[k, d] = U[k, d] + h0 * acc[k, d]
         n_rhs += 1
-        status = accelerations(Xs, Us, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
-                               ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
-                               etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
+        status = accelerations(Xs, Us, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
+                               use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
+                               D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
                                y_markers, y_idx, elim_buffer, next_space, solve_work, E, F, Bv, acc1, T, True)
         if status != OK:
             return status, t, 0.0, steps, rejected, n_rhs
@@ -218,10 +218,11 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_m, fixed, drag, 
             _combine(X, h, AB, i, i, KX, Xs)
             _combine(U, h, AB, i, i, KU, Us)
             n_rhs += 1
-            status = accelerations(Xs, Us, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
-                                   ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
-                                   Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
-                                   y_markers, y_idx, elim_buffer, next_space, solve_work, E, F, Bv, acc, T, True)
+            status = accelerations(Xs, Us, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
+                                   use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li,
+                                   Lx, D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
+                                   y_vals, y_markers, y_idx, elim_buffer, next_space, solve_work, E, F, Bv, acc, T,
+                                   True)
             if status != OK:
                 return status, t, h_next, steps, rejected, n_rhs
             _store(KX, i, Us)
@@ -230,9 +231,9 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_m, fixed, drag, 
         _combine(U, h, AB, s, s, KU, Un)
         n_rhs += 1
         # this evaluation also factors A(Xn), which the position projection below reuses
-        status = accelerations(Xn, Un, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
-                               ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
-                               etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
+        status = accelerations(Xn, Un, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
+                               use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
+                               D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
                                y_markers, y_idx, elim_buffer, next_space, solve_work, E, F, Bv, acc, T, True)
         if status != OK:
             return status, t, h_next, steps, rejected, n_rhs
@@ -249,13 +250,13 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_m, fixed, drag, 
         if err <= 1.0:
             # positions onto (11) in the mass metric (directions and factorisation at Xn, unit vectors in E from
             # the last evaluation), then the velocities onto (12) at the projected positions
-            if not project_positions(Xn, E, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
+            if not project_positions(Xn, E, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
                                      ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
                                      Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
                                      y_vals, y_markers, y_idx, elim_buffer, next_space, solve_work, mu, phi, scale,
                                      projection_tol, 50):
                 return PROJECTION_FAILED, t, h_next, steps, rejected, n_rhs
-            if project_velocities(Xn, Un, E, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
+            if project_velocities(Xn, Un, E, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
                                   ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
                                   Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
                                   y_markers, y_idx, elim_buffer, next_space, solve_work, mu, phi) != OK:
@@ -277,11 +278,11 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_m, fixed, drag, 
             if (steps < n_fixed) if n_fixed > 0 else (t < t_target):
                 # the first stage of the next step; A(X) is factored already (velocity projection)
                 n_rhs += 1
-                status = accelerations(X, U, F_base, k1, k2, R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
-                                       ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
-                                       Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
-                                       y_vals, y_markers, y_idx, elim_buffer, next_space, solve_work, E, F, Bv, acc, T,
-                                       False)
+                status = accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
+                                       use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp,
+                                       Li, Lx, D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight,
+                                       chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer, next_space, solve_work, E,
+                                       F, Bv, acc, T, False)
                 if status != OK:
                     return status, t, h_next, steps, rejected, n_rhs
                 _store(KX, 0, U)
