@@ -22,8 +22,10 @@ from numba.core.cpu import CPUTargetOptions
 # instead of raising.
 if hasattr(CPUTargetOptions, "_nrt"):
     kernel = njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+    outlined_kernel = njit(cache=True, error_model="numpy", _nrt=False)
 else:  # a numba without the option: the same code, with reference counting
     kernel = njit(cache=True, error_model="numpy", forceinline=True)
+    outlined_kernel = njit(cache=True, error_model="numpy")
 
 
 @njit(cache=True)
@@ -57,7 +59,7 @@ def ldl_factor(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, pivot_tol):
                            np.empty(n, np.int64))
 
 
-@kernel
+@outlined_kernel
 def ldl_factor_work(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, pivot_tol, y_vals, y_markers, y_idx, elim_buffer,
                     next_space):
     """:func:`ldl_factor` with caller-owned work arrays (length n), for kernels that factor every step.
@@ -115,7 +117,7 @@ def ldl_factor_work(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, pivot_tol, y_vals
     return bad
 
 
-@kernel
+@outlined_kernel
 def ldl_solve(n, Lp, Li, Lx, Dinv, x):
     """Solve L D L^T x = b in place (x holds b on entry)."""
     for i in range(n):

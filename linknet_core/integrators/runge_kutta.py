@@ -48,6 +48,7 @@ class ProjectedRungeKutta(Integrator):
         if backend not in ("auto", "numpy", "compiled"):
             raise SolverError(f"backend must be 'auto', 'numpy' or 'compiled', got {backend!r}")
         self.backend = backend
+        self._compiled_ok: bool | None = None
         for name, value in (("rtol", rtol), ("atol", atol)):
             if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise SolverError(f"{name} must be a positive finite tolerance, got {value!r}")
@@ -135,7 +136,12 @@ class ProjectedRungeKutta(Integrator):
 
     # ---- compiled path ----------------------------------------------------------------------------
     def compiled_available(self) -> bool:
-        """Whether this integrator runs its intervals in the compiled kernel."""
+        """Whether this integrator runs its intervals in the compiled kernel (decided once)."""
+        if self._compiled_ok is None:
+            self._compiled_ok = self._decide_compiled()
+        return self._compiled_ok
+
+    def _decide_compiled(self) -> bool:
         from .. import compiled
         from ..dynamics import Dynamics
 
