@@ -25,7 +25,7 @@ import scipy.sparse as sp
 from numba import njit
 from scipy.sparse.csgraph import connected_components
 
-from .ldl import kernel, ldl_factor_work, ldl_solve, outlined_kernel
+from .ldl import kernel, ldl_factor_work, ldl_solve
 
 OK, PROJECTION_FAILED, SINGULAR, NON_FINITE, STEP_UNDERFLOW, TOO_MANY_STEPS = 0, 1, 2, 3, 4, 5
 PIVOT_TOL = 1e-11  # as SymbolicLDL: a pivot below this times its diagonal entry means A is singular
