@@ -25,7 +25,7 @@ import scipy.sparse as sp
 from numba import njit
 from scipy.sparse.csgraph import connected_components
 
-from .ldl import kernel, ldl_factor_work, ldl_solve
+from .ldl import kernel, ldl_factor_scheduled, ldl_solve
 
 OK, PROJECTION_FAILED, SINGULAR, NON_FINITE, STEP_UNDERFLOW, TOO_MANY_STEPS = 0, 1, 2, 3, 4, 5
 PIVOT_TOL = 1e-11  # as SymbolicLDL: a pivot below this times its diagonal entry means A is singular
@@ -33,9 +33,9 @@ EPS = 2.220446049250313e-16
 
 # The entry points take a scene and its tension system as two tuples, built once per scene by CompiledScene:
 #   scene  = (k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free)
-#   system = (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
-#           chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
-#           next_space, solve_work)
+#   system = (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
+#           row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
+#           solve_work)
 # (the system holds the pattern of A, its factor storage and the factorisation's work arrays). An entry
 # point unpacks them, allocates its scratch arrays and hands everything as plain arrays to a step loop
 # compiled as a ``kernel`` (see linknet_core.ldl: inlined, no reference counting, never allocating), as are
@@ -309,16 +309,16 @@ def project_velocities_chain(X, U, E, k1, k2, inv_R, inv_m, chain_order, chain_d
 
 
 @kernel
-def factor_general(E, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree, Ax,
-                   y_vals, y_markers, y_idx, elim_buffer, next_space):
+def factor_general(E, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start,
+                   row_col, row_slot, Ax, y_vals):
     """A of (25) assembled from the pair arrays on the fixed pattern and factored by sparse LDL^T."""
     for p in range(Ax.shape[0]):
         Ax[p] = 0.0
     for p in range(pair_first.shape[0]):
         a, b = pair_first[p], pair_second[p]
         Ax[pair_slot[p]] += pair_weight[p] * (E[a, 0] * E[b, 0] + E[a, 1] * E[b, 1] + E[a, 2] * E[b, 2])
-    return ldl_factor_work(Ap.shape[0] - 1, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, PIVOT_TOL, y_vals, y_markers,
-                           y_idx, elim_buffer, next_space)
+    return ldl_factor_scheduled(Ap.shape[0] - 1, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, row_start, row_col, row_slot,
+                                PIVOT_TOL, y_vals)
 
 
 @kernel
@@ -334,22 +334,22 @@ def solve_general(b, ordering, Lp, Li, Lx, Dinv, w, out):
 
 @kernel
 def factor_tension_matrix(E, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
-                          D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
-                          y_markers, y_idx, elim_buffer, next_space, solve_work):
+                          D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
+                          chain_sub, Ax, y_vals, solve_work):
     """Assemble A of (25) from the unit vectors E and factor it in place, on the path chosen once per scene.
 
     Returns -1, or the first (elimination-order) column whose pivot vanished: singular configuration.
     """
     if use_chain:
         return factor_chain(E, chain_order, chain_diag_weight, chain_off_weight, chain_sub, D, Dinv)
-    return factor_general(E, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree, Ax,
-                          y_vals, y_markers, y_idx, elim_buffer, next_space)
+    return factor_general(E, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start,
+                          row_col, row_slot, Ax, y_vals)
 
 
 @kernel
 def solve_tension_system(b, out, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li,
-                         Lx, D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
-                         y_markers, y_idx, elim_buffer, next_space, solve_work):
+                         Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
+                         chain_sub, Ax, y_vals, solve_work):
     """out = A^-1 b with the last factorisation (b and out in the original link numbering)."""
     if use_chain:
         solve_chain(b, chain_order, chain_sub, Dinv, solve_work, out)
@@ -374,9 +374,9 @@ def add_correction(E, mu, k1, k2, inv_m, scale, V):
 
 @kernel
 def accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
-                  pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree, chain_order,
-                  chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer, next_space,
-                  solve_work, E, F, B, acc, T, refactor):
+                  pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start, row_col,
+                  row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work, E, F,
+                  B, acc, T, refactor):
     """The compiled right-hand side: accelerations (9) into acc, tensions (25)-(26) into T.
 
     Scratch: E (L,3) receives the unit vectors (8), F (K,3) the external forces, B (L,) the right-hand side
@@ -393,9 +393,9 @@ def accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk
     elif L > 0:
         unit_vectors(X, k1, k2, inv_R, E)
         if refactor and factor_tension_matrix(E, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot,
-                                              Ap, Ai, Lp, Li, Lx, D, Dinv, etree, chain_order, chain_diag_weight,
-                                              chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
-                                              next_space, solve_work) >= 0:
+                                              Ap, Ai, Lp, Li, Lx, D, Dinv, row_start, row_col, row_slot, chain_order,
+                                              chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
+                                              solve_work) >= 0:
             return SINGULAR
         for l in range(L):
             # B_l of (26): |U_k2 - U_k1|^2 / R_l + E_l . (F_k2/M_k2 - F_k1/M_k1)
@@ -408,8 +408,8 @@ def accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk
                     + E[l, 0] * (F[b, 0] * ib - F[a, 0] * ia) + E[l, 1] * (F[b, 1] * ib - F[a, 1] * ia)
                     + E[l, 2] * (F[b, 2] * ib - F[a, 2] * ia))
         solve_tension_system(B, T, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li,
-                             Lx, D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
-                             y_vals, y_markers, y_idx, elim_buffer, next_space, solve_work)
+                             Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
+                             chain_off_weight, chain_sub, Ax, y_vals, solve_work)
     for k in range(K):
         acc[k, 0] = F[k, 0]
         acc[k, 1] = F[k, 1]
@@ -439,9 +439,9 @@ def accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk
 
 @kernel
 def project_positions(Xc, E_dir, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
-                      pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree, chain_order,
-                      chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
-                      next_space, solve_work, mu, phi, inv_scale, tol, max_iter):
+                      pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start, row_col,
+                      row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work, mu,
+                      phi, inv_scale, tol, max_iter):
     """Move Xc onto (11) along M^-1 C(E_dir)^T mu, in place: simplified Newton with A(E_dir), already factored.
 
     The same iteration and stopping rule as Dynamics.project_positions (tolerance tol relative to R_l, never
@@ -477,17 +477,17 @@ def project_positions(Xc, E_dir, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, s
             return False
         previous = worst
         solve_tension_system(phi, mu, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp,
-                             Li, Lx, D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
-                             y_vals, y_markers, y_idx, elim_buffer, next_space, solve_work)
+                             Li, Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
+                             chain_off_weight, chain_sub, Ax, y_vals, solve_work)
         add_correction(E_dir, mu, k1, k2, inv_m, 1.0, Xc)
     return False
 
 
 @kernel
 def project_velocities(X, U, E, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
-                       pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree, chain_order,
-                       chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
-                       next_space, solve_work, mu, rhs):
+                       pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start, row_col,
+                       row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work,
+                       mu, rhs):
     """Closest U satisfying (12) at X in the mass metric, in place: U -= M^-1 C^T mu with A(X) mu = C U.
 
     Factors A(X) (left in the system arrays for the caller) and leaves the unit vectors at X in E.
@@ -501,15 +501,15 @@ def project_velocities(X, U, E, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk
                                         chain_sub, D, Dinv, solve_work)
     unit_vectors(X, k1, k2, inv_R, E)
     if factor_tension_matrix(E, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li,
-                             Lx, D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
-                             y_vals, y_markers, y_idx, elim_buffer, next_space, solve_work) >= 0:
+                             Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
+                             chain_off_weight, chain_sub, Ax, y_vals, solve_work) >= 0:
         return SINGULAR
     for l in range(L):
         a, b = k1[l], k2[l]
         rhs[l] = E[l, 0] * (U[a, 0] - U[b, 0]) + E[l, 1] * (U[a, 1] - U[b, 1]) + E[l, 2] * (U[a, 2] - U[b, 2])
     solve_tension_system(rhs, mu, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li,
-                         Lx, D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
-                         y_markers, y_idx, elim_buffer, next_space, solve_work)
+                         Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
+                         chain_sub, Ax, y_vals, solve_work)
     add_correction(E, mu, k1, k2, inv_m, -1.0, U)
     return OK
 
@@ -518,14 +518,13 @@ def project_velocities(X, U, E, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk
 def accelerations_once(X, U, F_base, scene, system, acc, T):
     """One evaluation of :func:`accelerations` from the scene and system tuples (returns its status)."""
     k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
-    (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
-     chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
-     next_space, solve_work) = system
+    (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start,
+     row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work) = system
     K, L = X.shape[0], k1.shape[0]
     return accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
-                         ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
-                         chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx,
-                         elim_buffer, next_space, solve_work, np.empty((L, 3)), np.empty((K, 3)), np.empty(L),
+                         ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
+                         row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
+                         y_vals, solve_work, np.empty((L, 3)), np.empty((K, 3)), np.empty(L),
                          acc, T, True)
 
 
@@ -537,32 +536,29 @@ def rattle_advance(X, U, n_steps, h, gammas, F_base, scene, system, tol, max_ite
     restores its copy and takes the numpy path.
     """
     k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
-    (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
-     chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
-     next_space, solve_work) = system
+    (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start,
+     row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work) = system
     K, L = X.shape[0], k1.shape[0]
     E0, E1, F, Uh, Xc = np.empty((L, 3)), np.empty((L, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3))
     mu, phi, scale = np.empty(L), np.empty(L), np.empty(L)
     return _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc,
                          free, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
-                         D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
-                         y_markers, y_idx, elim_buffer, next_space, solve_work, E0, E1, F, Uh, Xc, mu, phi, scale, tol,
-                         max_iter)
+                         D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
+                         chain_sub, Ax, y_vals, solve_work, E0, E1, F, Uh, Xc, mu, phi, scale, tol, max_iter)
 
 
 @kernel
 def _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                   use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
-                  etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx,
-                  elim_buffer, next_space, solve_work, E0, E1, F, Uh, Xc, mu, phi, scale, tol, max_iter):
+                  row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
+                  solve_work, E0, E1, F, Uh, Xc, mu, phi, scale, tol, max_iter):
     """The step loop of :func:`rattle_advance` (scratch: E0, E1 (L,3); F, Uh, Xc (K,3); mu, phi, scale (L,))."""
     K = X.shape[0]
     L = k1.shape[0]
     unit_vectors(X, k1, k2, inv_R, E0)
     if L > 0 and factor_tension_matrix(E0, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai,
-                                       Lp, Li, Lx, D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight,
-                                       chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer, next_space,
-                                       solve_work) >= 0:
+                                       Lp, Li, Lx, D, Dinv, row_start, row_col, row_slot, chain_order,
+                                       chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work) >= 0:
         return SINGULAR, 0
     for step in range(n_steps):
         for g in range(gammas.shape[0]):
@@ -576,8 +572,8 @@ def _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_R, inv_m, fix
             # position stage: Xc + M^-1 C(X)^T mu on (11), simplified Newton with A(X) factored
             if not project_positions(Xc, E0, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
                                      ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
-                                     Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
-                                     y_vals, y_markers, y_idx, elim_buffer, next_space, solve_work, mu, phi, scale, tol,
+                                     Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
+                                     chain_off_weight, chain_sub, Ax, y_vals, solve_work, mu, phi, scale, tol,
                                      max_iter):
                 return PROJECTION_FAILED, step
             for k in range(K):
@@ -591,8 +587,8 @@ def _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_R, inv_m, fix
                     X[k, d] = Xc[k, d]
             if project_velocities(X, U, E1, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
                                   ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
-                                  Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
-                                  y_markers, y_idx, elim_buffer, next_space, solve_work, mu, phi) != OK:
+                                  Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
+                                  chain_sub, Ax, y_vals, solve_work, mu, phi) != OK:
                 return SINGULAR, step
             E0, E1 = E1, E0  # the factorisation at X is the next stage's A(X)
         for k in range(K):
@@ -607,28 +603,27 @@ def accelerations_repeated(n_evals, X, U, F_base, scene, system, acc, T):
     """n_evals evaluations of :func:`accelerations` in a row at the same state (benchmarks: the right-hand
     side the compiled integrators call, timed without the Python call). Returns a checksum."""
     k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
-    (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
-     chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
-     next_space, solve_work) = system
+    (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start,
+     row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work) = system
     K, L = X.shape[0], k1.shape[0]
     E, F, B = np.empty((L, 3)), np.empty((K, 3)), np.empty(L)
     return _accelerations_loop(n_evals, X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                                use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
-                               D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
-                               y_markers, y_idx, elim_buffer, next_space, solve_work, E, F, B, acc, T)
+                               D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
+                               chain_sub, Ax, y_vals, solve_work, E, F, B, acc, T)
 
 
 @kernel
 def _accelerations_loop(n_evals, X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                         use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
-                        Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers,
-                        y_idx, elim_buffer, next_space, solve_work, E, F, B, acc, T):
+                        Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub,
+                        Ax, y_vals, solve_work, E, F, B, acc, T):
     checksum = 0.0
     for i in range(n_evals):
         accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
-                      pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree, chain_order,
-                      chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
-                      next_space, solve_work, E, F, B, acc, T, True)
+                      pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start, row_col,
+                      row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work, E,
+                      F, B, acc, T, True)
         checksum += acc[acc.shape[0] - 1, 2]
     return checksum
 
@@ -690,11 +685,10 @@ class CompiledScene:
         self.use_chain = bool(use_chain)
         n = max(scene.L, 1)
         self.system = (self.use_chain, i8(asm.ordering), i8(asm.pair_first), i8(asm.pair_second),
-                       f8(asm.pair_weight), i8(asm.pair_slot), i8(asm.Ap), i8(asm.Ai), i8(ldl.Lp), ldl.Li.copy(),
-                       ldl.Lx.copy(), ldl.D.copy(), ldl.Dinv.copy(), i8(ldl.etree), i8(order), f8(diag_weight),
-                       f8(off_weight), np.zeros(n), np.zeros(max(asm.Ai.shape[0], 1)), np.zeros(n),
-                       np.zeros(n, np.bool_), np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64),
-                       np.zeros(n))
+                       f8(asm.pair_weight), i8(asm.pair_slot), i8(asm.Ap), i8(asm.Ai), i8(ldl.Lp), i8(ldl.Li).copy(),
+                       ldl.Lx.copy(), ldl.D.copy(), ldl.Dinv.copy(), i8(ldl.row_start), i8(ldl.row_col),
+                       i8(ldl.row_slot), i8(order), f8(diag_weight), f8(off_weight), np.zeros(n),
+                       np.zeros(max(asm.Ai.shape[0], 1)), np.zeros(n), np.zeros(n))
         free_mass = np.where(scene.fixed, 0.0, scene.mass)
         self.F_scene = free_mass[:, None] * scene.gravity[None, :] + scene.force
 

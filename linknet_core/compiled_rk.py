@@ -151,9 +151,8 @@ def rk_advance(X, U, t, t_target, h_next, F_base, scene, system, AB, E1, E2, err
     steps, rejected steps, right-hand side evaluations).
     """
     k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
-    (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
-     chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
-     next_space, solve_work) = system
+    (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start,
+     row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work) = system
     K, L, s = X.shape[0], k1.shape[0], AB.shape[1]
     KX, KU = np.empty((s + 1, K, 3)), np.empty((s + 1, K, 3))
     Xs, Us, Xn, Un = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3))
@@ -161,18 +160,18 @@ def rk_advance(X, U, t, t_target, h_next, F_base, scene, system, AB, E1, E2, err
     T, Bv, mu, phi, scale = np.zeros(L), np.empty(L), np.empty(L), np.empty(L), np.empty(L)
     return _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                      use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
-                     etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx,
-                     elim_buffer, next_space, solve_work, AB, E1, E2, error_kind, exponent, rtol, atol, max_steps,
-                     n_fixed, safety, min_factor, max_factor, projection_tol, KX, KU, Xs, Us, Xn, Un, acc, acc1, T, E,
-                     F, Bv, mu, phi, scale)
+                     row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
+                     y_vals, solve_work, AB, E1, E2, error_kind, exponent, rtol, atol, max_steps, n_fixed, safety,
+                     min_factor, max_factor, projection_tol, KX, KU, Xs, Us, Xn, Un, acc, acc1, T, E, F, Bv, mu, phi,
+                     scale)
 
 
 @kernel
 def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
-              use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, etree,
-              chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer,
-              next_space, solve_work, AB, E1, E2, error_kind, exponent, rtol, atol, max_steps, n_fixed, safety,
-              min_factor, max_factor, projection_tol, KX, KU, Xs, Us, Xn, Un, acc, acc1, T, E, F, Bv, mu, phi, scale):
+              use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
+              row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
+              solve_work, AB, E1, E2, error_kind, exponent, rtol, atol, max_steps, n_fixed, safety, min_factor,
+              max_factor, projection_tol, KX, KU, Xs, Us, Xn, Un, acc, acc1, T, E, F, Bv, mu, phi, scale):
     """The step loop of :func:`rk_advance`. Scratch: stages KX, KU (s+1,K,3); Xs, Us, Xn, Un, acc, acc1, F (K,3);
     T, Bv, mu, phi, scale (L,); E (L,3)."""
     K = X.shape[0]
@@ -182,8 +181,8 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed,
     rejected = 0
     status = accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
                            ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
-                           etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, y_markers,
-                           y_idx, elim_buffer, next_space, solve_work, E, F, Bv, acc, T, True)
+                           row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub,
+                           Ax, y_vals, solve_work, E, F, Bv, acc, T, True)
     if status != OK:
         return status, t, h_next, steps, rejected, n_rhs
     _store(KX, 0, U)
@@ -197,8 +196,8 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed,
         n_rhs += 1
         status = accelerations(Xs, Us, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                                use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
-                               D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
-                               y_markers, y_idx, elim_buffer, next_space, solve_work, E, F, Bv, acc1, T, True)
+                               D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
+                               chain_sub, Ax, y_vals, solve_work, E, F, Bv, acc1, T, True)
         if status != OK:
             return status, t, 0.0, steps, rejected, n_rhs
         h_next = _initial_step_size(X, U, acc, Us, acc1, h0, free, rtol, atol, exponent, t_target - t)
@@ -220,9 +219,8 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed,
             n_rhs += 1
             status = accelerations(Xs, Us, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                                    use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li,
-                                   Lx, D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
-                                   y_vals, y_markers, y_idx, elim_buffer, next_space, solve_work, E, F, Bv, acc, T,
-                                   True)
+                                   Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
+                                   chain_off_weight, chain_sub, Ax, y_vals, solve_work, E, F, Bv, acc, T, True)
             if status != OK:
                 return status, t, h_next, steps, rejected, n_rhs
             _store(KX, i, Us)
@@ -233,8 +231,8 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed,
         # this evaluation also factors A(Xn), which the position projection below reuses
         status = accelerations(Xn, Un, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                                use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
-                               D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
-                               y_markers, y_idx, elim_buffer, next_space, solve_work, E, F, Bv, acc, T, True)
+                               D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
+                               chain_sub, Ax, y_vals, solve_work, E, F, Bv, acc, T, True)
         if status != OK:
             return status, t, h_next, steps, rejected, n_rhs
         _store(KX, s, Un)
@@ -252,14 +250,14 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed,
             # the last evaluation), then the velocities onto (12) at the projected positions
             if not project_positions(Xn, E, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
                                      ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
-                                     Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
-                                     y_vals, y_markers, y_idx, elim_buffer, next_space, solve_work, mu, phi, scale,
+                                     Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
+                                     chain_off_weight, chain_sub, Ax, y_vals, solve_work, mu, phi, scale,
                                      projection_tol, 50):
                 return PROJECTION_FAILED, t, h_next, steps, rejected, n_rhs
             if project_velocities(Xn, Un, E, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
                                   ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
-                                  Dinv, etree, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
-                                  y_markers, y_idx, elim_buffer, next_space, solve_work, mu, phi) != OK:
+                                  Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
+                                  chain_sub, Ax, y_vals, solve_work, mu, phi) != OK:
                 return SINGULAR, t, h_next, steps, rejected, n_rhs
             if n_fixed > 0:
                 t = t + h
@@ -280,9 +278,8 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed,
                 n_rhs += 1
                 status = accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                                        use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp,
-                                       Li, Lx, D, Dinv, etree, chain_order, chain_diag_weight, chain_off_weight,
-                                       chain_sub, Ax, y_vals, y_markers, y_idx, elim_buffer, next_space, solve_work, E,
-                                       F, Bv, acc, T, False)
+                                       Li, Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
+                                       chain_off_weight, chain_sub, Ax, y_vals, solve_work, E, F, Bv, acc, T, False)
                 if status != OK:
                     return status, t, h_next, steps, rejected, n_rhs
                 _store(KX, 0, U)

@@ -1,10 +1,14 @@
 """Sparse LDL^T factorisation with the symbolic analysis done once per scene.
 
 The tension matrix A (seed (25)) keeps its sparsity pattern for the whole run (it is fixed by the
-topology), so the elimination tree and the column counts of L are computed once, and each step only
-repeats the numeric factorisation. The numeric part is the up-looking algorithm of QDLDL (Stellato,
-Banjac et al., Apache-2.0), compiled with numba: it touches only the non-zeros of L, so for chains and
-trees in a perfect elimination order it costs O(L).
+topology), so everything that depends only on the pattern is computed once: the elimination tree, the
+column counts of L, and the whole schedule of the numeric factorisation (for each column k, which
+columns c update it, in which order, and where L(k, c) is stored). Each step then only repeats the
+arithmetic. The algorithm is the up-looking one of QDLDL (Stellato, Banjac et al., Apache-2.0), compiled
+with numba: it touches only the non-zeros of L, so for chains and trees in a perfect elimination order it
+costs O(L). :func:`ldl_schedule` replays its symbolic part once; :func:`ldl_factor_scheduled` does the
+same floating-point operations in the same order as :func:`ldl_factor` (bitwise identical results),
+without the elimination-tree walks and markers.
 
 The matrix is given as the upper triangle (row <= column, diagonal included) in CSC form, already
 permuted by the fill-reducing ordering chosen in :mod:`linknet_core.structure`.
@@ -15,9 +19,10 @@ import numpy as np
 from numba import njit
 from numba.core.cpu import CPUTargetOptions
 
-# Decorator of the compiled building blocks that never allocate (here and in linknet_core.compiled): cached,
-# inlined into their callers, and compiled without numba's reference counting. With it, every call passing
-# arrays costs two atomic operations per array, more than a small scene's whole right-hand side.
+# Decorators of the compiled building blocks that never allocate (here and in linknet_core.compiled): cached
+# and compiled without numba's reference counting (with it, every call passing arrays costs two atomic
+# operations per array, more than a small scene's whole right-hand side); ``kernel`` is also inlined into
+# its callers, ``outlined_kernel`` (large routines called from several places) is not.
 # error_model='numpy': a division by zero gives inf/nan as in C (the kernels check for non-finite values)
 # instead of raising.
 if hasattr(CPUTargetOptions, "_nrt"):
@@ -49,25 +54,17 @@ def elimination_tree(n, Ap, Ai):
 
 @njit(cache=True)
 def ldl_factor(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, pivot_tol):
-    """Numeric LDL^T of the upper-CSC matrix (Ap, Ai, Ax) into (Lp, Li, Lx), D, Dinv.
+    """Numeric LDL^T of the upper-CSC matrix (Ap, Ai, Ax) into (Lp, Li, Lx), D, Dinv (QDLDL's up-looking
+    algorithm, symbolic part included; :func:`ldl_factor_scheduled` is the same arithmetic without it).
 
     Returns -1 on success, or the 0-based column whose pivot fell below pivot_tol * its diagonal
     entry (the matrix is singular or nearly so: redundant links at this configuration).
     """
-    return ldl_factor_work(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, pivot_tol, np.zeros(n),
-                           np.zeros(n, np.bool_), np.empty(n, np.int64), np.empty(n, np.int64),
-                           np.empty(n, np.int64))
-
-
-@outlined_kernel
-def ldl_factor_work(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, pivot_tol, y_vals, y_markers, y_idx, elim_buffer,
-                    next_space):
-    """:func:`ldl_factor` with caller-owned work arrays (length n), for kernels that factor every step.
-
-    ``y_vals`` must be all zero and ``y_markers`` all False on entry; the factorisation leaves them so.
-    """
-    for i in range(n):
-        next_space[i] = Lp[i]
+    y_vals = np.zeros(n)
+    y_markers = np.zeros(n, np.bool_)
+    y_idx = np.empty(n, np.int64)
+    elim_buffer = np.empty(n, np.int64)
+    next_space = Lp[:n].copy()
     bad = -1
     for k in range(n):
         nnz_y = 0
@@ -117,6 +114,95 @@ def ldl_factor_work(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, pivot_tol, y_vals
     return bad
 
 
+@njit(cache=True)
+def ldl_schedule(n, Ap, Ai, Lp, etree):
+    """The symbolic part of :func:`ldl_factor`, replayed once for a fixed pattern.
+
+    Returns (row_start, row_col, row_slot, Li): for column k, the columns c = row_col[q] that update it, for
+    q in row_start[k]:row_start[k+1] in the order the factorisation takes them, and the slot row_slot[q] of
+    L(k, c) in (Lp, Li, Lx); and the row indices Li of L (fixed by the pattern).
+    """
+    y_markers = np.zeros(n, np.bool_)
+    y_idx = np.empty(n, np.int64)
+    elim_buffer = np.empty(n, np.int64)
+    next_space = Lp[:n].copy()
+    nnz_L = Lp[n]
+    row_start = np.zeros(n + 1, np.int64)
+    row_col = np.empty(nnz_L, np.int64)
+    row_slot = np.empty(nnz_L, np.int64)
+    Li = np.zeros(max(nnz_L, 1), np.int64)
+    q = 0
+    for k in range(n):
+        nnz_y = 0
+        for p in range(Ap[k], Ap[k + 1]):
+            bidx = Ai[p]
+            if bidx == k or y_markers[bidx]:
+                continue
+            y_markers[bidx] = True
+            elim_buffer[0] = bidx
+            nnz_e = 1
+            nxt = etree[bidx]
+            while nxt != -1 and nxt < k:
+                if y_markers[nxt]:
+                    break
+                y_markers[nxt] = True
+                elim_buffer[nnz_e] = nxt
+                nnz_e += 1
+                nxt = etree[nxt]
+            while nnz_e > 0:
+                nnz_e -= 1
+                y_idx[nnz_y] = elim_buffer[nnz_e]
+                nnz_y += 1
+        for i in range(nnz_y - 1, -1, -1):
+            c = y_idx[i]
+            slot = next_space[c]
+            row_col[q] = c
+            row_slot[q] = slot
+            Li[slot] = k
+            next_space[c] = slot + 1
+            y_markers[c] = False
+            q += 1
+        row_start[k + 1] = q
+    return row_start, row_col, row_slot, Li
+
+
+@outlined_kernel
+def ldl_factor_scheduled(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, row_start, row_col, row_slot, pivot_tol, y_vals):
+    """Numeric LDL^T with the schedule of :func:`ldl_schedule` (and Li from it): the arithmetic of
+    :func:`ldl_factor`, operation for operation. ``y_vals`` (n) must be zero on entry and is left so.
+
+    Returns -1 on success, or the first column whose pivot fell below pivot_tol * its diagonal entry.
+    """
+    bad = -1
+    for k in range(n):
+        diag = 0.0
+        for p in range(Ap[k], Ap[k + 1]):
+            i = Ai[p]
+            if i == k:
+                diag = Ax[p]
+            else:
+                y_vals[i] = Ax[p]
+        dk = diag
+        for q in range(row_start[k], row_start[k + 1]):
+            c = row_col[q]
+            slot = row_slot[q]
+            yc = y_vals[c]
+            for j in range(Lp[c], slot):
+                y_vals[Li[j]] -= Lx[j] * yc
+            lx = yc * Dinv[c]
+            Lx[slot] = lx
+            dk -= yc * lx
+            y_vals[c] = 0.0
+        D[k] = dk
+        if not (dk > pivot_tol * abs(diag)):
+            if bad == -1:
+                bad = k
+            Dinv[k] = 0.0
+        else:
+            Dinv[k] = 1.0 / dk
+    return bad
+
+
 @outlined_kernel
 def ldl_solve(n, Lp, Li, Lx, Dinv, x):
     """Solve L D L^T x = b in place (x holds b on entry)."""
@@ -134,7 +220,7 @@ def ldl_solve(n, Lp, Li, Lx, Dinv, x):
 
 
 class SymbolicLDL:
-    """Symbolic analysis (elimination tree, pattern sizes) of one fixed upper-CSC pattern.
+    """Symbolic analysis (elimination tree, pattern of L, factorisation schedule) of one fixed upper-CSC pattern.
 
     ``factor(values)`` repeats only the numeric factorisation; ``solve(b)`` uses the last one.
     """
@@ -147,10 +233,12 @@ class SymbolicLDL:
         self.Lp = np.zeros(self.n + 1, np.int64)
         np.cumsum(Lnz, out=self.Lp[1:])
         nnz_L = int(self.Lp[-1])
-        self.Li = np.zeros(max(nnz_L, 1), np.int64)
+        self.row_start, self.row_col, self.row_slot, self.Li = ldl_schedule(self.n, self.Ap, self.Ai, self.Lp,
+                                                                            self.etree)
         self.Lx = np.zeros(max(nnz_L, 1))
         self.D = np.zeros(self.n)
         self.Dinv = np.zeros(self.n)
+        self._y = np.zeros(max(self.n, 1))
         self.pivot_tol = pivot_tol
         self.singular_column = -1
 
@@ -160,8 +248,10 @@ class SymbolicLDL:
 
     def factor(self, Ax: np.ndarray) -> bool:
         """Numeric factorisation; False where a pivot vanished (singular at this configuration)."""
-        self.singular_column = ldl_factor(self.n, self.Ap, self.Ai, Ax, self.Lp, self.Li, self.Lx,
-                                          self.D, self.Dinv, self.etree, self.pivot_tol)
+        Ax = np.ascontiguousarray(Ax, np.float64)
+        self.singular_column = ldl_factor_scheduled(self.n, self.Ap, self.Ai, Ax, self.Lp, self.Li, self.Lx, self.D,
+                                                    self.Dinv, self.row_start, self.row_col, self.row_slot,
+                                                    self.pivot_tol, self._y)
         return self.singular_column < 0
 
     def solve(self, b: np.ndarray) -> np.ndarray:
