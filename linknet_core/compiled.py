@@ -13,6 +13,11 @@ the projected Runge-Kutta methods in :mod:`linknet_core.compiled_rk`):
 * :func:`accelerations` - dU/dt of (9) with the tensions of (25)-(26): the compiled right-hand side;
 * :func:`project_positions` / :func:`project_velocities` - onto (11) and (12).
 
+On the chain path the right-hand side, each Newton iteration of the position projection and the velocity
+projection are each two sweeps along the path (tensions_chain, project_positions_chain,
+project_velocities_chain): the elimination's dependency chain sets their speed, and the rest of the work
+(unit vectors, A's entries, residuals, applying the multipliers) fits in its shadow.
+
 They cover scenes whose A is non-singular along the way. Whenever a kernel cannot continue (a vanishing
 pivot: singular configuration; a projection that does not contract; non-finite values) it stops and
 reports it, and the caller redoes the rest of the interval on the numpy path, which has the
@@ -34,8 +39,8 @@ EPS = 2.220446049250313e-16
 # The entry points take a scene and its tension system as two tuples, built once per scene by CompiledScene:
 #   scene  = (k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free)
 #   system = (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
-#           row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
-#           solve_work)
+#             row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
+#             y_vals, solve_work)
 # (the system holds the pattern of A, its factor storage and the factorisation's work arrays). An entry
 # point unpacks them, allocates its scratch arrays and hands everything as plain arrays to a step loop
 # compiled as a ``kernel`` (see linknet_core.ldl: inlined, no reference counting, never allocating), as are
