@@ -143,11 +143,12 @@ def solve_chain(b, chain_order, chain_sub, Dinv, w, out):
 
 @kernel
 def tensions_chain(X, U, F, k1, k2, inv_R, inv_m, chain_order, chain_diag_weight, chain_off_weight, chain_sub, D, Dinv,
-                   w, E, T, refactor):
+                   w, E, T, link_force, refactor):
     """The tensions of (25)-(26) for a chain in two sweeps along the path: the unit vectors (8), A's entries,
     its LDL^T pivots (unless ``refactor`` is False: the factorisation at X is there already), B of (26) and the
-    forward substitution in one; the back substitution in the other. Returns -1 or the first position whose
-    pivot vanished."""
+    forward substitution in one; the back substitution, adding each link's force T_l E_l of (9) to
+    ``link_force`` (+ at k1, - at k2) as soon as T_l is known, in the other. Returns -1 or the first position
+    whose pivot vanished."""
     L = chain_order.shape[0]
     bad = -1
     previous = 0
@@ -198,7 +199,16 @@ def tensions_chain(X, U, F, k1, k2, inv_R, inv_m, chain_order, chain_diag_weight
             x = w[i] * Dinv[i]
         else:
             x = w[i] * Dinv[i] - chain_sub[i + 1] * x
-        T[chain_order[i]] = x
+        l = chain_order[i]
+        T[l] = x
+        a, b = k1[l], k2[l]
+        f0, f1, f2 = x * E[l, 0], x * E[l, 1], x * E[l, 2]
+        link_force[a, 0] += f0
+        link_force[a, 1] += f1
+        link_force[a, 2] += f2
+        link_force[b, 0] -= f0
+        link_force[b, 1] -= f1
+        link_force[b, 2] -= f2
     return -1
 
 
@@ -391,9 +401,14 @@ def accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk
     K = X.shape[0]
     L = k1.shape[0]
     external_forces(X, U, F_base, drag, sa, sb, sk, sr, sc, fixed, F)
+    for k in range(K):
+        acc[k, 0] = F[k, 0]
+        acc[k, 1] = F[k, 1]
+        acc[k, 2] = F[k, 2]
     if L > 0 and use_chain:
+        # tensions and their forces on the masses (added to acc) in two sweeps along the path
         if tensions_chain(X, U, F, k1, k2, inv_R, inv_m, chain_order, chain_diag_weight, chain_off_weight, chain_sub, D,
-                          Dinv, solve_work, E, T, refactor) >= 0:
+                          Dinv, solve_work, E, T, acc, refactor) >= 0:
             return SINGULAR
     elif L > 0:
         unit_vectors(X, k1, k2, inv_R, E)
@@ -415,21 +430,17 @@ def accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk
         solve_tension_system(B, T, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li,
                              Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
                              chain_off_weight, chain_sub, Ax, y_vals, solve_work)
-    for k in range(K):
-        acc[k, 0] = F[k, 0]
-        acc[k, 1] = F[k, 1]
-        acc[k, 2] = F[k, 2]
-    for l in range(L):
-        # (9): link l pulls k1(l) by +T_l E_l and k2(l) by -T_l E_l
-        a, b = k1[l], k2[l]
-        t = T[l]
-        f0, f1, f2 = t * E[l, 0], t * E[l, 1], t * E[l, 2]
-        acc[a, 0] += f0
-        acc[a, 1] += f1
-        acc[a, 2] += f2
-        acc[b, 0] -= f0
-        acc[b, 1] -= f1
-        acc[b, 2] -= f2
+        for l in range(L):
+            # (9): link l pulls k1(l) by +T_l E_l and k2(l) by -T_l E_l
+            a, b = k1[l], k2[l]
+            t = T[l]
+            f0, f1, f2 = t * E[l, 0], t * E[l, 1], t * E[l, 2]
+            acc[a, 0] += f0
+            acc[a, 1] += f1
+            acc[a, 2] += f2
+            acc[b, 0] -= f0
+            acc[b, 1] -= f1
+            acc[b, 2] -= f2
     total = 0.0
     for k in range(K):
         im = inv_m[k]
