@@ -96,18 +96,20 @@ def test_chain_path_and_general_path_give_the_same_run(name, method, kw):
     assert np.max(np.abs(runs[0].U - runs[1].U)) < 1e-10
 
 
-def test_c_reference_kernel_agrees_with_the_compiled_and_numpy_ones(tmp_path):
+def test_c_reference_kernels_agree_with_the_compiled_and_numpy_ones(tmp_path):
     bench = pytest.importorskip("benchmarks.bench_kernel")
     try:
         lib, _, _ = bench.build_c_reference(tmp_path)
+        lib_fused, _, _ = bench.build_c_reference(tmp_path, source=bench.C_SOURCE_FUSED)
     except bench.CUnavailable as exc:
         pytest.skip(str(exc))
     for n in (1, 10, 300):
         scene, dyn, X, U = bench.random_chain_state(n, seed=n)
         acc_c, T_c = bench.CChain(lib, scene, X, U).evaluate()
+        acc_f, T_f = bench.CChain(lib_fused, scene, X, U).evaluate()
         acc_l, T_l = bench.LinknetChain(dyn, X, U, use_chain=True).evaluate()
         acc_n, T_n = dyn.accelerations(X, U)
-        for acc, T in ((acc_c, T_c), (acc_l, T_l)):
+        for acc, T in ((acc_c, T_c), (acc_f, T_f), (acc_l, T_l)):
             np.testing.assert_allclose(acc, acc_n, rtol=0, atol=1e-12 * np.abs(acc_n).max())
             np.testing.assert_allclose(T, T_n, rtol=0, atol=1e-12 * np.abs(T_n).max())
         # the C kernel's physics: the anchored mass does not move, and (13) holds for every link
