@@ -22,6 +22,11 @@ class Unsupported(Exception):
     """The method cannot model this scene faithfully; the message says why."""
 
 
+class OverBudget(Exception):
+    """The run would exceed its time budget (`Method.run_budget`), predicted from a measurement made while
+    setting it up (e.g. one force evaluation); the message gives the measurement and the prediction."""
+
+
 class Method:
     name = "?"
     family = "peer"          # 'linknet' | 'baseline' | 'peer'
@@ -33,6 +38,10 @@ class Method:
     # fixed-step methods: observed order between successive settings >= ORDER_FRACTION * order.
     RTOL_BOUND_FACTOR = 1e3
     ORDER_FRACTION = 0.7
+
+    # wall-time budget [s] of one run, set by the driver; an adapter that can predict its run time cheaply
+    # during setup raises OverBudget instead of starting a run that the driver would kill at its timeout
+    run_budget: float | None = None
 
     def error_bound(self, knob_value: float) -> float | None:
         """Largest error [m] this method promises at this knob value (None: no promise for one run)."""

@@ -3,6 +3,11 @@
 Each free mass is a body whose frame sits on its parent mass (the joint) and whose point mass sits at the
 child end of the link (inertial pos), so the link length is exact by construction: zero constraint residual.
 Integrator RK4 with a fixed timestep (the knob); contacts disabled; mj_step(nstep=n) keeps the loop in C.
+The model is built with MuJoCo's MjSpec API (the same bodies, joints and inertials an MJCF file would give:
+checked array by array against the XML route on chain_10, chain_100 and double_pendulum); MJCF itself cannot
+describe chain_1000, whose 1000 nested <body> elements exceed the XML parser's depth limit
+(XML_ELEMENT_DEPTH_EXCEEDED). A compiled model is cached per scene in the (worker) process and only its
+timestep changed between settings: the timestep enters no compile-time quantity.
 
 What differs / what it cannot model:
 - A point mass has no rotational inertia; MuJoCo needs positive inertia on moving bodies (> mjMINVAL = 1e-15),
@@ -20,11 +25,12 @@ What differs / what it cannot model:
 """
 from __future__ import annotations
 
+import time
 from collections import deque
 
 import numpy as np
 
-from .base import Method, RunResult, Timer, Unsupported, n_steps
+from .base import Method, OverBudget, RunResult, Timer, Unsupported, n_steps
 
 EPS_INERTIA = 1e-12
 
@@ -92,18 +98,30 @@ class MujocoRK4(Method):
         except ImportError as e:
             return False, f"mujoco not installed ({e})"
 
-    MAX_DEPTH = 400
-
     def check_scene(self, spec):
         if not _is_rigid_cluster(spec):
-            parent, order = _tree(spec)
-            depth = {}
-            for c in order:
-                depth[c] = depth.get(parent[c], 0) + 1
-            if max(depth.values()) > self.MAX_DEPTH:
-                raise Unsupported(f"mujoco: {max(depth.values())} nested bodies; MuJoCo's XML parser stops at "
-                                  "XML_ELEMENT_DEPTH_EXCEEDED (measured on chain_1000); building the model through "
-                                  "MjSpec instead is not done here")
+            _tree(spec)
+
+    def _model(self, key, build):
+        """Compiled model from the per-process cache (MjSpec compile of chain_1000 takes ~40 s)."""
+        if key not in _MODELS:
+            _MODELS.clear()   # one scene at a time: the benchmark runs scene by scene
+            _MODELS[key] = build()
+        return _MODELS[key]
+
+    def _check_budget(self, m, d, n):
+        """Predict the run from the one mj_forward of the setup (RK4 = 4 of them a step) and refuse runs the
+        driver would kill at its timeout; chain_1000's 1000-deep dense joint-space mass matrix costs ~2 s a
+        forward pass."""
+        import mujoco
+        t0 = time.perf_counter()
+        mujoco.mj_forward(m, d)
+        per_forward = time.perf_counter() - t0
+        stages = 4 if self.integrator == "RK4" else 1
+        predicted = n * stages * per_forward
+        if self.run_budget is not None and predicted > self.run_budget:
+            raise OverBudget(f"mujoco: {n} {self.integrator} steps x {stages} forward passes x {per_forward:.3g} s "
+                             f"(measured) = {predicted:.3g} s predicted > run budget {self.run_budget:.3g} s")
 
     def _run_rigid(self, spec, t_end, dt):
         """The whole scene is one rigid body: a free joint, exact mass properties of the point masses."""
@@ -122,19 +140,13 @@ class MujocoRK4(Method):
             # angular velocity from the angular momentum: L = I w (exact for a rigid motion)
             Lmom = np.sum(m[:, None] * np.cross(r, spec.U0 - v_com), axis=0)
             w = np.linalg.solve(inertia, Lmom)
-            g = spec.gravity
-            fi = " ".join(_f(v) for v in (inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1],
-                                          inertia[0, 2], inertia[1, 2]))
-            xml = (f'<mujoco><option timestep="{_f(dt)}" integrator="{self.integrator}" '
-                   f'gravity="{_f(g[0])} {_f(g[1])} {_f(g[2])}"><flag contact="disable"/></option>'
-                   f'<worldbody><body name="rigid" pos="{_f(com[0])} {_f(com[1])} {_f(com[2])}">'
-                   f'<freejoint name="free"/><inertial pos="0 0 0" mass="{_f(M)}" fullinertia="{fi}"/>'
-                   f'</body></worldbody></mujoco>')
-            model = mujoco.MjModel.from_xml_string(xml)
+            model = self._model(("rigid", spec.digest(), self.integrator),
+                                lambda: rigid_body_model(spec.gravity, M, com, inertia, self.integrator))
+            model.opt.timestep = dt
             d = mujoco.MjData(model)
             d.qvel[:3] = v_com
             d.qvel[3:6] = w   # free joint: angular velocity in the body frame, aligned with the world at t=0
-            mujoco.mj_forward(model, d)
+            self._check_budget(model, d, n)
         with Timer() as tm:
             mujoco.mj_step(model, d, nstep=n)
         R = d.xmat[1].reshape(3, 3)
@@ -142,34 +154,6 @@ class MujocoRK4(Method):
         wb = d.qvel[3:6]
         U = d.qvel[:3] + np.cross(R @ wb, r @ R.T)
         return RunResult(X, U, tm.seconds, setup.seconds, steps=n, info={"model": "one free rigid body"})
-
-    def _xml(self, spec, dt, parent, order):
-        children = {}
-        for c in order:
-            children.setdefault(parent[c], []).append(c)
-
-        def body(c, indent):
-            p = parent[c]
-            r = spec.X0[c] - spec.X0[p]
-            rel = spec.X0[p] - (spec.X0[parent[p]] if p in parent else 0.0)
-            pos = rel if p in parent else spec.X0[p]
-            inertia = self._eps * spec.mass[c] * float(r @ r)
-            s = (f'{indent}<body name="b{c}" pos="{_f(pos[0])} {_f(pos[1])} {_f(pos[2])}">\n'
-                 f'{indent}  <joint name="j{c}" type="ball" damping="0" armature="0"/>\n'
-                 f'{indent}  <inertial pos="{_f(r[0])} {_f(r[1])} {_f(r[2])}" mass="{_f(spec.mass[c])}" '
-                 f'diaginertia="{_f(inertia)} {_f(inertia)} {_f(inertia)}"/>\n')
-            for g in children.get(c, []):
-                s += body(g, indent + "  ")
-            return s + f"{indent}</body>\n"
-
-        g = spec.gravity
-        roots = [c for c in order if not (parent[c] in parent)]
-        import sys
-        sys.setrecursionlimit(max(sys.getrecursionlimit(), 4 * len(order) + 1000))   # chain_1000 nests 1000 deep
-        return (f'<mujoco><option timestep="{_f(dt)}" integrator="{self.integrator}" '
-                f'gravity="{_f(g[0])} {_f(g[1])} {_f(g[2])}"><flag contact="disable"/></option>'
-                f'<compiler angle="radian" inertiafromgeom="false" autolimits="true"/>'
-                f"<worldbody>\n" + "".join(body(c, "  ") for c in roots) + "</worldbody></mujoco>")
 
     def run(self, spec, t_end, dt):
         import mujoco
@@ -184,13 +168,10 @@ class MujocoRK4(Method):
                        gravity=spec.gravity / lam)
         with Timer() as setup:
             parent, order = _tree(spec)
-            depth = {}
-            for c in order:   # breadth-first: parents first
-                depth[c] = depth.get(parent[c], 0) + 1
-            self._eps = max(EPS_INERTIA, 1e-15 * max(depth.values()) ** 3)
-            # nested body frames: a body sits on its parent mass; the XML gives its pos relative to the parent body
-            # frame, whose origin is the grandparent mass (or the world for children of anchors)
-            m = mujoco.MjModel.from_xml_string(self._xml(spec, dt, parent, order))
+            eps = inertia_eps(parent, order)
+            m = self._model(("tree", spec.digest(), self.integrator),
+                            lambda: tree_model(spec, parent, order, eps, self.integrator))
+            m.opt.timestep = dt
             d = mujoco.MjData(m)
             omega = {}
             for c in order:   # body angular velocity carrying the mass velocity (perpendicular to the link)
@@ -202,7 +183,7 @@ class MujocoRK4(Method):
                 adr = m.jnt_dofadr[jid]
                 w_parent = omega.get(parent[c], np.zeros(3))
                 d.qvel[adr:adr + 3] = omega[c] - w_parent   # frames start aligned with the world: local == world
-            mujoco.mj_forward(m, d)
+            self._check_budget(m, d, n)
             bid = {c: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"b{c}") for c in order}
         with Timer() as tm:
             mujoco.mj_step(m, d, nstep=n)
@@ -215,4 +196,97 @@ class MujocoRK4(Method):
             U[c] = jacp @ d.qvel
         X, U = X * lam, U * lam
         X[spec_si.fixed] = spec_si.X0[spec_si.fixed]
-        return RunResult(X, U, tm.seconds, setup.seconds, steps=n, info={"inertia_eps": self._eps})
+        return RunResult(X, U, tm.seconds, setup.seconds, steps=n, info={"inertia_eps": eps})
+
+
+_MODELS: dict = {}
+
+
+def inertia_eps(parent, order) -> float:
+    """eps = max(1e-12, 1e-15 N^3) for a tree N bodies deep (see the module docstring)."""
+    depth = {}
+    for c in order:   # breadth-first: parents first
+        depth[c] = depth.get(parent[c], 0) + 1
+    return max(EPS_INERTIA, 1e-15 * max(depth.values()) ** 3)
+
+
+def _body_frames(spec, parent, order, eps):
+    """Per body (parents first): name, parent body (None for the world), pos relative to the parent body frame,
+    inertial pos, mass and isotropic inertia. A body's frame sits on its parent mass, so its pos is relative to
+    the parent body's frame, whose origin is the grandparent mass (or the world for children of anchors)."""
+    for c in order:
+        p = parent[c]
+        r = spec.X0[c] - spec.X0[p]
+        pos = spec.X0[p] - spec.X0[parent[p]] if p in parent else spec.X0[p]
+        yield c, (p if p in parent else None), pos, r, float(spec.mass[c]), eps * float(spec.mass[c]) * float(r @ r)
+
+
+def _spec_options(s, gravity, integrator):
+    import mujoco
+    s.option.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{integrator}")
+    s.option.gravity = [float(v) for v in gravity]
+    s.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    s.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    s.compiler.autolimits = True
+
+
+def tree_model(spec, parent, order, eps, integrator="RK4"):
+    """Ball-jointed bodies built with MjSpec (no XML nesting limit); the same model as mjcf_tree()."""
+    import mujoco
+    s = mujoco.MjSpec()
+    _spec_options(s, spec.gravity, integrator)
+    bodies = {}
+    for c, p, pos, r, mass, inertia in _body_frames(spec, parent, order, eps):
+        b = (bodies[p] if p is not None else s.worldbody).add_body(name=f"b{c}", pos=[float(v) for v in pos])
+        b.add_joint(name=f"j{c}", type=mujoco.mjtJoint.mjJNT_BALL, damping=0.0, armature=0.0)
+        b.explicitinertial = True
+        b.mass = mass
+        b.ipos = [float(v) for v in r]
+        b.inertia = [inertia] * 3
+        bodies[c] = b
+    return s.compile()
+
+
+def mjcf_tree(spec, parent, order, eps, dt, integrator="RK4") -> str:
+    """The same model as MJCF text (MuJoCo's usual route; its parser stops at ~400 nested bodies). Kept to
+    check tree_model() against it (tests/test_benchmark_quick.py)."""
+    children = {}
+    for c, p, pos, r, mass, inertia in _body_frames(spec, parent, order, eps):
+        children.setdefault(p, []).append((c, pos, r, mass, inertia))
+    lines = []
+    stack = [(item, 1) for item in reversed(children.get(None, []))]
+    closing = []
+    # iterative depth-first emission (no recursion limit for deep chains)
+    while stack:
+        (c, pos, r, mass, inertia), depth = stack.pop()
+        while closing and closing[-1] >= depth:
+            lines.append("  " * closing.pop() + "</body>")
+        ind = "  " * depth
+        lines += [f'{ind}<body name="b{c}" pos="{_f(pos[0])} {_f(pos[1])} {_f(pos[2])}">',
+                  f'{ind}  <joint name="j{c}" type="ball" damping="0" armature="0"/>',
+                  f'{ind}  <inertial pos="{_f(r[0])} {_f(r[1])} {_f(r[2])}" mass="{_f(mass)}" '
+                  f'diaginertia="{_f(inertia)} {_f(inertia)} {_f(inertia)}"/>']
+        closing.append(depth)
+        stack += [(item, depth + 1) for item in reversed(children.get(c, []))]
+    while closing:
+        lines.append("  " * closing.pop() + "</body>")
+    g = spec.gravity
+    return (f'<mujoco><option timestep="{_f(dt)}" integrator="{integrator}" '
+            f'gravity="{_f(g[0])} {_f(g[1])} {_f(g[2])}"><flag contact="disable"/></option>'
+            f'<compiler angle="radian" inertiafromgeom="false" autolimits="true"/>'
+            "<worldbody>\n" + "\n".join(lines) + "\n</worldbody></mujoco>")
+
+
+def rigid_body_model(gravity, mass, com, inertia, integrator="RK4"):
+    """One free body with the exact mass properties of the point masses, built with MjSpec."""
+    import mujoco
+    s = mujoco.MjSpec()
+    _spec_options(s, gravity, integrator)
+    b = s.worldbody.add_body(name="rigid", pos=[float(v) for v in com])
+    b.add_freejoint(name="free")
+    b.explicitinertial = True
+    b.mass = float(mass)
+    b.ipos = [0.0, 0.0, 0.0]
+    b.fullinertia = [float(inertia[0, 0]), float(inertia[1, 1]), float(inertia[2, 2]), float(inertia[0, 1]),
+                     float(inertia[0, 2]), float(inertia[1, 2])]
+    return s.compile()
