@@ -24,6 +24,7 @@ import subprocess
 import sys
 import time
 import traceback
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,7 @@ if __package__ in (None, ""):   # `python benchmarks/work_precision.py`
     __package__ = "benchmarks"
 
 from .peers.base import Unsupported  # noqa: E402
+from .peers.isolated import InProcessRunner, IsolatedRunner  # noqa: E402
 from .reference import reference  # noqa: E402
 from .scene_spec import SceneSpec, load_json  # noqa: E402
 
@@ -56,9 +58,38 @@ def full_dts(order):
     """Fixed steps for the full sweep, from a coarse start that depends on the order, halving 20 times."""
     top = {2: 0.02, 3: 0.04, 4: 0.04}.get(order, 0.1)
     return [top / 2 ** i for i in range(0, 21)]
-FULL_RTOL = [10.0 ** -e for e in range(2, 14)]           # 1e-2 ... 1e-13
+# 1e-3 ... 1e-13. Not 1e-2: no method reached the 1e-3 m level at rtol 1e-2 in the 2026-11-21 run, and there
+# DOP853/DOPRI5 fail on chain_1000 by step-size underflow after ~40 s of ever smaller steps.
+FULL_RTOL = [10.0 ** -e for e in range(3, 14)]
 QUICK_RTOL = [1e-4, 1e-6, 1e-8]
-MIN_RUNS = {"linknet": 6, "baseline": 3, "peer": 3}   # full mode: settings run even past the time budget
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Time budget that bounds a whole run (issue 5: the full run finishes in about half an hour here).
+
+    run_timeout: hard limit of one setting (model construction + warm-up + repeats + integration); the worker
+        process running it is killed and the setting recorded as a timeout. Finer settings are not tried.
+    sweep: wall time of all of one method's settings on one scene, after which no further setting starts...
+    sweep_cap: ...unless the method still has fewer than `min_ok` successful settings, or the next setting is
+        predicted to reach an error level (1e-3/1e-6/1e-9 m) it has not reached yet; then up to this cap.
+    A setting is only started if its predicted wall time (the previous setting's, scaled by the knob ratio for
+    fixed steps, by the last growth for tolerances) fits within the applicable limit and the run timeout;
+    the settings not started are recorded as skipped, with the prediction.
+    Other stops: the error is below the reference floor; below 1e-10 m with >= min_ok settings (finer
+    settings only probe round-off; the finest level is 1e-9 m); the error grew three times in a row below
+    1e-6 m (round-off); max_failures failed settings in a row."""
+    run_timeout: float
+    sweep: float
+    sweep_cap: float
+    min_ok: int
+    max_failures: int = 8
+
+
+FULL_BUDGET = Budget(run_timeout=60.0, sweep=90.0, sweep_cap=120.0, min_ok=6)
+QUICK_BUDGET = Budget(run_timeout=60.0, sweep=4.0, sweep_cap=20.0, min_ok=2)
+QUICK_OK_RUNS = 3        # --quick: three successful settings a method
+ENOUGH_ERROR = 1e-10     # below the finest level (1e-9 m): more settings only measure round-off
 
 
 def quick_dts(order):
@@ -122,52 +153,102 @@ def all_methods(quick: bool):
 
 
 # ------------------------------------------------------------------------------------------------ runs
-def _measure(method, spec, t_end, knob, repeat_below: float):
-    """One run; runs shorter than `repeat_below` seconds are repeated (up to 5 in all) and the fastest kept."""
-    best = method.run(spec, t_end, knob)
-    total = best.seconds
-    for _ in range(4):
-        if total >= repeat_below or best.seconds >= repeat_below / 5:
-            break
-        r = method.run(spec, t_end, knob)
-        total += r.seconds
-        if r.seconds < best.seconds:
-            best = r
-    return best
+def _predict_wall(rows, knob_kind: str, knob_next: float):
+    """Predicted wall time [s] of the next setting from the last one run (None before the first): fixed steps
+    scale with the number of steps (a failed fixed-step run stopped early, so its scaled time is a lower
+    bound); tolerances with the growth between the last two successful settings (clamped to 1..4; 1.5
+    without two), from successful settings only (a failed adaptive run can take longer than any successful
+    one: step-size underflow after ever smaller steps)."""
+    done = [r for r in rows if r.get("wall_seconds") is not None
+            and (knob_kind == "dt" or r.get("status") == "ok")]
+    if not done:
+        return None
+    last = done[-1]
+    if knob_kind == "dt":
+        return last["wall_seconds"] * last["value"] / knob_next
+    oks = [r for r in done if r.get("status") == "ok"]
+    growth = 1.5
+    if len(oks) >= 2 and oks[-2]["wall_seconds"] > 0:
+        growth = min(4.0, max(1.0, oks[-1]["wall_seconds"] / oks[-2]["wall_seconds"]))
+    return last["wall_seconds"] * growth
 
 
-def sweep(method, spec, t_end, ref, *, quick: bool, run_budget: float, sweep_budget: float, log=print):
+def _next_level_in_reach(errs) -> bool:
+    """Is the next setting predicted (geometric extrapolation of the last two errors) to reach an error
+    level not reached yet?"""
+    if not errs:
+        return True
+    best = min(errs)
+    unreached = [lv for lv in LEVELS if lv < best]
+    if not unreached:
+        return False
+    guess = errs[-1] * (errs[-1] / errs[-2]) if len(errs) >= 2 and errs[-2] > 0 else errs[-1] / 10
+    return guess <= max(unreached)
+
+
+def sweep(method, spec, t_end, ref, *, quick: bool, budget: Budget, runner, log=print):
+    """All settings of one method on one scene, coarse to fine, within `budget` (see Budget).
+    Returns (rows, summary): one row per setting tried or skipped; summary = wall time spent and why it ended."""
     rows = []
+    t_sweep = time.perf_counter()
     try:
         method.check_scene(spec)
     except Unsupported as e:
-        return [{"status": "unsupported", "message": str(e)}]
+        return [{"status": "unsupported", "message": str(e)}], {"wall_seconds": 0.0, "stop": "unsupported"}
     if method.knob == "dt":
         knobs = quick_dts(method.order or 2) if quick else full_dts(method.order or 2)
     else:
         knobs = QUICK_RTOL if quick else FULL_RTOL
-    min_runs = 2 if quick else MIN_RUNS.get(method.family, 3)
+    method.run_budget = budget.run_timeout   # adapters that can predict their run time refuse longer runs
     floor = max(10 * float(ref["agreement"]), 1e-13)
     spent, failures = 0.0, 0
+    stop, skip_from, skip_why = "all settings run", None, ""
     i = -1
-    while i + 1 < len(knobs):
+    while True:
         # after a failure (step too coarse for the scene) jump a factor 4 instead of 2, until the first success
-        i += 2 if (failures and not any(x.get("status") == "ok" for x in rows) and not quick) else 1
+        oks = [x for x in rows if x.get("status") == "ok"]
+        i += 2 if (failures and not oks and not quick) else 1
         if i >= len(knobs):
             break
         knob = knobs[i]
+        errs = [x["error"] for x in oks]
+        pred = _predict_wall(rows, method.knob, knob)
+        if pred is not None:
+            extend = len(oks) < budget.min_ok or _next_level_in_reach(errs)
+            limit = budget.sweep_cap if extend else budget.sweep
+            if pred > budget.run_timeout:
+                stop, skip_from = f"next setting predicted {pred:.3g} s > run timeout {budget.run_timeout:g} s", i
+            elif spent + pred > limit:
+                stop = (f"sweep budget: {spent:.3g} s spent + {pred:.3g} s predicted > "
+                        f"{'cap ' if extend else ''}{limit:g} s")
+                skip_from = i
+            if skip_from is not None:
+                skip_why = f"not run: {stop}"
+                break
         row = {"knob": method.knob, "value": knob}
-        try:
-            r = _measure(method, spec, t_end, knob, repeat_below=0.0 if quick else 0.2)
-        except Exception as e:   # a failing run is a result, not a crash of the benchmark
-            failures += 1
-            row |= {"status": "failed", "message": f"{type(e).__name__}: {e}"[:300]}
+        status, payload, wall = runner.run(method, spec, t_end, knob, repeat_below=0.0 if quick else 0.2,
+                                           timeout=budget.run_timeout)
+        spent += wall
+        row["wall_seconds"] = wall
+        if status == "unsupported":
+            return [{"status": "unsupported", "message": payload}], {"wall_seconds": spent, "stop": "unsupported"}
+        if status in ("timeout", "skipped"):   # finer settings take longer still
+            row |= {"status": status, "message": payload}
             rows.append(row)
-            log(f"    {method.name:28s} {method.knob}={knob:<9.3g} FAILED {row['message'][:100]}")
-            if failures >= 8:   # eight in a row (a 4^7x smaller step): the method cannot do this scene
+            log(f"    {method.name:28s} {method.knob}={knob:<9.3g} {status.upper()} {payload[:110]}")
+            stop, skip_from = f"{status} at {method.knob} = {knob:.3g}", i + 1
+            skip_why = f"not run: finer than the setting that hit the run budget ({method.knob} = {knob:.3g})"
+            break
+        if status == "failed":   # a failing run is a result, not a crash of the benchmark
+            failures += 1
+            row |= {"status": "failed", "message": payload[:300]}
+            rows.append(row)
+            log(f"    {method.name:28s} {method.knob}={knob:<9.3g} FAILED {payload[:100]} ({wall:.3g} s)")
+            if failures >= budget.max_failures:   # a 4^7x smaller step failed too: the method cannot do this scene
+                stop = f"{failures} failed settings in a row"
                 break
             continue
-        failures = 0
+        r = payload
         err = float(np.max(np.linalg.norm(r.X - ref["X"], axis=1)))
         finite = bool(np.all(np.isfinite(r.X)))
         row |= {"status": "ok" if finite else "nonfinite", "seconds": r.seconds,
@@ -182,22 +263,34 @@ def sweep(method, spec, t_end, ref, *, quick: bool, run_budget: float, sweep_bud
         if not finite:   # blew up at this setting: a failure, try finer
             row["status"], row["message"] = "failed", "non-finite state at t_end"
             failures += 1
+            if failures >= budget.max_failures:
+                stop = f"{failures} failed settings in a row"
+                break
             continue
-        spent += r.seconds
+        failures = 0
         nan = float("nan")
         log(f"    {method.name:28s} {method.knob}={knob:<9.3g} err={err:9.3e} "
             f"res={row['residual'] if row['residual'] is not None else nan:8.1e} "
             f"dE={row['energy_drift'] if row['energy_drift'] is not None else nan:8.1e} "
-            f"t={r.seconds * 1e3:10.3f} ms steps={r.steps}")
-        n_ok = sum(1 for x in rows if x.get("status") == "ok")
-        if err < floor or (quick and n_ok >= 3):
+            f"t={r.seconds * 1e3:10.3f} ms steps={r.steps} (wall {wall:.3g} s)")
+        n_ok = len(oks) + 1
+        errs.append(err)
+        if err < floor:
+            stop = f"error {err:.2g} m below the reference floor {floor:.2g} m"
             break
-        errs = [x["error"] for x in rows if x.get("status") == "ok"]
+        if quick and n_ok >= QUICK_OK_RUNS:
+            stop = f"{QUICK_OK_RUNS} settings (--quick)"
+            break
+        if err < ENOUGH_ERROR and n_ok >= budget.min_ok:
+            stop = f"error {err:.2g} m < {ENOUGH_ERROR:g} m after {n_ok} settings"
+            break
         if len(errs) >= 3 and errs[-1] > errs[-2] > errs[-3] and errs[-3] < 1e-6:
-            break   # past the method's round-off floor: finer settings only add error
-        if (r.seconds > run_budget or spent > sweep_budget) and (n_ok >= min_runs or r.seconds > 6 * run_budget):
+            stop = "round-off: the error grew three times in a row"   # finer settings only add error
             break
-    return rows
+    if skip_from is not None:
+        rows += [{"knob": method.knob, "value": k, "status": "skipped", "message": skip_why}
+                 for k in knobs[skip_from:]]
+    return rows, {"wall_seconds": time.perf_counter() - t_sweep, "integration_wall_seconds": spent, "stop": stop}
 
 
 def fastest_at(rows, level):
@@ -257,39 +350,81 @@ def _machine():
     return {"platform": platform.platform(), "cpu": cpu, "cores": os.cpu_count(), "memory_GiB": mem}
 
 
+def _loadavg():
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        return None
+
+
 def _fmt_t(s):
     return "—" if s is None else (f"{s * 1e3:.3g} ms" if s < 1 else f"{s:.3g} s")
 
 
 def write_markdown(results, path: Path):
     meta = results["meta"]
+    prov = meta.get("provenance", {})
+    if prov.get("single_run"):
+        provenance = (f"**One run**: every number below was measured by this single invocation "
+                      f"({len(prov.get('scenes', []))} scenes, {len(prov.get('methods', []))} methods); nothing is "
+                      "merged or stitched from other runs.")
+    elif prov.get("merged_from"):
+        provenance = ("**Assembled from several runs** (--merge): earlier runs dated "
+                      + ", ".join(prov["merged_from"]) + f"; this one reran {', '.join(prov.get('scenes', []))}.")
+    else:
+        provenance = "Provenance not recorded (results written by an older version of this script)."
+    budget = meta.get("budget")
     lines = [f"# Work-precision benchmark{' (quick)' if meta['quick'] else ''}", "",
-             f"Generated {meta['date']} by `{meta['command']}` in {meta['total_seconds']:.0f} s.  ",
+             f"Generated {meta['date']} by `{meta['command']}` in {meta['total_seconds']:.0f} s of wall time"
+             + (f" ({meta['reference_seconds']:.0f} s of it computing references)"
+                if meta.get("reference_seconds") else " (references from the cache)") + ".  ",
+             provenance + "  ",
              f"Machine: {meta['machine']['cpu']}, {meta['machine']['cores']} cores, "
-             f"{meta['machine']['memory_GiB']} GiB; {meta['machine']['platform']}.  ",
+             f"{meta['machine']['memory_GiB']} GiB; {meta['machine']['platform']}"
+             + (f"; load average {meta['load_average']['start']} at the start, {meta['load_average']['end']} at the end"
+                if meta.get("load_average") else "") + ".  ",
              "Versions: " + ", ".join(f"{k} {v}" for k, v in meta["versions"].items() if v) + ".",
              *([f"Note: {meta['note']}."] if meta.get("note") else []), "",
+             *([f"Budget: every setting runs in a worker process killed after {budget['run_timeout']:g} s "
+                f"(recorded as a timeout); a method's sweep on a scene starts no setting predicted to take it past "
+                f"{budget['sweep']:g} s of wall time ({budget['sweep_cap']:g} s while it has fewer than "
+                f"{budget['min_ok']} successful settings or the next one is predicted to reach a new error level). "
+                "Settings not run are listed as skipped, with the reason, in results.json and counted below.", ""]
+               if budget else []),
              "Error = max over masses |X_k(t_end) − X_ref,k(t_end)|. Each cell is the fastest wall time (integration "
-             "only, one core, in-process) among the method's runs whose error is at or below the level; — means "
+             "only, one core) among the method's runs whose error is at or below the level; — means "
              "no run reached it (or the method cannot model the scene: see the notes). Ratio = linknet's best ÷ the "
-             "best of all other methods (peers and scipy baselines); below 1 linknet is faster.", ""]
+             "best of all other methods (peers and scipy baselines); below 1 linknet is faster. Settings = "
+             "ok / failed / timeout / skipped, and the wall time of the sweep (model construction, warm-up, "
+             "repeats and failed runs included).", ""]
     for sname, sres in results["scenes"].items():
         ref = sres["reference"]
         lines += [f"## {sname}", "", *([f"({sres['note']}.)", ""] if sres.get("note") else []),
                   f"K = {sres['K']}, L = {sres['L']}, t_end = {sres['t_end']} s. Reference: DOP853 rtol "
                   f"{ref['rtol_ref']:g} vs {ref['rtol_check']:g} agree to {ref['agreement']:.2g} m "
                   f"({'verified ≤ 1e-12' if ref['verified'] else 'NOT verified to 1e-12'}), residual "
-                  f"{ref['residual']:.2g}.", ""]
+                  f"{ref['residual']:.2g}."
+                  + (f" Scene wall time {sres['wall_seconds']:.0f} s." if sres.get("wall_seconds") else ""), ""]
         summ = sres["summary"]
         hdr = ("| method | " + " | ".join(f"≤ {lv:g} m" for lv in LEVELS)
-               + " | best error reached | its residual | its energy drift | max residual, all runs |")
-        lines += [hdr, "|" + "---|" * (len(LEVELS) + 5)]
+               + " | best error reached | its residual | its energy drift | max residual, all runs | settings |")
+        lines += [hdr, "|" + "---|" * (len(LEVELS) + 6)]
+        ends = []
         for mname, m in sres["methods"].items():
-            oks = [r for r in m["runs"] if r.get("status") == "ok"]
+            runs = m["runs"]
+            count = {st: sum(1 for r in runs if r.get("status") == st) for st in ("ok", "failed", "timeout", "skipped")}
+            sw = m.get("sweep") or {}
+            settings = "/".join(str(count[st]) for st in count) + (
+                f", {sw['wall_seconds']:.3g} s" if sw.get("wall_seconds") is not None else "")
+            if sw.get("stop"):
+                ends.append(f"{mname}: {sw['stop']}")
+            oks = [r for r in runs if r.get("status") == "ok"]
             if not oks:
-                msg = (m["runs"][-1].get("message", "") if m["runs"] else m.get("message", "")) or "no successful run"
+                tried = [r for r in runs if r.get("status") != "skipped"] or runs
+                msg = (tried[-1].get("message", "") if tried else m.get("message", "")) or "no successful run"
                 msg = " ".join(msg.split()).replace("|", "/")
-                lines.append(f"| {mname} | " + " | ".join("—" for _ in LEVELS) + f" | n/a: {msg[:120]} | | | |")
+                lines.append(f"| {mname} | " + " | ".join("—" for _ in LEVELS) + f" | n/a: {msg[:120]} | | | | "
+                             f"{settings} |")
                 continue
             cells = []
             for lv in LEVELS:
@@ -299,12 +434,15 @@ def write_markdown(results, path: Path):
             resid = max(r["residual"] for r in oks)
             drift = b["energy_drift"] if b["energy_drift"] is not None else float("nan")
             lines.append(f"| {mname} | " + " | ".join(cells) + f" | {b['error']:.2e} ({m['knob']} {b['value']:.3g}) | "
-                         f"{b['residual']:.1e} | {drift:.1e} | {resid:.1e} |")
+                         f"{b['residual']:.1e} | {drift:.1e} | {resid:.1e} | {settings} |")
         rcells = []
         for lv in LEVELS:
-            s = summ[f"{lv:g}"]
-            rcells.append("—" if s["ratio"] is None else f"**{s['ratio']:.3g}** ({s['linknet_best']} / {s['other_best']})")
-        lines += ["| **ratio linknet-best / best other** | " + " | ".join(rcells) + " | | | | |"[:-2], ""]
+            s_ = summ[f"{lv:g}"]
+            rcells.append("—" if s_["ratio"] is None else f"**{s_['ratio']:.3g}** ({s_['linknet_best']} / {s_['other_best']})")
+        lines += ["| **ratio linknet-best / best other** | " + " | ".join(rcells) + " | | | | | |", ""]
+        if ends:
+            lines += ["<details><summary>Why each sweep ended</summary>", "", *[f"- {e}" for e in ends], "",
+                      "</details>", ""]
         if sres.get("plot"):
             lines += [f"![{sname}]({Path(sres['plot']).name})", ""]
     if results.get("notes"):
@@ -370,7 +508,11 @@ def main(argv=None):
                     help="update an existing results.json in --out: rerun only the given scenes/methods")
     ap.add_argument("--render", type=Path, help="only rewrite results.md and the plots from this results JSON")
     ap.add_argument("--no-cache", action="store_true", help="recompute references even if cached")
-    ap.add_argument("--run-budget", type=float, help="stop a sweep after a run longer than this [s]")
+    ap.add_argument("--run-timeout", type=float, help="hard limit of one setting [s] (default: Budget)")
+    ap.add_argument("--sweep-budget", type=float, help="wall time of one method's sweep on one scene [s]")
+    ap.add_argument("--sweep-cap", type=float, help="extended limit to reach 6 settings or a new error level [s]")
+    ap.add_argument("--in-process", action="store_true",
+                    help="run the methods in this process (no worker process, so no run timeout): debugging")
     args = ap.parse_args(argv)
     quick = args.quick
     if args.render:
@@ -380,10 +522,13 @@ def main(argv=None):
         MODELS = args.models
     out = args.out or (ROOT / "docs" / "benchmarks" / ("quick" if quick else ""))
     out.mkdir(parents=True, exist_ok=True)
-    run_budget = args.run_budget or (2.0 if quick else 5.0)
-    sweep_budget = 4.0 if quick else 30.0
+    budget = QUICK_BUDGET if quick else FULL_BUDGET
+    budget = replace(budget, **{k: v for k, v in (("run_timeout", args.run_timeout), ("sweep", args.sweep_budget),
+                                                  ("sweep_cap", args.sweep_cap)) if v is not None})
     scenes = args.scenes or (list(QUICK_SCENES) if quick else list(SCENES))
     t_start = time.perf_counter()
+    load_start = _loadavg()
+    date_start = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     methods = all_methods(quick)
     if args.methods:
         methods = [m for m in methods if m.name in args.methods]
@@ -399,7 +544,10 @@ def main(argv=None):
             results["unavailable"][m.name] = why
             print(f"  {m.name}: unavailable: {why}")
     methods = [m for m in methods if m.name not in results["unavailable"]]
+    runner = InProcessRunner() if args.in_process else IsolatedRunner()
+    reference_seconds = 0.0
     for sname in scenes:
+        t_scene = time.perf_counter()
         t_end = SCENES[sname]
         try:
             spec = load_benchmark_scene(sname)
@@ -409,6 +557,8 @@ def main(argv=None):
             continue
         print(f"[{sname}] K={spec.K} L={spec.L} t_end={t_end}")
         ref = reference(spec, t_end, cache=not args.no_cache)
+        if not ref.get("cached"):
+            reference_seconds += float(ref["seconds"])
         kept = {}
         if previous and sname in previous["scenes"] and previous["scenes"][sname].get("digest") == spec.digest():
             kept = {n: m for n, m in previous["scenes"][sname]["methods"].items()
@@ -419,11 +569,13 @@ def main(argv=None):
         sres["reference"] = {k: (v.item() if hasattr(v, "item") else v) for k, v in sres["reference"].items()}
         for m in methods:
             try:
-                runs = sweep(m, spec, t_end, ref, quick=quick, run_budget=run_budget, sweep_budget=sweep_budget)
+                runs, summary = sweep(m, spec, t_end, ref, quick=quick, budget=budget, runner=runner)
             except Exception as e:   # never lose the other methods' results to one adapter's bug
                 traceback.print_exc()
-                runs = [{"status": "failed", "message": f"{type(e).__name__}: {e}"}]
-            sres["methods"][m.name] = {"family": m.family, "knob": m.knob, "order": m.order, "runs": runs}
+                runs, summary = [{"status": "failed", "message": f"{type(e).__name__}: {e}"}], {"stop": "driver error"}
+            sres["methods"][m.name] = {"family": m.family, "knob": m.knob, "order": m.order, "runs": runs,
+                                       "sweep": summary}
+            print(f"    {'':28s} -> {summary.get('stop')} ({summary.get('wall_seconds', 0):.1f} s)", flush=True)
         order = [m_.name for m_ in all_methods(quick)]
         sres["methods"] = dict(sorted(sres["methods"].items(),
                                       key=lambda kv: order.index(kv[0]) if kv[0] in order else len(order)))
@@ -434,18 +586,28 @@ def main(argv=None):
             sres["plot"] = str(p)
         except Exception as e:
             print(f"  plot failed: {e}")
+        sres["wall_seconds"] = time.perf_counter() - t_scene
+        print(f"[{sname}] done in {sres['wall_seconds']:.0f} s", flush=True)
         results["scenes"][sname] = sres
         (out / "results.partial.json").write_text(json.dumps(results, indent=1, default=_json_default))
+    runner.close()
     if previous:   # keep the scenes that were not rerun, in the benchmark's order
         results["scenes"] = {n: results["scenes"][n] for n in SCENES if n in results["scenes"]}
-    results["meta"] = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-                       "command": "python -m benchmarks.work_precision" + (" --quick" if quick else "")
-                       + (" --scenes " + " ".join(args.scenes) if args.scenes else ""),
+    results["meta"] = {"date": date_start,
+                       "command": "python -m benchmarks.work_precision" + (" " + " ".join(argv) if argv else
+                                                                           " " + " ".join(sys.argv[1:])).rstrip(),
                        "quick": quick, "machine": _machine(), "versions": _versions(),
-                       "total_seconds": time.perf_counter() - t_start
-                       + (previous["meta"].get("total_seconds", 0) if previous else 0)}
+                       "total_seconds": time.perf_counter() - t_start,
+                       "reference_seconds": reference_seconds,
+                       "budget": asdict(budget), "isolated": not args.in_process,
+                       "worker_restarts": runner.restarts,
+                       "load_average": {"start": load_start, "end": _loadavg()},
+                       "provenance": {"single_run": previous is None, "scenes": scenes,
+                                      "methods": [m.name for m in methods]}}
     if previous:
-        results["meta"]["merged_from"] = previous["meta"].get("merged_from", []) + [previous["meta"]["date"]]
+        results["meta"]["provenance"]["merged_from"] = (previous["meta"].get("provenance", {}).get("merged_from", [])
+                                                        + previous["meta"].get("merged_from", [])
+                                                        + [previous["meta"]["date"]])
     (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
     write_markdown({k: v for k, v in results.items()} | {"scenes": {k: v for k, v in results["scenes"].items()
                                                                     if "methods" in v}}, out / "results.md")

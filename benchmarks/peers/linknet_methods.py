@@ -44,8 +44,11 @@ class LinknetMethod(Method):
         with Timer() as setup:
             scene = ln.Scene.from_dict(spec.to_dict())
             kwargs = {self.knob: knob}
-            if "max_steps" in inspect.signature(ln.Simulator).parameters:
-                kwargs["max_steps"] = MAX_STEPS
+            params = inspect.signature(ln.Simulator).parameters
+            for name in ("max_steps_per_call", "max_steps"):   # no step cap short of the run itself
+                if name in params:
+                    kwargs[name] = MAX_STEPS
+                    break
             sim = ln.Simulator(scene, method=self.method, **kwargs)
             # warm-up on a throwaway simulator: one-time compilation (numba/codegen caches) is setup, as
             # OpenMM's Context creation and MuJoCo's model compilation are for the peers
