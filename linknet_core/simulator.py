@@ -126,6 +126,8 @@ class Simulator:
         F = np.asarray(F_input, dtype=float)
         if F.shape != (self.scene.K, 3):
             raise SolverError(f"input forces must have shape ({self.scene.K}, 3), got {F.shape}")
+        if np.isfinite(F).all():  # the common case, checked in one pass (this runs on every FMU doStep)
+            return F
         bad = ~np.isfinite(F)
         bad[self.scene.fixed] = False
         if bad.any():
@@ -140,7 +142,9 @@ class Simulator:
         if not math.isfinite(t_next) or not t_next > self.state.t:
             raise SolverError(f"cannot advance from t = {self.state.t} to t = {t_next}: the target must be later "
                               "and finite")
-        before = (self.state.copy(), copy.deepcopy(self.integrator.internals()))
+        # internals() hands out a fresh snapshot (every integrator builds it from copies), so no deep copy is
+        # needed here: it cost ~20 us per call, more than a compiled step of a 100-link chain
+        before = (self.state.copy(), self.integrator.internals())
         try:
             self.integrator.advance(self.state, t_next, F, self.max_steps_per_call)
         except Exception:
