@@ -55,10 +55,12 @@ def _open(fmu):
     return md, slave
 
 
-def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3):
+def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3, substeps=1):
+    """doStep of dt with `substeps` RATTLE steps inside it (solver step dt / substeps) vs Simulator.advance."""
     scene = ln.load_scene(ROOT / "models" / f"{scene_name}.json")
-    fmu = build_fmu.build_scene_fmu(ROOT / "models" / f"{scene_name}.json", fmu_dir / f"{scene_name}.fmu",
-                                    step=dt, quiet=True)
+    h = dt / substeps
+    fmu = build_fmu.build_scene_fmu(ROOT / "models" / f"{scene_name}.json",
+                                    fmu_dir / f"{scene_name}_{substeps}.fmu", step=h, quiet=True)
     md, slave = _open(fmu)
     vr = {v.name: v.valueReference for v in md.modelVariables}
     tip = int(scene.free_indices[-1])
@@ -72,7 +74,7 @@ def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3):
             slave.doStep(currentCommunicationPoint=t, communicationStepSize=dt)
             t += dt
 
-    sim = ln.Simulator(scene, method="rattle", dt=dt)
+    sim = ln.Simulator(scene, method="rattle", dt=h)
     F = np.zeros((scene.K, 3))
     F[tip, 2] = 0.1
 
@@ -96,7 +98,7 @@ def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3):
     t_fmu = min(p[0] for p in pairs) / n_steps
     t_lib = min(p[1] for p in pairs) / n_steps
     slave.terminate()
-    return dict(scene=scene_name, K=scene.K, L=scene.L, fmu_dostep_s=t_fmu, library_advance_s=t_lib,
+    return dict(scene=scene_name, K=scene.K, L=scene.L, substeps=substeps, fmu_dostep_s=t_fmu, library_advance_s=t_lib,
                 overhead_s=t_fmu - t_lib, ratio=t_fmu / t_lib)
 
 
@@ -159,13 +161,14 @@ def main(argv=None):
     fmu_dir = Path(a.out).parent / "bench_fmus"
     fmu_dir.mkdir(parents=True, exist_ok=True)
     results = {"n_steps": n_steps, "repeats": repeats,
-               "dostep": [bench_dostep(s, fmu_dir, n_steps, repeats) for s in ("chain_10", "chain_100", "net_10x10")],
+               "dostep": [bench_dostep(s, fmu_dir, n_steps, repeats, substeps=m)
+                          for m in (1, 10) for s in ("chain_10", "chain_100", "net_10x10")],
                "outputs": [bench_outputs(s, fmu_dir, n_steps, repeats) for s in ("chain_100", "net_10x10")],
                "getters": [bench_getter_paths(s, fmu_dir, repeats) for s in ("chain_100", "net_10x10")]}
-    print("1. per-doStep cost, one RATTLE step (dt = 1 ms) per communication step, input set each step")
-    print(f"   {'scene':10s} {'K':>4s} {'L':>4s} {'FMU doStep':>12s} {'Simulator.advance':>18s} {'overhead':>10s} {'ratio':>6s}")
+    print("1. per-doStep cost, communication step 1 ms holding 1 or 10 RATTLE steps, input set each step")
+    print(f"   {'scene':10s} {'K':>4s} {'L':>4s} {'steps':>5s} {'FMU doStep':>12s} {'Simulator.advance':>18s} {'overhead':>10s} {'ratio':>6s}")
     for r in results["dostep"]:
-        print(f"   {r['scene']:10s} {r['K']:4d} {r['L']:4d} {r['fmu_dostep_s'] * 1e6:10.1f}us {r['library_advance_s'] * 1e6:16.1f}us "
+        print(f"   {r['scene']:10s} {r['K']:4d} {r['L']:4d} {r['substeps']:5d} {r['fmu_dostep_s'] * 1e6:10.1f}us {r['library_advance_s'] * 1e6:16.1f}us "
               f"{r['overhead_s'] * 1e6:8.1f}us {r['ratio']:6.2f}")
     print("2. reading all outputs per communication step through fmpy (one getReal for all X, U, T, Freact)")
     for r in results["outputs"]:
