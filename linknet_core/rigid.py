@@ -342,7 +342,8 @@ class RigidBodyPath(FixedStepIntegrator):
         return c, v, q, Pi
 
     def _set_bodies(self, c, v, q, Pi):
-        self._c, self._v, self._q, self._Pi = (np.ascontiguousarray(a, dtype=float) for a in (c, v, q, Pi))
+        # own copies: a snapshot handed to set_internals stays the caller's (the Simulator no longer deep-copies)
+        self._c, self._v, self._q, self._Pi = (np.array(a, dtype=float, order="C") for a in (c, v, q, Pi))
 
     def _sync(self, X, U):
         """Follow a state set from outside (not produced by this path): refit the bodies to it."""
