@@ -556,21 +556,33 @@ def rattle_advance(X, U, n_steps, h, gammas, F_base, scene, system, tol, max_ite
      row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work) = system
     K, L = X.shape[0], k1.shape[0]
     E0, E1, F, Uh, Xc = np.empty((L, 3)), np.empty((L, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3))
+    U_iterate = np.empty((K, 3))
     mu, phi, scale = np.empty(L), np.empty(L), np.empty(L)
     return _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc,
                          free, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
                          D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
-                         chain_sub, Ax, y_vals, solve_work, E0, E1, F, Uh, Xc, mu, phi, scale, tol, max_iter)
+                         chain_sub, Ax, y_vals, solve_work, E0, E1, F, Uh, Xc, U_iterate, mu, phi, scale, tol,
+                         max_iter)
 
 
 @kernel
 def _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                   use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
                   row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
-                  solve_work, E0, E1, F, Uh, Xc, mu, phi, scale, tol, max_iter):
-    """The step loop of :func:`rattle_advance` (scratch: E0, E1 (L,3); F, Uh, Xc (K,3); mu, phi, scale (L,))."""
+                  solve_work, E0, E1, F, Uh, Xc, U_iterate, mu, phi, scale, tol, max_iter):
+    """The step loop of :func:`rattle_advance` (scratch: E0, E1 (L,3); F, Uh, Xc, U_iterate (K,3); mu, phi,
+    scale (L,))."""
     K = X.shape[0]
     L = k1.shape[0]
+    # drag or dampers: the second half kick is implicit in U_{n+1} (fixed-point iteration below), which keeps
+    # the step symmetric and so second order; explicit in the half-step velocity it is only first order
+    velocity_dependent = False
+    for k in range(K):
+        if drag[k] != 0.0:
+            velocity_dependent = True
+    for s in range(sc.shape[0]):
+        if sc[s] != 0.0:
+            velocity_dependent = True
     unit_vectors(X, k1, k2, inv_R, E0)
     if L > 0 and factor_tension_matrix(E0, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai,
                                        Lp, Li, Lx, D, Dinv, row_start, row_col, row_slot, chain_order,
@@ -606,6 +618,32 @@ def _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_R, inv_m, fix
                                   Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
                                   chain_sub, Ax, y_vals, solve_work, mu, phi) != OK:
                 return SINGULAR, step
+            if velocity_dependent:
+                # U_{n+1} = P(U_half + hs/2 M^-1 F(X_{n+1}, U_{n+1})): contraction factor ~ hs c / (2 m)
+                converged = False
+                for it in range(60):
+                    external_forces(X, U, F_base, drag, sa, sb, sk, sr, sc, fixed, F)
+                    size = 0.0
+                    for k in range(K):
+                        for d in range(3):
+                            U_iterate[k, d] = Uh[k, d] + 0.5 * hs * inv_m[k] * F[k, d]
+                            size = max(size, abs(U[k, d]))
+                    if project_velocities(X, U_iterate, E1, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc,
+                                          free, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot,
+                                          Ap, Ai, Lp, Li, Lx, D, Dinv, row_start, row_col, row_slot, chain_order,
+                                          chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work, mu,
+                                          phi) != OK:
+                        return SINGULAR, step
+                    change = 0.0
+                    for k in range(K):
+                        for d in range(3):
+                            change = max(change, abs(U_iterate[k, d] - U[k, d]))
+                            U[k, d] = U_iterate[k, d]
+                    if change <= 4e-16 * size or change == 0.0:
+                        converged = True
+                        break
+                if not converged:
+                    return PROJECTION_FAILED, step
             E0, E1 = E1, E0  # the factorisation at X is the next stage's A(X)
         for k in range(K):
             for d in range(3):
