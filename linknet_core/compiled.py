@@ -27,10 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 from scipy.sparse.csgraph import connected_components
 
-from .ldl import kernel, ldl_factor_scheduled, ldl_solve
+from .ldl import kernel, ldl_factor_scheduled, ldl_solve, outlined_kernel
 
 OK, PROJECTION_FAILED, SINGULAR, NON_FINITE, STEP_UNDERFLOW, TOO_MANY_STEPS = 0, 1, 2, 3, 4, 5
 PIVOT_TOL = 1e-11  # as SymbolicLDL: a pivot below this times its diagonal entry means A is singular
@@ -530,42 +529,23 @@ def project_velocities(X, U, E, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk
     return OK
 
 
-@njit(cache=True)
-def accelerations_once(X, U, F_base, scene, system, acc, T):
-    """One evaluation of :func:`accelerations` from the scene and system tuples (returns its status)."""
-    k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
-    (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start,
-     row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work) = system
-    K, L = X.shape[0], k1.shape[0]
-    return accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
-                         ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
-                         row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
-                         y_vals, solve_work, np.empty((L, 3)), np.empty((K, 3)), np.empty(L),
-                         acc, T, True)
+def rattle_scratch(K, L):
+    """Scratch arrays of :func:`rattle_advance` (allocated once per scene), in the order of :func:`_rattle_steps`."""
+    return (np.empty((L, 3)), np.empty((L, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)),
+            np.empty(L), np.empty(L), np.empty(L))
 
 
-@njit(cache=True)
-def rattle_advance(X, U, n_steps, h, gammas, F_base, scene, system, tol, max_iter):
+def rattle_advance(X, U, n_steps, h, gammas, F_base, scene, system, scratch, tol, max_iter):
     """Advance (X, U) in place by n_steps steps of size h, each a composition of RATTLE stages gammas.
 
     Returns (status, completed steps). On a non-zero status X and U are partially advanced: the caller
-    restores its copy and takes the numpy path.
+    restores its copy and takes the numpy path. (A Python function: a compiled wrapper unpacking the tuples
+    would make numba optimise the whole inlined step loop a second time when compiling it.)
     """
-    k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
-    (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start,
-     row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work) = system
-    K, L = X.shape[0], k1.shape[0]
-    E0, E1, F, Uh, Xc = np.empty((L, 3)), np.empty((L, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3))
-    U_iterate = np.empty((K, 3))
-    mu, phi, scale = np.empty(L), np.empty(L), np.empty(L)
-    return _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc,
-                         free, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
-                         D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
-                         chain_sub, Ax, y_vals, solve_work, E0, E1, F, Uh, Xc, U_iterate, mu, phi, scale, tol,
-                         max_iter)
+    return _rattle_steps(X, U, n_steps, h, gammas, F_base, *scene, *system, *scratch, tol, max_iter)
 
 
-@kernel
+@outlined_kernel
 def _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                   use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
                   row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
@@ -652,33 +632,32 @@ def _rattle_steps(X, U, n_steps, h, gammas, F_base, k1, k2, R, inv_R, inv_m, fix
     return OK, n_steps
 
 
-@njit(cache=True)
 def accelerations_repeated(n_evals, X, U, F_base, scene, system, acc, T):
-    """n_evals evaluations of :func:`accelerations` in a row at the same state (benchmarks: the right-hand
-    side the compiled integrators call, timed without the Python call). Returns a checksum."""
-    k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
-    (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start,
-     row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work) = system
-    K, L = X.shape[0], k1.shape[0]
-    E, F, B = np.empty((L, 3)), np.empty((K, 3)), np.empty(L)
-    return _accelerations_loop(n_evals, X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
-                               use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
-                               D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
-                               chain_sub, Ax, y_vals, solve_work, E, F, B, acc, T)
+    """n_evals evaluations of :func:`accelerations` in a row at the same state, in one compiled loop (one
+    evaluation for tests; many for benchmarks: the right-hand side the compiled integrators call, timed
+    without the Python call). Leaves the last result in acc and T; returns a checksum."""
+    K, L = X.shape[0], T.shape[0]
+    return _accelerations_loop(n_evals, X, U, F_base, *scene, *system, np.empty((L, 3)), np.empty((K, 3)),
+                               np.empty(L), acc, T, n_evals > 0)
 
 
-@kernel
+@outlined_kernel
 def _accelerations_loop(n_evals, X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                         use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
                         Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub,
-                        Ax, y_vals, solve_work, E, F, B, acc, T):
+                        Ax, y_vals, solve_work, E, F, B, acc, T, refactor):
+    """The loop of :func:`accelerations_repeated`: returns the status of the last evaluation when n_evals is 1,
+    else a checksum (``refactor`` is a runtime True: a literal would compile another accelerations)."""
     checksum = 0.0
+    status = OK
     for i in range(n_evals):
-        accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain, ordering,
-                      pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start, row_col,
-                      row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work, E,
-                      F, B, acc, T, True)
+        status = accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
+                               ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
+                               row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
+                               chain_sub, Ax, y_vals, solve_work, E, F, B, acc, T, refactor)
         checksum += acc[acc.shape[0] - 1, 2]
+    if n_evals == 1:
+        return float(status)
     return checksum
 
 
@@ -755,19 +734,24 @@ class CompiledScene:
         """One compiled right-hand side evaluation from Python (tests, benchmarks): (status, acc, T)."""
         acc = np.empty((self.K, 3))
         T = np.zeros(self.L)
-        status = accelerations_once(np.ascontiguousarray(X, np.float64), np.ascontiguousarray(U, np.float64),
-                                    self.base_forces(F_input), self.scene, self.system, acc, T)
+        X = np.ascontiguousarray(X, np.float64)
+        U = np.ascontiguousarray(U, np.float64)
+        status = int(accelerations_repeated(1, X, U, self.base_forces(F_input), self.scene, self.system, acc, T))
         return status, acc, T
 
 
 class CompiledRattle(CompiledScene):
     """:func:`rattle_advance` for one scene."""
 
+    def __init__(self, dyn, use_chain: bool | None = None):
+        super().__init__(dyn, use_chain=use_chain)
+        self.scratch = rattle_scratch(self.K, self.L)
+
     def advance(self, X, U, n_steps, h, gammas, F_input, tol):
         Xw = np.array(X, dtype=np.float64, copy=True, order="C")
         Uw = np.array(U, dtype=np.float64, copy=True, order="C")
         status, done = rattle_advance(Xw, Uw, int(n_steps), float(h), np.asarray(gammas, np.float64),
-                                      self.base_forces(F_input), self.scene, self.system, float(tol), 50)
+                                      self.base_forces(F_input), self.scene, self.system, self.scratch, float(tol), 50)
         return status, Xw, Uw
 
 

@@ -17,10 +17,10 @@ on the numpy path, which has the minimum-norm and Gauss-Newton fallbacks.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from .compiled import (NON_FINITE, OK, PROJECTION_FAILED, SINGULAR, STEP_UNDERFLOW, TOO_MANY_STEPS, CompiledScene,
-                       accelerations, kernel, project_positions, project_velocities)
+                       accelerations, project_positions, project_velocities)
+from .ldl import kernel, outlined_kernel
 
 __all__ = ["rk_advance", "CompiledRungeKutta", "RMS_ERROR", "HAIRER_ERROR", "OK", "PROJECTION_FAILED", "SINGULAR",
            "NON_FINITE", "STEP_UNDERFLOW", "TOO_MANY_STEPS"]
@@ -139,34 +139,30 @@ def _trial_step_size(X, U, acc0, free, rtol, atol, span):
     return min(h0, span)
 
 
-@njit(cache=True)
-def rk_advance(X, U, t, t_target, h_next, F_base, scene, system, AB, E1, E2, error_kind, exponent, rtol, atol,
-               max_steps, n_fixed, safety, min_factor, max_factor, projection_tol):
+def rk_scratch(K, L, s):
+    """Scratch arrays of :func:`rk_advance` for s stages (allocated once per scene and tableau), in the order of
+    :func:`_rk_steps`: KX, KU; Xs, Us, Xn, Un, acc, acc1; T; E; F; B, mu, phi, scale."""
+    return (np.empty((s + 1, K, 3)), np.empty((s + 1, K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)),
+            np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.zeros(L), np.empty((L, 3)), np.empty((K, 3)),
+            np.empty(L), np.empty(L), np.empty(L), np.empty(L))
+
+
+def rk_advance(X, U, t, t_target, h_next, F_base, scene, system, scratch, AB, E1, E2, error_kind, exponent, rtol,
+               atol, max_steps, n_fixed, safety, min_factor, max_factor, projection_tol):
     """Advance (X, U) in place from t to t_target with an embedded explicit pair.
 
     AB: the s x s matrix A of the tableau with the weights b as row s; E1, E2: error weights (s + 1 each,
     the last for the right-hand side at the new point). ``h_next`` <= 0 asks for the starting step to be
     chosen. ``n_fixed`` > 0 instead takes n_fixed steps of exactly h_next with no error control (order
     measurements). On return X, U hold the last accepted state. Returns (status, t, h_next, accepted
-    steps, rejected steps, right-hand side evaluations).
+    steps, rejected steps, right-hand side evaluations). (A Python function: a compiled wrapper unpacking the
+    tuples would make numba optimise the whole inlined step loop a second time when compiling it.)
     """
-    k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free = scene
-    (use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start,
-     row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work) = system
-    K, L, s = X.shape[0], k1.shape[0], AB.shape[1]
-    KX, KU = np.empty((s + 1, K, 3)), np.empty((s + 1, K, 3))
-    Xs, Us, Xn, Un = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3))
-    acc, acc1, F, E = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((L, 3))
-    T, Bv, mu, phi, scale = np.zeros(L), np.empty(L), np.empty(L), np.empty(L), np.empty(L)
-    return _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
-                     use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
-                     row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
-                     y_vals, solve_work, AB, E1, E2, error_kind, exponent, rtol, atol, max_steps, n_fixed, safety,
-                     min_factor, max_factor, projection_tol, KX, KU, Xs, Us, Xn, Un, acc, acc1, T, E, F, Bv, mu, phi,
-                     scale)
+    return _rk_steps(X, U, t, t_target, h_next, F_base, *scene, *system, AB, E1, E2, error_kind, exponent, rtol, atol,
+                     max_steps, n_fixed, safety, min_factor, max_factor, projection_tol, *scratch)
 
 
-@kernel
+@outlined_kernel
 def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
               use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
               row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals,
@@ -179,10 +175,14 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed,
     n_rhs = 1
     steps = 0
     rejected = 0
+    # runtime booleans rather than the constants True/False: numba compiles a separate accelerations for each
+    # literal value, and both would be inlined here
+    refactor = n_rhs > 0
+    reuse = not refactor
     status = accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free, use_chain,
                            ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
                            row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub,
-                           Ax, y_vals, solve_work, E, F, Bv, acc, T, True)
+                           Ax, y_vals, solve_work, E, F, Bv, acc, T, refactor)
     if status != OK:
         return status, t, h_next, steps, rejected, n_rhs
     _store(KX, 0, U)
@@ -197,7 +197,7 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed,
         status = accelerations(Xs, Us, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                                use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
                                D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
-                               chain_sub, Ax, y_vals, solve_work, E, F, Bv, acc1, T, True)
+                               chain_sub, Ax, y_vals, solve_work, E, F, Bv, acc1, T, refactor)
         if status != OK:
             return status, t, 0.0, steps, rejected, n_rhs
         h_next = _initial_step_size(X, U, acc, Us, acc1, h0, free, rtol, atol, exponent, t_target - t)
@@ -220,7 +220,7 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed,
             status = accelerations(Xs, Us, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                                    use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li,
                                    Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
-                                   chain_off_weight, chain_sub, Ax, y_vals, solve_work, E, F, Bv, acc, T, True)
+                                   chain_off_weight, chain_sub, Ax, y_vals, solve_work, E, F, Bv, acc, T, refactor)
             if status != OK:
                 return status, t, h_next, steps, rejected, n_rhs
             _store(KX, i, Us)
@@ -232,7 +232,7 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed,
         status = accelerations(Xn, Un, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                                use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
                                D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
-                               chain_sub, Ax, y_vals, solve_work, E, F, Bv, acc, T, True)
+                               chain_sub, Ax, y_vals, solve_work, E, F, Bv, acc, T, refactor)
         if status != OK:
             return status, t, h_next, steps, rejected, n_rhs
         _store(KX, s, Un)
@@ -279,7 +279,7 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed,
                 status = accelerations(X, U, F_base, k1, k2, R, inv_R, inv_m, fixed, drag, sa, sb, sk, sr, sc, free,
                                        use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp,
                                        Li, Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
-                                       chain_off_weight, chain_sub, Ax, y_vals, solve_work, E, F, Bv, acc, T, False)
+                                       chain_off_weight, chain_sub, Ax, y_vals, solve_work, E, F, Bv, acc, T, reuse)
                 if status != OK:
                     return status, t, h_next, steps, rejected, n_rhs
                 _store(KX, 0, U)
@@ -310,6 +310,7 @@ class CompiledRungeKutta(CompiledScene):
             raise ValueError(f"error weights must have {s + 1} entries (one per stage and one for the new point), "
                              f"got {E1.shape} and {E2.shape}")
         self.E1, self.E2 = E1, E2
+        self.scratch = rk_scratch(self.K, self.L, s)
         self.error_kind = int(error_kind)
         self.exponent = -1.0 / (error_estimator_order + 1)
 
@@ -321,6 +322,7 @@ class CompiledRungeKutta(CompiledScene):
         safety, min_factor, max_factor = controller
         status, t, h_next, steps, rejected, n_rhs = rk_advance(
             Xw, Uw, float(t), float(t_target), 0.0 if h is None else float(h), self.base_forces(F_input), self.scene,
-            self.system, self.AB, self.E1, self.E2, self.error_kind, self.exponent, float(rtol), float(atol),
-            int(max_steps), int(n_fixed), float(safety), float(min_factor), float(max_factor), float(projection_tol))
+            self.system, self.scratch, self.AB, self.E1, self.E2, self.error_kind, self.exponent, float(rtol),
+            float(atol), int(max_steps), int(n_fixed), float(safety), float(min_factor), float(max_factor),
+            float(projection_tol))
         return status, Xw, Uw, t, (h_next if h_next > 0.0 else None), steps, rejected, n_rhs
