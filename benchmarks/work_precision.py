@@ -73,9 +73,9 @@ class Budget:
     sweep: wall time of all of one method's settings on one scene, after which no further setting starts...
     sweep_cap: ...unless the method still has fewer than `min_ok` successful settings, or the next setting is
         predicted to reach an error level (1e-3/1e-6/1e-9 m) it has not reached yet; then up to this cap.
-    A setting is only started if its predicted wall time (the previous setting's, scaled by the knob ratio for
-    fixed steps, by the last growth for tolerances) fits within the applicable limit and the run timeout;
-    the settings not started are recorded as skipped, with the prediction.
+    A setting is only started if its predicted wall time (_predict_wall: the last successful setting's, scaled
+    by the knob ratio for fixed steps, by the last growth for tolerances) fits within the applicable limit
+    and the run timeout; the settings not started are recorded as skipped, with the prediction.
     Other stops: the error is below the reference floor; below 1e-10 m with >= min_ok settings (finer
     settings only probe round-off; the finest level is 1e-9 m); the error grew three times in a row below
     1e-6 m (round-off); max_failures failed settings in a row."""
@@ -87,7 +87,7 @@ class Budget:
 
 
 FULL_BUDGET = Budget(run_timeout=60.0, sweep=90.0, sweep_cap=120.0, min_ok=6)
-QUICK_BUDGET = Budget(run_timeout=60.0, sweep=4.0, sweep_cap=20.0, min_ok=2)
+QUICK_BUDGET = Budget(run_timeout=60.0, sweep=4.0, sweep_cap=60.0, min_ok=2)
 QUICK_OK_RUNS = 3        # --quick: three successful settings a method
 ENOUGH_ERROR = 1e-10     # below the finest level (1e-9 m): more settings only measure round-off
 
@@ -154,20 +154,22 @@ def all_methods(quick: bool):
 
 # ------------------------------------------------------------------------------------------------ runs
 def _predict_wall(rows, knob_kind: str, knob_next: float):
-    """Predicted wall time [s] of the next setting from the last one run (None before the first): fixed steps
-    scale with the number of steps (a failed fixed-step run stopped early, so its scaled time is a lower
-    bound); tolerances with the growth between the last two successful settings (clamped to 1..4; 1.5
-    without two), from successful settings only (a failed adaptive run can take longer than any successful
-    one: step-size underflow after ever smaller steps)."""
-    done = [r for r in rows if r.get("wall_seconds") is not None
-            and (knob_kind == "dt" or r.get("status") == "ok")]
+    """Predicted wall time [s] of the next setting (None before the first run). From the last successful
+    setting: fixed steps scale with the number of steps, tolerances with the growth between the last two
+    successful settings (clamped to 1..4; 1 without two). After failures only (the step still too coarse):
+    the last failed setting's own wall time, unscaled -- a failed run is no guide to a successful one (a
+    projection struggling at a too coarse step, or step-size underflow, costs more per step than a finer
+    step that succeeds), but one that already took long is likely to be followed by a long one."""
+    done = [r for r in rows if r.get("wall_seconds") is not None]
     if not done:
         return None
-    last = done[-1]
+    oks = [r for r in done if r.get("status") == "ok"]
+    if not oks:
+        return done[-1]["wall_seconds"]
+    last = oks[-1]
     if knob_kind == "dt":
         return last["wall_seconds"] * last["value"] / knob_next
-    oks = [r for r in done if r.get("status") == "ok"]
-    growth = 1.5
+    growth = 1.0   # one loose-tolerance run can cost more than the next (rejections at the whip)
     if len(oks) >= 2 and oks[-2]["wall_seconds"] > 0:
         growth = min(4.0, max(1.0, oks[-1]["wall_seconds"] / oks[-2]["wall_seconds"]))
     return last["wall_seconds"] * growth
@@ -481,17 +483,27 @@ def plot_scene(sname, sres, path: Path):
 PEER_NOTES = [
     "Timing: wall time of the integration only, model construction excluded (OpenMM Context creation, Exudyn "
     "Assemble, MuJoCo compile, linknet Simulator construction, scipy RHS setup); runs under 0.2 s are repeated "
-    "and the fastest kept.",
+    "and the fastest kept. Every method runs in one worker process (the same for all methods, restarted only "
+    "after a timeout), timed inside it.",
     "scipy-RK45 / scipy-DOP853: solve_ivp on the unprojected index-1 formulation (seed (9),(25),(26)), "
     "atol = 1e-3·rtol; the constraint drift is not corrected (naive baseline).",
     "OpenMM VerletIntegrator (leapfrog) with constraint tolerance 1e-12; anchored masses are particles of mass "
     "1e20 (OpenMM refuses constraints on massless particles); initial velocity given at -dt/2 from the exact "
-    "initial accelerations. Units m→nm, s→ps, kg→amu are exact (kJ/mol = amu nm²/ps²).",
+    "initial accelerations. Units m→nm, s→ps, kg→amu are exact (kJ/mol = amu nm²/ps²). OpenMM's CCMA builds "
+    "its constraint-coupling matrix once from angles given by triangles of constraints or angle forces; our "
+    "scenes have neither, so it iterates plain Jacobi SHAKE (150 iterations at most): too slow on chains (the "
+    "iteration radius is 1 - 1.2e-6 for chain_1000, hence its residuals) and divergent on net_10x10 once the "
+    "falling cloth folds (radius > 1 from t ≈ 0.1 s: NaN at every step; `python -m benchmarks.peers.openmm_peer "
+    "net_10x10`).",
     "Exudyn generalized-alpha, spectral radius 0.9 (Exudyn's default; 1.0 fails on the whipping chain), index-3 "
-    "constraints, full Newton to 1e-12; fixed step.",
-    "MuJoCo RK4 on ball-jointed bodies: exact link lengths by construction, point masses given inertia "
-    "1e-12·m·R²; only trees hanging from anchors (no faithful rigid distance constraint for closed loops: "
-    "MuJoCo's equality constraints are soft and of connect/weld type).",
+    "constraints, full Newton to 1e-12; fixed step. On chain_1000 its Newton iteration contracts only "
+    "linearly (factor ~0.7 per iteration with fresh Jacobians) from the second step and gives up after 50 "
+    "iterations, at every step and every Newton tolerance tried (1e-12 .. 1e-6).",
+    "MuJoCo RK4 on ball-jointed bodies built with MjSpec: exact link lengths by construction, point masses "
+    "given inertia eps·m·R² (eps = 1e-12 .. 1e-6 with depth); only trees hanging from anchors (no faithful "
+    "rigid distance constraint for closed loops: MuJoCo's equality constraints are soft and of connect/weld "
+    "type). Its joint-space mass matrix of a chain N bodies deep is dense: chain_1000 takes ~2-3 s per forward "
+    "pass, so every setting is predicted past the run budget and skipped.",
     "ASE VelocityVerlet + FixBondLengths (RATTLE, link-by-link Python loop, tolerance 1e-13); anchored masses "
     "of mass 1e20.",
 ]

@@ -74,3 +74,113 @@ class OpenMMVerlet(Method):
         U = Uh + 0.5 * dt * acc1
         U[spec.fixed] = 0.0
         return RunResult(X, U, tm.seconds, setup.seconds, steps=n, info={"platform": self.platform})
+
+
+# ------------------------------------------------------------------------------------------ diagnosis
+def jacobi_radius(spec, X, preconditioner=None) -> float:
+    """Spectral radius of the iteration OpenMM's CCMA performs on this configuration. CCMA corrects all
+    constraints at once with the inverse of a coupling matrix it builds once, at Context creation, from
+    angles it can find (a third constraint closing a triangle, or a HarmonicAngleForce); with neither, as in
+    our scenes, that matrix is the identity and the iteration is plain Jacobi on A = C M^-1 C^T, whose error
+    is multiplied by I - D^-1 A per iteration (D = diag A). `preconditioner` = the t = 0 matrix D^-1 A(X0)
+    gives the radius had CCMA been handed the initial angles instead. Above 1 the iteration diverges."""
+    inv_m = np.where(spec.fixed, 1.0 / ANCHOR_MASS, 1.0 / np.where(spec.fixed, 1.0, spec.mass))
+    M = _scaled_coupling(spec, X, inv_m)
+    P = np.eye(spec.L) if preconditioner is None else np.linalg.inv(preconditioner)
+    return float(np.abs(np.linalg.eigvals(np.eye(spec.L) - P @ M)).max())
+
+
+def _scaled_coupling(spec, X, inv_m):
+    d = X[spec.k2] - X[spec.k1]
+    E = d / np.linalg.norm(d, axis=1)[:, None]
+    C = np.zeros((spec.L, 3 * spec.K))   # dense: a diagnostic for scenes of a few hundred links
+    rows = np.arange(spec.L)
+    for a in range(3):
+        C[rows, 3 * spec.k1 + a] = E[:, a]
+        C[rows, 3 * spec.k2 + a] = -E[:, a]
+    A = (C * np.repeat(inv_m, 3)[None, :]) @ C.T
+    return A / np.diag(A)[:, None]
+
+
+def _blowup_time(spec, dt, t_end, platform="Reference", anchor_mass=ANCHOR_MASS, tol=1e-12, angle_hints=False,
+                 chunk_s=0.005):
+    """Simulate as the benchmark does and report when the coordinates first become non-finite. angle_hints:
+    add zero-stiffness HarmonicAngleForce terms at the initial angles (no force; CCMA reads its coupling
+    matrix from them)."""
+    import openmm as mm
+    system = mm.System()
+    for k in range(spec.K):
+        system.addParticle(anchor_mass if spec.fixed[k] else float(spec.mass[k]))
+    for a, b, r in zip(spec.k1, spec.k2, spec.length):
+        system.addConstraint(int(a), int(b), float(r))
+    grav = mm.CustomExternalForce("-m*(gx*x+gy*y+gz*z)")
+    grav.addPerParticleParameter("m")
+    for name, v in zip(("gx", "gy", "gz"), spec.gravity):
+        grav.addGlobalParameter(name, float(v))
+    for k in np.flatnonzero(spec.free):
+        grav.addParticle(int(k), [float(spec.mass[k])])
+    system.addForce(grav)
+    if angle_hints:
+        angles = mm.HarmonicAngleForce()
+        nbrs = {}
+        for a, b in zip(spec.k1, spec.k2):
+            nbrs.setdefault(int(a), []).append(int(b))
+            nbrs.setdefault(int(b), []).append(int(a))
+        for c, ns in nbrs.items():   # diagnostic setup, once
+            for i in range(len(ns)):
+                for j in range(i + 1, len(ns)):
+                    u, v = spec.X0[ns[i]] - spec.X0[c], spec.X0[ns[j]] - spec.X0[c]
+                    cos = float(u @ v / (np.linalg.norm(u) * np.linalg.norm(v)))
+                    angles.addAngle(ns[i], c, ns[j], float(np.arccos(np.clip(cos, -1.0, 1.0))), 0.0)
+        system.addForce(angles)
+    integ = mm.VerletIntegrator(dt)
+    integ.setConstraintTolerance(tol)
+    ctx = mm.Context(system, integ, mm.Platform.getPlatformByName(platform),
+                     {"Threads": "1"} if platform == "CPU" else {})
+    acc0, _ = Index1System(spec).accelerations(spec.X0, spec.U0)
+    ctx.setPositions(spec.X0)
+    ctx.setVelocities(spec.U0 - 0.5 * dt * acc0)
+    chunk = max(1, int(round(chunk_s / dt)))
+    n, done, residual = int(round(t_end / dt)), 0, None
+    while done < n:
+        try:
+            integ.step(chunk)
+        except Exception as e:   # the CPU platform raises on NaN coordinates
+            return f"{type(e).__name__} between t = {done * dt:.3f} and {(done + chunk) * dt:.3f} s"
+        done += chunk
+        X = np.asarray(ctx.getState(getPositions=True).getPositions(asNumpy=True)._value, dtype=float)
+        if not np.all(np.isfinite(X)):
+            return f"non-finite coordinates between t = {(done - chunk) * dt:.3f} and {done * dt:.3f} s"
+        if done * dt <= 0.05 + 1e-12:
+            residual = spec.constraint_residual(X)
+    return f"finite to t = {t_end} s (constraint residual at 0.05 s: {residual:.2g})"
+
+
+def diagnose(scene: str = "net_10x10", t_end: float = 0.25):
+    """Why OpenMM's runs of `scene` blow up: CCMA's iteration radius along an independent trajectory
+    (benchmarks.index1, scipy DOP853 rtol 1e-10), and when OpenMM's coordinates become NaN for several steps,
+    anchor masses, tolerances and both platforms."""
+    from scipy.integrate import solve_ivp
+
+    from ..work_precision import load_benchmark_scene
+    spec = load_benchmark_scene(scene)
+    sys_ = Index1System(spec)
+    times = [0.0, 0.025, 0.05, 0.075, 0.09, 0.1, 0.125, 0.15, 0.2, 0.25]
+    times = [t for t in times if t <= t_end]
+    sol = solve_ivp(sys_.rhs, (0, t_end), sys_.y0(), method="DOP853", rtol=1e-10, atol=1e-13, t_eval=times)
+    inv_m = np.where(spec.fixed, 1.0 / ANCHOR_MASS, 1.0 / np.where(spec.fixed, 1.0, spec.mass))
+    M0 = _scaled_coupling(spec, spec.X0, inv_m)
+    print(f"{scene}: radius of CCMA's iteration along the motion (> 1: diverges)")
+    for t, y in zip(sol.t, sol.y.T):
+        X, _ = sys_.split(y)
+        print(f"  t = {t:5.3f} s   as OpenMM runs it (identity matrix, plain Jacobi): {jacobi_radius(spec, X):.4f}"
+              f"   with the t = 0 angles supplied: {jacobi_radius(spec, X, M0):.4f}")
+    print("when OpenMM's coordinates become non-finite:")
+    for dt, kw in ((1e-3, {}), (1e-4, {}), (1e-5, {}), (1e-4, {"anchor_mass": 1e3}), (1e-4, {"tol": 1e-6}),
+                   (1e-4, {"platform": "CPU"}), (1e-4, {"angle_hints": True})):
+        print(f"  dt = {dt:g} s {kw or ''}: {_blowup_time(spec, dt, t_end, **kw)}", flush=True)
+
+
+if __name__ == "__main__":
+    import sys
+    diagnose(*sys.argv[1:2])
