@@ -78,14 +78,33 @@ class Index1System:
         return A
 
     def _is_redundant(self) -> bool:
+        """Do the links admit a state of self-stress (seed (27)-(36))? Decided on the constraint Jacobian C
+        (rows +-E_l over the free masses), which does not involve the masses: a test on A = C M^-1 C^T would
+        take a chain with mass ratios 1e-6..1e6 (cond A ~ 1e12, physically ill-conditioned but of full rank)
+        for a redundant one and give it truncated least-squares tensions."""
         if self.L == 0:
             return False
-        A = self.tension_matrix(self.spec.X0)
+        X = self.spec.X0
+        E = (X[self.k2] - X[self.k1]) / self.R[:, None]
+        free = np.flatnonzero(~self.spec.fixed)
+        col = np.full(self.K, -1)
+        col[free] = np.arange(len(free))
+        rows, cols, vals = [], [], []
+        for ends, sign in ((self.k1, 1.0), (self.k2, -1.0)):
+            keep = col[ends] >= 0
+            for a in range(3):
+                rows.append(np.flatnonzero(keep))
+                cols.append(3 * col[ends[keep]] + a)
+                vals.append(sign * E[keep, a])
+        C = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(self.L, 3 * len(free)))
+        if self.L > 3 * len(free):
+            return True
         if self.dense:
-            s = np.linalg.svd(A, compute_uv=False)
+            s = np.linalg.svd(C.toarray(), compute_uv=False)
             return bool(s[-1] <= 1e-10 * s[0])
-        try:
-            spla.splu(A).solve(np.ones(self.L))
+        try:   # C C^T is the tension matrix of unit masses: singular exactly when C has dependent rows
+            spla.splu((C @ C.T).tocsc()).solve(np.ones(self.L))
             return False
         except RuntimeError:
             return True
