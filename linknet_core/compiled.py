@@ -141,6 +141,21 @@ def solve_chain(b, chain_order, chain_sub, Dinv, w, out):
 
 
 @kernel
+def _link_terms(X, U, F, a, b, r, ia, ib):
+    """E_l of (8) and B_l of (26) for one link from k1 = a to k2 = b (r = 1/R_l, ia, ib = 1/M_a, 1/M_b)."""
+    e0 = (X[b, 0] - X[a, 0]) * r
+    e1 = (X[b, 1] - X[a, 1]) * r
+    e2 = (X[b, 2] - X[a, 2]) * r
+    du0 = U[b, 0] - U[a, 0]
+    du1 = U[b, 1] - U[a, 1]
+    du2 = U[b, 2] - U[a, 2]
+    # B_l of (26): |U_k2 - U_k1|^2 / R_l + E_l . (F_k2/M_k2 - F_k1/M_k1)
+    rhs = ((du0 * du0 + du1 * du1 + du2 * du2) * r + e0 * (F[b, 0] * ib - F[a, 0] * ia)
+           + e1 * (F[b, 1] * ib - F[a, 1] * ia) + e2 * (F[b, 2] * ib - F[a, 2] * ia))
+    return e0, e1, e2, rhs
+
+
+@kernel
 def tensions_chain(X, U, F, k1, k2, inv_R, inv_m, chain_order, chain_diag_weight, chain_off_weight, chain_sub, D, Dinv,
                    w, E, T, link_force, refactor):
     """The tensions of (25)-(26) for a chain in two sweeps along the path: the unit vectors (8), A's entries,
@@ -150,25 +165,15 @@ def tensions_chain(X, U, F, k1, k2, inv_R, inv_m, chain_order, chain_diag_weight
     whose pivot vanished."""
     L = chain_order.shape[0]
     bad = -1
-    previous = 0
-    for i in range(L):
-        l = chain_order[i]
-        a, b = k1[l], k2[l]
-        r = inv_R[l]
-        e0 = (X[b, 0] - X[a, 0]) * r
-        e1 = (X[b, 1] - X[a, 1]) * r
-        e2 = (X[b, 2] - X[a, 2]) * r
-        E[l, 0] = e0
-        E[l, 1] = e1
-        E[l, 2] = e2
-        ia, ib = inv_m[a], inv_m[b]
-        du0 = U[b, 0] - U[a, 0]
-        du1 = U[b, 1] - U[a, 1]
-        du2 = U[b, 2] - U[a, 2]
-        # B_l of (26): |U_k2 - U_k1|^2 / R_l + E_l . (F_k2/M_k2 - F_k1/M_k1)
-        rhs = ((du0 * du0 + du1 * du1 + du2 * du2) * r + e0 * (F[b, 0] * ib - F[a, 0] * ia)
-               + e1 * (F[b, 1] * ib - F[a, 1] * ia) + e2 * (F[b, 2] * ib - F[a, 2] * ia))
-        if refactor:
+    if refactor:  # two copies of the forward sweep: a test of refactor inside it costs ~30% of the sweep
+        previous = 0
+        for i in range(L):
+            l = chain_order[i]
+            a, b = k1[l], k2[l]
+            e0, e1, e2, rhs = _link_terms(X, U, F, a, b, inv_R[l], inv_m[a], inv_m[b])
+            E[l, 0] = e0
+            E[l, 1] = e1
+            E[l, 2] = e2
             diag = chain_diag_weight[i] * (e0 * e0 + e1 * e1 + e2 * e2)
             dk = diag
             wt = chain_off_weight[i]
@@ -177,6 +182,7 @@ def tensions_chain(X, U, F, k1, k2, inv_R, inv_m, chain_order, chain_diag_weight
                 m = off * Dinv[i - 1]
                 chain_sub[i] = m
                 dk -= m * off
+                rhs -= m * w[i - 1]
             else:
                 chain_sub[i] = 0.0
             D[i] = dk
@@ -186,10 +192,19 @@ def tensions_chain(X, U, F, k1, k2, inv_R, inv_m, chain_order, chain_diag_weight
                 Dinv[i] = 0.0
                 if bad == -1:
                     bad = i
-        if i > 0:
-            rhs -= chain_sub[i] * w[i - 1]
-        w[i] = rhs
-        previous = l
+            w[i] = rhs
+            previous = l
+    else:
+        for i in range(L):
+            l = chain_order[i]
+            a, b = k1[l], k2[l]
+            e0, e1, e2, rhs = _link_terms(X, U, F, a, b, inv_R[l], inv_m[a], inv_m[b])
+            E[l, 0] = e0
+            E[l, 1] = e1
+            E[l, 2] = e2
+            if i > 0:
+                rhs -= chain_sub[i] * w[i - 1]
+            w[i] = rhs
     if bad >= 0:
         return bad
     x = 0.0
