@@ -55,8 +55,10 @@ def _open(fmu):
     return md, slave
 
 
-def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3, substeps=1):
-    """doStep of dt with `substeps` RATTLE steps inside it (solver step dt / substeps) vs Simulator.advance."""
+def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3, substeps=1, inputs="tip"):
+    """doStep of dt with `substeps` RATTLE steps inside it (solver step dt / substeps) vs Simulator.advance.
+    inputs: "tip" sets one force component per step, "all" every force input (a master that connects them
+    all), both with the same values (0.1 N on the tip, 0 elsewhere)."""
     scene = ln.load_scene(ROOT / "models" / f"{scene_name}.json")
     h = dt / substeps
     fmu = build_fmu.build_scene_fmu(ROOT / "models" / f"{scene_name}.json",
@@ -65,12 +67,16 @@ def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3, substeps=1):
     vr = {v.name: v.valueReference for v in md.modelVariables}
     tip = int(scene.free_indices[-1])
     f_vr = [vr[f"F[{tip + 1},3]"]]
+    f_val = [0.1]
+    if inputs == "all":
+        f_vr = [v.valueReference for v in md.modelVariables if v.causality == "input"]
+        f_val = [0.1 if v.name == f"F[{tip + 1},3]" else 0.0 for v in md.modelVariables if v.causality == "input"]
     initial = slave.getFMUstate()  # every repeat runs the same span [0, n_steps * dt]
 
     def fmu_run():
         t = 0.0
         for n in range(n_steps):
-            slave.setReal(f_vr, [0.1])
+            slave.setReal(f_vr, f_val)
             slave.doStep(currentCommunicationPoint=t, communicationStepSize=dt)
             t += dt
 
@@ -98,7 +104,7 @@ def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3, substeps=1):
     t_fmu = min(p[0] for p in pairs) / n_steps
     t_lib = min(p[1] for p in pairs) / n_steps
     slave.terminate()
-    return dict(scene=scene_name, K=scene.K, L=scene.L, substeps=substeps, fmu_dostep_s=t_fmu, library_advance_s=t_lib,
+    return dict(scene=scene_name, K=scene.K, L=scene.L, substeps=substeps, inputs_set=len(f_vr), fmu_dostep_s=t_fmu, library_advance_s=t_lib,
                 overhead_s=t_fmu - t_lib, ratio=t_fmu / t_lib)
 
 
@@ -162,13 +168,14 @@ def main(argv=None):
     fmu_dir.mkdir(parents=True, exist_ok=True)
     results = {"n_steps": n_steps, "repeats": repeats,
                "dostep": [bench_dostep(s, fmu_dir, n_steps, repeats, substeps=m)
-                          for m in (1, 10) for s in ("chain_10", "chain_100", "net_10x10")],
+                          for m in (1, 10) for s in ("chain_10", "chain_100", "net_10x10")]
+               + [bench_dostep("chain_100", fmu_dir, n_steps, repeats, substeps=m, inputs="all") for m in (1, 10)],
                "outputs": [bench_outputs(s, fmu_dir, n_steps, repeats) for s in ("chain_100", "net_10x10")],
                "getters": [bench_getter_paths(s, fmu_dir, repeats) for s in ("chain_100", "net_10x10")]}
-    print("1. per-doStep cost, communication step 1 ms holding 1 or 10 RATTLE steps, input set each step")
-    print(f"   {'scene':10s} {'K':>4s} {'L':>4s} {'steps':>5s} {'FMU doStep':>12s} {'Simulator.advance':>18s} {'overhead':>10s} {'ratio':>6s}")
+    print("1. per-doStep cost, communication step 1 ms holding 1 or 10 RATTLE steps, inputs set each step (setReal + doStep)")
+    print(f"   {'scene':10s} {'K':>4s} {'L':>4s} {'steps':>5s} {'inputs':>6s} {'FMU doStep':>12s} {'Simulator.advance':>18s} {'overhead':>10s} {'ratio':>6s}")
     for r in results["dostep"]:
-        print(f"   {r['scene']:10s} {r['K']:4d} {r['L']:4d} {r['substeps']:5d} {r['fmu_dostep_s'] * 1e6:10.1f}us {r['library_advance_s'] * 1e6:16.1f}us "
+        print(f"   {r['scene']:10s} {r['K']:4d} {r['L']:4d} {r['substeps']:5d} {r['inputs_set']:6d} {r['fmu_dostep_s'] * 1e6:10.1f}us {r['library_advance_s'] * 1e6:16.1f}us "
               f"{r['overhead_s'] * 1e6:8.1f}us {r['ratio']:6.2f}")
     print("2. reading all outputs per communication step through fmpy (one getReal for all X, U, T, Freact)")
     for r in results["outputs"]:

@@ -53,6 +53,9 @@ class LinknetNetwork(Fmi2Slave):
         lay = self._layout
 
         self._real = np.zeros(lay.n_real)
+        self._is_input = np.zeros(lay.n_real, dtype=bool)
+        self._is_input[np.asarray(lay.F_vr, dtype=np.int64).ravel()] = True
+        self._input_vrs, self._input_idx = None, None   # the last list of input variables set (set_real)
         self._real[lay.M_vr] = np.asarray(self._scene0.mass)[lay.free_indices]
         self._real[lay.R_vr] = self._scene0.length
         self._real[lay.g_vr] = self._scene0.gravity
@@ -146,6 +149,28 @@ class LinknetNetwork(Fmi2Slave):
 
     def set_real(self, vrs, values):
         lay = self._layout
+        if not self._bad:
+            # the common call, every communication step: finite forces onto input variables. One array
+            # assignment instead of a Python loop per variable (~0.5 us each: 300 inputs of chain_100 would
+            # cost ~150 us, several RATTLE steps). A master sets the same variables every step, so the
+            # checks on the value references are done once for a list and remembered (a list comparison
+            # costs ~1.5 us for 300, the array conversion and checks ~12 us). Anything else: the loop below.
+            if vrs == self._input_vrs:
+                idx = self._input_idx
+            else:
+                idx = np.asarray(vrs, dtype=np.int64)
+                if not (idx.ndim == 1 and idx.size and idx.min() >= 0 and idx.max() < lay.n_real
+                        and self._is_input[idx].all()):
+                    idx = None
+                else:
+                    self._input_vrs, self._input_idx = list(vrs), idx
+            if idx is not None:
+                vals = np.asarray(values, dtype=float)
+                if vals.shape == idx.shape and np.isfinite(vals).all():
+                    self._real[idx] = vals
+                    self._F[lay.input_masses] = self._real[lay.F_vr]
+                    self._outputs_stale = True
+                    return
         changed_parameter = False
         for vr, value in zip(vrs, values):
             if not 0 <= vr < lay.n_real:
@@ -251,15 +276,10 @@ class LinknetNetwork(Fmi2Slave):
             return True
         try:
             # Simulator.advance leaves the state at t when it raises (the step can be retried
-            # after fmi2SetFMUstate or with other inputs)
+            # after fmi2SetFMUstate or with other inputs) and guarantees a finite state when it returns
             self._sim.advance(t + h, self._F)
         except ln.LinknetError as e:
             self._error(f"doStep from t={t!r} with h={h!r} failed: {e}")
-            return False
-        st = self._sim.state
-        if not (np.all(np.isfinite(st.X)) and np.all(np.isfinite(st.U))):
-            self._broken = f"the state became non-finite during [{t!r}, {t + h!r}]"
-            self._error(self._broken)
             return False
         self._outputs_stale = True
         return True

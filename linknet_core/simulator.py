@@ -83,6 +83,14 @@ def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: boo
     return X, U_projected, InitialReport(worst, projected, dv, worst_mass)
 
 
+def _finite_state(X: np.ndarray, U: np.ndarray) -> bool:
+    """One check per advance, for every path (point-mass, compiled, specialised). A sum of squares is
+    non-finite iff an entry is non-finite or beyond ~1e154, which is no physical state either; it costs
+    ~0.8 us against ~2.3 us for two isfinite passes (this runs on every FMU doStep)."""
+    x, u = X.ravel(), U.ravel()
+    return math.isfinite(float(x.dot(x)) + float(u.dot(u)))
+
+
 class Simulator:
     """One scene, one integrator, one state: the stepping interface.
 
@@ -137,6 +145,8 @@ class Simulator:
         return F
 
     def advance(self, t_next: float, F_input=None) -> None:
+        """Integrate to t_next with F_input held. On success the state is finite; on any error the simulator
+        is left exactly as before the call (state and integrator internals)."""
         F = self.check_input(F_input)
         t_next = float(t_next)
         if not math.isfinite(t_next) or not t_next > self.state.t:
@@ -147,6 +157,9 @@ class Simulator:
         before = (self.state.copy(), self.integrator.internals())
         try:
             self.integrator.advance(self.state, t_next, F, self.max_steps_per_call)
+            if not _finite_state(self.state.X, self.state.U):
+                raise SolverError(f"the state became non-finite between t = {before[0].t} and t = {t_next} "
+                                  f"(largest |X| {np.abs(self.state.X).max()} m); reduce the step or tolerance")
         except Exception:
             # leave the simulator where it was, so a caller can retry with other settings
             self.state, internals = before

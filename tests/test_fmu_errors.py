@@ -126,3 +126,54 @@ save(X=f.get(f.names('X')), T=f.get(f.names('T')), t=t)
         t += h
     np.testing.assert_allclose(out["X"], sim.state.X.ravel(), rtol=0, atol=1e-13)
     np.testing.assert_allclose(out["T"], sim.outputs()["T"], rtol=1e-12, atol=1e-12)
+
+
+def test_setting_every_force_input_in_one_call_matches_library_and_a_bad_entry_is_refused(fmu_dir):
+    """A master that connects every force input sets them all in one fmi2SetReal per step (the slave's
+    array fast path, remembering the checked list of value references). Same forces in the library: same
+    trajectory. A NaN inside such a call, or an output's value reference in it, still gets the checks."""
+    fmu = build_cached(fmu_dir, str(MODELS / "chain_10.json"), step=1e-3)
+    out = run_client(f"""
+{FMU_CLIENT_LIB}
+f = Fmu({str(fmu)!r})
+f.init()
+names = f.names('F')
+t, h, X = 0.0, 0.01, []
+for n in range(20):
+    f.set({{name: 0.3 * np.sin(7 * t + j) for j, name in enumerate(names)}})
+    f.step(t, h); t += h
+    X.append(f.get(f.names('X')))
+LOG.clear()
+values = {{name: 0.0 for name in names}}
+values[names[5]] = float('nan')
+f.set(values)
+try:
+    f.step(t, h); nan_status = 0
+except FMICallException as e:
+    nan_status = e.status
+nan_log = [m for s, m in LOG]
+LOG.clear()
+f.slave.setReal([f.vr[names[0]], f.vr['X[3,1]']], [0.0, 5.0])   # an input and an output in one call
+mixed_log = [m for s, m in LOG]
+f.set({{name: 0.0 for name in names}})
+f.step(t, h)
+save(X=np.array(X), nan_status=nan_status, nan_log=np.array(nan_log), mixed_log=np.array(mixed_log),
+     names=np.array(names))
+""", fmu_dir / "client_all_inputs")
+    scene = ln.load_scene(MODELS / "chain_10.json")
+    names = list(out["names"])
+    sim = ln.Simulator(scene, method="rattle", dt=1e-3)
+    t, X = 0.0, []
+    for n in range(20):
+        F = np.zeros((scene.K, 3))
+        for j, name in enumerate(names):          # F[k,i], 1-based
+            k, i = (int(v) for v in name[2:-1].split(","))
+            F[k - 1, i - 1] = 0.3 * np.sin(7 * t + j)
+        sim.advance(t + 0.01, F)
+        t += 0.01
+        X.append(sim.state.X.ravel().copy())
+    np.testing.assert_allclose(out["X"], np.array(X), rtol=0, atol=1e-12)
+    assert np.ptp(np.array(X)[:, -1]) > 1e-3      # the forces moved the chain
+    assert out["nan_status"] == 2                  # fmi2Discard
+    assert any(names[5] in m and "finite" in m for m in out["nan_log"])
+    assert any("X[3,1]" in m and "output" in m for m in out["mixed_log"])
