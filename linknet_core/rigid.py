@@ -15,9 +15,14 @@ Two classes of scenes pay the full point-mass machinery of (9), (25)-(26) for no
   masses are allowed. Anchored masses joined by no link (spring attachment points) are allowed too. The
   tensions at an output are the minimum-norm solution of C^T T = M a - F, with a_k the rigid-body
   accelerations a_c + alpha x rho_k + w x (w x rho_k) ((9) solved for the link forces); unique when the
-  body has no redundant link (31). Fixed-step methods only: rattle is the base step, suzuki4 and
-  yoshida4/6/8 compose it with the step fractions of :mod:`linknet_core.integrators.composition`.
-  Adaptive methods keep the point-mass path.
+  body has no redundant link (31). Fixed-step methods (:class:`RigidBodyPath`): rattle is the base step
+  kick-drift-rotate-kick, suzuki4 and yoshida4/6/8 compose it with the step fractions of
+  :mod:`linknet_core.integrators.composition`. Adaptive methods (dopri5, dop853:
+  :class:`linknet_core.rigid_adaptive.AdaptiveRigidBodyPath`) integrate the Newton-Euler equations of the
+  body state with their own embedded pair and step-size controller, the error measured on the masses'
+  positions and velocities as on the point-mass path; they take their rtol/atol from the point-mass
+  integrator handed to :func:`choose_specialisation` (``integrator=``), and keep the point-mass path
+  without one.
 
 Everything else takes the point-mass path, with the reason reported.
 """
@@ -53,6 +58,7 @@ class Specialisation:
     reason: str  # 'none': why not; otherwise a description
     bodies: "BodyLayout | None" = None
     notes: list = field(default_factory=list)
+    tolerances: "tuple[float, float] | None" = None  # (rtol, atol) of an adaptive method's rigid-body path
 
     def text(self) -> str:
         if self.kind == STATIC:
@@ -147,8 +153,12 @@ def _group(labels: np.ndarray, n: int) -> list:
 
 
 def choose_specialisation(scene: Scene, dyn: Dynamics, method: str | None = None, backend: str = "auto",
-                          enabled: bool = True) -> Specialisation:
-    """The specialisation of ``scene`` for ``method`` (None: report what each kind of method gets)."""
+                          enabled: bool = True, integrator: Integrator | None = None) -> Specialisation:
+    """The specialisation of ``scene`` for ``method`` (None: report what each kind of method gets).
+
+    ``integrator``: the point-mass integrator the path would stand in for. An adaptive method's rigid-body
+    path takes its tolerances (rtol, atol) from it; without it an adaptive method keeps the point-mass path.
+    """
     if not enabled:
         return Specialisation(NONE, "specialise=False: the point-mass path was asked for")
     if backend != "auto":
@@ -169,20 +179,33 @@ def choose_specialisation(scene: Scene, dyn: Dynamics, method: str | None = None
             return Specialisation(NONE, "no links")
         dof = 3 * n_free - st.rank_G
         return Specialisation(NONE, f"not static ({dof} degrees of freedom) and not free rigid bodies: {why}")
-    adaptive = sorted(name for name, cls in METHODS.items() if cls.adaptive)
-    if method is not None and METHODS[method].adaptive:
-        counted = _count(bodies.count, "free rigid body", "free rigid bodies")
-        return Specialisation(NONE, f"{counted}, but the adaptive method {method} keeps the point-mass path "
-                                    "(the rigid-body path is fixed-step)")
+    adaptive = method is not None and METHODS[method].adaptive
+    tolerances = None
+    if adaptive:
+        if integrator is None or not hasattr(integrator, "rtol"):
+            counted = _count(bodies.count, "free rigid body", "free rigid bodies")
+            return Specialisation(NONE, f"{counted}, but no tolerances were handed over for the adaptive method "
+                                        f"{method}'s rigid-body path (choose_specialisation(..., integrator=)): "
+                                        "it keeps the point-mass path")
+        tolerances = (float(integrator.rtol), float(integrator.atol))
     _, _, moments, _ = _principal_moments(scene, scene.X0, bodies.body_of, bodies.count)
     kinds = _top_kinds(moments)
     counts = np.bincount(kinds, minlength=3)
     described = ", ".join(_count(n, TOP_NAMES[i], TOP_NAMES[i] + "s") for i, n in enumerate(counts) if n)
-    how = ("c, v, quaternion and body angular momentum per body; kick, drift, free rotation (exact for "
-           "spherical and symmetric tops, DLM splitting otherwise), kick")
+    fixed_step = ("kick, drift, free rotation (exact for spherical and symmetric tops, DLM splitting otherwise), "
+                  "kick")
+    embedded = ("Newton-Euler equations (Euler's equations for Pi, quaternion kinematics) by the method's embedded "
+                "Runge-Kutta pair, error control on the masses' positions and velocities, quaternion renormalised "
+                "after every step")
+    how = "c, v, quaternion and body angular momentum per body; "
     if method is None:
-        how += f"; fixed-step methods only, {'/'.join(adaptive)} keep the point-mass path"
-    return Specialisation(RIGID, f"{described}; {how}", bodies)
+        adaptive_names = "/".join(sorted(name for name, cls in METHODS.items() if cls.adaptive))
+        how += f"fixed-step methods: {fixed_step}; adaptive methods ({adaptive_names}): {embedded}"
+    elif adaptive:
+        how += f"{embedded} (rtol {tolerances[0]:g}, atol {tolerances[1]:g})"
+    else:
+        how += fixed_step
+    return Specialisation(RIGID, f"{described}; {how}", bodies, tolerances=tolerances)
 
 
 def _count(n: int, one: str, many: str) -> str:
@@ -250,21 +273,15 @@ def _quaternions(R: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=1)[:, None]
 
 
-class RigidBodyPath(FixedStepIntegrator):
-    """Fixed-step integration of free rigid bodies: the step is a composition (gammas of ``method``) of the
-    base step of :func:`linknet_core.rigid_kernels.rigid_advance`, whole intervals in one compiled call."""
+class RigidBodies:
+    """What every free-rigid-body path shares (mixed into an integrator): the body layout, the body frames
+    (principal axes) and body-frame mass positions r_k fixed once, the body state (c, v, q, Pi), refitting it
+    to a mass state set from outside, snapshots, and the rigid-body accelerations and tensions."""
 
-    def __init__(self, dynamics: Dynamics, method: str, dt: float, bodies: BodyLayout, X0, U0):
-        super().__init__(dynamics, dt=dt)
+    def _init_bodies(self, dynamics: Dynamics, bodies: BodyLayout, X0, U0) -> None:
         from . import rigid_kernels
 
         self._kernels = rigid_kernels
-        cls = METHODS[method]
-        self.name, self.order, self.symplectic = cls.name, cls.order, cls.symplectic
-        self.gammas = np.asarray(cls.gammas, float)
-        self.guarantees = (f"order {cls.order} ({'base step' if cls.gammas == (1.0,) else 'composition'} of the "
-                           "rigid-body kick-drift-rotate-kick); symplectic and time-reversible for conservative "
-                           "forces; link lengths kept to round-off by construction")
         scene = dynamics.scene
         self.bodies = bodies
         self.notes: list[str] = []
@@ -313,6 +330,11 @@ class RigidBodyPath(FixedStepIntegrator):
         self._set_bodies(*self._fit(X0, U0))
         self._last = (X0.copy(), U0.copy())
 
+    def _base_forces(self, F_input) -> np.ndarray:
+        """Gravity, constant forces and the input held over the interval (zero-order hold), for the kernels."""
+        F_base = self._F_scene if F_input is None else self._F_scene + F_input
+        return np.ascontiguousarray(F_base, dtype=float)
+
     # ---- body state <-> mass state ---------------------------------------------------------------
     def _fit(self, X, U):
         """Body state (c, v, q, Pi) of a mass state: centre of mass and momentum, the rotation that best
@@ -351,25 +373,7 @@ class RigidBodyPath(FixedStepIntegrator):
             self._set_bodies(*self._fit(X, U))
             self._last = (np.array(X, float), np.array(U, float))
 
-    # ---- stepping -------------------------------------------------------------------------------
-    def _advance_steps(self, X, U, n, h, F_input):
-        self._sync(X, U)
-        F_base = self._F_scene if F_input is None else self._F_scene + F_input
-        c, v, q, Pi = (a.copy() for a in (self._c, self._v, self._q, self._Pi))
-        Xw = np.array(X, float, order="C")
-        Uw = np.array(U, float, order="C")
-        status = self._kernels.rigid_advance(c, v, q, Pi, int(n), float(h), self.gammas, self.kind, self.inertia,
-                                             self.body_mass, self.bodies.body_of, self.r, Xw, Uw,
-                                             np.ascontiguousarray(F_base, dtype=float), *self._force_args,
-                                             self._velocity_dependent)
-        if status == self._kernels.KICK_NOT_CONVERGED:
-            raise SolverError(f"the implicit half kick of the rigid bodies did not converge with h = {h:.3g} s: the "
-                              "drag or spring damping is too stiff for this step; reduce dt")
-        if status == self._kernels.OK:  # (a non-finite state is refused by the caller, which restores us)
-            self._set_bodies(c, v, q, Pi)
-            self._last = (Xw.copy(), Uw.copy())
-        return Xw, Uw
-
+    # ---- snapshots (cooperative: the integrator's own internals come from super()) ----------------
     def internals(self) -> dict:
         out = super().internals()
         out["bodies"] = {"c": self._c.copy(), "v": self._v.copy(), "q": self._q.copy(), "Pi": self._Pi.copy(),
@@ -451,13 +455,51 @@ class RigidBodyPath(FixedStepIntegrator):
         return self._tension_operator @ b.ravel()
 
 
+class RigidBodyPath(RigidBodies, FixedStepIntegrator):
+    """Fixed-step integration of free rigid bodies: the step is a composition (gammas of ``method``) of the
+    base step of :func:`linknet_core.rigid_kernels.rigid_advance`, whole intervals in one compiled call."""
+
+    def __init__(self, dynamics: Dynamics, method: str, dt: float, bodies: BodyLayout, X0, U0):
+        FixedStepIntegrator.__init__(self, dynamics, dt=dt)
+        cls = METHODS[method]
+        self.name, self.order, self.symplectic = cls.name, cls.order, cls.symplectic
+        self.gammas = np.asarray(cls.gammas, float)
+        self.guarantees = (f"order {cls.order} ({'base step' if cls.gammas == (1.0,) else 'composition'} of the "
+                           "rigid-body kick-drift-rotate-kick); symplectic and time-reversible for conservative "
+                           "forces; link lengths kept to round-off by construction")
+        self._init_bodies(dynamics, bodies, X0, U0)
+
+    def _advance_steps(self, X, U, n, h, F_input):
+        self._sync(X, U)
+        c, v, q, Pi = (a.copy() for a in (self._c, self._v, self._q, self._Pi))
+        Xw = np.array(X, float, order="C")
+        Uw = np.array(U, float, order="C")
+        status = self._kernels.rigid_advance(c, v, q, Pi, int(n), float(h), self.gammas, self.kind, self.inertia,
+                                             self.body_mass, self.bodies.body_of, self.r, Xw, Uw,
+                                             self._base_forces(F_input), *self._force_args,
+                                             self._velocity_dependent)
+        if status == self._kernels.KICK_NOT_CONVERGED:
+            raise SolverError(f"the implicit half kick of the rigid bodies did not converge with h = {h:.3g} s: the "
+                              "drag or spring damping is too stiff for this step; reduce dt")
+        if status == self._kernels.OK:  # (a non-finite state is refused by the caller, which restores us)
+            self._set_bodies(c, v, q, Pi)
+            self._last = (Xw.copy(), Uw.copy())
+        return Xw, Uw
+
+
 def build_path(spec: Specialisation, dyn: Dynamics, method: str, dt: float | None, X0, U0):
     """The integrator-like object of a specialisation and the initial state it starts from."""
     if spec.kind == STATIC:
         path = StaticPath(dyn, method, X0)
         return path, (path.X0, path.U0)
     if spec.kind == RIGID:
-        path = RigidBodyPath(dyn, method, dt, spec.bodies, X0, U0)
+        if METHODS[method].adaptive:
+            from .rigid_adaptive import AdaptiveRigidBodyPath
+
+            rtol, atol = spec.tolerances
+            path = AdaptiveRigidBodyPath(dyn, method, rtol, atol, spec.bodies, X0, U0)
+        else:
+            path = RigidBodyPath(dyn, method, dt, spec.bodies, X0, U0)
         spec.notes.extend(path.notes)
         return path, path.initial_state
     raise ValueError(f"no path for specialisation {spec.kind!r}")

@@ -33,6 +33,7 @@ from numba import njit
 
 from .compiled import external_forces as _forces  # the force model F_k of (9), shared with the RATTLE loop
 
+
 SPHERICAL, SYMMETRIC, ASYMMETRIC = 0, 1, 2
 OK, NON_FINITE, KICK_NOT_CONVERGED = 0, 1, 2
 EPS = 2.220446049250313e-16
@@ -246,3 +247,336 @@ def rigid_advance(c, v, q, Pi, n_steps, h, gammas, kind, inertia, body_mass, bod
                     return NON_FINITE
     mass_states(c, v, q, Pi, inertia, body_of, r, R, X, U)
     return OK
+
+
+# ---- embedded Runge-Kutta on the Newton-Euler equations (adaptive methods) ---------------------------
+#
+# The body state is one row of Y (B, 13): c (0:3), v (3:6), q (6:10), Pi (10:13). Its derivative is
+#     dc/dt = v,  dv/dt = f / m,  dq/dt = q (x) (0, w) / 2,  dPi/dt = Pi x w + R^T tau,   w = Pi / I,
+# (Newton for the centre of mass, Euler's equations in the body frame, quaternion kinematics), f and tau
+# the resultant and moment about c of the external forces F_k of (9) at the mass states of Y. The map
+# Y -> masses uses the rotation of q / |q| (the exact flow keeps |q|, a stage may not), and after every
+# accepted step q is renormalised: the analogue of the point-mass path's projection onto (11)-(12).
+# The error estimate is formed as the point-mass path forms it, from the masses' velocities and
+# accelerations at the stages (sum_i E_i (U_k, dU_k/dt)(Y_i)), in its norm, so that rtol/atol mean the same
+# there and here (see linknet_core.rigid_adaptive for why not from the body-state derivatives).
+
+STEP_UNDERFLOW, TOO_MANY_STEPS = 3, 4
+RMS_ERROR, HAIRER_ERROR = 0, 1  # as linknet_core.compiled_rk
+
+
+@njit(cache=True, error_model="numpy")
+def body_rotations(Y, R):
+    """R[b] of the unit quaternion q[b] / |q[b]|, q[b] = Y[b, 6:10] (the homogeneous form: a rotation for any q)."""
+    for b in range(Y.shape[0]):
+        w, x, y, z = Y[b, 6], Y[b, 7], Y[b, 8], Y[b, 9]
+        s = 2.0 / (w * w + x * x + y * y + z * z)
+        R[b, 0, 0] = 1.0 - s * (y * y + z * z)
+        R[b, 0, 1] = s * (x * y - w * z)
+        R[b, 0, 2] = s * (x * z + w * y)
+        R[b, 1, 0] = s * (x * y + w * z)
+        R[b, 1, 1] = 1.0 - s * (x * x + z * z)
+        R[b, 1, 2] = s * (y * z - w * x)
+        R[b, 2, 0] = s * (x * z - w * y)
+        R[b, 2, 1] = s * (y * z + w * x)
+        R[b, 2, 2] = 1.0 - s * (x * x + y * y)
+
+
+@njit(cache=True, error_model="numpy")
+def body_mass_states(Y, R, inertia, body_of, r, X, U):
+    """X_k = c + R r_k, U_k = v + R (w x r_k), w = Pi / I, for the masses of a body (R from body_rotations)."""
+    for k in range(X.shape[0]):
+        b = body_of[k]
+        if b < 0:
+            continue
+        r0, r1, r2 = r[k, 0], r[k, 1], r[k, 2]
+        w0, w1, w2 = Y[b, 10] / inertia[b, 0], Y[b, 11] / inertia[b, 1], Y[b, 12] / inertia[b, 2]
+        u0, u1, u2 = w1 * r2 - w2 * r1, w2 * r0 - w0 * r2, w0 * r1 - w1 * r0  # w x r, body frame
+        for d in range(3):
+            X[k, d] = Y[b, d] + R[b, d, 0] * r0 + R[b, d, 1] * r1 + R[b, d, 2] * r2
+            U[k, d] = Y[b, 3 + d] + R[b, d, 0] * u0 + R[b, d, 1] * u1 + R[b, d, 2] * u2
+
+
+@njit(cache=True, error_model="numpy")
+def body_derivative(Y, R, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag, sa, sb, sk, sr, sc, fixed,
+                    dY):
+    """dY/dt at Y; leaves R, the mass states X, U and the forces F of (9) at Y in their arrays."""
+    body_rotations(Y, R)
+    body_mass_states(Y, R, inertia, body_of, r, X, U)
+    _forces(X, U, F_base, drag, sa, sb, sk, sr, sc, fixed, F)
+    for b in range(Y.shape[0]):
+        for d in range(3):
+            f[b, d] = 0.0
+            tau[b, d] = 0.0
+    for k in range(X.shape[0]):
+        b = body_of[k]
+        if b < 0:
+            continue
+        p0, p1, p2 = X[k, 0] - Y[b, 0], X[k, 1] - Y[b, 1], X[k, 2] - Y[b, 2]
+        f[b, 0] += F[k, 0]
+        f[b, 1] += F[k, 1]
+        f[b, 2] += F[k, 2]
+        tau[b, 0] += p1 * F[k, 2] - p2 * F[k, 1]
+        tau[b, 1] += p2 * F[k, 0] - p0 * F[k, 2]
+        tau[b, 2] += p0 * F[k, 1] - p1 * F[k, 0]
+    for b in range(Y.shape[0]):
+        P0, P1, P2 = Y[b, 10], Y[b, 11], Y[b, 12]
+        w0, w1, w2 = P0 / inertia[b, 0], P1 / inertia[b, 1], P2 / inertia[b, 2]
+        qw, qx, qy, qz = Y[b, 6], Y[b, 7], Y[b, 8], Y[b, 9]
+        for d in range(3):
+            dY[b, d] = Y[b, 3 + d]
+            dY[b, 3 + d] = f[b, d] / body_mass[b]
+            # Euler's equations in the body frame: dPi/dt = Pi x w + R^T tau
+            dY[b, 10 + d] = R[b, 0, d] * tau[b, 0] + R[b, 1, d] * tau[b, 1] + R[b, 2, d] * tau[b, 2]
+        dY[b, 10] += P1 * w2 - P2 * w1
+        dY[b, 11] += P2 * w0 - P0 * w2
+        dY[b, 12] += P0 * w1 - P1 * w0
+        # dq/dt = q (x) (0, w) / 2: R <- R Rot(w dt), the body-frame angular velocity on the right
+        dY[b, 6] = -0.5 * (qx * w0 + qy * w1 + qz * w2)
+        dY[b, 7] = 0.5 * (qw * w0 + qy * w2 - qz * w1)
+        dY[b, 8] = 0.5 * (qw * w1 + qz * w0 - qx * w2)
+        dY[b, 9] = 0.5 * (qw * w2 + qx * w1 - qy * w0)
+
+
+@njit(cache=True, error_model="numpy")
+def mass_tangent(Y, e, R, inertia, body_of, r, dX, dU, th):
+    """(dX, dU): the change of the mass states for a change e of the body states at Y, to first order.
+    The quaternion change is taken as the body-frame rotation vector theta = 2 vec(q* (x) e_q) / |q|^2; its
+    part along q (a change of |q|, which the renormalisation removes) moves no mass. Applied to dY/dt at Y it
+    gives exactly the masses' (U_k, dU_k/dt) there."""
+    for b in range(Y.shape[0]):
+        qw, qx, qy, qz = Y[b, 6], Y[b, 7], Y[b, 8], Y[b, 9]
+        pw, px, py, pz = e[b, 6], e[b, 7], e[b, 8], e[b, 9]
+        s = 2.0 / (qw * qw + qx * qx + qy * qy + qz * qz)
+        # vec(q* (x) p) = q_w p_v - p_w q_v - q_v x p_v
+        th[b, 0] = s * (qw * px - pw * qx - (qy * pz - qz * py))
+        th[b, 1] = s * (qw * py - pw * qy - (qz * px - qx * pz))
+        th[b, 2] = s * (qw * pz - pw * qz - (qx * py - qy * px))
+    for k in range(dX.shape[0]):
+        b = body_of[k]
+        if b < 0:
+            dX[k, 0] = dX[k, 1] = dX[k, 2] = 0.0
+            dU[k, 0] = dU[k, 1] = dU[k, 2] = 0.0
+            continue
+        r0, r1, r2 = r[k, 0], r[k, 1], r[k, 2]
+        t0, t1, t2 = th[b, 0], th[b, 1], th[b, 2]
+        w0, w1, w2 = Y[b, 10] / inertia[b, 0], Y[b, 11] / inertia[b, 1], Y[b, 12] / inertia[b, 2]
+        a0, a1, a2 = e[b, 10] / inertia[b, 0], e[b, 11] / inertia[b, 1], e[b, 12] / inertia[b, 2]
+        x0, x1, x2 = t1 * r2 - t2 * r1, t2 * r0 - t0 * r2, t0 * r1 - t1 * r0  # theta x r
+        u0, u1, u2 = w1 * r2 - w2 * r1, w2 * r0 - w0 * r2, w0 * r1 - w1 * r0  # w x r
+        # theta x (w x r) + (e_Pi / I) x r
+        y0 = t1 * u2 - t2 * u1 + a1 * r2 - a2 * r1
+        y1 = t2 * u0 - t0 * u2 + a2 * r0 - a0 * r2
+        y2 = t0 * u1 - t1 * u0 + a0 * r1 - a1 * r0
+        for d in range(3):
+            dX[k, d] = e[b, d] + R[b, d, 0] * x0 + R[b, d, 1] * x1 + R[b, d, 2] * x2
+            dU[k, d] = e[b, 3 + d] + R[b, d, 0] * y0 + R[b, d, 1] * y1 + R[b, d, 2] * y2
+
+
+@njit(cache=True, error_model="numpy")
+def _combine_rows(Y, h, coef, row, n, KY, out):
+    """out = Y + h sum_{j<n} coef[row, j] KY[j]."""
+    for b in range(Y.shape[0]):
+        for i in range(Y.shape[1]):
+            acc = 0.0
+            for j in range(n):
+                acc += coef[row, j] * KY[j, b, i]
+            out[b, i] = Y[b, i] + h * acc
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _weighted_stages(weights, KY, out):
+    for b in range(out.shape[0]):
+        for i in range(out.shape[1]):
+            acc = 0.0
+            for j in range(weights.shape[0]):
+                acc += weights[j] * KY[j, b, i]
+            out[b, i] = acc
+
+
+@njit(cache=True, error_model="numpy")
+def _mass_error_norm(X, U, Xn, Un, dX1, dU1, dX2, dU2, h, free, kind, rtol, atol):
+    """The error norm of the point-mass path (linknet_core.compiled_rk._error_norm) on the masses' error
+    estimates (dX1, dU1) and, for Hairer's norm, (dX2, dU2)."""
+    n = 6 * free.shape[0]
+    s1 = 0.0
+    s2 = 0.0
+    for i in range(free.shape[0]):
+        k = free[i]
+        for d in range(3):
+            sx = atol + rtol * max(abs(X[k, d]), abs(Xn[k, d]))
+            su = atol + rtol * max(abs(U[k, d]), abs(Un[k, d]))
+            if kind == RMS_ERROR:
+                s1 += (h * dX1[k, d] / sx) ** 2 + (h * dU1[k, d] / su) ** 2
+            else:
+                s1 += (dX1[k, d] / sx) ** 2 + (dU1[k, d] / su) ** 2
+                s2 += (dX2[k, d] / sx) ** 2 + (dU2[k, d] / su) ** 2
+    if kind == RMS_ERROR:
+        return np.sqrt(s1 / n)
+    if s1 == 0.0 and s2 == 0.0:
+        return 0.0
+    return abs(h) * s1 / np.sqrt((s1 + 0.01 * s2) * n)
+
+
+@njit(cache=True, error_model="numpy")
+def _starting_step(Y, dY, R, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag, sa, sb, sk, sr, sc,
+                   fixed, free, rtol, atol, exponent, span, Ys, dYs, dX, dU, dXs, dUs):
+    """Hairer-Wanner's starting step on the masses' states, as the point-mass path chooses it
+    (ProjectedRungeKutta._initial_step): from (U, dU/dt) of the masses at Y and at Y + h0 dY/dt."""
+    n = 6 * free.shape[0]
+    th = np.empty((Y.shape[0], 3))
+    mass_tangent(Y, dY, R, inertia, body_of, r, dX, dU, th)  # (U_k, a_k)
+    d0 = 0.0
+    d1 = 0.0
+    for i in range(free.shape[0]):
+        k = free[i]
+        for d in range(3):
+            sx = atol + rtol * abs(X[k, d])
+            su = atol + rtol * abs(U[k, d])
+            d0 += (X[k, d] / sx) ** 2 + (U[k, d] / su) ** 2
+            d1 += (dX[k, d] / sx) ** 2 + (dU[k, d] / su) ** 2
+    d0 = np.sqrt(d0 / n)
+    d1 = np.sqrt(d1 / n)
+    h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+    h0 = min(h0, span)
+    for b in range(Y.shape[0]):
+        for i in range(Y.shape[1]):
+            Ys[b, i] = Y[b, i] + h0 * dY[b, i]
+    Rs = np.empty_like(R)
+    Xs = X.copy()
+    Us = U.copy()
+    body_derivative(Ys, Rs, inertia, body_mass, body_of, r, Xs, Us, F, f, tau, F_base, drag, sa, sb, sk, sr, sc,
+                    fixed, dYs)
+    mass_tangent(Ys, dYs, Rs, inertia, body_of, r, dXs, dUs, th)
+    d2 = 0.0
+    for i in range(free.shape[0]):
+        k = free[i]
+        for d in range(3):
+            sx = atol + rtol * abs(X[k, d])
+            su = atol + rtol * abs(U[k, d])
+            d2 += ((dXs[k, d] - dX[k, d]) / sx) ** 2 + ((dUs[k, d] - dU[k, d]) / su) ** 2
+    d2 = np.sqrt(d2 / n) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (-exponent)
+    return min(100.0 * h0, h1, span)
+
+
+@njit(cache=True, error_model="numpy")
+def rigid_rk_advance(Y, t, t_target, h_next, AB, E1, E2, error_kind, exponent, rtol, atol, max_steps, n_fixed,
+                     safety, min_factor, max_factor, inertia, body_mass, body_of, r, free, X, U, F_base, drag, sa, sb,
+                     sk, sr, sc, fixed):
+    """Advance the body states Y (B, 13) in place from t to t_target with the explicit embedded pair (AB: A with
+    the weights b as row s; E1, E2: error weights, s + 1 each). The step-size controller is that of the
+    point-mass path (linknet_core.compiled_rk): the same starting step, safety factor and bounds, no sliver
+    of a last step; the error is measured on the masses' positions and velocities. ``h_next`` <= 0 asks for
+    the starting step; ``n_fixed`` > 0 takes n_fixed steps of exactly h_next with no error control (order
+    measurements). On return Y holds the last accepted state and X, U its masses' states.
+    Returns (status, t, h_next, accepted steps, rejected steps, right-hand side evaluations)."""
+    B = Y.shape[0]
+    K = X.shape[0]
+    s = AB.shape[1]
+    KY = np.empty((s + 1, B, 13))
+    Ys = np.empty((B, 13))
+    Yn = np.empty((B, 13))
+    e1 = np.empty((B, 13))
+    R = np.empty((B, 3, 3))
+    R0 = np.empty((B, 3, 3))
+    F = np.empty((K, 3))
+    f = np.empty((B, 3))
+    tau = np.empty((B, 3))
+    # masses of no body (anchored spring attachment points) keep their states in every copy
+    Xs = X.copy()
+    Us = U.copy()
+    Xn = X.copy()
+    Un = U.copy()
+    dX1 = np.zeros((K, 3))
+    dU1 = np.zeros((K, 3))
+    dX2 = np.zeros((K, 3))
+    dU2 = np.zeros((K, 3))
+    # the masses' velocities and accelerations at every stage: the error estimate is formed from them
+    MX = np.zeros((s + 1, K, 3))
+    MU = np.zeros((s + 1, K, 3))
+    th = np.empty((B, 3))
+    steps = 0
+    rejected = 0
+    n_rhs = 1
+    body_derivative(Y, R0, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag, sa, sb, sk, sr, sc, fixed,
+                    KY[0])
+    mass_tangent(Y, KY[0], R0, inertia, body_of, r, MX[0], MU[0], th)
+    if h_next <= 0.0:
+        n_rhs += 1
+        h_next = _starting_step(Y, KY[0], R0, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag, sa, sb,
+                                sk, sr, sc, fixed, free, rtol, atol, exponent, t_target - t, Ys, e1, dX1, dU1, dX2,
+                                dU2)
+    while (steps < n_fixed) if n_fixed > 0 else (t < t_target):
+        remaining = t_target - t
+        if n_fixed > 0:
+            h = h_next
+        else:
+            h = min(h_next, remaining)
+            if h < remaining < 1.1 * h:  # avoid a sliver of a last step: split the rest in two
+                h = 0.5 * remaining
+            tt = max(abs(t), 1.0)
+            if h <= 16.0 * (np.nextafter(tt, np.inf) - tt) and h < remaining:
+                return STEP_UNDERFLOW, t, h_next, steps, rejected, n_rhs
+        for i in range(1, s):
+            _combine_rows(Y, h, AB, i, i, KY, Ys)
+            body_derivative(Ys, R, inertia, body_mass, body_of, r, Xs, Us, F, f, tau, F_base, drag, sa, sb, sk, sr,
+                            sc, fixed, KY[i])
+            if n_fixed == 0:
+                mass_tangent(Ys, KY[i], R, inertia, body_of, r, MX[i], MU[i], th)
+        _combine_rows(Y, h, AB, s, s, KY, Yn)
+        body_derivative(Yn, R, inertia, body_mass, body_of, r, Xn, Un, F, f, tau, F_base, drag, sa, sb, sk, sr, sc,
+                        fixed, KY[s])
+        mass_tangent(Yn, KY[s], R, inertia, body_of, r, MX[s], MU[s], th)
+        n_rhs += s
+        if n_fixed > 0:
+            err = 0.0
+            for b in range(B):
+                for i in range(13):
+                    if not np.isfinite(Yn[b, i]):
+                        return NON_FINITE, t, h_next, steps, rejected, n_rhs
+        else:
+            _weighted_stages(E1, MX, dX1)
+            _weighted_stages(E1, MU, dU1)
+            if error_kind == HAIRER_ERROR:
+                _weighted_stages(E2, MX, dX2)
+                _weighted_stages(E2, MU, dU2)
+            err = _mass_error_norm(X, U, Xn, Un, dX1, dU1, dX2, dU2, h, free, error_kind, rtol, atol)
+            if not np.isfinite(err):
+                rejected += 1
+                h_next = h * min_factor
+                continue
+        if err <= 1.0:
+            if n_fixed > 0:
+                t = t + h
+            else:
+                t = t_target if h == remaining else t + h
+                factor = max_factor if err == 0.0 else min(max_factor, safety * err ** exponent)
+                # a step shortened only to land on t_target says nothing against the longer step
+                h_next = max(h_next, h * factor) if h < h_next else h * factor
+            # renormalise q (the projection of this path). The mass states do not change (the map uses
+            # q / |q|), and the derivative at the new point only scales its dq/dt by 1/|q|: it stays the
+            # first stage of the next step (no extra evaluation)
+            for b in range(B):
+                norm = np.sqrt(Yn[b, 6] ** 2 + Yn[b, 7] ** 2 + Yn[b, 8] ** 2 + Yn[b, 9] ** 2)
+                for i in range(6, 10):
+                    Yn[b, i] /= norm
+                    KY[s, b, i] /= norm
+            Y[:, :] = Yn
+            KY[0, :, :] = KY[s]
+            MX[0, :, :] = MX[s]
+            MU[0, :, :] = MU[s]
+            X[:, :] = Xn
+            U[:, :] = Un
+            R0[:, :, :] = R
+            steps += 1
+            if n_fixed == 0 and steps > max_steps:
+                return TOO_MANY_STEPS, t, h_next, steps, rejected, n_rhs
+        else:
+            rejected += 1
+            h_next = h * max(min_factor, safety * err ** exponent)
+    return OK, t, h_next, steps, rejected, n_rhs
