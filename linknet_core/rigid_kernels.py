@@ -33,6 +33,10 @@ from numba import njit
 
 from .compiled import external_forces as _forces  # the force model F_k of (9), shared with the RATTLE loop
 
+# building blocks of the Runge-Kutta loop: inlined by LLVM into it (a call passing ~20 array structs costs
+# more than a small body's whole stage)
+_inlined = njit(cache=True, error_model="numpy", forceinline=True)
+
 
 SPHERICAL, SYMMETRIC, ASYMMETRIC = 0, 1, 2
 OK, NON_FINITE, KICK_NOT_CONVERGED = 0, 1, 2
@@ -265,7 +269,7 @@ STEP_UNDERFLOW, TOO_MANY_STEPS = 3, 4
 RMS_ERROR, HAIRER_ERROR = 0, 1  # as linknet_core.compiled_rk
 
 
-@njit(cache=True, error_model="numpy")
+@_inlined
 def body_rotations(Y, R):
     """R[b] of the unit quaternion q[b] / |q[b]|, q[b] = Y[b, 6:10] (the homogeneous form: a rotation for any q)."""
     for b in range(Y.shape[0]):
@@ -282,7 +286,7 @@ def body_rotations(Y, R):
         R[b, 2, 2] = 1.0 - s * (x * x + y * y)
 
 
-@njit(cache=True, error_model="numpy")
+@_inlined
 def body_mass_states(Y, R, inertia, body_of, r, X, U):
     """X_k = c + R r_k, U_k = v + R (w x r_k), w = Pi / I, for the masses of a body (R from body_rotations)."""
     for k in range(X.shape[0]):
@@ -297,7 +301,7 @@ def body_mass_states(Y, R, inertia, body_of, r, X, U):
             U[k, d] = Y[b, 3 + d] + R[b, d, 0] * u0 + R[b, d, 1] * u1 + R[b, d, 2] * u2
 
 
-@njit(cache=True, error_model="numpy")
+@_inlined
 def body_derivative(Y, R, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag, sa, sb, sk, sr, sc, fixed,
                     dY):
     """dY/dt at Y; leaves R, the mass states X, U and the forces F of (9) at Y in their arrays."""
@@ -338,7 +342,7 @@ def body_derivative(Y, R, inertia, body_mass, body_of, r, X, U, F, f, tau, F_bas
         dY[b, 9] = 0.5 * (qw * w2 + qx * w1 - qy * w0)
 
 
-@njit(cache=True, error_model="numpy")
+@_inlined
 def mass_tangent(Y, e, R, inertia, body_of, r, dX, dU, th):
     """(dX, dU): the change of the mass states for a change e of the body states at Y, to first order.
     The quaternion change is taken as the body-frame rotation vector theta = 2 vec(q* (x) e_q) / |q|^2; its
@@ -373,7 +377,7 @@ def mass_tangent(Y, e, R, inertia, body_of, r, dX, dU, th):
             dU[k, d] = e[b, 3 + d] + R[b, d, 0] * y0 + R[b, d, 1] * y1 + R[b, d, 2] * y2
 
 
-@njit(cache=True, error_model="numpy")
+@_inlined
 def _combine_rows(Y, h, coef, row, n, KY, out):
     """out = Y + h sum_{j<n} coef[row, j] KY[j]."""
     for b in range(Y.shape[0]):
@@ -385,7 +389,7 @@ def _combine_rows(Y, h, coef, row, n, KY, out):
     return out
 
 
-@njit(cache=True, error_model="numpy")
+@_inlined
 def _weighted_stages(weights, KY, out):
     for b in range(out.shape[0]):
         for i in range(out.shape[1]):
@@ -395,7 +399,7 @@ def _weighted_stages(weights, KY, out):
             out[b, i] = acc
 
 
-@njit(cache=True, error_model="numpy")
+@_inlined
 def _mass_error_norm(X, U, Xn, Un, dX1, dU1, dX2, dU2, h, free, kind, rtol, atol):
     """The error norm of the point-mass path (linknet_core.compiled_rk._error_norm) on the masses' error
     estimates (dX1, dU1) and, for Hairer's norm, (dX2, dU2)."""
