@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import compiled
 from .dynamics import Dynamics
 from .rigid import Specialisation, choose_specialisation
 from .scene import Scene
@@ -71,6 +72,10 @@ class RigidityReport:
             "solver: " + "; ".join(specialisations),
         ]
         lines.append(f"specialisation: {self.specialisation.text()}")
+        compiled_path = compiled.describe(self.dyn)
+        if self.specialisation.kind != "none":
+            compiled_path += f" (not used: the {self.specialisation.kind} specialisation stands in)"
+        lines.append(f"compiled path (RATTLE, compositions, Runge-Kutta): {compiled_path}")
         lines += [f"note: {n}" for n in st.notes]
         return "\n".join(lines)
 

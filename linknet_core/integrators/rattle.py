@@ -25,12 +25,24 @@ class Rattle(FixedStepIntegrator):
     gammas: tuple[float, ...] = (1.0,)
     compiled_fallbacks = 0  # intervals the compiled loop handed back to the numpy path
 
+    def __init__(self, dynamics, dt: float, backend: str = "auto"):
+        super().__init__(dynamics, dt, backend=backend)
+        self._kernel = self._compiled_kernel() if self.backend != "numpy" else None
+
+    def _compiled_kernel(self):
+        """The compiled loop of this scene (built with the integrator), or None where the numpy path runs. Its
+        ``planar`` says whether the next interval runs in the plane's coordinates (False forces 3-D)."""
+        from .. import compiled
+
+        if getattr(self, "_kernel", None) is None and compiled.supports(self.dyn):
+            self._kernel = compiled.CompiledRattle(self.dyn)
+        return getattr(self, "_kernel", None)
+
     def _advance_steps(self, X, U, n, h, F_input):
         from .. import compiled
 
         if self.backend != "numpy" and compiled.supports(self.dyn):
-            if not hasattr(self, "_kernel"):
-                self._kernel = compiled.CompiledRattle(self.dyn)
+            self._compiled_kernel()
             status, X_new, U_new = self._kernel.advance(X, U, n, h, self.gammas, F_input, self.position_tol)
             if status == compiled.OK:
                 return X_new, U_new

@@ -58,6 +58,14 @@ class ProjectedRungeKutta(Integrator):
         self.atol = float(atol if atol is not None else rtol)
         self.h = h0  # next step size; None until the first step is chosen
         self.free = dynamics.scene.free_indices
+        self._kernel = None
+        # the compiled kernel's per-scene arrays are built here, not inside the first (timed) advance; a
+        # backend='compiled' that cannot be honoured is still reported by advance, as for every other error
+        try:
+            if self.compiled_available():
+                self._compiled_kernel()
+        except SolverError:
+            self._compiled_ok = None
 
     def internals(self) -> dict:
         out = super().internals()
@@ -158,6 +166,8 @@ class ProjectedRungeKutta(Integrator):
         return ok
 
     def _compiled_kernel(self):
+        """The compiled kernel of this scene and tableau (built with the integrator): its ``planar`` says whether
+        the next interval runs in the plane's coordinates (set it False to force the 3-D kernels)."""
         if getattr(self, "_kernel", None) is None:
             from ..compiled_rk import HAIRER_ERROR, RMS_ERROR, CompiledRungeKutta
 
