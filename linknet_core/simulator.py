@@ -116,7 +116,8 @@ class Simulator:
                                                             length_tol=length_tol)
         # structure specialisation, chosen once (linknet_core.rigid): static scenes and free rigid bodies
         # skip the point-mass machinery; the specialised path stands in for the integrator
-        self.specialisation = choose_specialisation(scene, self.dyn, method, backend=backend, enabled=specialise)
+        self.specialisation = choose_specialisation(scene, self.dyn, method, backend=backend, enabled=specialise,
+                                                    integrator=self.integrator)
         self._tensions = self.dyn.tensions
         if self.specialisation.kind != "none":
             self.integrator, (X0, U0) = build_path(self.specialisation, self.dyn, method, dt, X0, U0)
