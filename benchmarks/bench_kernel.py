@@ -22,6 +22,10 @@ Part 2 (``--integrators``) - adaptive Runge-Kutta, numpy vs compiled: time per s
 ``Simulator.advance(2.0)`` for several scenes and tolerances (CPU time), the difference of the two paths'
 final positions, and how much the scene amplifies a 1e-13 m change of its initial state.
 
+Planar scenes: part 1 also times the right-hand side of a planar chain (and a pendulum) on the 2-D kernels
+against the 3-D ones; part 2 also times whole compiled runs of the planar scenes (pendulum, double
+pendulum, chain_10, chain_100; RATTLE, DOPRI5, DOP853) in 2-D and forced onto the 3-D kernels.
+
     python -m benchmarks.bench_kernel [--quick] [--integrators] [--out DIR]
 
 Writes DIR/kernel.json and DIR/kernel.md (default docs/benchmarks, or docs/benchmarks/quick with --quick).
@@ -88,10 +92,13 @@ def build_c_reference(workdir: Path | None = None, source: Path = C_SOURCE):
     return lib, " ".join([cc, *C_FLAGS]), (version[0] if version else cc)
 
 
-def random_chain_state(n_links: int, seed: int = 0):
-    """A chain anchored at its first mass in a random-walk shape, random masses, consistent random velocities."""
+def random_chain_state(n_links: int, seed: int = 0, planar: bool = False):
+    """A chain anchored at its first mass in a random-walk shape, random masses, consistent random velocities
+    (``planar``: walk and velocities in the x-z plane, gravity in it too)."""
     rng = np.random.default_rng(seed)
     steps = rng.normal(size=(n_links, 3))
+    if planar:
+        steps[:, 1] = 0.0
     steps *= (1.0 / n_links) / np.linalg.norm(steps, axis=1)[:, None]
     points = np.vstack([np.zeros(3), np.cumsum(steps, axis=0)])
     masses = rng.uniform(0.5, 1.5, n_links + 1)
@@ -99,6 +106,8 @@ def random_chain_state(n_links: int, seed: int = 0):
     scene = builders.chain(n_links, shape="points", points=points, masses=masses, name=f"chain_{n_links}_walk")
     dyn = ln.Dynamics(scene)
     U = rng.normal(size=points.shape) * (~scene.fixed)[:, None]
+    if planar:
+        U[:, 1] = 0.0
     U = dyn.project_velocities(scene.X0, U)
     return scene, dyn, np.ascontiguousarray(scene.X0, np.float64), np.ascontiguousarray(U, np.float64)
 
@@ -134,16 +143,25 @@ class CChain:
 class LinknetChain:
     """linknet's compiled right-hand side for one scene (chain path, or the general sparse path)."""
 
-    def __init__(self, dyn, X, U, use_chain):
-        self.kernel = compiled.CompiledScene(dyn, use_chain=use_chain)
+    def __init__(self, dyn, X, U, use_chain, planar=False):
+        """``planar``: the 2-D kernels in the plane's coordinates (the scene and state must be planar)."""
+        self.kernel = compiled.CompiledScene(dyn, use_chain=use_chain, planar=True if planar else False)
+        self.planar = planar
         self.X, self.U = X, U
         self.F_base = self.kernel.base_forces(None)
-        self.acc = np.zeros((dyn.scene.K, 3))
+        if planar:
+            k = self.kernel
+            self.X, self.U, self.F_base = k.to_plane(X, True), k.to_plane(U, False), k.to_plane(self.F_base, False)
+        self.acc = np.zeros((dyn.scene.K, self.X.shape[1]))
         self.T = np.zeros(dyn.scene.L)
         self.run(2)  # compile (or load from the cache) outside the timing
 
     def evaluate(self):
-        status, acc, T = self.kernel.accelerations(self.X, self.U)
+        if self.planar:
+            status, acc, T = self.kernel.accelerations(self.kernel.from_plane(self.X, True),
+                                                       self.kernel.from_plane(self.U, False), planar=True)
+        else:
+            status, acc, T = self.kernel.accelerations(self.X, self.U)
         if status != compiled.OK:
             raise RuntimeError(f"compiled right-hand side returned status {status}")
         return acc, T
@@ -214,6 +232,33 @@ def kernel_table(sizes=SIZES, budget=0.2, repeats=5, log=print):
     return {"compiler": compiler, "flags": flags, "rows": rows}
 
 
+def planar_kernel_table(sizes=(1,) + SIZES, budget=0.2, repeats=5, log=print):
+    """The right-hand side of a planar chain (random walk in the x-z plane; 1 link: a pendulum) on the 3-D
+    kernels and on the 2-D ones in the plane's coordinates, same state; both checked against numpy first."""
+    rows = []
+    for n in sizes:
+        scene, dyn, X, U = random_chain_state(n, planar=True)
+        paths = {"3d": LinknetChain(dyn, X, U, use_chain=True), "2d": LinknetChain(dyn, X, U, use_chain=True,
+                                                                                 planar=True)}
+        acc_np, T_np = dyn.accelerations(X, U)
+        worst = 0.0
+        for runner in paths.values():
+            acc, T = runner.evaluate()
+            worst = max(worst, _relative(acc, acc_np), _relative(T, T_np))
+        if not worst <= AGREEMENT_TOL:
+            raise RuntimeError(f"planar chain of {n} links: 2-D/3-D kernels disagree with numpy ({worst:.1e})")
+        times = {key: [] for key in paths}
+        for _ in range(repeats):
+            for key, runner in paths.items():
+                times[key].append(_time_per_eval(runner, budget, 1))
+        row = {"links": n, "ns_3d": 1e9 * min(times["3d"]), "ns_2d": 1e9 * min(times["2d"]), "agreement": worst}
+        row["ratio_2d_3d"] = row["ns_2d"] / row["ns_3d"]
+        rows.append(row)
+        log(f"planar chain {n:>6} links: 3-D {row['ns_3d']:>10.0f} ns  2-D {row['ns_2d']:>10.0f} ns  "
+            f"2-D/3-D {row['ratio_2d_3d']:.2f}; agreement with numpy {worst:.1e}")
+    return {"rows": rows}
+
+
 # ------------------------------------------------------------------------------------------------ part 2
 INTEGRATOR_SCENES = {
     "pendulum": builders.pendulum,
@@ -224,8 +269,12 @@ INTEGRATOR_SCENES = {
 }
 
 
-def _time_advance(scene, method, rtol, backend, t_end, repeats, numpy_budget):
-    sim = ln.Simulator(scene, method=method, rtol=rtol, backend=backend)
+def _time_advance(scene, method, rtol, backend, t_end, repeats, numpy_budget, planar=True, dt=None):
+    """CPU time of one Simulator.advance(t_end) (best of ``repeats``); ``planar`` False makes the compiled
+    kernel of a planar scene run on the 3-D kernels; ``dt`` for fixed-step methods (then rtol is None)."""
+    sim = ln.Simulator(scene, method=method, rtol=rtol, dt=dt, backend=backend)
+    if not planar and getattr(sim.integrator, "_kernel", None) is not None:
+        sim.integrator._kernel.force_3d()
     sim.advance(1e-3)  # compile / warm up outside the timing
     best = None
     for i in range(repeats):
@@ -238,8 +287,45 @@ def _time_advance(scene, method, rtol, backend, t_end, repeats, numpy_budget):
         if elapsed > numpy_budget:
             break
     stats = sim.integrator.stats.as_dict()
+    kernel = getattr(sim.integrator, "_kernel", None)
     return {"seconds": best, "steps": stats["steps"], "rejected": stats["rejected"],
-            "us_per_step": 1e6 * best / max(stats["steps"], 1), "X": sim.state.X}
+            "us_per_step": 1e6 * best / max(stats["steps"], 1), "X": sim.state.X,
+            "dim": None if kernel is None else kernel.dim}
+
+
+PLANAR_SCENES = ("pendulum", "double_pendulum", "chain_10", "chain_100")
+PLANAR_METHODS = (("rattle", None, 1e-3), ("dopri5", 1e-8, None), ("dop853", 1e-10, None))
+
+
+def planar_integrator_table(t_end=2.0, quick=False, log=print):
+    """One Simulator.advance(t_end) of planar scenes with the compiled kernels in 2-D (the default) and
+    forced onto the 3-D kernels: time per run and per step, and the difference of the final positions."""
+    rows = []
+    scenes = PLANAR_SCENES[:3] if quick else PLANAR_SCENES
+    for name in scenes:
+        scene = INTEGRATOR_SCENES[name]()
+        for method, rtol, dt in PLANAR_METHODS:
+            r = {"scene": name, "method": method, "rtol": rtol, "dt": dt}
+            runs = {}
+            for _ in range(3 if quick else 5):  # interleaved: a change of the machine's load hits both alike
+                for key, planar in (("3d", False), ("2d", True)):
+                    out = _time_advance(scene, method, rtol, "compiled", t_end, repeats=1, numpy_budget=1e9,
+                                        planar=planar, dt=dt)
+                    if key not in runs or out["seconds"] < runs[key]["seconds"]:
+                        runs[key] = out
+            for key in ("3d", "2d"):
+                r[key] = {k: v for k, v in runs[key].items() if k != "X"}
+            if runs["2d"]["dim"] != 2 or runs["3d"]["dim"] != 3:
+                raise RuntimeError(f"{name} {method}: the runs did not take the 2-D and 3-D kernels")
+            r["ratio_2d_3d"] = runs["2d"]["seconds"] / runs["3d"]["seconds"]
+            r["max_position_difference_m"] = float(np.max(np.abs(runs["2d"]["X"] - runs["3d"]["X"])))
+            rows.append(r)
+            setting = f"dt {dt:g}" if dt else f"rtol {rtol:.0e}"
+            log(f"{name:>16} {method:>7} {setting}: 3-D {1e3 * r['3d']['seconds']:8.3f} ms "
+                f"({r['3d']['us_per_step']:7.2f} us/step) | 2-D {1e3 * r['2d']['seconds']:8.3f} ms "
+                f"({r['2d']['us_per_step']:7.2f} us/step) | 2-D/3-D {r['ratio_2d_3d']:.2f}, |dX| "
+                f"{r['max_position_difference_m']:.0e} m")
+    return {"t_end": t_end, "rows": rows}
 
 
 def _sensitivity(scene, method, rtol, t_end, kick=1e-13):
@@ -307,7 +393,7 @@ def write_outputs(out: Path, result: dict) -> None:
             "hides in the shadow of the elimination's dependency chain; that is why it beats this C. A second C "
             "kernel written the same fused way (`c_reference/chain_rhs_fused.c`, same flags) shows what "
             "hand-written C reaches: linknet stays behind it by the cost of its generality (index arrays for the "
-            "link ends and the path order, drag and spring loops, the general scatter of the link forces). "
+            "link ends and the path order, the general scatter of the link forces). "
             "linknet's general sparse LDL^T path (what a chain would get without the specialisation) is in the "
             "second-to-last column.",
             "",
@@ -319,6 +405,45 @@ def write_outputs(out: Path, result: dict) -> None:
                          f"{r['linknet_ns_per_link']:.1f} | {r['c_ns_per_link']:.1f} | {r['c_fused_ns']:.0f} "
                          f"({r['ratio_fused']:.2f}) | {r['linknet_general_ns']:.0f} ({r['ratio_general']:.2f}) | "
                          f"{r['worst_disagreement']:.0e} |")
+        lines.append("")
+    pk = result.get("planar_kernel")
+    if pk:
+        lines += [
+            "## Planar scenes: right-hand side on the 2-D kernels vs the 3-D ones",
+            "",
+            "A chain anchored at one end in a random-walk shape in the x-z plane (1 link: a pendulum), random "
+            "masses and in-plane velocities projected onto (12), gravity in the plane. Same state, same "
+            "tridiagonal path: `compiled_kernels.accelerations` (3 components per vector) vs "
+            "`compiled_kernels_2d.accelerations` in the plane's coordinates (2 components), N evaluations in a "
+            "numba loop, best of interleaved CPU timings. Both agree with the numpy path to the last column "
+            "before timing.",
+            "",
+            "| links | 3-D ns/eval | 2-D ns/eval | 2-D / 3-D | agreement |",
+            "|---:|---:|---:|---:|---:|"]
+        for r in pk["rows"]:
+            lines.append(f"| {r['links']} | {r['ns_3d']:.0f} | {r['ns_2d']:.0f} | {r['ratio_2d_3d']:.2f} | "
+                         f"{r['agreement']:.0e} |")
+        lines.append("")
+    pi = result.get("planar_integrators")
+    if pi:
+        lines += [
+            f"## Planar scenes: one compiled `Simulator.advance({pi['t_end']:g})` in 2-D vs 3-D",
+            "",
+            "The same compiled integrator on the 2-D kernels (what a planar scene gets) and forced onto the 3-D "
+            "kernels; CPU time of one call covering the whole run, best of interleaved runs, after a warm-up "
+            "call (includes the Simulator's per-call work and, in 2-D, the mapping into the plane and back). "
+            "abs(dX): largest difference of the final positions (the shipped scenes lie in the x-z plane: the "
+            "reduction is exact, and the two runs do the same arithmetic on the in-plane coordinates).",
+            "",
+            "| scene | method | dt / rtol | steps | 3-D ms | 3-D us/step | 2-D ms | 2-D us/step | 2-D / 3-D "
+            "| abs(dX) m |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for r in pi["rows"]:
+            a, b = r["3d"], r["2d"]
+            setting = f"dt {r['dt']:g}" if r["dt"] else f"rtol {r['rtol']:.0e}"
+            lines.append(f"| {r['scene']} | {r['method']} | {setting} | {b['steps']} | {1e3 * a['seconds']:.3f} | "
+                         f"{a['us_per_step']:.2f} | {1e3 * b['seconds']:.3f} | {b['us_per_step']:.2f} | "
+                         f"{r['ratio_2d_3d']:.2f} | {r['max_position_difference_m']:.0e} |")
         lines.append("")
     it = result.get("integrators")
     if it:
@@ -361,7 +486,9 @@ def main(argv=None):
                        "quick": args.quick}}
     if not args.no_kernel:
         result["kernel"] = kernel_table(budget=0.05 if args.quick else 0.2, repeats=repeats)
+        result["planar_kernel"] = planar_kernel_table(budget=0.05 if args.quick else 0.2, repeats=repeats)
     if args.integrators:
+        result["planar_integrators"] = planar_integrator_table(quick=args.quick)
         result["integrators"] = integrator_table(quick=args.quick)
     out = args.out or (ROOT / "docs" / "benchmarks" / ("quick" if args.quick else ""))
     write_outputs(out, result)

@@ -204,7 +204,8 @@ class CompiledScene:
     factorisation. ``use_chain``: None picks the tridiagonal path for chain scenes (False forces the
     general sparse path, for tests). ``planar``: None runs planar scenes in 2-D, False always in 3-D (for
     comparisons), True demands a planar scene. ``self.planar`` says whether the next interval is tried in
-    2-D; it turns False for good when an interval had to run in 3-D.
+    2-D; it turns False when an interval had to run in 3-D and stays so (the integrators keep it with their
+    internals, so that a restored snapshot continues on the kernels it was taken on, bit for bit).
     """
 
     def __init__(self, dyn, use_chain: bool | None = None, planar: bool | None = None):
@@ -251,6 +252,10 @@ class CompiledScene:
             self.plane = (P, o, nrm, length, PLANE_TOL, np.ascontiguousarray(fixed, np.bool_))
             self._zero_input = np.zeros((self.K, 3))
             self._X2, self._U2, self._F2 = np.empty((self.K, 2)), np.empty((self.K, 2)), np.empty((self.K, 2))
+
+    def force_3d(self) -> None:
+        """Run every interval on the 3-D kernels, also for a planar scene (comparisons, benchmarks)."""
+        self.is_planar_scene = self.planar = False
 
     @property
     def dim(self) -> int:

@@ -190,3 +190,23 @@ def test_analyze_names_the_compiled_path():
     springs = analyze_scene(_springs_drag_scene()).text()
     assert "drag on 2 masses" in springs and "2 springs (1 damped)" in springs
     assert "numpy path" in analyze_scene(builders.redundant_truss()).text()
+
+
+def test_a_restored_snapshot_continues_on_the_kernels_it_was_taken_on():
+    """get_state/set_state continue bit-identically: the snapshot says 2-D, even after an excursion off the
+    plane sent the kernel to 3-D (in a tilted plane the two differ by round-off)."""
+    scene = _rotated(builders.double_pendulum(), _rotation(), "tilted")
+    F_out = np.zeros((scene.K, 3))
+    F_out[-1] = _rotation() @ [0.0, 0.5, 0.0]  # along the normal
+    straight = ln.Simulator(scene, method="dop853", rtol=1e-9)
+    straight.advance(0.1)
+    straight.advance(0.3)
+    sim = ln.Simulator(scene, method="dop853", rtol=1e-9)
+    sim.advance(0.1)
+    snap = sim.get_state()
+    sim.advance(0.2, F_out)
+    assert not _kernel(sim).planar
+    sim.set_state(snap)
+    sim.advance(0.3)
+    assert _kernel(sim).planar
+    assert np.array_equal(sim.state.X, straight.state.X) and np.array_equal(sim.state.U, straight.state.U)

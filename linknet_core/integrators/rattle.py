@@ -29,6 +29,18 @@ class Rattle(FixedStepIntegrator):
         super().__init__(dynamics, dt, backend=backend)
         self._kernel = self._compiled_kernel() if self.backend != "numpy" else None
 
+    def internals(self) -> dict:
+        out = super().internals()
+        if getattr(self, "_kernel", None) is not None:
+            out["compiled_planar"] = self._kernel.planar  # 2-D kernels until the state left the plane
+        return out
+
+    def set_internals(self, data: dict) -> None:
+        super().set_internals(data)
+        kernel = getattr(self, "_kernel", None)
+        if kernel is not None and "compiled_planar" in data:
+            kernel.planar = bool(data["compiled_planar"]) and kernel.is_planar_scene
+
     def _compiled_kernel(self):
         """The compiled loop of this scene (built with the integrator), or None where the numpy path runs. Its
         ``planar`` says whether the next interval runs in the plane's coordinates (False forces 3-D)."""

@@ -70,11 +70,16 @@ class ProjectedRungeKutta(Integrator):
     def internals(self) -> dict:
         out = super().internals()
         out["h"] = self.h
+        if getattr(self, "_kernel", None) is not None:
+            out["compiled_planar"] = self._kernel.planar  # 2-D kernels until the state left the plane
         return out
 
     def set_internals(self, data: dict) -> None:
         super().set_internals(data)
         self.h = data["h"]
+        kernel = getattr(self, "_kernel", None)
+        if kernel is not None and "compiled_planar" in data:
+            kernel.planar = bool(data["compiled_planar"]) and kernel.is_planar_scene
 
     # ---- one attempted step ------------------------------------------------------------------
     def _f(self, X, U, F_input):
