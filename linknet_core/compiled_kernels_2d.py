@@ -991,9 +991,15 @@ def _enter_plane(X3, U3, F_scene3, F_in3, fixed, P, o, nrm, length, tol, X, U, F
 
 
 @kernel
-def _leave_plane(X, U, P, o, X3, U3):
-    """X3 = o + P X, U3 = P U (back to 3-D)."""
+def _leave_plane(X, U, P, o, fixed, X3_in, U3_in, X3, U3):
+    """X3 = o + P X, U3 = P U (back to 3-D); the anchors keep their (K,3) X3_in, U3_in exactly (in a tilted plane
+    the round trip would move them by round-off)."""
     for k in range(X.shape[0]):
+        if fixed[k]:
+            for e in range(3):
+                X3[k, e] = X3_in[k, e]
+                U3[k, e] = U3_in[k, e]
+            continue
         for e in range(3):
             x = o[e]
             u = -0.0
@@ -1021,7 +1027,7 @@ def _rattle_steps_in_plane(X3, U3, F_scene3, F_in3, X3_out, U3_out, P, o, nrm, l
                                  pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv, row_start, row_col, row_slot,
                                  chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work,
                                  E0, E1, F, Uh, Xc, U_iterate, mu, phi, scale, tol, max_iter)
-    _leave_plane(X, U, P, o, X3_out, U3_out)
+    _leave_plane(X, U, P, o, fixed, X3, U3, X3_out, U3_out)
     return status, done
 
 
@@ -1043,5 +1049,5 @@ def _rk_steps_in_plane(X3, U3, F_scene3, F_in3, X3_out, U3_out, P, o, nrm, lengt
                        chain_off_weight, chain_sub, Ax, y_vals, solve_work, AB, E1, E2, error_kind, exponent, rtol,
                        atol, max_steps, n_fixed, safety, min_factor, max_factor, projection_tol, KX, KU, Xs, Us, Xn,
                        Un, acc, acc1, T, E, F, Bv, mu, phi, scale)
-    _leave_plane(X, U, P, o, X3_out, U3_out)
+    _leave_plane(X, U, P, o, fixed, X3, U3, X3_out, U3_out)
     return result

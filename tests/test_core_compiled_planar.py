@@ -210,3 +210,12 @@ def test_a_restored_snapshot_continues_on_the_kernels_it_was_taken_on():
     sim.advance(0.3)
     assert _kernel(sim).planar
     assert np.array_equal(sim.state.X, straight.state.X) and np.array_equal(sim.state.U, straight.state.U)
+
+
+def test_anchors_of_a_tilted_plane_stay_exactly_where_they_are():
+    scene = _rotated(builders.chain(10), _rotation(), "tilted_chain")
+    sim = ln.Simulator(scene, method="rattle", dt=1e-3)
+    for i in range(1, 21):
+        sim.advance(0.01 * i)
+    assert _kernel(sim).planar
+    assert np.array_equal(sim.state.X[scene.fixed], scene.X0[scene.fixed]) and not sim.state.U[scene.fixed].any()
