@@ -302,7 +302,7 @@ class CompiledScene:
         solver = ("chain: tridiagonal A of (25) in path order, each right-hand side two sweeps along the path"
                   if self.use_chain else "general sparse LDL^T of A (25) on the pattern analysed once")
         if self.is_planar_scene:
-            P, o, nrm = self.plane[0], self.plane[1], self.plane[2]
+            nrm = self.plane[2]
             aligned = bool(np.array_equal(np.abs(nrm), np.eye(3)[int(np.argmax(np.abs(nrm)))]))
             dims = (f"2-D planar (normal {np.round(nrm, 6).tolist()}, "
                     f"{'axis-aligned: exact reduction' if aligned else 'tilted: orthonormal in-plane basis'}; "

@@ -553,9 +553,9 @@ def project_positions(Xc, E_dir, k1, k2, R, inv_R, inv_m, fixed_idx, drag_idx, d
 
 @kernel
 def project_velocities(X, U, E, k1, k2, R, inv_R, inv_m, fixed_idx, drag_idx, drag_coef, sa, sb, sk, sr, sc, free,
-                       use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D, Dinv,
-                       row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
-                       y_vals, solve_work, mu, rhs):
+                       use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx, D,
+                       Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub,
+                       Ax, y_vals, solve_work, mu, rhs):
     """Closest U satisfying (12) at X in the mass metric, in place: U -= M^-1 C^T mu with A(X) mu = C U.
 
     Factors A(X) (left in the system arrays for the caller) and leaves the unit vectors at X in E.
@@ -903,9 +903,9 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed_
                                      chain_diag_weight, chain_off_weight, chain_sub, Ax, y_vals, solve_work, mu, phi,
                                      scale, projection_tol, 50):
                 return PROJECTION_FAILED, t, h_next, steps, rejected, n_rhs
-            if project_velocities(Xn, Un, E, k1, k2, R, inv_R, inv_m, fixed_idx, drag_idx, drag_coef, sa, sb, sk, sr, sc,
-                                  free, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp,
-                                  Li, Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
+            if project_velocities(Xn, Un, E, k1, k2, R, inv_R, inv_m, fixed_idx, drag_idx, drag_coef, sa, sb, sk, sr,
+                                  sc, free, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap,
+                                  Ai, Lp, Li, Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
                                   chain_off_weight, chain_sub, Ax, y_vals, solve_work, mu, phi) != OK:
                 return SINGULAR, t, h_next, steps, rejected, n_rhs
             if n_fixed > 0:
@@ -1011,10 +1011,10 @@ def _leave_plane(X, U, P, o, fixed, X3_in, U3_in, X3, U3):
 
 
 @outlined_kernel
-def _rattle_steps_in_plane(X3, U3, F_scene3, F_in3, X3_out, U3_out, P, o, nrm, length, plane_tol, fixed, n_steps, h,
-                           gammas, X, U, F_base, k1, k2, R, inv_R, inv_m, fixed_idx, drag_idx, drag_coef, sa, sb, sk, sr,
-                           sc, free, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp,
-                           Li, Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
+def _rattle_steps_in_plane(X3, U3, F_scene3, F_in3, X3_out, U3_out, P, o, nrm, length, plane_tol, fixed, n_steps,
+                           h, gammas, X, U, F_base, k1, k2, R, inv_R, inv_m, fixed_idx, drag_idx, drag_coef, sa, sb,
+                           sk, sr, sc, free, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap,
+                           Ai, Lp, Li, Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight,
                            chain_off_weight, chain_sub, Ax, y_vals, solve_work, E0, E1, F, Uh, Xc, U_iterate, mu, phi,
                            scale, tol, max_iter):
     """:func:`_rattle_steps` in the plane: the (K,3) X3, U3 (read only) and the forces mapped in, the result
@@ -1034,8 +1034,8 @@ def _rattle_steps_in_plane(X3, U3, F_scene3, F_in3, X3_out, U3_out, P, o, nrm, l
 @outlined_kernel
 def _rk_steps_in_plane(X3, U3, F_scene3, F_in3, X3_out, U3_out, P, o, nrm, length, plane_tol, fixed, t, t_target,
                        h_next, X, U, F_base, k1, k2, R, inv_R, inv_m, fixed_idx, drag_idx, drag_coef, sa, sb, sk, sr,
-                       sc, free, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li, Lx,
-                       D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
+                       sc, free, use_chain, ordering, pair_first, pair_second, pair_weight, pair_slot, Ap, Ai, Lp, Li,
+                       Lx, D, Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight,
                        chain_sub, Ax, y_vals, solve_work, AB, E1, E2, error_kind, exponent, rtol, atol, max_steps,
                        n_fixed, safety, min_factor, max_factor, projection_tol, KX, KU, Xs, Us, Xn, Un, acc, acc1, T, E,
                        F, Bv, mu, phi, scale):
