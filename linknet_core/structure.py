@@ -194,10 +194,12 @@ def planar_normal(scene: Scene, tol: float = 1e-12) -> np.ndarray | None:
     origin = X.mean(axis=0)
     vectors = np.vstack([X - origin, scene.U0, scene.gravity[None, :], scene.force])
     scale = max(np.abs(vectors).max(), 1e-300)
-    # eigen-decomposition of the 3 x 3 Gram matrix: O(K) memory (an SVD with full_matrices would build (3K)^2)
-    w, V = np.linalg.eigh((vectors / scale).T @ (vectors / scale))
-    if w[0] <= tol ** 2 * max(w[2], 1e-300):
-        return V[:, 0]
+    # thin SVD: O(K) memory (full_matrices would build a (K+2)^2 matrix). Not the eigenvalues of the 3 x 3
+    # Gram matrix: their round-off (~eps times the largest) is far above tol^2 times it, so a tilted plane
+    # was never recognised; singular values carry round-off ~eps relative, below tol
+    _, sv, vt = np.linalg.svd(vectors / scale, full_matrices=False)
+    if sv.size == 3 and sv[2] <= tol * max(sv[0], 1e-300):
+        return vt[2]
     return None
 
 

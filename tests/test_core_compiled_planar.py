@@ -85,6 +85,12 @@ def test_tilted_plane_runs_in_2d_and_is_the_rotated_trajectory(method, kw):
     Q = _rotation()
     scene = _rotated(base, Q, "tilted")
     assert abs(compiled.plane_normal(scene) @ (Q @ [0, 1, 0])) == pytest.approx(1.0, abs=1e-12)
+    # the structure analysis recognises the tilted plane too (linknet analyze reports it)
+    assert abs(ln.Dynamics(scene).structure.planar_normal @ (Q @ [0, 1, 0])) == pytest.approx(1.0, abs=1e-12)
+    off_plane = _rotated(builders.double_pendulum(), _rotation(), "tilted")
+    d = off_plane.to_dict()
+    d["masses"][2]["velocity"] = (np.asarray(d["masses"][2].get("velocity", [0, 0, 0])) + 1e-6 * (Q @ [0, 1, 0])).tolist()
+    assert ln.Dynamics(ln.Scene.from_dict(d)).structure.planar_normal is None  # 1e-6 m/s off the plane: not planar
     sims = {b: ln.Simulator(scene, method=method, backend=b, **kw) for b in ("numpy", "compiled")}
     aligned = ln.Simulator(base, method=method, backend="compiled", **kw)
     for t in (0.25, 0.5):
