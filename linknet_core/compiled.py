@@ -329,13 +329,16 @@ class CompiledRattle(CompiledScene):
         if self.planar:
             self.scratch2 = rattle_scratch(self.K, self.L, 2)
 
+    completed_steps = 0  # steps the last advance completed (all of them on OK; before the failing one otherwise)
+
     def advance(self, X, U, n_steps, h, gammas, F_input, tol):
-        """Returns (status, X, U): new (K,3) arrays; X, U are not modified."""
+        """Returns (status, X, U): new (K,3) arrays; X, U are not modified. On a non-OK status X, U stop inside
+        the failing step, after ``completed_steps`` whole ones."""
         gammas = np.asarray(gammas, np.float64)
         if self.planar:
             X3, U3, F_in = self._plane_inputs(X, U, F_input)
             X_out, U_out = np.empty((self.K, 3)), np.empty((self.K, 3))
-            status, _ = k2._rattle_steps_in_plane(X3, U3, self.F_scene, F_in, X_out, U_out, *self.plane,
+            status, self.completed_steps = k2._rattle_steps_in_plane(X3, U3, self.F_scene, F_in, X_out, U_out, *self.plane,
                                                   int(n_steps), float(h), gammas, self._X2, self._U2, self._F2,
                                                   *self.scene, *self.system, *self.scratch2, float(tol), 50)
             if status != LEFT_PLANE:
@@ -343,8 +346,9 @@ class CompiledRattle(CompiledScene):
             self.planar = False  # the state or the input left the plane: 3-D from here on
         Xw = np.array(X, dtype=np.float64, copy=True, order="C")
         Uw = np.array(U, dtype=np.float64, copy=True, order="C")
-        status, done = rattle_advance(Xw, Uw, int(n_steps), float(h), gammas, self.base_forces(F_input), self.scene,
-                                      self.system, self.scratch, float(tol), 50)
+        status, self.completed_steps = rattle_advance(Xw, Uw, int(n_steps), float(h), gammas,
+                                                      self.base_forces(F_input), self.scene, self.system,
+                                                      self.scratch, float(tol), 50)
         return status, Xw, Uw
 
 

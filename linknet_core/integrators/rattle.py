@@ -54,12 +54,29 @@ class Rattle(FixedStepIntegrator):
         from .. import compiled
 
         if self.backend != "numpy" and compiled.supports(self.dyn):
-            self._compiled_kernel()
-            status, X_new, U_new = self._kernel.advance(X, U, n, h, self.gammas, F_input, self.position_tol)
-            if status == compiled.OK:
-                return X_new, U_new
-            # singular configuration or slow projection: the numpy path has the fallbacks
-            self.compiled_fallbacks += 1
+            kernel = self._compiled_kernel()
+            remaining = n
+            while remaining:
+                status, X_new, U_new = kernel.advance(X, U, remaining, h, self.gammas, F_input, self.position_tol)
+                if status == compiled.OK:
+                    return X_new, U_new
+                # singular configuration or slow projection: the failing step takes the numpy path (it has the
+                # exact-Newton and minimum-norm fallbacks), then the compiled loop resumes. Handing the whole
+                # rest of the interval to numpy made a whipping chain_1000 ~100x slower after one hard step.
+                self.compiled_fallbacks += 1
+                done = kernel.completed_steps
+                if done:
+                    # the kernel's arrays stop inside the failing step: redo the completed steps (the same
+                    # arithmetic, so the same bits) to land on the last step boundary
+                    status, X_done, U_done = kernel.advance(X, U, done, h, self.gammas, F_input, self.position_tol)
+                    if status != compiled.OK:
+                        break
+                    X, U, remaining = X_done, U_done, remaining - done
+                X, U = self.step(X, U, h, F_input)
+                remaining -= 1
+            if not remaining:
+                return X, U
+            n = remaining
         elif self.backend == "compiled":
             raise SolverError(f"the compiled loop does not handle {self.dyn.structure.kind} scenes; use backend 'auto'")
         return super()._advance_steps(X, U, n, h, F_input)
