@@ -144,9 +144,10 @@ def mass_states(c, v, q, Pi, inertia, body_of, r, R, X, U):
         U[k, 2] = v[b, 2] + w[b, 0] * p1 - w[b, 1] * p0
 
 
-@njit(cache=True)
+@_inlined
 def _loads(X, c, F, body_of, f, tau):
-    """Resultant f and moment tau (about c, space frame) of the external forces on each body."""
+    """Resultant f and moment tau (about c, space frame) of the external forces on each body (c: the
+    centres in columns 0-2, so a body state Y serves as well)."""
     f[:, :] = 0.0
     tau[:, :] = 0.0
     for k in range(X.shape[0]):
@@ -308,21 +309,7 @@ def body_derivative(Y, R, inertia, body_mass, body_of, r, X, U, F, f, tau, F_bas
     body_rotations(Y, R)
     body_mass_states(Y, R, inertia, body_of, r, X, U)
     _forces(X, U, F_base, drag, sa, sb, sk, sr, sc, fixed, F)
-    for b in range(Y.shape[0]):
-        for d in range(3):
-            f[b, d] = 0.0
-            tau[b, d] = 0.0
-    for k in range(X.shape[0]):
-        b = body_of[k]
-        if b < 0:
-            continue
-        p0, p1, p2 = X[k, 0] - Y[b, 0], X[k, 1] - Y[b, 1], X[k, 2] - Y[b, 2]
-        f[b, 0] += F[k, 0]
-        f[b, 1] += F[k, 1]
-        f[b, 2] += F[k, 2]
-        tau[b, 0] += p1 * F[k, 2] - p2 * F[k, 1]
-        tau[b, 1] += p2 * F[k, 0] - p0 * F[k, 2]
-        tau[b, 2] += p0 * F[k, 1] - p1 * F[k, 0]
+    _loads(X, Y, F, body_of, f, tau)
     for b in range(Y.shape[0]):
         P0, P1, P2 = Y[b, 10], Y[b, 11], Y[b, 12]
         w0, w1, w2 = P0 / inertia[b, 0], P1 / inertia[b, 1], P2 / inertia[b, 2]
