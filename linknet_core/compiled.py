@@ -41,47 +41,9 @@ from .compiled_kernels import (EPS, LEFT_PLANE, NON_FINITE, OK, PIVOT_TOL, PROJE
                                SINGULAR, STEP_UNDERFLOW, TOO_MANY_STEPS, accelerations, add_correction,
                                factor_tension_matrix, project_positions, project_velocities, solve_tension_system,
                                unit_vectors)
-from .ldl import kernel
 
 PLANE_TOL = 1e-12  # an out-of-plane component at most this relative to its size is round-off (dropped in 2-D)
 KERNELS = {3: k3, 2: k2}
-
-
-# The force model in the all-masses form linknet_core.rigid_kernels calls (the compiled integrators use
-# compiled_kernels.scene_forces, which touches only the masses with drag and skips absent terms).
-@kernel
-def external_forces(X, U, F_base, drag, sa, sb, sk, sr, sc, fixed, F):
-    """F_k of (9) into F: F_base (gravity, constant and input forces) - drag U + spring-dampers; zero on anchors."""
-    K = X.shape[0]
-    for k in range(K):
-        dk = drag[k]
-        F[k, 0] = F_base[k, 0] - dk * U[k, 0]
-        F[k, 1] = F_base[k, 1] - dk * U[k, 1]
-        F[k, 2] = F_base[k, 2] - dk * U[k, 2]
-    for s in range(sa.shape[0]):
-        a, b = sa[s], sb[s]
-        dx0 = X[b, 0] - X[a, 0]
-        dx1 = X[b, 1] - X[a, 1]
-        dx2 = X[b, 2] - X[a, 2]
-        dist = np.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
-        if dist == 0.0:
-            continue
-        n0, n1, n2 = dx0 / dist, dx1 / dist, dx2 / dist
-        rate = n0 * (U[b, 0] - U[a, 0]) + n1 * (U[b, 1] - U[a, 1]) + n2 * (U[b, 2] - U[a, 2])
-        f = sk[s] * (dist - sr[s]) + sc[s] * rate
-        F[a, 0] += f * n0
-        F[a, 1] += f * n1
-        F[a, 2] += f * n2
-        F[b, 0] -= f * n0
-        F[b, 1] -= f * n1
-        F[b, 2] -= f * n2
-    for k in range(K):
-        if fixed[k]:
-            F[k, 0] = 0.0
-            F[k, 1] = 0.0
-            F[k, 2] = 0.0
-
-
 
 
 def plane_normal(scene, structure_normal=None, rtol: float = PLANE_TOL):

@@ -734,7 +734,7 @@ def _weighted(coef, KY, k, d):
 
 
 @kernel
-def _error_norm(X, U, Xn, Un, KX, KU, h, free, E1, E2, kind, rtol, atol):
+def rk_error_norm(X, U, Xn, Un, KX, KU, h, free, E1, E2, kind, rtol, atol):
     """The embedded error estimate in the norm of ProjectedRungeKutta.error_norm (free masses only). The mean
     is over the 6 coordinates of a free mass whatever DIM: in the plane the out-of-plane ones are zero and
     count as they do on the 3-D path."""
@@ -765,9 +765,9 @@ def _error_norm(X, U, Xn, Un, KX, KU, h, free, E1, E2, kind, rtol, atol):
 
 
 @kernel
-def _initial_step_size(X, U, acc0, Us, acc1, h0, free, rtol, atol, exponent, span):
+def initial_step_size(X, U, acc0, Us, acc1, h0, free, rtol, atol, exponent, span):
     """Hairer-Wanner's starting step, as ProjectedRungeKutta._initial_step, from f at (X, U) and at
-    (X + h0 U, U + h0 acc0) = (., Us) (RMS over 6 coordinates per free mass, as :func:`_error_norm`)."""
+    (X + h0 U, U + h0 acc0) = (., Us) (RMS over 6 coordinates per free mass, as :func:`rk_error_norm`)."""
     n = 6 * free.shape[0]
     d1 = 0.0
     d2 = 0.0
@@ -788,7 +788,7 @@ def _initial_step_size(X, U, acc0, Us, acc1, h0, free, rtol, atol, exponent, spa
 
 
 @kernel
-def _trial_step_size(X, U, acc0, free, rtol, atol, span):
+def trial_step_size(X, U, acc0, free, rtol, atol, span):
     """The first guess h0 of Hairer-Wanner's starting step."""
     n = 6 * free.shape[0]
     d0 = 0.0
@@ -804,6 +804,33 @@ def _trial_step_size(X, U, acc0, free, rtol, atol, span):
     d1 = np.sqrt(d1 / n)
     h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
     return min(h0, span)
+
+
+@kernel
+def controlled_step(h_next, t, t_target):
+    """The step an adaptive loop takes next from t (ProjectedRungeKutta.advance's rule): h_next, cut to land
+    on t_target, the rest split in two rather than leaving a sliver of a last step. -1.0 when that step is
+    within 16 ulps of t and does not finish the interval (step-size underflow). Shared with the rigid-body
+    loop (rigid_kernels.rigid_rk_advance)."""
+    remaining = t_target - t
+    h = min(h_next, remaining)
+    if h < remaining < 1.1 * h:
+        h = 0.5 * remaining
+    tt = max(abs(t), 1.0)
+    if h <= 16.0 * (np.nextafter(tt, np.inf) - tt) and h < remaining:
+        return -1.0
+    return h
+
+
+@kernel
+def next_step_size(h, h_next, err, exponent, safety, min_factor, max_factor):
+    """The step size after a step h with error norm err: grown by safety * err^exponent (at most max_factor)
+    when accepted (err <= 1), shrunk (at least min_factor) when rejected."""
+    if err > 1.0:
+        return h * max(min_factor, safety * err ** exponent)
+    factor = max_factor if err == 0.0 else min(max_factor, safety * err ** exponent)
+    # a step shortened only to land on t_target says nothing against the longer step
+    return max(h_next, h * factor) if h < h_next else h * factor
 
 
 @outlined_kernel
@@ -833,7 +860,7 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed_
     _store(KX, 0, U)
     _store(KU, 0, acc)
     if h_next <= 0.0:
-        h0 = _trial_step_size(X, U, acc, free, rtol, atol, t_target - t)
+        h0 = trial_step_size(X, U, acc, free, rtol, atol, t_target - t)
         for k in range(K):
             for d in range(DIM):
                 Xs[k, d] = X[k, d] + h0 * U[k, d]
@@ -845,18 +872,12 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed_
                                chain_off_weight, chain_sub, Ax, y_vals, solve_work, E, F, Bv, acc1, T, refactor)
         if status != OK:
             return status, t, 0.0, steps, rejected, n_rhs
-        h_next = _initial_step_size(X, U, acc, Us, acc1, h0, free, rtol, atol, exponent, t_target - t)
+        h_next = initial_step_size(X, U, acc, Us, acc1, h0, free, rtol, atol, exponent, t_target - t)
     while (steps < n_fixed) if n_fixed > 0 else (t < t_target):
         remaining = t_target - t
-        if n_fixed > 0:
-            h = h_next
-        else:
-            h = min(h_next, remaining)
-            if h < remaining < 1.1 * h:  # avoid a sliver of a last step: split the rest in two
-                h = 0.5 * remaining
-            tt = max(abs(t), 1.0)
-            if h <= 16.0 * (np.nextafter(tt, np.inf) - tt) and h < remaining:
-                return STEP_UNDERFLOW, t, h_next, steps, rejected, n_rhs
+        h = h_next if n_fixed > 0 else controlled_step(h_next, t, t_target)
+        if h < 0.0:
+            return STEP_UNDERFLOW, t, h_next, steps, rejected, n_rhs
         # the stages
         for i in range(1, s):
             _combine(X, h, AB, i, i, KX, Xs)
@@ -886,7 +907,7 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed_
         if n_fixed > 0:
             err = 0.0
         else:
-            err = _error_norm(X, U, Xn, Un, KX, KU, h, free, E1, E2, error_kind, rtol, atol)
+            err = rk_error_norm(X, U, Xn, Un, KX, KU, h, free, E1, E2, error_kind, rtol, atol)
             if not np.isfinite(err):
                 rejected += 1
                 h_next = h * min_factor
@@ -909,9 +930,7 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed_
                 t = t + h
             else:
                 t = t_target if h == remaining else t + h
-                factor = max_factor if err == 0.0 else min(max_factor, safety * err ** exponent)
-                # a step shortened only to land on t_target says nothing against the longer step
-                h_next = max(h_next, h * factor) if h < h_next else h * factor
+                h_next = next_step_size(h, h_next, err, exponent, safety, min_factor, max_factor)
             for k in range(K):
                 for d in range(DIM):
                     X[k, d] = Xn[k, d]
@@ -933,7 +952,7 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed_
                 _store(KU, 0, acc)
         else:
             rejected += 1
-            h_next = h * max(min_factor, safety * err ** exponent)
+            h_next = next_step_size(h, h_next, err, exponent, safety, min_factor, max_factor)
     return OK, t, h_next, steps, rejected, n_rhs
 
 

@@ -27,7 +27,7 @@ from .compiled_kernels import (HAIRER_ERROR, LEFT_PLANE, NON_FINITE, OK, PROJECT
                                STEP_UNDERFLOW, TOO_MANY_STEPS)
 from . import compiled_kernels_2d as k2
 
-__all__ = ["rk_advance", "CompiledRungeKutta", "RMS_ERROR", "HAIRER_ERROR", "OK", "PROJECTION_FAILED", "SINGULAR",
+__all__ = ["rk_advance", "CompiledRungeKutta", "embedded_pair", "ERROR_KINDS", "RMS_ERROR", "HAIRER_ERROR", "OK", "PROJECTION_FAILED", "SINGULAR",
            "NON_FINITE", "STEP_UNDERFLOW", "TOO_MANY_STEPS", "LEFT_PLANE"]
 
 
@@ -56,31 +56,41 @@ def rk_advance(X, U, t, t_target, h_next, F_base, scene, system, scratch, AB, E1
                                          projection_tol, *scratch)
 
 
+ERROR_KINDS = {"rms": RMS_ERROR, "hairer": HAIRER_ERROR}  # ProjectedRungeKutta.error_norm_kind -> kernel code
+
+
+def embedded_pair(A, B, error_weights, error_estimator_order):
+    """The arrays an explicit embedded tableau is handed to a compiled loop as (this one and
+    rigid_kernels.rigid_rk_advance): AB (A with the weights b as row s), the error weights E1, E2 (s + 1
+    each; E2 zero for a single-estimate norm) and the controller's exponent -1 / (order of the estimate + 1)."""
+    B = np.asarray(B, np.float64)
+    s = B.shape[0]
+    A = np.asarray(A, np.float64)
+    if A.ndim != 2 or A.shape[0] != s or A.shape[1] > s or np.any(np.triu(A[:, :s]) != 0.0):
+        raise ValueError(f"an explicit tableau needs a strictly lower-triangular A with {s} rows, got {A.shape}")
+    AB = np.zeros((s + 1, s))
+    AB[:s, :A.shape[1]] = A
+    AB[s] = B
+    E1 = np.ascontiguousarray(error_weights[0], np.float64)
+    E2 = np.ascontiguousarray(error_weights[1] if len(error_weights) > 1 else np.zeros_like(E1), np.float64)
+    if E1.shape != (s + 1,) or E2.shape != (s + 1,):
+        raise ValueError(f"error weights must have {s + 1} entries (one per stage and one for the new point), "
+                         f"got {E1.shape} and {E2.shape}")
+    return AB, E1, E2, -1.0 / (error_estimator_order + 1)
+
+
 class CompiledRungeKutta(CompiledScene):
     """:func:`rk_advance` for one scene and one tableau (A, b, error weights, error norm)."""
 
     def __init__(self, dyn, A, B, error_weights, error_kind: int, error_estimator_order: int,
                  use_chain: bool | None = None, planar: bool | None = None):
         super().__init__(dyn, use_chain=use_chain, planar=planar)
-        B = np.asarray(B, np.float64)
-        s = B.shape[0]
-        A = np.asarray(A, np.float64)
-        if A.ndim != 2 or A.shape[0] != s or A.shape[1] > s or np.any(np.triu(A[:, :s]) != 0.0):
-            raise ValueError(f"an explicit tableau needs a strictly lower-triangular A with {s} rows, got {A.shape}")
-        self.AB = np.zeros((s + 1, s))
-        self.AB[:s, :A.shape[1]] = A
-        self.AB[s] = B
-        E1 = np.ascontiguousarray(error_weights[0], np.float64)
-        E2 = np.ascontiguousarray(error_weights[1] if len(error_weights) > 1 else np.zeros_like(E1), np.float64)
-        if E1.shape != (s + 1,) or E2.shape != (s + 1,):
-            raise ValueError(f"error weights must have {s + 1} entries (one per stage and one for the new point), "
-                             f"got {E1.shape} and {E2.shape}")
-        self.E1, self.E2 = E1, E2
+        self.AB, self.E1, self.E2, self.exponent = embedded_pair(A, B, error_weights, error_estimator_order)
+        s = self.AB.shape[1]
         self.scratch = rk_scratch(self.K, self.L, s)
         if self.planar:
             self.scratch2 = rk_scratch(self.K, self.L, s, 2)
         self.error_kind = int(error_kind)
-        self.exponent = -1.0 / (error_estimator_order + 1)
 
     def advance(self, X, U, t, t_target, h, F_input, rtol, atol, max_steps, controller, n_fixed=0,
                 projection_tol=1e-14):

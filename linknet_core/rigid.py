@@ -318,13 +318,18 @@ class RigidBodies:
         self.r = np.zeros_like(X0)  # body-frame positions, in the frame of exactly the matrix the kernel uses
         self.r[self._inside] = np.einsum("kji,kj->ki", R0[body_of[self._inside]], rho)
         self.r.setflags(write=False)
-        # scene arrays for the kernel (the force model is compiled.external_forces, shared with the RATTLE loop)
+        # scene arrays for the kernels, in the form of the compiled loops' force model
+        # (compiled_kernels.scene_forces: drag on the masses that have it, F_base zero on anchors)
         s = scene.springs
-        free_mass = np.where(scene.fixed, 0.0, scene.mass)
+        fixed = np.asarray(scene.fixed, bool)
+        drag_idx = np.flatnonzero((np.asarray(scene.drag) != 0.0) & ~fixed)
+        self._fixed_idx = np.flatnonzero(fixed).astype(np.int64)
+        free_mass = np.where(fixed, 0.0, scene.mass)  # an anchor's mass may be infinite (1/M = 0)
         self._F_scene = free_mass[:, None] * scene.gravity[None, :] + scene.force
-        self._force_args = (np.ascontiguousarray(scene.drag), s.a, s.b, np.ascontiguousarray(s.stiffness),
-                            np.ascontiguousarray(s.rest_length), np.ascontiguousarray(s.damping),
-                            np.ascontiguousarray(scene.fixed))
+        self._F_scene[fixed] = 0.0  # no force acts on an anchor
+        self._force_args = (drag_idx.astype(np.int64), np.ascontiguousarray(np.asarray(scene.drag)[drag_idx], float),
+                            s.a, s.b, np.ascontiguousarray(s.stiffness), np.ascontiguousarray(s.rest_length),
+                            np.ascontiguousarray(s.damping), self._fixed_idx)
         self._velocity_dependent = has_velocity_dependent_forces(scene)
         self._tension_operator = self._build_tension_operator(scene)
         self._set_bodies(*self._fit(X0, U0))
@@ -332,8 +337,11 @@ class RigidBodies:
 
     def _base_forces(self, F_input) -> np.ndarray:
         """Gravity, constant forces and the input held over the interval (zero-order hold), for the kernels."""
-        F_base = self._F_scene if F_input is None else self._F_scene + F_input
-        return np.ascontiguousarray(F_base, dtype=float)
+        if F_input is None:
+            return self._F_scene
+        F_base = np.array(self._F_scene + F_input, dtype=float, order="C")
+        F_base[self._fixed_idx] = 0.0  # no force acts on an anchor
+        return F_base
 
     # ---- body state <-> mass state ---------------------------------------------------------------
     def _fit(self, X, U):

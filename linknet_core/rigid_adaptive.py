@@ -39,13 +39,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from .compiled_rk import ERROR_KINDS, embedded_pair
 from .dynamics import Dynamics
 from .errors import SolverError
 from .integrators import METHODS
 from .integrators.base import Integrator
+from .integrators.runge_kutta import MAX_FACTOR, MIN_FACTOR, SAFETY  # the point-mass path's controller
 from .rigid import BodyLayout, RigidBodies
-
-SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0  # the point-mass path's controller (integrators.runge_kutta)
 
 
 class AdaptiveRigidBodyPath(RigidBodies, Integrator):
@@ -62,17 +62,9 @@ class AdaptiveRigidBodyPath(RigidBodies, Integrator):
         self.name, self.order, self.symplectic = cls.name, cls.order, cls.symplectic
         self.rtol, self.atol = float(rtol), float(atol)
         self.h = h0
-        B = np.asarray(cls.B, float)
-        s = B.shape[0]
-        A = np.asarray(cls.A, float)
-        self._AB = np.zeros((s + 1, s))
-        self._AB[:s, :A.shape[1]] = A
-        self._AB[s] = B
-        E1 = np.ascontiguousarray(cls.error_weights[0], float)
-        E2 = np.ascontiguousarray(cls.error_weights[1] if len(cls.error_weights) > 1 else np.zeros_like(E1), float)
-        self._E1, self._E2 = E1, E2
-        self._error_kind = {"rms": 0, "hairer": 1}[cls.error_norm_kind]
-        self._exponent = -1.0 / (cls.error_estimator_order + 1)
+        self._AB, self._E1, self._E2, self._exponent = embedded_pair(cls.A, cls.B, cls.error_weights,
+                                                                     cls.error_estimator_order)
+        self._error_kind = ERROR_KINDS[cls.error_norm_kind]
         self.guarantees = (f"order {cls.order}, adaptive ({cls.name}'s embedded pair on the Newton-Euler equations "
                            "of each body; error control on the masses' positions and velocities in the point-mass "
                            "path's norm); quaternion renormalised after every step, link lengths kept to "

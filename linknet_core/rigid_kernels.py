@@ -31,7 +31,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .compiled import external_forces as _forces  # the force model F_k of (9), shared with the RATTLE loop
+# the force model F_k of (9) and the adaptive step controller are the point-mass loops' own
+from .compiled_kernels import (controlled_step, initial_step_size, next_step_size, rk_error_norm,
+                               scene_forces as _forces, trial_step_size)
 
 # building blocks of the Runge-Kutta loop: inlined by LLVM into it (a call passing ~20 array structs costs
 # more than a small body's whole stage)
@@ -174,7 +176,7 @@ def _kick(v, Pi, R, f, tau, body_mass, hk):
 
 @njit(cache=True)
 def _implicit_kick(c, v, q, Pi, inertia, body_of, r, R, X, U, F, f, tau, body_mass, hk,
-                   F_base, drag, sa, sb, sk, sr, sc, fixed):
+                   F_base, drag_idx, drag_coef, sa, sb, sk, sr, sc, fixed_idx):
     """(v, Pi) <- (v, Pi) + hk (f, R^T tau) evaluated at the *new* velocities (fixed-point iteration to
     round-off). Returns False if it does not converge (damping too stiff for the step)."""
     B = v.shape[0]
@@ -197,7 +199,7 @@ def _implicit_kick(c, v, q, Pi, inertia, body_of, r, R, X, U, F, f, tau, body_ma
                 sv = max(sv, abs(v[b, d]))
                 sp = max(sp, abs(Pi[b, d]))
         mass_states(c, v, q, Pi, inertia, body_of, r, R, X, U)
-        _forces(X, U, F_base, drag, sa, sb, sk, sr, sc, fixed, F)
+        _forces(X, U, F_base, drag_idx, drag_coef, sa, sb, sk, sr, sc, fixed_idx, F)
         _loads(X, c, F, body_of, f, tau)
         if it > 0 and dv <= 8 * EPS * sv and dp <= 8 * EPS * sp:
             return True
@@ -210,7 +212,7 @@ def _implicit_kick(c, v, q, Pi, inertia, body_of, r, R, X, U, F, f, tau, body_ma
 
 @njit(cache=True)
 def rigid_advance(c, v, q, Pi, n_steps, h, gammas, kind, inertia, body_mass, body_of, r, X, U,
-                  F_base, drag, sa, sb, sk, sr, sc, fixed, velocity_dependent):
+                  F_base, drag_idx, drag_coef, sa, sb, sk, sr, sc, fixed_idx, velocity_dependent):
     """Advance every body in place by n_steps steps of size h, each a composition of base steps of
     gammas[i] h; X, U are updated to the final state (masses of no body are left as they are).
 
@@ -226,7 +228,7 @@ def rigid_advance(c, v, q, Pi, n_steps, h, gammas, kind, inertia, body_mass, bod
     tau = np.empty((B, 3))
     R = np.empty((B, 3, 3))
     mass_states(c, v, q, Pi, inertia, body_of, r, R, X, U)
-    _forces(X, U, F_base, drag, sa, sb, sk, sr, sc, fixed, F)
+    _forces(X, U, F_base, drag_idx, drag_coef, sa, sb, sk, sr, sc, fixed_idx, F)
     _loads(X, c, F, body_of, f, tau)
     for step in range(n_steps):
         for g in range(gammas.shape[0]):
@@ -238,11 +240,11 @@ def rigid_advance(c, v, q, Pi, n_steps, h, gammas, kind, inertia, body_mass, bod
                     c[b, d] += hs * v[b, d]
             free_rotation(q, Pi, kind, inertia, hs)
             mass_states(c, v, q, Pi, inertia, body_of, r, R, X, U)
-            _forces(X, U, F_base, drag, sa, sb, sk, sr, sc, fixed, F)
+            _forces(X, U, F_base, drag_idx, drag_coef, sa, sb, sk, sr, sc, fixed_idx, F)
             _loads(X, c, F, body_of, f, tau)
             if velocity_dependent:
                 if not _implicit_kick(c, v, q, Pi, inertia, body_of, r, R, X, U, F, f, tau, body_mass, 0.5 * hs,
-                                      F_base, drag, sa, sb, sk, sr, sc, fixed):
+                                      F_base, drag_idx, drag_coef, sa, sb, sk, sr, sc, fixed_idx):
                     return KICK_NOT_CONVERGED
             else:
                 _kick(v, Pi, R, f, tau, body_mass, 0.5 * hs)
@@ -267,7 +269,6 @@ def rigid_advance(c, v, q, Pi, n_steps, h, gammas, kind, inertia, body_mass, bod
 # there and here (see linknet_core.rigid_adaptive for why not from the body-state derivatives).
 
 STEP_UNDERFLOW, TOO_MANY_STEPS = 3, 4
-RMS_ERROR, HAIRER_ERROR = 0, 1  # as linknet_core.compiled_rk
 
 
 @_inlined
@@ -303,12 +304,12 @@ def body_mass_states(Y, R, inertia, body_of, r, X, U):
 
 
 @_inlined
-def body_derivative(Y, R, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag, sa, sb, sk, sr, sc, fixed,
+def body_derivative(Y, R, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag_idx, drag_coef, sa, sb, sk, sr, sc, fixed_idx,
                     dY):
     """dY/dt at Y; leaves R, the mass states X, U and the forces F of (9) at Y in their arrays."""
     body_rotations(Y, R)
     body_mass_states(Y, R, inertia, body_of, r, X, U)
-    _forces(X, U, F_base, drag, sa, sb, sk, sr, sc, fixed, F)
+    _forces(X, U, F_base, drag_idx, drag_coef, sa, sb, sk, sr, sc, fixed_idx, F)
     _loads(X, Y, F, body_of, f, tau)
     for b in range(Y.shape[0]):
         P0, P1, P2 = Y[b, 10], Y[b, 11], Y[b, 12]
@@ -376,89 +377,30 @@ def _combine_rows(Y, h, coef, row, n, KY, out):
     return out
 
 
-@_inlined
-def _weighted_stages(weights, KY, out):
-    for b in range(out.shape[0]):
-        for i in range(out.shape[1]):
-            acc = 0.0
-            for j in range(weights.shape[0]):
-                acc += weights[j] * KY[j, b, i]
-            out[b, i] = acc
-
-
-@_inlined
-def _mass_error_norm(X, U, Xn, Un, dX1, dU1, dX2, dU2, h, free, kind, rtol, atol):
-    """The error norm of the point-mass path (linknet_core.compiled_rk._error_norm) on the masses' error
-    estimates (dX1, dU1) and, for Hairer's norm, (dX2, dU2)."""
-    n = 6 * free.shape[0]
-    s1 = 0.0
-    s2 = 0.0
-    for i in range(free.shape[0]):
-        k = free[i]
-        for d in range(3):
-            sx = atol + rtol * max(abs(X[k, d]), abs(Xn[k, d]))
-            su = atol + rtol * max(abs(U[k, d]), abs(Un[k, d]))
-            if kind == RMS_ERROR:
-                s1 += (h * dX1[k, d] / sx) ** 2 + (h * dU1[k, d] / su) ** 2
-            else:
-                s1 += (dX1[k, d] / sx) ** 2 + (dU1[k, d] / su) ** 2
-                s2 += (dX2[k, d] / sx) ** 2 + (dU2[k, d] / su) ** 2
-    if kind == RMS_ERROR:
-        return np.sqrt(s1 / n)
-    if s1 == 0.0 and s2 == 0.0:
-        return 0.0
-    return abs(h) * s1 / np.sqrt((s1 + 0.01 * s2) * n)
-
-
 @njit(cache=True, error_model="numpy")
-def _starting_step(Y, dY, R, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag, sa, sb, sk, sr, sc,
-                   fixed, free, rtol, atol, exponent, span, Ys, dYs, dX, dU, dXs, dUs):
-    """Hairer-Wanner's starting step on the masses' states, as the point-mass path chooses it
-    (ProjectedRungeKutta._initial_step): from (U, dU/dt) of the masses at Y and at Y + h0 dY/dt."""
-    n = 6 * free.shape[0]
+def _starting_step(Y, dY, R, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag_idx, drag_coef, sa, sb,
+                   sk, sr, sc, fixed_idx, free, rtol, atol, exponent, span):
+    """Hairer-Wanner's starting step on the masses' states, as the point-mass path chooses it (the same
+    kernels): from (U, dU/dt) of the masses at Y and at Y + h0 dY/dt."""
     th = np.empty((Y.shape[0], 3))
+    dX, dU, dXs, dUs = np.empty_like(X), np.empty_like(X), np.empty_like(X), np.empty_like(X)
     mass_tangent(Y, dY, R, inertia, body_of, r, dX, dU, th)  # (U_k, a_k)
-    d0 = 0.0
-    d1 = 0.0
-    for i in range(free.shape[0]):
-        k = free[i]
-        for d in range(3):
-            sx = atol + rtol * abs(X[k, d])
-            su = atol + rtol * abs(U[k, d])
-            d0 += (X[k, d] / sx) ** 2 + (U[k, d] / su) ** 2
-            d1 += (dX[k, d] / sx) ** 2 + (dU[k, d] / su) ** 2
-    d0 = np.sqrt(d0 / n)
-    d1 = np.sqrt(d1 / n)
-    h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-    h0 = min(h0, span)
-    for b in range(Y.shape[0]):
-        for i in range(Y.shape[1]):
-            Ys[b, i] = Y[b, i] + h0 * dY[b, i]
+    h0 = trial_step_size(X, U, dU, free, rtol, atol, span)
+    Ys = Y + h0 * dY
+    dYs = np.empty_like(Y)
     Rs = np.empty_like(R)
     Xs = X.copy()
     Us = U.copy()
-    body_derivative(Ys, Rs, inertia, body_mass, body_of, r, Xs, Us, F, f, tau, F_base, drag, sa, sb, sk, sr, sc,
-                    fixed, dYs)
+    body_derivative(Ys, Rs, inertia, body_mass, body_of, r, Xs, Us, F, f, tau, F_base, drag_idx, drag_coef, sa, sb,
+                    sk, sr, sc, fixed_idx, dYs)
     mass_tangent(Ys, dYs, Rs, inertia, body_of, r, dXs, dUs, th)
-    d2 = 0.0
-    for i in range(free.shape[0]):
-        k = free[i]
-        for d in range(3):
-            sx = atol + rtol * abs(X[k, d])
-            su = atol + rtol * abs(U[k, d])
-            d2 += ((dXs[k, d] - dX[k, d]) / sx) ** 2 + ((dUs[k, d] - dU[k, d]) / su) ** 2
-    d2 = np.sqrt(d2 / n) / h0
-    if d1 <= 1e-15 and d2 <= 1e-15:
-        h1 = max(1e-6, h0 * 1e-3)
-    else:
-        h1 = (0.01 / max(d1, d2)) ** (-exponent)
-    return min(100.0 * h0, h1, span)
+    return initial_step_size(X, U, dU, dXs, dUs, h0, free, rtol, atol, exponent, span)
 
 
 @njit(cache=True, error_model="numpy")
 def rigid_rk_advance(Y, t, t_target, h_next, AB, E1, E2, error_kind, exponent, rtol, atol, max_steps, n_fixed,
-                     safety, min_factor, max_factor, inertia, body_mass, body_of, r, free, X, U, F_base, drag, sa, sb,
-                     sk, sr, sc, fixed):
+                     safety, min_factor, max_factor, inertia, body_mass, body_of, r, free, X, U, F_base, drag_idx, drag_coef, sa, sb,
+                     sk, sr, sc, fixed_idx):
     """Advance the body states Y (B, 13) in place from t to t_target with the explicit embedded pair (AB: A with
     the weights b as row s; E1, E2: error weights, s + 1 each). The step-size controller is that of the
     point-mass path (linknet_core.compiled_rk): the same starting step, safety factor and bounds, no sliver
@@ -472,7 +414,6 @@ def rigid_rk_advance(Y, t, t_target, h_next, AB, E1, E2, error_kind, exponent, r
     KY = np.empty((s + 1, B, 13))
     Ys = np.empty((B, 13))
     Yn = np.empty((B, 13))
-    e1 = np.empty((B, 13))
     R = np.empty((B, 3, 3))
     R0 = np.empty((B, 3, 3))
     F = np.empty((K, 3))
@@ -483,10 +424,6 @@ def rigid_rk_advance(Y, t, t_target, h_next, AB, E1, E2, error_kind, exponent, r
     Us = U.copy()
     Xn = X.copy()
     Un = U.copy()
-    dX1 = np.zeros((K, 3))
-    dU1 = np.zeros((K, 3))
-    dX2 = np.zeros((K, 3))
-    dU2 = np.zeros((K, 3))
     # the masses' velocities and accelerations at every stage: the error estimate is formed from them
     MX = np.zeros((s + 1, K, 3))
     MU = np.zeros((s + 1, K, 3))
@@ -494,34 +431,27 @@ def rigid_rk_advance(Y, t, t_target, h_next, AB, E1, E2, error_kind, exponent, r
     steps = 0
     rejected = 0
     n_rhs = 1
-    body_derivative(Y, R0, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag, sa, sb, sk, sr, sc, fixed,
+    body_derivative(Y, R0, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag_idx, drag_coef, sa, sb, sk, sr, sc, fixed_idx,
                     KY[0])
     mass_tangent(Y, KY[0], R0, inertia, body_of, r, MX[0], MU[0], th)
     if h_next <= 0.0:
         n_rhs += 1
-        h_next = _starting_step(Y, KY[0], R0, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag, sa, sb,
-                                sk, sr, sc, fixed, free, rtol, atol, exponent, t_target - t, Ys, e1, dX1, dU1, dX2,
-                                dU2)
+        h_next = _starting_step(Y, KY[0], R0, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag_idx,
+                                drag_coef, sa, sb, sk, sr, sc, fixed_idx, free, rtol, atol, exponent, t_target - t)
     while (steps < n_fixed) if n_fixed > 0 else (t < t_target):
         remaining = t_target - t
-        if n_fixed > 0:
-            h = h_next
-        else:
-            h = min(h_next, remaining)
-            if h < remaining < 1.1 * h:  # avoid a sliver of a last step: split the rest in two
-                h = 0.5 * remaining
-            tt = max(abs(t), 1.0)
-            if h <= 16.0 * (np.nextafter(tt, np.inf) - tt) and h < remaining:
-                return STEP_UNDERFLOW, t, h_next, steps, rejected, n_rhs
+        h = h_next if n_fixed > 0 else controlled_step(h_next, t, t_target)
+        if h < 0.0:
+            return STEP_UNDERFLOW, t, h_next, steps, rejected, n_rhs
         for i in range(1, s):
             _combine_rows(Y, h, AB, i, i, KY, Ys)
-            body_derivative(Ys, R, inertia, body_mass, body_of, r, Xs, Us, F, f, tau, F_base, drag, sa, sb, sk, sr,
-                            sc, fixed, KY[i])
+            body_derivative(Ys, R, inertia, body_mass, body_of, r, Xs, Us, F, f, tau, F_base, drag_idx, drag_coef, sa, sb, sk, sr,
+                            sc, fixed_idx, KY[i])
             if n_fixed == 0:
                 mass_tangent(Ys, KY[i], R, inertia, body_of, r, MX[i], MU[i], th)
         _combine_rows(Y, h, AB, s, s, KY, Yn)
-        body_derivative(Yn, R, inertia, body_mass, body_of, r, Xn, Un, F, f, tau, F_base, drag, sa, sb, sk, sr, sc,
-                        fixed, KY[s])
+        body_derivative(Yn, R, inertia, body_mass, body_of, r, Xn, Un, F, f, tau, F_base, drag_idx, drag_coef, sa, sb, sk, sr, sc,
+                        fixed_idx, KY[s])
         mass_tangent(Yn, KY[s], R, inertia, body_of, r, MX[s], MU[s], th)
         n_rhs += s
         if n_fixed > 0:
@@ -531,12 +461,7 @@ def rigid_rk_advance(Y, t, t_target, h_next, AB, E1, E2, error_kind, exponent, r
                     if not np.isfinite(Yn[b, i]):
                         return NON_FINITE, t, h_next, steps, rejected, n_rhs
         else:
-            _weighted_stages(E1, MX, dX1)
-            _weighted_stages(E1, MU, dU1)
-            if error_kind == HAIRER_ERROR:
-                _weighted_stages(E2, MX, dX2)
-                _weighted_stages(E2, MU, dU2)
-            err = _mass_error_norm(X, U, Xn, Un, dX1, dU1, dX2, dU2, h, free, error_kind, rtol, atol)
+            err = rk_error_norm(X, U, Xn, Un, MX, MU, h, free, E1, E2, error_kind, rtol, atol)
             if not np.isfinite(err):
                 rejected += 1
                 h_next = h * min_factor
@@ -546,9 +471,7 @@ def rigid_rk_advance(Y, t, t_target, h_next, AB, E1, E2, error_kind, exponent, r
                 t = t + h
             else:
                 t = t_target if h == remaining else t + h
-                factor = max_factor if err == 0.0 else min(max_factor, safety * err ** exponent)
-                # a step shortened only to land on t_target says nothing against the longer step
-                h_next = max(h_next, h * factor) if h < h_next else h * factor
+                h_next = next_step_size(h, h_next, err, exponent, safety, min_factor, max_factor)
             # renormalise q (the projection of this path). The mass states do not change (the map uses
             # q / |q|), and the derivative at the new point only scales its dq/dt by 1/|q|: it stays the
             # first stage of the next step (no extra evaluation)
@@ -569,5 +492,5 @@ def rigid_rk_advance(Y, t, t_target, h_next, AB, E1, E2, error_kind, exponent, r
                 return TOO_MANY_STEPS, t, h_next, steps, rejected, n_rhs
         else:
             rejected += 1
-            h_next = h * max(min_factor, safety * err ** exponent)
+            h_next = next_step_size(h, h_next, err, exponent, safety, min_factor, max_factor)
     return OK, t, h_next, steps, rejected, n_rhs

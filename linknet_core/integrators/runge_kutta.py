@@ -174,9 +174,9 @@ class ProjectedRungeKutta(Integrator):
         """The compiled kernel of this scene and tableau (built with the integrator): its ``planar`` says whether
         the next interval runs in the plane's coordinates (set it False to force the 3-D kernels)."""
         if getattr(self, "_kernel", None) is None:
-            from ..compiled_rk import HAIRER_ERROR, RMS_ERROR, CompiledRungeKutta
+            from ..compiled_rk import ERROR_KINDS, CompiledRungeKutta
 
-            kind = {"rms": RMS_ERROR, "hairer": HAIRER_ERROR}[self.error_norm_kind]
+            kind = ERROR_KINDS[self.error_norm_kind]
             self._kernel = CompiledRungeKutta(self.dyn, self.A, self.B, self.error_weights, kind,
                                               self.error_estimator_order)
         return self._kernel
