@@ -53,6 +53,28 @@ def elimination_tree(n, Ap, Ai):
 
 
 @njit(cache=True)
+def _reach(bidx, k, etree, y_markers, elim_buffer, y_idx, nnz_y):
+    """Append to y_idx[nnz_y:] the unmarked columns on the elimination-tree path from bidx towards k, marking
+    them, in the order column k's factorisation must take them (QDLDL's symbolic step). Returns the new count."""
+    y_markers[bidx] = True
+    elim_buffer[0] = bidx
+    nnz_e = 1
+    nxt = etree[bidx]
+    while nxt != -1 and nxt < k:
+        if y_markers[nxt]:
+            break
+        y_markers[nxt] = True
+        elim_buffer[nnz_e] = nxt
+        nnz_e += 1
+        nxt = etree[nxt]
+    while nnz_e > 0:
+        nnz_e -= 1
+        y_idx[nnz_y] = elim_buffer[nnz_e]
+        nnz_y += 1
+    return nnz_y
+
+
+@njit(cache=True)
 def ldl_factor(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, pivot_tol):
     """Numeric LDL^T of the upper-CSC matrix (Ap, Ai, Ax) into (Lp, Li, Lx), D, Dinv (QDLDL's up-looking
     algorithm, symbolic part included; :func:`ldl_factor_scheduled` is the same arithmetic without it).
@@ -76,21 +98,7 @@ def ldl_factor(n, Ap, Ai, Ax, Lp, Li, Lx, D, Dinv, etree, pivot_tol):
                 continue
             y_vals[bidx] = Ax[p]
             if not y_markers[bidx]:
-                y_markers[bidx] = True
-                elim_buffer[0] = bidx
-                nnz_e = 1
-                nxt = etree[bidx]
-                while nxt != -1 and nxt < k:
-                    if y_markers[nxt]:
-                        break
-                    y_markers[nxt] = True
-                    elim_buffer[nnz_e] = nxt
-                    nnz_e += 1
-                    nxt = etree[nxt]
-                while nnz_e > 0:
-                    nnz_e -= 1
-                    y_idx[nnz_y] = elim_buffer[nnz_e]
-                    nnz_y += 1
+                nnz_y = _reach(bidx, k, etree, y_markers, elim_buffer, y_idx, nnz_y)
         dk = diag
         for i in range(nnz_y - 1, -1, -1):
             c = y_idx[i]
@@ -138,21 +146,7 @@ def ldl_schedule(n, Ap, Ai, Lp, etree):
             bidx = Ai[p]
             if bidx == k or y_markers[bidx]:
                 continue
-            y_markers[bidx] = True
-            elim_buffer[0] = bidx
-            nnz_e = 1
-            nxt = etree[bidx]
-            while nxt != -1 and nxt < k:
-                if y_markers[nxt]:
-                    break
-                y_markers[nxt] = True
-                elim_buffer[nnz_e] = nxt
-                nnz_e += 1
-                nxt = etree[nxt]
-            while nnz_e > 0:
-                nnz_e -= 1
-                y_idx[nnz_y] = elim_buffer[nnz_e]
-                nnz_y += 1
+            nnz_y = _reach(bidx, k, etree, y_markers, elim_buffer, y_idx, nnz_y)
         for i in range(nnz_y - 1, -1, -1):
             c = y_idx[i]
             slot = next_space[c]
