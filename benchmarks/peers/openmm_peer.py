@@ -40,29 +40,9 @@ class OpenMMVerlet(Method):
             return False, f"openmm not installed ({e})"
 
     def run(self, spec, t_end, dt):
-        import openmm as mm
         n, dt = n_steps(t_end, dt)
         with Timer() as setup:
-            system = mm.System()
-            for k in range(spec.K):
-                system.addParticle(ANCHOR_MASS if spec.fixed[k] else float(spec.mass[k]))
-            for a, b, r in zip(spec.k1, spec.k2, spec.length):
-                system.addConstraint(int(a), int(b), float(r))
-            grav = mm.CustomExternalForce("-m*(gx*x+gy*y+gz*z)")
-            grav.addPerParticleParameter("m")
-            for name, v in zip(("gx", "gy", "gz"), spec.gravity):
-                grav.addGlobalParameter(name, float(v))
-            for k in np.flatnonzero(spec.free):
-                grav.addParticle(int(k), [float(spec.mass[k])])
-            system.addForce(grav)
-            integ = mm.VerletIntegrator(dt)
-            integ.setConstraintTolerance(self.constraint_tolerance)
-            platform = mm.Platform.getPlatformByName(self.platform)
-            props = {"Threads": "1"} if self.platform == "CPU" else {}
-            ctx = mm.Context(system, integ, platform, props)
-            acc0, _ = Index1System(spec).accelerations(spec.X0, spec.U0)
-            ctx.setPositions(spec.X0)
-            ctx.setVelocities(spec.U0 - 0.5 * dt * acc0)   # leapfrog wants v(-dt/2)
+            integ, ctx = _start(_system(spec, ANCHOR_MASS), spec, dt, self.platform, self.constraint_tolerance)
         with Timer() as tm:
             integ.step(n)
             st = ctx.getState(getPositions=True, getVelocities=True)
@@ -74,6 +54,39 @@ class OpenMMVerlet(Method):
         U = Uh + 0.5 * dt * acc1
         U[spec.fixed] = 0.0
         return RunResult(X, U, tm.seconds, setup.seconds, steps=n, info={"platform": self.platform})
+
+
+def _system(spec, anchor_mass):
+    """The scene as an OpenMM System: particles (anchors of mass anchor_mass), one constraint per link,
+    gravity on the free masses."""
+    import openmm as mm
+    system = mm.System()
+    for k in range(spec.K):
+        system.addParticle(anchor_mass if spec.fixed[k] else float(spec.mass[k]))
+    for a, b, r in zip(spec.k1, spec.k2, spec.length):
+        system.addConstraint(int(a), int(b), float(r))
+    grav = mm.CustomExternalForce("-m*(gx*x+gy*y+gz*z)")
+    grav.addPerParticleParameter("m")
+    for name, v in zip(("gx", "gy", "gz"), spec.gravity):
+        grav.addGlobalParameter(name, float(v))
+    for k in np.flatnonzero(spec.free):
+        grav.addParticle(int(k), [float(spec.mass[k])])
+    system.addForce(grav)
+    return system
+
+
+def _start(system, spec, dt, platform, tol):
+    """VerletIntegrator and Context (one thread on CPU) at the scene's initial state; the leapfrog holds
+    v(-dt/2), computed from the exact initial accelerations."""
+    import openmm as mm
+    integ = mm.VerletIntegrator(dt)
+    integ.setConstraintTolerance(tol)
+    ctx = mm.Context(system, integ, mm.Platform.getPlatformByName(platform),
+                     {"Threads": "1"} if platform == "CPU" else {})
+    acc0, _ = Index1System(spec).accelerations(spec.X0, spec.U0)
+    ctx.setPositions(spec.X0)
+    ctx.setVelocities(spec.U0 - 0.5 * dt * acc0)
+    return integ, ctx
 
 
 # ------------------------------------------------------------------------------------------ diagnosis
@@ -108,18 +121,7 @@ def _blowup_time(spec, dt, t_end, platform="Reference", anchor_mass=ANCHOR_MASS,
     add zero-stiffness HarmonicAngleForce terms at the initial angles (no force; CCMA reads its coupling
     matrix from them)."""
     import openmm as mm
-    system = mm.System()
-    for k in range(spec.K):
-        system.addParticle(anchor_mass if spec.fixed[k] else float(spec.mass[k]))
-    for a, b, r in zip(spec.k1, spec.k2, spec.length):
-        system.addConstraint(int(a), int(b), float(r))
-    grav = mm.CustomExternalForce("-m*(gx*x+gy*y+gz*z)")
-    grav.addPerParticleParameter("m")
-    for name, v in zip(("gx", "gy", "gz"), spec.gravity):
-        grav.addGlobalParameter(name, float(v))
-    for k in np.flatnonzero(spec.free):
-        grav.addParticle(int(k), [float(spec.mass[k])])
-    system.addForce(grav)
+    system = _system(spec, anchor_mass)
     if angle_hints:
         angles = mm.HarmonicAngleForce()
         nbrs = {}
@@ -133,13 +135,7 @@ def _blowup_time(spec, dt, t_end, platform="Reference", anchor_mass=ANCHOR_MASS,
                     cos = float(u @ v / (np.linalg.norm(u) * np.linalg.norm(v)))
                     angles.addAngle(ns[i], c, ns[j], float(np.arccos(np.clip(cos, -1.0, 1.0))), 0.0)
         system.addForce(angles)
-    integ = mm.VerletIntegrator(dt)
-    integ.setConstraintTolerance(tol)
-    ctx = mm.Context(system, integ, mm.Platform.getPlatformByName(platform),
-                     {"Threads": "1"} if platform == "CPU" else {})
-    acc0, _ = Index1System(spec).accelerations(spec.X0, spec.U0)
-    ctx.setPositions(spec.X0)
-    ctx.setVelocities(spec.U0 - 0.5 * dt * acc0)
+    integ, ctx = _start(system, spec, dt, platform, tol)
     chunk = max(1, int(round(chunk_s / dt)))
     n, done, residual = int(round(t_end / dt)), 0, None
     while done < n:
