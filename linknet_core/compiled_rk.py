@@ -27,8 +27,8 @@ from .compiled_kernels import (HAIRER_ERROR, LEFT_PLANE, NON_FINITE, OK, PROJECT
                                STEP_UNDERFLOW, TOO_MANY_STEPS)
 from . import compiled_kernels_2d as k2
 
-__all__ = ["rk_advance", "CompiledRungeKutta", "embedded_pair", "ERROR_KINDS", "RMS_ERROR", "HAIRER_ERROR", "OK", "PROJECTION_FAILED", "SINGULAR",
-           "NON_FINITE", "STEP_UNDERFLOW", "TOO_MANY_STEPS", "LEFT_PLANE"]
+__all__ = ["rk_advance", "CompiledRungeKutta", "embedded_pair", "ERROR_KINDS", "RMS_ERROR", "HAIRER_ERROR", "OK",
+           "PROJECTION_FAILED", "SINGULAR", "NON_FINITE", "STEP_UNDERFLOW", "TOO_MANY_STEPS", "LEFT_PLANE"]
 
 
 def rk_scratch(K, L, s, dim=3):

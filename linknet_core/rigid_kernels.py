@@ -304,8 +304,8 @@ def body_mass_states(Y, R, inertia, body_of, r, X, U):
 
 
 @_inlined
-def body_derivative(Y, R, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag_idx, drag_coef, sa, sb, sk, sr, sc, fixed_idx,
-                    dY):
+def body_derivative(Y, R, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag_idx, drag_coef, sa, sb, sk,
+                    sr, sc, fixed_idx, dY):
     """dY/dt at Y; leaves R, the mass states X, U and the forces F of (9) at Y in their arrays."""
     body_rotations(Y, R)
     body_mass_states(Y, R, inertia, body_of, r, X, U)
@@ -399,8 +399,8 @@ def _starting_step(Y, dY, R, inertia, body_mass, body_of, r, X, U, F, f, tau, F_
 
 @njit(cache=True, error_model="numpy")
 def rigid_rk_advance(Y, t, t_target, h_next, AB, E1, E2, error_kind, exponent, rtol, atol, max_steps, n_fixed,
-                     safety, min_factor, max_factor, inertia, body_mass, body_of, r, free, X, U, F_base, drag_idx, drag_coef, sa, sb,
-                     sk, sr, sc, fixed_idx):
+                     safety, min_factor, max_factor, inertia, body_mass, body_of, r, free, X, U, F_base, drag_idx,
+                     drag_coef, sa, sb, sk, sr, sc, fixed_idx):
     """Advance the body states Y (B, 13) in place from t to t_target with the explicit embedded pair (AB: A with
     the weights b as row s; E1, E2: error weights, s + 1 each). The step-size controller is that of the
     point-mass path (linknet_core.compiled_rk): the same starting step, safety factor and bounds, no sliver
@@ -431,8 +431,8 @@ def rigid_rk_advance(Y, t, t_target, h_next, AB, E1, E2, error_kind, exponent, r
     steps = 0
     rejected = 0
     n_rhs = 1
-    body_derivative(Y, R0, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag_idx, drag_coef, sa, sb, sk, sr, sc, fixed_idx,
-                    KY[0])
+    body_derivative(Y, R0, inertia, body_mass, body_of, r, X, U, F, f, tau, F_base, drag_idx, drag_coef, sa, sb, sk, sr,
+                    sc, fixed_idx, KY[0])
     mass_tangent(Y, KY[0], R0, inertia, body_of, r, MX[0], MU[0], th)
     if h_next <= 0.0:
         n_rhs += 1
@@ -445,13 +445,13 @@ def rigid_rk_advance(Y, t, t_target, h_next, AB, E1, E2, error_kind, exponent, r
             return STEP_UNDERFLOW, t, h_next, steps, rejected, n_rhs
         for i in range(1, s):
             _combine_rows(Y, h, AB, i, i, KY, Ys)
-            body_derivative(Ys, R, inertia, body_mass, body_of, r, Xs, Us, F, f, tau, F_base, drag_idx, drag_coef, sa, sb, sk, sr,
-                            sc, fixed_idx, KY[i])
+            body_derivative(Ys, R, inertia, body_mass, body_of, r, Xs, Us, F, f, tau, F_base, drag_idx, drag_coef, sa,
+                            sb, sk, sr, sc, fixed_idx, KY[i])
             if n_fixed == 0:
                 mass_tangent(Ys, KY[i], R, inertia, body_of, r, MX[i], MU[i], th)
         _combine_rows(Y, h, AB, s, s, KY, Yn)
-        body_derivative(Yn, R, inertia, body_mass, body_of, r, Xn, Un, F, f, tau, F_base, drag_idx, drag_coef, sa, sb, sk, sr, sc,
-                        fixed_idx, KY[s])
+        body_derivative(Yn, R, inertia, body_mass, body_of, r, Xn, Un, F, f, tau, F_base, drag_idx, drag_coef, sa, sb,
+                        sk, sr, sc, fixed_idx, KY[s])
         mass_tangent(Yn, KY[s], R, inertia, body_of, r, MX[s], MU[s], th)
         n_rhs += s
         if n_fixed > 0:
