@@ -53,8 +53,6 @@ class LinknetNetwork(Fmi2Slave):
         lay = self._layout
 
         self._real = np.zeros(lay.n_real)
-        self._is_input = np.zeros(lay.n_real, dtype=bool)
-        self._is_input[np.asarray(lay.F_vr, dtype=np.int64).ravel()] = True
         self._input_vrs, self._input_idx = None, None   # the last list of input variables set (set_real)
         self._real[lay.M_vr] = np.asarray(self._scene0.mass)[lay.free_indices]
         self._real[lay.R_vr] = self._scene0.length
@@ -160,7 +158,7 @@ class LinknetNetwork(Fmi2Slave):
             else:
                 idx = np.asarray(vrs, dtype=np.int64)
                 if not (idx.ndim == 1 and idx.size and idx.min() >= 0 and idx.max() < lay.n_real
-                        and self._is_input[idx].all()):
+                        and lay.is_input[idx].all()):
                     idx = None
                 else:
                     self._input_vrs, self._input_idx = list(vrs), idx
