@@ -3,9 +3,14 @@
 
     python benchmarks/bench_fmu.py [--quick] [--out build/bench_fmu.json]
 
-1. per-doStep overhead of the FMU (fmpy -> pythonfmu binary -> Python slave -> Simulator) over
-   the in-process `Simulator.advance`, with one RATTLE step per communication step, so the
-   difference is the FMI round trip (inputs set every step, as a master does);
+1. per-doStep overhead of the FMU over the in-process `Simulator.advance`, with 1 or 10 RATTLE steps
+   per communication step (inputs set every step, as a master does), from two hosts:
+   - fmpy (ctypes -> pythonfmu binary -> Python slave -> Simulator), in this process;
+   - a plain C host (benchmarks/c_reference/fmi2_timing_host.c, compiled here with the system C
+     compiler, run on the same extracted FMU with the same inputs and steps): setReal + doStep,
+     doStep alone and setReal alone, so the FMU's own cost is separated from fmpy's marshalling;
+     also, as a diagnostic, the same with the C thread's Python thread state kept between calls
+     (pythonfmu 0.7.0 otherwise creates and deletes one in every FMI call from a C thread);
 2. cost of reading all outputs per communication step through fmpy (one fmi2GetReal call for
    every X, U, T, Freact) for chain_100 and net_10x10;
 3. the slave's array-backed get_real against pythonfmu's default per-variable getters
@@ -18,6 +23,8 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -42,11 +49,67 @@ def _best_time(fn, repeats):
     return float(np.min(samples))
 
 
-def _open(fmu):
-    from fmpy import extract, read_model_description
+C_TIMING_HOST = ROOT / "benchmarks" / "c_reference" / "fmi2_timing_host.c"
+C_HOST_FLAGS = ["-O2", "-Wall"]
+
+
+def c_compiler() -> str | None:
+    """The system C compiler, looked up as benchmarks/bench_kernel.py does ($CC, cc, gcc, clang)."""
+    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
+        if name and shutil.which(name):
+            return name
+    return None
+
+
+def build_c_timing_host(build_dir: Path):
+    """Compile the C timing host; returns (executable or None, compiler command line or the reason it is missing)."""
+    cc = c_compiler()
+    if cc is None:
+        return None, "no C compiler (cc, gcc or clang) on PATH"
+    exe = build_dir / "fmi2_timing_host"
+    cmd = [cc, *C_HOST_FLAGS, "-o", str(exe), str(C_TIMING_HOST), "-ldl"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        return None, f"{' '.join(cmd)} failed:\n{proc.stderr}"
+    return exe, " ".join([cc, *C_HOST_FLAGS, "... -ldl"])
+
+
+def _c_host_env():
+    """A C master's process has no Python hints: the FMU binary must find its Python through its own links
+    (as in tests/test_fmu_c_host.py)."""
+    return {k: v for k, v in os.environ.items() if not k.startswith("PYTHON") and k != "LD_PRELOAD"}
+
+
+def run_c_timing_host(exe, unzipped, md, n_steps, repeats, dt, in_vr, in_val, out_vr):
+    """One run of the C timing host; returns its JSON line as a dict, or {"error": ...}."""
+    cmd = [str(exe), str(unzipped), md.coSimulation.modelIdentifier, md.guid, repr(dt), str(n_steps), str(repeats)]
+    cmd += [f"in:{vr}={val!r}" for vr, val in zip(in_vr, in_val)] + [f"out:{vr}" for vr in out_vr]
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, env=_c_host_env(), timeout=3600)
+    except subprocess.TimeoutExpired:
+        return {"error": "C host timed out after 3600 s"}
+    lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
+    if not lines:
+        return {"error": f"C host exit code {proc.returncode}: {proc.stderr[-2000:]}"}
+    res = json.loads(lines[-1])
+    if proc.returncode != 0:  # the line is printed once every span ran: a failure after it (shutdown) leaves it whole
+        res["exit_code"], res["stderr"] = proc.returncode, proc.stderr[-2000:]
+    return res
+
+
+def _extract(fmu):
+    """Unpack next to the FMU (build/, ignored by git): fmpy and the C host run the same files."""
+    from fmpy import extract
+    where = Path(fmu).with_suffix("")
+    shutil.rmtree(where, ignore_errors=True)
+    return Path(extract(str(fmu), unzipdir=str(where)))
+
+
+def _open(fmu, unzipped=None):
+    from fmpy import read_model_description
     from fmpy.fmi2 import FMU2Slave
     md = read_model_description(str(fmu))
-    slave = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(fmu)),
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=str(unzipped or _extract(fmu)),
                       modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bench")
     slave.instantiate()
     slave.setupExperiment(startTime=0.0)
@@ -55,15 +118,18 @@ def _open(fmu):
     return md, slave
 
 
-def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3, substeps=1, inputs="tip"):
+def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3, substeps=1, inputs="tip", c_host=None):
     """doStep of dt with `substeps` RATTLE steps inside it (solver step dt / substeps) vs Simulator.advance.
     inputs: "tip" sets one force component per step, "all" every force input (a master that connects them
-    all), both with the same values (0.1 N on the tip, 0 elsewhere)."""
+    all), both with the same values (0.1 N on the tip, 0 elsewhere). c_host: the compiled C timing host
+    (None: that column is skipped), run on the same extracted FMU between the two halves of the
+    fmpy/library repeats, so that the three are measured over the same stretch of machine load."""
     scene = ln.load_scene(ROOT / "models" / f"{scene_name}.json")
     h = dt / substeps
     fmu = build_fmu.build_scene_fmu(ROOT / "models" / f"{scene_name}.json",
                                     fmu_dir / f"{scene_name}_{substeps}.fmu", step=h, quiet=True)
-    md, slave = _open(fmu)
+    unzipped = _extract(fmu)
+    md, slave = _open(fmu, unzipped)
     vr = {v.name: v.valueReference for v in md.modelVariables}
     tip = int(scene.free_indices[-1])
     f_vr = [vr[f"F[{tip + 1},3]"]]
@@ -71,6 +137,9 @@ def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3, substeps=1, inp
     if inputs == "all":
         f_vr = [v.valueReference for v in md.modelVariables if v.causality == "input"]
         f_val = [0.1 if v.name == f"F[{tip + 1},3]" else 0.0 for v in md.modelVariables if v.causality == "input"]
+    # read after a run, to check that every host did the same work as the library: the tip's state, a tension
+    check_names = [f"X[{tip + 1},{i}]" for i in (1, 2, 3)] + [f"U[{tip + 1},3]", "T[1]"]
+    check_vr = [vr[n] for n in check_names]
     initial = slave.getFMUstate()  # every repeat runs the same span [0, n_steps * dt]
 
     def fmu_run():
@@ -99,13 +168,37 @@ def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3, substeps=1, inp
         return time.perf_counter() - t0
 
     # alternate the two so that load from other processes on the machine hits both alike
-    pairs = [(timed(fmu_run, lambda: slave.setFMUstate(initial)), timed(lib_run, sim.reset))
-             for _ in range(repeats)]
-    t_fmu = min(p[0] for p in pairs) / n_steps
-    t_lib = min(p[1] for p in pairs) / n_steps
+    def pairs(k):
+        return [(timed(fmu_run, lambda: slave.setFMUstate(initial)), timed(lib_run, sim.reset)) for _ in range(k)]
+
+    first = pairs((repeats + 1) // 2)
+    c_res = None
+    if c_host is not None:
+        c_res = run_c_timing_host(c_host, unzipped, md, n_steps, repeats, dt, f_vr, f_val, check_vr)
+    all_pairs = first + pairs(repeats - len(first))
+    t_fmu = min(p[0] for p in all_pairs) / n_steps
+    t_lib = min(p[1] for p in all_pairs) / n_steps
+    # both ended their last run at t = n_steps * dt with the same force held
+    o = sim.outputs(F)
+    lib_check = [*o["X"][tip], o["U"][tip, 2], o["T"][0]]
+    fmpy_check = slave.getReal(check_vr)
     slave.terminate()
-    return dict(scene=scene_name, K=scene.K, L=scene.L, substeps=substeps, inputs_set=len(f_vr), fmu_dostep_s=t_fmu, library_advance_s=t_lib,
-                overhead_s=t_fmu - t_lib, ratio=t_fmu / t_lib)
+    row = dict(scene=scene_name, K=scene.K, L=scene.L, substeps=substeps, inputs_set=len(f_vr), fmu_dostep_s=t_fmu,
+               library_advance_s=t_lib, overhead_s=t_fmu - t_lib, ratio=t_fmu / t_lib,
+               checked_outputs=check_names, fmpy_vs_library_max_abs_diff=_max_abs_diff(fmpy_check, lib_check))
+    if c_res is not None:
+        row["c_host"] = c_res
+        if "error" not in c_res:
+            row["c_host_overhead_s"] = c_res["setreal_dostep_s"] - t_lib
+            if c_res.get("setreal_dostep_tstate_kept_s") is not None:
+                row["c_host_tstate_kept_overhead_s"] = c_res["setreal_dostep_tstate_kept_s"] - t_lib
+            row["c_host_vs_library_max_abs_diff"] = max(
+                _max_abs_diff(v, lib_check) for k, v in c_res.items() if k.startswith("outputs_after_"))
+    return row
+
+
+def _max_abs_diff(a, b):
+    return float(np.max(np.abs(np.asarray(a, dtype=float) - np.asarray(b, dtype=float))))
 
 
 def bench_outputs(scene_name, fmu_dir, n_steps, repeats, dt=1e-3):
@@ -166,17 +259,48 @@ def main(argv=None):
     n_steps, repeats = (20, 2) if a.quick else (300, 9)
     fmu_dir = Path(a.out).parent / "bench_fmus"
     fmu_dir.mkdir(parents=True, exist_ok=True)
-    results = {"n_steps": n_steps, "repeats": repeats,
-               "dostep": [bench_dostep(s, fmu_dir, n_steps, repeats, substeps=m)
+    c_host, c_host_build = build_c_timing_host(fmu_dir)
+    if c_host is None:
+        print(f"note: the C-host columns are skipped: {c_host_build}")
+    results = {"n_steps": n_steps, "repeats": repeats, "c_host_build": c_host_build,
+               "dostep": [bench_dostep(s, fmu_dir, n_steps, repeats, substeps=m, c_host=c_host)
                           for m in (1, 10) for s in ("chain_10", "chain_100", "net_10x10")]
-               + [bench_dostep("chain_100", fmu_dir, n_steps, repeats, substeps=m, inputs="all") for m in (1, 10)],
+               + [bench_dostep("chain_100", fmu_dir, n_steps, repeats, substeps=m, inputs="all", c_host=c_host)
+                  for m in (1, 10)],
                "outputs": [bench_outputs(s, fmu_dir, n_steps, repeats) for s in ("chain_100", "net_10x10")],
                "getters": [bench_getter_paths(s, fmu_dir, repeats) for s in ("chain_100", "net_10x10")]}
-    print("1. per-doStep cost, communication step 1 ms holding 1 or 10 RATTLE steps, inputs set each step (setReal + doStep)")
-    print(f"   {'scene':10s} {'K':>4s} {'L':>4s} {'steps':>5s} {'inputs':>6s} {'FMU doStep':>12s} {'Simulator.advance':>18s} {'overhead':>10s} {'ratio':>6s}")
+
+    def us(seconds):
+        return "-" if seconds is None else f"{seconds * 1e6:.1f}us"
+
+    print("1. per-doStep cost, communication step 1 ms holding 1 or 10 RATTLE steps, inputs set each step. Best of "
+          f"{repeats} repeats of {n_steps} steps. Overhead = setReal + doStep - Simulator.advance (this process)")
+    print(f"   {'':32s} {'------ fmpy host ------':>23s} {'---------------- C host ----------------':>41s}")
+    print(f"   {'scene':10s} {'steps':>5s} {'inputs':>6s} {'advance':>9s} "
+          f"{'set+step':>11s} {'overhead':>11s} {'set+step':>10s} {'doStep':>9s} {'setReal':>9s} {'overhead':>10s}")
     for r in results["dostep"]:
-        print(f"   {r['scene']:10s} {r['K']:4d} {r['L']:4d} {r['substeps']:5d} {r['inputs_set']:6d} {r['fmu_dostep_s'] * 1e6:10.1f}us {r['library_advance_s'] * 1e6:16.1f}us "
-              f"{r['overhead_s'] * 1e6:8.1f}us {r['ratio']:6.2f}")
+        c = r.get("c_host") or {}
+        print(f"   {r['scene']:10s} {r['substeps']:5d} {r['inputs_set']:6d} {us(r['library_advance_s']):>9s} "
+              f"{us(r['fmu_dostep_s']):>11s} {us(r['overhead_s']):>11s} {us(c.get('setreal_dostep_s')):>10s} "
+              f"{us(c.get('dostep_s')):>9s} {us(c.get('setreal_s')):>9s} {us(r.get('c_host_overhead_s')):>10s}")
+    if any(r.get("c_host_tstate_kept_overhead_s") is not None for r in results["dostep"]):
+        print("   C host with its thread's Python thread state kept between calls (diagnostic: pythonfmu 0.7.0 "
+              "otherwise creates and deletes one per FMI call)")
+        print(f"   {'scene':10s} {'steps':>5s} {'inputs':>6s} "
+              f"{'set+step':>10s} {'doStep':>9s} {'setReal':>9s} {'overhead':>10s}")
+        for r in results["dostep"]:
+            c = r.get("c_host") or {}
+            print(f"   {r['scene']:10s} {r['substeps']:5d} {r['inputs_set']:6d} "
+                  f"{us(c.get('setreal_dostep_tstate_kept_s')):>10s} {us(c.get('dostep_tstate_kept_s')):>9s} "
+                  f"{us(c.get('setreal_tstate_kept_s')):>9s} {us(r.get('c_host_tstate_kept_overhead_s')):>10s}")
+    for r in results["dostep"]:
+        err = (r.get("c_host") or {}).get("error")
+        if err:
+            print(f"   note: C host failed on {r['scene']} ({r['substeps']} steps): {err}")
+    worst = max(max(r["fmpy_vs_library_max_abs_diff"], r.get("c_host_vs_library_max_abs_diff", 0.0))
+                for r in results["dostep"])
+    print(f"   same work: the tip mass's X, U[.,3] and T[1] after the last run, fmpy and C host against the library: "
+          f"max |difference| {worst:.1e}")
     print("2. reading all outputs per communication step through fmpy (one getReal for all X, U, T, Freact)")
     for r in results["outputs"]:
         print(f"   {r['scene']:10s} {r['n_outputs']:5d} outputs: doStep {r['dostep_s'] * 1e6:8.1f}us, doStep + read all "
