@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .compiled import KERNELS, CompiledScene
+from .compiled import KERNELS, CompiledScene, DirectCall
 from .compiled_kernels import (HAIRER_ERROR, LEFT_PLANE, NON_FINITE, OK, PROJECTION_FAILED, RMS_ERROR, SINGULAR,
                                STEP_UNDERFLOW, TOO_MANY_STEPS)
 from . import compiled_kernels_2d as k2
@@ -91,6 +91,8 @@ class CompiledRungeKutta(CompiledScene):
         if self.planar:
             self.scratch2 = rk_scratch(self.K, self.L, s, 2)
         self.error_kind = int(error_kind)
+        self._steps_in_plane = DirectCall(k2._rk_steps_in_plane)
+        self._steps_3d = DirectCall(KERNELS[3]._rk_steps)
 
     def advance(self, X, U, t, t_target, h, F_input, rtol, atol, max_steps, controller, n_fixed=0,
                 projection_tol=1e-14):
@@ -101,7 +103,7 @@ class CompiledRungeKutta(CompiledScene):
         if self.planar:
             X3, U3, F_in = self._plane_inputs(X, U, F_input)
             X_out, U_out = np.empty((self.K, 3)), np.empty((self.K, 3))
-            status, t_end, h_next, steps, rejected, n_rhs = k2._rk_steps_in_plane(
+            status, t_end, h_next, steps, rejected, n_rhs = self._steps_in_plane(
                 X3, U3, self.F_scene, F_in, X_out, U_out, *self.plane, float(t), float(t_target), h0, self._X2,
                 self._U2, self._F2, *self.scene, *self.system, self.AB, self.E1, self.E2, self.error_kind,
                 self.exponent, float(rtol), float(atol), int(max_steps), int(n_fixed), float(safety),
@@ -111,8 +113,8 @@ class CompiledRungeKutta(CompiledScene):
             self.planar = False  # the state or the input left the plane: 3-D from here on
         Xw = np.array(X, dtype=np.float64, copy=True, order="C")
         Uw = np.array(U, dtype=np.float64, copy=True, order="C")
-        status, t, h_next, steps, rejected, n_rhs = rk_advance(
-            Xw, Uw, float(t), float(t_target), h0, self.base_forces(F_input), self.scene, self.system, self.scratch,
-            self.AB, self.E1, self.E2, self.error_kind, self.exponent, float(rtol), float(atol), int(max_steps),
-            int(n_fixed), float(safety), float(min_factor), float(max_factor), float(projection_tol))
+        status, t, h_next, steps, rejected, n_rhs = self._steps_3d(
+            Xw, Uw, float(t), float(t_target), h0, self.base_forces(F_input), *self.scene, *self.system, self.AB,
+            self.E1, self.E2, self.error_kind, self.exponent, float(rtol), float(atol), int(max_steps), int(n_fixed),
+            float(safety), float(min_factor), float(max_factor), float(projection_tol), *self.scratch)
         return status, Xw, Uw, t, (h_next if h_next > 0.0 else None), steps, rejected, n_rhs

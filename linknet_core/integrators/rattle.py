@@ -8,9 +8,9 @@ symmetric and second order; it is no longer symplectic (the system is not Hamilt
 """
 from __future__ import annotations
 
-
 import numpy as np
 
+from ..compiled_kernels import OK as COMPILED_OK
 from ..errors import SolverError
 from .base import FixedStepIntegrator
 
@@ -51,14 +51,12 @@ class Rattle(FixedStepIntegrator):
         return getattr(self, "_kernel", None)
 
     def _advance_steps(self, X, U, n, h, F_input):
-        from .. import compiled
-
-        if self.backend != "numpy" and compiled.supports(self.dyn):
-            kernel = self._compiled_kernel()
+        kernel = self._kernel  # decided at construction (None: the numpy path); no per-call lookups here
+        if kernel is not None:
             remaining = n
             while remaining:
                 status, X_new, U_new = kernel.advance(X, U, remaining, h, self.gammas, F_input, self.position_tol)
-                if status == compiled.OK:
+                if status == COMPILED_OK:
                     return X_new, U_new
                 # singular configuration or slow projection: the failing step takes the numpy path (it has the
                 # exact-Newton and minimum-norm fallbacks), then the compiled loop resumes. Handing the whole
@@ -69,7 +67,7 @@ class Rattle(FixedStepIntegrator):
                     # the kernel's arrays stop inside the failing step: redo the completed steps (the same
                     # arithmetic, so the same bits) to land on the last step boundary
                     status, X_done, U_done = kernel.advance(X, U, done, h, self.gammas, F_input, self.position_tol)
-                    if status != compiled.OK:
+                    if status != COMPILED_OK:
                         break
                     X, U, remaining = X_done, U_done, remaining - done
                 X, U = self.step(X, U, h, F_input)
