@@ -28,6 +28,7 @@ from pythonfmu import Fmi2Slave, Fmi2Causality, Fmi2Variability, Fmi2Initial, Re
 from pythonfmu.enums import Fmi2Status
 
 import linknet_core as ln
+from linknet_fmu import thread_state
 from linknet_fmu.layout import Layout
 
 CONFIG_FILE = "linknet_fmu.json"
@@ -39,6 +40,7 @@ class LinknetNetwork(Fmi2Slave):
     """A network of point masses joined by rigid links (model name = the scene's name)."""
 
     def __init__(self, **kwargs):
+        thread_state.keep()
         super().__init__(**kwargs)
         with open(os.path.join(self.resources, CONFIG_FILE)) as f:
             cfg = json.load(f)
@@ -53,7 +55,7 @@ class LinknetNetwork(Fmi2Slave):
         lay = self._layout
 
         self._real = np.zeros(lay.n_real)
-        self._input_vrs, self._input_idx = None, None   # the last list of input variables set (set_real)
+        self._input_vrs = self._input_idx = self._input_force_idx = None  # the last inputs set (set_real)
         self._real[lay.M_vr] = np.asarray(self._scene0.mass)[lay.free_indices]
         self._real[lay.R_vr] = self._scene0.length
         self._real[lay.g_vr] = self._scene0.gravity
@@ -98,6 +100,7 @@ class LinknetNetwork(Fmi2Slave):
         self._sim = ln.Simulator(scene, method=method, **kwargs)
         self._scene = scene
         self._F = np.zeros((scene.K, 3))
+        self._F_flat = self._F.reshape(-1)  # a view: set_real writes the inputs through it
         self._F[self._layout.input_masses] = self._real[self._layout.F_vr]
         self._outputs_stale = True
 
@@ -132,6 +135,7 @@ class LinknetNetwork(Fmi2Slave):
 
     # ------------------------------------------------------------------ FMI: values
     def get_real(self, vrs):
+        thread_state.keep()
         if self._parameters_dirty and not self._initialized:
             # initial unknowns read in initialization mode: T depends on M, R, g (ModelStructure)
             self._apply_parameters_safely()
@@ -146,6 +150,7 @@ class LinknetNetwork(Fmi2Slave):
             return [float("nan")] * len(vrs)
 
     def set_real(self, vrs, values):
+        thread_state.keep()
         lay = self._layout
         if not self._bad:
             # the common call, every communication step: finite forces onto input variables. One array
@@ -154,19 +159,21 @@ class LinknetNetwork(Fmi2Slave):
             # checks on the value references are done once for a list and remembered (a list comparison
             # costs ~1.5 us for 300, the array conversion and checks ~12 us). Anything else: the loop below.
             if vrs == self._input_vrs:
-                idx = self._input_idx
+                idx, force_idx = self._input_idx, self._input_force_idx
             else:
                 idx = np.asarray(vrs, dtype=np.int64)
                 if not (idx.ndim == 1 and idx.size and idx.min() >= 0 and idx.max() < lay.n_real
                         and lay.is_input[idx].all()):
-                    idx = None
+                    idx = force_idx = None
                 else:
-                    self._input_vrs, self._input_idx = list(vrs), idx
+                    force_idx = lay.force_index[idx]
+                    self._input_vrs, self._input_idx, self._input_force_idx = list(vrs), idx, force_idx
             if idx is not None:
                 vals = np.asarray(values, dtype=float)
-                if vals.shape == idx.shape and np.isfinite(vals).all():
+                # finite (and below ~1e154, else the per-variable path below takes it) in one dot product
+                if vals.shape == idx.shape and math.isfinite(float(vals.dot(vals))):
                     self._real[idx] = vals
-                    self._F[lay.input_masses] = self._real[lay.F_vr]
+                    self._F_flat[force_idx] = vals
                     self._outputs_stale = True
                     return
         changed_parameter = False
@@ -245,6 +252,7 @@ class LinknetNetwork(Fmi2Slave):
         self._broken = None  # parameters are applied before initialization ends: an earlier failure is gone
 
     def do_step(self, current_time, step_size):
+        thread_state.keep()
         try:
             return self._do_step(current_time, step_size)
         except Exception as e:  # last resort: an exception here would be fmi2Fatal

@@ -136,6 +136,10 @@ class Layout:
         for v in self.reals:
             kinds[v.vr] = v.causality
         self.is_input = kinds == "input"
+        # value reference of an input -> its entry in the simulator's (K,3) force array, flattened (-1: none)
+        self.force_index = np.full(self.n_real, -1, dtype=np.int64)
+        self.force_index[self.F_vr.reshape(-1)] = (3 * np.asarray(self.input_masses, dtype=np.int64)[:, None]
+                                                   + np.arange(3)).reshape(-1)
         self.is_parameter = kinds == "parameter"
 
     # ------------------------------------------------------------------ dependencies
