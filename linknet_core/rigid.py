@@ -383,9 +383,12 @@ class RigidBodies:
 
     # ---- snapshots (cooperative: the integrator's own internals come from super()) ----------------
     def internals(self) -> dict:
+        # references, not copies: these arrays are only ever replaced, never written into (the step loops work
+        # on copies), and set_internals copies what it is handed. Simulator.advance takes this snapshot on
+        # every call; six copies cost ~2 us, more than a step of a small body.
         out = super().internals()
-        out["bodies"] = {"c": self._c.copy(), "v": self._v.copy(), "q": self._q.copy(), "Pi": self._Pi.copy(),
-                         "X": self._last[0].copy(), "U": self._last[1].copy()}
+        out["bodies"] = {"c": self._c, "v": self._v, "q": self._q, "Pi": self._Pi, "X": self._last[0],
+                         "U": self._last[1]}
         return out
 
     def set_internals(self, data: dict) -> None:
@@ -490,7 +493,7 @@ class RigidBodyPath(RigidBodies, FixedStepIntegrator):
             raise SolverError(f"the implicit half kick of the rigid bodies did not converge with h = {h:.3g} s: the "
                               "drag or spring damping is too stiff for this step; reduce dt")
         if status == self._kernels.OK:  # (a non-finite state is refused by the caller, which restores us)
-            self._set_bodies(c, v, q, Pi)
+            self._c, self._v, self._q, self._Pi = c, v, q, Pi  # this call's own copies
             self._last = (Xw.copy(), Uw.copy())
         return Xw, Uw
 
