@@ -10,8 +10,9 @@ tableaux are those of scipy's RK45 (Dormand-Prince 5(4)) and DOP853 (Hairer's 8(
 ``backend``: 'compiled' runs each interval between two output points in one numba call
 (:mod:`linknet_core.compiled_rk`, the same algorithm on the same tableau); 'auto' does so for the scenes
 the compiled kernels handle (non-redundant) when the right-hand side is the stock numeric one; 'numpy'
-never. Where the compiled kernel meets a singular configuration it hands the rest of the interval to the
-numpy path.
+never. Where the compiled kernel cannot go on (a singular configuration, a projection that does not converge,
+non-finite values) the numpy path, which has the fallbacks, takes the trouble from the last accepted step
+and the compiled kernel resumes after it.
 """
 from __future__ import annotations
 
@@ -40,7 +41,7 @@ class ProjectedRungeKutta(Integrator):
     error_norm_kind = "rms"
     error_estimator_order: int
     n_stages: int
-    compiled_fallbacks = 0  # intervals the compiled kernel handed (in part) to the numpy path
+    compiled_fallbacks = 0  # hand-overs from the compiled kernel to the numpy path (one per kernel failure)
 
     def __init__(self, dynamics, rtol: float = 1e-8, atol: float | None = None, h0: float | None = None,
                  backend: str = "auto"):
@@ -197,27 +198,45 @@ class ProjectedRungeKutta(Integrator):
 
     # ---- driver ------------------------------------------------------------------------------
     def advance(self, state, t_target, F_input, max_steps):
-        X, U, t = state.X, state.U, state.t
-        steps = 0
-        if self.compiled_available():
-            from .. import compiled_rk as ck
+        X, U, t, t_start = state.X, state.U, state.t, state.t
+        if not self.compiled_available():
+            X, U, _, _ = self._advance_numpy(X, U, t, t_start, t_target, F_input, max_steps, 0)
+            state.X, state.U, state.t = X, U, t_target
+            return
+        from .. import compiled_rk as ck
 
-            status, X, U, t, self.h, steps, rejected, n_rhs = self._compiled_kernel().advance(
-                X, U, t, t_target, self.h, F_input, self.rtol, self.atol, max_steps, (SAFETY, MIN_FACTOR, MAX_FACTOR))
-            self.stats.steps += steps
+        kernel = self._compiled_kernel()
+        steps = 0  # accepted in this interval by the compiled and numpy pieces together: max_steps bounds them all
+        numpy_run = 0  # accepted steps the numpy path takes at the next hand-over
+        while True:
+            status, X, U, t, self.h, done, rejected, n_rhs = kernel.advance(
+                X, U, t, t_target, self.h, F_input, self.rtol, self.atol, max_steps - steps,
+                (SAFETY, MIN_FACTOR, MAX_FACTOR))
+            steps += done
+            self.stats.steps += done
             self.stats.rejected += rejected
             self.dyn.rhs_evaluations += n_rhs
             if status == ck.OK:
-                state.X, state.U, state.t = X, U, t_target
-                return
+                break
             if status == ck.STEP_UNDERFLOW:
                 raise self._underflow(t)
             if status == ck.TOO_MANY_STEPS:
-                raise self._too_many(max_steps, state.t, t_target)
-            # a singular configuration, a slow projection or non-finite values: the numpy path takes the
-            # rest of the interval from the last accepted step (and has the fallbacks, or the error message)
+                raise self._too_many(max_steps, t_start, t_target)
+            # a singular configuration, a slow projection or non-finite values: the kernel stopped at its last
+            # accepted step (X, U, t and the step size h it would try next). The numpy path, which has the
+            # fallbacks (exact Newton, minimum-norm tensions, step rejection) or the error message, takes the
+            # trouble from there, then the kernel resumes from the numpy path's accepted state and step size.
+            # Handing the numpy path the whole rest of the interval made chain_1000 released from horizontal
+            # (dopri5, rtol 1e-4 or 1e-3, one 2 s interval, a projection the kernel cannot converge in the first
+            # steps) 12x slower. A kernel that fails again before accepting a step has wasted one attempt: the
+            # numpy run then doubles, so a long hard stretch wastes a few attempts, not one per step.
             self.compiled_fallbacks += 1
-        self._advance_numpy(state, X, U, t, t_target, F_input, max_steps, steps)
+            numpy_run = 2 * numpy_run if (numpy_run and not done) else 1
+            X, U, t, steps = self._advance_numpy(X, U, t, t_start, t_target, F_input, max_steps, steps,
+                                                 stop_after=numpy_run)
+            if t >= t_target:
+                break
+        state.X, state.U, state.t = X, U, t_target
 
     def _underflow(self, t):
         return SolverError(f"step size underflow at t = {t}: the tolerance rtol = {self.rtol} cannot be "
@@ -228,14 +247,17 @@ class ProjectedRungeKutta(Integrator):
         return SolverError(f"more than {max_steps} steps between t = {t_start} and t = {t_target}; "
                            "raise max_steps or the tolerance")
 
-    def _advance_numpy(self, state, X, U, t, t_target, F_input, max_steps, steps):
-        """From (X, U) at t to t_target on the numpy path; ``steps`` already taken in this interval."""
+    def _advance_numpy(self, X, U, t, t_start, t_target, F_input, max_steps, steps, stop_after=None):
+        """The numpy path from (X, U) at t towards t_target, in the interval that began at t_start with ``steps``
+        accepted already; it stops at t_target or, given ``stop_after``, after that many accepted steps of its
+        own. Leaves the next step size in self.h and returns the accepted (X, U, t, steps); t is t_target
+        exactly once reached."""
         dyn = self.dyn
-        t_start = state.t
         k0 = self._f(X, U, F_input)
         if self.h is None:
             self.h = self._initial_step(X, U, k0, F_input, t_target - t)
         exponent = -1.0 / (self.error_estimator_order + 1)
+        accepted = 0
         while t < t_target:
             remaining = t_target - t
             h = min(self.h, remaining)
@@ -258,15 +280,18 @@ class ProjectedRungeKutta(Integrator):
                 # a step shortened only to land on t_target says nothing against the longer step
                 self.h = max(self.h, h * factor) if h < self.h else h * factor
                 steps += 1
+                accepted += 1
                 self.stats.steps += 1
                 if steps > max_steps:
                     raise self._too_many(max_steps, t_start, t_target)
+                if accepted == stop_after:
+                    break  # whoever takes over evaluates the first stage of the next step itself
                 if t < t_target:  # the first stage of the next step (none after the last one)
                     k0 = self._f(X, U, F_input)
             else:
                 self.stats.rejected += 1
                 self.h = h * max(MIN_FACTOR, SAFETY * err ** exponent)
-        state.X, state.U, state.t = X, U, t_target
+        return X, U, t, steps
 
 
 class DOPRI5(ProjectedRungeKutta):
