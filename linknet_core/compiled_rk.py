@@ -15,8 +15,12 @@ twin; a planar scene runs in its plane's coordinates until an input force or the
 (see :mod:`linknet_core.compiled`).
 
 Whenever the kernel cannot continue (a vanishing pivot of A, a projection that does not contract,
-non-finite values) it stops at the last accepted step and says why; the integrator finishes the interval
-on the numpy path, which has the minimum-norm and Gauss-Newton fallbacks.
+non-finite values) it stops at the last accepted step and says why; the integrator takes the trouble on
+the numpy path, which has the minimum-norm and Gauss-Newton fallbacks, and the kernel resumes after it in
+the same interval (:meth:`linknet_core.integrators.runge_kutta.ProjectedRungeKutta.advance`).
+
+The class is called once per output interval (every FMU doStep), so its step loops are called through
+:class:`linknet_core.compiled.DirectCall`, without numba's per-call type dispatch.
 """
 from __future__ import annotations
 
