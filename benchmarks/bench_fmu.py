@@ -9,8 +9,9 @@
    - a plain C host (benchmarks/c_reference/fmi2_timing_host.c, compiled here with the system C
      compiler, run on the same extracted FMU with the same inputs and steps): setReal + doStep,
      doStep alone and setReal alone, so the FMU's own cost is separated from fmpy's marshalling;
-     also, as a diagnostic, the same with the C thread's Python thread state kept between calls
-     (pythonfmu 0.7.0 otherwise creates and deletes one in every FMI call from a C thread);
+     also, as a diagnostic, the same with the C thread's Python thread state kept between calls by
+     the host: pythonfmu 0.7.0 creates and deletes one in every FMI call from a C thread unless the
+     FMU keeps it (fmu_src/linknet_fmu/thread_state.py does); equal figures say that it does;
 2. cost of reading all outputs per communication step through fmpy (one fmi2GetReal call for
    every X, U, T, Freact) for chain_100 and net_10x10;
 3. the slave's array-backed get_real against pythonfmu's default per-variable getters
@@ -306,8 +307,8 @@ def main(argv=None):
               f"{us(r['fmu_dostep_s']):>11s} {us(r['overhead_s']):>11s} {us(c.get('setreal_dostep_s')):>10s} "
               f"{us(c.get('dostep_s')):>9s} {us(c.get('setreal_s')):>9s} {us(r.get('c_host_overhead_s')):>10s}")
     if any(r.get("c_host_tstate_kept_overhead_s") is not None for r in results["dostep"]):
-        print("   C host with its thread's Python thread state kept between calls (diagnostic: pythonfmu 0.7.0 "
-              "otherwise creates and deletes one per FMI call)")
+        print("   C host with its thread's Python thread state kept by the host (diagnostic: pythonfmu 0.7.0 creates\n"
+              "   and deletes one per FMI call unless the FMU keeps it; equal to the table above when the FMU keeps it)")
         print(f"   {'scene':10s} {'steps':>5s} {'inputs':>6s} "
               f"{'set+step':>10s} {'doStep':>9s} {'setReal':>9s} {'overhead':>10s}")
         for r in results["dostep"]:

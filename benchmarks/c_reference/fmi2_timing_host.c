@@ -78,7 +78,9 @@ static const char *variant_name[N_VARIANTS] = {"setreal_dostep", "dostep", "setr
  * PyGILState_Ensure/Release. On a host thread that has no Python thread state (any C master), each call
  * then creates one and deletes it again. The _kept variants hold one for the calling thread
  * (PyGILState_Ensure + PyEval_SaveThread before the span, undone after it, both untimed), so each call
- * only takes and drops the GIL, as it does under a Python host. The functions come from the libpython
+ * only takes and drops the GIL, as it does under a Python host. linknet FMUs keep that thread state
+ * themselves (fmu_src/linknet_fmu/thread_state.py): then the _kept variants equal the plain ones, and a
+ * difference says the FMU's keeping fails somewhere. The functions come from the libpython
  * the FMU binary links (dlsym on the FMU's handle searches its dependencies); the plain variants never
  * touch them. */
 typedef int (*GILStateEnsure_t)(void);
