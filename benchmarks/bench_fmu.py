@@ -308,7 +308,7 @@ def main(argv=None):
               f"{us(c.get('dostep_s')):>9s} {us(c.get('setreal_s')):>9s} {us(r.get('c_host_overhead_s')):>10s}")
     if any(r.get("c_host_tstate_kept_overhead_s") is not None for r in results["dostep"]):
         print("   C host with its thread's Python thread state kept by the host (diagnostic: pythonfmu 0.7.0 creates\n"
-              "   and deletes one per FMI call unless the FMU keeps it; equal to the table above when the FMU keeps it)")
+              "   and deletes one per FMI call unless the FMU keeps it; equal to the table above if it does)")
         print(f"   {'scene':10s} {'steps':>5s} {'inputs':>6s} "
               f"{'set+step':>10s} {'doStep':>9s} {'setReal':>9s} {'overhead':>10s}")
         for r in results["dostep"]:
