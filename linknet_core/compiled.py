@@ -343,6 +343,27 @@ class CompiledRattle(CompiledScene):
         return status, Xw, Uw
 
 
+class CompiledTensions(CompiledScene):
+    """T of (25)-(26) at one state in one compiled call: the tensions a Simulator reports (FMU outputs are
+    read every communication step; the numpy solve costs 20-40 us for the shipped scenes, several RATTLE
+    steps). Always in 3-D (exact for planar states too). :meth:`tensions` returns None where the kernel meets
+    a vanishing pivot, and the caller takes the numpy path's minimum-norm solution there."""
+
+    def __init__(self, dyn):
+        super().__init__(dyn, planar=False)
+        K, L = self.K, self.L
+        self._work = (np.empty((L, 3)), np.empty((K, 3)), np.empty(L), np.empty((K, 3)), np.empty(L))  # E F B acc T
+        self._loop = DirectCall(k3._accelerations_loop)
+
+    def tensions(self, X, U, F_input):
+        X, U = np.ascontiguousarray(X, np.float64), np.ascontiguousarray(U, np.float64)
+        if X.shape != (self.K, 3) or U.shape != (self.K, 3):  # DirectCall does not check shapes
+            raise ValueError(f"X and U must have shape {(self.K, 3)}, got {X.shape} and {U.shape}")
+        E, F, B, acc, T = self._work
+        status = self._loop(1, X, U, self.base_forces(F_input), *self.scene, *self.system, E, F, B, acc, T, True)
+        return T.copy() if status == OK else None
+
+
 def supports(dyn) -> bool:
     """The compiled kernels handle the LDL^T structures (chain, tree, general), not the redundant one."""
     return dyn.structure.kind != "redundant" and hasattr(dyn.solver, "ldl")

@@ -119,6 +119,9 @@ class Simulator:
         self.specialisation = choose_specialisation(scene, self.dyn, method, backend=backend, enabled=specialise,
                                                     integrator=self.integrator)
         self._tensions = self.dyn.tensions
+        self._compiled_tensions = None  # built at the first outputs() of a scene the compiled kernels take
+        if backend != "numpy" and self.specialisation.kind == "none":
+            self._tensions = self._point_mass_tensions
         if self.specialisation.kind != "none":
             self.integrator, (X0, U0) = build_path(self.specialisation, self.dyn, method, dt, X0, U0)
             self._tensions = self.integrator.tensions
@@ -178,8 +181,20 @@ class Simulator:
         F = self.check_input(F_input)
         X, U = self.state.X, self.state.U
         T = self._tensions(X, U, F)
-        Freact = self.dyn.link_forces(X, T)[self.scene.fixed]
-        return {"t": self.state.t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": Freact}
+        return {"t": self.state.t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": self.dyn.anchor_reactions(X, T)}
+
+    def _point_mass_tensions(self, X, U, F):
+        """T of (25)-(26): in one compiled call where the compiled kernels take the scene (tested against the
+        numpy path to round-off), else, and at a singular configuration, the numpy path (minimum norm)."""
+        if self._compiled_tensions is None:
+            from . import compiled
+
+            self._compiled_tensions = compiled.CompiledTensions(self.dyn) if compiled.supports(self.dyn) else False
+        if self._compiled_tensions:
+            T = self._compiled_tensions.tensions(X, U, F)
+            if T is not None:
+                return T
+        return self.dyn.tensions(X, U, F)
 
     # ---- snapshots ---------------------------------------------------------------------------
     def get_state(self) -> dict:

@@ -2,6 +2,8 @@
 projection tolerance, the same constraint guarantees, and a hand-back to the numpy path where it cannot go."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -83,3 +85,50 @@ def test_a_step_the_compiled_loop_cannot_take_goes_to_numpy_and_the_loop_resumes
     assert sim.integrator.compiled_fallbacks == 1
     assert np.max(np.abs(sim.state.X - reference.state.X)) < 1e-13
     assert np.max(np.abs(sim.state.U - reference.state.U)) < 1e-11
+
+
+def _scenes_for_outputs():
+    scenes = [ln.load_scene(p) for p in sorted((Path(__file__).resolve().parents[1] / "models").glob("*.json"))]
+    d = builders.chain(12).to_dict()
+    d["masses"][5]["drag"] = 0.4
+    d["springs"] = [{"a": 1, "b": 13, "stiffness": 30.0, "rest_length": 0.8, "damping": 0.7}]
+    return scenes + [ln.Scene.from_dict(d)]
+
+
+@pytest.mark.parametrize("method", ["rattle", "dop853"])
+def test_reported_tensions_and_anchor_reactions_match_the_numpy_path(method):
+    # outputs() solves (25)-(26) in one compiled call where the compiled kernels take the scene: the same
+    # tensions as the numpy path's solve at the same state, and the anchors' rows of C^T T
+    from linknet_core import compiled
+
+    for scene in _scenes_for_outputs():
+        kw = {"rtol": 1e-9} if method == "dop853" else {"dt": 1e-3}
+        sim = ln.Simulator(scene, method=method, **kw)
+        F = np.zeros((scene.K, 3))
+        F[scene.free_indices[-1]] = [0.3, -0.2, 0.4]
+        sim.advance(0.03, F)
+        out = sim.outputs(F)
+        X, U = sim.state.X, sim.state.U
+        scale = max(float(np.abs(out["T"]).max(initial=0.0)), 1.0)
+        if sim.specialisation.kind == "none":
+            assert bool(sim._compiled_tensions) == compiled.supports(sim.dyn), scene.name
+            T_numpy = sim.dyn.tensions(X, U, F)
+            assert np.max(np.abs(out["T"] - T_numpy), initial=0.0) <= 1e-12 * scale, scene.name
+        reactions = sim.dyn.link_forces(X, out["T"])[scene.fixed]
+        assert out["Freact"].shape == reactions.shape
+        assert np.max(np.abs(out["Freact"] - reactions), initial=0.0) <= 1e-13 * scale, scene.name
+
+
+def test_reported_tensions_at_a_singular_configuration_are_the_minimum_norm_ones():
+    # the parallelogram four-bar at its flat position: A of (25) is singular, the compiled solve declines
+    # and the numpy path's minimum-norm tensions (31) are reported
+    scene = builders.four_bar(ground=1.0, crank=0.4, coupler=1.0, rocker=0.4, crank_angle_deg=60.0,
+                              crank_speed=5.0, gravity=(0.0, 0.0, 0.0), name="parallelogram")
+    sim = ln.Simulator(scene, method="dop853", rtol=1e-10)
+    sim.advance(np.radians(120.0) / 5.0)
+    X, U = sim.state.X, sim.state.U
+    T = sim.outputs()["T"]
+    assert sim._compiled_tensions.tensions(X, U, None) is None  # the vanishing pivot
+    assert np.all(np.isfinite(T))
+    assert np.array_equal(T, sim.dyn.tensions(X, U, None))
+    assert sim.dyn.solver.singular_events >= 1
