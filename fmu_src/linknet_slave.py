@@ -143,8 +143,12 @@ class LinknetNetwork(Fmi2Slave):
         if self._outputs_stale:
             self._refresh_outputs()
         try:
-            # a master reads the same list every communication step: its index array is checked once and
-            # remembered (converting and checking 709 value references cost ~15 us a call)
+            if len(vrs) <= 16:  # a few variables (a master reading one per connection): index directly
+                if len(vrs) and min(vrs) < 0:  # numpy would wrap a negative index around
+                    raise IndexError
+                return self._real[vrs].tolist()
+            # a master reading many variables reads the same list every communication step: its index array
+            # is checked once and remembered (converting and checking 709 value references cost ~15 us a call)
             if vrs != self._read_vrs:
                 idx = np.asarray(vrs)
                 if idx.size == 0:

@@ -157,8 +157,16 @@ f.slave.setReal([f.vr[names[0]], f.vr['X[3,1]']], [0.0, 5.0])   # an input and a
 mixed_log = [m for s, m in LOG]
 f.set({{name: 0.0 for name in names}})
 f.step(t, h)
+LOG.clear()
+long_read = [f.vr[n] for n in f.names('X')]      # more than 16: the remembered-list path of get_real
+try:
+    bad_read = np.array(f.slave.getReal(long_read + [10**6]))
+except FMICallException:
+    bad_read = np.array([np.nan])
+bad_read_log = [m for s, m in LOG]
 save(X=np.array(X), nan_status=nan_status, nan_log=np.array(nan_log), mixed_log=np.array(mixed_log),
-     names=np.array(names))
+     names=np.array(names), bad_read=bad_read, bad_read_log=np.array(bad_read_log),
+     good_read=np.array(f.slave.getReal(long_read)), X_last=f.get(f.names('X')))
 """, fmu_dir / "client_all_inputs")
     scene = ln.load_scene(MODELS / "chain_10.json")
     names = list(out["names"])
@@ -177,3 +185,7 @@ save(X=np.array(X), nan_status=nan_status, nan_log=np.array(nan_log), mixed_log=
     assert out["nan_status"] == 2                  # fmi2Discard
     assert any(names[5] in m and "finite" in m for m in out["nan_log"])
     assert any("X[3,1]" in m and "output" in m for m in out["mixed_log"])
+    # a long read with an unknown value reference is refused (NaNs and a message), the next read is right
+    assert np.all(np.isnan(out["bad_read"]))
+    assert any("unknown value reference" in m for m in out["bad_read_log"])
+    np.testing.assert_array_equal(out["good_read"], out["X_last"])
