@@ -38,6 +38,7 @@ sys.path.insert(0, str(ROOT / "fmu_src"))
 
 import build_fmu  # noqa: E402
 import linknet_core as ln  # noqa: E402
+from linknet_core.codegen import compiler  # noqa: E402
 
 
 def _best_time(fn, repeats):
@@ -54,17 +55,9 @@ C_TIMING_HOST = ROOT / "benchmarks" / "c_reference" / "fmi2_timing_host.c"
 C_HOST_FLAGS = ["-O2", "-Wall"]
 
 
-def c_compiler() -> str | None:
-    """The system C compiler, looked up as benchmarks/bench_kernel.py does ($CC, cc, gcc, clang)."""
-    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
-        if name and shutil.which(name):
-            return name
-    return None
-
-
 def build_c_timing_host(build_dir: Path):
     """Compile the C timing host; returns (executable or None, compiler command line or the reason it is missing)."""
-    cc = c_compiler()
+    cc = compiler()  # $CC, cc, gcc or clang (linknet_core.codegen)
     if cc is None:
         return None, "no C compiler (cc, gcc or clang) on PATH"
     exe = build_dir / "fmi2_timing_host"

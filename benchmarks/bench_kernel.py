@@ -38,7 +38,6 @@ import ctypes
 import json
 import os
 import platform
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -49,6 +48,7 @@ import numpy as np
 
 import linknet_core as ln
 from linknet_core import builders, compiled
+from linknet_core.codegen import compiler
 
 ROOT = Path(__file__).resolve().parent.parent
 C_SOURCE = Path(__file__).resolve().parent / "c_reference" / "chain_rhs.c"
@@ -64,17 +64,10 @@ class CUnavailable(RuntimeError):
     pass
 
 
-def c_compiler() -> str | None:
-    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
-        if name and shutil.which(name):
-            return name
-    return None
-
-
 def build_c_reference(workdir: Path | None = None, source: Path = C_SOURCE):
     """Compile a C reference (default chain_rhs.c) into a shared library and load it; returns (library,
     compiler command line, compiler version)."""
-    cc = c_compiler()
+    cc = compiler()  # $CC, cc, gcc or clang (linknet_core.codegen)
     if cc is None:
         raise CUnavailable("no C compiler (cc, gcc or clang) on PATH")
     workdir = Path(workdir or tempfile.mkdtemp(prefix="linknet_c_reference_"))
