@@ -184,6 +184,8 @@ class CompiledScene:
     internals, so that a restored snapshot continues on the kernels it was taken on, bit for bit).
     """
 
+    _rhs_work = None  # scratch of accelerations(), allocated at its first call
+
     def __init__(self, dyn, use_chain: bool | None = None, planar: bool | None = None):
         scene = dyn.scene
         asm = dyn.solver.assembly
@@ -267,19 +269,24 @@ class CompiledScene:
         return Z @ P.T + (o if point else 0.0)
 
     def accelerations(self, X, U, F_input=None, planar: bool = False):
-        """One compiled right-hand side evaluation from Python (tests, benchmarks): (status, acc (K,3), T).
+        """One compiled right-hand side evaluation from Python (the tensions Simulator.outputs reports; tests,
+        benchmarks): (status, acc (K,3), T), status OK or SINGULAR (a vanishing pivot of A).
         ``planar``: evaluate it with the 2-D kernels in the plane's coordinates (the state must be planar)."""
         T = np.zeros(self.L)
-        F = self.base_forces(F_input).copy()
+        F = self.base_forces(F_input)  # (the loop zeroes its anchored rows, which are zero already)
         if planar:
             acc2 = np.empty((self.K, 2))
             status = int(accelerations_repeated(1, self.to_plane(X, True), self.to_plane(U, False),
                                                 self.to_plane(F, False), self.scene, self.system, acc2, T))
             return status, self.from_plane(acc2, False), T
+        X, U = np.ascontiguousarray(X, np.float64), np.ascontiguousarray(U, np.float64)
+        if X.shape != (self.K, 3) or U.shape != (self.K, 3):  # DirectCall does not check shapes
+            raise ValueError(f"X and U must have shape {(self.K, 3)}, got {X.shape} and {U.shape}")
+        if self._rhs_work is None:  # E, F, B of one evaluation, kept: Simulator.outputs calls this every step
+            self._rhs_work = (np.empty((self.L, 3)), np.empty((self.K, 3)), np.empty(self.L))
+            self._rhs_3d = DirectCall(k3._accelerations_loop)
         acc = np.empty((self.K, 3))
-        X = np.ascontiguousarray(X, np.float64)
-        U = np.ascontiguousarray(U, np.float64)
-        status = int(accelerations_repeated(1, X, U, F, self.scene, self.system, acc, T))
+        status = int(self._rhs_3d(1, X, U, F, *self.scene, *self.system, *self._rhs_work, acc, T, True))
         return status, acc, T
 
     def describe(self) -> str:
@@ -341,27 +348,6 @@ class CompiledRattle(CompiledScene):
                                                       self.base_forces(F_input), *self.scene, *self.system,
                                                       *self.scratch, float(tol), 50)
         return status, Xw, Uw
-
-
-class CompiledTensions(CompiledScene):
-    """T of (25)-(26) at one state in one compiled call: the tensions a Simulator reports (FMU outputs are
-    read every communication step; the numpy solve costs 20-40 us for the shipped scenes, several RATTLE
-    steps). Always in 3-D (exact for planar states too). :meth:`tensions` returns None where the kernel meets
-    a vanishing pivot, and the caller takes the numpy path's minimum-norm solution there."""
-
-    def __init__(self, dyn):
-        super().__init__(dyn, planar=False)
-        K, L = self.K, self.L
-        self._work = (np.empty((L, 3)), np.empty((K, 3)), np.empty(L), np.empty((K, 3)), np.empty(L))  # E F B acc T
-        self._loop = DirectCall(k3._accelerations_loop)
-
-    def tensions(self, X, U, F_input):
-        X, U = np.ascontiguousarray(X, np.float64), np.ascontiguousarray(U, np.float64)
-        if X.shape != (self.K, 3) or U.shape != (self.K, 3):  # DirectCall does not check shapes
-            raise ValueError(f"X and U must have shape {(self.K, 3)}, got {X.shape} and {U.shape}")
-        E, F, B, acc, T = self._work
-        status = self._loop(1, X, U, self.base_forces(F_input), *self.scene, *self.system, E, F, B, acc, T, True)
-        return T.copy() if status == OK else None
 
 
 def supports(dyn) -> bool:

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .compiled_kernels import OK as COMPILED_OK
 from .dynamics import Dynamics
 from .errors import SceneError, SolverError
 from .forces import kinetic_energy
@@ -160,9 +161,9 @@ class Simulator:
         if not math.isfinite(t_next) or not t_next > t_before:
             raise SolverError(f"cannot advance from t = {t_before} to t = {t_next}: the target must be later "
                               "and finite")
-        # The integrators never write into the state's arrays, they replace them (tests/test_core_simulator.py
-        # checks every path), so keeping references is the snapshot: copying cost ~1 us per call. internals()
-        # hands out a fresh snapshot (every integrator builds it from copies).
+        # The integrators never write into the state's arrays, they replace them (tests/test_core_validation.py
+        # checks every path), so keeping references is the snapshot: copying cost ~1 us per call. Nor does a
+        # later call write into what internals() hands out.
         X_before, U_before, internals = state.X, state.U, self.integrator.internals()
         try:
             self.integrator.advance(state, t_next, F, self.max_steps_per_call)
@@ -189,10 +190,11 @@ class Simulator:
         if self._compiled_tensions is None:
             from . import compiled
 
-            self._compiled_tensions = compiled.CompiledTensions(self.dyn) if compiled.supports(self.dyn) else False
+            self._compiled_tensions = (compiled.CompiledScene(self.dyn, planar=False) if compiled.supports(self.dyn)
+                                       else False)
         if self._compiled_tensions:
-            T = self._compiled_tensions.tensions(X, U, F)
-            if T is not None:
+            status, _, T = self._compiled_tensions.accelerations(X, U, F)
+            if status == COMPILED_OK:  # else a vanishing pivot
                 return T
         return self.dyn.tensions(X, U, F)
 
