@@ -839,7 +839,7 @@ def _rk_steps(X, U, t, t_target, h_next, F_base, k1, k2, R, inv_R, inv_m, fixed_
               Dinv, row_start, row_col, row_slot, chain_order, chain_diag_weight, chain_off_weight, chain_sub, Ax,
               y_vals, solve_work, AB, E1, E2, error_kind, exponent, rtol, atol, max_steps, n_fixed, safety, min_factor,
               max_factor, projection_tol, KX, KU, Xs, Us, Xn, Un, acc, acc1, T, E, F, Bv, mu, phi, scale):
-    """The step loop of linknet_core.compiled_rk.rk_advance. Scratch: stages KX, KU (s+1,K,DIM); Xs, Us, Xn, Un,
+    """The step loop of linknet_core.compiled_rk.CompiledRungeKutta (arguments described there). Scratch: stages KX, KU (s+1,K,DIM); Xs, Us, Xn, Un,
     acc, acc1, F (K,DIM); T, Bv, mu, phi, scale (L,); E (L,DIM)."""
     K = X.shape[0]
     s = AB.shape[1]

@@ -31,33 +31,16 @@ from .compiled_kernels import (HAIRER_ERROR, LEFT_PLANE, NON_FINITE, OK, PROJECT
                                STEP_UNDERFLOW, TOO_MANY_STEPS)
 from . import compiled_kernels_2d as k2
 
-__all__ = ["rk_advance", "CompiledRungeKutta", "embedded_pair", "ERROR_KINDS", "RMS_ERROR", "HAIRER_ERROR", "OK",
+__all__ = ["CompiledRungeKutta", "embedded_pair", "ERROR_KINDS", "RMS_ERROR", "HAIRER_ERROR", "OK",
            "PROJECTION_FAILED", "SINGULAR", "NON_FINITE", "STEP_UNDERFLOW", "TOO_MANY_STEPS", "LEFT_PLANE"]
 
 
 def rk_scratch(K, L, s, dim=3):
-    """Scratch arrays of :func:`rk_advance` for s stages (allocated once per scene and tableau), in the order of
+    """Scratch arrays of :class:`CompiledRungeKutta`'s step loop for s stages (allocated once per scene and tableau), in the order of
     compiled_kernels._rk_steps: KX, KU; Xs, Us, Xn, Un, acc, acc1; T; E; F; B, mu, phi, scale."""
     return (np.empty((s + 1, K, dim)), np.empty((s + 1, K, dim)), np.empty((K, dim)), np.empty((K, dim)),
             np.empty((K, dim)), np.empty((K, dim)), np.empty((K, dim)), np.empty((K, dim)), np.zeros(L),
             np.empty((L, dim)), np.empty((K, dim)), np.empty(L), np.empty(L), np.empty(L), np.empty(L))
-
-
-def rk_advance(X, U, t, t_target, h_next, F_base, scene, system, scratch, AB, E1, E2, error_kind, exponent, rtol,
-               atol, max_steps, n_fixed, safety, min_factor, max_factor, projection_tol):
-    """Advance (X, U) in place from t to t_target with an embedded explicit pair, in as many components as X
-    has (3, or 2 in a plane's coordinates, with ``scratch`` to match).
-
-    AB: the s x s matrix A of the tableau with the weights b as row s; E1, E2: error weights (s + 1 each,
-    the last for the right-hand side at the new point). ``h_next`` <= 0 asks for the starting step to be
-    chosen. ``n_fixed`` > 0 instead takes n_fixed steps of exactly h_next with no error control (order
-    measurements). On return X, U hold the last accepted state. Returns (status, t, h_next, accepted
-    steps, rejected steps, right-hand side evaluations). (A Python function: a compiled wrapper unpacking the
-    tuples would make numba optimise the whole inlined step loop a second time when compiling it.)
-    """
-    return KERNELS[X.shape[1]]._rk_steps(X, U, t, t_target, h_next, F_base, *scene, *system, AB, E1, E2, error_kind,
-                                         exponent, rtol, atol, max_steps, n_fixed, safety, min_factor, max_factor,
-                                         projection_tol, *scratch)
 
 
 ERROR_KINDS = {"rms": RMS_ERROR, "hairer": HAIRER_ERROR}  # ProjectedRungeKutta.error_norm_kind -> kernel code
@@ -84,7 +67,9 @@ def embedded_pair(A, B, error_weights, error_estimator_order):
 
 
 class CompiledRungeKutta(CompiledScene):
-    """:func:`rk_advance` for one scene and one tableau (A, b, error weights, error norm)."""
+    """The compiled step loop (``_rk_steps`` of linknet_core.compiled_kernels, or its planar twin) for one scene
+    and one tableau (A, b, error weights, error norm): AB, the s x s matrix A with the weights b as row s;
+    E1, E2, error weights (s + 1 each, the last for the right-hand side at the new point)."""
 
     def __init__(self, dyn, A, B, error_weights, error_kind: int, error_estimator_order: int,
                  use_chain: bool | None = None, planar: bool | None = None):
@@ -100,8 +85,10 @@ class CompiledRungeKutta(CompiledScene):
 
     def advance(self, X, U, t, t_target, h, F_input, rtol, atol, max_steps, controller, n_fixed=0,
                 projection_tol=1e-14):
-        """Returns (status, X, U, t, h_next or None, steps, rejected, rhs evaluations); X, U are new (K,3)
-        arrays (the last accepted state), the arguments are not modified."""
+        """From (X, U) at t towards t_target. ``h`` None asks for the starting step to be chosen; ``n_fixed`` > 0
+        instead takes n_fixed steps of exactly h with no error control (order measurements). Returns (status,
+        X, U, t, h_next or None, accepted steps, rejected steps, rhs evaluations); X, U are new (K,3) arrays
+        (the last accepted state), the arguments are not modified."""
         safety, min_factor, max_factor = controller
         h0 = 0.0 if h is None else float(h)
         if self.planar:
