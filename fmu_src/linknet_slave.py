@@ -150,9 +150,7 @@ class LinknetNetwork(Fmi2Slave):
             # a master reading many variables reads the same list every communication step: its index array
             # is checked once and remembered (converting and checking 709 value references cost ~15 us a call)
             if vrs != self._read_vrs:
-                idx = np.asarray(vrs)
-                if idx.size == 0:
-                    idx = idx.astype(np.int64)
+                idx = np.asarray(vrs)  # more than 16 entries here
                 if (idx.ndim != 1 or idx.dtype.kind not in "iu"
                         or (idx.size and (idx.min() < 0 or idx.max() >= self._real.size))):
                     raise IndexError  # (numpy would wrap a negative index around)
