@@ -22,6 +22,7 @@ import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _dop853
 from scipy.integrate._ivp.rk import RK45 as _RK45
 
+from ..compiled_kernels import OK as COMPILED_OK, STEP_UNDERFLOW, TOO_MANY_STEPS
 from ..errors import SolverError
 from .base import Integrator
 
@@ -186,11 +187,9 @@ class ProjectedRungeKutta(Integrator):
         """n steps of size h without error control, each followed by the projections (order measurements);
         in the compiled kernel when available, else by :meth:`step`. Returns (X, U)."""
         if self.compiled_available():
-            from ..compiled_rk import OK
-
             status, X_new, U_new, *_ = self._compiled_kernel().advance(
                 X, U, 0.0, n * h, h, F_input, self.rtol, self.atol, n, (SAFETY, MIN_FACTOR, MAX_FACTOR), n_fixed=n)
-            if status == OK:
+            if status == COMPILED_OK:
                 return X_new, U_new
         for _ in range(n):
             X, U = self.step(X, U, h, F_input)
@@ -203,8 +202,6 @@ class ProjectedRungeKutta(Integrator):
             X, U, _, _ = self._advance_numpy(X, U, t, t_start, t_target, F_input, max_steps, 0)
             state.X, state.U, state.t = X, U, t_target
             return
-        from .. import compiled_rk as ck
-
         kernel = self._compiled_kernel()
         steps = 0  # accepted in this interval by the compiled and numpy pieces together: max_steps bounds them all
         numpy_run = 0  # accepted steps the numpy path takes at the next hand-over
@@ -216,11 +213,11 @@ class ProjectedRungeKutta(Integrator):
             self.stats.steps += done
             self.stats.rejected += rejected
             self.dyn.rhs_evaluations += n_rhs
-            if status == ck.OK:
+            if status == COMPILED_OK:
                 break
-            if status == ck.STEP_UNDERFLOW:
+            if status == STEP_UNDERFLOW:
                 raise self._underflow(t)
-            if status == ck.TOO_MANY_STEPS:
+            if status == TOO_MANY_STEPS:
                 raise self._too_many(max_steps, t_start, t_target)
             # a singular configuration, a slow projection or non-finite values: the kernel stopped at its last
             # accepted step (X, U, t and the step size h it would try next). The numpy path, which has the
