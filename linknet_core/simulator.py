@@ -84,12 +84,16 @@ def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: boo
     return X, U_projected, InitialReport(worst, projected, dv, worst_mass)
 
 
-def _finite_state(X: np.ndarray, U: np.ndarray) -> bool:
-    """One check per advance, for every path (point-mass, compiled, specialised). A sum of squares is
-    non-finite iff an entry is non-finite or beyond ~1e154, which is no physical state either; it costs
-    ~0.8 us against ~2.3 us for two isfinite passes (this runs on every FMU doStep)."""
-    x, u = X.ravel(), U.ravel()
-    return math.isfinite(float(x.dot(x)) + float(u.dot(u)))
+def _all_finite(*arrays: np.ndarray) -> bool:
+    """Whether every entry is finite and below ~1e154, in one dot product per array: a sum of squares is
+    non-finite iff an entry is non-finite or beyond ~1e154, which is no physical state or force either. For the
+    state after every advance and the input before it (every FMU doStep): ~0.8 us for X and U against ~2.3 us
+    for two isfinite passes."""
+    total = 0.0
+    for a in arrays:
+        v = a.ravel()
+        total += float(v.dot(v))
+    return math.isfinite(total)
 
 
 class Simulator:
@@ -140,8 +144,7 @@ class Simulator:
         F = F_input if type(F_input) is np.ndarray and F_input.dtype == np.float64 else np.asarray(F_input, float)
         if F.shape != (self.scene.K, 3):
             raise SolverError(f"input forces must have shape ({self.scene.K}, 3), got {F.shape}")
-        f = F.ravel()
-        if math.isfinite(float(f.dot(f))):  # every entry finite (and below ~1e154): the common case
+        if _all_finite(F):  # the common case; else the entries are checked one by one below
             return F
         bad = ~np.isfinite(F)
         bad[self.scene.fixed] = False
@@ -167,7 +170,7 @@ class Simulator:
         X_before, U_before, internals = state.X, state.U, self.integrator.internals()
         try:
             self.integrator.advance(state, t_next, F, self.max_steps_per_call)
-            if not _finite_state(state.X, state.U):
+            if not _all_finite(state.X, state.U):
                 raise SolverError(f"the state became non-finite between t = {t_before} and t = {t_next} "
                                   f"(largest |X| {np.abs(state.X).max()} m); reduce the step or tolerance")
         except Exception:
