@@ -252,7 +252,7 @@ class Result:
         np.savez_compressed(
             path, t=self.t, X=self.X, U=self.U, T=self.T, energy=self.energy, residual=self.residual,
             velocity_residual=self.velocity_residual, mass_names=np.array(self.scene.mass_names),
-            k1=self.scene.k1 + 1, k2=self.scene.k2 + 1, method=self.method)
+            k1=self.scene.k1 + 1, k2=self.scene.k2 + 1, fixed=self.scene.fixed, method=self.method)
 
     def summary(self) -> str:
         s = self.stats
