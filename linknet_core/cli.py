@@ -1,4 +1,4 @@
-"""The ``linknet`` command: simulate, analyze, check."""
+"""The ``linknet`` command: simulate, analyze, check, animate, view."""
 from __future__ import annotations
 
 import argparse
@@ -6,6 +6,7 @@ import sys
 
 import numpy as np
 
+from . import visual  # light: matplotlib and plotly are imported only when a picture is drawn
 from .errors import LinknetError
 
 
@@ -22,6 +23,8 @@ def _add_simulate(sub):
     p.add_argument("--n-out", type=int, default=201, help="number of output samples (default 201)")
     p.add_argument("--out", help="write arrays to this .npz")
     p.add_argument("--plot", help="write a PNG of positions and tensions against time")
+    p.add_argument("--animate", metavar="PATH", help="write an animation of the network (.gif, or .mp4 with ffmpeg); "
+                                                    "`linknet animate` has the options")
     p.add_argument("--project-initial", action="store_true",
                    help="project initial positions onto the link lengths instead of refusing them")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -42,10 +45,22 @@ def _add_check(sub):
     checks.add_arguments(p)
 
 
+def _add_animate(sub):
+    visual.add_animate_arguments(sub.add_parser(
+        "animate", help="animate a run (GIF, MP4) or draw one frame (PNG): links coloured by tension"))
+
+
+def _add_view(sub):
+    visual.add_view_arguments(sub.add_parser(
+        "view", help="interactive 3-D view of a run in one self-contained HTML file (time slider, tension on hover)"))
+
+
 def cmd_simulate(args) -> int:
     from .scene import load_scene
     from .simulator import simulate
 
+    if args.animate:  # refuse a bad animation path (or MP4 without ffmpeg) before the run, not after it
+        visual.check_animation_path(args.animate)
     scene = load_scene(args.scene)
     method = args.method or ("dop853" if args.rtol is not None else "rattle")
     dt = args.dt
@@ -67,6 +82,8 @@ def cmd_simulate(args) -> int:
     if args.plot:
         plot_result(res, args.plot)
         print(f"wrote {args.plot}")
+    if args.animate:
+        visual.animate_result(res, args.animate)
     return 0
 
 
@@ -122,13 +139,16 @@ def build_parser() -> argparse.ArgumentParser:
     _add_simulate(sub)
     _add_analyze(sub)
     _add_check(sub)
+    _add_animate(sub)
+    _add_view(sub)
     return parser
 
 
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    handlers = {"simulate": cmd_simulate, "analyze": cmd_analyze, "check": cmd_check}
+    handlers = {"simulate": cmd_simulate, "analyze": cmd_analyze, "check": cmd_check, "animate": visual.cmd_animate,
+                "view": visual.cmd_view}
     try:
         return handlers[args.command](args)
     except LinknetError as exc:

@@ -1,0 +1,620 @@
+"""Pictures of a run's motion: an animation (GIF or MP4, matplotlib), a still (PNG) and an interactive
+3-D view (one self-contained HTML file, plotly).
+
+Every picture draws the network itself: masses as points, anchored masses marked, links as segments
+coloured by their tension T on a diverging colour scale centred on T = 0 (T > 0 tension, red; T < 0
+compression, blue), with a time stamp and a colour bar. Links are one collection (one LineCollection,
+one plotly trace), so a 100 x 100 net draws as fast as the renderer can fill its 19800 segments.
+
+Used by ``linknet animate``, ``linknet view``, ``linknet simulate --animate`` and the demo. matplotlib
+and plotly are imported only when a picture is drawn, so the CLI starts fast.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import time
+import zipfile
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import LinknetError
+
+VIEWS = ("auto", "xz", "xy", "yz", "3d")
+PLANES = {"xz": (0, 2), "xy": (0, 1), "yz": (1, 2)}  # the two coordinates a flat view shows
+AXIS_NAMES = "xyz"
+DEFAULT_CMAP = "coolwarm"  # diverging, perceptually balanced; its T = 0 grey stays visible on white
+DEFAULT_SIZE = (800, 600)  # pixels of an animation or still
+DPI = 100
+DEFAULT_FPS = 25.0
+DEFAULT_MAX_FRAMES = 250  # ten seconds of animation at the default frame rate
+GIF_MAX_FPS = 50.0  # GIF delays are whole centiseconds, and browsers slow anything under 2 cs to 10 cs
+HTML_MAX_FRAMES = 100
+ORTHOGRAPHIC_ZOOM = 2.5  # a flat view's network fills about the plot's width (measured in Chromium)
+HTML_FRAME_BUDGET = 40e6  # bytes of frame data in an HTML view before frames are thinned by default
+ANIMATION_SUFFIXES = (".gif", ".mp4")
+STILL_SUFFIX = ".png"
+
+
+@dataclass(frozen=True)
+class Motion:
+    """What a picture of a run needs: sample times, positions, tensions, the links and the anchors."""
+
+    title: str
+    t: np.ndarray  # (n,) s
+    X: np.ndarray  # (n, K, 3) m
+    T: np.ndarray  # (n, L) N
+    k1: np.ndarray  # (L,) 0-based ends of each link
+    k2: np.ndarray
+    fixed: np.ndarray  # (K,) bool: anchored masses
+    mass_names: tuple[str, ...]
+    notes: tuple[str, ...] = ()  # what the reader had to assume, printed by the CLI
+
+    def __post_init__(self):
+        n = self.t.shape[0] if self.t.ndim == 1 else -1
+        K, L = len(self.mass_names), self.k1.shape[0]
+        if n < 1 or self.X.shape != (n, K, 3) or self.T.shape != (n, L) or self.k2.shape != (L,) \
+                or self.fixed.shape != (K,):
+            raise LinknetError(f"{self.title}: inconsistent arrays: t {self.t.shape}, X {self.X.shape}, "
+                               f"T {self.T.shape}, {K} mass names, k1 {self.k1.shape}, k2 {self.k2.shape}, "
+                               f"fixed {self.fixed.shape} (expected t (n,), X (n, K, 3), T (n, L))")
+        if L and (min(self.k1.min(), self.k2.min()) < 0 or max(self.k1.max(), self.k2.max()) >= K):
+            raise LinknetError(f"{self.title}: a link end is not one of the {K} masses")
+        if np.any(np.diff(self.t) <= 0):
+            raise LinknetError(f"{self.title}: sample times are not increasing")
+        for name, values in (("positions X", self.X), ("tensions T", self.T)):
+            bad = np.flatnonzero(~np.isfinite(values.reshape(n, -1)).all(axis=1))
+            if bad.size:
+                raise LinknetError(f"{self.title}: {name} are not finite at t = {self.t[bad[0]]:g} s "
+                                   f"(sample {bad[0] + 1} of {n})")
+
+    @property
+    def K(self) -> int:
+        return len(self.mass_names)
+
+    @property
+    def L(self) -> int:
+        return self.k1.shape[0]
+
+    @classmethod
+    def from_arrays(cls, scene, t, X, T, title: str | None = None) -> "Motion":
+        """A run given as arrays (for example read back from an FMU) of ``scene``."""
+        return cls(title=title or scene.name, t=np.asarray(t, float), X=np.asarray(X, float),
+                   T=np.asarray(T, float).reshape(len(t), scene.L), k1=np.asarray(scene.k1),
+                   k2=np.asarray(scene.k2), fixed=np.asarray(scene.fixed, bool), mass_names=tuple(scene.mass_names))
+
+    @classmethod
+    def from_result(cls, res) -> "Motion":
+        return cls.from_arrays(res.scene, res.t, res.X, res.T, title=f"{res.scene.name}, {res.method}")
+
+    @classmethod
+    def from_npz(cls, path) -> "Motion":
+        """A run written by ``Result.save_npz`` (``linknet simulate --out``)."""
+        path = Path(path)
+        not_a_result = f"{path}: not a result file written by `linknet simulate --out`"
+        try:
+            data = np.load(path, allow_pickle=False)
+            if not isinstance(data, np.lib.npyio.NpzFile):  # a plain .npy array
+                raise LinknetError(f"{not_a_result} (it holds one array, not an .npz archive)")
+            with data:
+                arrays = {key: data[key] for key in data.files}
+        except FileNotFoundError:
+            raise LinknetError(f"{path}: no such file") from None
+        except LinknetError:
+            raise
+        except ValueError:  # numpy found neither an .npz nor an .npy and refused to unpickle it
+            raise LinknetError(f"{not_a_result} (not an .npz archive)") from None
+        except (OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # a damaged archive
+            raise LinknetError(f"{not_a_result} ({exc})") from None
+        missing = [key for key in ("t", "X", "T", "k1", "k2", "mass_names") if key not in arrays]
+        if missing:
+            raise LinknetError(f"{not_a_result}: it has no {', '.join(missing)} (it has: {', '.join(sorted(arrays)) or 'nothing'})")
+        notes = ()
+        K = arrays["mass_names"].shape[0]
+        if "fixed" in arrays:
+            fixed = arrays["fixed"].astype(bool)
+        else:
+            fixed = np.zeros(K, bool)
+            notes = (f"{path.name} does not say which masses are anchored (written before linknet saved "
+                     "'fixed'): anchored masses are drawn as free ones",)
+        method = str(arrays["method"]) if "method" in arrays else ""
+        try:
+            return cls(title=f"{path.stem}, {method}" if method else path.stem, t=arrays["t"].astype(float),
+                       X=arrays["X"].astype(float), T=arrays["T"].astype(float),
+                       k1=arrays["k1"].astype(int) - 1, k2=arrays["k2"].astype(int) - 1, fixed=fixed,
+                       mass_names=tuple(str(name) for name in arrays["mass_names"]), notes=notes)
+        except (TypeError, ValueError) as exc:  # LinknetError is a ValueError too
+            if isinstance(exc, LinknetError):
+                raise LinknetError(f"{path}: {exc}") from None
+            raise LinknetError(f"{not_a_result} ({exc})") from None
+
+    def tension_peak(self) -> float:
+        """max |T| over the whole run."""
+        return float(np.max(np.abs(self.T))) if self.T.size else 0.0
+
+    def tension_limit(self) -> float:
+        """The colour scale's default half range: the 99th percentile of |T| over all links and samples, so
+        that a short spike (a whipping tip, a jerk) saturates instead of washing every other link out to the
+        T = 0 colour; the largest |T| if that percentile is 0, and 1 N if no link ever carries a force."""
+        if not self.T.size:
+            return 1.0
+        typical = float(np.percentile(np.abs(self.T), 99.0))
+        return typical if typical > 0 else self.tension_peak() or 1.0
+
+    def resolve_view(self, view: str) -> str:
+        """``auto``: the coordinate plane the whole run stays in (xz for a motion in a vertical plane), else 3d."""
+        if view != "auto":
+            return view
+        spread = np.ptp(self.X.reshape(-1, 3), axis=0)
+        flat = spread <= 1e-9 * max(float(spread.max()), 1e-300)
+        for dropped, plane in ((1, "xz"), (2, "xy"), (0, "yz")):
+            if flat[dropped]:
+                return plane
+        return "3d"
+
+    def frame_indices(self, max_frames: int, fps: float, speed: float) -> np.ndarray:
+        """Samples to show, evenly spaced in time: as many as playing at ``speed`` x real time at ``fps``
+        needs, at most ``max_frames`` and at most every sample (samples are shown, never interpolated)."""
+        if len(self.t) == 1:
+            return np.zeros(1, int)
+        span = float(self.t[-1] - self.t[0])
+        wanted = int(round(span / speed * fps)) + 1
+        count = max(1, min(len(self.t), max_frames, wanted))
+        targets = np.linspace(self.t[0], self.t[-1], count)
+        right = np.clip(np.searchsorted(self.t, targets), 1, len(self.t) - 1)
+        left = right - 1
+        nearest = np.where(np.abs(self.t[left] - targets) <= np.abs(self.t[right] - targets), left, right)
+        return np.unique(nearest)
+
+    def bounds(self, view: str) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper corner of a box holding every mass at every sample, with a margin, so that the
+        axes stay still while the network moves."""
+        low, high = self.X.reshape(-1, 3).min(axis=0), self.X.reshape(-1, 3).max(axis=0)
+        shown = list(PLANES.get(view, (0, 1, 2)))
+        size = max(float(np.max(high[shown] - low[shown])), 1e-9)
+        margin = 0.06 * size
+        return low - margin, high + margin
+
+
+@dataclass(frozen=True)
+class Written:
+    """What one output holds and how long it took to write (printed by the CLI and the demo)."""
+
+    path: Path
+    frames: int
+    samples: int
+    seconds: float
+    detail: str
+
+    def line(self) -> str:
+        size = self.path.stat().st_size
+        return (f"wrote {self.path}: {self.frames} frame{'s' if self.frames != 1 else ''} of {self.samples} "
+                f"samples, {self.detail}, {size / 1e6:.2f} MB, in {self.seconds:.2f} s")
+
+
+def tension_colours(cmap_name: str, limit: float):
+    """The colour scale of every picture: ``cmap_name`` with 0 N at its centre and +-``limit`` at its ends
+    (values beyond take the end colours)."""
+    import matplotlib
+    from matplotlib.colors import CenteredNorm
+
+    try:
+        cmap = matplotlib.colormaps[cmap_name]
+    except KeyError:
+        raise LinknetError(f"unknown colour map {cmap_name!r}; use a diverging one such as coolwarm, RdBu_r, "
+                           "PuOr_r or bwr") from None
+    return cmap, CenteredNorm(vcenter=0.0, halfrange=limit)
+
+
+def _marker_size(count: int) -> float:
+    """Mass marker diameter (points): big enough to see on a few masses, small enough not to hide a 100 x 100 net."""
+    return 7.0 if count <= 30 else 3.0 if count <= 300 else 1.5 if count <= 3000 else 0.8
+
+
+def _line_width(count: int) -> float:
+    """Link width (points), for the same reason."""
+    return 3.0 if count <= 30 else 2.0 if count <= 300 else 1.0 if count <= 3000 else 0.5
+
+
+def _time_format(times: np.ndarray) -> str:
+    """Enough decimals to tell neighbouring frames apart."""
+    steps = np.diff(times)
+    step = float(steps.min()) if steps.size else 1.0
+    return f"{{:.{int(min(9, max(1, math.ceil(-math.log10(step) - 1e-6))))}f}}"
+
+
+class NetworkFigure:
+    """The matplotlib picture of a motion. ``show(i)`` draws sample i: links as one LineCollection
+    (Line3DCollection in the 3-D view) coloured by T, free and anchored masses as two marker sets, the time
+    stamp with the range of T at that sample, the colour bar and a legend."""
+
+    def __init__(self, motion: Motion, view: str = "auto", size=DEFAULT_SIZE, cmap: str = DEFAULT_CMAP,
+                 tension_range: float | None = None, elev: float = 25.0, azim: float = -60.0, times=None):
+        from matplotlib.collections import LineCollection
+        from matplotlib.figure import Figure
+
+        self.motion = motion
+        self.view = motion.resolve_view(view)
+        limit = tension_range or motion.tension_limit()
+        self.cmap, self.norm = tension_colours(cmap, limit)
+        # pyplot-free figure: no global state and no GUI backend, in the CLI as in a notebook
+        self.fig = Figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
+        low, high = motion.bounds(self.view)
+        width, mass_size = _line_width(motion.L), _marker_size(motion.K)
+        free, anchored = ~motion.fixed, motion.fixed
+        if self.view == "3d":
+            from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+            ax = self.fig.add_subplot(projection="3d", computed_zorder=False)
+            ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]), zlim=(low[2], high[2]),
+                   xlabel="x, m", ylabel="y, m", zlabel="z, m")
+            ax.set_box_aspect(high - low)  # equal scale on the three axes: the network keeps its shape
+            ax.view_init(elev=elev, azim=azim)
+            self.links = Line3DCollection(np.zeros((motion.L, 2, 3)), cmap=self.cmap, norm=self.norm,
+                                          linewidths=width, zorder=2)
+        else:
+            a, b = PLANES[self.view]
+            ax = self.fig.add_subplot()
+            ax.set(xlim=(low[a], high[a]), ylim=(low[b], high[b]),
+                   xlabel=f"{AXIS_NAMES[a]}, m", ylabel=f"{AXIS_NAMES[b]}, m")
+            ax.set_aspect("equal", adjustable="box")
+            self.links = LineCollection(np.zeros((motion.L, 2, 2)), cmap=self.cmap, norm=self.norm,
+                                        linewidths=width, zorder=2, capstyle="round")
+        ax.add_collection(self.links)
+        self.ax = ax
+        nothing = ([], [], []) if self.view == "3d" else ([], [])
+        (self.free_marks,) = ax.plot(*nothing, ls="none", marker="o", ms=mass_size, color="0.15", zorder=3,
+                                     label="mass")
+        (self.anchor_marks,) = ax.plot(*nothing, ls="none", marker="s", ms=max(1.6 * mass_size, 7.0), mfc="black",
+                                       mec="white", mew=0.6, zorder=4, label="anchored mass")
+        self._free, self._anchored = free, anchored
+        ax.set_title(motion.title, loc="right", fontsize=10)
+        extend = "neither" if limit >= motion.tension_peak() else "both"
+        self.fig.colorbar(self.links, ax=ax, shrink=0.85, extend=extend,
+                          label="link tension T, N   (> 0 pulls, < 0 pushes)")
+        # time stamp and legend outside the axes, where they never cover the network
+        self.stamp = ax.set_title("\n", loc="left", fontsize=9, family="monospace")
+        handles = [self.free_marks] + ([self.anchor_marks] if anchored.any() else [])
+        self.fig.legend(handles=handles, loc="outside lower center", fontsize=8, frameon=False, ncols=len(handles))
+        self._time_format = _time_format(motion.t if times is None else times)
+
+    def show(self, i: int) -> None:
+        """Draw sample i of the motion."""
+        motion = self.motion
+        X, T = motion.X[i], motion.T[i]
+        ends = np.stack([X[motion.k1], X[motion.k2]], axis=1)  # (L, 2, 3)
+        if self.view == "3d":
+            self.links.set_segments(ends)
+            self.free_marks.set_data_3d(*X[self._free].T)
+            self.anchor_marks.set_data_3d(*X[self._anchored].T)
+        else:
+            a, b = PLANES[self.view]
+            self.links.set_segments(ends[:, :, [a, b]])
+            self.free_marks.set_data(X[self._free, a], X[self._free, b])
+            self.anchor_marks.set_data(X[self._anchored, a], X[self._anchored, b])
+        self.links.set_array(T)
+        stamp = f"t = {self._time_format.format(motion.t[i])} s"
+        if T.size:
+            stamp += f"\nT from {T.min():.4g} to {T.max():.4g} N"
+        self.stamp.set_text(stamp)
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """'800x600' -> (800, 600), for argparse (which prints the message as its one-line usage error)."""
+    try:
+        width, height = (int(part) for part in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"WIDTHxHEIGHT in pixels, like 800x600 (got {text!r})") from None
+    if not (16 <= width <= 8000 and 16 <= height <= 8000):
+        raise argparse.ArgumentTypeError(f"16 to 8000 pixels each way (got {text!r})")
+    return width, height
+
+
+def check_animation_path(path, fps: float = DEFAULT_FPS, size=DEFAULT_SIZE) -> str:
+    """Refuse, before any work, an output an animation cannot be written to: returns its suffix."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in ANIMATION_SUFFIXES + (STILL_SUFFIX,):
+        raise LinknetError(f"{path}: an animation is written as .gif or .mp4 (a still frame as .png), "
+                           f"not {suffix or 'a file without a suffix'}")
+    if suffix == ".gif" and fps > GIF_MAX_FPS:
+        raise LinknetError(f"{path}: a GIF plays at most {GIF_MAX_FPS:g} frames per second (its delays are whole "
+                           f"centiseconds and browsers slow shorter ones down); use --fps {GIF_MAX_FPS:g} or less, "
+                           "or --speed to slow the motion down")
+    if suffix == ".mp4":
+        from matplotlib import animation, rcParams
+
+        if not animation.writers.is_available("ffmpeg"):
+            raise LinknetError(f"{path}: writing MP4 needs ffmpeg, which was not found (matplotlib looks for "
+                               f"{rcParams['animation.ffmpeg_path']!r}); install ffmpeg (Debian: apt-get install "
+                               "ffmpeg) or write a .gif, which needs nothing more")
+        if size[0] % 2 or size[1] % 2:
+            raise LinknetError(f"{path}: MP4 (H.264) frames need an even width and height (got {size[0]}x{size[1]})")
+    return suffix
+
+
+def _output_dir(path: Path) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise LinknetError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
+def write_animation(motion: Motion, path, *, view: str = "auto", max_frames: int = DEFAULT_MAX_FRAMES,
+                    fps: float = DEFAULT_FPS, speed: float = 1.0, size=DEFAULT_SIZE, cmap: str = DEFAULT_CMAP,
+                    tension_range: float | None = None, elev: float = 25.0, azim: float = -60.0) -> Written:
+    """Write the motion as a GIF (Pillow, always available) or MP4 (ffmpeg) with matplotlib's writers."""
+    from matplotlib import animation
+
+    path = Path(path)
+    suffix = check_animation_path(path, fps, size)
+    if suffix == STILL_SUFFIX:
+        raise LinknetError(f"{path}: a .png holds one frame; write it with write_still (linknet animate --at)")
+    _output_dir(path)
+    start = time.perf_counter()
+    frames = motion.frame_indices(max_frames, fps, speed)
+    picture = NetworkFigure(motion, view, size, cmap, tension_range, elev, azim, times=motion.t[frames])
+    writer = animation.PillowWriter(fps=fps) if suffix == ".gif" else animation.FFMpegWriter(fps=fps, codec="h264")
+    try:
+        with writer.saving(picture.fig, str(path), dpi=DPI):
+            for i in frames:
+                picture.show(int(i))
+                writer.grab_frame()
+    except OSError as exc:
+        raise LinknetError(f"cannot write {path}: {exc.strerror or exc}") from None
+    except (RuntimeError, ValueError) as exc:  # ffmpeg failing part way
+        raise LinknetError(f"cannot write {path}: {exc}") from None
+    seconds = time.perf_counter() - start
+    span = float(motion.t[frames[-1]] - motion.t[frames[0]])
+    playback = (len(frames) - 1) / fps
+    pace = f", plays at {span / playback:.3g}x real time" if span > 0 else ""
+    return Written(path, len(frames), len(motion.t), seconds,
+                   f"{size[0]}x{size[1]} px, {picture.view} view, {fps:g} fps{pace}")
+
+
+def write_still(motion: Motion, path, *, at: float | None = None, view: str = "auto", size=DEFAULT_SIZE,
+                cmap: str = DEFAULT_CMAP, tension_range: float | None = None, elev: float = 25.0,
+                azim: float = -60.0) -> Written:
+    """Write one frame as PNG: the sample nearest to time ``at`` (default: the last sample)."""
+    path = Path(path)
+    _output_dir(path)
+    start = time.perf_counter()
+    i = len(motion.t) - 1 if at is None else int(np.argmin(np.abs(motion.t - at)))
+    picture = NetworkFigure(motion, view, size, cmap, tension_range, elev, azim)
+    picture.show(i)
+    try:
+        picture.fig.savefig(path, dpi=DPI)
+    except OSError as exc:
+        raise LinknetError(f"cannot write {path}: {exc.strerror or exc}") from None
+    return Written(path, 1, len(motion.t), time.perf_counter() - start,
+                   f"t = {motion.t[i]:g} s, {size[0]}x{size[1]} px, {picture.view} view")
+
+
+def plotly_colorscale(cmap_name: str, stops: int = 21) -> list:
+    """The matplotlib colour map as a plotly colour scale, so the HTML view colours T as the animation does."""
+    from matplotlib.colors import to_hex
+
+    cmap, _ = tension_colours(cmap_name, 1.0)
+    return [[float(s), to_hex(cmap(float(s)))] for s in np.linspace(0.0, 1.0, stops)]
+
+
+def _html_bytes_per_frame(motion: Motion) -> float:
+    """Frame data an HTML view stores per frame, as float32 in base64 (4/3 bytes per byte): per link 3 vertices
+    (k1 end, k2 end, gap) of 3 coordinates and a colour value each, its midpoint and T; 3 coordinates per mass."""
+    return 4 * 4 / 3 * ((3 * 4 + 3 + 1) * motion.L + 3 * motion.K)
+
+
+def html_default_max_frames(motion: Motion) -> int:
+    """Up to HTML_MAX_FRAMES, fewer where the frames of a large scene would pass HTML_FRAME_BUDGET bytes."""
+    return int(max(2, min(HTML_MAX_FRAMES, HTML_FRAME_BUDGET // _html_bytes_per_frame(motion))))
+
+
+def _camera(view: str, elev: float, azim: float) -> dict:
+    """plotly camera looking along the dropped axis for a flat view (orthographic, as the animation's 2-D
+    axes), or from (elev, azim) as matplotlib's 3-D view for 3d."""
+    if view == "3d":
+        e, a = math.radians(elev), math.radians(azim)
+        eye = 2.0 * np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])
+        return dict(eye=dict(zip("xyz", eye.tolist())), up=dict(x=0, y=0, z=1), projection=dict(type="perspective"))
+    eye, up = {"xz": ((0, -2, 0), (0, 0, 1)), "xy": ((0, 0, 2), (0, 1, 0)), "yz": ((2, 0, 0), (0, 0, 1))}[view]
+    return dict(eye=dict(zip("xyz", eye)), up=dict(zip("xyz", up)), projection=dict(type="orthographic"))
+
+
+def build_html_figure(motion: Motion, *, view: str = "auto", max_frames: int | None = None,
+                      fps: float = DEFAULT_FPS, speed: float = 1.0, cmap: str = DEFAULT_CMAP,
+                      tension_range: float | None = None, elev: float = 25.0, azim: float = -60.0):
+    """The plotly figure of the HTML view: trace 0 the links (one line trace, coloured per vertex by T, gaps
+    between links), trace 1 the link midpoints (coloured by T, the hover targets: link number, its masses
+    and T), trace 2 the free masses, trace 3 the anchored ones; one frame per shown sample, a time slider
+    and play / pause buttons. Returns (figure, frame indices)."""
+    import plotly.graph_objects as go
+
+    view = motion.resolve_view(view)
+    frames = motion.frame_indices(max_frames or html_default_max_frames(motion), fps, speed)
+    limit = tension_range or motion.tension_limit()
+    scale = dict(colorscale=plotly_colorscale(cmap), cmin=-limit, cmax=limit)
+    free, anchored = ~motion.fixed, motion.fixed
+    L = motion.L
+
+    def link_vertices(i):  # (3L, 3) float32: k1 end, k2 end, a NaN gap, per link
+        X = motion.X[i].astype(np.float32)
+        vertices = np.full((L, 3, 3), np.nan, np.float32)
+        vertices[:, 0], vertices[:, 1] = X[motion.k1], X[motion.k2]
+        return vertices.reshape(-1, 3)
+
+    def moving_traces(i):
+        X, T = motion.X[i].astype(np.float32), motion.T[i].astype(np.float32)
+        vertices, middles = link_vertices(i), 0.5 * (X[motion.k1] + X[motion.k2])
+        return [go.Scatter3d(x=vertices[:, 0], y=vertices[:, 1], z=vertices[:, 2], line=dict(color=np.repeat(T, 3))),
+                go.Scatter3d(x=middles[:, 0], y=middles[:, 1], z=middles[:, 2], marker=dict(color=T)),
+                go.Scatter3d(x=X[free, 0], y=X[free, 1], z=X[free, 2])]
+
+    first = int(frames[0])
+    links, middles, masses = moving_traces(first)
+    links.update(mode="lines", name="links", hoverinfo="skip", showlegend=False,
+                 line=dict(width=max(2.0, 2 * _line_width(L)), **scale))
+    link_ends = np.stack([np.arange(1, L + 1), motion.k1 + 1, motion.k2 + 1], axis=1)
+    # midpoint markers as wide as the line: they read as part of it, and they are what the pointer hovers on
+    middles.update(mode="markers", name="links (hover for T)", customdata=link_ends,
+                   marker=dict(size=links.line.width, colorbar=dict(title=dict(text="T, N"),
+                               len=0.75), showscale=True, **scale),
+                   hovertemplate="link %{customdata[0]} (masses %{customdata[1]}-%{customdata[2]})"
+                                 "<br>T = %{marker.color:.5g} N<extra></extra>")
+    free_numbers = np.flatnonzero(free) + 1
+    masses.update(mode="markers", name="masses", marker=dict(size=1.5 * _marker_size(motion.K), color="#262626"),
+                  text=[f"mass {k} ({motion.mass_names[k - 1]})" for k in free_numbers],
+                  hovertemplate="%{text}<br>(%{x:.4g}, %{y:.4g}, %{z:.4g}) m<extra></extra>")
+    X0 = motion.X[first]
+    anchors = go.Scatter3d(x=X0[anchored, 0], y=X0[anchored, 1], z=X0[anchored, 2], mode="markers",
+                           name="anchored masses",
+                           marker=dict(size=2.2 * _marker_size(motion.K), color="black", symbol="square"),
+                           text=[f"mass {k + 1} ({motion.mass_names[k]}), anchored" for k in np.flatnonzero(anchored)],
+                           hovertemplate="%{text}<br>(%{x:.4g}, %{y:.4g}, %{z:.4g}) m<extra></extra>")
+    time_format = _time_format(motion.t[frames])
+    labels = [time_format.format(motion.t[i]) for i in frames]
+    figure_frames = [go.Frame(name=str(i), data=moving_traces(int(i)), traces=[0, 1, 2]) for i in frames]
+    animate = dict(mode="immediate", frame=dict(duration=0, redraw=True), transition=dict(duration=0))
+    slider = dict(active=0, x=0.13, len=0.85, y=0.02, pad=dict(t=30, b=10),
+                  currentvalue=dict(prefix="t = ", suffix=" s", font=dict(size=14)),
+                  steps=[dict(method="animate", label=label, args=[[str(i)], animate])
+                         for label, i in zip(labels, frames)])
+    play = dict(type="buttons", direction="left", x=0.0, y=0.02, xanchor="left", yanchor="top",
+                pad=dict(t=30, r=10), showactive=False,
+                buttons=[dict(label="Play", method="animate",
+                              args=[None, dict(frame=dict(duration=1000.0 / fps, redraw=True), fromcurrent=True,
+                                               transition=dict(duration=0))]),
+                         dict(label="Pause", method="animate", args=[[None], animate])])
+    low, high = motion.bounds("3d")
+    aspect = np.maximum((high - low) / float(np.max(high - low)), 0.02)  # equal scale: the network keeps its shape
+    axes = {f"{c}axis": dict(range=[float(low[j]), float(high[j])], autorange=False, title=dict(text=f"{c}, m"))
+            for j, c in enumerate(AXIS_NAMES)}
+    if view != "3d":
+        # plotly zooms an orthographic camera through the aspect ratio, not the eye distance: this fills the view
+        aspect = ORTHOGRAPHIC_ZOOM * aspect
+        seen_edge_on = AXIS_NAMES[({0, 1, 2} - set(PLANES[view])).pop()]
+        axes[f"{seen_edge_on}axis"].update(showticklabels=False, title=dict(text=""))
+    layout = go.Layout(
+        title=dict(text=f"{motion.title}: {motion.K} masses, {L} links, {len(frames)} of {len(motion.t)} samples"
+                        "<br><sup>T > 0 tension (red), T < 0 compression (blue). Drag to rotate, scroll to zoom, "
+                        "hover on a link for its tension.</sup>", x=0.01),
+        template="plotly_white", sliders=[slider], updatemenus=[play], margin=dict(l=0, r=0, t=70, b=0),
+        legend=dict(x=0.01, y=0.92),
+        scene=dict(aspectmode="manual", aspectratio=dict(zip("xyz", aspect.tolist())),
+                   camera=_camera(view, elev, azim), **axes))
+    return go.Figure(data=[links, middles, masses, anchors], layout=layout, frames=figure_frames), frames
+
+
+def write_html(motion: Motion, path, **options) -> Written:
+    """Write the interactive 3-D view: one HTML file with plotly.js inline, so it opens with no network."""
+    import plotly.io as pio
+
+    path = Path(path)
+    if path.suffix.lower() not in (".html", ".htm"):
+        raise LinknetError(f"{path}: the interactive view is written as .html")
+    _output_dir(path)
+    start = time.perf_counter()
+    figure, frames = build_html_figure(motion, **options)
+    try:
+        pio.write_html(figure, str(path), include_plotlyjs=True, full_html=True, auto_play=False,
+                       config=dict(displaylogo=False, scrollZoom=True))
+    except OSError as exc:
+        raise LinknetError(f"cannot write {path}: {exc.strerror or exc}") from None
+    return Written(path, len(frames), len(motion.t), time.perf_counter() - start,
+                   f"{figure.layout.scene.camera.projection.type} camera, plotly.js inline")
+
+
+# ---- command line (wired in linknet_core.cli) ------------------------------------------------------------
+
+def _positive(kind):
+    def parse(text):
+        value = kind(text)  # a ValueError here reads "invalid int value: 'abc'" in argparse's error
+        if not value > 0:
+            raise argparse.ArgumentTypeError(f"must be positive (got {text})")
+        return value
+    parse.__name__ = kind.__name__
+    return parse
+
+
+def _add_picture_arguments(p, max_frames_help: str) -> None:
+    p.add_argument("result", help="a run written by `linknet simulate --out RESULT.npz`")
+    p.add_argument("--view", choices=VIEWS, default="auto",
+                   help="projection: a coordinate plane (xz, xy, yz) or 3d; auto picks the plane the whole run "
+                        "stays in, else 3d")
+    p.add_argument("--elev", type=float, default=25.0, help="3d view: elevation of the viewer, degrees (default 25)")
+    p.add_argument("--azim", type=float, default=-60.0, help="3d view: azimuth of the viewer, degrees (default -60)")
+    p.add_argument("--max-frames", type=_positive(int), default=None, help=max_frames_help)
+    p.add_argument("--fps", type=_positive(float), default=DEFAULT_FPS,
+                   help=f"frames per second of playback (default {DEFAULT_FPS:g})")
+    p.add_argument("--speed", type=_positive(float), default=1.0,
+                   help="playback speed relative to real time (default 1; 0.25 is four times slower); "
+                        "sets how many samples are shown")
+    p.add_argument("--tension-range", type=_positive(float), metavar="N",
+                   help="colour scale from -N to N newtons (default: the 99th percentile of |T| over the run, so "
+                        "that short spikes saturate rather than wash the rest out)")
+    p.add_argument("--cmap", default=DEFAULT_CMAP, help=f"diverging matplotlib colour map (default {DEFAULT_CMAP})")
+
+
+def _one_line_errors(p) -> None:
+    """argparse prints a usage block before a bad option's error; the CLI promises one line naming the problem."""
+    def error(message):
+        p.exit(2, f"{p.prog}: error: {message} (see {p.prog} --help)\n")
+    p.error = error
+
+
+def add_animate_arguments(p) -> None:
+    _one_line_errors(p)
+    _add_picture_arguments(p, f"at most this many frames (default {DEFAULT_MAX_FRAMES}); samples are thinned "
+                              "evenly in time")
+    p.add_argument("-o", "--out", required=True, help="OUT.gif or OUT.mp4 (needs ffmpeg), or OUT.png for one frame")
+    p.add_argument("--size", type=parse_size, default=DEFAULT_SIZE, metavar="WxH",
+                   help=f"picture size in pixels (default {DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]})")
+    p.add_argument("--at", type=float, metavar="TIME", help="OUT.png: time of the frame, s (default: the last sample)")
+
+
+def add_view_arguments(p) -> None:
+    _one_line_errors(p)
+    _add_picture_arguments(p, f"at most this many frames (default {HTML_MAX_FRAMES}, fewer for large scenes so "
+                              f"the file stays near {HTML_FRAME_BUDGET / 1e6:.0f} MB)")
+    p.add_argument("-o", "--out", required=True, help="OUT.html (self-contained: opens without network access)")
+
+
+def _print_notes(motion: Motion) -> None:
+    for note in motion.notes:
+        print("note:", note)
+
+
+def _picture_options(args) -> dict:
+    return dict(view=args.view, cmap=args.cmap, tension_range=args.tension_range, elev=args.elev, azim=args.azim)
+
+
+def cmd_animate(args) -> int:
+    motion = Motion.from_npz(args.result)
+    _print_notes(motion)
+    options = _picture_options(args)
+    if Path(args.out).suffix.lower() == STILL_SUFFIX:
+        written = write_still(motion, args.out, at=args.at, size=args.size, **options)
+    else:
+        written = write_animation(motion, args.out, max_frames=args.max_frames or DEFAULT_MAX_FRAMES, fps=args.fps,
+                                  speed=args.speed, size=args.size, **options)
+    print(written.line())
+    return 0
+
+
+def cmd_view(args) -> int:
+    motion = Motion.from_npz(args.result)
+    _print_notes(motion)
+    written = write_html(motion, args.out, max_frames=args.max_frames, fps=args.fps, speed=args.speed,
+                         **_picture_options(args))
+    print(written.line())
+    return 0
+
+
+def animate_result(res, path) -> None:
+    """``linknet simulate --animate PATH``: the run just computed, with the default picture options."""
+    motion = Motion.from_result(res)
+    if Path(path).suffix.lower() == STILL_SUFFIX:
+        print(write_still(motion, path).line())
+    else:
+        print(write_animation(motion, path).line())
