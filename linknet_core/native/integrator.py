@@ -1,0 +1,132 @@
+"""The native core as an integrator: whole intervals between two outputs in one call into C.
+
+:class:`NativeIntegrator` takes the place of the numpy reference integrator of the same method inside
+:class:`linknet_core.Simulator`. It holds the model (built once per scene), the method as data and the
+native data (state, internals, scratch). ``advance`` copies the held input in, calls ``ln_advance`` (which
+is all or nothing), and hands out copies of the new state, so that no caller's array is ever written into.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SolverError
+from ..integrators.base import Integrator, StepStats
+from . import library as lib
+from .model import NativeData, NativeMethod, NativeModel
+
+
+@dataclass
+class _Internals:
+    t: float
+    h_next: float
+    planar: int
+    steps: int
+    rejected: int
+    n_rhs: int
+
+
+class NativeIntegrator(Integrator):
+    """``method_cls``: the reference integrator class whose method this runs (its gammas or tableau, name,
+    order, guarantees). ``static``: a scene with no degrees of freedom (an advance moves t only)."""
+
+    def __init__(self, model: NativeModel, method_cls, *, dt=None, rtol=None, atol=None, static: bool = False):
+        super().__init__(dynamics=None)
+        self.model = model
+        self.name, self.order, self.symplectic = method_cls.name, method_cls.order, method_cls.symplectic
+        self.adaptive, self.guarantees = method_cls.adaptive, method_cls.guarantees
+        self.dt, self.rtol = dt, rtol
+        self.atol = atol if atol is not None else rtol
+        position_tol = getattr(method_cls, "position_tol", 1e-14)
+        self.method = NativeMethod(method_cls, dt=dt, rtol=rtol, atol=self.atol, position_tol=position_tol,
+                                   static=static)
+        self.data = NativeData(model, self.method.n_stages)
+        self._model_p, self._method_p, self._data_p = model.pointer, self.method.pointer, self.data._ptr
+        self._d = self.data.struct
+        self._out = (None, None)  # the arrays last handed out as the state (the data holds the same values)
+
+    # ---- stats and internals: they live in the native data ------------------------------------
+    @property
+    def stats(self) -> StepStats:
+        return StepStats(int(self._d.steps), int(self._d.rejected))
+
+    @stats.setter
+    def stats(self, value) -> None:  # Integrator.__init__ sets it; the native data keeps its own
+        pass
+
+    @property
+    def rhs_evaluations(self) -> int:
+        return int(self._d.n_rhs)
+
+    def internals(self) -> dict:
+        d = self._d
+        return {"native": _Internals(d.t, d.h_next, d.planar, d.steps, d.rejected, d.n_rhs)}
+
+    def set_internals(self, data: dict) -> None:
+        saved = data["native"]
+        d = self._d
+        d.t, d.h_next, d.planar = saved.t, saved.h_next, saved.planar
+        d.steps, d.rejected, d.n_rhs = saved.steps, saved.rejected, saved.n_rhs
+        self._out = (None, None)  # the state may have been set from outside too: copy it in next time
+
+    # ---- stepping -------------------------------------------------------------------------------
+    def _load(self, state, F_input) -> None:
+        X, U = state.X, state.U
+        if X is not self._out[0] or U is not self._out[1]:  # a state set from outside: copy it in
+            self.data.X[...] = X
+            self.data.U[...] = U
+        self._d.t = state.t
+        if F_input is None:
+            self.data.F_input.fill(0.0)
+        else:
+            self.data.F_input[...] = F_input
+
+    def advance(self, state, t_target: float, F_input, max_steps: int) -> None:
+        self._load(state, F_input)
+        status = lib.advance(self._model_p, self._method_p, self._data_p, t_target, max_steps)
+        if status != lib.OK:
+            raise SolverError(self.explain(status, state.t, t_target, max_steps))
+        X, U = self.data.X.copy(), self.data.U.copy()
+        state.X, state.U, state.t = X, U, t_target
+        self._out = (X, U)
+
+    def tensions(self, X, U, F_input=None) -> np.ndarray:
+        """T of (25)-(26) at (X, U) with F_input held (minimum-norm where A is singular)."""
+        F = self.data.F_input
+        if F_input is None:
+            F.fill(0.0)
+        else:
+            F[...] = F_input
+        X = np.ascontiguousarray(X, np.float64)
+        U = np.ascontiguousarray(U, np.float64)
+        status = lib.evaluate(self._model_p, self._data_p, lib.pointer(X), lib.pointer(U))
+        if status != lib.OK:
+            raise SolverError(f"the tensions (25)-(26) cannot be evaluated at this state: {lib.STATUS[status]}")
+        return self.data.T.copy()
+
+    def explain(self, status: int, t_start: float, t_target: float, max_steps: int) -> str:
+        """The failure of an advance in words, naming the link, the residuals and what may help."""
+        scene, d = self.model.scene, self._d
+        span = f"between t = {t_start} and t = {t_target}"
+        if status == lib.PROJECTION_FAILED:
+            link = scene.link_label(int(d.fail_link)) if d.fail_link >= 0 else "a link"
+            return (f"position projection onto the link lengths (11) did not converge {span}: after "
+                    f"{d.fail_iterations} iterations the residual is {d.fail_residual:.3g} relative at {link} "
+                    f"(it was {d.fail_before:.3g} relative before projection). Reduce the step (or tighten the "
+                    "tolerance); if the configuration is singular (a taut string, a loop passing a flat "
+                    "position), no step may be small enough")
+        if status == lib.IMPLICIT_KICK_FAILED:
+            return (f"the implicit velocity half step (drag, dampers) does not converge {span} at dt = {self.dt:g}: "
+                    "the damping is too stiff for this step (h c / 2m near or above 1); reduce dt")
+        if status == lib.STEP_UNDERFLOW:
+            return (f"step size underflow {span}: the tolerance rtol = {self.rtol} cannot be met (singular "
+                    "configuration or discontinuous input?)")
+        if status == lib.TOO_MANY_STEPS:
+            return f"more than {max_steps} steps {span}; raise max_steps or the tolerance"
+        if status == lib.NON_FINITE:
+            return (f"the state became non-finite {span} (the forces or the state contain NaN or infinity, or "
+                    "the motion blew up); reduce the step or tolerance")
+        if status == lib.BAD_ARGUMENT:
+            return f"cannot advance from t = {t_start} to t = {t_target}: the target must be later and finite"
+        return f"the native core stopped {span}: {lib.STATUS.get(status, status)}"

@@ -1,0 +1,136 @@
+"""The native core's shared library (built from src/ at install time) and its structs, as ctypes sees them.
+
+The struct layouts mirror src/linknet.h field for field; tests/native checks the sizes against the C
+compiler's (``ln_sizeof``). Everything here is declaration: what the model and data mean, and how they are
+filled, is in :mod:`linknet_core.native.model`.
+"""
+from __future__ import annotations
+
+import ctypes
+import importlib.machinery
+from pathlib import Path
+
+import numpy as np
+
+SOURCE_DIR = Path(__file__).resolve().parent / "src"
+
+ln_int = ctypes.c_int64
+c_double_p = ctypes.POINTER(ctypes.c_double)
+ln_int_p = ctypes.POINTER(ln_int)
+c_uint8_p = ctypes.POINTER(ctypes.c_uint8)
+
+# enum ln_status, as the messages name them
+STATUS = {0: "ok", 1: "projection failed", 2: "singular", 3: "non-finite", 4: "step underflow", 5: "too many steps",
+          6: "left the plane", 7: "implicit kick failed", 8: "bad argument", 9: "out of memory"}
+OK, PROJECTION_FAILED, SINGULAR, NON_FINITE, STEP_UNDERFLOW, TOO_MANY_STEPS = 0, 1, 2, 3, 4, 5
+LEFT_PLANE, IMPLICIT_KICK_FAILED, BAD_ARGUMENT, NO_MEMORY = 6, 7, 8, 9
+SOLVER_NONE, SOLVER_CHAIN, SOLVER_LDL, SOLVER_MIN_NORM = 0, 1, 2, 3
+COMPOSITION, RUNGE_KUTTA, STATIC = 0, 1, 2
+RMS_ERROR, HAIRER_ERROR = 0, 1
+
+
+class Model(ctypes.Structure):
+    _fields_ = [
+        ("K", ln_int), ("L", ln_int),
+        ("k1", ln_int_p), ("k2", ln_int_p),
+        ("R", c_double_p), ("inv_R", c_double_p),
+        ("inv_m", c_double_p),
+        ("n_free", ln_int), ("free_idx", ln_int_p),
+        ("n_fixed", ln_int), ("fixed_idx", ln_int_p),
+        ("is_fixed", c_uint8_p),
+        ("F_scene", c_double_p),
+        ("n_drag", ln_int), ("drag_idx", ln_int_p), ("drag_coef", c_double_p),
+        ("n_springs", ln_int), ("spring_a", ln_int_p), ("spring_b", ln_int_p),
+        ("spring_k", c_double_p), ("spring_rest", c_double_p), ("spring_c", c_double_p),
+        ("velocity_dependent", ctypes.c_int),
+        ("solver", ctypes.c_int),
+        ("n_pairs", ln_int), ("pair_first", ln_int_p), ("pair_second", ln_int_p), ("pair_weight", c_double_p),
+        ("chain_order", ln_int_p), ("chain_diag_weight", c_double_p), ("chain_off_weight", c_double_p),
+        ("ldl", ctypes.c_void_p),
+        ("pivot_tol", ctypes.c_double), ("rank_tol", ctypes.c_double),
+        ("dense_min_norm_limit", ln_int),
+        ("planar", ctypes.c_int),
+        ("plane_P", ctypes.c_double * 6), ("plane_o", ctypes.c_double * 3), ("plane_n", ctypes.c_double * 3),
+        ("plane_length", ctypes.c_double), ("plane_tol", ctypes.c_double),
+        ("rigid", ctypes.c_void_p),
+    ]
+
+
+class Method(ctypes.Structure):
+    _fields_ = [
+        ("kind", ctypes.c_int),
+        ("dt", ctypes.c_double),
+        ("n_gammas", ln_int), ("gammas", c_double_p),
+        ("n_stages", ln_int), ("AB", c_double_p), ("E1", c_double_p), ("E2", c_double_p),
+        ("error_norm", ctypes.c_int),
+        ("exponent", ctypes.c_double),
+        ("safety", ctypes.c_double), ("min_factor", ctypes.c_double), ("max_factor", ctypes.c_double),
+        ("rtol", ctypes.c_double), ("atol", ctypes.c_double),
+        ("position_tol", ctypes.c_double),
+        ("max_projection_iter", ln_int),
+    ]
+
+
+class Data(ctypes.Structure):
+    _fields_ = [
+        ("t", ctypes.c_double),
+        ("X", c_double_p), ("U", c_double_p), ("F_input", c_double_p),
+        ("h_next", ctypes.c_double),
+        ("planar", ctypes.c_int),
+        ("steps", ln_int), ("rejected", ln_int), ("n_rhs", ln_int), ("last_steps", ln_int),
+        ("status", ctypes.c_int),
+        ("fail_link", ln_int),
+        ("fail_residual", ctypes.c_double), ("fail_before", ctypes.c_double),
+        ("fail_iterations", ln_int),
+        ("fail_t", ctypes.c_double),
+        ("T", c_double_p), ("acc", c_double_p),
+    ]
+    # the scratch that follows in ln_data is the C side's own: ctypes never reads past these fields
+
+
+def _library_path() -> Path:
+    here = Path(__file__).resolve().parent
+    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+        candidate = here / f"_linknet{suffix}"
+        if candidate.exists():
+            return candidate
+    raise ImportError(f"linknet's native core is not built in {here}: install the package (`pip install -e .` "
+                      "compiles linknet_core/native/src with the system's C compiler)")
+
+
+lib = ctypes.CDLL(str(_library_path()))
+
+
+def _declare(name, restype, *argtypes):
+    function = getattr(lib, name)
+    function.restype = restype
+    function.argtypes = list(argtypes)
+    return function
+
+
+Model_p, Method_p, Data_p = ctypes.POINTER(Model), ctypes.POINTER(Method), ctypes.POINTER(Data)
+data_new = _declare("ln_data_new", Data_p, Model_p, ln_int)
+data_free = _declare("ln_data_free", None, Data_p)
+advance = _declare("ln_advance", ctypes.c_int, Model_p, Method_p, Data_p, ctypes.c_double, ln_int)
+evaluate = _declare("ln_evaluate", ctypes.c_int, Model_p, Data_p, c_double_p, c_double_p)
+fixed_step_count = _declare("ln_fixed_step_count", ln_int, ctypes.c_double, ctypes.c_double)
+sizeof = _declare("ln_sizeof", ctypes.c_size_t, ctypes.c_int)
+ldl_analyse = _declare("ln_ldl_analyse", ctypes.c_void_p, ln_int, ln_int, ln_int_p, ln_int_p, ln_int_p)
+ldl_symbolic_free = _declare("ln_ldl_symbolic_free", None, ctypes.c_void_p)
+ldl_nnz_L = _declare("ln_ldl_nnz_L", ln_int, ctypes.c_void_p)
+ldl_get_ordering = _declare("ln_ldl_get_ordering", None, ctypes.c_void_p, ln_int_p)
+
+
+def pointer(array: np.ndarray, ctype=ctypes.c_double):
+    """A ctypes pointer to a C-contiguous array's first element (the array must outlive its use)."""
+    if not array.flags.c_contiguous:
+        raise ValueError("the native core takes C-contiguous arrays")
+    return array.ctypes.data_as(ctypes.POINTER(ctype))
+
+
+def int_array(values) -> np.ndarray:
+    return np.ascontiguousarray(values, np.int64)
+
+
+def float_array(values) -> np.ndarray:
+    return np.ascontiguousarray(values, np.float64)

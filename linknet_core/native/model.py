@@ -1,0 +1,291 @@
+"""The native core's model, method and data, built from a scene, its structure and an integrator.
+
+:class:`NativeModel` is ln_model of one scene: topology, masses, lengths, force elements and what the
+structure analysis decided (the tension solver, its elimination order, the plane of a planar scene, the
+rigid-body layout), built once. :class:`NativeMethod` is ln_method: an integrator's method as data (the
+step fractions of a RATTLE composition, or the tableau and controller of an embedded Runge-Kutta pair).
+:class:`NativeData` is ln_data: the state, the integrator's internals and the scratch, allocated by C.
+"""
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from ..integrators.runge_kutta import MAX_FACTOR, MIN_FACTOR, SAFETY
+from ..structure import SINGULAR_RCOND, link_pairs
+from ..tensions import DENSE_MIN_NORM_LIMIT, PIVOT_TOL
+from . import library as lib
+from .library import float_array, int_array, pointer
+
+PLANE_TOL = 1e-12  # an out-of-plane component at most this relative to its size is round-off (dropped in 2-D)
+
+
+def plane_normal(scene, structure_normal=None, rtol: float = PLANE_TOL):
+    """Unit normal of the plane holding every position, velocity, gravity and constant force, or None.
+
+    ``Structure.planar_normal`` when it found one; else the same test by a thin SVD of those vectors. A scene
+    wrongly taken for planar would still be safe: the 2-D path checks the state and the input of every
+    interval and hands anything off the plane to 3-D.
+    """
+    if structure_normal is not None:
+        return np.asarray(structure_normal, np.float64)
+    X = np.asarray(scene.X0, np.float64)
+    if X.shape[0] == 0:
+        return None
+    vectors = np.vstack([X - X.mean(axis=0), scene.U0, np.asarray(scene.gravity)[None, :], scene.force])
+    scale = np.abs(vectors).max()
+    if not scale > 0:
+        return None
+    _, sv, vt = np.linalg.svd(vectors / scale, full_matrices=False)
+    if sv.shape[0] < 3 or sv[2] > rtol * sv[0]:
+        return None
+    return vt[2]
+
+
+def scene_plane(scene, normal):
+    """(P (3,2) orthonormal in-plane basis, o (3,) a point of the plane, n (3,) unit normal, length (size of the
+    scene: the scale of the in-plane test)), or None when ``normal`` is None.
+
+    An axis-aligned plane gets the exact 0/1 basis and an origin with zero in-plane components, so that the
+    reduction to 2-D and back is exact: the in-plane coordinates are those of the 3-D path.
+    """
+    if normal is None:
+        return None
+    n = np.asarray(normal, np.float64)
+    n = n / np.linalg.norm(n)
+    X0 = np.asarray(scene.X0, np.float64)
+    axis = int(np.argmax(np.abs(n)))
+    others = [a for a in range(3) if a != axis]
+    if np.all(np.abs(n[others]) <= PLANE_TOL):
+        P = np.eye(3)[:, others]
+        n = np.eye(3)[axis]
+        o = np.zeros(3)
+        o[axis] = X0[0, axis] if X0.shape[0] else 0.0
+    else:
+        a = np.eye(3)[int(np.argmin(np.abs(n)))]
+        p0 = a - (a @ n) * n
+        p0 /= np.linalg.norm(p0)
+        P = np.column_stack([p0, np.cross(n, p0)])
+        o = n * float(n @ X0.mean(axis=0)) if X0.shape[0] else np.zeros(3)
+    length = float(np.abs(X0 - o).sum(axis=1).max()) if X0.shape[0] else 0.0
+    return P, o, n, length
+
+
+def chain_elimination(L, first, second, weight, ordering):
+    """Path order of a chain's links and the weights of its tridiagonal A, or None where A is not tridiagonal
+    in that order. The links of each path (a component of the graph cut at the anchors) come in the
+    structure's leaves-first order, which for a path is path order; the test below checks it."""
+    off = first != second
+    graph = sp.coo_matrix((np.ones(int(off.sum())), (first[off], second[off])), shape=(L, L))
+    _, component = connected_components(graph, directed=False)
+    position_of = np.empty(L, np.int64)
+    position_of[ordering] = np.arange(L)
+    order = np.lexsort((position_of, component)).astype(np.int64)
+    position = np.empty(L, np.int64)
+    position[order] = np.arange(L)
+    p1, p2 = position[first[off]], position[second[off]]
+    if np.any(np.abs(p1 - p2) != 1):
+        return None
+    diag_weight = np.bincount(position[first[~off]], weights=weight[~off], minlength=L)
+    off_weight = np.zeros(L)
+    np.add.at(off_weight, np.maximum(p1, p2), weight[off])
+    return order, diag_weight, off_weight
+
+
+class NativeModel:
+    """ln_model of one scene. ``solver`` is decided from the structure: 'chain' (tridiagonal in path order),
+    'ldl' (trees and general graphs: sparse LDL^T in the structure's elimination order) or 'min-norm'
+    (self-stresses). ``planar``: None runs a planar scene in 2-D, False always in 3-D. ``rigid``: the
+    ln_rigid_model of a free-rigid-body specialisation (with the arrays it points into), or None."""
+
+    def __init__(self, scene, structure, planar: bool | None = None, rigid=None):
+        self.scene = scene
+        K, L = scene.K, scene.L
+        fixed = np.asarray(scene.fixed, bool)
+        keep = self._keep = []
+
+        def f8(a):
+            a = float_array(a)
+            keep.append(a)
+            return pointer(a)
+
+        def i8(a):
+            a = int_array(a)
+            keep.append(a)
+            return pointer(a, lib.ln_int)
+
+        m = self.struct = lib.Model()
+        m.K, m.L = K, L
+        m.k1, m.k2 = i8(scene.k1), i8(scene.k2)
+        m.R, m.inv_R = f8(scene.length), f8(1.0 / scene.length if L else np.zeros(0))
+        m.inv_m = f8(scene.inv_mass)
+        m.n_free, m.free_idx = scene.free_indices.size, i8(scene.free_indices)
+        m.n_fixed, m.fixed_idx = int(fixed.sum()), i8(np.flatnonzero(fixed))
+        is_fixed = np.ascontiguousarray(fixed, np.uint8)
+        keep.append(is_fixed)
+        m.is_fixed = pointer(is_fixed, ctypes.c_uint8)
+        free_mass = np.where(fixed, 0.0, scene.mass)  # an anchor's mass is infinite (1/M = 0)
+        F_scene = free_mass[:, None] * np.asarray(scene.gravity)[None, :] + scene.force
+        F_scene[fixed] = 0.0  # no force acts on an anchor
+        m.F_scene = f8(F_scene)
+        drag = np.asarray(scene.drag, float)
+        drag_idx = np.flatnonzero((drag != 0.0) & ~fixed)
+        m.n_drag, m.drag_idx, m.drag_coef = drag_idx.size, i8(drag_idx), f8(drag[drag_idx])
+        s = scene.springs
+        m.n_springs = s.count
+        m.spring_a, m.spring_b = i8(s.a), i8(s.b)
+        m.spring_k, m.spring_rest, m.spring_c = f8(s.stiffness), f8(s.rest_length), f8(s.damping)
+        m.velocity_dependent = int(drag_idx.size > 0 or bool(np.any(np.asarray(s.damping) != 0.0)))
+
+        pairs = link_pairs(scene)
+        weight = pairs.sign * scene.inv_mass[pairs.mass]
+        m.n_pairs, m.pair_first, m.pair_second = pairs.first.size, i8(pairs.first), i8(pairs.second)
+        m.pair_weight = f8(weight)
+        m.pivot_tol, m.rank_tol, m.dense_min_norm_limit = PIVOT_TOL, SINGULAR_RCOND, DENSE_MIN_NORM_LIMIT
+        self._ldl = None
+        if L == 0:
+            self.solver = "none"
+            m.solver = lib.SOLVER_NONE
+        elif structure.kind == "redundant":
+            self.solver = "min-norm"
+            m.solver = lib.SOLVER_MIN_NORM
+        else:
+            chain = None
+            if structure.kind == "chain":
+                chain = chain_elimination(L, pairs.first, pairs.second, weight, structure.ordering)
+            if chain is not None:
+                order, diag_weight, off_weight = chain
+                self.solver = "chain"
+                m.solver = lib.SOLVER_CHAIN
+                m.chain_order, m.chain_diag_weight, m.chain_off_weight = i8(order), f8(diag_weight), f8(off_weight)
+            else:
+                self.solver = "ldl"
+                m.solver = lib.SOLVER_LDL
+                ordering = int_array(structure.ordering)
+                first, second = int_array(pairs.first), int_array(pairs.second)
+                self._ldl = lib.ldl_analyse(L, first.size, pointer(first, lib.ln_int), pointer(second, lib.ln_int),
+                                            pointer(ordering, lib.ln_int))
+                if not self._ldl:
+                    raise MemoryError("the sparse LDL^T analysis of the tension matrix failed (out of memory)")
+                m.ldl = self._ldl
+        self.nnz_L = int(lib.ldl_nnz_L(self._ldl)) if self._ldl else (max(L - 1, 0) if self.solver == "chain" else 0)
+
+        plane = None if planar is False else scene_plane(scene, plane_normal(scene, structure.planar_normal))
+        self.plane = plane
+        if plane is not None:
+            P, o, n, length = plane
+            m.planar = 1
+            m.plane_P[:] = np.ascontiguousarray(P, np.float64).ravel().tolist()
+            m.plane_o[:], m.plane_n[:] = list(o), list(n)
+            m.plane_length, m.plane_tol = length, PLANE_TOL
+        self.rigid = rigid
+        if rigid is not None:
+            m.rigid = ctypes.cast(ctypes.pointer(rigid), ctypes.c_void_p)
+        self.pointer = ctypes.pointer(m)
+
+    def __del__(self):
+        if getattr(self, "_ldl", None):
+            lib.ldl_symbolic_free(self._ldl)
+            self._ldl = None
+
+    def describe(self) -> str:
+        """The native path this scene gets, in words (``linknet analyze``)."""
+        solver = {"chain": "chain: tridiagonal A of (25) in path order, each right-hand side two sweeps along the path",
+                  "ldl": f"sparse LDL^T of A (25) on the pattern analysed once (nnz(L) = {self.nnz_L})",
+                  "min-norm": "minimum-norm tensions (self-stresses: A singular)",
+                  "none": "no links"}[self.solver]
+        if self.plane is not None:
+            n = self.plane[2]
+            aligned = bool(np.array_equal(np.abs(n), np.eye(3)[int(np.argmax(np.abs(n)))]))
+            dims = (f"2-D planar (normal {np.round(n, 6).tolist()}, "
+                    f"{'axis-aligned: exact reduction' if aligned else 'tilted: orthonormal in-plane basis'}; "
+                    "an out-of-plane input force or state switches to 3-D)")
+        else:
+            dims = "3-D"
+        m = self.struct
+        terms = ["gravity, constant and input forces summed once per interval"]
+        if m.n_drag:
+            terms.append(f"drag on {m.n_drag} mass{'es' if m.n_drag != 1 else ''}")
+        if m.n_springs:
+            damped = int(np.count_nonzero(np.asarray(self.scene.springs.damping) != 0.0))
+            terms.append(f"{m.n_springs} spring{'s' if m.n_springs != 1 else ''}" + (f" ({damped} damped)" if damped else ""))
+        if not (m.n_drag or m.n_springs):
+            terms.append("no drag or springs: no force evaluation per step")
+        return f"{solver}; {dims}; forces: {', '.join(terms)}"
+
+
+class NativeMethod:
+    """ln_method of an integrator: the method as data. Compositions of RATTLE are their step fractions
+    ``gammas`` (RATTLE itself: one, 1.0); embedded Runge-Kutta pairs are their tableau (A, B), error weights,
+    error norm and the order of their estimate. Adding a method of either kind needs no code here."""
+
+    def __init__(self, cls, *, dt=None, rtol=None, atol=None, position_tol=1e-14, max_projection_iter=50,
+                 static=False):
+        s = self.struct = lib.Method()
+        self._keep = []
+        s.position_tol, s.max_projection_iter = position_tol, max_projection_iter
+        self.n_stages = 0
+        if static:
+            s.kind = lib.STATIC
+        elif getattr(cls, "adaptive", False):
+            s.kind = lib.RUNGE_KUTTA
+            AB, E1, E2, exponent = embedded_pair(cls.A, cls.B, cls.error_weights, cls.error_estimator_order)
+            self._keep += [AB, E1, E2]
+            s.n_stages = self.n_stages = AB.shape[1]
+            s.AB, s.E1, s.E2 = pointer(AB), pointer(E1), pointer(E2)
+            s.error_norm = lib.HAIRER_ERROR if cls.error_norm_kind == "hairer" else lib.RMS_ERROR
+            s.exponent = exponent
+            s.safety, s.min_factor, s.max_factor = SAFETY, MIN_FACTOR, MAX_FACTOR  # the reference's controller
+            s.rtol, s.atol = rtol, atol
+        else:
+            s.kind = lib.COMPOSITION
+            gammas = float_array(cls.gammas)
+            self._keep.append(gammas)
+            s.n_gammas, s.gammas, s.dt = gammas.size, pointer(gammas), dt
+        self.pointer = ctypes.pointer(s)
+
+
+def embedded_pair(A, B, error_weights, error_estimator_order):
+    """An explicit embedded tableau as ln_method takes it: AB (A with the weights b as row s), the error
+    weights E1, E2 (s + 1 each; E2 zero for a single-estimate norm) and the controller's exponent
+    -1 / (order of the estimate + 1)."""
+    B = np.asarray(B, np.float64)
+    s = B.shape[0]
+    A = np.asarray(A, np.float64)
+    if A.ndim != 2 or A.shape[0] != s or A.shape[1] > s or np.any(np.triu(A[:, :s]) != 0.0):
+        raise ValueError(f"an explicit tableau needs a strictly lower-triangular A with {s} rows, got {A.shape}")
+    AB = np.zeros((s + 1, s))
+    AB[:s, :A.shape[1]] = A
+    AB[s] = B
+    E1 = float_array(error_weights[0])
+    E2 = float_array(error_weights[1] if len(error_weights) > 1 else np.zeros_like(E1))
+    if E1.shape != (s + 1,) or E2.shape != (s + 1,):
+        raise ValueError(f"error weights must have {s + 1} entries (one per stage and one for the new point), "
+                         f"got {E1.shape} and {E2.shape}")
+    return AB, E1, E2, -1.0 / (error_estimator_order + 1)
+
+
+class NativeData:
+    """ln_data for one model: the state t, X, U, the held input F_input, the last tensions T, and the
+    integrator's internals, with numpy views of C's arrays (X, U, F_input, T: (K,3), (K,3), (K,3), (L,))."""
+
+    def __init__(self, model: NativeModel, n_stages: int = 0):
+        self.model = model  # the data points into nothing of the model's, but C reads both together
+        self._ptr = lib.data_new(model.pointer, n_stages)
+        if not self._ptr:
+            raise MemoryError("the native core could not allocate its data (out of memory)")
+        d = self.struct = self._ptr.contents
+        K, L = model.scene.K, model.scene.L
+        self.X = np.ctypeslib.as_array(d.X, (K, 3)) if K else np.zeros((0, 3))
+        self.U = np.ctypeslib.as_array(d.U, (K, 3)) if K else np.zeros((0, 3))
+        self.F_input = np.ctypeslib.as_array(d.F_input, (K, 3)) if K else np.zeros((0, 3))
+        self.T = np.ctypeslib.as_array(d.T, (L,)) if L else np.zeros(0)
+        self.acc = np.ctypeslib.as_array(d.acc, (K, 3)) if K else np.zeros((0, 3))
+
+    def __del__(self):
+        if getattr(self, "_ptr", None):
+            lib.data_free(self._ptr)
+            self._ptr = None

@@ -1,0 +1,218 @@
+/* The data (mutable state, internals, scratch) and the whole-interval advance: one call per output or
+   communication interval runs every step, assembly, factorisation and projection in C, all or nothing. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "ldl.h"
+#include "linknet.h"
+#include "minnorm.h"
+#include "rigid.h"
+
+#define FN(name) name##_2d
+#include "stages.h"
+#undef FN
+#define FN(name) name##_3d
+#include "stages.h"
+#undef FN
+
+static double *doubles(ln_int n) { return calloc((size_t)(n > 0 ? n : 1), sizeof(double)); }
+
+void ln_data_free(ln_data *d)
+{
+    if (!d) return;
+    double *arrays[] = {d->X, d->U, d->F_input, d->T, d->acc, d->X_start, d->U_start, d->Xp, d->Up, d->Fp,
+                        d->F_base, d->F, d->Uh, d->Xc, d->U_iterate, d->acc1, d->Xs, d->Us, d->Xn, d->Un, d->E0,
+                        d->E1, d->B, d->mu, d->phi, d->scale, d->work, d->KX, d->KU, d->pair_values, d->chain_sub,
+                        d->chain_Dinv, d->krylov};
+    for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
+    ln_ldl_numeric_free(d->ldl);
+    ln_minnorm_free(d->minnorm);
+    ln_rigid_data_free(d->rigid);
+    free(d);
+}
+
+ln_data *ln_data_new(const ln_model *m, ln_int n_stages)
+{
+    ln_data *d = calloc(1, sizeof *d);
+    if (!d) return NULL;
+    const ln_int K3 = 3 * m->K, L = m->L, L3 = 3 * m->L, K2 = 2 * m->K;
+    d->X = doubles(K3); d->U = doubles(K3); d->F_input = doubles(K3); d->T = doubles(L); d->acc = doubles(K3);
+    d->X_start = doubles(K3); d->U_start = doubles(K3);
+    d->Xp = doubles(K2); d->Up = doubles(K2); d->Fp = doubles(K2);
+    d->F_base = doubles(K3); d->F = doubles(K3); d->Uh = doubles(K3); d->Xc = doubles(K3);
+    d->U_iterate = doubles(K3); d->acc1 = doubles(K3); d->Xs = doubles(K3); d->Us = doubles(K3);
+    d->Xn = doubles(K3); d->Un = doubles(K3);
+    d->E0 = doubles(L3); d->E1 = doubles(L3);
+    d->B = doubles(L); d->mu = doubles(L); d->phi = doubles(L); d->scale = doubles(L); d->work = doubles(L);
+    d->n_stages_allocated = n_stages > 0 ? n_stages : 0;
+    d->KX = doubles((d->n_stages_allocated + 1) * K3);
+    d->KU = doubles((d->n_stages_allocated + 1) * K3);
+    d->pair_values = doubles(m->n_pairs);
+    d->chain_sub = doubles(L); d->chain_Dinv = doubles(L);
+    d->planar = m->planar;
+    d->fail_link = -1;
+    int ok = d->X && d->U && d->F_input && d->T && d->acc && d->X_start && d->U_start && d->Xp && d->Up && d->Fp
+             && d->F_base && d->F && d->Uh && d->Xc && d->U_iterate && d->acc1 && d->Xs && d->Us && d->Xn && d->Un
+             && d->E0 && d->E1 && d->B && d->mu && d->phi && d->scale && d->work && d->KX && d->KU
+             && d->pair_values && d->chain_sub && d->chain_Dinv;
+    if (ok && m->solver == LN_SOLVER_LDL) ok = (d->ldl = ln_ldl_numeric_new(m->ldl)) != NULL;
+    if (ok && m->rigid) ok = (d->rigid = ln_rigid_data_new(m)) != NULL;
+    if (!ok) {
+        ln_data_free(d);
+        return NULL;
+    }
+    return d;
+}
+
+ln_int ln_fixed_step_count(double span, double dt)
+{
+    const double ratio = span / dt, nearest = round(ratio);
+    /* a whole number of steps up to round-off in t (which grows with t) is that number, not one more */
+    const double n = fabs(ratio - nearest) <= 1e-9 * fmax(ratio, 1.0) ? nearest : ceil(ratio);
+    return n < 1.0 ? 1 : (ln_int)n;
+}
+
+/* Gravity, constant forces and the held input: the part of F_k of (9) fixed over an interval; zero on
+   anchors, where no force acts. */
+static int base_forces(const ln_model *m, const ln_data *d, double *F_base)
+{
+    double total = 0.0;
+    for (ln_int k = 0; k < m->K; k++)
+        for (int e = 0; e < 3; e++) {
+            const ln_int i = 3 * k + e;
+            F_base[i] = m->is_fixed[k] ? 0.0 : m->F_scene[i] + d->F_input[i];
+            total += F_base[i];
+        }
+    return isfinite(total);
+}
+
+int ln_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U)
+{
+    if (!base_forces(m, d, d->F_base)) return LN_NON_FINITE;
+    d->n_rhs++;
+    return ln_accelerations_3d(m, d, X, U, d->F_base, d->acc, d->T, 1);
+}
+
+/* The state and base forces in the plane's coordinates: X = P^T (X3 - o), U = P^T U3, F = P^T F3. 0 when a
+   position, velocity or force on a free mass has a component along the normal beyond round-off. */
+static int enter_plane(const ln_model *m, ln_data *d)
+{
+    const double *P = m->plane_P, *o = m->plane_o, *n = m->plane_n;
+    const double c = n[0] * o[0] + n[1] * o[1] + n[2] * o[2], tol = m->plane_tol;
+    for (ln_int k = 0; k < m->K; k++) {
+        const double *X = d->X + 3 * k, *U = d->U + 3 * k, *F = d->F_base + 3 * k;
+        double x_off = -c, x_size = fabs(c) + m->plane_length, u_off = 0.0, u_size = 0.0, f_off = 0.0, f_size = 0.0;
+        for (int e = 0; e < 3; e++) {
+            x_off += n[e] * X[e];
+            x_size += fabs(X[e]);
+            u_off += n[e] * U[e];
+            u_size += fabs(U[e]);
+            f_off += n[e] * F[e];
+            f_size += fabs(F[e]);
+        }
+        if (!(fabs(x_off) <= tol * x_size && fabs(u_off) <= tol * u_size && fabs(f_off) <= tol * f_size)) return 0;
+        for (int j = 0; j < 2; j++) {
+            double x = 0.0, u = 0.0, f = 0.0;
+            for (int e = 0; e < 3; e++) {
+                x += P[2 * e + j] * (X[e] - o[e]);
+                u += P[2 * e + j] * U[e];
+                f += P[2 * e + j] * F[e];
+            }
+            d->Xp[2 * k + j] = x;
+            d->Up[2 * k + j] = u;
+            d->Fp[2 * k + j] = f;
+        }
+    }
+    return 1;
+}
+
+/* Back to 3-D: X3 = o + P X, U3 = P U; anchors keep their coordinates exactly (in a tilted plane the round
+   trip would move them by round-off). */
+static void leave_plane(const ln_model *m, ln_data *d)
+{
+    const double *P = m->plane_P, *o = m->plane_o;
+    for (ln_int k = 0; k < m->K; k++) {
+        if (m->is_fixed[k]) continue;
+        for (int e = 0; e < 3; e++) {
+            d->X[3 * k + e] = o[e] + P[2 * e] * d->Xp[2 * k] + P[2 * e + 1] * d->Xp[2 * k + 1];
+            d->U[3 * k + e] = P[2 * e] * d->Up[2 * k] + P[2 * e + 1] * d->Up[2 * k + 1];
+        }
+    }
+}
+
+static int run_interval(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps,
+                        ln_int *steps)
+{
+    const double span = t_target - d->t;
+    int planar = d->planar && enter_plane(m, d);
+    d->planar = planar;  /* once the state or an input has left the plane, 3-D from then on */
+    double *X = planar ? d->Xp : d->X, *U = planar ? d->Up : d->U;
+    const double *F_base = planar ? d->Fp : d->F_base;
+    int status;
+    if (meth->kind == LN_COMPOSITION) {
+        const ln_int n = ln_fixed_step_count(span, meth->dt);
+        if (n > max_steps) return LN_TOO_MANY_STEPS;
+        status = planar ? ln_rattle_steps_2d(m, meth, d, X, U, F_base, n, span / (double)n, steps)
+                        : ln_rattle_steps_3d(m, meth, d, X, U, F_base, n, span / (double)n, steps);
+    } else {
+        double t = d->t;
+        status = planar ? ln_rk_steps_2d(m, meth, d, X, U, F_base, &t, t_target, max_steps, steps)
+                        : ln_rk_steps_3d(m, meth, d, X, U, F_base, &t, t_target, max_steps, steps);
+    }
+    if (planar) leave_plane(m, d);
+    return status;
+}
+
+int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps)
+{
+    const ln_int n3 = 3 * m->K;
+    d->status = LN_OK;
+    d->fail_link = -1;
+    d->fail_t = d->t;
+    if (!(isfinite(t_target) && t_target > d->t) || max_steps < 1) return d->status = LN_BAD_ARGUMENT;
+    if (!base_forces(m, d, d->F_base)) return d->status = LN_NON_FINITE;
+    if (meth->kind == LN_STATIC) {  /* 0 degrees of freedom: nothing moves */
+        d->t = t_target;
+        d->last_steps = 0;
+        return LN_OK;
+    }
+    /* all or nothing: what a failed interval changed is put back */
+    const double h_next = d->h_next;
+    const int planar = d->planar;
+    const ln_int rejected = d->rejected, n_rhs = d->n_rhs;
+    memcpy(d->X_start, d->X, (size_t)n3 * sizeof(double));
+    memcpy(d->U_start, d->U, (size_t)n3 * sizeof(double));
+    ln_int steps = 0;
+    int status = m->rigid ? ln_rigid_advance(m, meth, d, t_target, max_steps, &steps)
+                          : run_interval(m, meth, d, t_target, max_steps, &steps);
+    if (status == LN_OK) {
+        double total = 0.0;
+        for (ln_int i = 0; i < n3; i++) total += d->X[i] * d->X[i] + d->U[i] * d->U[i];
+        if (!isfinite(total)) status = LN_NON_FINITE;
+    }
+    if (status != LN_OK) {
+        memcpy(d->X, d->X_start, (size_t)n3 * sizeof(double));
+        memcpy(d->U, d->U_start, (size_t)n3 * sizeof(double));
+        d->h_next = h_next;
+        d->planar = planar;
+        d->rejected = rejected;
+        d->n_rhs = n_rhs;
+        if (m->rigid) ln_rigid_restore(m, d);
+        return d->status = status;
+    }
+    d->t = t_target;
+    d->steps += steps;
+    d->last_steps = steps;
+    return LN_OK;
+}
+
+size_t ln_sizeof(int which)
+{
+    switch (which) {
+    case 0: return sizeof(ln_model);
+    case 1: return sizeof(ln_method);
+    case 2: return offsetof(ln_data, X_start);  /* the part of ln_data the Python binding reads */
+    default: return 0;
+    }
+}

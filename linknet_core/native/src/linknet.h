@@ -1,0 +1,198 @@
+/* linknet native core: the immutable model, the mutable data and the stage functions.
+ *
+ * Equation numbers (n) are those of the seed note "Mechanics of a network of rigid links with point
+ * masses at the vertices". K point masses M_k at X_k with velocities U_k and external forces F_k; L rigid
+ * links l joining k1(l), k2(l) with lengths R_l. The tensions T solve A T = B (25)-(26) with
+ * A = C M^-1 C^T, row l of C being +E_l at k1(l) and -E_l at k2(l), E_l = (X_k2 - X_k1) / R_l (8).
+ *
+ * As MuJoCo keeps mjModel apart from mjData, the model (topology, masses, lengths, force elements and
+ * the structure analysed once in Python) never changes during a run and is only read; the data holds
+ * t, X, U, the integrator's internals and every scratch array. Stage functions take (const model*, data*).
+ *
+ * Vectors have DIM components: planar scenes run in their plane's coordinates (DIM = 2), everything
+ * else in 3-D. The DIM-generic stage files are compiled twice, by dim2.c and dim3.c; FN(name) gives each
+ * copy its own symbol (name_2d, name_3d). The state in ln_data is always (K,3).
+ *
+ * No dependency beyond libc and libm; no allocation inside a step (ln_data_new allocates everything,
+ * except the minimum-norm workspace, allocated at its first use).
+ */
+#ifndef LINKNET_H
+#define LINKNET_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef int64_t ln_int;
+
+/* Status of a stage or of a whole advance. Keep in step with linknet_core/native/binding.py (STATUS). */
+enum ln_status {
+    LN_OK = 0,
+    LN_PROJECTION_FAILED = 1,   /* the position projection onto (11) did not converge */
+    LN_SINGULAR = 2,            /* a vanishing pivot where no minimum-norm path was possible */
+    LN_NON_FINITE = 3,          /* NaN or infinity in the state or the forces */
+    LN_STEP_UNDERFLOW = 4,      /* adaptive step below 16 ulps of t */
+    LN_TOO_MANY_STEPS = 5,      /* more accepted steps than max_steps in one advance */
+    LN_LEFT_PLANE = 6,          /* internal: the state or the input left the plane (the advance goes on in 3-D) */
+    LN_IMPLICIT_KICK_FAILED = 7,/* RATTLE's implicit velocity half step (drag, dampers) did not converge */
+    LN_BAD_ARGUMENT = 8,        /* a target time not after t, a negative count, ... */
+    LN_NO_MEMORY = 9
+};
+
+/* How A of (25) is factored, chosen once per scene from its structure. */
+enum ln_solver {
+    LN_SOLVER_NONE = 0,     /* no links */
+    LN_SOLVER_CHAIN = 1,    /* tridiagonal in path order: two sweeps per right-hand side */
+    LN_SOLVER_LDL = 2,      /* sparse LDL^T on the pattern analysed once (trees: no fill) */
+    LN_SOLVER_MIN_NORM = 3  /* redundant links (self-stresses): minimum-norm tensions */
+};
+
+/* What an integrator is: the method as data. */
+enum ln_method_kind {
+    LN_COMPOSITION = 0,     /* RATTLE and its symmetric compositions: the step fractions gammas */
+    LN_RUNGE_KUTTA = 1,     /* explicit embedded Runge-Kutta on the index-1 form, projected: the tableau */
+    LN_STATIC = 2           /* 0 degrees of freedom: nothing moves, an advance moves t only */
+};
+
+enum ln_error_norm { LN_RMS_ERROR = 0, LN_HAIRER_ERROR = 1 };
+
+struct ln_rigid_model;      /* engine_rigid.c: free rigid bodies (rigid.h) */
+struct ln_rigid_data;
+struct ln_minnorm_work;     /* engine_minnorm.c: minimum-norm solves (minnorm.h) */
+
+struct ln_ldl_symbolic;     /* engine_ldl.c: sparse LDL^T of A, analysed once (ldl.h) */
+struct ln_ldl_numeric;
+
+typedef struct ln_model {
+    ln_int K, L;
+    const ln_int *k1, *k2;          /* (L) the masses joined by link l (5), 0-based */
+    const double *R, *inv_R;        /* (L) R_l (6) and 1/R_l */
+    const double *inv_m;            /* (K) 1/M_k; 0 on anchored masses */
+    ln_int n_free;
+    const ln_int *free_idx;         /* (n_free) */
+    ln_int n_fixed;
+    const ln_int *fixed_idx;        /* (n_fixed) */
+    const uint8_t *is_fixed;        /* (K) */
+
+    /* F_k of (9): the part fixed over a run, and the force elements */
+    const double *F_scene;          /* (K,3) M_k g + constant forces; zero on anchors */
+    ln_int n_drag;
+    const ln_int *drag_idx;         /* (n_drag) free masses with viscous drag */
+    const double *drag_coef;        /* (n_drag) N s/m: force -c U */
+    ln_int n_springs;
+    const ln_int *spring_a, *spring_b;                      /* (n_springs) */
+    const double *spring_k, *spring_rest, *spring_c;        /* N/m, m, N s/m */
+    int velocity_dependent;         /* drag or a damper: RATTLE's second half kick is implicit */
+
+    /* the tension system (25) */
+    int solver;                     /* enum ln_solver */
+    ln_int n_pairs;                 /* pairs of links coupled in A (diagonal pairs included) */
+    const ln_int *pair_first, *pair_second;
+    const double *pair_weight;      /* S(l,l')/M(l,l') of (21)-(22), 1/M of one end on the diagonal (18) */
+    const ln_int *chain_order;      /* (L) chains: links in path order */
+    const double *chain_diag_weight, *chain_off_weight;    /* (L) chains, in path order */
+    const struct ln_ldl_symbolic *ldl;  /* LN_SOLVER_LDL (NULL for the others) */
+    double pivot_tol;               /* a pivot below pivot_tol times its diagonal entry: A is singular */
+    double rank_tol;                /* minimum-norm solves: pivots below rank_tol times the largest are zero */
+    ln_int dense_min_norm_limit;    /* links; above it minimum-norm solves are iterative */
+
+    /* planar scenes: the plane's orthonormal in-plane basis P (3x2, row-major), a point o, the unit
+       normal n, the scene's size (scale of the in-plane test) and the round-off tolerance of that test */
+    int planar;
+    double plane_P[6], plane_o[3], plane_n[3], plane_length, plane_tol;
+
+    const struct ln_rigid_model *rigid;     /* free rigid bodies, or NULL */
+} ln_model;
+
+typedef struct ln_method {
+    int kind;                       /* enum ln_method_kind */
+    double dt;                      /* fixed-step methods: the longest step */
+    ln_int n_gammas;                /* compositions: step fractions (RATTLE: one, 1.0) */
+    const double *gammas;
+    ln_int n_stages;                /* Runge-Kutta: s */
+    const double *AB;               /* ((s+1) x s) the tableau's A with the weights b as row s */
+    const double *E1, *E2;          /* (s+1) error weights (E2 zero for a single estimate) */
+    int error_norm;                 /* enum ln_error_norm */
+    double exponent;                /* step-size controller exponent, -1/(order of the estimate + 1) */
+    double safety, min_factor, max_factor;
+    double rtol, atol;
+    double position_tol;            /* relative tolerance of the position projection onto (11) */
+    ln_int max_projection_iter;
+} ln_method;
+
+typedef struct ln_data {
+    /* the state */
+    double t;
+    double *X, *U;                  /* (K,3) */
+    double *F_input;                /* (K,3) held input force; rows of anchored masses are ignored */
+
+    /* the integrator's internals */
+    double h_next;                  /* adaptive methods: next step (0: choose the starting step) */
+    int planar;                     /* 1 while the 2-D path is used (a planar scene until it left the plane) */
+    ln_int steps, rejected, n_rhs;  /* accumulated over the run */
+    ln_int last_steps;              /* steps of the last advance */
+
+    /* diagnostics of the last failure */
+    int status;
+    ln_int fail_link;               /* worst link of a failed projection, or -1 */
+    double fail_residual;           /* relative residual reached */
+    double fail_before;             /* relative residual before the projection */
+    ln_int fail_iterations;
+    double fail_t;                  /* time of the last accepted state */
+
+    /* the last evaluation's tensions and accelerations */
+    double *T;                      /* (L) */
+    double *acc;                    /* (K,3) */
+
+    /* scratch (sized for DIM = 3; the 2-D path uses the first 2K or 2L entries) */
+    double *X_start, *U_start;      /* (K,3) the state at the start of an advance (all-or-nothing) */
+    double *Xp, *Up, *Fp;           /* (K,2) the state and base force in the plane's coordinates */
+    double *F_base, *F, *Uh, *Xc, *U_iterate, *acc1, *Xs, *Us, *Xn, *Un;    /* (K,3) */
+    double *E0, *E1;                /* (L,3) unit vectors */
+    double *B, *mu, *phi, *scale, *work;                                    /* (L) */
+    double *KX, *KU;                /* ((s+1),K,3) Runge-Kutta stages */
+    ln_int n_stages_allocated;
+
+    /* the factorisation of A */
+    double *pair_values;            /* (n_pairs) the entries of A (25), pair by pair */
+    struct ln_ldl_numeric *ldl;     /* LN_SOLVER_LDL */
+    double *chain_sub, *chain_Dinv; /* (L) LN_SOLVER_CHAIN: Thomas' elimination in path order */
+    int singular;                   /* the last factorisation met a vanishing pivot: minimum-norm solves */
+    ln_int singular_events;         /* factorisations that switched to the minimum-norm path */
+
+    double *krylov;                 /* the exact-Newton position stage's Krylov basis, allocated at first use */
+    ln_int krylov_size;
+    ln_int exact_newton_projections;   /* position stages that needed exact Newton */
+
+    struct ln_minnorm_work *minnorm;
+    struct ln_rigid_data *rigid;
+} ln_data;
+
+/* ---- data.c: allocation and the whole-interval advance ------------------------------------------ */
+ln_data *ln_data_new(const ln_model *m, ln_int n_stages);  /* NULL: out of memory */
+void ln_data_free(ln_data *d);
+
+/* Advance d from d->t to t_target with d->F_input held (zero-order hold), all or nothing: on any status
+   but LN_OK the state and internals are those before the call, and the diagnostics say why. */
+int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps);
+
+/* The tensions T of (25)-(26) and accelerations (9) at X, U (K,3) with d->F_input held (the reported outputs:
+   direct feedthrough of F). Minimum-norm where A is singular. Results in d->T, d->acc. */
+int ln_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U);
+
+/* Equal steps no longer than dt that land on the target: how many (a whole number up to round-off is that
+   number, not one more). */
+ln_int ln_fixed_step_count(double span, double dt);
+
+/* ---- DIM-generic stages (the 3-D copies; the 2-D ones end in _2d) -------------------------------- */
+void ln_scene_forces_3d(const ln_model *m, const double *X, const double *U, const double *F_base, double *F);
+int ln_accelerations_3d(const ln_model *m, ln_data *d, const double *X, const double *U, const double *F_base,
+                        double *acc, double *T, int refactor);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

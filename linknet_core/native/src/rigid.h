@@ -1,0 +1,83 @@
+/* Free rigid bodies (engine_rigid.c): a scene whose every linked component is free, rigid and has a full
+ * inertia tensor moves as rigid bodies. Each body's state is its centre of mass c, velocity v, orientation
+ * quaternion q and body-frame angular momentum Pi; the masses' X, U follow from it:
+ *     X_k = c + R r_k,   U_k = v + w x (R r_k),   w = R I^-1 Pi   (space frame),
+ * r_k the mass's position in the body's principal axes, R the rotation of q (body -> space). The external
+ * forces F_k of (9) act on a body through their resultant and their moment about c; the link tensions are
+ * internal and cancel (31), so the point-mass machinery of (25)-(26) is not needed to move the bodies (the
+ * tensions at an output come from ln_evaluate).
+ *
+ * ln_model.rigid points to the layout (which masses form which body, their body-frame offsets, inertia),
+ * computed once in Python (principal axes, body frames); ln_data.rigid holds the body states and scratch.
+ *
+ * The body state of body b is row b of a (B,13) array: c (0:3), v (3:6), q = (w, x, y, z) (6:10), Pi (10:13).
+ */
+#ifndef LINKNET_RIGID_H
+#define LINKNET_RIGID_H
+
+#include "linknet.h"
+
+/* How a body's free rotation is integrated, from its principal moments. */
+enum ln_top {
+    LN_SPHERICAL_TOP = 0,   /* I_1 = I_2 = I_3: exact, one rotation about Pi */
+    LN_SYMMETRIC_TOP = 1,   /* I_1 = I_2 != I_3 (body axis 3 the distinct one): exact, two commuting rotations */
+    LN_ASYMMETRIC_TOP = 2   /* three distinct moments: the symmetric DLM splitting */
+};
+
+#define LN_RIGID_STATE 13           /* numbers per body: c, v, q, Pi */
+#define LN_RIGID_MAX_STAGES 32      /* Runge-Kutta stages the body-state scratch is sized for */
+
+/* Fixed for a run. Laid out for ctypes: linknet_core/native/rigid.py mirrors it field for field. */
+struct ln_rigid_model {
+    ln_int n_bodies;                /* B */
+    const ln_int *body_of;          /* (K) body of each mass; -1 for a mass of no body (an anchor joined by no
+                                       link, which holds only springs) */
+    const double *r;                /* (K,3) body-frame position of each mass relative to its body's centre of
+                                       mass (zero off the bodies) */
+    const double *inertia;          /* (B,3) principal moments I_1, I_2, I_3 (a symmetric top's first two equal) */
+    const double *body_mass;        /* (B) */
+    const ln_int *kind;             /* (B) enum ln_top */
+};
+
+/* Owned by ln_data; the body states and what a whole-interval advance needs, allocated once. */
+struct ln_rigid_data {
+    ln_int n_bodies;
+    double *Y;                      /* (B,13) the body states */
+    double *Y_start;                /* (B,13) where the last advance started (ln_rigid_restore) */
+    double *R;                      /* (B,3,3) rotation matrices (row-major) of the current evaluation */
+    double *f, *tau, *w, *th;       /* (B,3) resultant, moment about c, angular velocity, rotation vector */
+    double *v0, *Pi0, *v_prev, *Pi_prev;    /* (B,3) the implicit half kick's iterates */
+    double *Ys, *Yn;                /* (B,13) a Runge-Kutta stage, the new point */
+    double *KY;                     /* (LN_RIGID_MAX_STAGES+1, B, 13) Runge-Kutta stage derivatives */
+};
+
+struct ln_rigid_data *ln_rigid_data_new(const ln_model *m);
+void ln_rigid_data_free(struct ln_rigid_data *r);
+
+/* Advance the bodies from d->t to t_target with the base forces d->F_base (K,3; zero on anchors) held,
+   the state-dependent forces (drag, springs) evaluated as they change; fixed-step compositions
+   (method->gammas, steps of at most method->dt) or the embedded Runge-Kutta pair of the method (tableau,
+   controller, d->h_next). Writes the masses' d->X, d->U at the end and the accepted steps into *steps.
+   On a status other than LN_OK the caller restores X, U and calls ln_rigid_restore. Statuses: LN_OK,
+   LN_NON_FINITE, LN_IMPLICIT_KICK_FAILED, LN_STEP_UNDERFLOW, LN_TOO_MANY_STEPS, LN_BAD_ARGUMENT (no bodies,
+   a method of no known kind, more stages than LN_RIGID_MAX_STAGES or than ln_data_new was given). */
+int ln_rigid_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps,
+                     ln_int *steps);
+
+/* Put the body states back to where the last ln_rigid_advance started. */
+void ln_rigid_restore(const ln_model *m, ln_data *d);
+
+/* The body states (B,13) into Y. */
+void ln_rigid_get_state(const ln_model *m, const ln_data *d, double *Y);
+
+/* Set the body states from Y (B,13), for a state set from outside (fitted to the masses in Python) or a
+   snapshot, and write the masses' d->X, d->U from them. LN_BAD_ARGUMENT (nothing changed) if the model has
+   no bodies, or Y has a non-finite number or a zero quaternion. */
+int ln_rigid_set_state(const ln_model *m, ln_data *d, const double *Y);
+
+/* n steps of exactly h of the method's Runge-Kutta tableau with no error control, the quaternion
+   renormalised after each (order measurements). Moves d->t by n h, the bodies and d->X, d->U; d->h_next is
+   left as it is. LN_OK, LN_NON_FINITE or LN_BAD_ARGUMENT (not a Runge-Kutta method, n < 1 or h <= 0). */
+int ln_rigid_rk_fixed_steps(const ln_model *m, const ln_method *meth, ln_data *d, double h, ln_int n);
+
+#endif

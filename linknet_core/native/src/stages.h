@@ -1,0 +1,37 @@
+/* Prototypes of the DIM-generic stages (src/stages/). No include guard: included once per DIM, with FN
+   defined by the includer (dim.h in the stage files; data.c includes it for both DIMs). Vectors have DIM
+   components: (K,DIM) and (L,DIM) arrays, row-major. */
+
+/* stages/forces.c: F_k of (9) */
+void FN(ln_scene_forces)(const ln_model *m, const double *X, const double *U, const double *F_base, double *F);
+
+/* stages/tension.c: A of (25), B of (26) and their solution */
+void FN(ln_unit_vectors)(const ln_model *m, const double *X, double *E);
+int FN(ln_factor_tension_matrix)(const ln_model *m, ln_data *d, const double *E);
+void FN(ln_solve_tension_system)(const ln_model *m, ln_data *d, const double *b, double *x);
+void FN(ln_add_correction)(const ln_model *m, const double *E, const double *mu, double scale, double *V);
+
+/* stages/minnorm.c: minimum-norm solves where A is singular (redundant links, singular passages).
+   factor: A(E) = C(E) M^-1 C(E)^T from the unit vectors E (L,DIM), as A of (25); LN_OK or LN_NO_MEMORY.
+   solve: x = A^+ b (b, x of length L in link numbering; not the same array): the minimum-norm solution,
+   which for a consistent b solves A x = b and has no component along the self-stresses (27), (31). */
+int FN(ln_minnorm_factor)(const ln_model *m, ln_data *d, const double *E);
+void FN(ln_minnorm_solve)(const ln_model *m, ln_data *d, const double *b, double *x);
+
+/* stages/accelerations.c: dU/dt of (9) with the tensions of (25)-(26) */
+int FN(ln_accelerations)(const ln_model *m, ln_data *d, const double *X, const double *U, const double *F_base,
+                         double *acc, double *T, int refactor);
+
+/* stages/projections.c: onto (11) and (12) */
+int FN(ln_project_positions)(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
+                             ln_int max_iter);
+int FN(ln_project_velocities)(const ln_model *m, ln_data *d, const double *X, double *U, double *E);
+
+/* stages/rattle.c: RATTLE and its compositions, n_steps steps of size h on X, U in place */
+int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
+                        const double *F_base, ln_int n_steps, double h, ln_int *completed);
+
+/* stages/runge_kutta.c: embedded explicit Runge-Kutta with step-size control, projected after every step,
+   from t to t_target on X, U in place (the last accepted state); *t and d->h_next are updated */
+int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
+                    const double *F_base, double *t, double t_target, ln_int max_steps, ln_int *accepted);

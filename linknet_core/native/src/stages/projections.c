@@ -1,0 +1,348 @@
+/* Projections onto the constraint manifolds: positions onto (11), velocities onto (12).
+ *
+ * Positions: Xc moves along M^-1 C(E_dir)^T mu until every |X_k2 - X_k1|^2 = R_l^2 (11). Simplified Newton:
+ * the matrix A(E_dir) = C(E_dir) M^-1 C(E_dir)^T is factored already (RATTLE: at the start of its step;
+ * Runge-Kutta: at the new point). The residual is phi_l = (|X_k2 - X_k1|^2 - R_l^2) / (2 R_l), a length.
+ * Converged when every |phi_l| is within tol R_l, never below the round-off floor of computing
+ * |X_k2 - X_k1| from coordinates of size |X|; given up when it contracts too slowly.
+ *
+ * Velocities: the closest U satisfying (12) in the mass metric, U -= M^-1 C^T mu with A(X) mu = C U.
+ */
+#include <math.h>
+#include <stdlib.h>
+
+#include "../dim.h"
+#include "../linknet.h"
+#include "../stages.h"
+
+#define EPS 2.220446049250313e-16
+#define KRYLOV_DIM 30        /* GMRES restart length of the exact-Newton solve */
+#define KRYLOV_RESTARTS 10
+#define KRYLOV_RTOL 1e-12
+
+static inline double length_residual(const ln_model *m, const double *Xc, ln_int l)
+{
+    const ln_int a = m->k1[l], b = m->k2[l];
+    double sq = 0.0;
+    for (int e = 0; e < DIM; e++) {
+        const double dx = Xc[b * DIM + e] - Xc[a * DIM + e];
+        sq += dx * dx;
+    }
+    return (sq - m->R[l] * m->R[l]) * (0.5 * m->inv_R[l]);
+}
+
+static void residual_floor(const ln_model *m, const double *Xc, double tol, double *inv_scale)
+{
+    for (ln_int l = 0; l < m->L; l++) {
+        const ln_int a = m->k1[l], b = m->k2[l];
+        double size_a = 0.0, size_b = 0.0;
+        for (int e = 0; e < DIM; e++) {
+            size_a = fmax(size_a, fabs(Xc[a * DIM + e]));
+            size_b = fmax(size_b, fabs(Xc[b * DIM + e]));
+        }
+        inv_scale[l] = 1.0 / (m->R[l] * tol + 8.0 * EPS * (size_a + size_b));
+    }
+}
+
+static void record_failure(const ln_model *m, ln_data *d, const double *Xc, ln_int iterations, double before)
+{
+    double worst = -1.0;
+    for (ln_int l = 0; l < m->L; l++) {
+        const double r = fabs(length_residual(m, Xc, l)) * m->inv_R[l];
+        if (r > worst || !(r == r)) {
+            worst = r;
+            d->fail_link = l;
+        }
+    }
+    d->fail_residual = worst;
+    d->fail_before = before;
+    d->fail_iterations = iterations;
+}
+
+/* The chain's Newton iteration: the residuals of (11), the convergence test and the forward substitution in
+   one sweep; the back substitution, each multiplier applied as soon as it is known, in the other. */
+static int project_positions_chain(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
+                                   ln_int max_iter, double *first)
+{
+    const ln_int L = m->L;
+    const ln_int *order = m->chain_order;
+    double *w = d->work, *inv_scale = d->scale;
+    const double *sub = d->chain_sub, *Dinv = d->chain_Dinv;
+    residual_floor(m, Xc, tol, inv_scale);
+    double previous = 1e300;
+    for (ln_int it = 0; it < max_iter; it++) {
+        double worst = 0.0;
+        for (ln_int i = 0; i < L; i++) {
+            const ln_int l = order[i];
+            double phi = length_residual(m, Xc, l);
+            const double r = fabs(phi) * inv_scale[l];
+            if (!(r <= worst)) worst = r;
+            if (i > 0) phi -= sub[i] * w[i - 1];
+            w[i] = phi;
+        }
+        if (*first < 0) *first = worst * tol;
+        if (worst <= 1.0) return LN_OK;
+        if (!(worst < 1e300) || (it > 2 && worst > 0.3 * previous)) break;
+        previous = worst;
+        double x = 0.0;
+        for (ln_int i = L - 1; i >= 0; i--) {
+            x = (i == L - 1) ? w[i] * Dinv[i] : w[i] * Dinv[i] - sub[i + 1] * x;
+            const ln_int l = order[i], a = m->k1[l], b = m->k2[l];
+            const double fa = x * m->inv_m[a], fb = x * m->inv_m[b];
+            for (int e = 0; e < DIM; e++) {
+                Xc[a * DIM + e] += fa * E_dir[l * DIM + e];
+                Xc[b * DIM + e] -= fb * E_dir[l * DIM + e];
+            }
+        }
+    }
+    return LN_PROJECTION_FAILED;
+}
+
+/* Simplified Newton with A(E_dir) factored (the chain's own sweeps, or the general solve). Returns LN_OK,
+   or LN_PROJECTION_FAILED when it contracts too slowly (it is then handed to exact Newton). */
+static int simplified_newton(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
+                             ln_int max_iter, double *first)
+{
+    const ln_int L = m->L;
+    if (m->solver == LN_SOLVER_CHAIN && !d->singular)
+        return project_positions_chain(m, d, Xc, E_dir, tol, max_iter, first);
+    double *phi = d->phi, *mu = d->mu, *inv_scale = d->scale;
+    residual_floor(m, Xc, tol, inv_scale);
+    double previous = 1e300;
+    for (ln_int it = 0; it < max_iter; it++) {
+        double worst = 0.0;
+        for (ln_int l = 0; l < L; l++) {
+            phi[l] = length_residual(m, Xc, l);
+            const double r = fabs(phi[l]) * inv_scale[l];
+            if (!(r <= worst)) worst = r;
+        }
+        if (*first < 0) *first = worst * tol;
+        if (worst <= 1.0) return LN_OK;
+        if (!(worst < 1e300) || (it > 2 && worst > 0.3 * previous)) break;
+        previous = worst;
+        FN(ln_solve_tension_system)(m, d, phi, mu);
+        FN(ln_add_correction)(m, E_dir, mu, 1.0, Xc);
+    }
+    return LN_PROJECTION_FAILED;
+}
+
+/* y = J x with J = C(Xc) M^-1 C(E_dir)^T, the exact Newton matrix of the position stage: moving along
+   M^-1 C(E_dir)^T x changes phi_l by -(J x)_l. dX: (K,DIM) scratch. */
+static void newton_matrix_product(const ln_model *m, const double *Xc, const double *E_dir, const double *x,
+                                  double *dX, double *y)
+{
+    for (ln_int i = 0; i < m->K * DIM; i++) dX[i] = 0.0;
+    FN(ln_add_correction)(m, E_dir, x, 1.0, dX);
+    for (ln_int l = 0; l < m->L; l++) {
+        const ln_int a = m->k1[l], b = m->k2[l];
+        double s = 0.0;
+        for (int e = 0; e < DIM; e++)
+            s += (Xc[b * DIM + e] - Xc[a * DIM + e]) * m->inv_R[l] * (dX[a * DIM + e] - dX[b * DIM + e]);
+        y[l] = s;
+    }
+}
+
+/* mu = J^-1 phi by GMRES, right-preconditioned with the factored A(E_dir) (close to J: few iterations). */
+static int newton_solve(const ln_model *m, ln_data *d, const double *Xc, const double *E_dir, const double *phi,
+                        double *mu)
+{
+    const ln_int L = m->L, n = KRYLOV_DIM;
+    const ln_int need = (n + 1) * L + (n + 1) * n + 4 * (n + 1) + 2 * L;
+    if (d->krylov_size < need) {
+        free(d->krylov);
+        d->krylov = malloc((size_t)need * sizeof(double));
+        d->krylov_size = d->krylov ? need : 0;
+        if (!d->krylov) return LN_NO_MEMORY;
+    }
+    double *V = d->krylov, *H = V + (n + 1) * L, *cs = H + (n + 1) * n, *sn = cs + (n + 1), *g = sn + (n + 1);
+    double *y = g + (n + 1), *z = y + (n + 1), *w = z + L, *dX = d->acc1;
+    double beta0 = 0.0;
+    for (ln_int l = 0; l < L; l++) {
+        mu[l] = 0.0;
+        beta0 += phi[l] * phi[l];
+    }
+    beta0 = sqrt(beta0);
+    if (beta0 == 0.0) return LN_OK;
+    for (int restart = 0; restart < KRYLOV_RESTARTS; restart++) {
+        /* r = phi - J mu */
+        newton_matrix_product(m, Xc, E_dir, mu, dX, w);
+        double beta = 0.0;
+        for (ln_int l = 0; l < L; l++) {
+            V[l] = phi[l] - w[l];
+            beta += V[l] * V[l];
+        }
+        beta = sqrt(beta);
+        if (beta <= KRYLOV_RTOL * beta0) return LN_OK;
+        for (ln_int l = 0; l < L; l++) V[l] /= beta;
+        for (ln_int i = 0; i <= n; i++) g[i] = 0.0;
+        g[0] = beta;
+        ln_int j = 0;
+        for (; j < n; j++) {
+            FN(ln_solve_tension_system)(m, d, V + j * L, z);
+            newton_matrix_product(m, Xc, E_dir, z, dX, w);
+            for (ln_int i = 0; i <= j; i++) {  /* modified Gram-Schmidt */
+                double h = 0.0;
+                for (ln_int l = 0; l < L; l++) h += w[l] * V[i * L + l];
+                H[i * n + j] = h;
+                for (ln_int l = 0; l < L; l++) w[l] -= h * V[i * L + l];
+            }
+            double h = 0.0;
+            for (ln_int l = 0; l < L; l++) h += w[l] * w[l];
+            h = sqrt(h);
+            H[(j + 1) * n + j] = h;
+            if (h > 0.0)
+                for (ln_int l = 0; l < L; l++) V[(j + 1) * L + l] = w[l] / h;
+            for (ln_int i = 0; i < j; i++) {  /* the earlier Givens rotations */
+                const double a = H[i * n + j], b = H[(i + 1) * n + j];
+                H[i * n + j] = cs[i] * a + sn[i] * b;
+                H[(i + 1) * n + j] = -sn[i] * a + cs[i] * b;
+            }
+            const double a = H[j * n + j], b = H[(j + 1) * n + j], r = hypot(a, b);
+            cs[j] = r > 0.0 ? a / r : 1.0;
+            sn[j] = r > 0.0 ? b / r : 0.0;
+            H[j * n + j] = r;
+            H[(j + 1) * n + j] = 0.0;
+            g[j + 1] = -sn[j] * g[j];
+            g[j] = cs[j] * g[j];
+            if (fabs(g[j + 1]) <= KRYLOV_RTOL * beta0 || h == 0.0) {
+                j++;
+                break;
+            }
+        }
+        /* y = H^-1 g (upper triangular), mu += P^-1 V y */
+        for (ln_int i = j - 1; i >= 0; i--) {
+            double s = g[i];
+            for (ln_int k = i + 1; k < j; k++) s -= H[i * n + k] * y[k];
+            y[i] = H[i * n + i] != 0.0 ? s / H[i * n + i] : 0.0;
+        }
+        for (ln_int l = 0; l < L; l++) w[l] = 0.0;
+        for (ln_int i = 0; i < j; i++)
+            for (ln_int l = 0; l < L; l++) w[l] += y[i] * V[i * L + l];
+        FN(ln_solve_tension_system)(m, d, w, z);
+        for (ln_int l = 0; l < L; l++) mu[l] += z[l];
+    }
+    return LN_OK;  /* an inexact Newton step still contracts; the outer iteration judges convergence */
+}
+
+/* Exact Newton from the starting point X_start, for steps where the directions turn too much within a step
+   for simplified Newton (a whipping chain's tip): J = C(Xc) M^-1 C(E_dir)^T, the point reached is the same
+   (it lies on (11) along M^-1 C(E_dir)^T from the start). */
+static int exact_newton(const ln_model *m, ln_data *d, double *Xc, const double *X_start, const double *E_dir,
+                        double tol, ln_int max_iter)
+{
+    const ln_int L = m->L;
+    double *phi = d->phi, *mu = d->mu, *inv_scale = d->scale;
+    for (ln_int i = 0; i < m->K * DIM; i++) Xc[i] = X_start[i];
+    residual_floor(m, Xc, tol, inv_scale);
+    for (ln_int it = 0; it < max_iter; it++) {
+        double worst = 0.0;
+        for (ln_int l = 0; l < L; l++) {
+            phi[l] = length_residual(m, Xc, l);
+            const double r = fabs(phi[l]) * inv_scale[l];
+            if (!(r <= worst)) worst = r;
+        }
+        if (worst <= 1.0) return LN_OK;
+        if (!(worst < 1e300)) break;
+        const int status = newton_solve(m, d, Xc, E_dir, phi, mu);
+        if (status != LN_OK) return status;
+        FN(ln_add_correction)(m, E_dir, mu, 1.0, Xc);
+    }
+    return LN_PROJECTION_FAILED;
+}
+
+int FN(ln_project_positions)(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
+                             ln_int max_iter)
+{
+    if (m->L == 0) return LN_OK;
+    double *X_start = d->Xs == Xc ? d->Us : d->Xs;  /* a copy of the starting point, for exact Newton */
+    for (ln_int i = 0; i < m->K * DIM; i++) X_start[i] = Xc[i];
+    double before = -1.0;
+    if (simplified_newton(m, d, Xc, E_dir, tol, max_iter, &before) == LN_OK) return LN_OK;
+    d->exact_newton_projections++;
+    const int status = exact_newton(m, d, Xc, X_start, E_dir, tol, max_iter);
+    if (status == LN_PROJECTION_FAILED) record_failure(m, d, Xc, max_iter, before);
+    return status;
+}
+
+/* The chain's velocity projection in two sweeps: unit vectors, A's entries and pivots, C U and the forward
+   substitution in one; the back substitution with the correction of U in the other. Returns 1 at a
+   vanishing pivot (the caller takes the general route). */
+static int project_velocities_chain(const ln_model *m, ln_data *d, const double *X, double *U, double *E)
+{
+    const ln_int L = m->L;
+    const ln_int *order = m->chain_order;
+    double *w = d->work, *sub = d->chain_sub, *Dinv = d->chain_Dinv;
+    int singular = 0;
+    for (ln_int i = 0; i < L; i++) {
+        const ln_int l = order[i], a = m->k1[l], b = m->k2[l];
+        const double r = m->inv_R[l];
+        double sq = 0.0, rhs = 0.0;
+        for (int e = 0; e < DIM; e++) {
+            const double u = (X[b * DIM + e] - X[a * DIM + e]) * r;
+            E[l * DIM + e] = u;
+            sq += u * u;
+            rhs += u * (U[a * DIM + e] - U[b * DIM + e]);
+        }
+        const double diag = m->chain_diag_weight[i] * sq;
+        double pivot = diag;
+        const double wt = m->chain_off_weight[i];
+        if (wt != 0.0) {
+            double off = 0.0;
+            for (int e = 0; e < DIM; e++) off += E[order[i - 1] * DIM + e] * E[l * DIM + e];
+            off *= wt;
+            const double mult = off * Dinv[i - 1];
+            sub[i] = mult;
+            pivot -= mult * off;
+            rhs -= mult * w[i - 1];
+        } else {
+            sub[i] = 0.0;
+        }
+        if (pivot > m->pivot_tol * fabs(diag)) {
+            Dinv[i] = 1.0 / pivot;
+        } else {
+            Dinv[i] = 0.0;
+            singular = 1;
+        }
+        w[i] = rhs;
+    }
+    if (singular) return 1;
+    double x = 0.0;
+    for (ln_int i = L - 1; i >= 0; i--) {
+        x = (i == L - 1) ? w[i] * Dinv[i] : w[i] * Dinv[i] - sub[i + 1] * x;
+        const ln_int l = order[i], a = m->k1[l], b = m->k2[l];
+        const double fa = x * m->inv_m[a], fb = x * m->inv_m[b];
+        for (int e = 0; e < DIM; e++) {
+            U[a * DIM + e] -= fa * E[l * DIM + e];
+            U[b * DIM + e] += fb * E[l * DIM + e];
+        }
+    }
+    d->singular = 0;
+    return 0;
+}
+
+int FN(ln_project_velocities)(const ln_model *m, ln_data *d, const double *X, double *U, double *E)
+{
+    const ln_int L = m->L;
+    if (L == 0) return LN_OK;
+    if (m->solver == LN_SOLVER_CHAIN && !project_velocities_chain(m, d, X, U, E)) return LN_OK;
+    FN(ln_unit_vectors)(m, X, E);
+    int status;
+    if (m->solver == LN_SOLVER_CHAIN) {  /* a singular configuration of a chain */
+        d->singular = 1;
+        d->singular_events++;
+        status = FN(ln_minnorm_factor)(m, d, E);
+    } else {
+        status = FN(ln_factor_tension_matrix)(m, d, E);
+    }
+    if (status != LN_OK) return status;
+    double *rhs = d->phi, *mu = d->mu;
+    for (ln_int l = 0; l < L; l++) {
+        const ln_int a = m->k1[l], b = m->k2[l];
+        double s = 0.0;
+        for (int e = 0; e < DIM; e++) s += E[l * DIM + e] * (U[a * DIM + e] - U[b * DIM + e]);
+        rhs[l] = s;
+    }
+    FN(ln_solve_tension_system)(m, d, rhs, mu);
+    FN(ln_add_correction)(m, E, mu, -1.0, U);
+    return LN_OK;
+}

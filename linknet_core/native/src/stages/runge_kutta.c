@@ -1,0 +1,210 @@
+/* Explicit embedded Runge-Kutta on the index-1 formulation, projected onto the constraint manifolds.
+ *
+ * The index-1 ODE is dX/dt = U (10), dU/dt = accelerations (9) with the tensions of (25)-(26). It keeps (13)
+ * exactly but lets (11) and (12) drift, so after every accepted step the positions are projected onto (11)
+ * and the velocities onto (12) (projections.c). The method is its tableau (method->AB, E1, E2): adding one
+ * needs no code here. The step size follows the embedded error estimate (RMS norm of the embedded
+ * difference, or DOP853's combined 5th/3rd-order estimate) with the controller of Hairer, Norsett and
+ * Wanner, and the first step is their starting-step heuristic.
+ */
+#include <math.h>
+
+#include "../dim.h"
+#include "../linknet.h"
+#include "../stages.h"
+
+/* out = Y0 + h sum_{j<n} coef[row, j] KY[j] (zero coefficients skipped); KY rows are (K,DIM) blocks. */
+static void combine(ln_int size, const double *Y0, double h, const double *coef, ln_int row, ln_int n,
+                    ln_int s, const double *KY, double *out)
+{
+    for (ln_int i = 0; i < size; i++) out[i] = 0.0;
+    for (ln_int j = 0; j < n; j++) {
+        const double c = coef[row * s + j];
+        if (c == 0.0) continue;
+        const double *Kj = KY + j * size;
+        for (ln_int i = 0; i < size; i++) out[i] += c * Kj[i];
+    }
+    for (ln_int i = 0; i < size; i++) out[i] = Y0[i] + h * out[i];
+}
+
+static inline double weighted(const double *coef, ln_int n, const double *KY, ln_int size, ln_int i)
+{
+    double s = 0.0;
+    for (ln_int j = 0; j < n; j++)
+        if (coef[j] != 0.0) s += coef[j] * KY[j * size + i];
+    return s;
+}
+
+/* The error norm over the free masses' coordinates; the mean is over 6 coordinates per free mass whatever
+   DIM (in a plane the out-of-plane ones are zero and count as they do in 3-D). */
+static double error_norm(const ln_model *m, const ln_method *meth, const double *X, const double *U,
+                         const double *Xn, const double *Un, const double *KX, const double *KU, double h)
+{
+    const ln_int size = m->K * DIM, n_weights = meth->n_stages + 1;
+    const double n = 6.0 * (double)m->n_free;
+    double s1 = 0.0, s2 = 0.0;
+    for (int part = 0; part < 2; part++) {
+        const double *Y0 = part == 0 ? X : U, *Y1 = part == 0 ? Xn : Un, *KY = part == 0 ? KX : KU;
+        for (ln_int f = 0; f < m->n_free; f++) {
+            const ln_int k = m->free_idx[f];
+            for (int e = 0; e < DIM; e++) {
+                const ln_int i = k * DIM + e;
+                const double scale = meth->atol + meth->rtol * fmax(fabs(Y0[i]), fabs(Y1[i]));
+                if (meth->error_norm == LN_RMS_ERROR) {
+                    const double err = h * weighted(meth->E1, n_weights, KY, size, i) / scale;
+                    s1 += err * err;
+                } else {
+                    const double e5 = weighted(meth->E1, n_weights, KY, size, i) / scale;
+                    const double e3 = weighted(meth->E2, n_weights, KY, size, i) / scale;
+                    s1 += e5 * e5;
+                    s2 += e3 * e3;
+                }
+            }
+        }
+    }
+    if (meth->error_norm == LN_RMS_ERROR) return sqrt(s1 / n);
+    if (s1 == 0.0 && s2 == 0.0) return 0.0;
+    return fabs(h) * s1 / sqrt((s1 + 0.01 * s2) * n);
+}
+
+/* The step an adaptive loop takes next from t: h_next, cut to land on t_target, the rest split in two rather
+   than leaving a sliver of a last step; -1 when that step is within 16 ulps of t (step-size underflow). */
+static double controlled_step(double h_next, double t, double t_target)
+{
+    const double remaining = t_target - t;
+    double h = fmin(h_next, remaining);
+    if (h < remaining && remaining < 1.1 * h) h = 0.5 * remaining;
+    const double tt = fmax(fabs(t), 1.0);
+    if (h <= 16.0 * (nextafter(tt, INFINITY) - tt) && h < remaining) return -1.0;
+    return h;
+}
+
+/* The step after a step h with error norm err: grown (accepted) or shrunk (rejected) by safety err^exponent. */
+static double next_step_size(const ln_method *meth, double h, double h_next, double err)
+{
+    if (err > 1.0) return h * fmax(meth->min_factor, meth->safety * pow(err, meth->exponent));
+    const double factor = err == 0.0 ? meth->max_factor : fmin(meth->max_factor, meth->safety * pow(err, meth->exponent));
+    /* a step shortened only to land on t_target says nothing against the longer step */
+    return h < h_next ? fmax(h_next, h * factor) : h * factor;
+}
+
+/* Hairer-Wanner's starting step (as scipy's select_initial_step), from f at (X, U) and at
+   (X + h0 U, U + h0 acc0). */
+static int starting_step(const ln_model *m, const ln_method *meth, ln_data *d, const double *X, const double *U,
+                         const double *F_base, const double *acc0, double span, double *h_out)
+{
+    const double n = 6.0 * (double)m->n_free;
+    double d0 = 0.0, d1 = 0.0;
+    for (ln_int f = 0; f < m->n_free; f++)
+        for (int e = 0; e < DIM; e++) {
+            const ln_int i = m->free_idx[f] * DIM + e;
+            const double sx = meth->atol + meth->rtol * fabs(X[i]), su = meth->atol + meth->rtol * fabs(U[i]);
+            d0 += (X[i] / sx) * (X[i] / sx) + (U[i] / su) * (U[i] / su);
+            d1 += (U[i] / sx) * (U[i] / sx) + (acc0[i] / su) * (acc0[i] / su);
+        }
+    d0 = sqrt(d0 / n);
+    d1 = sqrt(d1 / n);
+    double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+    h0 = fmin(h0, span);
+    const ln_int size = m->K * DIM;
+    for (ln_int i = 0; i < size; i++) {
+        d->Xs[i] = X[i] + h0 * U[i];
+        d->Us[i] = U[i] + h0 * acc0[i];
+    }
+    d->n_rhs++;
+    const int status = FN(ln_accelerations)(m, d, d->Xs, d->Us, F_base, d->acc1, d->T, 1);
+    if (status != LN_OK) return status;
+    double d2 = 0.0;
+    for (ln_int f = 0; f < m->n_free; f++)
+        for (int e = 0; e < DIM; e++) {
+            const ln_int i = m->free_idx[f] * DIM + e;
+            const double sx = meth->atol + meth->rtol * fabs(X[i]), su = meth->atol + meth->rtol * fabs(U[i]);
+            const double dx = (d->Us[i] - U[i]) / sx, du = (d->acc1[i] - acc0[i]) / su;
+            d2 += dx * dx + du * du;
+        }
+    d2 = sqrt(d2 / n) / h0;
+    const double h1 = (d1 <= 1e-15 && d2 <= 1e-15) ? fmax(1e-6, h0 * 1e-3)
+                                                    : pow(0.01 / fmax(d1, d2), -meth->exponent);
+    *h_out = fmin(fmin(100.0 * h0, h1), span);
+    return LN_OK;
+}
+
+int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
+                    const double *F_base, double *t_inout, double t_target, ln_int max_steps, ln_int *accepted)
+{
+    const ln_int size = m->K * DIM, s = meth->n_stages;
+    double *KX = d->KX, *KU = d->KU, *Xs = d->Xs, *Us = d->Us, *Xn = d->Xn, *Un = d->Un, *acc = d->acc;
+    double t = *t_inout;
+    int status;
+    *accepted = 0;
+    d->n_rhs++;
+    if ((status = FN(ln_accelerations)(m, d, X, U, F_base, acc, d->T, 1)) != LN_OK) return status;
+    for (ln_int i = 0; i < size; i++) {
+        KX[i] = U[i];
+        KU[i] = acc[i];
+    }
+    if (d->h_next <= 0.0) {
+        double h0;
+        if ((status = starting_step(m, meth, d, X, U, F_base, acc, t_target - t, &h0)) != LN_OK) return status;
+        d->h_next = h0;
+    }
+    while (t < t_target) {
+        const double remaining = t_target - t;
+        const double h = controlled_step(d->h_next, t, t_target);
+        if (h < 0.0) return LN_STEP_UNDERFLOW;
+        for (ln_int i = 1; i < s; i++) {
+            combine(size, X, h, meth->AB, i, i, s, KX, Xs);
+            combine(size, U, h, meth->AB, i, i, s, KU, Us);
+            d->n_rhs++;
+            if ((status = FN(ln_accelerations)(m, d, Xs, Us, F_base, acc, d->T, 1)) != LN_OK) return status;
+            for (ln_int j = 0; j < size; j++) {
+                KX[i * size + j] = Us[j];
+                KU[i * size + j] = acc[j];
+            }
+        }
+        combine(size, X, h, meth->AB, s, s, s, KX, Xn);
+        combine(size, U, h, meth->AB, s, s, s, KU, Un);
+        d->n_rhs++;
+        /* this evaluation also factors A(Xn), which the position projection below reuses */
+        if ((status = FN(ln_accelerations)(m, d, Xn, Un, F_base, acc, d->T, 1)) != LN_OK) return status;
+        for (ln_int j = 0; j < size; j++) {
+            KX[s * size + j] = Un[j];
+            KU[s * size + j] = acc[j];
+        }
+        const double err = error_norm(m, meth, X, U, Xn, Un, KX, KU, h);
+        if (!isfinite(err)) {
+            d->rejected++;
+            d->h_next = h * meth->min_factor;
+            continue;
+        }
+        if (err > 1.0) {
+            d->rejected++;
+            d->h_next = next_step_size(meth, h, d->h_next, err);
+            continue;
+        }
+        /* positions onto (11) along the directions at Xn (unit vectors E1 of the last evaluation, A(Xn)
+           factored), then the velocities onto (12) at the projected positions */
+        if ((status = FN(ln_project_positions)(m, d, Xn, d->E1, meth->position_tol, meth->max_projection_iter))
+            != LN_OK) return status;
+        if ((status = FN(ln_project_velocities)(m, d, Xn, Un, d->E1)) != LN_OK) return status;
+        t = (h == remaining) ? t_target : t + h;
+        d->h_next = next_step_size(meth, h, d->h_next, err);
+        for (ln_int j = 0; j < size; j++) {
+            X[j] = Xn[j];
+            U[j] = Un[j];
+        }
+        *t_inout = t;
+        ++*accepted;
+        if (*accepted > max_steps) return LN_TOO_MANY_STEPS;
+        if (t < t_target) {
+            /* the first stage of the next step; A(X) is factored already (velocity projection) */
+            d->n_rhs++;
+            if ((status = FN(ln_accelerations)(m, d, X, U, F_base, acc, d->T, 0)) != LN_OK) return status;
+            for (ln_int j = 0; j < size; j++) {
+                KX[j] = U[j];
+                KU[j] = acc[j];
+            }
+        }
+    }
+    return LN_OK;
+}
