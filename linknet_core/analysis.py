@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import compiled
 from .dynamics import Dynamics
+from .native.model import NativeModel
 from .rigid import Specialisation, choose_specialisation
 from .scene import Scene
 
@@ -46,11 +46,11 @@ class RigidityReport:
         anchored = ", ".join(s.mass_label(k) for k in self.anchored[:8]) or "none"
         if len(self.anchored) > 8:
             anchored += f" and {len(self.anchored) - 8} more"
-        solver = self.dyn.solver
-        specialisations = [f"structure class {st.kind} (topology {st.topology}); tension solver {solver.name}"]
-        if hasattr(solver, "ldl"):
-            specialisations.append(f"LDL^T with symbolic analysis once: nnz(L) = {solver.ldl.nnz_L} "
-                                   f"({'no fill, O(L)' if st.topology in ('chain', 'tree') else 'minimum-degree ordering'})")
+        native = NativeModel(s, st)
+        specialisations = [f"structure class {st.kind} (topology {st.topology}); tension solver {native.solver}"]
+        if native.solver == "ldl":
+            specialisations.append(f"LDL^T with symbolic analysis once: nnz(L) = {native.nnz_L} "
+                                   f"({'no fill, O(L)' if st.topology in ('chain', 'tree') else 'fill-reducing ordering'})")
         if st.planar_normal is not None:
             specialisations.append(f"planar scene (normal {np.round(st.planar_normal, 6).tolist()})")
         if self.anchored:
@@ -72,10 +72,10 @@ class RigidityReport:
             "solver: " + "; ".join(specialisations),
         ]
         lines.append(f"specialisation: {self.specialisation.text()}")
-        compiled_path = compiled.describe(self.dyn)
+        native_path = native.describe()
         if self.specialisation.kind != "none":
-            compiled_path += f" (not used: the {self.specialisation.kind} specialisation stands in)"
-        lines.append(f"compiled path (RATTLE, compositions, Runge-Kutta): {compiled_path}")
+            native_path += f" (not used: the {self.specialisation.kind} specialisation stands in)"
+        lines.append(f"native path (RATTLE, compositions, Runge-Kutta): {native_path}")
         lines += [f"note: {n}" for n in st.notes]
         return "\n".join(lines)
 

@@ -152,17 +152,15 @@ def _group(labels: np.ndarray, n: int) -> list:
     return np.split(order, np.cumsum(np.bincount(labels, minlength=n))[:-1])
 
 
-def choose_specialisation(scene: Scene, dyn: Dynamics, method: str | None = None, backend: str = "auto",
-                          enabled: bool = True, integrator: Integrator | None = None) -> Specialisation:
+def choose_specialisation(scene: Scene, dyn: Dynamics, method: str | None = None, enabled: bool = True,
+                          tolerances: tuple | None = None) -> Specialisation:
     """The specialisation of ``scene`` for ``method`` (None: report what each kind of method gets).
 
-    ``integrator``: the point-mass integrator the path would stand in for. An adaptive method's rigid-body
-    path takes its tolerances (rtol, atol) from it; without it an adaptive method keeps the point-mass path.
+    ``tolerances``: (rtol, atol) of an adaptive method, which its rigid-body path takes over; without them an
+    adaptive method keeps the point-mass path.
     """
     if not enabled:
-        return Specialisation(NONE, "specialise=False: the point-mass path was asked for")
-    if backend != "auto":
-        return Specialisation(NONE, f"backend {backend!r} names an implementation of the point-mass loop")
+        return Specialisation(NONE, "specialise=False, or the numpy reference backend: the point-mass path")
     st = dyn.structure
     n_free = int(scene.free_indices.size)
     if scene.L and st.rank_exact and st.rank_G == 3 * n_free:
@@ -180,14 +178,15 @@ def choose_specialisation(scene: Scene, dyn: Dynamics, method: str | None = None
         dof = 3 * n_free - st.rank_G
         return Specialisation(NONE, f"not static ({dof} degrees of freedom) and not free rigid bodies: {why}")
     adaptive = method is not None and METHODS[method].adaptive
-    tolerances = None
     if adaptive:
-        if integrator is None or not hasattr(integrator, "rtol"):
+        if tolerances is None or tolerances[0] is None:
             counted = _count(bodies.count, "free rigid body", "free rigid bodies")
             return Specialisation(NONE, f"{counted}, but no tolerances were handed over for the adaptive method "
-                                        f"{method}'s rigid-body path (choose_specialisation(..., integrator=)): "
+                                        f"{method}'s rigid-body path (choose_specialisation(..., tolerances=)): "
                                         "it keeps the point-mass path")
-        tolerances = (float(integrator.rtol), float(integrator.atol))
+        tolerances = (float(tolerances[0]), float(tolerances[1] if tolerances[1] is not None else tolerances[0]))
+    else:
+        tolerances = None
     _, _, moments, _ = _principal_moments(scene, scene.X0, bodies.body_of, bodies.count)
     kinds = _top_kinds(moments)
     counts = np.bincount(kinds, minlength=3)

@@ -9,16 +9,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .compiled_kernels import OK as COMPILED_OK
 from .dynamics import Dynamics
 from .errors import SceneError, SolverError
 from .forces import kinetic_energy
-from .integrators import make_integrator
-from .rigid import build_path, choose_specialisation
+from .integrators import make_integrator, method_settings
+from .native.integrator import NativeIntegrator
+from .native.model import NativeModel
+from .rigid import RIGID, STATIC, build_path, choose_specialisation
 from .scene import Scene
 from .state import State
 
-DEFAULT_LENGTH_TOL = 1e-6  # relative violation of (11) accepted in a scene's initial positions
+DEFAULT_LENGTH_TOL = 1e-6
+BACKENDS = ("auto", "native", "numpy")  # relative violation of (11) accepted in a scene's initial positions
 
 
 @dataclass
@@ -113,27 +115,43 @@ class Simulator:
                  length_tol: float = DEFAULT_LENGTH_TOL, max_steps_per_call: int = 100_000_000,
                  dynamics: Dynamics | None = None, backend: str = "auto", rhs_kernel: str = "numpy",
                  specialise: bool = True):
+        if backend not in BACKENDS:
+            raise SolverError(f"backend must be one of {', '.join(map(repr, BACKENDS))}, got {backend!r}")
         self.scene = scene
         self.dyn = dynamics or Dynamics(scene, rhs_kernel=rhs_kernel)
         self.method = method
-        self.integrator = make_integrator(method, self.dyn, dt=dt, rtol=rtol, atol=atol, backend=backend)
+        method_cls, dt, rtol, atol = method_settings(method, dt, rtol, atol)
         X0, U0, self.initial_report = prepare_initial_state(scene, self.dyn, project_positions=project_initial,
                                                             length_tol=length_tol)
-        # structure specialisation, chosen once (linknet_core.rigid): static scenes and free rigid bodies
-        # skip the point-mass machinery; the specialised path stands in for the integrator
-        self.specialisation = choose_specialisation(scene, self.dyn, method, backend=backend, enabled=specialise,
-                                                    integrator=self.integrator)
-        self._tensions = self.dyn.tensions
-        self._compiled_tensions = None  # built at the first outputs() of a scene the compiled kernels take
-        if backend != "numpy" and self.specialisation.kind == "none":
-            self._tensions = self._point_mass_tensions
-        if self.specialisation.kind != "none":
-            self.integrator, (X0, U0) = build_path(self.specialisation, self.dyn, method, dt, X0, U0)
-            self._tensions = self.integrator.tensions
+        # one backend, chosen here before anything is built: the native core, or the numpy reference (asked
+        # for, or implied by a casadi right-hand side, which is a variant of the numpy Dynamics)
+        self.backend = "numpy" if backend == "numpy" or self.dyn.rhs_kernel != "numpy" else "native"
+        if self.backend == "numpy":
+            self.specialisation = choose_specialisation(scene, self.dyn, method, enabled=False)
+            self.integrator = make_integrator(method, self.dyn, dt=dt, rtol=rtol, atol=atol)
+            self._tensions = self.dyn.tensions
+        else:
+            self.specialisation = choose_specialisation(scene, self.dyn, method, enabled=specialise,
+                                                        tolerances=(rtol, atol))
+            if self.specialisation.kind == RIGID:
+                self.integrator, (X0, U0) = build_path(self.specialisation, self.dyn, method, dt, X0, U0)
+                self._tensions = self.integrator.tensions
+            else:
+                model = NativeModel(scene, self.dyn.structure)
+                self.integrator = NativeIntegrator(model, method_cls, dt=dt, rtol=rtol, atol=atol,
+                                                   static=self.specialisation.kind == STATIC)
+                self._tensions = self.integrator.tensions
+                if self.specialisation.kind == STATIC:
+                    U0 = np.zeros_like(U0)  # the only velocity (12) allows where nothing can move
         self._initial = State(0.0, X0, U0)
         self._initial_internals = copy.deepcopy(self.integrator.internals())
         self.max_steps_per_call = max_steps_per_call
         self.state = self._initial.copy()
+
+    @property
+    def rhs_evaluations(self) -> int:
+        """Right-hand sides (9) evaluated so far."""
+        return getattr(self.integrator, "rhs_evaluations", self.dyn.rhs_evaluations)
 
     # ---- stepping ----------------------------------------------------------------------------
     def check_input(self, F_input) -> np.ndarray | None:
@@ -161,6 +179,9 @@ class Simulator:
         t_next = float(t_next)
         state = self.state
         t_before = state.t
+        if self._native_all_or_nothing:  # the native advance restores everything itself on failure
+            self.integrator.advance(state, t_next, F, self.max_steps_per_call)
+            return
         if not math.isfinite(t_next) or not t_next > t_before:
             raise SolverError(f"cannot advance from t = {t_before} to t = {t_next}: the target must be later "
                               "and finite")
@@ -179,6 +200,10 @@ class Simulator:
             self.integrator.set_internals(internals)
             raise
 
+    @property
+    def _native_all_or_nothing(self) -> bool:
+        return isinstance(self.integrator, NativeIntegrator)
+
     def outputs(self, F_input=None) -> dict:
         """Positions, velocities, tensions (with direct feedthrough of F_input, since B of (26) contains F)
         and the force the network exerts on each anchored mass."""
@@ -186,20 +211,6 @@ class Simulator:
         X, U = self.state.X, self.state.U
         T = self._tensions(X, U, F)
         return {"t": self.state.t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": self.dyn.anchor_reactions(X, T)}
-
-    def _point_mass_tensions(self, X, U, F):
-        """T of (25)-(26): in one compiled call where the compiled kernels take the scene (tested against the
-        numpy path to round-off), else, and at a singular configuration, the numpy path (minimum norm)."""
-        if self._compiled_tensions is None:
-            from . import compiled
-
-            self._compiled_tensions = (compiled.CompiledScene(self.dyn, planar=False) if compiled.supports(self.dyn)
-                                       else False)
-        if self._compiled_tensions:
-            status, _, T = self._compiled_tensions.accelerations(X, U, F)
-            if status == COMPILED_OK:  # else a vanishing pivot
-                return T
-        return self.dyn.tensions(X, U, F)
 
     # ---- snapshots ---------------------------------------------------------------------------
     def get_state(self) -> dict:
@@ -219,7 +230,7 @@ class Simulator:
     def summary(self) -> str:
         """Scene, method and the specialisation chosen for it (and why)."""
         lines = [f"{self.scene.name}: K={self.scene.K} masses, L={self.scene.L} links, method {self.method}, "
-                 f"solver {self.dyn.structure.kind}",
+                 f"solver {self.dyn.structure.kind}, backend {self.backend}",
                  f"  specialisation: {self.specialisation.text()}"]
         return "\n".join(lines + [f"  note: {n}" for n in self.specialisation.notes])
 
@@ -322,7 +333,7 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
     wall = time.perf_counter() - start
     if show is not False and wall > 2.0:
         sys.stderr.write("\n")
-    stats = dict(sim.integrator.stats.as_dict(), wall_time=wall, rhs_evaluations=sim.dyn.rhs_evaluations,
+    stats = dict(sim.integrator.stats.as_dict(), wall_time=wall, rhs_evaluations=sim.rhs_evaluations,
                  structure=sim.dyn.structure.kind, method=method, dt=dt, rtol=rtol, rhs_kernel=sim.dyn.rhs_kernel,
                  initial=sim.initial_report.lines(scene) + sim.specialisation.notes,
                  specialisation=sim.specialisation.text())

@@ -17,50 +17,28 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 
-from .ldl import SymbolicLDL
+from scipy.sparse.linalg import splu
 from .scene import Scene
 from .structure import SINGULAR_RCOND, Structure, link_pairs
 
 DENSE_MIN_NORM_LIMIT = 2500  # links; above it the redundant path uses MINRES (min-norm from x0 = 0)
+PIVOT_TOL = 1e-11  # a pivot below this times its diagonal entry means A is singular (as the native core)
 
 
 class TensionAssembly:
-    """Index arrays that assemble A of (25) as the values of a fixed sparse pattern.
-
-    The pattern is the upper triangle of P A P^T in CSC form (P the elimination order), so that the
-    values feed :class:`SymbolicLDL` directly. Assembly is one gather, one dot product per pair and one
-    ``bincount``: no loop over links.
-    """
+    """Index arrays that assemble A of (25): one gather, one dot product per pair of links sharing a free mass
+    and one sparse matrix, no loop over links."""
 
     def __init__(self, scene: Scene, ordering: np.ndarray):
         self.scene = scene
-        L = scene.L
         self.ordering = np.asarray(ordering, np.int64)
-        self.position_of = np.empty(L, np.int64)
-        self.position_of[self.ordering] = np.arange(L)
         pairs = link_pairs(scene)
         self.pair_first, self.pair_second = pairs.first, pairs.second
         # weight of each pair: S(l,l') / M(l,l') of (21)-(22), or 1/M of one end on the diagonal (18)
         self.pair_weight = pairs.sign * scene.inv_mass[pairs.mass]
-        p1, p2 = self.position_of[pairs.first], self.position_of[pairs.second]
-        rows, cols = np.minimum(p1, p2), np.maximum(p1, p2)
-        # CSC slots of the upper triangle: sort by (column, row), unique
-        key = cols * L + rows
-        unique_keys, self.pair_slot = np.unique(key, return_inverse=True)
-        self.nnz = unique_keys.size
-        self.Ai = (unique_keys % L).astype(np.int64)
-        col_of_slot = unique_keys // L
-        self.Ap = np.zeros(L + 1, np.int64)
-        np.cumsum(np.bincount(col_of_slot, minlength=L), out=self.Ap[1:])
-        # links with no free end cannot exist (the scene forbids links between two anchors),
-        # so every column has its diagonal entry.
 
     def pair_values(self, E: np.ndarray) -> np.ndarray:
         return self.pair_weight * np.einsum("ij,ij->i", E[self.pair_first], E[self.pair_second])
-
-    def upper_values(self, E: np.ndarray) -> np.ndarray:
-        """Values of the upper triangle of P A P^T, in the CSC order of (Ap, Ai)."""
-        return np.bincount(self.pair_slot, weights=self.pair_values(E), minlength=self.nnz)
 
     def matrix(self, E: np.ndarray, E_right: np.ndarray | None = None) -> sp.csr_matrix:
         """A of (25) in the original link numbering, as a symmetric CSR matrix.
@@ -81,9 +59,6 @@ class TensionAssembly:
         cols = np.concatenate([g, f[off]])
         data = np.concatenate([vals, mirrored])
         return sp.csr_matrix((data, (rows, cols)), shape=(L, L))
-
-    def new_factorisation(self) -> SymbolicLDL:
-        return SymbolicLDL(self.scene.L, self.Ap, self.Ai)
 
 
 def unit_vectors(scene: Scene, X: np.ndarray) -> np.ndarray:
@@ -117,26 +92,32 @@ class TensionSolver:
         raise NotImplementedError
 
 
-class SparseLDLSolver(TensionSolver):
-    """Chains, trees and general graphs: LDL^T on a fixed pattern, symbolic analysis once.
+class SparseSolver(TensionSolver):
+    """Chains, trees and general graphs: a sparse factorisation of the positive definite A in the structure's
+    elimination order (SuperLU without pivoting, so its pivots are those of LDL^T).
 
-    For chains and trees the ordering is leaves-first, so L has no fill and a solve costs O(L).
-    If a pivot vanishes (the configuration has become singular, e.g. a loop passing through a flat
-    position) the solver switches to the minimum-norm path for that evaluation, so the forces are
-    still right (31); it counts such events in ``singular_events``.
+    If a pivot falls below PIVOT_TOL times its diagonal entry (the configuration has become singular, e.g. a
+    loop passing through a flat position) the solver switches to the minimum-norm path for that evaluation,
+    so the forces are still right (31); it counts such events in ``singular_events``.
     """
 
-    name = "sparse-ldl"
+    name = "sparse"
 
     def __init__(self, scene: Scene, structure: Structure):
         super().__init__(scene, structure)
-        self.ldl = self.assembly.new_factorisation()
         self.singular_events = 0
         self._fallback: MinNormSolver | None = None
         self._singular = False
+        self._lu = None
 
     def factor(self, E: np.ndarray) -> None:
-        self._singular = not self.ldl.factor(self.assembly.upper_values(E))
+        order = self.assembly.ordering
+        A = self.assembly.matrix(E)[order][:, order].tocsc()
+        try:
+            self._lu = splu(A, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+            self._singular = not np.all(self._lu.U.diagonal() > PIVOT_TOL * np.abs(A.diagonal()))
+        except RuntimeError:  # an exactly zero pivot
+            self._singular = True
         if self._singular:
             self.singular_events += 1
             if self._fallback is None:
@@ -147,9 +128,8 @@ class SparseLDLSolver(TensionSolver):
         if self._singular:
             return self._fallback.solve(b)
         order = self.assembly.ordering
-        x = self.ldl.solve_in_place(np.ascontiguousarray(b[order], dtype=float))  # b[order] is already a copy
-        out = np.empty_like(x)
-        out[order] = x
+        out = np.empty(b.shape[0])
+        out[order] = self._lu.solve(np.ascontiguousarray(b[order], dtype=float))
         return out
 
 
@@ -200,7 +180,7 @@ class MinNormSolver(TensionSolver):
 def make_solver(scene: Scene, structure: Structure) -> TensionSolver:
     if structure.kind == "redundant":
         return MinNormSolver(scene, structure)
-    return SparseLDLSolver(scene, structure)
+    return SparseSolver(scene, structure)
 
 
 def reference_tensions(scene: Scene, X, U, F) -> np.ndarray:

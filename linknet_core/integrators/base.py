@@ -14,6 +14,7 @@ import numpy as np
 
 from ..dynamics import Dynamics
 from ..errors import SolverError
+from ..native.library import fixed_step_count
 from ..state import State
 
 
@@ -51,11 +52,8 @@ class Integrator:
 class FixedStepIntegrator(Integrator):
     """Equal steps no longer than ``dt`` that land exactly on the target time."""
 
-    def __init__(self, dynamics: Dynamics, dt: float, backend: str = "auto"):
+    def __init__(self, dynamics: Dynamics, dt: float):
         super().__init__(dynamics)
-        if backend not in ("auto", "numpy", "compiled"):
-            raise SolverError(f"backend must be 'auto', 'numpy' or 'compiled', got {backend!r}")
-        self.backend = backend
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             raise SolverError(f"dt must be a positive finite step in seconds, got {dt!r}")
         self.dt = float(dt)
@@ -64,16 +62,13 @@ class FixedStepIntegrator(Integrator):
         raise NotImplementedError
 
     def _advance_steps(self, X, U, n, h, F_input):
-        """n steps of size h (the numpy path; subclasses may run them in compiled code)."""
         for _ in range(n):
             X, U = self.step(X, U, h, F_input)
         return X, U
 
     def advance(self, state, t_target, F_input, max_steps):
         span = t_target - state.t
-        ratio = span / self.dt
-        # a whole number of steps up to round-off in t (which grows with t) is that number, not one more
-        n = max(1, round(ratio) if abs(ratio - round(ratio)) <= 1e-9 * max(ratio, 1.0) else math.ceil(ratio))
+        n = fixed_step_count(span, self.dt)  # the native core's rule, so both paths take the same steps
         if n > max_steps:
             raise SolverError(f"reaching t = {t_target} needs {n} steps of dt = {self.dt}, more than the "
                               f"limit of {max_steps}; raise max_steps or the step")

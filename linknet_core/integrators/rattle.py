@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..compiled_kernels import OK as COMPILED_OK
 from ..errors import SolverError
 from .base import FixedStepIntegrator
 
@@ -23,61 +22,6 @@ class Rattle(FixedStepIntegrator):
                   "1e-14 relative and velocity constraints (12) to round-off after every step; bounded energy error")
     position_tol = 1e-14
     gammas: tuple[float, ...] = (1.0,)
-    compiled_fallbacks = 0  # intervals the compiled loop handed back to the numpy path
-
-    def __init__(self, dynamics, dt: float, backend: str = "auto"):
-        super().__init__(dynamics, dt, backend=backend)
-        self._kernel = self._compiled_kernel() if self.backend != "numpy" else None
-
-    def internals(self) -> dict:
-        out = super().internals()
-        if getattr(self, "_kernel", None) is not None:
-            out["compiled_planar"] = self._kernel.planar  # 2-D kernels until the state left the plane
-        return out
-
-    def set_internals(self, data: dict) -> None:
-        super().set_internals(data)
-        kernel = getattr(self, "_kernel", None)
-        if kernel is not None and "compiled_planar" in data:
-            kernel.planar = bool(data["compiled_planar"]) and kernel.is_planar_scene
-
-    def _compiled_kernel(self):
-        """The compiled loop of this scene (built with the integrator), or None where the numpy path runs. Its
-        ``planar`` says whether the next interval runs in the plane's coordinates (False forces 3-D)."""
-        from .. import compiled
-
-        if getattr(self, "_kernel", None) is None and compiled.supports(self.dyn):
-            self._kernel = compiled.CompiledRattle(self.dyn)
-        return getattr(self, "_kernel", None)
-
-    def _advance_steps(self, X, U, n, h, F_input):
-        kernel = self._kernel  # decided at construction (None: the numpy path); no per-call lookups here
-        if kernel is not None:
-            remaining = n
-            while remaining:
-                status, X_new, U_new = kernel.advance(X, U, remaining, h, self.gammas, F_input, self.position_tol)
-                if status == COMPILED_OK:
-                    return X_new, U_new
-                # singular configuration or slow projection: the failing step takes the numpy path (it has the
-                # exact-Newton and minimum-norm fallbacks), then the compiled loop resumes. Handing the whole
-                # rest of the interval to numpy made a whipping chain_1000 ~100x slower after one hard step.
-                self.compiled_fallbacks += 1
-                done = kernel.completed_steps
-                if done:
-                    # the kernel's arrays stop inside the failing step: redo the completed steps (the same
-                    # arithmetic, so the same bits) to land on the last step boundary
-                    status, X_done, U_done = kernel.advance(X, U, done, h, self.gammas, F_input, self.position_tol)
-                    if status != COMPILED_OK:
-                        break
-                    X, U, remaining = X_done, U_done, remaining - done
-                X, U = self.step(X, U, h, F_input)
-                remaining -= 1
-            if not remaining:
-                return X, U
-            n = remaining
-        elif self.backend == "compiled":
-            raise SolverError(f"the compiled loop does not handle {self.dyn.structure.kind} scenes; use backend 'auto'")
-        return super()._advance_steps(X, U, n, h, F_input)
 
     def step(self, X, U, h, F_input):
         dyn = self.dyn

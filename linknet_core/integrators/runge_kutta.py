@@ -7,12 +7,8 @@ the order of the method. The step size is controlled by the embedded error estim
 ``rtol``/``atol`` (SI units; atol defaults to rtol). A method is defined by its tableau only; the
 tableaux are those of scipy's RK45 (Dormand-Prince 5(4)) and DOP853 (Hairer's 8(5,3)).
 
-``backend``: 'compiled' runs each interval between two output points in one numba call
-(:mod:`linknet_core.compiled_rk`, the same algorithm on the same tableau); 'auto' does so for the scenes
-the compiled kernels handle (non-redundant) when the right-hand side is the stock numeric one; 'numpy'
-never. Where the compiled kernel cannot go on (a singular configuration, a projection that does not converge,
-non-finite values) the numpy path, which has the fallbacks, takes the trouble from the last accepted step
-and the compiled kernel resumes after it.
+This is the readable reference: the native core (linknet_core/native/src/stages/runge_kutta.c) runs the
+same algorithm on the same tableau, and the tests hold the two together to round-off.
 """
 from __future__ import annotations
 
@@ -22,7 +18,6 @@ import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _dop853
 from scipy.integrate._ivp.rk import RK45 as _RK45
 
-from ..compiled_kernels import OK as COMPILED_OK, STEP_UNDERFLOW, TOO_MANY_STEPS
 from ..errors import SolverError
 from .base import Integrator
 
@@ -42,15 +37,8 @@ class ProjectedRungeKutta(Integrator):
     error_norm_kind = "rms"
     error_estimator_order: int
     n_stages: int
-    compiled_fallbacks = 0  # hand-overs from the compiled kernel to the numpy path (one per kernel failure)
-
-    def __init__(self, dynamics, rtol: float = 1e-8, atol: float | None = None, h0: float | None = None,
-                 backend: str = "auto"):
+    def __init__(self, dynamics, rtol: float = 1e-8, atol: float | None = None, h0: float | None = None):
         super().__init__(dynamics)
-        if backend not in ("auto", "numpy", "compiled"):
-            raise SolverError(f"backend must be 'auto', 'numpy' or 'compiled', got {backend!r}")
-        self.backend = backend
-        self._compiled_ok: bool | None = None
         for name, value in (("rtol", rtol), ("atol", atol)):
             if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise SolverError(f"{name} must be a positive finite tolerance, got {value!r}")
@@ -60,28 +48,15 @@ class ProjectedRungeKutta(Integrator):
         self.atol = float(atol if atol is not None else rtol)
         self.h = h0  # next step size; None until the first step is chosen
         self.free = dynamics.scene.free_indices
-        self._kernel = None
-        # the compiled kernel's per-scene arrays are built here, not inside the first (timed) advance; a
-        # backend='compiled' that cannot be honoured is still reported by advance, as for every other error
-        try:
-            if self.compiled_available():
-                self._compiled_kernel()
-        except SolverError:
-            self._compiled_ok = None
 
     def internals(self) -> dict:
         out = super().internals()
         out["h"] = self.h
-        if getattr(self, "_kernel", None) is not None:
-            out["compiled_planar"] = self._kernel.planar  # 2-D kernels until the state left the plane
         return out
 
     def set_internals(self, data: dict) -> None:
         super().set_internals(data)
         self.h = data["h"]
-        kernel = getattr(self, "_kernel", None)
-        if kernel is not None and "compiled_planar" in data:
-            kernel.planar = bool(data["compiled_planar"]) and kernel.is_planar_scene
 
     # ---- one attempted step ------------------------------------------------------------------
     def _f(self, X, U, F_input):
@@ -149,119 +124,31 @@ class ProjectedRungeKutta(Integrator):
         X_new, _ = self.dyn.project_positions(X_new, tol=1e-14)
         return X_new, self.dyn.project_velocities(X_new, U_new)
 
-    # ---- compiled path ----------------------------------------------------------------------------
-    def compiled_available(self) -> bool:
-        """Whether this integrator runs its intervals in the compiled kernel (decided once)."""
-        if self._compiled_ok is None:
-            self._compiled_ok = self._decide_compiled()
-        return self._compiled_ok
-
-    def _decide_compiled(self) -> bool:
-        from .. import compiled
-        from ..dynamics import Dynamics
-
-        if self.backend == "numpy":
-            return False
-        # the kernel re-implements Dynamics' right-hand side: a casadi kernel or an overridden accelerations()
-        # was asked for explicitly, so 'auto' leaves it to them
-        stock = self.dyn.rhs_kernel == "numpy" and type(self.dyn).accelerations is Dynamics.accelerations
-        ok = compiled.supports(self.dyn) and stock
-        if self.backend == "compiled" and not ok:
-            why = (f"{self.dyn.structure.kind} scenes" if not compiled.supports(self.dyn)
-                   else "a right-hand side other than the stock numeric one")
-            raise SolverError(f"the compiled Runge-Kutta kernel does not handle {why}; use backend 'auto'")
-        return ok
-
-    def _compiled_kernel(self):
-        """The compiled kernel of this scene and tableau (built with the integrator): its ``planar`` says whether
-        the next interval runs in the plane's coordinates (set it False to force the 3-D kernels)."""
-        if getattr(self, "_kernel", None) is None:
-            from ..compiled_rk import ERROR_KINDS, CompiledRungeKutta
-
-            kind = ERROR_KINDS[self.error_norm_kind]
-            self._kernel = CompiledRungeKutta(self.dyn, self.A, self.B, self.error_weights, kind,
-                                              self.error_estimator_order)
-        return self._kernel
-
     def fixed_steps(self, X, U, h, n, F_input=None):
-        """n steps of size h without error control, each followed by the projections (order measurements);
-        in the compiled kernel when available, else by :meth:`step`. Returns (X, U)."""
-        if self.compiled_available():
-            status, X_new, U_new, *_ = self._compiled_kernel().advance(
-                X, U, 0.0, n * h, h, F_input, self.rtol, self.atol, n, (SAFETY, MIN_FACTOR, MAX_FACTOR), n_fixed=n)
-            if status == COMPILED_OK:
-                return X_new, U_new
+        """n steps of size h without error control, each followed by the projections (order measurements).
+        Returns (X, U)."""
         for _ in range(n):
             X, U = self.step(X, U, h, F_input)
         return X, U
 
     # ---- driver ------------------------------------------------------------------------------
     def advance(self, state, t_target, F_input, max_steps):
-        X, U, t, t_start = state.X, state.U, state.t, state.t
-        if not self.compiled_available():
-            X, U, _, _ = self._advance_numpy(X, U, t, t_start, t_target, F_input, max_steps, 0)
-            state.X, state.U, state.t = X, U, t_target
-            return
-        kernel = self._compiled_kernel()
-        steps = 0  # accepted in this interval by the compiled and numpy pieces together: max_steps bounds them all
-        numpy_run = 0  # accepted steps the numpy path takes at the next hand-over
-        while True:
-            status, X, U, t, self.h, done, rejected, n_rhs = kernel.advance(
-                X, U, t, t_target, self.h, F_input, self.rtol, self.atol, max_steps - steps,
-                (SAFETY, MIN_FACTOR, MAX_FACTOR))
-            steps += done
-            self.stats.steps += done
-            self.stats.rejected += rejected
-            self.dyn.rhs_evaluations += n_rhs
-            if status == COMPILED_OK:
-                break
-            if status == STEP_UNDERFLOW:
-                raise self._underflow(t)
-            if status == TOO_MANY_STEPS:
-                raise self._too_many(max_steps, t_start, t_target)
-            # a singular configuration, a slow projection or non-finite values: the kernel stopped at its last
-            # accepted step (X, U, t and the step size h it would try next). The numpy path, which has the
-            # fallbacks (exact Newton, minimum-norm tensions, step rejection) or the error message, takes the
-            # trouble from there, then the kernel resumes from the numpy path's accepted state and step size.
-            # Handing the numpy path the whole rest of the interval made chain_1000 released from horizontal
-            # (dopri5, rtol 1e-4 or 1e-3, one 2 s interval, a projection the kernel cannot converge in the first
-            # steps) 12x slower. A kernel that fails again before accepting a step has wasted one attempt: the
-            # numpy run then doubles, so a long hard stretch wastes a few attempts, not one per step.
-            self.compiled_fallbacks += 1
-            numpy_run = 2 * numpy_run if (numpy_run and not done) else 1
-            X, U, t, steps = self._advance_numpy(X, U, t, t_start, t_target, F_input, max_steps, steps,
-                                                 stop_after=numpy_run)
-            if t >= t_target:
-                break
-        state.X, state.U, state.t = X, U, t_target
-
-    def _underflow(self, t):
-        return SolverError(f"step size underflow at t = {t}: the tolerance rtol = {self.rtol} cannot be "
-                           "met (singular configuration or discontinuous input?)")
-
-    @staticmethod
-    def _too_many(max_steps, t_start, t_target):
-        return SolverError(f"more than {max_steps} steps between t = {t_start} and t = {t_target}; "
-                           "raise max_steps or the tolerance")
-
-    def _advance_numpy(self, X, U, t, t_start, t_target, F_input, max_steps, steps, stop_after=None):
-        """The numpy path from (X, U) at t towards t_target, in the interval that began at t_start with ``steps``
-        accepted already; it stops at t_target or, given ``stop_after``, after that many accepted steps of its
-        own. Leaves the next step size in self.h and returns the accepted (X, U, t, steps); t is t_target
-        exactly once reached."""
+        """From the state towards t_target with error control; leaves the next step size in self.h."""
         dyn = self.dyn
+        X, U, t, t_start = state.X, state.U, state.t, state.t
         k0 = self._f(X, U, F_input)
         if self.h is None:
             self.h = self._initial_step(X, U, k0, F_input, t_target - t)
         exponent = -1.0 / (self.error_estimator_order + 1)
-        accepted = 0
+        steps = 0
         while t < t_target:
             remaining = t_target - t
             h = min(self.h, remaining)
             if h < remaining < 1.1 * h:  # avoid a sliver of a last step: split the rest in two
                 h = 0.5 * remaining
             if h <= 16 * np.spacing(max(abs(t), 1.0)) and h < remaining:
-                raise self._underflow(t)
+                raise SolverError(f"step size underflow at t = {t}: the tolerance rtol = {self.rtol} cannot be "
+                                  "met (singular configuration or discontinuous input?)")
             X_new, U_new, KX, KU = self._attempt(X, U, h, k0, F_input)
             err = self.error_norm(KX, KU, h, self._scale(X, U, X_new, U_new))
             if not math.isfinite(err):
@@ -269,26 +156,24 @@ class ProjectedRungeKutta(Integrator):
                 self.h = h * MIN_FACTOR
                 continue
             if err <= 1.0:
-                X_new, _ = dyn.project_positions(X_new, tol=1e-14)
-                U_new = dyn.project_velocities(X_new, U_new)
+                X_new, _ = dyn.project_positions(X_new, tol=1e-14)  # onto (11)
+                U_new = dyn.project_velocities(X_new, U_new)  # onto (12)
                 t = t_target if h == remaining else t + h
                 X, U = X_new, U_new
                 factor = MAX_FACTOR if err == 0 else min(MAX_FACTOR, SAFETY * err ** exponent)
                 # a step shortened only to land on t_target says nothing against the longer step
                 self.h = max(self.h, h * factor) if h < self.h else h * factor
                 steps += 1
-                accepted += 1
                 self.stats.steps += 1
                 if steps > max_steps:
-                    raise self._too_many(max_steps, t_start, t_target)
-                if accepted == stop_after:
-                    break  # whoever takes over evaluates the first stage of the next step itself
+                    raise SolverError(f"more than {max_steps} steps between t = {t_start} and t = {t_target}; "
+                                      "raise max_steps or the tolerance")
                 if t < t_target:  # the first stage of the next step (none after the last one)
                     k0 = self._f(X, U, F_input)
             else:
                 self.stats.rejected += 1
                 self.h = h * max(MIN_FACTOR, SAFETY * err ** exponent)
-        return X, U, t, steps
+        state.X, state.U, state.t = X, U, t_target
 
 
 class DOPRI5(ProjectedRungeKutta):
