@@ -13,7 +13,6 @@ Rules this file keeps (see docs/fmu.md):
   operations instead of pythonfmu's per-variable getter calls.
 """
 import linknet_fmu.libpython_global  # noqa: F401  first: C hosts need libpython's symbols global
-import linknet_fmu.stable_core  # noqa: F401  before linknet_core: numba's kernel cache must survive new processes
 
 import copy
 import json

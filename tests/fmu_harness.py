@@ -26,13 +26,6 @@ DONE = "LINKNET-FMU-CLIENT-DONE"
 sys.path.insert(0, str(ROOT))
 import build_fmu  # noqa: E402
 
-# Every client is a fresh process that unpacks its FMU anew: one stable copy of linknet_core for the whole
-# session (fmu_src/linknet_fmu/stable_core.py) lets numba compile the kernels once, not once per client,
-# and keeps the tests out of the user's ~/.cache.
-import tempfile  # noqa: E402
-
-os.environ.setdefault("LINKNET_FMU_CACHE", tempfile.mkdtemp(prefix="linknet_fmu_cache_"))
-
 _cache: dict = {}
 
 
