@@ -234,7 +234,7 @@ def test_constant_input_force_equals_scene_force():
     np.testing.assert_allclose(with_input.T, in_scene.T, atol=1e-12)
 
 
-@pytest.mark.parametrize("method,backend", [("rattle", "numpy"), ("rattle", "compiled"), ("yoshida4", "compiled")])
+@pytest.mark.parametrize("method,backend", [("rattle", "numpy"), ("rattle", "native"), ("yoshida4", "native")])
 def test_rattle_keeps_its_order_with_drag_and_dampers(method, backend):
     """Drag and a damper make the forces velocity-dependent; RATTLE's second half kick is then implicit in
     the new velocity, so the step stays symmetric and the order nominal (explicit in the half-step velocity
