@@ -113,6 +113,8 @@ data_new = _declare("ln_data_new", Data_p, Model_p, ln_int)
 data_free = _declare("ln_data_free", None, Data_p)
 advance = _declare("ln_advance", ctypes.c_int, Model_p, Method_p, Data_p, ctypes.c_double, ln_int)
 evaluate = _declare("ln_evaluate", ctypes.c_int, Model_p, Data_p, c_double_p, c_double_p)
+evaluate_repeated = _declare("ln_evaluate_repeated", ctypes.c_int, Model_p, Data_p, ctypes.c_int, c_double_p,
+                             c_double_p, ln_int)
 fixed_step_count = _declare("ln_fixed_step_count", ln_int, ctypes.c_double, ctypes.c_double)
 sizeof = _declare("ln_sizeof", ctypes.c_size_t, ctypes.c_int)
 ldl_analyse = _declare("ln_ldl_analyse", ctypes.c_void_p, ln_int, ln_int, ln_int_p, ln_int_p, ln_int_p)

@@ -94,6 +94,25 @@ int ln_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U)
     return ln_accelerations_3d(m, d, X, U, d->F_base, d->acc, d->T, 1);
 }
 
+int ln_evaluate_repeated(const ln_model *m, ln_data *d, int dim, const double *X, const double *U, ln_int n)
+{
+    if (!base_forces(m, d, d->F_base)) return LN_NON_FINITE;
+    const double *F_base = d->F_base;
+    if (dim == 2) {  /* X, U are in the plane's coordinates: the base force goes there too */
+        const double *P = m->plane_P;
+        for (ln_int k = 0; k < m->K; k++)
+            for (int j = 0; j < 2; j++)
+                d->Fp[2 * k + j] = P[j] * d->F_base[3 * k] + P[2 + j] * d->F_base[3 * k + 1] + P[4 + j] * d->F_base[3 * k + 2];
+        F_base = d->Fp;
+    }
+    int status = LN_OK;
+    for (ln_int i = 0; i < n && status == LN_OK; i++)
+        status = dim == 2 ? ln_accelerations_2d(m, d, X, U, F_base, d->acc, d->T, 1)
+                          : ln_accelerations_3d(m, d, X, U, F_base, d->acc, d->T, 1);
+    d->n_rhs += n;
+    return status;
+}
+
 /* The state and base forces in the plane's coordinates: X = P^T (X3 - o), U = P^T U3, F = P^T F3. 0 when a
    position, velocity or force on a free mass has a component along the normal beyond round-off. */
 static int enter_plane(const ln_model *m, ln_data *d)

@@ -183,6 +183,11 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
    direct feedthrough of F). Minimum-norm where A is singular. Results in d->T, d->acc. */
 int ln_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U);
 
+/* n evaluations of the right-hand side at the same state in one call, in dim = 3 or (planar scenes, X and U
+   in the plane's coordinates, (K,2)) dim = 2 components: the right-hand side the integrators call, timed
+   without a call from Python for each (benchmarks). Results in d->acc, d->T (in dim components). */
+int ln_evaluate_repeated(const ln_model *m, ln_data *d, int dim, const double *X, const double *U, ln_int n);
+
 /* Equal steps no longer than dt that land on the target: how many (a whole number up to round-off is that
    number, not one more). */
 ln_int ln_fixed_step_count(double span, double dt);
