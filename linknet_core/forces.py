@@ -45,7 +45,8 @@ def external_forces(scene: Scene, X: np.ndarray, U: np.ndarray, F_input: np.ndar
 
 
 def has_velocity_dependent_forces(scene: Scene) -> bool:
-    return bool(np.any(scene.drag > 0) or np.any(scene.springs.damping > 0))
+    """Drag on a free mass or a damper: RATTLE's second half kick is then implicit in the new velocity."""
+    return bool(np.any((scene.drag != 0) & ~scene.fixed) or np.any(scene.springs.damping != 0))
 
 
 def potential_energy(scene: Scene, X: np.ndarray) -> float:

@@ -25,6 +25,7 @@ DENSE_RANK_LIMIT = 2500  # links; above it, rank is estimated from the LDL pivot
 # eigenvalue of A = C M^-1 C^T below SINGULAR_RCOND times the largest is zero. In terms of singular values
 # of C that is sqrt(SINGULAR_RCOND) = 1e-5 relative.
 SINGULAR_RCOND = 1e-10
+PLANE_TOL = 1e-12  # an out-of-plane component at most this relative to its size is round-off (dropped in 2-D)
 
 
 @dataclass(frozen=True)
@@ -188,7 +189,7 @@ def rank_and_nullspace(scene: Scene, X: np.ndarray, rtol: float = SINGULAR_RCOND
     return rank, U[:, rank:]
 
 
-def planar_normal(scene: Scene, tol: float = 1e-12) -> np.ndarray | None:
+def planar_normal(scene: Scene, tol: float = PLANE_TOL) -> np.ndarray | None:
     """Normal of the plane holding every mass, velocity, gravity and constant force, if there is one."""
     X = scene.X0
     origin = X.mean(axis=0)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import SolverError
+from ..forces import has_velocity_dependent_forces
 from .base import FixedStepIntegrator
 
 
@@ -35,13 +36,9 @@ class Rattle(FixedStepIntegrator):
         # velocity stage: half kick with the new forces, then projection onto (12) at X_new
         F1 = dyn.forces(X_new, U_half, F_input)
         U_new = dyn.project_velocities(X_new, U_half + 0.5 * h * inv_m * F1)
-        if self._velocity_dependent():
+        if has_velocity_dependent_forces(self.dyn.scene):
             U_new = self._implicit_kick(X_new, U_half, U_new, h, F_input)
         return X_new, U_new
-
-    def _velocity_dependent(self) -> bool:
-        scene = self.dyn.scene
-        return bool((scene.drag != 0).any() or (scene.springs.damping != 0).any())
 
     def _implicit_kick(self, X_new, U_half, U_new, h, F_input):
         """Second half kick with the forces at U_{n+1} itself (drag, dampers): the step stays symmetric and

@@ -14,35 +14,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from ..forces import has_velocity_dependent_forces
 from ..integrators.runge_kutta import MAX_FACTOR, MIN_FACTOR, SAFETY
-from ..structure import SINGULAR_RCOND, link_pairs
+from ..structure import PLANE_TOL, SINGULAR_RCOND, link_pairs
 from ..tensions import DENSE_MIN_NORM_LIMIT, PIVOT_TOL
 from . import library as lib
 from .library import float_array, int_array, pointer
-
-PLANE_TOL = 1e-12  # an out-of-plane component at most this relative to its size is round-off (dropped in 2-D)
-
-
-def plane_normal(scene, structure_normal=None, rtol: float = PLANE_TOL):
-    """Unit normal of the plane holding every position, velocity, gravity and constant force, or None.
-
-    ``Structure.planar_normal`` when it found one; else the same test by a thin SVD of those vectors. A scene
-    wrongly taken for planar would still be safe: the 2-D path checks the state and the input of every
-    interval and hands anything off the plane to 3-D.
-    """
-    if structure_normal is not None:
-        return np.asarray(structure_normal, np.float64)
-    X = np.asarray(scene.X0, np.float64)
-    if X.shape[0] == 0:
-        return None
-    vectors = np.vstack([X - X.mean(axis=0), scene.U0, np.asarray(scene.gravity)[None, :], scene.force])
-    scale = np.abs(vectors).max()
-    if not scale > 0:
-        return None
-    _, sv, vt = np.linalg.svd(vectors / scale, full_matrices=False)
-    if sv.shape[0] < 3 or sv[2] > rtol * sv[0]:
-        return None
-    return vt[2]
 
 
 def scene_plane(scene, normal):
@@ -138,7 +115,7 @@ class NativeModel:
         m.n_springs = s.count
         m.spring_a, m.spring_b = i8(s.a), i8(s.b)
         m.spring_k, m.spring_rest, m.spring_c = f8(s.stiffness), f8(s.rest_length), f8(s.damping)
-        m.velocity_dependent = int(drag_idx.size > 0 or bool(np.any(np.asarray(s.damping) != 0.0)))
+        m.velocity_dependent = int(has_velocity_dependent_forces(scene))
 
         pairs = link_pairs(scene)
         weight = pairs.sign * scene.inv_mass[pairs.mass]
@@ -173,7 +150,7 @@ class NativeModel:
                 m.ldl = self._ldl
         self.nnz_L = int(lib.ldl_nnz_L(self._ldl)) if self._ldl else (max(L - 1, 0) if self.solver == "chain" else 0)
 
-        plane = None if planar is False else scene_plane(scene, plane_normal(scene, structure.planar_normal))
+        plane = None if planar is False else scene_plane(scene, structure.planar_normal)
         self.plane = plane
         if plane is not None:
             P, o, n, length = plane
