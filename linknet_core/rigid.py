@@ -272,6 +272,102 @@ def _quaternions(R: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=1)[:, None]
 
 
+def rotation_matrices(q: np.ndarray) -> np.ndarray:
+    """R (B,3,3) of unit quaternions q (B,4) = (w, x, y, z), with the arithmetic of the step loops (so that r_k
+    fitted with it is in the frame of exactly the matrix they use)."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    R = np.empty((q.shape[0], 3, 3))
+    R[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    R[:, 0, 1] = 2.0 * (x * y - w * z)
+    R[:, 0, 2] = 2.0 * (x * z + w * y)
+    R[:, 1, 0] = 2.0 * (x * y + w * z)
+    R[:, 1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    R[:, 1, 2] = 2.0 * (y * z - w * x)
+    R[:, 2, 0] = 2.0 * (x * z - w * y)
+    R[:, 2, 1] = 2.0 * (y * z + w * x)
+    R[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    return R
+
+
+@dataclass(frozen=True)
+class BodyGeometry:
+    """What a rigid-body path fixes once from the initial positions: per body its mass, top kind (0 spherical,
+    1 symmetric, 2 asymmetric), principal moments in the body frame's axis order, and per mass its position
+    r_k in its body's frame (principal axes; zero off the bodies)."""
+
+    body_mass: np.ndarray  # (B,)
+    kind: np.ndarray  # (B,) int64
+    inertia: np.ndarray  # (B,3)
+    r: np.ndarray  # (K,3), read-only
+    inside: np.ndarray  # (K,) bool: the mass belongs to a body
+
+
+def freeze_initial_state(dynamics: Dynamics, X0, U0):
+    """The initial state a body is frozen in: (X0, U0) as given, or, with link lengths off by more than
+    RESHAPE_TOL, projected onto the exact lengths first (as RATTLE's first position stage would). Returns
+    (X0, U0, notes)."""
+    X0, U0 = np.array(X0, float), np.array(U0, float)
+    notes = []
+    if dynamics.constraint_residual(X0) > RESHAPE_TOL:
+        X0, _ = dynamics.project_positions(X0, tol=1e-14)
+        U0 = dynamics.project_velocities(X0, U0)
+        notes.append("initial positions projected onto the exact link lengths before freezing the bodies")
+    return X0, U0, notes
+
+
+def body_geometry(scene: Scene, bodies: BodyLayout, X0: np.ndarray) -> BodyGeometry:
+    """Body frames from the principal axes at X0 (right-handed; a symmetric top's distinct axis is the third,
+    a spherical top keeps the space axes) and the masses' body-frame positions in them."""
+    B, body_of = bodies.count, bodies.body_of
+    inside = body_of >= 0
+    body_mass, c, moments, axes = _principal_moments(scene, X0, body_of, B)
+    kind = _top_kinds(moments)
+    first_pair_equal = moments[:, 1] - moments[:, 0] <= TOP_TOL * moments[:, 2]
+    perm = np.where((kind == 1) & ~first_pair_equal, 1, 0)
+    order = np.array([[0, 1, 2], [1, 2, 0]])[perm]  # cyclic: keeps the handedness
+    frames = np.take_along_axis(axes, order[:, None, :], axis=2)
+    inertia = np.take_along_axis(moments, order, axis=1)
+    symmetric = kind == 1  # the exact flow needs I_1 = I_2 exactly
+    inertia[symmetric, :2] = inertia[symmetric, :2].mean(axis=1)[:, None]
+    frames[kind == 0] = np.eye(3)
+    inertia[kind == 0] = moments[kind == 0].mean(axis=1)[:, None]
+    flip = np.linalg.det(frames) < 0
+    frames[flip, :, 0] *= -1.0
+    R0 = rotation_matrices(_quaternions(frames))
+    rho = X0[inside] - c[body_of[inside]]
+    r = np.zeros_like(X0)  # in the frame of exactly the matrix the step loops use
+    r[inside] = np.einsum("kji,kj->ki", R0[body_of[inside]], rho)
+    r.setflags(write=False)
+    return BodyGeometry(body_mass, kind, inertia, r, inside)
+
+
+def fit_bodies(scene: Scene, bodies: BodyLayout, geometry: BodyGeometry, X, U):
+    """Body state (c, v, q, Pi) of a mass state: centre of mass and momentum, the rotation that best maps r
+    onto X - c (Kabsch, mass-weighted) and the angular momentum about c in the body frame."""
+    inside = geometry.inside
+    B, idx = bodies.count, bodies.body_of[inside]
+    m = scene.mass[inside]
+    Xi, Ui, r = X[inside], U[inside], geometry.r[inside]
+
+    def per_body(values):
+        flat = values.reshape(values.shape[0], -1)
+        return np.stack([np.bincount(idx, weights=flat[:, j], minlength=B) for j in range(flat.shape[1])],
+                        axis=1).reshape((B,) + values.shape[1:])
+
+    c = per_body(m[:, None] * Xi) / geometry.body_mass[:, None]
+    v = per_body(m[:, None] * Ui) / geometry.body_mass[:, None]
+    rho = Xi - c[idx]
+    H = per_body(m[:, None, None] * rho[:, :, None] * r[:, None, :])
+    W, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(W @ Vt))
+    W[:, :, 2] *= d[:, None]
+    q = _quaternions(W @ Vt)
+    R = rotation_matrices(q)
+    L = per_body(m[:, None] * np.cross(rho, Ui - v[idx]))
+    Pi = np.einsum("bji,bj->bi", R, L)
+    return c, v, q, Pi
+
+
 class RigidBodies:
     """What every free-rigid-body path shares (mixed into an integrator): the body layout, the body frames
     (principal axes) and body-frame mass positions r_k fixed once, the body state (c, v, q, Pi), refitting it
@@ -283,40 +379,12 @@ class RigidBodies:
         self._kernels = rigid_kernels
         scene = dynamics.scene
         self.bodies = bodies
-        self.notes: list[str] = []
-        X0, U0 = np.array(X0, float), np.array(U0, float)
-        if dynamics.constraint_residual(X0) > RESHAPE_TOL:
-            # a body is frozen in its initial shape: make the link lengths exact first, as RATTLE's first
-            # position stage would
-            X0, _ = dynamics.project_positions(X0, tol=1e-14)
-            U0 = dynamics.project_velocities(X0, U0)
-            self.notes.append("initial positions projected onto the exact link lengths before freezing the bodies")
+        X0, U0, self.notes = freeze_initial_state(dynamics, X0, U0)
         self.initial_state = (X0, U0)
-        B = bodies.count
-        body_of = bodies.body_of
-        self._inside = body_of >= 0
-        self.body_mass, c, moments, axes = _principal_moments(scene, X0, body_of, B)
-        self.kind = _top_kinds(moments)
-        # body frames: principal axes (right-handed); a symmetric top's distinct axis is the third;
-        # a spherical top keeps the space axes
-        first_pair_equal = moments[:, 1] - moments[:, 0] <= TOP_TOL * moments[:, 2]
-        perm = np.where((self.kind == 1) & ~first_pair_equal, 1, 0)
-        order = np.array([[0, 1, 2], [1, 2, 0]])[perm]  # cyclic: keeps the handedness
-        frames = np.take_along_axis(axes, order[:, None, :], axis=2)
-        self.inertia = np.take_along_axis(moments, order, axis=1)
-        symmetric = self.kind == 1  # the kernel's exact flow needs I_1 = I_2 exactly
-        self.inertia[symmetric, :2] = self.inertia[symmetric, :2].mean(axis=1)[:, None]
-        frames[self.kind == 0] = np.eye(3)
-        self.inertia[self.kind == 0] = moments[self.kind == 0].mean(axis=1)[:, None]
-        flip = np.linalg.det(frames) < 0
-        frames[flip, :, 0] *= -1.0
-        q0 = _quaternions(frames)
-        R0 = np.empty((B, 3, 3))
-        rigid_kernels.rotation_matrices(q0, R0)
-        rho = X0[self._inside] - c[body_of[self._inside]]
-        self.r = np.zeros_like(X0)  # body-frame positions, in the frame of exactly the matrix the kernel uses
-        self.r[self._inside] = np.einsum("kji,kj->ki", R0[body_of[self._inside]], rho)
-        self.r.setflags(write=False)
+        self.geometry = body_geometry(scene, bodies, X0)
+        self._inside = self.geometry.inside
+        self.body_mass, self.kind, self.inertia, self.r = (self.geometry.body_mass, self.geometry.kind,
+                                                           self.geometry.inertia, self.geometry.r)
         # scene arrays for the kernels, in the form of the compiled loops' force model
         # (compiled_kernels.scene_forces: drag on the masses that have it, F_base zero on anchors)
         s = scene.springs
@@ -344,31 +412,7 @@ class RigidBodies:
 
     # ---- body state <-> mass state ---------------------------------------------------------------
     def _fit(self, X, U):
-        """Body state (c, v, q, Pi) of a mass state: centre of mass and momentum, the rotation that best
-        maps r onto X - c (Kabsch, mass-weighted) and the angular momentum about c in the body frame."""
-        scene = self.dyn.scene
-        B, idx = self.bodies.count, self.bodies.body_of[self._inside]
-        m = scene.mass[self._inside]
-        Xi, Ui, r = X[self._inside], U[self._inside], self.r[self._inside]
-
-        def per_body(values):
-            flat = values.reshape(values.shape[0], -1)
-            return np.stack([np.bincount(idx, weights=flat[:, j], minlength=B) for j in range(flat.shape[1])],
-                            axis=1).reshape((B,) + values.shape[1:])
-
-        c = per_body(m[:, None] * Xi) / self.body_mass[:, None]
-        v = per_body(m[:, None] * Ui) / self.body_mass[:, None]
-        rho = Xi - c[idx]
-        H = per_body(m[:, None, None] * rho[:, :, None] * r[:, None, :])
-        W, _, Vt = np.linalg.svd(H)
-        d = np.sign(np.linalg.det(W @ Vt))
-        W[:, :, 2] *= d[:, None]
-        q = _quaternions(W @ Vt)
-        R = np.empty((B, 3, 3))
-        self._kernels.rotation_matrices(q, R)
-        L = per_body(m[:, None] * np.cross(rho, Ui - v[idx]))
-        Pi = np.einsum("bji,bj->bi", R, L)
-        return c, v, q, Pi
+        return fit_bodies(self.dyn.scene, self.bodies, self.geometry, X, U)
 
     def _set_bodies(self, c, v, q, Pi):
         # own copies: a snapshot handed to set_internals stays the caller's (the Simulator no longer deep-copies)
@@ -432,9 +476,7 @@ class RigidBodies:
         return acc
 
     def _rotations(self) -> np.ndarray:
-        R = np.empty((self.bodies.count, 3, 3))
-        self._kernels.rotation_matrices(self._q, R)
-        return R
+        return rotation_matrices(self._q)
 
     def _body_frame_accelerations(self, X, F):
         B, idx = self.bodies.count, self.bodies.body_of[self._inside]

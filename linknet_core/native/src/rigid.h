@@ -80,4 +80,7 @@ int ln_rigid_set_state(const ln_model *m, ln_data *d, const double *Y);
    left as it is. LN_OK, LN_NON_FINITE or LN_BAD_ARGUMENT (not a Runge-Kutta method, n < 1 or h <= 0). */
 int ln_rigid_rk_fixed_steps(const ln_model *m, const ln_method *meth, ln_data *d, double h, ln_int n);
 
+/* sizeof(struct ln_rigid_model): the ctypes mirror's size is checked against it */
+size_t ln_rigid_model_size(void);
+
 #endif
