@@ -27,12 +27,14 @@ VIEWS = ("auto", "xz", "xy", "yz", "3d")
 PLANES = {"xz": (0, 2), "xy": (0, 1), "yz": (1, 2)}  # the two coordinates a flat view shows
 AXIS_NAMES = "xyz"
 DEFAULT_CMAP = "coolwarm"  # diverging, perceptually balanced; its T = 0 grey stays visible on white
+DENSE_MASSES = 300
 DEFAULT_SIZE = (800, 600)  # pixels of an animation or still
 DPI = 100
 DEFAULT_FPS = 25.0
 DEFAULT_MAX_FRAMES = 250  # ten seconds of animation at the default frame rate
 GIF_MAX_FPS = 50.0  # GIF delays are whole centiseconds, and browsers slow anything under 2 cs to 10 cs
 HTML_MAX_FRAMES = 100
+HTML_VIEW_PX = 450  # width of the scene box on a 1000 px wide page at the default zoom (measured in Chromium)
 ORTHOGRAPHIC_ZOOM = 2.5  # a flat view's network fills about the plot's width (measured in Chromium)
 HTML_FRAME_BUDGET = 40e6  # bytes of frame data in an HTML view before frames are thinned by default
 ANIMATION_SUFFIXES = (".gif", ".mp4")
@@ -210,13 +212,19 @@ def tension_colours(cmap_name: str, limit: float):
 
 
 def _marker_size(count: int) -> float:
-    """Mass marker diameter (points): big enough to see on a few masses, small enough not to hide a 100 x 100 net."""
-    return 7.0 if count <= 30 else 3.0 if count <= 300 else 1.5 if count <= 3000 else 0.8
+    """Mass marker diameter (points in the animation, pixels in the HTML view) for ``count`` masses."""
+    return 7.0 if count <= 30 else 4.0 if count <= DENSE_MASSES else 2.0
+
+
+def _shows_free_masses(motion: Motion) -> bool:
+    """Up to DENSE_MASSES masses are drawn; more would bury the links' colours under their markers, and the links
+    draw the network's shape anyway (the HTML view keeps them one legend click away)."""
+    return motion.K <= DENSE_MASSES
 
 
 def _line_width(count: int) -> float:
-    """Link width (points), for the same reason."""
-    return 3.0 if count <= 30 else 2.0 if count <= 300 else 1.0 if count <= 3000 else 0.5
+    """Link width (points) for ``count`` links: thick on a few, thin enough to keep a 100 x 100 net's cells apart."""
+    return 3.0 if count <= 30 else 2.5 if count <= 300 else 1.8 if count <= 3000 else 0.8
 
 
 def _time_format(times: np.ndarray) -> str:
@@ -268,6 +276,7 @@ class NetworkFigure:
         nothing = ([], [], []) if self.view == "3d" else ([], [])
         (self.free_marks,) = ax.plot(*nothing, ls="none", marker="o", ms=mass_size, color="0.15", zorder=3,
                                      label="mass")
+        self.free_marks.set_visible(_shows_free_masses(motion))
         (self.anchor_marks,) = ax.plot(*nothing, ls="none", marker="s", ms=max(1.6 * mass_size, 7.0), mfc="black",
                                        mec="white", mew=0.6, zorder=4, label="anchored mass")
         self._free, self._anchored = free, anchored
@@ -277,7 +286,8 @@ class NetworkFigure:
                           label="link tension T, N   (> 0 pulls, < 0 pushes)")
         # time stamp and legend outside the axes, where they never cover the network
         self.stamp = ax.set_title("\n", loc="left", fontsize=9, family="monospace")
-        handles = [self.free_marks] + ([self.anchor_marks] if anchored.any() else [])
+        handles = [marks for marks, shown in ((self.free_marks, _shows_free_masses(motion)),
+                                              (self.anchor_marks, anchored.any())) if shown]
         self.fig.legend(handles=handles, loc="outside lower center", fontsize=8, frameon=False, ncols=len(handles))
         self._time_format = _time_format(motion.t if times is None else times)
 
@@ -411,6 +421,17 @@ def html_default_max_frames(motion: Motion) -> int:
     return int(max(2, min(HTML_MAX_FRAMES, HTML_FRAME_BUDGET // _html_bytes_per_frame(motion))))
 
 
+def _link_shortening(motion: Motion, radius_px: float) -> float:
+    """Fraction of its length a link leaves out at each end so that it ends about ``radius_px`` from its masses
+    on the screen, in a view whose box spans HTML_VIEW_PX pixels (at most 0.3: every link stays visible)."""
+    if not motion.L:
+        return 0.0
+    lengths = np.linalg.norm(motion.X[0, motion.k2] - motion.X[0, motion.k1], axis=1)
+    low, high = motion.bounds("3d")
+    link_px = float(np.median(lengths)) / float(np.max(high - low)) * HTML_VIEW_PX
+    return min(0.3, radius_px / link_px) if link_px > 0 else 0.0
+
+
 def _camera(view: str, elev: float, azim: float) -> dict:
     """plotly camera looking along the dropped axis for a flat view (orthographic, as the animation's 2-D
     axes), or from (elev, azim) as matplotlib's 3-D view for 3d."""
@@ -425,10 +446,10 @@ def _camera(view: str, elev: float, azim: float) -> dict:
 def build_html_figure(motion: Motion, *, view: str = "auto", max_frames: int | None = None,
                       fps: float = DEFAULT_FPS, speed: float = 1.0, cmap: str = DEFAULT_CMAP,
                       tension_range: float | None = None, elev: float = 25.0, azim: float = -60.0):
-    """The plotly figure of the HTML view: trace 0 the links (one line trace, coloured per vertex by T, gaps
-    between links), trace 1 the link midpoints (coloured by T, the hover targets: link number, its masses
-    and T), trace 2 the free masses, trace 3 the anchored ones; one frame per shown sample, a time slider
-    and play / pause buttons. Returns (figure, frame indices)."""
+    """The plotly figure of the HTML view: trace 0 the links (one line trace, coloured per vertex by T, a gap
+    between links; hovering a link shows its number, its masses and T), trace 1 the free masses, trace 2 the
+    anchored ones; one frame per shown sample, a time slider and play / pause buttons.
+    Returns (figure, frame indices)."""
     import plotly.graph_objects as go
 
     view = motion.resolve_view(view)
@@ -438,43 +459,48 @@ def build_html_figure(motion: Motion, *, view: str = "auto", max_frames: int | N
     free, anchored = ~motion.fixed, motion.fixed
     L = motion.L
 
-    def link_vertices(i):  # (3L, 3) float32: k1 end, k2 end, a NaN gap, per link
-        X = motion.X[i].astype(np.float32)
+    mass_px, masses_shown = _marker_size(motion.K), _shows_free_masses(motion)
+    # plotly draws a marker as a flat disc facing the camera, so a link running toward the viewer covers the half
+    # of each of its masses it passes in front of: links stop short of their masses by a marker radius at the
+    # default zoom, where the disc hides the gap
+    shortening = _link_shortening(motion, mass_px / 2) if masses_shown else 0.0
+
+    def link_vertices(i):  # (3L, 3) float32: near k1 end, near k2 end, a NaN gap, per link
+        X = motion.X[i]
+        along = X[motion.k2] - X[motion.k1]
         vertices = np.full((L, 3, 3), np.nan, np.float32)
-        vertices[:, 0], vertices[:, 1] = X[motion.k1], X[motion.k2]
+        vertices[:, 0], vertices[:, 1] = X[motion.k1] + shortening * along, X[motion.k2] - shortening * along
         return vertices.reshape(-1, 3)
 
     def moving_traces(i):
-        X, T = motion.X[i].astype(np.float32), motion.T[i].astype(np.float32)
-        vertices, middles = link_vertices(i), 0.5 * (X[motion.k1] + X[motion.k2])
-        return [go.Scatter3d(x=vertices[:, 0], y=vertices[:, 1], z=vertices[:, 2], line=dict(color=np.repeat(T, 3))),
-                go.Scatter3d(x=middles[:, 0], y=middles[:, 1], z=middles[:, 2], marker=dict(color=T)),
+        X, vertices = motion.X[i].astype(np.float32), link_vertices(i)
+        return [go.Scatter3d(x=vertices[:, 0], y=vertices[:, 1], z=vertices[:, 2],
+                             line=dict(color=np.repeat(motion.T[i].astype(np.float32), 3))),
                 go.Scatter3d(x=X[free, 0], y=X[free, 1], z=X[free, 2])]
 
     first = int(frames[0])
-    links, middles, masses = moving_traces(first)
-    links.update(mode="lines", name="links", hoverinfo="skip", showlegend=False,
-                 line=dict(width=max(2.0, 2 * _line_width(L)), **scale))
-    link_ends = np.stack([np.arange(1, L + 1), motion.k1 + 1, motion.k2 + 1], axis=1)
-    # midpoint markers as wide as the line: they read as part of it, and they are what the pointer hovers on
-    middles.update(mode="markers", name="links (hover for T)", customdata=link_ends,
-                   marker=dict(size=links.line.width, colorbar=dict(title=dict(text="T, N"),
-                               len=0.75), showscale=True, **scale),
-                   hovertemplate="link %{customdata[0]} (masses %{customdata[1]}-%{customdata[2]})"
-                                 "<br>T = %{marker.color:.5g} N<extra></extra>")
+    links, masses = moving_traces(first)
+    # every vertex of a link carries the link's number and its masses: the hover label of whichever is nearest
+    link_ends = np.repeat(np.stack([np.arange(1, L + 1), motion.k1 + 1, motion.k2 + 1], axis=1), 3, axis=0)
+    links.update(mode="lines", name="links", customdata=link_ends,
+                 line=dict(width=max(2.0, 2 * _line_width(L)), showscale=True,
+                           colorbar=dict(title=dict(text="T, N"), len=0.75), **scale),
+                 hovertemplate="link %{customdata[0]} (masses %{customdata[1]}-%{customdata[2]})"
+                               "<br>T = %{line.color:.5g} N<extra></extra>")
     free_numbers = np.flatnonzero(free) + 1
-    masses.update(mode="markers", name="masses", marker=dict(size=1.5 * _marker_size(motion.K), color="#262626"),
+    masses.update(mode="markers", name="masses", marker=dict(size=mass_px, color="#262626"),
+                  visible=True if masses_shown else "legendonly",
                   text=[f"mass {k} ({motion.mass_names[k - 1]})" for k in free_numbers],
                   hovertemplate="%{text}<br>(%{x:.4g}, %{y:.4g}, %{z:.4g}) m<extra></extra>")
     X0 = motion.X[first]
     anchors = go.Scatter3d(x=X0[anchored, 0], y=X0[anchored, 1], z=X0[anchored, 2], mode="markers",
                            name="anchored masses",
-                           marker=dict(size=2.2 * _marker_size(motion.K), color="black", symbol="square"),
+                           marker=dict(size=max(1.6 * mass_px, 7.0), color="black", symbol="square"),
                            text=[f"mass {k + 1} ({motion.mass_names[k]}), anchored" for k in np.flatnonzero(anchored)],
                            hovertemplate="%{text}<br>(%{x:.4g}, %{y:.4g}, %{z:.4g}) m<extra></extra>")
     time_format = _time_format(motion.t[frames])
     labels = [time_format.format(motion.t[i]) for i in frames]
-    figure_frames = [go.Frame(name=str(i), data=moving_traces(int(i)), traces=[0, 1, 2]) for i in frames]
+    figure_frames = [go.Frame(name=str(i), data=moving_traces(int(i)), traces=[0, 1]) for i in frames]
     animate = dict(mode="immediate", frame=dict(duration=0, redraw=True), transition=dict(duration=0))
     slider = dict(active=0, x=0.13, len=0.85, y=0.02, pad=dict(t=30, b=10),
                   currentvalue=dict(prefix="t = ", suffix=" s", font=dict(size=14)),
@@ -503,7 +529,7 @@ def build_html_figure(motion: Motion, *, view: str = "auto", max_frames: int | N
         legend=dict(x=0.01, y=0.92),
         scene=dict(aspectmode="manual", aspectratio=dict(zip("xyz", aspect.tolist())),
                    camera=_camera(view, elev, azim), **axes))
-    return go.Figure(data=[links, middles, masses, anchors], layout=layout, frames=figure_frames), frames
+    return go.Figure(data=[links, masses, anchors], layout=layout, frames=figure_frames), frames
 
 
 def write_html(motion: Motion, path, **options) -> Written:
