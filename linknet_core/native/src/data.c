@@ -57,7 +57,7 @@ ln_data *ln_data_new(const ln_model *m, ln_int n_stages)
              && d->E0 && d->E1 && d->B && d->mu && d->phi && d->scale && d->work && d->KX && d->KU
              && d->pair_values && d->chain_sub && d->chain_Dinv;
     if (ok && m->solver == LN_SOLVER_LDL) ok = (d->ldl = ln_ldl_numeric_new(m->ldl)) != NULL;
-    if (ok && m->rigid) ok = (d->rigid = ln_rigid_data_new(m)) != NULL;
+    if (ok && m->rigid) ok = (d->rigid = ln_rigid_data_new(m, n_stages)) != NULL;
     if (!ok) {
         ln_data_free(d);
         return NULL;
@@ -73,9 +73,7 @@ ln_int ln_fixed_step_count(double span, double dt)
     return n < 1.0 ? 1 : (ln_int)n;
 }
 
-/* Gravity, constant forces and the held input: the part of F_k of (9) fixed over an interval; zero on
-   anchors, where no force acts. */
-static int base_forces(const ln_model *m, const ln_data *d, double *F_base)
+int ln_base_forces(const ln_model *m, const ln_data *d, double *F_base)
 {
     double total = 0.0;
     for (ln_int k = 0; k < m->K; k++)
@@ -89,14 +87,14 @@ static int base_forces(const ln_model *m, const ln_data *d, double *F_base)
 
 int ln_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U)
 {
-    if (!base_forces(m, d, d->F_base)) return LN_NON_FINITE;
+    if (!ln_base_forces(m, d, d->F_base)) return LN_NON_FINITE;
     d->n_rhs++;
     return ln_accelerations_3d(m, d, X, U, d->F_base, d->acc, d->T, 1);
 }
 
 int ln_evaluate_repeated(const ln_model *m, ln_data *d, int dim, const double *X, const double *U, ln_int n)
 {
-    if (!base_forces(m, d, d->F_base)) return LN_NON_FINITE;
+    if (!ln_base_forces(m, d, d->F_base)) return LN_NON_FINITE;
     const double *F_base = d->F_base;
     if (dim == 2) {  /* X, U are in the plane's coordinates: the base force goes there too */
         const double *P = m->plane_P;
@@ -190,7 +188,7 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
     d->fail_link = -1;
     d->fail_t = d->t;
     if (!(isfinite(t_target) && t_target > d->t) || max_steps < 1) return d->status = LN_BAD_ARGUMENT;
-    if (!base_forces(m, d, d->F_base)) return d->status = LN_NON_FINITE;
+    if (!ln_base_forces(m, d, d->F_base)) return d->status = LN_NON_FINITE;
     if (meth->kind == LN_STATIC) {  /* 0 degrees of freedom: nothing moves */
         d->t = t_target;
         d->last_steps = 0;

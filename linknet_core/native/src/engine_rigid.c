@@ -36,6 +36,10 @@
 #include "linknet.h"
 #include "rigid.h"
 
+#define FN(name) name##_3d  /* the rigid path is 3-D: the point-mass stages it shares are the 3-D ones */
+#include "stages.h"
+#undef FN
+
 #define NY LN_RIGID_STATE
 #define IMPLICIT_KICK_ITERATIONS 100
 
@@ -56,7 +60,7 @@ void ln_rigid_data_free(struct ln_rigid_data *r)
     free(r);
 }
 
-struct ln_rigid_data *ln_rigid_data_new(const ln_model *m)
+struct ln_rigid_data *ln_rigid_data_new(const ln_model *m, ln_int n_stages)
 {
     if (!m->rigid) return NULL;
     struct ln_rigid_data *r = calloc(1, sizeof *r);
@@ -67,7 +71,7 @@ struct ln_rigid_data *ln_rigid_data_new(const ln_model *m)
     r->f = doubles(3 * B); r->tau = doubles(3 * B); r->w = doubles(3 * B); r->th = doubles(3 * B);
     r->v0 = doubles(3 * B); r->Pi0 = doubles(3 * B); r->v_prev = doubles(3 * B); r->Pi_prev = doubles(3 * B);
     r->Ys = doubles(NY * B); r->Yn = doubles(NY * B);
-    r->KY = doubles((LN_RIGID_MAX_STAGES + 1) * NY * B);
+    r->KY = doubles(((n_stages > 0 ? n_stages : 0) + 1) * NY * B);
     if (!(r->Y && r->Y_start && r->R && r->f && r->tau && r->w && r->th && r->v0 && r->Pi0 && r->v_prev && r->Pi_prev
           && r->Ys && r->Yn && r->KY)) {
         ln_rigid_data_free(r);
@@ -438,65 +442,6 @@ static void combine_rows(ln_int size, const double *Y, double h, const double *A
     }
 }
 
-/* The step-size controller of the point-mass path (stages/runge_kutta.c), the same rules: the step taken
-   next from t, cut to land on t_target with no sliver of a last step (-1: underflow within 16 ulps of t);
-   the step after an accepted or rejected one; the error norm over the free masses' coordinates, the mean
-   over 6 per free mass. */
-static double controlled_step(double h_next, double t, double t_target)
-{
-    const double remaining = t_target - t;
-    double h = fmin(h_next, remaining);
-    if (h < remaining && remaining < 1.1 * h) h = 0.5 * remaining;
-    const double tt = fmax(fabs(t), 1.0);
-    if (h <= 16.0 * (nextafter(tt, INFINITY) - tt) && h < remaining) return -1.0;
-    return h;
-}
-
-static double next_step_size(const ln_method *meth, double h, double h_next, double err)
-{
-    if (err > 1.0) return h * fmax(meth->min_factor, meth->safety * pow(err, meth->exponent));
-    const double factor = err == 0.0 ? meth->max_factor
-                                     : fmin(meth->max_factor, meth->safety * pow(err, meth->exponent));
-    /* a step shortened only to land on t_target says nothing against the longer step */
-    return h < h_next ? fmax(h_next, h * factor) : h * factor;
-}
-
-static inline double weighted(const double *coef, ln_int n, const double *KY, ln_int size, ln_int i)
-{
-    double s = 0.0;
-    for (ln_int j = 0; j < n; j++)
-        if (coef[j] != 0.0) s += coef[j] * KY[j * size + i];
-    return s;
-}
-
-static double error_norm(const ln_model *m, const ln_method *meth, const double *X, const double *U,
-                         const double *Xn, const double *Un, const double *KX, const double *KU, double h)
-{
-    const ln_int size = 3 * m->K, n_weights = meth->n_stages + 1;
-    const double n = 6.0 * (double)m->n_free;
-    double s1 = 0.0, s2 = 0.0;
-    for (int part = 0; part < 2; part++) {
-        const double *Y0 = part == 0 ? X : U, *Y1 = part == 0 ? Xn : Un, *KY = part == 0 ? KX : KU;
-        for (ln_int f = 0; f < m->n_free; f++)
-            for (int e = 0; e < 3; e++) {
-                const ln_int i = 3 * m->free_idx[f] + e;
-                const double scale = meth->atol + meth->rtol * fmax(fabs(Y0[i]), fabs(Y1[i]));
-                if (meth->error_norm == LN_RMS_ERROR) {
-                    const double err = h * weighted(meth->E1, n_weights, KY, size, i) / scale;
-                    s1 += err * err;
-                } else {
-                    const double e5 = weighted(meth->E1, n_weights, KY, size, i) / scale;
-                    const double e3 = weighted(meth->E2, n_weights, KY, size, i) / scale;
-                    s1 += e5 * e5;
-                    s2 += e3 * e3;
-                }
-            }
-    }
-    if (meth->error_norm == LN_RMS_ERROR) return sqrt(s1 / n);
-    if (s1 == 0.0 && s2 == 0.0) return 0.0;
-    return fabs(h) * s1 / sqrt((s1 + 0.01 * s2) * n);
-}
-
 /* Hairer-Wanner's starting step on the masses' states, as the point-mass path chooses it: from the masses'
    (U, dU/dt) at Y (MU0 their accelerations) and at Y + h0 dY/dt. Uses d->Xs, Us, Uh, Xc and rd->Ys, Yn as
    scratch, and leaves rd->R at the trial point. */
@@ -516,8 +461,7 @@ static double starting_step(const ln_model *m, const ln_method *meth, ln_data *d
         }
     d0 = sqrt(d0 / n);
     d1 = sqrt(d1 / n);
-    double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
-    h0 = fmin(h0, span);
+    const double h0 = ln_trial_step(d0, d1, span);
     const ln_int size = NY * m->rigid->n_bodies;
     for (ln_int i = 0; i < size; i++) rd->Ys[i] = Y[i] + h0 * dY[i];
     body_derivative(m, d, rd->Ys, d->F_base, d->Xs, d->Us, rd->Yn);
@@ -532,8 +476,7 @@ static double starting_step(const ln_model *m, const ln_method *meth, ln_data *d
             d2 += dx * dx + du * du;
         }
     d2 = sqrt(d2 / n) / h0;
-    const double h1 = (d1 <= 1e-15 && d2 <= 1e-15) ? fmax(1e-6, h0 * 1e-3) : pow(0.01 / fmax(d1, d2), -meth->exponent);
-    return fmin(fmin(100.0 * h0, h1), span);
+    return ln_starting_step(meth, h0, d1, d2, span);
 }
 
 /* The step loop from *t_inout: to t_target under error control (n_fixed = 0), or n_fixed steps of exactly
@@ -550,7 +493,7 @@ static int rk_steps(const ln_model *m, const ln_method *meth, ln_data *d, double
     double t = *t_inout;
     ln_int steps = 0;
     *accepted = 0;
-    if (s < 1 || s > LN_RIGID_MAX_STAGES || s > d->n_stages_allocated) return LN_BAD_ARGUMENT;
+    if (s < 1 || s > d->n_stages_allocated) return LN_BAD_ARGUMENT;
     /* masses of no body (anchors holding springs) keep their states in every copy */
     memcpy(Xs, X, (size_t)K3 * sizeof(double));
     memcpy(Us, U, (size_t)K3 * sizeof(double));
@@ -566,7 +509,7 @@ static int rk_steps(const ln_model *m, const ln_method *meth, ln_data *d, double
     }
     while (n_fixed > 0 ? steps < n_fixed : t < t_target) {
         const double remaining = t_target - t;
-        const double h = n_fixed > 0 ? d->h_next : controlled_step(d->h_next, t, t_target);
+        const double h = n_fixed > 0 ? d->h_next : ln_controlled_step(d->h_next, t, t_target);
         if (h < 0.0) {
             d->fail_t = t;
             return LN_STEP_UNDERFLOW;
@@ -588,7 +531,7 @@ static int rk_steps(const ln_model *m, const ln_method *meth, ln_data *d, double
                     return LN_NON_FINITE;
                 }
         } else {
-            err = error_norm(m, meth, X, U, Xn, Un, MX, MU, h);
+            err = ln_rk_error_norm_3d(m, meth, X, U, Xn, Un, MX, MU, h);
             if (!isfinite(err)) {
                 d->rejected++;
                 d->h_next = h * meth->min_factor;
@@ -597,14 +540,14 @@ static int rk_steps(const ln_model *m, const ln_method *meth, ln_data *d, double
         }
         if (err > 1.0) {
             d->rejected++;
-            d->h_next = next_step_size(meth, h, d->h_next, err);
+            d->h_next = ln_next_step_size(meth, h, d->h_next, err);
             continue;
         }
         if (n_fixed > 0) {
             t = t + h;
         } else {
             t = h == remaining ? t_target : t + h;
-            d->h_next = next_step_size(meth, h, d->h_next, err);
+            d->h_next = ln_next_step_size(meth, h, d->h_next, err);
         }
         /* renormalise q. The masses' states do not change (the map uses q / |q|), and the derivative at the
            new point only scales its dq/dt by 1/|q|: it stays the first stage of the next step */
@@ -686,10 +629,7 @@ int ln_rigid_rk_fixed_steps(const ln_model *m, const ln_method *meth, ln_data *d
 {
     if (!m->rigid || !d->rigid || meth->kind != LN_RUNGE_KUTTA || n < 1 || !(h > 0.0 && isfinite(h)))
         return LN_BAD_ARGUMENT;
-    /* the base forces of ln_advance (gravity, constant forces, the held input; zero on anchors) */
-    for (ln_int k = 0; k < m->K; k++)
-        for (int e = 0; e < 3; e++)
-            d->F_base[3 * k + e] = m->is_fixed[k] ? 0.0 : m->F_scene[3 * k + e] + d->F_input[3 * k + e];
+    if (!ln_base_forces(m, d, d->F_base)) return LN_NON_FINITE;
     struct ln_rigid_data *rd = d->rigid;
     const double h_next = d->h_next;
     double t = d->t;

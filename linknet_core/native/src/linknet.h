@@ -188,6 +188,19 @@ int ln_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U)
    without a call from Python for each (benchmarks). Results in d->acc, d->T (in dim components). */
 int ln_evaluate_repeated(const ln_model *m, ln_data *d, int dim, const double *X, const double *U, ln_int n);
 
+/* controller.c: the step-size controller of the embedded Runge-Kutta pairs. The step taken next from t (h_next
+   cut to land on t_target with no sliver of a last step; -1 on underflow within 16 ulps of t); the step
+   after one of size h with error norm err (grown when accepted, shrunk when rejected); Hairer-Wanner's
+   starting step from the norms d0 = |y|, d1 = |f(y)|, d2 = |f(y + h0 f) - f(y)| / h0 of the state. */
+double ln_controlled_step(double h_next, double t, double t_target);
+double ln_next_step_size(const ln_method *meth, double h, double h_next, double err);
+double ln_trial_step(double d0, double d1, double span);
+double ln_starting_step(const ln_method *meth, double h0, double d1, double d2, double span);
+
+/* Gravity, constant forces and the held input d->F_input: the part of F_k of (9) fixed over an interval, zero
+   on anchors. 0 when it is not finite. */
+int ln_base_forces(const ln_model *m, const ln_data *d, double *F_base);
+
 /* Equal steps no longer than dt that land on the target: how many (a whole number up to round-off is that
    number, not one more). */
 ln_int ln_fixed_step_count(double span, double dt);

@@ -25,7 +25,6 @@ enum ln_top {
 };
 
 #define LN_RIGID_STATE 13           /* numbers per body: c, v, q, Pi */
-#define LN_RIGID_MAX_STAGES 32      /* Runge-Kutta stages the body-state scratch is sized for */
 
 /* Fixed for a run. Laid out for ctypes: linknet_core/native/rigid.py mirrors it field for field. */
 struct ln_rigid_model {
@@ -48,10 +47,10 @@ struct ln_rigid_data {
     double *f, *tau, *w, *th;       /* (B,3) resultant, moment about c, angular velocity, rotation vector */
     double *v0, *Pi0, *v_prev, *Pi_prev;    /* (B,3) the implicit half kick's iterates */
     double *Ys, *Yn;                /* (B,13) a Runge-Kutta stage, the new point */
-    double *KY;                     /* (LN_RIGID_MAX_STAGES+1, B, 13) Runge-Kutta stage derivatives */
+    double *KY;                     /* (n_stages+1, B, 13) Runge-Kutta stage derivatives */
 };
 
-struct ln_rigid_data *ln_rigid_data_new(const ln_model *m);
+struct ln_rigid_data *ln_rigid_data_new(const ln_model *m, ln_int n_stages);  /* stages of the method */
 void ln_rigid_data_free(struct ln_rigid_data *r);
 
 /* Advance the bodies from d->t to t_target with the base forces d->F_base (K,3; zero on anchors) held,
@@ -60,7 +59,7 @@ void ln_rigid_data_free(struct ln_rigid_data *r);
    controller, d->h_next). Writes the masses' d->X, d->U at the end and the accepted steps into *steps.
    On a status other than LN_OK the caller restores X, U and calls ln_rigid_restore. Statuses: LN_OK,
    LN_NON_FINITE, LN_IMPLICIT_KICK_FAILED, LN_STEP_UNDERFLOW, LN_TOO_MANY_STEPS, LN_BAD_ARGUMENT (no bodies,
-   a method of no known kind, more stages than LN_RIGID_MAX_STAGES or than ln_data_new was given). */
+   a method of no known kind, more stages than ln_data_new was given). */
 int ln_rigid_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps,
                      ln_int *steps);
 

@@ -31,6 +31,12 @@ int FN(ln_project_velocities)(const ln_model *m, ln_data *d, const double *X, do
 int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
                         const double *F_base, ln_int n_steps, double h, ln_int *completed);
 
+/* stages/runge_kutta.c: the embedded error estimate over the free masses' positions and velocities (stages KX,
+   KU of (K,DIM) blocks, s + 1 of them), in the norm the method names; the mean is over 6 coordinates per free
+   mass whatever DIM */
+double FN(ln_rk_error_norm)(const ln_model *m, const ln_method *meth, const double *X, const double *U,
+                            const double *Xn, const double *Un, const double *KX, const double *KU, double h);
+
 /* stages/runge_kutta.c: embedded explicit Runge-Kutta with step-size control, projected after every step,
    from t to t_target on X, U in place (the last accepted state); *t and d->h_next are updated */
 int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,

@@ -37,8 +37,8 @@ static inline double weighted(const double *coef, ln_int n, const double *KY, ln
 
 /* The error norm over the free masses' coordinates; the mean is over 6 coordinates per free mass whatever
    DIM (in a plane the out-of-plane ones are zero and count as they do in 3-D). */
-static double error_norm(const ln_model *m, const ln_method *meth, const double *X, const double *U,
-                         const double *Xn, const double *Un, const double *KX, const double *KU, double h)
+double FN(ln_rk_error_norm)(const ln_model *m, const ln_method *meth, const double *X, const double *U,
+                            const double *Xn, const double *Un, const double *KX, const double *KU, double h)
 {
     const ln_int size = m->K * DIM, n_weights = meth->n_stages + 1;
     const double n = 6.0 * (double)m->n_free;
@@ -67,27 +67,6 @@ static double error_norm(const ln_model *m, const ln_method *meth, const double 
     return fabs(h) * s1 / sqrt((s1 + 0.01 * s2) * n);
 }
 
-/* The step an adaptive loop takes next from t: h_next, cut to land on t_target, the rest split in two rather
-   than leaving a sliver of a last step; -1 when that step is within 16 ulps of t (step-size underflow). */
-static double controlled_step(double h_next, double t, double t_target)
-{
-    const double remaining = t_target - t;
-    double h = fmin(h_next, remaining);
-    if (h < remaining && remaining < 1.1 * h) h = 0.5 * remaining;
-    const double tt = fmax(fabs(t), 1.0);
-    if (h <= 16.0 * (nextafter(tt, INFINITY) - tt) && h < remaining) return -1.0;
-    return h;
-}
-
-/* The step after a step h with error norm err: grown (accepted) or shrunk (rejected) by safety err^exponent. */
-static double next_step_size(const ln_method *meth, double h, double h_next, double err)
-{
-    if (err > 1.0) return h * fmax(meth->min_factor, meth->safety * pow(err, meth->exponent));
-    const double factor = err == 0.0 ? meth->max_factor : fmin(meth->max_factor, meth->safety * pow(err, meth->exponent));
-    /* a step shortened only to land on t_target says nothing against the longer step */
-    return h < h_next ? fmax(h_next, h * factor) : h * factor;
-}
-
 /* Hairer-Wanner's starting step (as scipy's select_initial_step), from f at (X, U) and at
    (X + h0 U, U + h0 acc0). */
 static int starting_step(const ln_model *m, const ln_method *meth, ln_data *d, const double *X, const double *U,
@@ -104,8 +83,7 @@ static int starting_step(const ln_model *m, const ln_method *meth, ln_data *d, c
         }
     d0 = sqrt(d0 / n);
     d1 = sqrt(d1 / n);
-    double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
-    h0 = fmin(h0, span);
+    const double h0 = ln_trial_step(d0, d1, span);
     const ln_int size = m->K * DIM;
     for (ln_int i = 0; i < size; i++) {
         d->Xs[i] = X[i] + h0 * U[i];
@@ -123,9 +101,7 @@ static int starting_step(const ln_model *m, const ln_method *meth, ln_data *d, c
             d2 += dx * dx + du * du;
         }
     d2 = sqrt(d2 / n) / h0;
-    const double h1 = (d1 <= 1e-15 && d2 <= 1e-15) ? fmax(1e-6, h0 * 1e-3)
-                                                    : pow(0.01 / fmax(d1, d2), -meth->exponent);
-    *h_out = fmin(fmin(100.0 * h0, h1), span);
+    *h_out = ln_starting_step(meth, h0, d1, d2, span);
     return LN_OK;
 }
 
@@ -150,7 +126,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
     }
     while (t < t_target) {
         const double remaining = t_target - t;
-        const double h = controlled_step(d->h_next, t, t_target);
+        const double h = ln_controlled_step(d->h_next, t, t_target);
         if (h < 0.0) return LN_STEP_UNDERFLOW;
         for (ln_int i = 1; i < s; i++) {
             combine(size, X, h, meth->AB, i, i, s, KX, Xs);
@@ -171,7 +147,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
             KX[s * size + j] = Un[j];
             KU[s * size + j] = acc[j];
         }
-        const double err = error_norm(m, meth, X, U, Xn, Un, KX, KU, h);
+        const double err = FN(ln_rk_error_norm)(m, meth, X, U, Xn, Un, KX, KU, h);
         if (!isfinite(err)) {
             d->rejected++;
             d->h_next = h * meth->min_factor;
@@ -179,7 +155,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
         }
         if (err > 1.0) {
             d->rejected++;
-            d->h_next = next_step_size(meth, h, d->h_next, err);
+            d->h_next = ln_next_step_size(meth, h, d->h_next, err);
             continue;
         }
         /* positions onto (11) along the directions at Xn (unit vectors E1 of the last evaluation, A(Xn)
@@ -188,7 +164,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
             != LN_OK) return status;
         if ((status = FN(ln_project_velocities)(m, d, Xn, Un, d->E1)) != LN_OK) return status;
         t = (h == remaining) ? t_target : t + h;
-        d->h_next = next_step_size(meth, h, d->h_next, err);
+        d->h_next = ln_next_step_size(meth, h, d->h_next, err);
         for (ln_int j = 0; j < size; j++) {
             X[j] = Xn[j];
             U[j] = Un[j];

@@ -1,0 +1,36 @@
+/* The step-size controller of the embedded Runge-Kutta pairs (Hairer, Norsett and Wanner), shared by the
+   point-mass path (stages/runge_kutta.c) and the free-rigid-body path (engine_rigid.c). */
+#include <math.h>
+
+#include "linknet.h"
+
+double ln_controlled_step(double h_next, double t, double t_target)
+{
+    const double remaining = t_target - t;
+    double h = fmin(h_next, remaining);
+    if (h < remaining && remaining < 1.1 * h) h = 0.5 * remaining;  /* no sliver of a last step */
+    const double tt = fmax(fabs(t), 1.0);
+    if (h <= 16.0 * (nextafter(tt, INFINITY) - tt) && h < remaining) return -1.0;
+    return h;
+}
+
+double ln_next_step_size(const ln_method *meth, double h, double h_next, double err)
+{
+    if (err > 1.0) return h * fmax(meth->min_factor, meth->safety * pow(err, meth->exponent));
+    const double factor = err == 0.0 ? meth->max_factor
+                                     : fmin(meth->max_factor, meth->safety * pow(err, meth->exponent));
+    /* a step shortened only to land on t_target says nothing against the longer step */
+    return h < h_next ? fmax(h_next, h * factor) : h * factor;
+}
+
+double ln_trial_step(double d0, double d1, double span)
+{
+    const double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+    return fmin(h0, span);
+}
+
+double ln_starting_step(const ln_method *meth, double h0, double d1, double d2, double span)
+{
+    const double h1 = (d1 <= 1e-15 && d2 <= 1e-15) ? fmax(1e-6, h0 * 1e-3) : pow(0.01 / fmax(d1, d2), -meth->exponent);
+    return fmin(fmin(100.0 * h0, h1), span);
+}
