@@ -1,10 +1,10 @@
-"""Adaptive methods on a free rigid body: the rigid-body path (linknet_core.rigid_adaptive) against the
+"""Adaptive methods on a free rigid body: the native rigid-body path (specialisation 'rigid') against the
 point-mass path (specialise=False), as time to reach a position error at t_end.
 
 Scene: models/spinning_tetrahedron.json (a spherical top, no gravity), whose exact solution is a uniform
 rotation about the spin axis; the error is max_k |X_k(t_end) - X_k^exact| (m). For each path and rtol
-(atol = rtol) the run from t = 0 to t_end in one advance is timed (best of several repeats, after a warm-up
-run that compiles the kernels; building the simulator is not timed); the table lists every setting, then
+(atol = rtol) the run from t = 0 to t_end in one advance is timed (best of several repeats; building the
+simulator is not timed); the table lists every setting, then
 for each target error the cheapest setting of each path that reaches it.
 
     OPENBLAS_NUM_THREADS=1 python -m benchmarks.bench_rigid_adaptive [--method dop853] [--t-end 2]
@@ -19,9 +19,6 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 import linknet_core as ln
-from linknet_core.integrators import make_integrator
-from linknet_core.rigid import build_path, choose_specialisation
-from linknet_core.simulator import prepare_initial_state
 
 MODEL = Path(__file__).resolve().parent.parent / "models" / "spinning_tetrahedron.json"
 TARGETS = (1e-6, 1e-9)
@@ -42,27 +39,13 @@ def exact_positions(scene: ln.Scene, t: float) -> np.ndarray:
 
 
 def runner(scene: ln.Scene, method: str, rtol: float, rigid: bool):
-    """A fresh integrator-like object and initial state: (advance(t_end) -> X, path description)."""
-    if not rigid:
-        sim = ln.Simulator(scene, method=method, rtol=rtol, atol=rtol, specialise=False)
-
-        def run(t_end):
-            sim.advance(t_end)
-            return sim.state.X, sim.integrator.stats.steps
-        return run
-    # the rigid path exactly as Simulator builds it (choose_specialisation with the integrator whose tolerances
-    # it takes, then build_path), driven directly
-    dyn = ln.Dynamics(scene)
-    integrator = make_integrator(method, dyn, rtol=rtol, atol=rtol)
-    X0, U0, _ = prepare_initial_state(scene, dyn)
-    spec = choose_specialisation(scene, dyn, method, integrator=integrator)
-    assert spec.kind == "rigid", spec.text()
-    path, (X0, U0) = build_path(spec, dyn, method, None, X0, U0)
-    state = ln.State(0.0, X0, U0)
+    """A fresh simulator on the rigid-body path or the point-mass path: advance(t_end) -> (X, steps)."""
+    sim = ln.Simulator(scene, method=method, rtol=rtol, atol=rtol, specialise=rigid)
+    assert sim.specialisation.kind == ("rigid" if rigid else "none"), sim.specialisation.text()
 
     def run(t_end):
-        path.advance(state, t_end, None, 10 ** 8)
-        return state.X, path.stats.steps
+        sim.advance(t_end)
+        return sim.state.X, sim.integrator.stats.steps
     return run
 
 
@@ -87,7 +70,6 @@ def main(argv=None):
     rtols = [10.0 ** -e for e in np.arange(4, 14.5, 0.5)]
     rows = {True: [], False: []}
     for rigid in (True, False):
-        runner(scene, args.method, 1e-6, rigid)(0.01)  # warm-up: compile (or load) the kernels
         for rtol in rtols:
             seconds, X, steps = measure(scene, args.method, rtol, rigid, args.t_end)
             rows[rigid].append((rtol, float(np.abs(X - X_exact).max()), steps, seconds))

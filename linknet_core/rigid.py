@@ -1,4 +1,4 @@
-"""Structure specialisation, chosen once per scene (issue 6: skip what a scene doesn't need).
+"""Structure specialisation, chosen once per scene: skip what a scene doesn't need.
 
 Two classes of scenes pay the full point-mass machinery of (9), (25)-(26) for nothing:
 
@@ -10,21 +10,19 @@ Two classes of scenes pay the full point-mass machinery of (9), (25)-(26) for no
 
 * **free rigid bodies**: every connected component of the link graph is free (no anchored mass), rigid
   (rank G_c = 3 n_c - 6: no internal mechanism) and has >= 3 non-collinear masses (a full inertia
-  tensor). Each component moves as one rigid body (:mod:`linknet_core.rigid_kernels`), driven by the
+  tensor). Each component moves as one rigid body (the native core's engine_rigid.c), driven by the
   resultant and moment of the external forces F_k of (9); springs, dampers, drag and inputs between or on
-  masses are allowed. Anchored masses joined by no link (spring attachment points) are allowed too. The
-  tensions at an output are the minimum-norm solution of C^T T = M a - F, with a_k the rigid-body
-  accelerations a_c + alpha x rho_k + w x (w x rho_k) ((9) solved for the link forces); unique when the
-  body has no redundant link (31). Fixed-step methods (:class:`RigidBodyPath`): rattle is the base step
-  kick-drift-rotate-kick, suzuki4 and yoshida4/6/8 compose it with the step fractions of
-  :mod:`linknet_core.integrators.composition`. Adaptive methods (dopri5, dop853:
-  :class:`linknet_core.rigid_adaptive.AdaptiveRigidBodyPath`) integrate the Newton-Euler equations of the
-  body state with their own embedded pair and step-size controller, the error measured on the masses'
-  positions and velocities as on the point-mass path; they take their rtol/atol from the point-mass
-  integrator handed to :func:`choose_specialisation` (``integrator=``), and keep the point-mass path
-  without one.
+  masses are allowed. Anchored masses joined by no link (spring attachment points) are allowed too.
+  Fixed-step methods: rattle is the base step kick-drift-rotate-kick (free rotation exact for spherical and
+  symmetric tops, DLM splitting otherwise), the compositions compose it with their step fractions. Adaptive
+  methods (dopri5, dop853) integrate the Newton-Euler equations of the body state with their own embedded
+  pair and the step-size controller of the point-mass path, the error measured on the masses' positions and
+  velocities; they take their (rtol, atol) from :func:`choose_specialisation` (``tolerances=``). The
+  tensions at an output are those of (25)-(26) at the state.
 
-Everything else takes the point-mass path, with the reason reported.
+This module decides which one applies (and why not) and computes the body geometry once (principal axes,
+body-frame offsets, the fit of body states to a mass state); linknet_core.native.rigid builds the native
+model from it. Everything else takes the point-mass path, with the reason reported.
 """
 from __future__ import annotations
 
@@ -35,17 +33,12 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from .dynamics import Dynamics
-from .errors import SolverError
-from .forces import external_forces, has_velocity_dependent_forces
 from .integrators import METHODS
-from .integrators.base import FixedStepIntegrator, Integrator
 from .scene import Scene
-from .structure import constraint_jacobian
 
 STATIC, RIGID, NONE = "static", "rigid", "none"
 TOP_TOL = 1e-12  # principal moments equal to this (relative) make a spherical or symmetric top (exact flows)
 COLLINEAR_TOL = 1e-10  # smallest principal moment below this times the largest: the masses lie on a line
-DENSE_LIMIT = 3000  # links of one body (or unknowns of a static scene) for a dense pseudo-inverse
 RESHAPE_TOL = 1e-13  # initial link lengths are made exact below this relative error before a body is frozen
 TOP_NAMES = ("spherical top", "symmetric top", "asymmetric top")
 
@@ -140,9 +133,6 @@ def free_rigid_bodies(scene: Scene, dyn: Dynamics) -> tuple[BodyLayout | None, s
                       f"= {rigid_rank}")
     links_of = _group(body_of[scene.k1], B)
     masses_of = _group(np.where(linked, body_of, B), B + 1)[:B]
-    biggest = max(links.size for links in links_of)
-    if biggest > DENSE_LIMIT:
-        return None, f"a body of {biggest} links exceeds the dense tension operator's limit of {DENSE_LIMIT}"
     return BodyLayout(B, body_of, links_of, masses_of), ""
 
 
@@ -164,13 +154,9 @@ def choose_specialisation(scene: Scene, dyn: Dynamics, method: str | None = None
     st = dyn.structure
     n_free = int(scene.free_indices.size)
     if scene.L and st.rank_exact and st.rank_G == 3 * n_free:
-        if 3 * n_free > DENSE_LIMIT and scene.L > DENSE_LIMIT:
-            note = "sparse normal equations"
-        else:
-            note = "dense pseudo-inverse"
         return Specialisation(STATIC, f"the {n_free} free masses cannot move (rank G = 3 K_free = {3 * n_free}): "
                                       "X = X0, U = 0, advance moves t only; tensions the minimum-norm solution of "
-                                      f"C^T T + F = 0 ({note}, factored once)")
+                                      "C^T T + F = 0, i.e. of (25)-(26) at U = 0")
     bodies, why = free_rigid_bodies(scene, dyn)
     if bodies is None:
         if not scene.L:
@@ -219,41 +205,6 @@ def _top_kinds(moments: np.ndarray) -> np.ndarray:
 
 
 # ---- the static path ---------------------------------------------------------------------------------
-
-class StaticPath(Integrator):
-    """0 degrees of freedom: nothing moves, ``advance`` only moves t; tensions from the static balance."""
-
-    def __init__(self, dynamics: Dynamics, method: str, X0: np.ndarray):
-        super().__init__(dynamics)
-        cls = METHODS[method]
-        self.name, self.order, self.symplectic, self.adaptive = cls.name, cls.order, cls.symplectic, cls.adaptive
-        self.guarantees = "exact: a static scene has no motion to integrate"
-        scene = dynamics.scene
-        self.X0 = np.array(X0, float)
-        self.U0 = np.zeros_like(self.X0)
-        self._free = scene.free_indices
-        Cf = constraint_jacobian(scene, self.X0)  # L x 3 K_free, full column rank
-        n = Cf.shape[1]
-        if n <= DENSE_LIMIT or scene.L <= DENSE_LIMIT:
-            self._P = np.linalg.pinv(Cf.toarray().T, rcond=1e-12)  # T = P (-F): minimum norm
-            self._solve = lambda rhs: self._P @ rhs
-        else:
-            from scipy.sparse.linalg import splu
-
-            # min-norm T = C (C^T C)^-1 (-F): C^T C is SPD because C has full column rank
-            lu = splu((Cf.T @ Cf).tocsc())
-            self._solve = lambda rhs: Cf @ lu.solve(rhs)
-
-    def advance(self, state, t_target, F_input, max_steps) -> None:
-        state.t = t_target
-
-    def tensions(self, X, U, F_input=None) -> np.ndarray:
-        """Minimum-norm T of C^T T + F = 0 on the free masses, F the external forces of (9) at (X, U)."""
-        F = external_forces(self.dyn.scene, X, U, F_input)
-        return self._solve(-F[self._free].ravel())
-
-
-# ---- the free-rigid-body path ------------------------------------------------------------------------
 
 def _quaternions(R: np.ndarray) -> np.ndarray:
     """Unit quaternions (w, x, y, z) of rotation matrices R (B,3,3), Shepperd's branch-by-largest."""
@@ -366,192 +317,3 @@ def fit_bodies(scene: Scene, bodies: BodyLayout, geometry: BodyGeometry, X, U):
     L = per_body(m[:, None] * np.cross(rho, Ui - v[idx]))
     Pi = np.einsum("bji,bj->bi", R, L)
     return c, v, q, Pi
-
-
-class RigidBodies:
-    """What every free-rigid-body path shares (mixed into an integrator): the body layout, the body frames
-    (principal axes) and body-frame mass positions r_k fixed once, the body state (c, v, q, Pi), refitting it
-    to a mass state set from outside, snapshots, and the rigid-body accelerations and tensions."""
-
-    def _init_bodies(self, dynamics: Dynamics, bodies: BodyLayout, X0, U0) -> None:
-        from . import rigid_kernels
-
-        self._kernels = rigid_kernels
-        scene = dynamics.scene
-        self.bodies = bodies
-        X0, U0, self.notes = freeze_initial_state(dynamics, X0, U0)
-        self.initial_state = (X0, U0)
-        self.geometry = body_geometry(scene, bodies, X0)
-        self._inside = self.geometry.inside
-        self.body_mass, self.kind, self.inertia, self.r = (self.geometry.body_mass, self.geometry.kind,
-                                                           self.geometry.inertia, self.geometry.r)
-        # scene arrays for the kernels, in the form of the compiled loops' force model
-        # (compiled_kernels.scene_forces: drag on the masses that have it, F_base zero on anchors)
-        s = scene.springs
-        fixed = np.asarray(scene.fixed, bool)
-        drag_idx = np.flatnonzero((np.asarray(scene.drag) != 0.0) & ~fixed)
-        self._fixed_idx = np.flatnonzero(fixed).astype(np.int64)
-        free_mass = np.where(fixed, 0.0, scene.mass)  # an anchor's mass may be infinite (1/M = 0)
-        self._F_scene = free_mass[:, None] * scene.gravity[None, :] + scene.force
-        self._F_scene[fixed] = 0.0  # no force acts on an anchor
-        self._force_args = (drag_idx.astype(np.int64), np.ascontiguousarray(np.asarray(scene.drag)[drag_idx], float),
-                            s.a, s.b, np.ascontiguousarray(s.stiffness), np.ascontiguousarray(s.rest_length),
-                            np.ascontiguousarray(s.damping), self._fixed_idx)
-        self._velocity_dependent = has_velocity_dependent_forces(scene)
-        self._tension_operator = self._build_tension_operator(scene)
-        self._set_bodies(*self._fit(X0, U0))
-        self._last = (X0.copy(), U0.copy())
-
-    def _base_forces(self, F_input) -> np.ndarray:
-        """Gravity, constant forces and the input held over the interval (zero-order hold), for the kernels."""
-        if F_input is None:
-            return self._F_scene
-        F_base = np.array(self._F_scene + F_input, dtype=float, order="C")
-        F_base[self._fixed_idx] = 0.0  # no force acts on an anchor
-        return F_base
-
-    # ---- body state <-> mass state ---------------------------------------------------------------
-    def _fit(self, X, U):
-        return fit_bodies(self.dyn.scene, self.bodies, self.geometry, X, U)
-
-    def _set_bodies(self, c, v, q, Pi):
-        # own copies: a snapshot handed to set_internals stays the caller's (the Simulator no longer deep-copies)
-        self._c, self._v, self._q, self._Pi = (np.array(a, dtype=float, order="C") for a in (c, v, q, Pi))
-
-    def _sync(self, X, U):
-        """Follow a state set from outside (not produced by this path): refit the bodies to it."""
-        if not (np.array_equal(X, self._last[0]) and np.array_equal(U, self._last[1])):
-            self._set_bodies(*self._fit(X, U))
-            self._last = (np.array(X, float), np.array(U, float))
-
-    # ---- snapshots (cooperative: the integrator's own internals come from super()) ----------------
-    def internals(self) -> dict:
-        # references, not copies: these arrays are only ever replaced, never written into (the step loops work
-        # on copies), and set_internals copies what it is handed. Simulator.advance takes this snapshot on
-        # every call; six copies cost ~2 us, more than a step of a small body.
-        out = super().internals()
-        out["bodies"] = {"c": self._c, "v": self._v, "q": self._q, "Pi": self._Pi, "X": self._last[0],
-                         "U": self._last[1]}
-        return out
-
-    def set_internals(self, data: dict) -> None:
-        super().set_internals(data)
-        b = data["bodies"]
-        self._set_bodies(b["c"], b["v"], b["q"], b["Pi"])
-        self._last = (np.array(b["X"]), np.array(b["U"]))
-
-    # ---- tensions -------------------------------------------------------------------------------
-    def _build_tension_operator(self, scene: Scene) -> sp.csr_matrix:
-        """P (L x 3K) with T = P b the minimum-norm solution of C_body^T T = b, b the body-frame link forces
-        on the masses; C_body is fixed (E_l = (r_k2 - r_k1) / R_l), so P is computed once per body."""
-        rows, cols, vals = [], [], []
-        for links, masses in zip(self.bodies.links_of, self.bodies.masses_of):  # setup: once per body
-            local = -np.ones(scene.K, np.int64)
-            local[masses] = np.arange(masses.size)
-            E = (self.r[scene.k2[links]] - self.r[scene.k1[links]]) / scene.length[links][:, None]
-            Ct = np.zeros((3 * masses.size, links.size))
-            j = np.arange(links.size)
-            for d in range(3):
-                Ct[3 * local[scene.k1[links]] + d, j] = E[:, d]
-                Ct[3 * local[scene.k2[links]] + d, j] = -E[:, d]
-            P = np.linalg.pinv(Ct, rcond=1e-12)
-            cols_b = (3 * masses[:, None] + np.arange(3)).ravel()
-            rows.append(np.repeat(links, cols_b.size))
-            cols.append(np.tile(cols_b, links.size))
-            vals.append(P.ravel())
-        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                             shape=(scene.L, 3 * scene.K))
-
-    def accelerations(self, X, U, F_input=None) -> np.ndarray:
-        """Rigid-body accelerations a_k = a_c + alpha x rho_k + w x (w x rho_k) (space frame; 0 off the bodies),
-        with alpha from Euler's equations I dw/dt = tau - w x (I w) in the body frame."""
-        self._sync(X, U)
-        scene = self.dyn.scene
-        F = external_forces(scene, X, U, F_input)
-        a_body = self._body_frame_accelerations(X, F)
-        R = self._rotations()
-        idx = self.bodies.body_of[self._inside]
-        acc = np.zeros_like(X)
-        acc[self._inside] = np.einsum("kij,kj->ki", R[idx], a_body)
-        return acc
-
-    def _rotations(self) -> np.ndarray:
-        return rotation_matrices(self._q)
-
-    def _body_frame_accelerations(self, X, F):
-        B, idx = self.bodies.count, self.bodies.body_of[self._inside]
-        R = self._rotations()
-        Fi = F[self._inside]
-        rho = X[self._inside] - self._c[idx]
-        f = np.stack([np.bincount(idx, weights=Fi[:, d], minlength=B) for d in range(3)], axis=1)
-        moment = np.cross(rho, Fi)
-        tau = np.stack([np.bincount(idx, weights=moment[:, d], minlength=B) for d in range(3)], axis=1)
-        w = self._Pi / self.inertia
-        alpha = (np.einsum("bji,bj->bi", R, tau) - np.cross(w, self._Pi)) / self.inertia
-        r = self.r[self._inside]
-        a_c = np.einsum("bji,bj->bi", R, f / self.body_mass[:, None])
-        wi = w[idx]
-        return a_c[idx] + np.cross(alpha[idx], r) + np.cross(wi, np.cross(wi, r))
-
-    def tensions(self, X, U, F_input=None) -> np.ndarray:
-        """Minimum-norm T of C^T T = M a - F: the link forces that give the masses their rigid-body
-        accelerations under the external forces F of (9)."""
-        self._sync(X, U)
-        scene = self.dyn.scene
-        F = external_forces(scene, X, U, F_input)
-        R = self._rotations()
-        idx = self.bodies.body_of[self._inside]
-        b = np.zeros_like(X)
-        F_body = np.einsum("kji,kj->ki", R[idx], F[self._inside])
-        b[self._inside] = scene.mass[self._inside][:, None] * self._body_frame_accelerations(X, F) - F_body
-        return self._tension_operator @ b.ravel()
-
-
-class RigidBodyPath(RigidBodies, FixedStepIntegrator):
-    """Fixed-step integration of free rigid bodies: the step is a composition (gammas of ``method``) of the
-    base step of :func:`linknet_core.rigid_kernels.rigid_advance`, whole intervals in one compiled call."""
-
-    def __init__(self, dynamics: Dynamics, method: str, dt: float, bodies: BodyLayout, X0, U0):
-        FixedStepIntegrator.__init__(self, dynamics, dt=dt)
-        cls = METHODS[method]
-        self.name, self.order, self.symplectic = cls.name, cls.order, cls.symplectic
-        self.gammas = np.asarray(cls.gammas, float)
-        self.guarantees = (f"order {cls.order} ({'base step' if cls.gammas == (1.0,) else 'composition'} of the "
-                           "rigid-body kick-drift-rotate-kick); symplectic and time-reversible for conservative "
-                           "forces; link lengths kept to round-off by construction")
-        self._init_bodies(dynamics, bodies, X0, U0)
-
-    def _advance_steps(self, X, U, n, h, F_input):
-        self._sync(X, U)
-        c, v, q, Pi = (a.copy() for a in (self._c, self._v, self._q, self._Pi))
-        Xw = np.array(X, float, order="C")
-        Uw = np.array(U, float, order="C")
-        status = self._kernels.rigid_advance(c, v, q, Pi, int(n), float(h), self.gammas, self.kind, self.inertia,
-                                             self.body_mass, self.bodies.body_of, self.r, Xw, Uw,
-                                             self._base_forces(F_input), *self._force_args,
-                                             self._velocity_dependent)
-        if status == self._kernels.KICK_NOT_CONVERGED:
-            raise SolverError(f"the implicit half kick of the rigid bodies did not converge with h = {h:.3g} s: the "
-                              "drag or spring damping is too stiff for this step; reduce dt")
-        if status == self._kernels.OK:  # (a non-finite state is refused by the caller, which restores us)
-            self._c, self._v, self._q, self._Pi = c, v, q, Pi  # this call's own copies
-            self._last = (Xw.copy(), Uw.copy())
-        return Xw, Uw
-
-
-def build_path(spec: Specialisation, dyn: Dynamics, method: str, dt: float | None, X0, U0):
-    """The integrator-like object of a specialisation and the initial state it starts from."""
-    if spec.kind == STATIC:
-        path = StaticPath(dyn, method, X0)
-        return path, (path.X0, path.U0)
-    if spec.kind == RIGID:
-        if METHODS[method].adaptive:
-            from .rigid_adaptive import AdaptiveRigidBodyPath
-
-            rtol, atol = spec.tolerances
-            path = AdaptiveRigidBodyPath(dyn, method, rtol, atol, spec.bodies, X0, U0)
-        else:
-            path = RigidBodyPath(dyn, method, dt, spec.bodies, X0, U0)
-        spec.notes.extend(path.notes)
-        return path, path.initial_state
-    raise ValueError(f"no path for specialisation {spec.kind!r}")

@@ -15,7 +15,8 @@ from .forces import kinetic_energy
 from .integrators import make_integrator, method_settings
 from .native.integrator import NativeIntegrator
 from .native.model import NativeModel
-from .rigid import RIGID, STATIC, build_path, choose_specialisation
+from .native.rigid import NativeRigidIntegrator
+from .rigid import RIGID, STATIC, choose_specialisation
 from .scene import Scene
 from .state import State
 
@@ -134,15 +135,16 @@ class Simulator:
             self.specialisation = choose_specialisation(scene, self.dyn, method, enabled=specialise,
                                                         tolerances=(rtol, atol))
             if self.specialisation.kind == RIGID:
-                self.integrator, (X0, U0) = build_path(self.specialisation, self.dyn, method, dt, X0, U0)
-                self._tensions = self.integrator.tensions
+                self.integrator = NativeRigidIntegrator(self.dyn, self.specialisation.bodies, method_cls, X0, U0,
+                                                        dt=dt, rtol=rtol, atol=atol)
+                X0, U0 = self.integrator.initial_state
+                self.specialisation.notes.extend(self.integrator.notes)
             else:
-                model = NativeModel(scene, self.dyn.structure)
-                self.integrator = NativeIntegrator(model, method_cls, dt=dt, rtol=rtol, atol=atol,
-                                                   static=self.specialisation.kind == STATIC)
-                self._tensions = self.integrator.tensions
+                self.integrator = NativeIntegrator(NativeModel(scene, self.dyn.structure), method_cls, dt=dt,
+                                                   rtol=rtol, atol=atol, static=self.specialisation.kind == STATIC)
                 if self.specialisation.kind == STATIC:
                     U0 = np.zeros_like(U0)  # the only velocity (12) allows where nothing can move
+            self._tensions = self.integrator.tensions
         self._initial = State(0.0, X0, U0)
         self._initial_internals = copy.deepcopy(self.integrator.internals())
         self.max_steps_per_call = max_steps_per_call

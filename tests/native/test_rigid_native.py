@@ -1,12 +1,6 @@
 """The free-rigid-body path of the native core (src/engine_rigid.c, linknet_core/native/rigid.py).
 
-Two kinds of checks:
-
-* against the numba kernels it replaces (linknet_core.rigid_kernels, while they exist): the same
-  trajectories to round-off on the shipped spinning tetrahedron and on spherical, symmetric and
-  asymmetric tops, several bodies, springs, dampers, drag, inputs and an anchored spring hook, for RATTLE's
-  rigid-body step, its compositions and the embedded pairs;
-* physics that holds without them: exact free fall of the centre of mass, the exact flow of spherical and
+Physics: exact free fall of the centre of mass, the exact flow of spherical and
   symmetric tops, conservation of momentum, angular momentum and energy of a free body, agreement with the
   point-mass path within the methods' accuracy, measured convergence orders, time reversibility, and the
   all-or-nothing advance.
@@ -33,15 +27,6 @@ ROOT = Path(__file__).resolve().parents[2]
 FN = RigidFunctions(lib.lib)
 G = np.array([0.0, 0.0, -9.81])
 IRREGULAR = [[0.0, 0.0, 0.0], [1.1, 0.1, 0.0], [0.2, 0.9, 0.1], [0.3, 0.2, 0.8]]
-
-try:  # the numba kernels this path replaces, while they exist
-    from linknet_core.rigid import RigidBodyPath
-    from linknet_core.rigid_adaptive import AdaptiveRigidBodyPath
-    import linknet_core.rigid_kernels  # noqa: F401
-    NUMBA = None
-except ImportError as error:
-    NUMBA = f"the numba rigid-body kernels are gone ({error}): nothing to compare with"
-
 
 # ---- scenes --------------------------------------------------------------------------------------
 
@@ -165,18 +150,6 @@ class Bodies:
         return self.data.X.copy(), self.data.U.copy()
 
 
-def numba_path(scene, method, dt=None, rtol=None):
-    """The numba rigid-body path the native one replaces, and its initial state."""
-    dyn = ln.Dynamics(scene)
-    X0, U0, _ = prepare_initial_state(scene, dyn)
-    layout, _ = free_rigid_bodies(scene, dyn)
-    if METHODS[method].adaptive:
-        path = AdaptiveRigidBodyPath(dyn, method, rtol, rtol, layout, X0, U0)
-    else:
-        path = RigidBodyPath(dyn, method, dt, layout, X0, U0)
-    return path, ln.State(0.0, *path.initial_state)
-
-
 def point_mass(scene, method, t, F=None, **settings):
     """The point-mass path (specialise=False): (9), (25)-(26) with no knowledge of the bodies."""
     sim = ln.Simulator(scene, method=method, specialise=False, **settings)
@@ -224,44 +197,6 @@ def test_body_states_round_trip_and_bad_states_are_refused():
     assert FN.set_state(b.model.pointer, b.data._ptr, Y) == lib.BAD_ARGUMENT
     np.testing.assert_array_equal(b.Y, Y0)
     np.testing.assert_array_equal(b.data.X, X)
-
-
-# ---- against the numba kernels -------------------------------------------------------------------
-
-@pytest.mark.skipif(NUMBA is not None, reason=NUMBA or "")
-@pytest.mark.parametrize("method", list(SETTINGS))
-@pytest.mark.parametrize("case", list(SCENES))
-def test_same_trajectories_as_the_numba_kernels(case, method):
-    """Same operations in the same order: the trajectories agree to round-off (measured: bit for bit),
-    and so do the accepted and rejected steps. Inputs change from one advance to the next."""
-    scene = SCENES[case]()
-    settings = SETTINGS[method]
-    native = Bodies(scene, method, **settings)
-    path, state = numba_path(scene, method, **settings)
-    inputs = np.random.default_rng(7).normal(size=(4, scene.K, 3))
-    for i, t in enumerate((0.05, 0.3, 0.55, 1.0)):
-        F = inputs[i] if "inputs" in case or case == "anchored spring hook" else None
-        X, U = native.run(t, F)
-        path.advance(state, t, F, 10 ** 7)
-        scale_X, scale_U = np.abs(state.X).max(), np.abs(state.U).max()
-        assert np.abs(X - state.X).max() <= 1e-14 * scale_X, (t, np.abs(X - state.X).max())
-        assert np.abs(U - state.U).max() <= 1e-13 * scale_U, (t, np.abs(U - state.U).max())
-    assert (native.data.struct.steps, native.data.struct.rejected) == (path.stats.steps, path.stats.rejected)
-    np.testing.assert_allclose(native.Y[:, 6:10], path._q, rtol=0, atol=1e-14)
-
-
-@pytest.mark.skipif(NUMBA is not None, reason=NUMBA or "")
-@pytest.mark.parametrize("method,counts", [("dopri5", [16, 32]), ("dop853", [6, 11])])
-def test_fixed_tableau_steps_as_the_numba_kernels(method, counts):
-    scene = two_bodies()
-    F = np.random.default_rng(3).normal(size=(scene.K, 3))
-    for n in counts:
-        native = Bodies(scene, method, rtol=1e-6)
-        path, state = numba_path(scene, method, rtol=1e-6)
-        X, U = native.fixed_steps(0.5 / n, n, F)
-        Xn, Un = path.fixed_steps(state.X, state.U, 0.5 / n, n, F)
-        assert np.abs(X - Xn).max() <= 1e-14 * np.abs(Xn).max()
-        assert np.abs(U - Un).max() <= 1e-13 * np.abs(Un).max()
 
 
 # ---- physics -------------------------------------------------------------------------------------
