@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """linknet demo: build a shipped scene's FMU, simulate it with fmpy under a force input,
-print a summary and write a plot of positions and tensions against time.
+print a summary, write a plot of positions and tensions against time and an animation of the run.
 
     python examples/demo.py [--scene models/chain_10.json] [--t-end 3] [--out build/demo]
 
@@ -21,7 +21,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import build_fmu  # noqa: E402
-import linknet_core as ln  # noqa: E402  (used for the summary's energy bookkeeping only)
+import linknet_core as ln  # noqa: E402  (the summary's energy bookkeeping and the animation)
+from linknet_core import visual  # noqa: E402
 
 
 def tip_force(t):
@@ -111,6 +112,9 @@ def main(argv=None) -> int:
     png = out / f"{scene.name}_demo.png"
     fig.savefig(png, dpi=110)
     print(f"  plot: {png}")
+
+    motion = visual.Motion.from_arrays(scene, t, X, T, title=f"{scene.name} FMU, force input on mass {tip + 1} (z)")
+    print(f"  animation: {visual.write_animation(motion, out / f'{scene.name}_demo.gif').line()}")
     return 0
 
 
