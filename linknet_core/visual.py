@@ -290,6 +290,10 @@ class NetworkFigure:
                                               (self.anchor_marks, anchored.any())) if shown]
         self.fig.legend(handles=handles, loc="outside lower center", fontsize=8, frameon=False, ncols=len(handles))
         self._time_format = _time_format(motion.t if times is None else times)
+        # lay the figure out once (nothing that sizes it changes between frames), then keep that layout: the
+        # constrained layout engine would otherwise measure every text again for each frame, half of its cost
+        self.fig.draw_without_rendering()
+        self.fig.set_layout_engine("none")
 
     def show(self, i: int) -> None:
         """Draw sample i of the motion."""
