@@ -4,6 +4,9 @@ All of them are array code over the scene's index arrays; none knows about the l
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Callable
+
 import numpy as np
 
 from .scene import Scene
@@ -17,27 +20,63 @@ def scatter_add(K: int, index: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     return out
 
 
-def spring_forces(scene: Scene, X: np.ndarray, U: np.ndarray) -> np.ndarray:
-    """Linear spring-dampers: force k (d - d0) + c d' along the axis, pulling the ends together when stretched."""
-    s = scene.springs
-    if s.count == 0:
-        return np.zeros_like(X)
-    d = X[s.b] - X[s.a]
+def _drag(K, X, U, masses, c):
+    """Viscous drag: -c U on its mass."""
+    k = masses[:, 0]
+    return scatter_add(K, k, -c[:, :1] * U[k])
+
+
+def _spring(K, X, U, masses, p):
+    """Linear spring-damper between two masses: k (d - d0) + c d' along the axis, pulling the ends together
+    when stretched (parameters k, d0, c)."""
+    a, b = masses[:, 0], masses[:, 1]
+    d = X[b] - X[a]
     dist = np.sqrt(np.einsum("ij,ij->i", d, d))
     with np.errstate(invalid="ignore", divide="ignore"):
         n = np.where(dist[:, None] > 0, d / dist[:, None], 0.0)  # no direction when the ends coincide
-    rate = np.einsum("ij,ij->i", n, U[s.b] - U[s.a])
-    f = (s.stiffness * (dist - s.rest_length) + s.damping * rate)[:, None] * n
-    return scatter_add(scene.K, s.a, f) - scatter_add(scene.K, s.b, f)
+    rate = np.einsum("ij,ij->i", n, U[b] - U[a])
+    f = (p[:, 0] * (dist - p[:, 1]) + p[:, 2] * rate)[:, None] * n
+    return scatter_add(K, a, f) - scatter_add(K, b, f)
+
+
+def _spring_potential(X, masses, p):
+    d = X[masses[:, 1]] - X[masses[:, 0]]
+    return 0.5 * float(np.sum(p[:, 0] * (np.sqrt(np.einsum("ij,ij->i", d, d)) - p[:, 1]) ** 2))
+
+
+@dataclass(frozen=True)
+class ElementKind:
+    """A kind of force element: its forces on all masses, its potential (None: dissipative) and whether it
+    depends on the velocities (per element)."""
+
+    forces: Callable
+    potential: Callable | None
+    velocity_dependent: Callable
+
+
+# The kinds of scene.ForceElements; the native core's stages/forces.c has the same names and formulas.
+ELEMENT_KINDS = {
+    "drag": ElementKind(_drag, None, lambda p: p[:, 0] != 0),
+    "spring": ElementKind(_spring, _spring_potential, lambda p: p[:, 2] != 0),
+}
+
+
+def element_forces(scene: Scene, X: np.ndarray, U: np.ndarray) -> np.ndarray:
+    """The forces of the scene's force elements (drag, springs, ...) on every mass."""
+    F = np.zeros_like(X)
+    elements = scene.force_elements
+    for kind in dict.fromkeys(elements.kinds):
+        F += ELEMENT_KINDS[kind].forces(scene.K, X, U, *elements.of_kind(kind))
+    return F
 
 
 def external_forces(scene: Scene, X: np.ndarray, U: np.ndarray, F_input: np.ndarray | None = None) -> np.ndarray:
     """F_k of (9) and (26): everything but the link tensions. Zero rows on anchored masses."""
     free = ~scene.fixed
     mass = np.where(free, scene.mass, 0.0)
-    F = mass[:, None] * scene.gravity[None, :] + scene.force - scene.drag[:, None] * U
-    if scene.springs.count:
-        F = F + spring_forces(scene, X, U)
+    F = mass[:, None] * scene.gravity[None, :] + scene.force
+    if scene.force_elements.count:
+        F = F + element_forces(scene, X, U)
     if F_input is not None:
         F = F + F_input
     F[scene.fixed] = 0.0
@@ -45,20 +84,23 @@ def external_forces(scene: Scene, X: np.ndarray, U: np.ndarray, F_input: np.ndar
 
 
 def has_velocity_dependent_forces(scene: Scene) -> bool:
-    """Drag on a free mass or a damper: RATTLE's second half kick is then implicit in the new velocity."""
-    return bool(np.any((scene.drag != 0) & ~scene.fixed) or np.any(scene.springs.damping != 0))
+    """A force element that depends on the velocities (drag, a damper): RATTLE's second half kick is then
+    implicit in the new velocity."""
+    elements = scene.force_elements
+    return any(bool(np.any(ELEMENT_KINDS[kind].velocity_dependent(elements.of_kind(kind)[1])))
+               for kind in dict.fromkeys(elements.kinds))
 
 
 def potential_energy(scene: Scene, X: np.ndarray) -> float:
-    """Potential of the conservative forces: gravity, constant forces and springs (inputs excluded)."""
+    """Potential of the conservative forces: gravity, constant forces and the force elements that have one
+    (springs); inputs excluded."""
     free = ~scene.fixed
     mass = np.where(free, scene.mass, 0.0)
     V = -float(np.sum(mass[:, None] * scene.gravity[None, :] * X)) - float(np.sum(scene.force[free] * X[free]))
-    s = scene.springs
-    if s.count:
-        d = X[s.b] - X[s.a]
-        dist = np.sqrt(np.einsum("ij,ij->i", d, d))
-        V += 0.5 * float(np.sum(s.stiffness * (dist - s.rest_length) ** 2))
+    elements = scene.force_elements
+    for kind in dict.fromkeys(elements.kinds):
+        if ELEMENT_KINDS[kind].potential is not None:
+            V += ELEMENT_KINDS[kind].potential(X, *elements.of_kind(kind))
     return V
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +59,31 @@ class Springs:
         return int(self.a.shape[0])
 
 
+FORCE_ELEMENT_PARAMETERS = 4  # parameters per force element (their meaning is the kind's)
+
+
+@dataclass(frozen=True)
+class ForceElements:
+    """The state-dependent force elements of F_k (9) as one table, the form both force paths take: a kind per
+    element (its formula is in linknet_core.forces and in the native core's stages/forces.c), the masses it
+    acts on (two columns, -1 where unused, 0-based) and its parameters (FORCE_ELEMENT_PARAMETERS columns,
+    their meaning the kind's). Gravity, constant and input forces are not elements: they do not depend on
+    the state."""
+
+    kinds: tuple[str, ...]
+    masses: np.ndarray  # (n, 2) int
+    parameters: np.ndarray  # (n, FORCE_ELEMENT_PARAMETERS)
+
+    @property
+    def count(self) -> int:
+        return len(self.kinds)
+
+    def of_kind(self, kind: str) -> tuple[np.ndarray, np.ndarray]:
+        """(masses, parameters) of the elements of one kind."""
+        rows = np.array([k == kind for k in self.kinds], bool)
+        return self.masses[rows], self.parameters[rows]
+
+
 @dataclass(frozen=True)
 class Scene:
     """Immutable description of a network of point masses joined by rigid links."""
@@ -80,6 +106,25 @@ class Scene:
     options: dict = field(default_factory=dict)
 
     # ---- derived, read-only views -------------------------------------------------------------
+    @cached_property
+    def force_elements(self) -> ForceElements:
+        """Drag on the free masses that have it (c: force -c U) and the spring-dampers (stiffness k, rest
+        length d0, damping c: force k (d - d0) + c d' along the axis), as one table."""
+        rows = []
+        for k in np.flatnonzero((self.drag != 0) & ~self.fixed):
+            rows.append(("drag", (k, -1), (self.drag[k],)))
+        s = self.springs
+        for i in range(s.count):
+            rows.append(("spring", (s.a[i], s.b[i]), (s.stiffness[i], s.rest_length[i], s.damping[i])))
+        masses = np.full((len(rows), 2), -1, np.int64)
+        parameters = np.zeros((len(rows), FORCE_ELEMENT_PARAMETERS))
+        for i, (_, ends, values) in enumerate(rows):
+            masses[i] = ends
+            parameters[i, :len(values)] = values
+        masses.setflags(write=False)
+        parameters.setflags(write=False)
+        return ForceElements(tuple(kind for kind, _, _ in rows), masses, parameters)
+
     @property
     def K(self) -> int:
         return int(self.mass.shape[0])

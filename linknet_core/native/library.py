@@ -39,9 +39,8 @@ class Model(ctypes.Structure):
         ("n_fixed", ln_int), ("fixed_idx", ln_int_p),
         ("is_fixed", c_uint8_p),
         ("F_scene", c_double_p),
-        ("n_drag", ln_int), ("drag_idx", ln_int_p), ("drag_coef", c_double_p),
-        ("n_springs", ln_int), ("spring_a", ln_int_p), ("spring_b", ln_int_p),
-        ("spring_k", c_double_p), ("spring_rest", c_double_p), ("spring_c", c_double_p),
+        ("n_elements", ln_int), ("element_kind", ln_int_p), ("element_mass", ln_int_p),
+        ("element_param", c_double_p),
         ("velocity_dependent", ctypes.c_int),
         ("solver", ctypes.c_int),
         ("n_pairs", ln_int), ("pair_first", ln_int_p), ("pair_second", ln_int_p), ("pair_weight", c_double_p),
@@ -115,6 +114,7 @@ advance = _declare("ln_advance", ctypes.c_int, Model_p, Method_p, Data_p, ctypes
 evaluate = _declare("ln_evaluate", ctypes.c_int, Model_p, Data_p, c_double_p, c_double_p)
 evaluate_repeated = _declare("ln_evaluate_repeated", ctypes.c_int, Model_p, Data_p, ctypes.c_int, c_double_p,
                              c_double_p, ln_int)
+force_kind = _declare("ln_force_kind", ln_int, ctypes.c_char_p)
 fixed_step_count = _declare("ln_fixed_step_count", ln_int, ctypes.c_double, ctypes.c_double)
 sizeof = _declare("ln_sizeof", ctypes.c_size_t, ctypes.c_int)
 ldl_analyse = _declare("ln_ldl_analyse", ctypes.c_void_p, ln_int, ln_int, ln_int_p, ln_int_p, ln_int_p)

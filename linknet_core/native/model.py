@@ -108,13 +108,12 @@ class NativeModel:
         F_scene = free_mass[:, None] * np.asarray(scene.gravity)[None, :] + scene.force
         F_scene[fixed] = 0.0  # no force acts on an anchor
         m.F_scene = f8(F_scene)
-        drag = np.asarray(scene.drag, float)
-        drag_idx = np.flatnonzero((drag != 0.0) & ~fixed)
-        m.n_drag, m.drag_idx, m.drag_coef = drag_idx.size, i8(drag_idx), f8(drag[drag_idx])
-        s = scene.springs
-        m.n_springs = s.count
-        m.spring_a, m.spring_b = i8(s.a), i8(s.b)
-        m.spring_k, m.spring_rest, m.spring_c = f8(s.stiffness), f8(s.rest_length), f8(s.damping)
+        elements = scene.force_elements
+        kinds = [lib.force_kind(kind.encode()) for kind in elements.kinds]
+        if -1 in kinds:
+            raise ValueError(f"the native core has no force element of kind {elements.kinds[kinds.index(-1)]!r}")
+        m.n_elements, m.element_kind = elements.count, i8(kinds)
+        m.element_mass, m.element_param = i8(elements.masses), f8(elements.parameters)
         m.velocity_dependent = int(has_velocity_dependent_forces(scene))
 
         pairs = link_pairs(scene)
@@ -182,15 +181,12 @@ class NativeModel:
                     "an out-of-plane input force or state switches to 3-D)")
         else:
             dims = "3-D"
-        m = self.struct
         terms = ["gravity, constant and input forces summed once per interval"]
-        if m.n_drag:
-            terms.append(f"drag on {m.n_drag} mass{'es' if m.n_drag != 1 else ''}")
-        if m.n_springs:
-            damped = int(np.count_nonzero(np.asarray(self.scene.springs.damping) != 0.0))
-            terms.append(f"{m.n_springs} spring{'s' if m.n_springs != 1 else ''}" + (f" ({damped} damped)" if damped else ""))
-        if not (m.n_drag or m.n_springs):
-            terms.append("no drag or springs: no force evaluation per step")
+        kinds = self.scene.force_elements.kinds
+        for kind in dict.fromkeys(kinds):
+            terms.append(f"{kinds.count(kind)} {kind} element{'s' if kinds.count(kind) != 1 else ''}")
+        if not kinds:
+            terms.append("no force elements: no force evaluation per step")
         return f"{solver}; {dims}; forces: {', '.join(terms)}"
 
 

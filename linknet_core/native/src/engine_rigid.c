@@ -85,7 +85,7 @@ struct ln_rigid_data *ln_rigid_data_new(const ln_model *m, ln_int n_stages)
 static inline const double *forces(const ln_model *m, ln_data *d, const double *X, const double *U,
                                    const double *F_base)
 {
-    if (m->n_drag == 0 && m->n_springs == 0) return F_base;
+    if (m->n_elements == 0) return F_base;
     ln_scene_forces_3d(m, X, U, F_base, d->F);
     return d->F;
 }

@@ -59,9 +59,11 @@ enum ln_method_kind {
 
 enum ln_error_norm { LN_RMS_ERROR = 0, LN_HAIRER_ERROR = 1 };
 
+#define LN_FORCE_PARAMETERS 4       /* parameters per force element */
+
 struct ln_rigid_model;      /* engine_rigid.c: free rigid bodies (rigid.h) */
 struct ln_rigid_data;
-struct ln_minnorm_work;     /* engine_minnorm.c: minimum-norm solves (minnorm.h) */
+struct ln_minnorm_work;     /* stages/minnorm.c: minimum-norm solves (minnorm.h) */
 
 struct ln_ldl_symbolic;     /* engine_ldl.c: sparse LDL^T of A, analysed once (ldl.h) */
 struct ln_ldl_numeric;
@@ -77,15 +79,14 @@ typedef struct ln_model {
     const ln_int *fixed_idx;        /* (n_fixed) */
     const uint8_t *is_fixed;        /* (K) */
 
-    /* F_k of (9): the part fixed over a run, and the force elements */
+    /* F_k of (9): the part fixed over a run, and the state-dependent force elements (stages/forces.c names
+       the kinds and gives each its formula and the meaning of its parameters) */
     const double *F_scene;          /* (K,3) M_k g + constant forces; zero on anchors */
-    ln_int n_drag;
-    const ln_int *drag_idx;         /* (n_drag) free masses with viscous drag */
-    const double *drag_coef;        /* (n_drag) N s/m: force -c U */
-    ln_int n_springs;
-    const ln_int *spring_a, *spring_b;                      /* (n_springs) */
-    const double *spring_k, *spring_rest, *spring_c;        /* N/m, m, N s/m */
-    int velocity_dependent;         /* drag or a damper: RATTLE's second half kick is implicit */
+    ln_int n_elements;
+    const ln_int *element_kind;     /* (n_elements) ln_force_kind of the kind's name */
+    const ln_int *element_mass;     /* (n_elements, 2) the masses it acts on, -1 where unused */
+    const double *element_param;    /* (n_elements, LN_FORCE_PARAMETERS) */
+    int velocity_dependent;         /* an element depends on U: RATTLE's second half kick is implicit */
 
     /* the tension system (25) */
     int solver;                     /* enum ln_solver */
@@ -204,6 +205,9 @@ int ln_base_forces(const ln_model *m, const ln_data *d, double *F_base);
 /* Equal steps no longer than dt that land on the target: how many (a whole number up to round-off is that
    number, not one more). */
 ln_int ln_fixed_step_count(double span, double dt);
+
+/* The code of a force element kind named as in linknet_core.forces (stages/forces.c), or -1. */
+ln_int ln_force_kind(const char *name);
 
 /* ---- DIM-generic stages (the 3-D copies; the 2-D ones end in _2d) -------------------------------- */
 void ln_scene_forces_3d(const ln_model *m, const double *X, const double *U, const double *F_base, double *F);

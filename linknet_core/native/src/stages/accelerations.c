@@ -97,7 +97,7 @@ int FN(ln_accelerations)(const ln_model *m, ln_data *d, const double *X, const d
     const ln_int K = m->K, L = m->L;
     double *E = d->E1;
     const double *F = F_base;
-    if (m->n_drag > 0 || m->n_springs > 0) {
+    if (m->n_elements > 0) {
         FN(ln_scene_forces)(m, X, U, F_base, d->F);
         F = d->F;
     }

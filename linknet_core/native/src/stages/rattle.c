@@ -22,7 +22,7 @@
 static inline const double *rattle_forces(const ln_model *m, ln_data *d, const double *X, const double *U,
                                           const double *F_base)
 {
-    if (m->n_drag == 0 && m->n_springs == 0) return F_base;
+    if (m->n_elements == 0) return F_base;
     FN(ln_scene_forces)(m, X, U, F_base, d->F);
     return d->F;
 }
