@@ -1,4 +1,4 @@
-"""External forces F_k of (9): gravity, constant forces, spring-dampers, viscous drag, inputs.
+"""External forces F_k of (9): gravity, constant forces, spring-dampers, viscous and quadratic drag, inputs.
 
 All of them are array code over the scene's index arrays; none knows about the links' tensions.
 """
@@ -24,6 +24,13 @@ def _drag(K, X, U, masses, c):
     """Viscous drag: -c U on its mass."""
     k = masses[:, 0]
     return scatter_add(K, k, -c[:, :1] * U[k])
+
+
+def _quadratic_drag(K, X, U, masses, c):
+    """Aerodynamic drag: -c |U| U on its mass (speed squared, against the velocity)."""
+    k = masses[:, 0]
+    u = U[k]
+    return scatter_add(K, k, -(c[:, :1] * np.linalg.norm(u, axis=1)[:, None]) * u)
 
 
 def _spring(K, X, U, masses, p):
@@ -57,6 +64,7 @@ class ElementKind:
 # The kinds of scene.ForceElements; the native core's stages/forces.c has the same names and formulas.
 ELEMENT_KINDS = {
     "drag": ElementKind(_drag, None, lambda p: p[:, 0] != 0),
+    "quadratic_drag": ElementKind(_quadratic_drag, None, lambda p: p[:, 0] != 0),
     "spring": ElementKind(_spring, _spring_potential, lambda p: p[:, 2] != 0),
 }
 

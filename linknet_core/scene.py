@@ -19,7 +19,7 @@ import numpy as np
 
 from .errors import SceneError
 
-_MASS_KEYS = {"name", "mass", "position", "velocity", "fixed", "force", "drag"}
+_MASS_KEYS = {"name", "mass", "position", "velocity", "fixed", "force", "drag", "quadratic_drag"}
 _LINK_KEYS = {"a", "b", "length", "name"}
 _SPRING_KEYS = {"a", "b", "stiffness", "rest_length", "damping", "name"}
 _SCENE_KEYS = {"name", "description", "gravity", "masses", "links", "springs", "options"}
@@ -99,6 +99,7 @@ class Scene:
     gravity: np.ndarray  # (3,) m/s^2
     force: np.ndarray  # (K,3) constant external force per mass, N
     drag: np.ndarray  # (K,) viscous drag coefficient, N s/m (force = -drag * U)
+    quadratic_drag: np.ndarray  # (K,) aerodynamic drag coefficient, N s^2/m^2 (force = -c |U| U)
     springs: Springs
     X0: np.ndarray  # (K,3) initial positions
     U0: np.ndarray  # (K,3) initial velocities
@@ -108,11 +109,14 @@ class Scene:
     # ---- derived, read-only views -------------------------------------------------------------
     @cached_property
     def force_elements(self) -> ForceElements:
-        """Drag on the free masses that have it (c: force -c U) and the spring-dampers (stiffness k, rest
+        """Drag on the free masses that have it (c: force -c U), quadratic (aerodynamic) drag (c: force -c |U| U)
+        and the spring-dampers (stiffness k, rest
         length d0, damping c: force k (d - d0) + c d' along the axis), as one table."""
         rows = []
         for k in np.flatnonzero((self.drag != 0) & ~self.fixed):
             rows.append(("drag", (k, -1), (self.drag[k],)))
+        for k in np.flatnonzero((self.quadratic_drag != 0) & ~self.fixed):
+            rows.append(("quadratic_drag", (k, -1), (self.quadratic_drag[k],)))
         s = self.springs
         for i in range(s.count):
             rows.append(("spring", (s.a[i], s.b[i]), (s.stiffness[i], s.rest_length[i], s.damping[i])))
@@ -175,6 +179,8 @@ class Scene:
                 entry["force"] = self.force[k].tolist()
             if self.drag[k] != 0:
                 entry["drag"] = float(self.drag[k])
+            if self.quadratic_drag[k] != 0:
+                entry["quadratic_drag"] = float(self.quadratic_drag[k])
             masses.append(entry)
         links = [
             {"a": int(self.k1[l]) + 1, "b": int(self.k2[l]) + 1, "length": float(self.length[l])}
@@ -299,6 +305,7 @@ def _parse_scene(data: dict, source: str) -> Scene:
     U0 = np.zeros((K, 3))
     force = np.zeros((K, 3))
     drag = np.zeros(K)
+    quadratic_drag = np.zeros(K)
     for k, entry in enumerate(masses):
         if not isinstance(entry, dict):
             raise SceneError(f"{source}: mass {k + 1} must be an object")
@@ -324,6 +331,8 @@ def _parse_scene(data: dict, source: str) -> Scene:
             U0[k] = _vector(entry.get("velocity"), f"{label} velocity", source, default=[0, 0, 0])
         force[k] = _vector(entry.get("force"), f"{label} force", source, default=[0, 0, 0])
         drag[k] = _number(entry.get("drag", 0.0), f"{label} drag", source, nonnegative=True)
+        quadratic_drag[k] = _number(entry.get("quadratic_drag", 0.0), f"{label} quadratic_drag", source,
+                                    nonnegative=True)
 
     def resolve(ref, what: str) -> int:
         if isinstance(ref, bool):
@@ -417,6 +426,7 @@ def _parse_scene(data: dict, source: str) -> Scene:
         gravity=_frozen(gravity),
         force=_frozen(force),
         drag=_frozen(drag),
+        quadratic_drag=_frozen(quadratic_drag),
         springs=Springs(_frozen_int(sa), _frozen_int(sb), _frozen(stiffness), _frozen(rest), _frozen(damping),
                         tuple(spring_names)),
         X0=_frozen(X0),

@@ -15,9 +15,10 @@ enum ln_force_kind_code {
     LN_FORCE_DRAG,      /* one mass k; c: -c U_k (viscous drag) */
     LN_FORCE_SPRING,    /* masses a, b; k, d0, c: k (d - d0) + c d' along the axis, pulling a and b together when
                            stretched (linear spring-damper) */
+    LN_FORCE_QUADRATIC_DRAG,    /* one mass k; c: -c |U_k| U_k (aerodynamic drag) */
     LN_FORCE_KIND_COUNT
 };
-static const char *const force_kind_names[LN_FORCE_KIND_COUNT] = {"drag", "spring"};
+static const char *const force_kind_names[LN_FORCE_KIND_COUNT] = {"drag", "spring", "quadratic_drag"};
 #endif
 
 #if DIM == 3
@@ -57,6 +58,13 @@ void FN(ln_scene_forces)(const ln_model *m, const double *X, const double *U, co
                 F[a * DIM + e] += fn;
                 F[b * DIM + e] -= fn;
             }
+            break;
+        }
+        case LN_FORCE_QUADRATIC_DRAG: {
+            double speed = 0.0;
+            for (int e = 0; e < DIM; e++) speed += U[a * DIM + e] * U[a * DIM + e];
+            const double c = p[0] * sqrt(speed);
+            for (int e = 0; e < DIM; e++) F[a * DIM + e] -= c * U[a * DIM + e];
             break;
         }
         default:
