@@ -28,6 +28,7 @@ PLANES = {"xz": (0, 2), "xy": (0, 1), "yz": (1, 2)}  # the two coordinates a fla
 AXIS_NAMES = "xyz"
 DEFAULT_CMAP = "coolwarm"  # diverging, perceptually balanced; its T = 0 grey stays visible on white
 DENSE_MASSES = 300
+TENSION_PERCENTILE = 95.0  # of |T| over a run: the default half range of the colour scale (Motion.tension_limit)
 DEFAULT_SIZE = (800, 600)  # pixels of an animation or still
 DPI = 100
 DEFAULT_FPS = 25.0
@@ -138,12 +139,12 @@ class Motion:
         return float(np.max(np.abs(self.T))) if self.T.size else 0.0
 
     def tension_limit(self) -> float:
-        """The colour scale's default half range: the 99th percentile of |T| over all links and samples, so
+        """The colour scale's default half range: the 95th percentile of |T| over all links and samples, so
         that a short spike (a whipping tip, a jerk) saturates instead of washing every other link out to the
         T = 0 colour; the largest |T| if that percentile is 0, and 1 N if no link ever carries a force."""
         if not self.T.size:
             return 1.0
-        typical = float(np.percentile(np.abs(self.T), 99.0))
+        typical = float(np.percentile(np.abs(self.T), TENSION_PERCENTILE))
         return typical if typical > 0 else self.tension_peak() or 1.0
 
     def resolve_view(self, view: str) -> str:
@@ -258,7 +259,8 @@ class NetworkFigure:
 
             ax = self.fig.add_subplot(projection="3d", computed_zorder=False)
             ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]), zlim=(low[2], high[2]),
-                   xlabel="x, m", ylabel="y, m", zlabel="z, m")
+                   xlabel="x, m", ylabel="y, m")
+            ax.set_zlabel("z, m", labelpad=12)  # clear of the z tick labels
             ax.set_box_aspect(high - low)  # equal scale on the three axes: the network keeps its shape
             ax.view_init(elev=elev, azim=azim)
             self.links = Line3DCollection(np.zeros((motion.L, 2, 3)), cmap=self.cmap, norm=self.norm,
@@ -282,7 +284,7 @@ class NetworkFigure:
         self._free, self._anchored = free, anchored
         ax.set_title(motion.title, loc="right", fontsize=10)
         extend = "neither" if limit >= motion.tension_peak() else "both"
-        self.fig.colorbar(self.links, ax=ax, shrink=0.85, extend=extend,
+        self.fig.colorbar(self.links, ax=ax, shrink=0.85, extend=extend, pad=0.1 if self.view == "3d" else 0.05,
                           label="link tension T, N   (> 0 pulls, < 0 pushes)")
         # time stamp and legend outside the axes, where they never cover the network
         self.stamp = ax.set_title("\n", loc="left", fontsize=9, family="monospace")
@@ -581,7 +583,7 @@ def _add_picture_arguments(p, max_frames_help: str) -> None:
                    help="playback speed relative to real time (default 1; 0.25 is four times slower); "
                         "sets how many samples are shown")
     p.add_argument("--tension-range", type=_positive(float), metavar="N",
-                   help="colour scale from -N to N newtons (default: the 99th percentile of |T| over the run, so "
+                   help="colour scale from -N to N newtons (default: the 95th percentile of |T| over the run, so "
                         "that short spikes saturate rather than wash the rest out)")
     p.add_argument("--cmap", default=DEFAULT_CMAP, help=f"diverging matplotlib colour map (default {DEFAULT_CMAP})")
 
