@@ -130,7 +130,6 @@ class Simulator:
         if self.backend == "numpy":
             self.specialisation = choose_specialisation(scene, self.dyn, method, enabled=False)
             self.integrator = make_integrator(method, self.dyn, dt=dt, rtol=rtol, atol=atol)
-            self._tensions = self.dyn.tensions
         else:
             self.specialisation = choose_specialisation(scene, self.dyn, method, enabled=specialise,
                                                         tolerances=(rtol, atol))
@@ -144,7 +143,6 @@ class Simulator:
                                                    rtol=rtol, atol=atol, static=self.specialisation.kind == STATIC)
                 if self.specialisation.kind == STATIC:
                     U0 = np.zeros_like(U0)  # the only velocity (12) allows where nothing can move
-            self._tensions = self.integrator.tensions
         self._initial = State(0.0, X0, U0)
         self._initial_internals = copy.deepcopy(self.integrator.internals())
         self.max_steps_per_call = max_steps_per_call
@@ -181,7 +179,7 @@ class Simulator:
         t_next = float(t_next)
         state = self.state
         t_before = state.t
-        if self._native_all_or_nothing:  # the native advance restores everything itself on failure
+        if self.backend == "native":  # the native advance restores everything itself on failure
             self.integrator.advance(state, t_next, F, self.max_steps_per_call)
             return
         if not math.isfinite(t_next) or not t_next > t_before:
@@ -202,17 +200,17 @@ class Simulator:
             self.integrator.set_internals(internals)
             raise
 
-    @property
-    def _native_all_or_nothing(self) -> bool:
-        return isinstance(self.integrator, NativeIntegrator)
-
     def outputs(self, F_input=None) -> dict:
         """Positions, velocities, tensions (with direct feedthrough of F_input, since B of (26) contains F)
         and the force the network exerts on each anchored mass."""
         F = self.check_input(F_input)
         X, U = self.state.X, self.state.U
-        T = self._tensions(X, U, F)
-        return {"t": self.state.t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": self.dyn.anchor_reactions(X, T)}
+        if self.backend == "native":
+            T, Freact = self.integrator.outputs(X, U, F)
+        else:
+            T = self.dyn.tensions(X, U, F)
+            Freact = self.dyn.anchor_reactions(X, T)
+        return {"t": self.state.t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": Freact}
 
     # ---- snapshots ---------------------------------------------------------------------------
     def get_state(self) -> dict:

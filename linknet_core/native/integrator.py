@@ -93,6 +93,10 @@ class NativeIntegrator(Integrator):
 
     def tensions(self, X, U, F_input=None) -> np.ndarray:
         """T of (25)-(26) at (X, U) with F_input held (minimum-norm where A is singular)."""
+        return self.outputs(X, U, F_input)[0]
+
+    def outputs(self, X, U, F_input=None):
+        """(T, the force the network exerts on each anchor) at (X, U) with F_input held, in one call."""
         F = self.data.F_input
         if F_input is None:
             F.fill(0.0)
@@ -103,7 +107,7 @@ class NativeIntegrator(Integrator):
         status = lib.evaluate(self._model_p, self._data_p, lib.pointer(X), lib.pointer(U))
         if status != lib.OK:
             raise SolverError(f"the tensions (25)-(26) cannot be evaluated at this state: {lib.STATUS[status]}")
-        return self.data.T.copy()
+        return self.data.T.copy(), self.data.reaction.copy()
 
     def explain(self, status: int, t_start: float, t_target: float, max_steps: int) -> str:
         """The failure of an advance in words, naming the link, the residuals and what may help."""

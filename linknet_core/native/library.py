@@ -82,7 +82,7 @@ class Data(ctypes.Structure):
         ("fail_residual", ctypes.c_double), ("fail_before", ctypes.c_double),
         ("fail_iterations", ln_int),
         ("fail_t", ctypes.c_double),
-        ("T", c_double_p), ("acc", c_double_p),
+        ("T", c_double_p), ("acc", c_double_p), ("reaction", c_double_p),
     ]
     # the scratch that follows in ln_data is the C side's own: ctypes never reads past these fields
 

@@ -243,7 +243,8 @@ def embedded_pair(A, B, error_weights, error_estimator_order):
 
 class NativeData:
     """ln_data for one model: the state t, X, U, the held input F_input, the last tensions T, and the
-    integrator's internals, with numpy views of C's arrays (X, U, F_input, T: (K,3), (K,3), (K,3), (L,))."""
+    integrator's internals, with numpy views of C's arrays (X, U, F_input, T, reaction: (K,3), (K,3), (K,3), (L,),
+    (anchors,3))."""
 
     def __init__(self, model: NativeModel, n_stages: int = 0):
         self.model = model  # the data points into nothing of the model's, but C reads both together
@@ -257,6 +258,8 @@ class NativeData:
         self.F_input = np.ctypeslib.as_array(d.F_input, (K, 3)) if K else np.zeros((0, 3))
         self.T = np.ctypeslib.as_array(d.T, (L,)) if L else np.zeros(0)
         self.acc = np.ctypeslib.as_array(d.acc, (K, 3)) if K else np.zeros((0, 3))
+        n_fixed = int(model.struct.n_fixed)
+        self.reaction = np.ctypeslib.as_array(d.reaction, (n_fixed, 3)) if n_fixed else np.zeros((0, 3))
 
     def __del__(self):
         if getattr(self, "_ptr", None):

@@ -21,7 +21,7 @@ static double *doubles(ln_int n) { return calloc((size_t)(n > 0 ? n : 1), sizeof
 void ln_data_free(ln_data *d)
 {
     if (!d) return;
-    double *arrays[] = {d->X, d->U, d->F_input, d->T, d->acc, d->X_start, d->U_start, d->Xp, d->Up, d->Fp,
+    double *arrays[] = {d->X, d->U, d->F_input, d->T, d->acc, d->reaction, d->X_start, d->U_start, d->Xp, d->Up, d->Fp,
                         d->F_base, d->F, d->Uh, d->Xc, d->U_iterate, d->acc1, d->Xs, d->Us, d->Xn, d->Un, d->E0,
                         d->E1, d->B, d->mu, d->phi, d->scale, d->work, d->KX, d->KU, d->pair_values, d->chain_sub,
                         d->chain_Dinv, d->krylov};
@@ -38,6 +38,7 @@ ln_data *ln_data_new(const ln_model *m, ln_int n_stages)
     if (!d) return NULL;
     const ln_int K3 = 3 * m->K, L = m->L, L3 = 3 * m->L, K2 = 2 * m->K;
     d->X = doubles(K3); d->U = doubles(K3); d->F_input = doubles(K3); d->T = doubles(L); d->acc = doubles(K3);
+    d->reaction = doubles(3 * m->n_fixed);
     d->X_start = doubles(K3); d->U_start = doubles(K3);
     d->Xp = doubles(K2); d->Up = doubles(K2); d->Fp = doubles(K2);
     d->F_base = doubles(K3); d->F = doubles(K3); d->Uh = doubles(K3); d->Xc = doubles(K3);
@@ -52,7 +53,7 @@ ln_data *ln_data_new(const ln_model *m, ln_int n_stages)
     d->chain_sub = doubles(L); d->chain_Dinv = doubles(L);
     d->planar = m->planar;
     d->fail_link = -1;
-    int ok = d->X && d->U && d->F_input && d->T && d->acc && d->X_start && d->U_start && d->Xp && d->Up && d->Fp
+    int ok = d->X && d->U && d->F_input && d->T && d->acc && d->reaction && d->X_start && d->U_start && d->Xp && d->Up && d->Fp
              && d->F_base && d->F && d->Uh && d->Xc && d->U_iterate && d->acc1 && d->Xs && d->Us && d->Xn && d->Un
              && d->E0 && d->E1 && d->B && d->mu && d->phi && d->scale && d->work && d->KX && d->KU
              && d->pair_values && d->chain_sub && d->chain_Dinv;
@@ -89,7 +90,23 @@ int ln_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U)
 {
     if (!ln_base_forces(m, d, d->F_base)) return LN_NON_FINITE;
     d->n_rhs++;
-    return ln_accelerations_3d(m, d, X, U, d->F_base, d->acc, d->T, 1);
+    const int status = ln_accelerations_3d(m, d, X, U, d->F_base, d->acc, d->T, 1);
+    /* the link forces on the anchors, gathered in the rows of a (K,3) scratch (only anchors' rows used) */
+    double *on_mass = d->Uh;
+    for (ln_int i = 0; i < m->n_fixed; i++)
+        for (int e = 0; e < 3; e++) on_mass[3 * m->fixed_idx[i] + e] = 0.0;
+    for (ln_int l = 0; l < m->L; l++) {
+        const ln_int a = m->k1[l], b = m->k2[l];
+        if (!m->is_fixed[a] && !m->is_fixed[b]) continue;
+        for (int e = 0; e < 3; e++) {
+            const double f = d->T[l] * (X[3 * b + e] - X[3 * a + e]) * m->inv_R[l];  /* T_l E_l (8) */
+            if (m->is_fixed[a]) on_mass[3 * a + e] += f;
+            if (m->is_fixed[b]) on_mass[3 * b + e] -= f;
+        }
+    }
+    for (ln_int i = 0; i < m->n_fixed; i++)
+        for (int e = 0; e < 3; e++) d->reaction[3 * i + e] = on_mass[3 * m->fixed_idx[i] + e];
+    return status;
 }
 
 int ln_evaluate_repeated(const ln_model *m, ln_data *d, int dim, const double *X, const double *U, ln_int n)

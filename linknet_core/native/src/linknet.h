@@ -144,9 +144,10 @@ typedef struct ln_data {
     ln_int fail_iterations;
     double fail_t;                  /* time of the last accepted state */
 
-    /* the last evaluation's tensions and accelerations */
+    /* the last evaluation's tensions, accelerations and anchor reactions */
     double *T;                      /* (L) */
     double *acc;                    /* (K,3) */
+    double *reaction;               /* (n_fixed,3) the force the network exerts on each anchor (ln_evaluate) */
 
     /* scratch (sized for DIM = 3; the 2-D path uses the first 2K or 2L entries) */
     double *X_start, *U_start;      /* (K,3) the state at the start of an advance (all-or-nothing) */
@@ -181,7 +182,9 @@ void ln_data_free(ln_data *d);
 int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps);
 
 /* The tensions T of (25)-(26) and accelerations (9) at X, U (K,3) with d->F_input held (the reported outputs:
-   direct feedthrough of F). Minimum-norm where A is singular. Results in d->T, d->acc. */
+   direct feedthrough of F), and the force the links exert on each anchor, sum_l T_l E_l (delta(k,k1(l)) -
+   delta(k,k2(l))) of (9) at the anchored k. Minimum-norm where A is singular. Results in d->T, d->acc,
+   d->reaction. */
 int ln_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U);
 
 /* n evaluations of the right-hand side at the same state in one call, in dim = 3 or (planar scenes, X and U
