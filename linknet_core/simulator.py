@@ -272,7 +272,9 @@ class Result:
                 f"  specialisation: {s.get('specialisation', 'none')}\n"
                 f"  t_end = {self.t[-1]:g} s, steps = {s.get('steps')} (rejected {s.get('rejected', 0)}), "
                 f"wall time = {s.get('wall_time', 0):.3f} s\n"
-                f"  final energy drift = {self.energy_drift:.3e} (relative), max constraint residual = "
+                + (f"  {s['split']} steps split into equal sub-steps where the position stage did not converge at "
+                   f"full length (finest: {s['finest_split']} sub-steps)\n" if s.get("split") else "")
+                + f"  final energy drift = {self.energy_drift:.3e} (relative), max constraint residual = "
                 f"{float(self.residual.max()):.3e} (relative), max velocity residual = "
                 f"{float(self.velocity_residual.max()):.3e} m/s\n"
                 f"  max tension = {float(np.max(self.T)) if self.T.size else 0.0:.6g} N, "

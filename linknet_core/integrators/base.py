@@ -22,9 +22,11 @@ from ..state import State
 class StepStats:
     steps: int = 0
     rejected: int = 0
+    split: int = 0  # fixed steps split into equal sub-steps (their position stage failed at full length)
+    finest_split: int = 0  # the most sub-steps one step was split into
 
     def as_dict(self) -> dict:
-        return {"steps": self.steps, "rejected": self.rejected}
+        return {"steps": self.steps, "rejected": self.rejected, "split": self.split, "finest_split": self.finest_split}
 
 
 class Integrator:

@@ -25,6 +25,8 @@ class _Internals:
     steps: int
     rejected: int
     n_rhs: int
+    split_steps: int
+    finest_split: int
 
 
 class NativeIntegrator(Integrator):
@@ -49,7 +51,8 @@ class NativeIntegrator(Integrator):
     # ---- stats and internals: they live in the native data ------------------------------------
     @property
     def stats(self) -> StepStats:
-        return StepStats(int(self._d.steps), int(self._d.rejected))
+        d = self._d
+        return StepStats(int(d.steps), int(d.rejected), int(d.split_steps), int(d.finest_split))
 
     @stats.setter
     def stats(self, value) -> None:  # Integrator.__init__ sets it; the native data keeps its own
@@ -61,13 +64,15 @@ class NativeIntegrator(Integrator):
 
     def internals(self) -> dict:
         d = self._d
-        return {"native": _Internals(d.t, d.h_next, d.planar, d.steps, d.rejected, d.n_rhs)}
+        return {"native": _Internals(d.t, d.h_next, d.planar, d.steps, d.rejected, d.n_rhs, d.split_steps,
+                                     d.finest_split)}
 
     def set_internals(self, data: dict) -> None:
         saved = data["native"]
         d = self._d
         d.t, d.h_next, d.planar = saved.t, saved.h_next, saved.planar
         d.steps, d.rejected, d.n_rhs = saved.steps, saved.rejected, saved.n_rhs
+        d.split_steps, d.finest_split = saved.split_steps, saved.finest_split
         self._out = (None, None)  # the state may have been set from outside too: copy it in next time
 
     # ---- stepping -------------------------------------------------------------------------------

@@ -21,7 +21,7 @@ static double *doubles(ln_int n) { return calloc((size_t)(n > 0 ? n : 1), sizeof
 void ln_data_free(ln_data *d)
 {
     if (!d) return;
-    double *arrays[] = {d->X, d->U, d->F_input, d->T, d->acc, d->reaction, d->X_start, d->U_start, d->Xp, d->Up, d->Fp,
+    double *arrays[] = {d->X, d->U, d->F_input, d->T, d->acc, d->reaction, d->X_start, d->U_start, d->X_step, d->U_step, d->Xp, d->Up, d->Fp,
                         d->F_base, d->F, d->Uh, d->Xc, d->U_iterate, d->acc1, d->Xs, d->Us, d->Xn, d->Un, d->E0,
                         d->E1, d->B, d->mu, d->phi, d->scale, d->work, d->KX, d->KU, d->pair_values, d->chain_sub,
                         d->chain_Dinv, d->krylov};
@@ -39,7 +39,7 @@ ln_data *ln_data_new(const ln_model *m, ln_int n_stages)
     const ln_int K3 = 3 * m->K, L = m->L, L3 = 3 * m->L, K2 = 2 * m->K;
     d->X = doubles(K3); d->U = doubles(K3); d->F_input = doubles(K3); d->T = doubles(L); d->acc = doubles(K3);
     d->reaction = doubles(3 * m->n_fixed);
-    d->X_start = doubles(K3); d->U_start = doubles(K3);
+    d->X_start = doubles(K3); d->U_start = doubles(K3); d->X_step = doubles(K3); d->U_step = doubles(K3);
     d->Xp = doubles(K2); d->Up = doubles(K2); d->Fp = doubles(K2);
     d->F_base = doubles(K3); d->F = doubles(K3); d->Uh = doubles(K3); d->Xc = doubles(K3);
     d->U_iterate = doubles(K3); d->acc1 = doubles(K3); d->Xs = doubles(K3); d->Us = doubles(K3);
@@ -53,7 +53,7 @@ ln_data *ln_data_new(const ln_model *m, ln_int n_stages)
     d->chain_sub = doubles(L); d->chain_Dinv = doubles(L);
     d->planar = m->planar;
     d->fail_link = -1;
-    int ok = d->X && d->U && d->F_input && d->T && d->acc && d->reaction && d->X_start && d->U_start && d->Xp && d->Up && d->Fp
+    int ok = d->X && d->U && d->F_input && d->T && d->acc && d->reaction && d->X_start && d->U_start && d->X_step && d->U_step && d->Xp && d->Up && d->Fp
              && d->F_base && d->F && d->Uh && d->Xc && d->U_iterate && d->acc1 && d->Xs && d->Us && d->Xn && d->Un
              && d->E0 && d->E1 && d->B && d->mu && d->phi && d->scale && d->work && d->KX && d->KU
              && d->pair_values && d->chain_sub && d->chain_Dinv;
@@ -214,7 +214,7 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
     /* all or nothing: what a failed interval changed is put back */
     const double h_next = d->h_next;
     const int planar = d->planar;
-    const ln_int rejected = d->rejected, n_rhs = d->n_rhs;
+    const ln_int rejected = d->rejected, n_rhs = d->n_rhs, split_steps = d->split_steps, finest_split = d->finest_split;
     memcpy(d->X_start, d->X, (size_t)n3 * sizeof(double));
     memcpy(d->U_start, d->U, (size_t)n3 * sizeof(double));
     ln_int steps = 0;
@@ -232,6 +232,8 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
         d->planar = planar;
         d->rejected = rejected;
         d->n_rhs = n_rhs;
+        d->split_steps = split_steps;
+        d->finest_split = finest_split;
         if (m->rigid) ln_rigid_restore(m, d);
         return d->status = status;
     }

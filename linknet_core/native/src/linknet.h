@@ -134,6 +134,8 @@ typedef struct ln_data {
     double h_next;                  /* adaptive methods: next step (0: choose the starting step) */
     int planar;                     /* 1 while the 2-D path is used (a planar scene until it left the plane) */
     ln_int steps, rejected, n_rhs;  /* accumulated over the run */
+    ln_int split_steps;             /* fixed steps split into sub-steps because their position stage failed */
+    ln_int finest_split;            /* the most sub-steps one step was split into */
     ln_int last_steps;              /* steps of the last advance */
 
     /* diagnostics of the last failure */
@@ -151,6 +153,7 @@ typedef struct ln_data {
 
     /* scratch (sized for DIM = 3; the 2-D path uses the first 2K or 2L entries) */
     double *X_start, *U_start;      /* (K,3) the state at the start of an advance (all-or-nothing) */
+    double *X_step, *U_step;        /* (K,3) the state at the start of a fixed step (for splitting it) */
     double *Xp, *Up, *Fp;           /* (K,2) the state and base force in the plane's coordinates */
     double *F_base, *F, *Uh, *Xc, *U_iterate, *acc1, *Xs, *Us, *Xn, *Un;    /* (K,3) */
     double *E0, *E1;                /* (L,3) unit vectors */

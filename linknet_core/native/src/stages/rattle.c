@@ -8,7 +8,7 @@
  * With velocity-dependent forces (drag, dampers) the second half kick is implicit in U_new (fixed-point
  * iteration), which keeps the step symmetric and so second order. A composition takes RATTLE steps of
  * gamma_i h in turn (method->gammas); the velocity projection's factorisation at X_new is the next stage's
- * A(X).
+ * A(X). A step whose position stage cannot converge is split into equal sub-steps (split_step).
  */
 #include <math.h>
 
@@ -27,67 +27,119 @@ static inline const double *rattle_forces(const ln_model *m, ln_data *d, const d
     return d->F;
 }
 
+/* One step of size h: the composition's RATTLE stages in turn, with A(X) factored at *E0 on entry and, on
+   success, at the new X on exit (the pointers swap with every stage). */
+static int composition_step(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
+                            const double *F_base, double h, double **E0_inout, double **E1_inout)
+{
+    const ln_int K = m->K;
+    const double *inv_m = m->inv_m;
+    double *E0 = *E0_inout, *E1 = *E1_inout, *Uh = d->Uh, *Xc = d->Xc, *U_iterate = d->U_iterate;
+    int status;
+    for (ln_int g = 0; g < meth->n_gammas; g++) {
+        const double hs = meth->gammas[g] * h;
+        const double *F = rattle_forces(m, d, X, U, F_base);
+        for (ln_int k = 0; k < K; k++)
+            for (int e = 0; e < DIM; e++) {
+                const ln_int i = k * DIM + e;
+                Uh[i] = U[i] + 0.5 * hs * inv_m[k] * F[i];
+                Xc[i] = X[i] + hs * Uh[i];
+            }
+        /* position stage: Xc + M^-1 C(X)^T mu on (11), simplified Newton with A(X) factored */
+        status = FN(ln_project_positions)(m, d, Xc, E0, meth->position_tol, meth->max_projection_iter);
+        if (status != LN_OK) return status;
+        for (ln_int i = 0; i < K * DIM; i++) Uh[i] = (Xc[i] - X[i]) / hs;
+        /* second half kick, then the velocity projection onto (12) at the new positions */
+        F = rattle_forces(m, d, Xc, Uh, F_base);
+        for (ln_int k = 0; k < K; k++)
+            for (int e = 0; e < DIM; e++) {
+                const ln_int i = k * DIM + e;
+                U[i] = Uh[i] + 0.5 * hs * inv_m[k] * F[i];
+                X[i] = Xc[i];
+            }
+        if ((status = FN(ln_project_velocities)(m, d, X, U, E1)) != LN_OK) return status;
+        if (m->velocity_dependent) {
+            /* U_new = P(U_half + hs/2 M^-1 F(X_new, U_new)): contraction factor ~ hs c / (2 m) */
+            int converged = 0;
+            for (int it = 0; it < IMPLICIT_KICK_ITERATIONS && !converged; it++) {
+                FN(ln_scene_forces)(m, X, U, F_base, d->F);
+                double size = 0.0;
+                for (ln_int k = 0; k < K; k++)
+                    for (int e = 0; e < DIM; e++) {
+                        const ln_int i = k * DIM + e;
+                        U_iterate[i] = Uh[i] + 0.5 * hs * inv_m[k] * d->F[i];
+                        size = fmax(size, fabs(U[i]));
+                    }
+                if ((status = FN(ln_project_velocities)(m, d, X, U_iterate, E1)) != LN_OK) return status;
+                double change = 0.0;
+                for (ln_int i = 0; i < K * DIM; i++) {
+                    change = fmax(change, fabs(U_iterate[i] - U[i]));
+                    U[i] = U_iterate[i];
+                }
+                converged = change <= 4e-16 * size || change == 0.0;
+            }
+            if (!converged) return LN_IMPLICIT_KICK_FAILED;
+        }
+        double *swap = E0;  /* the factorisation at the new X is the next stage's A(X) */
+        E0 = E1;
+        E1 = swap;
+        *E0_inout = E0;
+        *E1_inout = E1;
+    }
+    return LN_OK;
+}
+
+/* A step whose position stage (or implicit half kick) fails is taken again from its start as 2, 4, ...
+   equal sub-steps, each the whole composition (so each keeps the method's symmetry), at most
+   2^MAX_SPLIT_LEVEL of them: a whipping tip that moves too far within one step for Newton to converge
+   moves little enough within a sub-step, and the result keeps the method's order as dt shrinks. */
+#define MAX_SPLIT_LEVEL 6
+
+static int split_step(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
+                      const double *F_base, double h, double **E0, double **E1, int status)
+{
+    const ln_int size = m->K * DIM;
+    for (int level = 1; level <= MAX_SPLIT_LEVEL; level++) {
+        const ln_int parts = (ln_int)1 << level;
+        for (ln_int i = 0; i < size; i++) {
+            X[i] = d->X_step[i];
+            U[i] = d->U_step[i];
+        }
+        FN(ln_unit_vectors)(m, X, *E0);
+        if ((status = FN(ln_factor_tension_matrix)(m, d, *E0)) != LN_OK) return status;
+        status = LN_OK;
+        for (ln_int part = 0; part < parts && status == LN_OK; part++)
+            status = composition_step(m, meth, d, X, U, F_base, h / (double)parts, E0, E1);
+        if (status == LN_OK) {
+            d->split_steps++;
+            if (parts > d->finest_split) d->finest_split = parts;
+            return LN_OK;
+        }
+        if (status != LN_PROJECTION_FAILED && status != LN_IMPLICIT_KICK_FAILED) return status;
+    }
+    return status;
+}
+
 int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
                         const double *F_base, ln_int n_steps, double h, ln_int *completed)
 {
-    const ln_int K = m->K, L = m->L;
-    const double *inv_m = m->inv_m;
-    double *E0 = d->E0, *E1 = d->E1, *Uh = d->Uh, *Xc = d->Xc, *U_iterate = d->U_iterate;
+    const ln_int size = m->K * DIM;
+    double *E0 = d->E0, *E1 = d->E1;
     int status;
     *completed = 0;
     FN(ln_unit_vectors)(m, X, E0);
-    if (L > 0 && (status = FN(ln_factor_tension_matrix)(m, d, E0)) != LN_OK) return status;
+    if (m->L > 0 && (status = FN(ln_factor_tension_matrix)(m, d, E0)) != LN_OK) return status;
     for (ln_int step = 0; step < n_steps; step++) {
-        for (ln_int g = 0; g < meth->n_gammas; g++) {
-            const double hs = meth->gammas[g] * h;
-            const double *F = rattle_forces(m, d, X, U, F_base);
-            for (ln_int k = 0; k < K; k++)
-                for (int e = 0; e < DIM; e++) {
-                    const ln_int i = k * DIM + e;
-                    Uh[i] = U[i] + 0.5 * hs * inv_m[k] * F[i];
-                    Xc[i] = X[i] + hs * Uh[i];
-                }
-            /* position stage: Xc + M^-1 C(X)^T mu on (11), simplified Newton with A(X) factored */
-            status = FN(ln_project_positions)(m, d, Xc, E0, meth->position_tol, meth->max_projection_iter);
-            if (status != LN_OK) return status;
-            for (ln_int i = 0; i < K * DIM; i++) Uh[i] = (Xc[i] - X[i]) / hs;
-            /* second half kick, then the velocity projection onto (12) at the new positions */
-            F = rattle_forces(m, d, Xc, Uh, F_base);
-            for (ln_int k = 0; k < K; k++)
-                for (int e = 0; e < DIM; e++) {
-                    const ln_int i = k * DIM + e;
-                    U[i] = Uh[i] + 0.5 * hs * inv_m[k] * F[i];
-                    X[i] = Xc[i];
-                }
-            if ((status = FN(ln_project_velocities)(m, d, X, U, E1)) != LN_OK) return status;
-            if (m->velocity_dependent) {
-                /* U_new = P(U_half + hs/2 M^-1 F(X_new, U_new)): contraction factor ~ hs c / (2 m) */
-                int converged = 0;
-                for (int it = 0; it < IMPLICIT_KICK_ITERATIONS && !converged; it++) {
-                    FN(ln_scene_forces)(m, X, U, F_base, d->F);
-                    double size = 0.0;
-                    for (ln_int k = 0; k < K; k++)
-                        for (int e = 0; e < DIM; e++) {
-                            const ln_int i = k * DIM + e;
-                            U_iterate[i] = Uh[i] + 0.5 * hs * inv_m[k] * d->F[i];
-                            size = fmax(size, fabs(U[i]));
-                        }
-                    if ((status = FN(ln_project_velocities)(m, d, X, U_iterate, E1)) != LN_OK) return status;
-                    double change = 0.0;
-                    for (ln_int i = 0; i < K * DIM; i++) {
-                        change = fmax(change, fabs(U_iterate[i] - U[i]));
-                        U[i] = U_iterate[i];
-                    }
-                    converged = change <= 4e-16 * size || change == 0.0;
-                }
-                if (!converged) return LN_IMPLICIT_KICK_FAILED;
-            }
-            double *swap = E0;  /* the factorisation at the new X is the next stage's A(X) */
-            E0 = E1;
-            E1 = swap;
+        for (ln_int i = 0; i < size; i++) {
+            d->X_step[i] = X[i];
+            d->U_step[i] = U[i];
         }
+        status = composition_step(m, meth, d, X, U, F_base, h, &E0, &E1);
+        if (status == LN_PROJECTION_FAILED || status == LN_IMPLICIT_KICK_FAILED)
+            status = split_step(m, meth, d, X, U, F_base, h, &E0, &E1, status);
+        if (status != LN_OK) return status;
         double total = 0.0;
-        for (ln_int i = 0; i < K * DIM; i++) total += X[i] + U[i];
+        for (ln_int i = 0; i < size; i++) total += X[i] + U[i];
         if (!isfinite(total)) return LN_NON_FINITE;
         *completed = step + 1;
     }

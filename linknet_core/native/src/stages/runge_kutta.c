@@ -160,8 +160,15 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
         }
         /* positions onto (11) along the directions at Xn (unit vectors E1 of the last evaluation, A(Xn)
            factored), then the velocities onto (12) at the projected positions */
-        if ((status = FN(ln_project_positions)(m, d, Xn, d->E1, meth->position_tol, meth->max_projection_iter))
-            != LN_OK) return status;
+        status = FN(ln_project_positions)(m, d, Xn, d->E1, meth->position_tol, meth->max_projection_iter);
+        if (status == LN_PROJECTION_FAILED) {
+            /* the new point is too far off (11) for the projection: a step too long for the motion, rejected
+               like one whose error estimate is too large (a shorter step lands closer to the manifold) */
+            d->rejected++;
+            d->h_next = h * meth->min_factor;
+            continue;
+        }
+        if (status != LN_OK) return status;
         if ((status = FN(ln_project_velocities)(m, d, Xn, Un, d->E1)) != LN_OK) return status;
         t = (h == remaining) ? t_target : t + h;
         d->h_next = ln_next_step_size(meth, h, d->h_next, err);
