@@ -27,7 +27,7 @@ VIEWS = ("auto", "xz", "xy", "yz", "3d")
 PLANES = {"xz": (0, 2), "xy": (0, 1), "yz": (1, 2)}  # the two coordinates a flat view shows
 AXIS_NAMES = "xyz"
 DEFAULT_CMAP = "coolwarm"  # diverging, perceptually balanced; its T = 0 grey stays visible on white
-DENSE_MASSES = 300
+DENSE_MASSES = 300  # more masses are not drawn by default: their markers would bury the links (_shows_free_masses)
 TENSION_PERCENTILE = 95.0  # of |T| over a run: the default half range of the colour scale (Motion.tension_limit)
 DEFAULT_SIZE = (800, 600)  # pixels of an animation or still
 DPI = 100
@@ -100,38 +100,41 @@ class Motion:
         not_a_result = f"{path}: not a result file written by `linknet simulate --out`"
         try:
             data = np.load(path, allow_pickle=False)
-            if not isinstance(data, np.lib.npyio.NpzFile):  # a plain .npy array
-                raise LinknetError(f"{not_a_result} (it holds one array, not an .npz archive)")
-            with data:
-                arrays = {key: data[key] for key in data.files}
         except FileNotFoundError:
             raise LinknetError(f"{path}: no such file") from None
-        except LinknetError:
-            raise
         except ValueError:  # numpy found neither an .npz nor an .npy and refused to unpickle it
             raise LinknetError(f"{not_a_result} (not an .npz archive)") from None
-        except (OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # a damaged archive
+        except OSError as exc:  # a directory, no permission
+            raise LinknetError(f"{path}: {exc.strerror or exc}") from None
+        except (EOFError, zipfile.BadZipFile) as exc:  # a damaged archive
+            raise LinknetError(f"{not_a_result} ({exc})") from None
+        if not isinstance(data, np.lib.npyio.NpzFile):
+            raise LinknetError(f"{not_a_result} (it holds one array, not an .npz archive)")
+        try:
+            with data:
+                arrays = {key: data[key] for key in data.files}
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # a damaged archive
             raise LinknetError(f"{not_a_result} ({exc})") from None
         missing = [key for key in ("t", "X", "T", "k1", "k2", "mass_names") if key not in arrays]
         if missing:
-            raise LinknetError(f"{not_a_result}: it has no {', '.join(missing)} (it has: {', '.join(sorted(arrays)) or 'nothing'})")
+            raise LinknetError(f"{not_a_result}: it has no {', '.join(missing)} "
+                               f"(it has: {', '.join(sorted(arrays)) or 'nothing'})")
+        names = tuple(str(name) for name in np.atleast_1d(arrays["mass_names"]))
         notes = ()
-        K = arrays["mass_names"].shape[0]
         if "fixed" in arrays:
             fixed = arrays["fixed"].astype(bool)
         else:
-            fixed = np.zeros(K, bool)
+            fixed = np.zeros(len(names), bool)
             notes = (f"{path.name} does not say which masses are anchored (written before linknet saved "
                      "'fixed'): anchored masses are drawn as free ones",)
         method = str(arrays["method"]) if "method" in arrays else ""
         try:
             return cls(title=f"{path.stem}, {method}" if method else path.stem, t=arrays["t"].astype(float),
-                       X=arrays["X"].astype(float), T=arrays["T"].astype(float),
-                       k1=arrays["k1"].astype(int) - 1, k2=arrays["k2"].astype(int) - 1, fixed=fixed,
-                       mass_names=tuple(str(name) for name in arrays["mass_names"]), notes=notes)
-        except (TypeError, ValueError) as exc:  # LinknetError is a ValueError too
-            if isinstance(exc, LinknetError):
-                raise LinknetError(f"{path}: {exc}") from None
+                       X=arrays["X"].astype(float), T=arrays["T"].astype(float), k1=arrays["k1"].astype(int) - 1,
+                       k2=arrays["k2"].astype(int) - 1, fixed=fixed, mass_names=names, notes=notes)
+        except LinknetError as exc:  # the arrays do not fit together
+            raise LinknetError(f"{path}: {exc}") from None
+        except (TypeError, ValueError) as exc:  # arrays of the wrong kind
             raise LinknetError(f"{not_a_result} ({exc})") from None
 
     def tension_peak(self) -> float:

@@ -88,6 +88,7 @@ def exit_code(argv):
 @pytest.mark.parametrize("args, says", [
     (["animate", "{missing}", "-o", "{dir}/a.gif"], "nothing.npz: no such file"),
     (["animate", "{text}", "-o", "{dir}/a.gif"], "not a result file written by `linknet simulate --out`"),
+    (["animate", "{dir}", "-o", "{dir}/a.gif"], "Is a directory"),
     (["view", "{plain}", "-o", "{dir}/a.html"], "it holds one array"),
     (["animate", "{foreign}", "-o", "{dir}/a.gif"], "it has no t, X, T, k1, k2, mass_names"),
     (["animate", "{truncated}", "-o", "{dir}/a.gif"], "not a result file"),

@@ -35,8 +35,9 @@ function xform(m, v) {
 return arguments[0].map(p => {
   const v = xform(camera.projection, xform(camera.view, xform(camera.model,
                   [p[0] * scale[0], p[1] * scale[1], p[2] * scale[2], 1])));
-  return [box.left + size.l + domain.x[0] * size.w + 0.5 * (1 + v[0] / v[3]) * size.w * (domain.x[1] - domain.x[0]),
-          box.top + size.t + (1 - domain.y[1]) * size.h + 0.5 * (1 - v[1] / v[3]) * size.h * (domain.y[1] - domain.y[0])];
+  const width = size.w * (domain.x[1] - domain.x[0]), height = size.h * (domain.y[1] - domain.y[0]);
+  return [box.left + size.l + domain.x[0] * size.w + 0.5 * (1 + v[0] / v[3]) * width,
+          box.top + size.t + (1 - domain.y[1]) * size.h + 0.5 * (1 - v[1] / v[3]) * height];
 });
 """
 
