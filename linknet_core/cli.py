@@ -1,4 +1,4 @@
-"""The ``linknet`` command: simulate, analyze, check, animate, view."""
+"""The ``linknet`` command: simulate, analyze, check, ensemble, animate, view."""
 from __future__ import annotations
 
 import argparse
@@ -7,6 +7,7 @@ import sys
 import numpy as np
 
 from . import visual  # light: matplotlib and plotly are imported only when a picture is drawn
+from .ensemble import command as ensemble_command  # light: Dask and xarray are imported only when a study runs
 from .errors import LinknetError
 
 
@@ -53,6 +54,11 @@ def _add_animate(sub):
 def _add_view(sub):
     visual.add_view_arguments(sub.add_parser(
         "view", help="interactive 3-D view of a run in one self-contained HTML file (time slider, tension on hover)"))
+
+
+def _add_ensemble(sub):
+    ensemble_command.add_arguments(sub.add_parser(
+        "ensemble", help="parameter study or Monte Carlo run on Dask, results as a netCDF dataset (docs/ensemble.md)"))
 
 
 def cmd_simulate(args) -> int:
@@ -139,6 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_simulate(sub)
     _add_analyze(sub)
     _add_check(sub)
+    _add_ensemble(sub)
     _add_animate(sub)
     _add_view(sub)
     return parser
@@ -148,7 +155,7 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     handlers = {"simulate": cmd_simulate, "analyze": cmd_analyze, "check": cmd_check, "animate": visual.cmd_animate,
-                "view": visual.cmd_view}
+                "view": visual.cmd_view, "ensemble": ensemble_command.cmd_ensemble}
     try:
         return handlers[args.command](args)
     except LinknetError as exc:

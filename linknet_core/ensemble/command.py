@@ -1,0 +1,144 @@
+"""``linknet ensemble``: a parameter study or Monte Carlo run from the command line.
+
+    linknet ensemble models/chain_10.json --vary M[3]=0.5:2:10 --vary R[1..10]=0.09:0.11:5 --t-end 2 \\
+        --out study.nc [--scheduler tcp://host:8786] [--plot study.png]
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+
+from ..errors import LinknetError
+
+_DISTRIBUTIONS = {
+    "uniform": lambda rng, a, b, n: rng.uniform(a, b, n),
+    "normal": lambda rng, mean, sd, n: rng.normal(mean, sd, n),
+}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scene", help="scene JSON file, or a linknet FMU (.fmu, from build_fmu.py) to run every member "
+                                 "through")
+    p.add_argument("--vary", action="append", default=[], metavar="NAME=VALUES",
+                   help="a grid axis: M[3]=0.5:2:10 (start:stop:count, both ends included), R[1..10]=0.09,0.1 "
+                        "(a list; a..b sets a range of indices to the same value), g[3]=-1.62, F[11,3]=0:5:6 "
+                        "(constant input force), integrator=rattle,dop853, step=..., tolerance=...; scene "
+                        "studies also X0[k,i], U0[k,i], drag[k], stiffness[s], damping[s], rest_length[s]. "
+                        "Several --vary make a full factorial grid")
+    p.add_argument("--sample", action="append", default=[], metavar="NAME=DIST:A:B",
+                   help="Monte Carlo: NAME drawn from uniform:LOW:HIGH or normal:MEAN:SD, --n-samples times "
+                        "(with --vary, every grid point runs every sample)")
+    p.add_argument("--samples", metavar="CSV", help="parameter sets from a CSV file: a header of parameter "
+                                                    "names, one member per row")
+    p.add_argument("--n-samples", type=int, default=100, help="number of --sample draws (default 100)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of --sample (default 0)")
+    p.add_argument("--t-end", type=float, required=True, help="end time of every member, s")
+    p.add_argument("--method", help="integration method (default rattle, or dop853 with --rtol; an FMU keeps its "
+                                    "own unless given)")
+    step = p.add_mutually_exclusive_group()
+    step.add_argument("--dt", type=float, help="step of a fixed-step method, s (default 1e-3)")
+    step.add_argument("--rtol", type=float, help="tolerance of an adaptive method")
+    p.add_argument("--atol", type=float, help="absolute tolerance of an adaptive method")
+    p.add_argument("--n-out", type=int, default=201, help="output samples per member (default 201)")
+    p.add_argument("--outputs", default="X,U,T",
+                   help="what to keep per member and time, of X,U,T,Freact (default X,U,T; 'none' keeps only the "
+                        "quantities of interest)")
+    p.add_argument("--tip", help="mass whose final position is reported (1-based number or name; default the "
+                                 "last free mass)")
+    p.add_argument("--project-initial", action=argparse.BooleanOptionalAction, default=None,
+                   help="project initial positions onto each member's link lengths (default: when R or X0 "
+                        "is varied)")
+    p.add_argument("--out", help="netCDF file the members stream into (read it with xarray.open_dataset)")
+    p.add_argument("--scheduler", metavar="ADDR", help="run on an existing Dask cluster (tcp://host:8786) instead "
+                                                       "of a LocalCluster")
+    p.add_argument("--workers", type=int, help="worker processes of the LocalCluster (default one per core)")
+    p.add_argument("--members-per-task", type=int, help="fixed batch size (default: sized from the member time)")
+    p.add_argument("--plot", metavar="PNG", help="draw the quantities of interest against the varied parameters")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _vary(texts, scene) -> dict:
+    from .parameters import parse_name, parse_values
+
+    vary = {}
+    for text in texts:
+        name, sep, values = text.partition("=")
+        if not sep:
+            raise LinknetError(f"--vary {text!r}: write NAME=VALUES, e.g. M[3]=0.5:2:10")
+        parameter = parse_name(name, scene)
+        vary[parameter.name] = parse_values(values, parameter)
+    return vary
+
+
+def _samples(args, scene) -> dict | None:
+    from .parameters import check_values, parse_name
+
+    columns: dict = {}
+    if args.samples:
+        try:
+            with open(args.samples) as f:
+                header = f.readline().strip().split(",")
+                rows = [line.strip().split(",") for line in f if line.strip()]
+        except OSError as exc:
+            raise LinknetError(f"cannot read --samples {args.samples}: {exc.strerror}") from None
+        for j, name in enumerate(header):
+            parameter = parse_name(name, scene)
+            try:
+                values = [row[j] for row in rows]
+            except IndexError:
+                raise LinknetError(f"--samples {args.samples}: a row has fewer than {len(header)} values") from None
+            columns[parameter.name] = check_values(parameter, values if parameter.family.text
+                                                   else [float(v) for v in values])
+    rng = np.random.default_rng(args.seed)
+    for text in args.sample:
+        name, _, spec = text.partition("=")
+        kind, *numbers = spec.split(":")
+        if kind not in _DISTRIBUTIONS or len(numbers) != 2:
+            raise LinknetError(f"--sample {text!r}: write NAME=uniform:LOW:HIGH or NAME=normal:MEAN:SD")
+        try:
+            a, b = float(numbers[0]), float(numbers[1])
+        except ValueError:
+            raise LinknetError(f"--sample {text!r}: the distribution's two numbers are not numbers") from None
+        parameter = parse_name(name, scene)
+        draws = _DISTRIBUTIONS[kind](rng, a, b, args.n_samples)
+        if columns and len(next(iter(columns.values()))) != draws.size:
+            raise LinknetError(f"--sample draws {draws.size} values (--n-samples) but --samples has "
+                               f"{len(next(iter(columns.values())))} rows")
+        columns[parameter.name] = draws
+    return columns or None
+
+
+def cmd_ensemble(args) -> int:
+    from . import load_source, ensemble, plot, summary
+
+    if args.plot and not args.plot.lower().endswith(".png"):
+        raise LinknetError(f"--plot {args.plot}: the plot is a PNG file")
+    scene = load_source(args.scene)[0]
+    vary = _vary(args.vary, scene)
+    samples = _samples(args, scene)
+    if not vary and not samples:
+        raise LinknetError("nothing to vary: give --vary NAME=VALUES, --sample or --samples")
+    outputs = [] if args.outputs.strip().lower() == "none" else [o.strip() for o in args.outputs.split(",")
+                                                                  if o.strip()]
+    try:
+        ds = ensemble(args.scene, vary=vary, samples=samples, t_end=args.t_end, method=args.method, dt=args.dt,
+                      rtol=args.rtol, atol=args.atol, n_out=args.n_out, outputs=outputs, tip=args.tip,
+                      project_initial=args.project_initial, out=args.out, client=args.scheduler,
+                      workers=args.workers, members_per_task=args.members_per_task, progress=not args.no_progress)
+    except KeyboardInterrupt:
+        kept = f"; the members finished so far are in {args.out}" if args.out else ""
+        print(f"linknet ensemble: interrupted{kept}", file=sys.stderr)
+        return 130
+    except (LinknetError, SystemExit):
+        raise
+    except Exception as exc:  # Dask, HDF5, the network: one line, as every linknet error (the API raises them)
+        raise LinknetError(f"{type(exc).__name__}: {exc}") from None
+    print(summary(ds))
+    if args.out:
+        print(f"wrote {args.out}")
+    if args.plot:
+        plot(ds, args.plot)
+        print(f"wrote {args.plot}")
+    return 0

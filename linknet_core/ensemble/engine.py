@@ -1,0 +1,250 @@
+"""Running a study on Dask: the client, the stream of member batches, retries after a worker dies.
+
+* ``client=None`` starts a ``LocalCluster`` on 127.0.0.1 with one single-threaded worker process per core
+  and closes it afterwards; an address (``"tcp://host:8786"``) or a ``distributed.Client`` uses that
+  cluster as it is.
+* Members go out in batches of consecutive members, at most two batches per worker thread in flight, so
+  the scheduler holds a few tasks whatever the study's size. The first batches hold one member each (the
+  first result comes as soon as possible); later batches are sized from the measured member time to about
+  ``TASK_SECONDS`` each, which keeps Dask's per-task cost (a few ms of scheduler and network time) small
+  against the work, and never so large that the last batches leave workers idle.
+* Results are taken as they finish and handed to the sink (the study file) at once, then released, so the
+  cluster never holds more than the batches in flight.
+* When a worker dies, the scheduler reruns the batches it was running and any finished result not yet
+  fetched from it (the "remove-worker" event names those tasks; this module listens to it): those members
+  are the study's retried members. A batch whose workers keep dying (``KilledWorker``) is split into single
+  members, so only a member that itself kills workers fails, with that as its error.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import os
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+from ..errors import LinknetError
+from .members import StudyPayload, StudySpec, error_text, run_batch
+from .parameters import Plan
+
+TASK_SECONDS = 0.25  # target work per task once the member time is known
+# A scheduler spends ~0.2-1 ms per task (benchmarks/bench_ensemble.py measures it): a study keeps below this
+# many tasks per second in all, so on a large cluster tasks grow to threads / MAX_TASKS_PER_SECOND seconds
+MAX_TASKS_PER_SECOND = 500
+WORKER_WAIT_SECONDS = 60.0  # how long a study waits for the first worker of an existing cluster
+
+
+@dataclass
+class Progress:
+    """Where a study stands; handed to the progress callback after every finished batch."""
+
+    total: int
+    workers: int
+    done: int = 0
+    failed: int = 0
+    retried: int = 0
+    tasks: int = 0  # batches submitted (a batch split after KilledWorker counts its singles too)
+    started: float = field(default_factory=time.perf_counter)
+    first_result_seconds: float | None = None
+
+    @property
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.started
+
+
+def available_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+class Engine:
+    """A Dask client for one study; closes what it opened (never a cluster it was given)."""
+
+    def __init__(self, client=None, workers: int | None = None, connect_timeout: float = 10.0):
+        from distributed import Client, LocalCluster
+
+        self._cluster = None
+        if client is None:
+            n = workers or available_cores()
+            # single-threaded workers: the solver holds the GIL in its Python layers, so threads would queue
+            self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                         dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+            self.client = Client(self._cluster)
+            self._owns_client = True
+            self.description = f"LocalCluster on 127.0.0.1, {n} worker process(es)"
+            return
+        if workers is not None:
+            raise LinknetError("workers= sets the size of the embedded LocalCluster; an existing cluster "
+                               "(client=...) keeps the workers it has")
+        if isinstance(client, str):
+            try:
+                self.client = Client(client, timeout=connect_timeout)
+            except (OSError, TimeoutError) as exc:
+                raise LinknetError(f"cannot reach the Dask scheduler at {client}: {exc}") from None
+            self._owns_client = True
+        elif isinstance(client, Client):
+            self.client = client
+            self._owns_client = False
+        else:
+            raise LinknetError(f"client must be None (a LocalCluster), a scheduler address such as "
+                               f"'tcp://127.0.0.1:8786', or a distributed.Client; got {client!r}")
+        self.description = f"Dask scheduler {self.client.scheduler.address}"
+        try:
+            self.client.wait_for_workers(1, timeout=WORKER_WAIT_SECONDS)
+        except TimeoutError:
+            self.close()
+            raise LinknetError(f"no Dask worker joined the scheduler at {self.client.scheduler.address} within "
+                               f"{WORKER_WAIT_SECONDS:g} s") from None
+
+    def threads(self) -> int:
+        return max(1, sum(self.client.nthreads().values()))
+
+    def close(self) -> None:
+        if self._owns_client:
+            self.client.close()
+        if self._cluster is not None:
+            self._cluster.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class _BatchSizer:
+    """Members per task: 1 until a member time is known, then about TASK_SECONDS of work (longer on clusters
+    with more than TASK_SECONDS * MAX_TASKS_PER_SECOND threads), capped so that the remaining members still
+    make two tasks per worker thread (no idle workers at the end)."""
+
+    def __init__(self, fixed: int | None):
+        self.fixed = fixed
+        self._seconds = 0.0
+        self._members = 0
+
+    def record(self, run_seconds) -> None:
+        self._seconds += float(sum(run_seconds))
+        self._members += len(run_seconds)
+
+    def size(self, remaining: int, threads: int) -> int:
+        if self.fixed:
+            return self.fixed
+        if not self._members:
+            return 1
+        per_member = max(self._seconds / self._members, 1e-6)
+        task_seconds = max(TASK_SECONDS, threads / MAX_TASKS_PER_SECOND)
+        return max(1, min(int(task_seconds / per_member), math.ceil(remaining / (2 * threads))))
+
+
+def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=None,
+              members_per_task: int | None = None) -> Progress:
+    """Run every member of ``plan`` on ``engine``'s cluster, handing each finished batch to ``sink.write``;
+    returns the final progress (``sink.mark_retried`` has been told the retried members)."""
+    from distributed import as_completed
+    from distributed.scheduler import KilledWorker
+
+    client = engine.client
+    payload = StudyPayload(spec)
+    try:
+        client.register_plugin(payload, name=payload.name)
+    except Exception as exc:  # e.g. a worker without linknet (or fmpy) installed
+        raise LinknetError(f"the Dask workers cannot take the study ({error_text(exc)}); every worker needs "
+                           "linknet, and fmpy for an FMU study, installed in its Python") from None
+
+    threads = engine.threads()
+    progress = Progress(total=plan.n_members, workers=threads)
+    sizer = _BatchSizer(members_per_task)
+    lock = threading.Lock()  # the event handler runs on the client's event-loop thread
+    in_flight: dict[str, tuple[int, int]] = {}  # task key -> (first member, count)
+    retried: set[int] = set()
+    written: set[int] = set()
+    singles: deque[int] = deque()  # members of batches that kept killing workers, to run one by one
+    cursor = 0
+    resubmissions = 0
+    last_thread_check = time.perf_counter()
+
+    def on_event(event):
+        _, message = event
+        if not isinstance(message, dict) or message.get("action") != "remove-worker":
+            return
+        keys = set(message.get("processing-tasks", ())) | set(message.get("lost-computed-tasks", ()))
+        with lock:
+            for key in keys:
+                if key in in_flight:
+                    first, count = in_flight[key]
+                    retried.update(m for m in range(first, first + count) if m not in written)
+
+    def submit(ac) -> None:
+        nonlocal cursor, resubmissions
+        if singles:
+            first, count = singles.popleft(), 1
+            resubmissions += 1
+            key = f"linknet-ensemble-{spec.study_id}-{first}-single{resubmissions}"
+        else:
+            first = cursor
+            count = min(sizer.size(plan.n_members - cursor, threads), plan.n_members - cursor)
+            cursor += count
+            key = f"linknet-ensemble-{spec.study_id}-{first}-{count}"
+        settings = [plan.setting(m) for m in range(first, first + count)]
+        future = client.submit(run_batch, spec.study_id, first, settings, key=key)
+        progress.tasks += 1
+        with lock:
+            in_flight[key] = (first, count)
+        ac.add(future)
+
+    def record_failure(first: int, count: int, message: str) -> None:
+        sink.write({"first": first, "count": count, "outputs": {}, "error": [message] * count,
+                    "run_seconds": [math.nan] * count, "worker": ""})
+
+    client.subscribe_topic("all", on_event)
+    ac = as_completed(with_results=True, raise_errors=False)
+    try:
+        while len(in_flight) < 2 * threads and cursor < plan.n_members:
+            submit(ac)
+        for future, result in ac:
+            with lock:
+                first, count = in_flight.pop(future.key)
+            if future.status == "finished":
+                sink.write(result)
+                sizer.record([s for s, e in zip(result["run_seconds"], result["error"]) if not e])
+                progress.failed += sum(1 for e in result["error"] if e)
+            elif isinstance(result, KilledWorker) and count > 1:
+                singles.extend(range(first, first + count))  # find the member that kills its workers
+                count = 0
+            elif isinstance(result, KilledWorker):
+                record_failure(first, count, f"KilledWorker: every worker that ran this member died "
+                                             f"({result}); it may crash its process (e.g. a fault in an FMU)")
+                progress.failed += count
+            elif type(result).__name__ == "CancelledError":
+                raise LinknetError("the Dask scheduler cancelled the study (connection to it lost?)")
+            else:  # the task itself failed, not a member (members record their own errors)
+                record_failure(first, count, error_text(result))
+                progress.failed += count
+            future.release()
+            with lock:
+                written.update(range(first, first + count))
+                progress.retried = len(retried)
+            progress.done += count
+            if progress.first_result_seconds is None and count:
+                progress.first_result_seconds = progress.elapsed
+            if time.perf_counter() - last_thread_check > 2.0:  # workers may join or leave an existing cluster
+                threads, last_thread_check = engine.threads(), time.perf_counter()
+                progress.workers = threads
+            while len(in_flight) < 2 * threads and (singles or cursor < plan.n_members):
+                submit(ac)
+            if on_progress is not None:
+                on_progress(progress)
+    finally:
+        if in_flight:  # interrupted: nothing more should run for this study
+            client.cancel(list(ac.futures), force=True)
+        client.unsubscribe_topic("all")
+        try:
+            client.unregister_worker_plugin(payload.name)
+        except Exception:  # the cluster may be gone already (interrupted, scheduler lost)
+            pass
+    sink.mark_retried(retried)
+    return progress

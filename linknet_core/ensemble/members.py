@@ -1,0 +1,340 @@
+"""What a Dask worker does: run members, one ``Simulator`` run or one FMU run through fmpy each.
+
+A study reaches the workers once, as a worker plugin (:class:`StudyPayload`): the scene, the settings and
+the FMU's bytes, if any. Dask gives a plugin to every worker of the cluster, including workers that start
+later (a nanny restarting a killed one), so tasks carry only member indices and values, and nothing a task
+needs can be lost with a worker. Each task runs a batch of consecutive members and returns their outputs
+stacked; a member that fails is recorded with its error and the batch goes on.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import tempfile
+import threading
+import time
+import zipfile
+from dataclasses import dataclass
+
+import numpy as np
+from distributed import WorkerPlugin, get_worker
+
+from ..errors import LinknetError, SceneError
+from ..integrators import METHODS
+from ..scene import Scene
+from ..simulator import Simulator
+from .parameters import Parameter, member_forces, member_scene
+
+OUTPUTS = ("X", "U", "T", "Freact")  # what a study can keep per member and time
+
+
+@dataclass(frozen=True)
+class StudySpec:
+    """Everything a worker needs to run any member of one study."""
+
+    study_id: str
+    scene: dict  # the base scene, Scene.to_dict() form
+    parameters: tuple[Parameter, ...]
+    times: np.ndarray  # output times, s; times[0] = 0
+    method: str | None  # None: the FMU's own integrator (library studies always name one)
+    dt: float | None
+    rtol: float | None
+    atol: float | None
+    project_initial: bool | None
+    outputs: tuple[str, ...]
+    tip: int  # 0-based mass whose final position is a quantity of interest
+    fmu: bytes | None = None
+
+    def solver(self, setting: dict) -> tuple[str | None, float | None, float | None]:
+        """(method, dt, rtol) of a member: its own integrator, step, tolerance if varied, else the study's.
+        dt is None for adaptive methods and rtol None for fixed-step ones, as ``Simulator`` wants."""
+        method = setting.get("integrator", self.method)
+        dt, rtol = setting.get("step", self.dt), setting.get("tolerance", self.rtol)
+        if method is None:
+            return None, dt, rtol
+        return (method, None, rtol) if METHODS[method].adaptive else (method, dt, None)
+
+
+def error_text(exc: BaseException) -> str:
+    """A member's recorded error, one line: the library's message with its kind."""
+    kind = "invalid scene" if isinstance(exc, SceneError) else type(exc).__name__
+    return f"{kind}: {exc}".replace("\n", " ")
+
+
+class StudyPayload(WorkerPlugin):
+    """Installs one study on every worker (``Client.register_plugin``); removed when the study ends."""
+
+    def __init__(self, spec: StudySpec):
+        self.spec = spec
+        self.name = f"linknet-ensemble-{spec.study_id}"
+
+    def setup(self, worker):
+        _RUNTIMES[self.spec.study_id] = StudyRuntime(self.spec)
+
+    def teardown(self, worker):
+        runtime = _RUNTIMES.pop(self.spec.study_id, None)
+        if runtime is not None:
+            runtime.close()
+
+
+_RUNTIMES: dict[str, "StudyRuntime"] = {}  # study id -> what this worker process holds for it
+
+
+class StudyRuntime:
+    """One study in one worker process: the parsed base scene, and the extracted FMU when there is one."""
+
+    def __init__(self, spec: StudySpec):
+        self.spec = spec
+        self.base_scene = Scene.from_dict(spec.scene, source=spec.scene.get("name", "scene"))
+        self.fmu = FmuRunner(spec.fmu, spec.study_id) if spec.fmu is not None else None
+
+    def close(self):
+        if self.fmu is not None:
+            self.fmu.close()
+
+    def run(self, setting: dict) -> dict:
+        """One member: the requested outputs at every output time, and the quantities of interest."""
+        if self.fmu is not None:
+            X, U, T, Freact = self.fmu.run(self.spec, setting, self.base_scene)
+        else:
+            X, U, T, Freact = self._run_library(setting)
+        out = {name: array for name, array in zip(OUTPUTS, (X, U, T, Freact)) if name in self.spec.outputs}
+        out.update(quantities_of_interest(T, X, self.spec.tip))
+        return out
+
+    def _run_library(self, setting: dict):
+        spec = self.spec
+        data = member_scene(spec.scene, spec.parameters, setting)
+        scene = self.base_scene if data is None else Scene.from_dict(data, source=self.base_scene.name)
+        method, dt, rtol = spec.solver(setting)
+        sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=spec.atol if rtol is not None else None,
+                        project_initial=spec.project_initial)
+        forces = member_forces(spec.parameters, setting, scene.K)
+        n = spec.times.size
+        X, U = np.empty((n, scene.K, 3)), np.empty((n, scene.K, 3))
+        T, Freact = np.empty((n, scene.L)), np.empty((n, scene.fixed_indices.size, 3))
+        # the same sequence of advance and outputs calls as ln.simulate with a constant force
+        for i, t in enumerate(spec.times):
+            if i:
+                sim.advance(t, forces)
+            out = sim.outputs(forces)
+            X[i], U[i], T[i], Freact[i] = out["X"], out["U"], out["T"], out["Freact"]
+        return X, U, T, Freact
+
+
+def quantities_of_interest(T: np.ndarray, X: np.ndarray, tip: int) -> dict:
+    """Largest and smallest tension over the output samples (and the link of the largest), final tip position."""
+    if T.shape[1]:
+        worst = np.unravel_index(int(np.argmax(T)), T.shape)
+        qoi = {"max_tension": float(T[worst]), "max_tension_link": int(worst[1]) + 1, "min_tension": float(T.min())}
+    else:
+        qoi = {"max_tension": np.nan, "max_tension_link": 0, "min_tension": np.nan}
+    qoi["tip_final"] = X[-1, tip].copy()
+    return qoi
+
+
+def run_batch(study_id: str, first: int, settings: list[dict]) -> dict:
+    """Members first .. first + len(settings) - 1, stacked: one dict of arrays per batch (NaN where a member
+    failed), with each member's error ('' if none), run time and this worker's address."""
+    runtime = _RUNTIMES.get(study_id)
+    if runtime is None:  # the plugin installs the study before a worker takes its tasks
+        raise RuntimeError(f"study {study_id} is not installed on worker {get_worker().address}")
+    results, errors, seconds = [], [], []
+    for setting in settings:
+        start = time.perf_counter()
+        try:
+            results.append(runtime.run(setting))
+            errors.append("")
+        except Exception as exc:  # a member's failure is its result; the batch goes on
+            results.append(None)
+            errors.append(error_text(exc))
+        seconds.append(time.perf_counter() - start)
+    template = next((r for r in results if r is not None), None)
+    stacked = {}
+    if template is not None:
+        for key, value in template.items():
+            blank = np.full(np.shape(value), np.nan) if key != "max_tension_link" else 0
+            stacked[key] = np.stack([np.asarray(r[key] if r is not None else blank) for r in results])
+    return {"first": first, "count": len(settings), "outputs": stacked, "error": errors,
+            "run_seconds": np.array(seconds), "worker": get_worker().address}
+
+
+# ---- FMU members ------------------------------------------------------------------------------------
+
+class FmuError(LinknetError):
+    """The FMU refused a member (its own message, logged through the FMI logger, is the text)."""
+
+
+class _QuietFmuErrors:
+    """Stands in for sys.stderr and drops the slave's '[linknet FMU error] ...' lines written while this thread
+    runs an FMU member: the FMI logger has them already (they become the member's recorded error), and from a
+    LocalCluster's workers they would land on the user's terminal, through the progress bar."""
+
+    MARK = "[linknet FMU error]"
+
+    def __init__(self, stream):
+        self.stream = stream
+        self.running_member = threading.local()
+
+    def write(self, text):
+        if getattr(self.running_member, "active", False) and text.startswith(self.MARK):
+            return len(text)
+        return self.stream.write(text)
+
+    def __getattr__(self, name):
+        return getattr(self.stream, name)
+
+
+class FmuRunner:
+    """One FMU extracted once per worker process, an instance per worker thread reset between members."""
+
+    def __init__(self, fmu_bytes: bytes, study_id: str):
+        from fmpy import extract, read_model_description
+
+        self.directory = tempfile.mkdtemp(prefix=f"linknet-ensemble-{study_id[:12]}-")
+        archive = os.path.join(self.directory, "model.fmu")
+        with open(archive, "wb") as f:
+            f.write(fmu_bytes)
+        self.unzipdir = extract(archive, unzipdir=os.path.join(self.directory, "unzipped"))
+        self.md = read_model_description(self.unzipdir)
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self._local = threading.local()
+        self._instances = []
+        self._lock = threading.Lock()
+        if not isinstance(sys.stderr, _QuietFmuErrors):
+            sys.stderr = _QuietFmuErrors(sys.stderr)
+        self._stderr = sys.stderr
+        self._read = None  # which outputs the FMU has, found at the first member
+
+    def close(self):
+        with self._lock:
+            for slave, _ in self._instances:
+                try:
+                    slave.freeInstance()
+                except Exception:  # an instance left broken by a failed member has nothing more to free
+                    pass
+            self._instances.clear()
+        shutil.rmtree(self.directory, ignore_errors=True)
+
+    def _instance(self):
+        """This thread's instance (FMU instances are not thread-safe), and its log of messages."""
+        if getattr(self._local, "slave", None) is None:
+            from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, defaultCallbacks
+
+            log: list[tuple[int, str]] = []
+
+            def logger(env, instance, status, category, message):
+                log.append((int(status), message.decode("utf-8", "replace")))
+
+            callbacks = fmi2CallbackFunctions()
+            callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+            callbacks.allocateMemory = defaultCallbacks.allocateMemory
+            callbacks.freeMemory = defaultCallbacks.freeMemory
+            slave = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
+                              modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="member")
+            # pythonfmu forwards its messages (the reason for a refused member) only with logging on
+            slave.instantiate(callbacks=callbacks, loggingOn=True)
+            self._local.slave, self._local.log, self._local.fresh = slave, log, True
+            self._local.callbacks = callbacks  # ctypes callbacks must outlive the instance
+            with self._lock:
+                self._instances.append((slave, callbacks))
+        return self._local.slave, self._local.log
+
+    def _drop_instance(self):
+        slave = self._local.slave
+        self._local.slave = None
+        with self._lock:
+            self._instances = [(s, c) for s, c in self._instances if s is not slave]
+        try:
+            slave.freeInstance()
+        except Exception:
+            pass
+
+    def run(self, spec: StudySpec, setting: dict, scene: Scene):
+        from fmpy.fmi1 import FMICallException
+
+        slave, log = self._instance()
+        self._stderr.running_member.active = True
+        try:
+            if not self._local.fresh:
+                slave.reset()  # pythonfmu re-creates the slave from the FMU's resources: every parameter anew
+            self._local.fresh = False
+            log.clear()
+            return self._simulate(slave, spec, setting, scene)
+        except FMICallException as exc:
+            errors = [message for status, message in log if status >= 2]  # discard, error, fatal
+            raise FmuError(errors[-1] if errors else str(exc)) from None
+        except Exception:
+            self._drop_instance()  # whatever state it is in, the next member gets a new instance
+            raise
+        finally:
+            self._stderr.running_member.active = False
+
+    def _simulate(self, slave, spec: StudySpec, setting: dict, scene: Scene):
+        method, dt, rtol = spec.solver(setting)
+        starts: dict[str, float] = {}
+        for p in spec.parameters:
+            if not p.family.text and p.family.name not in ("step", "tolerance"):
+                starts.update({name: float(setting[p.name]) for name in p.fmu_variables()})
+        if dt is not None:
+            starts["step"] = float(dt)
+        if rtol is not None:
+            starts["tolerance"] = float(rtol)
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        if starts:
+            slave.setReal([self.vr[name] for name in starts], list(starts.values()))
+        if method is not None:
+            slave.setString([self.vr["integrator"]], [method])
+        slave.exitInitializationMode()
+
+        if self._read is None:
+            self._read = _OutputMap(self.vr, scene)
+        read = self._read
+        n = spec.times.size
+        values = np.empty((n, len(read.vrs)))
+        values[0] = slave.getReal(read.vrs)
+        for i in range(1, n):
+            slave.doStep(currentCommunicationPoint=float(spec.times[i - 1]),
+                         communicationStepSize=float(spec.times[i] - spec.times[i - 1]))
+            values[i] = slave.getReal(read.vrs)
+        return read.split(values)
+
+
+class _OutputMap:
+    """Where each output of the FMU goes in the (time, mass, axis) and (time, link) arrays. An FMU built with
+    ``--outputs`` exposes X and U for some masses only: the others stay NaN."""
+
+    def __init__(self, vr: dict, scene: Scene):
+        self.K, self.L, self.fixed = scene.K, scene.L, scene.fixed_indices
+        names = ([f"X[{k + 1},{i + 1}]" for k in range(self.K) for i in range(3)]
+                 + [f"U[{k + 1},{i + 1}]" for k in range(self.K) for i in range(3)]
+                 + [f"T[{l + 1}]" for l in range(self.L)]
+                 + [f"Freact[{k + 1},{i + 1}]" for k in self.fixed for i in range(3)])
+        self.present = np.array([name in vr for name in names])
+        self.vrs = [vr[name] for name in np.array(names)[self.present]]
+
+    def split(self, values: np.ndarray):
+        full = np.full((values.shape[0], self.present.size), np.nan)
+        full[:, self.present] = values
+        n, K3 = values.shape[0], 3 * self.K
+        X = full[:, :K3].reshape(n, self.K, 3)
+        U = full[:, K3:2 * K3].reshape(n, self.K, 3)
+        T = full[:, 2 * K3:2 * K3 + self.L]
+        Freact = full[:, 2 * K3 + self.L:].reshape(n, self.fixed.size, 3)
+        return X, U, T, Freact
+
+
+def fmu_contents(fmu_bytes: bytes) -> tuple[dict, dict]:
+    """The scene an FMU built by build_fmu.py carries, and its build settings (integrator, step, tolerance)."""
+    import io
+
+    try:
+        with zipfile.ZipFile(io.BytesIO(fmu_bytes)) as z:
+            scene = json.loads(z.read("resources/linknet_scene.json"))
+            config = json.loads(z.read("resources/linknet_fmu.json"))
+    except (zipfile.BadZipFile, KeyError, json.JSONDecodeError) as exc:
+        raise LinknetError(f"not a linknet FMU (built by build_fmu.py from a scene): {exc}") from None
+    return scene, config

@@ -1,0 +1,187 @@
+"""What a person reads from a study: the progress bar, the summary table, the plot."""
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+
+ROW_LIMIT = 30  # a study with more members is summarised per parameter value, not member by member
+
+
+class ProgressBar:
+    """One line on stderr, redrawn after each finished batch: members done, failed, retried, rate, time left."""
+
+    def __init__(self, stream=None):
+        self.stream = stream or sys.stderr
+        self._shown = False
+
+    def __call__(self, progress) -> None:
+        frac = progress.done / progress.total
+        width = 28
+        bar = "#" * int(width * frac) + "-" * (width - int(width * frac))
+        rate = progress.done / progress.elapsed if progress.elapsed > 0 else 0.0
+        left = (progress.total - progress.done) / rate if rate > 0 else float("nan")
+        line = (f"\r[{bar}] {progress.done}/{progress.total} members, {progress.failed} failed, "
+                f"{progress.retried} retried, {rate:.1f}/s on {progress.workers} worker thread(s), "
+                f"~{left:.0f} s left ")
+        self.stream.write(line)
+        self.stream.flush()
+        self._shown = True
+
+    def close(self) -> None:
+        if self._shown:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _varied(ds) -> list[str]:
+    return json.loads(ds.attrs.get("varied", "[]"))
+
+
+def _fmt(value) -> str:
+    if isinstance(value, (str, np.str_)):
+        return str(value)
+    value = float(value)
+    return "nan" if not np.isfinite(value) else f"{value:.6g}"
+
+
+def _table(header: list[str], rows: list[list[str]]) -> str:
+    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)]
+    lines = ["  ".join(h.rjust(w) for h, w in zip(header, widths)),
+             "  ".join("-" * w for w in widths)]
+    lines += ["  ".join(c.rjust(w) for c, w in zip(r, widths)) for r in rows]
+    return "\n".join(lines)
+
+
+def summary(ds) -> str:
+    """The study in a few lines: what ran, and the quantities of interest (largest tension, final tip
+    position) against the varied parameters: member by member for small studies, else per value of each
+    parameter (min / mean / max over the other members); then failures and retries."""
+    names = _varied(ds)
+    status = ds["status"].values.astype(str)
+    ok = status == "ok"
+    tip = f'tip = mass {ds.attrs.get("tip_mass")} ("{ds.attrs.get("tip_name")}")'
+    lines = [f'{ds.attrs.get("scene_name")}: {ds.sizes["member"]} members through the '
+             f'{ds.attrs.get("runs_through")}, t_end = {ds.attrs.get("t_end"):g} s, {ds.attrs.get("solver")}; '
+             f'{int(ok.sum())} ok, {int((status == "failed").sum())} failed, {int((status == "not run").sum())} '
+             f'not run, {int(ds["retried"].values.sum())} retried',
+             f'  engine: {ds.attrs.get("engine")}; {ds.attrs.get("wall_seconds", float("nan")):.2f} s wall, '
+             f'first result after {ds.attrs.get("first_result_seconds", float("nan")):.2f} s', ""]
+    max_t, tip_final = ds["max_tension"].values, ds["tip_final"].values
+    qoi_header = ["max T [N]", "link", "tip x [m]", "tip z [m]"]
+    if ds.sizes["member"] <= ROW_LIMIT or not names:
+        rows = []
+        for m in range(ds.sizes["member"]) if ds.sizes["member"] <= ROW_LIMIT else []:
+            params = [_fmt(ds[n].values[m]) for n in names]
+            qoi = ([_fmt(max_t[m]), str(int(ds["max_tension_link"].values[m])), _fmt(tip_final[m, 0]),
+                    _fmt(tip_final[m, 2])] if ok[m] else ["", "", "", ""])
+            rows.append([str(m)] + params + qoi + [status[m]])
+        if rows:
+            lines.append(f"quantities of interest ({tip}):")
+            lines.append(_table(["member"] + names + qoi_header + ["status"], rows))
+    else:
+        lines.append(f"quantities of interest ({tip}), min / mean / max over the members with each value:")
+        for name in names:
+            values = ds[name].values
+            rows = []
+            for value in _unique(values):
+                sel = ok & (values == value)
+                rows.append([_fmt(value), str(int(sel.sum()))] + [_spread(q[sel]) for q in
+                                                                  (max_t, tip_final[:, 0], tip_final[:, 2])])
+            lines.append(_table([name, "ok"] + ["max T [N]", "tip x [m]", "tip z [m]"], rows))
+            lines.append("")
+    failed = np.flatnonzero(status == "failed")
+    if failed.size:
+        errors = ds["error"].values.astype(str)
+        groups: dict[str, list[int]] = {}
+        for m in failed:
+            groups.setdefault(errors[m], []).append(int(m))
+        lines.append(f"failed members ({failed.size}, {len(groups)} distinct error(s)):")
+        for error, members in list(groups.items())[:10]:
+            setting = ", ".join(f"{n}={_fmt(ds[n].values[members[0]])}" for n in names)
+            which = f"member {members[0]} ({setting})" if len(members) == 1 else f"members {_ranges(members)}"
+            lines.append(f"  {which}: {error[:300]}")
+        if len(groups) > 10:
+            lines.append(f"  ... and {len(groups) - 10} more errors (the file's 'error' variable has them all)")
+    retried = np.flatnonzero(ds["retried"].values)
+    if retried.size:
+        lines.append(f"retried after a worker died: members {_ranges(retried)}")
+    return "\n".join(lines).rstrip()
+
+
+def _unique(values):
+    """The distinct values in first-seen order (at most 50: beyond that it is not a table)."""
+    seen = list(dict.fromkeys(values.tolist()))
+    return seen[:50]
+
+
+def _spread(q) -> str:
+    q = q[np.isfinite(q)]
+    return "" if q.size == 0 else f"{q.min():.4g} / {q.mean():.4g} / {q.max():.4g}"
+
+
+def _ranges(members) -> str:
+    """[1, 2, 3, 7] -> '1-3, 7'."""
+    out, start = [], None
+    for i, m in enumerate(members):
+        if start is None:
+            start = m
+        if i + 1 == len(members) or members[i + 1] != m + 1:
+            out.append(f"{start}-{m}" if m != start else f"{m}")
+            start = None
+    return ", ".join(out)
+
+
+def plot(ds, path) -> None:
+    """The quantities of interest against each varied parameter (one column per parameter; points coloured
+    by the next parameter when there is one), and the tip's height against time for up to 200 members."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = _varied(ds) or ["member"]
+    ok = ds["status"].values.astype(str) == "ok"
+    quantities = [("max_tension", None, "max tension [N]"), ("tip_final", 0, "final tip x [m]"),
+                  ("tip_final", 2, "final tip z [m]")]
+    has_path = "X" in ds
+    rows = len(quantities) + (1 if has_path else 0)
+    fig, axes = plt.subplots(rows, len(names), figsize=(4.2 * len(names), 2.8 * rows), squeeze=False)
+    for col, name in enumerate(names):
+        x = ds[name].values
+        colour_by = names[col + 1] if col + 1 < len(names) else (names[0] if len(names) > 1 else None)
+        colours = ds[colour_by].values if colour_by else None
+        numeric_colours = colours is not None and np.issubdtype(np.asarray(colours).dtype, np.number)
+        for row, (var, axis, label) in enumerate(quantities):
+            ax = axes[row, col]
+            y = ds[var].values if axis is None else ds[var].values[:, axis]
+            points = ax.scatter(x[ok], y[ok], s=12, c=colours[ok] if numeric_colours else None, cmap="viridis")
+            if numeric_colours and row == 0:
+                fig.colorbar(points, ax=ax, label=colour_by)
+            failed = ~ok & (ds["status"].values.astype(str) == "failed")
+            if failed.any():
+                ax.scatter(x[failed], np.full(failed.sum(), np.nanmean(y[ok]) if ok.any() else 0.0), marker="x",
+                           color="red", label="failed")
+                ax.legend(fontsize=7)
+            ax.set_ylabel(label)
+            ax.set_xlabel(name)
+    if has_path:
+        tip = int(ds.attrs["tip_mass"])
+        z = ds["X"].sel(mass=tip, axis="z").values
+        t = ds["time"].values
+        members = np.flatnonzero(ok)[:200]
+        for col, name in enumerate(names):
+            ax = axes[-1, col]
+            values = ds[name].values[members]
+            numeric = np.issubdtype(np.asarray(values).dtype, np.number)
+            span = (np.nanmin(values), np.nanmax(values)) if numeric and values.size else (0, 1)
+            for m, v in zip(members, values):
+                shade = (v - span[0]) / (span[1] - span[0]) if numeric and span[1] > span[0] else 0.5
+                ax.plot(t, z[m], color=plt.cm.viridis(shade), lw=0.8)
+            ax.set_xlabel("t [s]")
+            ax.set_ylabel(f"tip z [m], coloured by {name}")
+    fig.suptitle(f'{ds.attrs.get("scene_name")}: {ds.sizes["member"]} members, {ds.attrs.get("solver")}')
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
