@@ -3,7 +3,7 @@
     n = (xb - xa)/|xb - xa|,  f = k (|xb - xa| - d0) + c n.(vb - va)
     Fa = f n (force on end a),  Fb = -f n (force on end b)
 
-the same law as linknet_core's scene springs (forces.spring_forces), so a composition of
+the same law as linknet_core's scene springs (forces.element_forces, the 'spring' kind), so a composition of
 two network FMUs through this FMU converges to the monolithic scene with that spring.
 Outputs have direct feedthrough from the four inputs.
 """

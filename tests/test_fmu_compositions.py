@@ -78,11 +78,11 @@ save(errors=np.array([c.errors(c.master(fmus, h, 1.0), ref) for h in {steps!r}])
 
 
 def test_component_fmus_follow_their_laws_and_refuse_bad_parameters(tmp_path):
-    """The spring-damper FMU gives linknet_core's spring force (forces.spring_forces) and the PD
+    """The spring-damper FMU gives linknet_core's spring force (forces.element_forces) and the PD
     FMU its control law, for random arguments; bad parameters are refused by name."""
     from fmu_harness import build_cached, FMU_CLIENT_LIB
     import linknet_core as ln
-    from linknet_core.forces import spring_forces
+    from linknet_core.forces import element_forces
 
     spring = build_cached(tmp_path, "spring_damper")
     pd = build_cached(tmp_path, "pd_controller")
@@ -112,7 +112,7 @@ save(fa=np.array(fa), fp=np.array(fp), status=status, log=np.array(' '.join(m fo
     for a, f in zip(args, out["fa"]):
         X = np.array([a[0:3], a[6:9]])
         U = np.array([a[3:6], a[9:12]])
-        np.testing.assert_allclose(f, spring_forces(scene, X, U).ravel(), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(f, element_forces(scene, X, U).ravel(), rtol=1e-12, atol=1e-12)
     for a, f in zip(args, out["fp"]):
         expected = 40.0 * (np.array([0.0, 0.5, 0.0]) - a[:3]) - 3.0 * a[3:6] + np.array([0, 0, 1.5])
         np.testing.assert_allclose(f, expected, rtol=1e-12, atol=1e-12)
