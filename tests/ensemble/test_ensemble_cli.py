@@ -1,0 +1,64 @@
+"""`linknet ensemble`: the issue's command on a real cluster, the summary table, the plot; errors are one
+clear line, never a traceback."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from conftest import MODELS, ROOT
+
+
+def linknet(*args, timeout=180):
+    return subprocess.run([sys.executable, "-m", "linknet_core.cli", "ensemble", *map(str, args)],
+                          capture_output=True, text=True, cwd=str(ROOT), timeout=timeout)
+
+
+def test_grid_study_with_summary_table_progress_and_plot(process_cluster, tmp_path):
+    out, png = tmp_path / "study.nc", tmp_path / "study.png"
+    run = linknet(MODELS / "chain_10.json", "--vary", "M[3]=0.5:2:3", "--vary", "R[1..10]=0.09:0.11:2",
+                  "--t-end", "0.3", "--n-out", "11", "--out", out, "--scheduler", process_cluster, "--plot", png)
+    assert run.returncode == 0, run.stderr
+    assert "6/6 members, 0 failed, 0 retried" in run.stderr  # the progress bar's last state
+    lines = run.stdout.splitlines()
+    header = next(line for line in lines if line.lstrip().startswith("member"))
+    assert header.split()[:3] == ["member", "M[3]", "R[1..10]"] and "max T [N]" in header
+    assert sum(line.rstrip().endswith(" ok") for line in lines) == 6
+    ds = xr.open_dataset(out, engine="h5netcdf")
+    np.testing.assert_allclose(ds["M[3]"].values, [0.5, 0.5, 1.25, 1.25, 2.0, 2.0])
+    np.testing.assert_allclose(ds["R[1..10]"].values, [0.09, 0.11] * 3)
+    assert (ds["status"].values == "ok").all() and png.stat().st_size > 10_000
+
+
+def test_monte_carlo_from_the_command_line(process_cluster, tmp_path):
+    run = linknet(MODELS / "double_pendulum.json", "--sample", "U0[3,3]=normal:0:0.5", "--n-samples", "40",
+                  "--seed", "3", "--t-end", "0.2", "--n-out", "5", "--outputs", "none", "--no-progress",
+                  "--out", tmp_path / "mc.nc", "--scheduler", process_cluster)
+    assert run.returncode == 0, run.stderr
+    assert run.stderr == ""  # --no-progress
+    assert "min / mean / max over the members with each value" in run.stdout  # 40 members: per value
+    ds = xr.open_dataset(tmp_path / "mc.nc", engine="h5netcdf")
+    assert "X" not in ds and ds.sizes["member"] == 40
+    np.testing.assert_allclose(ds["U0[3,3]"].values, np.random.default_rng(3).normal(0, 0.5, 40))
+
+
+@pytest.mark.parametrize("args,words", [
+    (["--vary", "Q[1]=1,2"], "unknown parameter 'Q[1]'"),
+    (["--vary", "M[1]=1,2"], "anchored"),
+    (["--vary", "M[3]=1:2"], "write start:stop:count"),
+    (["--vary", "M[3]=1,2", "--scheduler", "tcp://127.0.0.1:9"], "cannot reach the Dask scheduler"),
+    (["--vary", "M[3]=1,2", "--out", "/nonexistent-folder/x.nc"], "does not exist"),
+    ([], "nothing to vary"),
+])
+def test_errors_are_one_line(args, words):
+    run = linknet(MODELS / "chain_10.json", "--t-end", "0.1", *args)
+    assert run.returncode == 2
+    assert "Traceback" not in run.stderr
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("linknet ensemble: error: ") and words in lines[0], run.stderr
+
+
+def test_missing_scene_is_one_line(tmp_path):
+    run = linknet(tmp_path / "missing.json", "--t-end", "1", "--vary", "M[2]=1")
+    assert run.returncode == 2 and "cannot read scene file" in run.stderr and "Traceback" not in run.stderr

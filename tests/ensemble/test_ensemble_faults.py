@@ -1,0 +1,62 @@
+"""Faults: a member whose values make an invalid scene, or whose run fails, is recorded with its error while
+the others complete; a worker killed mid-study costs only the retries of its members."""
+import os
+import signal
+
+import numpy as np
+
+import linknet_core as ln
+from linknet_core.ensemble import summary
+
+from conftest import MODELS, assert_member_equals, serial_run
+
+T_END, N_OUT = 0.5, 26
+
+
+def test_invalid_member_and_failed_run_are_recorded_the_others_complete(local_client, tmp_path):
+    scene = ln.load_scene(MODELS / "chain_10.json")
+    ds = ln.ensemble(scene, vary={"M[11]": [1.0, -1.0], "F[11,3]": [2.0, 1e200]}, t_end=T_END, n_out=N_OUT,
+                     client=local_client, out=tmp_path / "faults.nc")
+    status, error = list(ds["status"].values), list(ds["error"].values)
+    assert status == ["ok", "failed", "failed", "failed"], error
+    # member 1: a huge force, the run fails; members 2, 3: a negative mass, the scene is invalid
+    assert "non-finite" in error[1] or "SolverError" in error[1], error[1]
+    assert error[2].startswith("invalid scene:") and "mass" in error[2] and "positive" in error[2]
+    assert error[3] == error[2]
+    assert np.isnan(ds["X"].values[1:]).all() and np.isnan(ds["max_tension"].values[1:]).all()
+    assert ds.attrs["failed"] == 3 and ds.attrs["complete"] == 1
+    assert_member_equals(ds, 0, serial_run(scene, {"M[11]": 1.0, "F[11,3]": 2.0}, T_END, N_OUT))
+    text = summary(ds)
+    assert "members 2-3: invalid scene" in text and "member 1 (M[11]=1, F[11,3]=1e+200)" in text
+
+
+def test_killed_worker_costs_only_its_members_retries(process_client):
+    """SIGKILL one of the two `dask worker` processes after the third result: its members in flight run again
+    on a worker that lives (its nanny starts a new one), every member still equals its serial run, results
+    finished before the kill are kept, and the study names the retried members."""
+    scene = ln.load_scene(MODELS / "chain_10.json")
+    dt, t_end = 1e-5, 0.6  # ~0.3 s per member: the kill lands while both workers run members
+    pids = process_client.run(os.getpid)  # worker address -> process id
+    killed = {}
+
+    def kill_after_third_result(progress):
+        if progress.done >= 3 and not killed:
+            busy = [w for w, keys in process_client.processing().items() if keys and w in pids]
+            killed["address"] = busy[0]
+            os.kill(pids[busy[0]], signal.SIGKILL)
+
+    masses = np.linspace(0.5, 2.0, 12)
+    ds = ln.ensemble(scene, vary={"M[11]": masses}, t_end=t_end, n_out=N_OUT, dt=dt, client=process_client,
+                     members_per_task=1, progress=kill_after_third_result)
+    assert killed, "the study ended before the kill"
+    assert list(ds["status"].values) == ["ok"] * 12, list(ds["error"].values)
+    retried = np.flatnonzero(ds["retried"].values)
+    assert 1 <= retried.size <= 4  # at most the 2 tasks per worker thread in flight
+    assert ds.attrs["retried"] == retried.size
+    workers = ds["worker"].values
+    assert killed["address"] not in set(workers[retried])  # reruns happened on living workers
+    kept = [m for m in range(12) if workers[m] == killed["address"]]  # finished before the kill: not rerun
+    assert not set(kept) & set(retried)
+    for m in range(12):
+        assert_member_equals(ds, m, serial_run(scene, {"M[11]": masses[m]}, t_end, N_OUT, dt=dt))
+    process_client.wait_for_workers(2, timeout=60)  # the nanny restarted the killed worker
