@@ -1,5 +1,5 @@
-"""Shared runs and helpers of the picture tests: real runs written as the CLI writes them, a crafted motion
-whose every link and tension is known, and the means to find a point of the network in a rendered picture."""
+"""Shared runs of the picture tests: real runs written as the CLI writes them, and a crafted motion whose
+every link and tension is known (the helpers that look into pictures are in picture_probes.py)."""
 from __future__ import annotations
 
 import numpy as np
@@ -27,9 +27,6 @@ def net_npz(tmp_path_factory):
     return path
 
 
-CRAFTED_LIMIT = 10.0  # N: the crafted tensions are drawn on a colour scale from -10 to 10 N
-
-
 @pytest.fixture
 def crafted():
     """A zigzag in the xz plane: A (anchored) - B - C - D, links A-B vertical, B-C horizontal, C-D vertical, so
@@ -43,32 +40,3 @@ def crafted():
     return visual.Motion(title="crafted", t=0.1 * np.arange(n), X=X, T=T, k1=np.array([0, 1, 2]),
                          k2=np.array([1, 2, 3]), fixed=np.array([True, False, False, False]),
                          mass_names=("A", "B", "C", "D"))
-
-
-def render(picture: visual.NetworkFigure) -> np.ndarray:
-    """The picture as the writers draw it, (height, width, 4) uint8."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    canvas = FigureCanvasAgg(picture.fig)
-    canvas.draw()
-    return np.asarray(canvas.buffer_rgba()).copy()
-
-
-def pixel_of(picture: visual.NetworkFigure, point) -> tuple[int, int]:
-    """(row, column) of the image pixel where a point (x, y, z, m) is drawn; call after render()."""
-    if picture.view == "3d":
-        from mpl_toolkits.mplot3d import proj3d
-
-        x, y, _ = proj3d.proj_transform(*point, picture.ax.get_proj())
-    else:
-        a, b = visual.PLANES[picture.view]
-        x, y = point[a], point[b]
-    column, height_up = picture.ax.transData.transform((x, y))
-    return int(round(picture.fig.bbox.height - height_up - 0.5)), int(round(column - 0.5))
-
-
-def tension_rgb(T: float, limit: float, cmap: str = visual.DEFAULT_CMAP) -> np.ndarray:
-    """The 0-255 colour of tension T on a scale from -limit to limit, computed independently of visual.py's norm."""
-    import matplotlib
-
-    return np.round(255 * np.array(matplotlib.colormaps[cmap](0.5 + 0.5 * T / limit)[:3]))

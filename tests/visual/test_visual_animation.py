@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from conftest import CRAFTED_LIMIT, pixel_of, render, tension_rgb
+from picture_probes import CRAFTED_LIMIT, pixel_of, render, tension_rgb
 from linknet_core import visual
 from linknet_core.errors import LinknetError
 
