@@ -20,7 +20,8 @@ class BuildNativeLibrary(build_ext):
 setup(
     ext_modules=[Extension(
         "linknet_core.native._linknet",
-        sources=sorted(str(p) for p in SOURCE_DIR.glob("*.c")),
+        # AMD (src/amd, vendored): only its int64 entry points, each of which includes its generic source
+        sources=sorted(str(p) for p in [*SOURCE_DIR.glob("*.c"), *SOURCE_DIR.glob("amd/amd_l*.c")]),
         include_dirs=[str(SOURCE_DIR)],
         depends=sorted(str(p) for p in SOURCE_DIR.rglob("*.[ch]")),
         extra_compile_args=["-std=c99", "-O3", "-fno-math-errno", "-ffp-contract=off", "-Wall", "-Wextra"],
