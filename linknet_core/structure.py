@@ -6,7 +6,7 @@ therefore tells the solver what it faces:
 
 * chain     - the cut graph is a union of paths: A is tridiagonal in path order, O(L);
 * tree      - the cut graph is a forest: eliminating links from the leaves inwards creates no fill, O(L);
-* general   - loops among free masses: sparse LDL^T with a minimum-degree ordering computed once;
+* general   - loops among free masses: sparse LDL^T with AMD's fill-reducing ordering computed once;
 * redundant - the links admit states of self-stress (A singular, the homogeneous solutions of (27),
               equivalently (31)): minimum-norm tensions by a rank-revealing path.
 """
@@ -18,6 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, breadth_first_order
 
+from .native.ldl import amd_ordering, zero_pivots
 from .scene import Scene
 
 DENSE_RANK_LIMIT = 2500  # links; above it, rank is estimated from the LDL pivots
@@ -134,33 +135,6 @@ def _tree_ordering(scene: Scene, graph, node_of_end, n_free) -> np.ndarray:
     return np.argsort(-link_depth, kind="stable")
 
 
-def _min_degree_ordering(A_pattern: sp.csr_matrix) -> np.ndarray:
-    """Fill-reducing ordering: SuperLU's minimum degree on A + A^T, or RCM, whichever fills less."""
-    from scipy.sparse.csgraph import reverse_cuthill_mckee
-    from scipy.sparse.linalg import splu
-
-    from .ldl import elimination_tree
-
-    n = A_pattern.shape[0]
-    candidates = [np.asarray(reverse_cuthill_mckee(A_pattern.tocsr(), symmetric_mode=True), np.int64)]
-    try:
-        pattern = A_pattern.tocsc().astype(float)
-        pattern = pattern + sp.identity(n, format="csc") * n  # diagonally dominant: no pivoting
-        lu = splu(pattern, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-        candidates += [np.asarray(lu.perm_c, np.int64), np.argsort(lu.perm_c).astype(np.int64)]
-    except Exception:  # noqa: BLE001 - the RCM ordering is a valid fallback
-        pass
-    best, best_fill = None, None
-    for perm in candidates:
-        upper = sp.triu(A_pattern[perm][:, perm], format="csc")
-        upper.sort_indices()
-        _, Lnz = elimination_tree(n, upper.indptr.astype(np.int64), upper.indices.astype(np.int64))
-        fill = int(Lnz.sum())
-        if best_fill is None or fill < best_fill:
-            best, best_fill = perm, fill
-    return best
-
-
 def constraint_jacobian(scene: Scene, X: np.ndarray, free_only: bool = True) -> sp.csr_matrix:
     """C (L x 3K, or L x 3K_free) with row l = +E_l at k1(l) and -E_l at k2(l) (see (9), (12))."""
     E = (X[scene.k2] - X[scene.k1]) / scene.length[:, None]
@@ -227,10 +201,7 @@ def analyse(scene: Scene) -> Structure:
     else:
         topology = "general"
         pairs = link_pairs(scene)
-        pattern = sp.coo_matrix((np.ones(pairs.first.size), (pairs.first, pairs.second)),
-                                shape=(scene.L, scene.L)).tocsr()
-        pattern = ((pattern + pattern.T) != 0).astype(float)
-        ordering = _min_degree_ordering(pattern)
+        ordering = amd_ordering(scene.L, pairs.first, pairs.second)
 
     notes = []
     rank_exact = True
@@ -262,10 +233,8 @@ def _dense_rank(scene: Scene, ordering: np.ndarray, rtol: float = SINGULAR_RCOND
 
 
 def _rank_from_pivots(scene: Scene, ordering: np.ndarray) -> int:
-    from .tensions import TensionAssembly
-
-    assembly = TensionAssembly(scene, ordering)
+    """L minus the pivots one native LDL^T of A (25) at the initial configuration zeroes."""
+    pairs = link_pairs(scene)
     E = (scene.X0[scene.k2] - scene.X0[scene.k1]) / scene.length[:, None]
-    ldl = assembly.new_factorisation()
-    ldl.factor(assembly.upper_values(E))
-    return int(scene.L - np.count_nonzero(ldl.Dinv == 0.0))
+    values = pairs.sign * scene.inv_mass[pairs.mass] * np.einsum("ij,ij->i", E[pairs.first], E[pairs.second])
+    return int(scene.L - zero_pivots(scene.L, pairs.first, pairs.second, values, ordering))
