@@ -32,6 +32,7 @@ TENSION_PERCENTILE = 95.0  # of |T| over a run: the default half range of the co
 DEFAULT_SIZE = (800, 600)  # pixels of an animation or still
 DPI = 100
 DEFAULT_FPS = 25.0
+DEFAULT_ELEV, DEFAULT_AZIM = 25.0, -60.0  # degrees: the 3d view's viewer, in matplotlib's convention
 DEFAULT_MAX_FRAMES = 250  # ten seconds of animation at the default frame rate
 GIF_MAX_FPS = 50.0  # GIF delays are whole centiseconds, and browsers slow anything under 2 cs to 10 cs
 HTML_MAX_FRAMES = 100
@@ -244,14 +245,15 @@ class NetworkFigure:
     stamp with the range of T at that sample, the colour bar and a legend."""
 
     def __init__(self, motion: Motion, view: str = "auto", size=DEFAULT_SIZE, cmap: str = DEFAULT_CMAP,
-                 tension_range: float | None = None, elev: float = 25.0, azim: float = -60.0, times=None):
+                 tension_range: float | None = None, elev: float = DEFAULT_ELEV, azim: float = DEFAULT_AZIM,
+                 frame_times=None):
         from matplotlib.collections import LineCollection
         from matplotlib.figure import Figure
 
         self.motion = motion
         self.view = motion.resolve_view(view)
         limit = tension_range or motion.tension_limit()
-        self.cmap, self.norm = tension_colours(cmap, limit)
+        colour_map, norm = tension_colours(cmap, limit)
         # pyplot-free figure: no global state and no GUI backend, in the CLI as in a notebook
         self.fig = Figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
         low, high = motion.bounds(self.view)
@@ -266,7 +268,7 @@ class NetworkFigure:
             ax.set_zlabel("z, m", labelpad=12)  # clear of the z tick labels
             ax.set_box_aspect(high - low)  # equal scale on the three axes: the network keeps its shape
             ax.view_init(elev=elev, azim=azim)
-            self.links = Line3DCollection(np.zeros((motion.L, 2, 3)), cmap=self.cmap, norm=self.norm,
+            self.links = Line3DCollection(np.zeros((motion.L, 2, 3)), cmap=colour_map, norm=norm,
                                           linewidths=width, zorder=2)
         else:
             a, b = PLANES[self.view]
@@ -274,7 +276,7 @@ class NetworkFigure:
             ax.set(xlim=(low[a], high[a]), ylim=(low[b], high[b]),
                    xlabel=f"{AXIS_NAMES[a]}, m", ylabel=f"{AXIS_NAMES[b]}, m")
             ax.set_aspect("equal", adjustable="box")
-            self.links = LineCollection(np.zeros((motion.L, 2, 2)), cmap=self.cmap, norm=self.norm,
+            self.links = LineCollection(np.zeros((motion.L, 2, 2)), cmap=colour_map, norm=norm,
                                         linewidths=width, zorder=2, capstyle="round")
         ax.add_collection(self.links)
         self.ax = ax
@@ -294,7 +296,8 @@ class NetworkFigure:
         handles = [marks for marks, shown in ((self.free_marks, _shows_free_masses(motion)),
                                               (self.anchor_marks, anchored.any())) if shown]
         self.fig.legend(handles=handles, loc="outside lower center", fontsize=8, frameon=False, ncols=len(handles))
-        self._time_format = _time_format(motion.t if times is None else times)
+        # the time stamp's decimals tell the frames shown apart (frame_times; default every sample)
+        self._time_format = _time_format(motion.t if frame_times is None else frame_times)
         # lay the figure out once (nothing that sizes it changes between frames), then keep that layout: the
         # constrained layout engine would otherwise measure every text again for each frame, half of its cost
         self.fig.draw_without_rendering()
@@ -363,7 +366,8 @@ def _output_dir(path: Path) -> None:
 
 def write_animation(motion: Motion, path, *, view: str = "auto", max_frames: int = DEFAULT_MAX_FRAMES,
                     fps: float = DEFAULT_FPS, speed: float = 1.0, size=DEFAULT_SIZE, cmap: str = DEFAULT_CMAP,
-                    tension_range: float | None = None, elev: float = 25.0, azim: float = -60.0) -> Written:
+                    tension_range: float | None = None, elev: float = DEFAULT_ELEV,
+                    azim: float = DEFAULT_AZIM) -> Written:
     """Write the motion as a GIF (Pillow, always available) or MP4 (ffmpeg) with matplotlib's writers."""
     from matplotlib import animation
 
@@ -374,7 +378,7 @@ def write_animation(motion: Motion, path, *, view: str = "auto", max_frames: int
     _output_dir(path)
     start = time.perf_counter()
     frames = motion.frame_indices(max_frames, fps, speed)
-    picture = NetworkFigure(motion, view, size, cmap, tension_range, elev, azim, times=motion.t[frames])
+    picture = NetworkFigure(motion, view, size, cmap, tension_range, elev, azim, frame_times=motion.t[frames])
     writer = animation.PillowWriter(fps=fps) if suffix == ".gif" else animation.FFMpegWriter(fps=fps, codec="h264")
     try:
         with writer.saving(picture.fig, str(path), dpi=DPI):
@@ -394,8 +398,8 @@ def write_animation(motion: Motion, path, *, view: str = "auto", max_frames: int
 
 
 def write_still(motion: Motion, path, *, at: float | None = None, view: str = "auto", size=DEFAULT_SIZE,
-                cmap: str = DEFAULT_CMAP, tension_range: float | None = None, elev: float = 25.0,
-                azim: float = -60.0) -> Written:
+                cmap: str = DEFAULT_CMAP, tension_range: float | None = None, elev: float = DEFAULT_ELEV,
+                azim: float = DEFAULT_AZIM) -> Written:
     """Write one frame as PNG: the sample nearest to time ``at`` (default: the last sample)."""
     path = Path(path)
     _output_dir(path)
@@ -420,9 +424,10 @@ def plotly_colorscale(cmap_name: str, stops: int = 21) -> list:
 
 
 def _html_bytes_per_frame(motion: Motion) -> float:
-    """Frame data an HTML view stores per frame, as float32 in base64 (4/3 bytes per byte): per link 3 vertices
-    (k1 end, k2 end, gap) of 3 coordinates and a colour value each, its midpoint and T; 3 coordinates per mass."""
-    return 4 * 4 / 3 * ((3 * 4 + 3 + 1) * motion.L + 3 * motion.K)
+    """Frame data an HTML view stores per frame. Per link: 3 vertices (k1 end, k2 end, a NaN gap) of 3
+    coordinates and a colour value, float32 in base64, whose '/' plotly writes as a 6-character escape (a NaN
+    holds one): about 100 bytes, measured on chain_10, net_10x10 and a 100 x 100 net. Per mass: 3 float32."""
+    return 100.0 * motion.L + 18.0 * motion.K
 
 
 def html_default_max_frames(motion: Motion) -> int:
@@ -454,7 +459,7 @@ def _camera(view: str, elev: float, azim: float) -> dict:
 
 def build_html_figure(motion: Motion, *, view: str = "auto", max_frames: int | None = None,
                       fps: float = DEFAULT_FPS, speed: float = 1.0, cmap: str = DEFAULT_CMAP,
-                      tension_range: float | None = None, elev: float = 25.0, azim: float = -60.0):
+                      tension_range: float | None = None, elev: float = DEFAULT_ELEV, azim: float = DEFAULT_AZIM):
     """The plotly figure of the HTML view: trace 0 the links (one line trace, coloured per vertex by T, a gap
     between links; hovering a link shows its number, its masses and T), trace 1 the free masses, trace 2 the
     anchored ones; one frame per shown sample, a time slider and play / pause buttons.
@@ -577,8 +582,10 @@ def _add_picture_arguments(p, max_frames_help: str) -> None:
     p.add_argument("--view", choices=VIEWS, default="auto",
                    help="projection: a coordinate plane (xz, xy, yz) or 3d; auto picks the plane the whole run "
                         "stays in, else 3d")
-    p.add_argument("--elev", type=float, default=25.0, help="3d view: elevation of the viewer, degrees (default 25)")
-    p.add_argument("--azim", type=float, default=-60.0, help="3d view: azimuth of the viewer, degrees (default -60)")
+    p.add_argument("--elev", type=float, default=DEFAULT_ELEV,
+                   help=f"3d view: elevation of the viewer, degrees (default {DEFAULT_ELEV:g})")
+    p.add_argument("--azim", type=float, default=DEFAULT_AZIM,
+                   help=f"3d view: azimuth of the viewer, degrees (default {DEFAULT_AZIM:g})")
     p.add_argument("--max-frames", type=_positive(int), default=None, help=max_frames_help)
     p.add_argument("--fps", type=_positive(float), default=DEFAULT_FPS,
                    help=f"frames per second of playback (default {DEFAULT_FPS:g})")
