@@ -129,8 +129,12 @@ class NativeIntegrator(Integrator):
             return (f"the implicit velocity half step (drag, dampers) does not converge {span} at dt = {self.dt:g}: "
                     "the damping is too stiff for this step (h c / 2m near or above 1); reduce dt")
         if status == lib.STEP_UNDERFLOW:
-            return (f"step size underflow {span}: the tolerance rtol = {self.rtol} cannot be met (singular "
-                    "configuration or discontinuous input?)")
+            why = "singular configuration or discontinuous input?"
+            if d.fail_link >= 0:  # the steps were cut because their positions could not be projected onto (11)
+                why = (f"the position projection onto the link lengths (11) kept failing, last at "
+                       f"{scene.link_label(int(d.fail_link))} (residual {d.fail_residual:.3g} relative after "
+                       f"{d.fail_iterations} iterations): a singular configuration such as a taut string?")
+            return f"step size underflow {span}: the tolerance rtol = {self.rtol} cannot be met ({why})"
         if status == lib.TOO_MANY_STEPS:
             return f"more than {max_steps} steps {span}; raise max_steps or the tolerance"
         if status == lib.NON_FINITE:
