@@ -12,7 +12,7 @@ this thread (the machine may be shared); analysis is timed once.
 ``--step`` also times whole RATTLE steps (dt 1e-4 s) of the 100 x 100 net through linknet_core.Simulator on
 the native core, against factor + 2 solves.
 
-    OPENBLAS_NUM_THREADS=1 python -m benchmarks.bench_ldl [--step] [--repeats 15]
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.bench_ldl [--step] [--repeats 15] [--portable]
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from linknet_core import builders
-from linknet_core.native.ldl import NativeLDL
+from linknet_core.native.ldl import NativeLDL, vector_kernels
 from linknet_core.scene import Scene, load_scene
 from linknet_core.structure import analyse, link_pairs
 
@@ -123,9 +123,12 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=15)
     parser.add_argument("--step", action="store_true", help="also time RATTLE steps of the 100 x 100 net")
+    parser.add_argument("--portable", action="store_true", help="the portable supernodal kernels, not AVX2")
     parser.add_argument("--library", help="a shared library to load instead of the package's (development)")
     args = parser.parse_args(argv)
     lib = ctypes.CDLL(args.library) if args.library else None
+    if args.portable:
+        vector_kernels(False, lib)
 
     net = builders.net(100, 100)
     first, second, _ = pair_values(net, net.X0)
@@ -138,11 +141,12 @@ def main(argv=None) -> None:
         rows.append(measure(name, scene, analyse(scene).ordering, args.repeats, lib))
 
     print(f"{'scene, ordering':34s} {'L':>6s} {'analyse':>9s} {'nnz(L)':>8s} {'algorithm':>10s} {'blocks':>6s} "
-          f"{'factor':>10s} {'solve':>10s} {'f + 6 s':>10s} {'residual':>9s}")
+          f"{'factor':>11s} {'solve':>11s} {'f + 6 s':>11s} {'residual':>9s}")
     for r in rows:
         print(f"{r['name']:34s} {r['L']:6d} {r['analyse'] * 1e3:7.2f}ms {r['nnz_L']:8d} {r['algorithm']:>10s} "
-              f"{r['blocks']:6d} {r['factor'] * 1e3:8.3f}ms {r['solve'] * 1e3:8.3f}ms "
-              f"{(r['factor'] + 6 * r['solve']) * 1e3:8.3f}ms {r['residual']:9.1e}")
+              f"{r['blocks']:6d} {r['factor'] * 1e6:9.1f}us {r['solve'] * 1e6:9.1f}us "
+              f"{(r['factor'] + 6 * r['solve']) * 1e6:9.1f}us {r['residual']:9.1e}")
+    print(f"(supernodal factorisation with AVX2 kernels: {'yes' if vector_kernels(None, lib) else 'no'})")
     if args.step:
         step = step_time(args.repeats)
         ldl = rows[0]["factor"] + 2 * rows[0]["solve"]

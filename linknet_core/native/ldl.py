@@ -29,6 +29,7 @@ def declare(lib: ctypes.CDLL) -> ctypes.CDLL:
         ("ln_ldl_numeric_free", None, [ctypes.c_void_p]),
         ("ln_ldl_factor", ln_int, [ctypes.c_void_p, ctypes.c_void_p, _double_p, ctypes.c_double]),
         ("ln_ldl_get_pivots", ln_int, [ctypes.c_void_p, ctypes.c_void_p, _double_p]),
+        ("ln_ldl_vector_kernels", ctypes.c_int, [ctypes.c_int]),
         ("ln_ldl_solve", None, [ctypes.c_void_p, ctypes.c_void_p, _double_p, _double_p]),
     ):
         function = getattr(lib, name)
@@ -102,10 +103,10 @@ class NativeLDL:
 
     @property
     def info(self) -> dict:
-        raw = np.zeros(5)
+        raw = np.zeros(6)
         self._lib.ln_ldl_info(self._symbolic, raw.ctypes.data_as(_double_p))
         return {"algorithm": "supernodal" if raw[0] else "columns", "nnz_L": int(raw[1]), "blocks": int(raw[2]),
-                "stored": int(raw[3]), "flops": float(raw[4])}
+                "stored": int(raw[3]), "flops": float(raw[4]), "avx2": bool(raw[5])}
 
     def factor(self, pair_values, pivot_tol: float = PIVOT_TOL) -> int:
         """Numeric factorisation; returns -1, or the first elimination column whose pivot was zeroed."""
@@ -133,6 +134,13 @@ class NativeLDL:
         pointer = x.ctypes.data_as(_double_p)
         self._lib.ln_ldl_solve(self._symbolic, self._numeric, pointer, pointer)
         return x
+
+
+def vector_kernels(enable: bool | None = None, lib: ctypes.CDLL | None = None) -> bool:
+    """Whether analyses from now on use the AVX2 copy of the supernodal factorisation (where the processor has
+    it); ``enable`` switches it for the whole process (tests and benchmarks: both copies agree bitwise)."""
+    lib = declare(lib) if lib is not None else _package_library()
+    return bool(lib.ln_ldl_vector_kernels(-1 if enable is None else int(bool(enable))))
 
 
 def amd_ordering(n: int, first, second, lib: ctypes.CDLL | None = None) -> np.ndarray:

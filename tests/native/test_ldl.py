@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from linknet_core import builders
-from linknet_core.native.ldl import PIVOT_TOL, NativeLDL, amd_ordering, zero_pivots
+from linknet_core.native.ldl import PIVOT_TOL, NativeLDL, amd_ordering, vector_kernels, zero_pivots
 from linknet_core.scene import Scene, load_scene
 from linknet_core.structure import _dense_rank, _rank_from_pivots, analyse, link_pairs
 
@@ -116,6 +116,25 @@ def test_pivots_are_those_of_the_dense_factorisation(size):
     expected = np.linalg.cholesky(A[np.ix_(order, order)]).diagonal() ** 2
     assert zeroed == 0
     assert np.allclose(D, expected, rtol=1e-9)
+
+
+def test_vector_kernels_give_bitwise_the_same_factorisation():
+    """The supernodal factorisation's AVX2 copy (where the processor has it) and its portable copy."""
+    scene = builders.net(30, 30)
+    first, second, values = pair_values(scene, perturbed(scene, np.random.default_rng(4), 0.3))
+    b = np.random.default_rng(5).standard_normal(scene.L)
+    was = vector_kernels()
+    results = []
+    try:
+        for enable in (False, True):
+            vector_kernels(enable)
+            ldl = NativeLDL(scene.L, first, second)
+            assert ldl.info["algorithm"] == "supernodal" and ldl.info["avx2"] == vector_kernels()
+            ldl.factor(values)
+            results.append((ldl.pivots()[0], ldl.solve(b)))
+    finally:
+        vector_kernels(was)
+    assert np.array_equal(results[0][0], results[1][0]) and np.array_equal(results[0][1], results[1][1])
 
 
 def test_chains_and_trees_in_leaves_first_order_have_no_fill():

@@ -28,8 +28,13 @@ void ln_ldl_get_ordering(const struct ln_ldl_symbolic *s, ln_int *ordering);  /*
 /* What the analysis chose, for benchmarks and tests: info[0] 1 if supernodal, 0 if column by column;
    info[1] nnz(L) below the diagonal; info[2] supernodes (columns for the column algorithm); info[3] values
    stored for L (dense blocks' upper triangles and amalgamation zeros included); info[4] multiply-adds of one
-   factorisation counted on the structure of L. */
-void ln_ldl_info(const struct ln_ldl_symbolic *s, double info[5]);
+   factorisation counted on the structure of L; info[5] 1 if the supernodal factorisation runs its AVX2 copy. */
+void ln_ldl_info(const struct ln_ldl_symbolic *s, double info[6]);
+
+/* Whether analyses from now on pick the AVX2 copy of the supernodal factorisation where the processor has
+   it: enable 1 (the default) or 0, or -1 to only ask. Returns whether they will. Process-wide, for tests and
+   benchmarks: both copies give bitwise the same factorisation. */
+int ln_ldl_vector_kernels(int enable);
 
 struct ln_ldl_numeric *ln_ldl_numeric_new(const struct ln_ldl_symbolic *s);
 void ln_ldl_numeric_free(struct ln_ldl_numeric *f);
