@@ -117,7 +117,8 @@ def ensemble(scene, vary=None, samples=None, *, t_end: float, method: str | None
             if final is not None:
                 facts.update(wall_seconds=time.perf_counter() - started,
                              members_per_second=final.total / final.elapsed,
-                             first_result_seconds=final.first_result_seconds, workers=final.workers,
+                             first_result_seconds=None if final.first_result_seconds is None
+                             else final.first_result_seconds + final.started - started, workers=final.workers,
                              failed=final.failed, retried=final.retried, tasks=final.tasks, complete=1)
             else:  # interrupted: the members written so far stay readable, marked as such
                 facts["complete"] = 0

@@ -23,6 +23,7 @@ import os
 import threading
 import time
 from collections import deque
+from concurrent.futures import CancelledError
 from dataclasses import dataclass, field
 
 from ..errors import LinknetError
@@ -71,8 +72,15 @@ class Engine:
         if client is None:
             n = workers or available_cores()
             # single-threaded workers: the solver holds the GIL in its Python layers, so threads would queue
-            self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                         dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+            try:
+                self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                             dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+            except Exception as exc:
+                # the usual cause: a script without a main guard, which each spawned worker imports again and
+                # which then tries to start a cluster of its own while it is being imported
+                raise LinknetError(f"the LocalCluster's worker processes did not start ({error_text(exc)}). Dask "
+                                   "starts each worker by importing the main script again, so a script must call "
+                                   "ln.ensemble under `if __name__ == \"__main__\":`") from None
             self.client = Client(self._cluster)
             self._owns_client = True
             self.description = f"LocalCluster on 127.0.0.1, {n} worker process(es)"
@@ -161,7 +169,6 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
     lock = threading.Lock()  # the event handler runs on the client's event-loop thread
     in_flight: dict[str, tuple[int, int]] = {}  # task key -> (first member, count)
     retried: set[int] = set()
-    written: set[int] = set()
     singles: deque[int] = deque()  # members of batches that kept killing workers, to run one by one
     cursor = 0
     resubmissions = 0
@@ -172,11 +179,11 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
         if not isinstance(message, dict) or message.get("action") != "remove-worker":
             return
         keys = set(message.get("processing-tasks", ())) | set(message.get("lost-computed-tasks", ()))
-        with lock:
+        with lock:  # a batch stays in flight until its result is written: none of its members is written yet
             for key in keys:
                 if key in in_flight:
                     first, count = in_flight[key]
-                    retried.update(m for m in range(first, first + count) if m not in written)
+                    retried.update(range(first, first + count))
 
     def submit(ac) -> None:
         nonlocal cursor, resubmissions
@@ -219,14 +226,13 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
                 record_failure(first, count, f"KilledWorker: every worker that ran this member died "
                                              f"({result}); it may crash its process (e.g. a fault in an FMU)")
                 progress.failed += count
-            elif type(result).__name__ == "CancelledError":
+            elif isinstance(result, CancelledError):
                 raise LinknetError("the Dask scheduler cancelled the study (connection to it lost?)")
             else:  # the task itself failed, not a member (members record their own errors)
                 record_failure(first, count, error_text(result))
                 progress.failed += count
             future.release()
             with lock:
-                written.update(range(first, first + count))
                 progress.retried = len(retried)
             progress.done += count
             if progress.first_result_seconds is None and count:

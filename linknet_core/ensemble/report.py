@@ -7,6 +7,7 @@ import sys
 import numpy as np
 
 ROW_LIMIT = 30  # a study with more members is summarised per parameter value, not member by member
+VALUE_LIMIT = 20  # a parameter with more values is summarised per tenth of its values
 
 
 class ProgressBar:
@@ -66,8 +67,9 @@ def summary(ds) -> str:
              f'{ds.attrs.get("runs_through")}, t_end = {ds.attrs.get("t_end"):g} s, {ds.attrs.get("solver")}; '
              f'{int(ok.sum())} ok, {int((status == "failed").sum())} failed, {int((status == "not run").sum())} '
              f'not run, {int(ds["retried"].values.sum())} retried',
-             f'  engine: {ds.attrs.get("engine")}; {ds.attrs.get("wall_seconds", float("nan")):.2f} s wall, '
-             f'first result after {ds.attrs.get("first_result_seconds", float("nan")):.2f} s', ""]
+             f'  engine: {ds.attrs.get("engine")}; {ds.attrs.get("wall_seconds", float("nan")):.2f} s wall and '
+             f'first result after {ds.attrs.get("first_result_seconds", float("nan")):.2f} s (engine start included), '
+             f'{ds.attrs.get("members_per_second", float("nan")):.1f} members/s once running', ""]
     max_t, tip_final = ds["max_tension"].values, ds["tip_final"].values
     qoi_header = ["max T [N]", "link", "tip x [m]", "tip z [m]"]
     if ds.sizes["member"] <= ROW_LIMIT or not names:
@@ -81,14 +83,14 @@ def summary(ds) -> str:
             lines.append(f"quantities of interest ({tip}):")
             lines.append(_table(["member"] + names + qoi_header + ["status"], rows))
     else:
-        lines.append(f"quantities of interest ({tip}), min / mean / max over the members with each value:")
+        lines.append(f"quantities of interest ({tip}), min / mean / max over the members with each value "
+                     f"(or in each tenth of the values, when there are more than {VALUE_LIMIT}):")
         for name in names:
-            values = ds[name].values
             rows = []
-            for value in _unique(values):
-                sel = ok & (values == value)
-                rows.append([_fmt(value), str(int(sel.sum()))] + [_spread(q[sel]) for q in
-                                                                  (max_t, tip_final[:, 0], tip_final[:, 2])])
+            for label, sel in _groups(ds[name].values):
+                sel = sel & ok
+                rows.append([label, str(int(sel.sum()))] + [_spread(q[sel]) for q in
+                                                            (max_t, tip_final[:, 0], tip_final[:, 2])])
             lines.append(_table([name, "ok"] + ["max T [N]", "tip x [m]", "tip z [m]"], rows))
             lines.append("")
     failed = np.flatnonzero(status == "failed")
@@ -110,10 +112,16 @@ def summary(ds) -> str:
     return "\n".join(lines).rstrip()
 
 
-def _unique(values):
-    """The distinct values in first-seen order (at most 50: beyond that it is not a table)."""
-    seen = list(dict.fromkeys(values.tolist()))
-    return seen[:50]
+def _groups(values):
+    """(label, members) per distinct value, or per tenth of the sorted values when there are more than
+    VALUE_LIMIT distinct numbers (Monte Carlo samples, fine grids)."""
+    distinct = list(dict.fromkeys(values.tolist()))
+    if len(distinct) <= VALUE_LIMIT or not np.issubdtype(values.dtype, np.number):
+        return [(_fmt(v), values == v) for v in distinct[:VALUE_LIMIT]]
+    edges = np.quantile(values, np.linspace(0, 1, 11))
+    bins = np.clip(np.searchsorted(edges, values, side="right") - 1, 0, 9)
+    return [(f"{_fmt(values[bins == b].min())} .. {_fmt(values[bins == b].max())}", bins == b)
+            for b in range(10) if (bins == b).any()]
 
 
 def _spread(q) -> str:
