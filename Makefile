@@ -1,7 +1,7 @@
 # The two quick-start commands of the README: `make demo` and `make test`.
 PYTHON ?= python3
 
-.PHONY: install demo test bench bench-quick stress
+.PHONY: install demo test bench bench-quick bench-ensemble stress
 
 install:
 	$(PYTHON) -m pip install -q -e '.[test]'
@@ -19,3 +19,7 @@ bench: install
 bench-quick: install
 	$(PYTHON) -m pip install -q -e '.[bench]'
 	$(PYTHON) -m benchmarks.work_precision --quick
+
+# ensembles on Dask: members/s on 1 and 2 workers, per-member overhead, cold start (docs/ensemble.md)
+bench-ensemble: install
+	$(PYTHON) -m benchmarks.bench_ensemble
