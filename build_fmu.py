@@ -4,6 +4,7 @@
     python build_fmu.py models/chain_10.json [-o chain_10.fmu] [--integrator rattle --step 1e-3]
     python build_fmu.py --component pd_controller -o pd_controller.fmu
     python build_fmu.py --component spring_damper -o spring_damper.fmu
+    python build_fmu.py models/chain_10.json --native -o chain_10.fmu   # no Python on the host (C core inside)
 
 pythonfmu 0.7.0 writes the FMU; this script then
   1. post-processes modelDescription.xml: UnitDefinitions, TypeDefinitions, unit/declaredType
@@ -194,7 +195,8 @@ def _parse_masses(spec, scene):
 
 
 def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=None, inputs=None,
-                    outputs=None, stop_time=None, comm_step=None, link_python=True, quiet=False) -> Path:
+                    outputs=None, stop_time=None, comm_step=None, link_python=True, quiet=False,
+                    native=False) -> Path:
     import linknet_core as ln
     from linknet_fmu.layout import Layout
 
@@ -234,6 +236,14 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
         raise SystemExit(f"build_fmu: {scene.name}: {e}")
     out = Path(out) if out else Path(f"{ident}.fmu")
     out.parent.mkdir(parents=True, exist_ok=True)
+    if native:  # the self-contained FMU on the native C core: same options and variables (fmu_src/native/build.py)
+        from native.build import NativeBuildError, build_native_fmu
+        experiment = dict(startTime=0.0, stopTime=float(stop_time or fmu_opts.get("stop_time", 2.0)),
+                          stepSize=float(comm_step or fmu_opts.get("comm_step", 1e-2)), tolerance=cfg["tolerance"])
+        try:
+            return build_native_fmu(scene, cfg, layout, out, experiment, postprocess_model_description, quiet=quiet)
+        except NativeBuildError as e:
+            raise SystemExit(f"build_fmu: {e}")
 
     with tempfile.TemporaryDirectory(prefix="linknet_stage_") as stage:
         stage = Path(stage)
@@ -302,6 +312,8 @@ def main(argv=None):
     p.add_argument("--outputs", help="expose X/U outputs only for these masses")
     p.add_argument("--stop-time", type=float, help="DefaultExperiment stopTime (default 2)")
     p.add_argument("--comm-step", type=float, help="DefaultExperiment stepSize (default 0.01)")
+    p.add_argument("--native", action="store_true",
+                   help="build the self-contained FMU on the native C core (no Python on the host; C sources inside)")
     p.add_argument("--no-link-libpython", action="store_true",
                    help="leave the binary unlinked (C hosts must then preload libpython)")
     a = p.parse_args(argv)
@@ -309,7 +321,7 @@ def main(argv=None):
         build_component_fmu(a.component, a.output, link_python=not a.no_link_libpython)
     elif a.scene:
         build_scene_fmu(a.scene, a.output, a.integrator, a.step, a.tolerance, a.inputs, a.outputs,
-                        a.stop_time, a.comm_step, link_python=not a.no_link_libpython)
+                        a.stop_time, a.comm_step, link_python=not a.no_link_libpython, native=a.native)
     else:
         p.error("give a scene file or --component")
 

@@ -1,0 +1,570 @@
+"""Build the self-contained FMI 2.0 Co-Simulation FMU of a scene on the native C core (`build_fmu.py --native`).
+
+The FMU holds no Python. Its binary is compiled here with the system C compiler from:
+
+* the native core, linknet_core/native/src (copied as it is: every .c file that no other .c file includes is
+  compiled, so the DIM-generic stages come in through dim2.c/dim3.c and AMD through its amd_l*.c wrappers);
+* the FMI glue, fmu_src/native/fmi2Functions.c (scene-independent, FMI only) and linknet_model.c (the core as
+  the glue's model, fmu_model.h), with fmi2_api.h, fmu_model.h, lnfmu_scene.h;
+* one generated file, linknet_scene.c: the scene as constant data. The ln_model and every integrator's
+  ln_method are read field by field from the structs linknet_core's own Simulator hands the core for this
+  scene (the ctypes mirrors in linknet_core.native), so the FMU at its default parameters runs the library's
+  arithmetic bit for bit. Plus what a changed mass, length or gravity needs, the initial state and internals,
+  and the variable table of fmu_src/linknet_fmu/layout.py (the same Layout the pythonfmu FMU uses).
+
+All of these go into the FMU's sources/ and are listed in <SourceFiles>, so a tool on another platform can build
+the binary itself. The modelDescription.xml goes through build_fmu.postprocess_model_description, as the
+pythonfmu FMU's does: the two agree on variables, units, types, DefaultExperiment and ModelStructure.
+"""
+from __future__ import annotations
+
+import ctypes
+import datetime
+import hashlib
+import inspect
+import math
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import uuid
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+GLUE_FILES = ("fmi2Functions.c", "linknet_model.c", "fmi2_api.h", "fmu_model.h", "lnfmu_scene.h")
+SCENE_FILE = "linknet_scene.c"
+STATE_FORMAT = 1  # keep equal to STATE_FORMAT in fmi2Functions.c (a part of the fingerprint)
+# as setup.py compiles the core for the library: the same code generation, so the same results
+CFLAGS = ["-std=c99", "-O3", "-fno-math-errno", "-ffp-contract=off"]
+WARNINGS = ["-Wall", "-Wextra"]
+LOG_CATEGORIES = (("logStatusWarning", "Log messages with fmi2Warning status."),
+                  ("logStatusDiscard", "Log messages with fmi2Discard status."),
+                  ("logStatusError", "Log messages with fmi2Error status."),
+                  ("logStatusFatal", "Log messages with fmi2Fatal status (never sent by this FMU)."),
+                  ("logAll", "Log all messages."))
+
+
+class NativeBuildError(RuntimeError):
+    """The native FMU cannot be built (message says why)."""
+
+
+# ---------------------------------------------------------------------------- the core's sources
+def core_source_dir() -> Path:
+    import linknet_core.native.library as library  # where the package's native sources are
+    return Path(library.SOURCE_DIR)
+
+
+def translation_units(src: Path) -> list[str]:
+    """The .c files under src (relative paths) that no other .c file includes: the ones to compile."""
+    files = sorted(p for p in src.rglob("*.c") if "__pycache__" not in p.parts)
+    included = set()
+    for p in files:
+        for name in re.findall(r'^\s*#\s*include\s+"([^"]+\.c)"', p.read_text(errors="replace"), re.M):
+            included.add((p.parent / name).resolve())
+    return [p.relative_to(src).as_posix() for p in files if p.resolve() not in included]
+
+
+def force_parameters(src: Path) -> int:
+    m = re.search(r"#define\s+LN_FORCE_PARAMETERS\s+(\d+)", (src / "linknet.h").read_text())
+    if not m:
+        raise NativeBuildError("linknet.h no longer defines LN_FORCE_PARAMETERS: teach fmu_src/native/build.py")
+    return int(m.group(1))
+
+
+# ---------------------------------------------------------------------------- C literals
+def c_double(x: float) -> str:
+    x = float(x)
+    if math.isnan(x):
+        return "NAN"
+    if math.isinf(x):
+        return "INFINITY" if x > 0 else "-INFINITY"
+    return x.hex()  # exact: C99 hexadecimal floating constants
+
+
+def c_string(s: str) -> str:
+    out = []
+    for ch in s.encode("utf-8"):
+        c = chr(ch)
+        if c in '"\\':
+            out.append("\\" + c)
+        elif 32 <= ch < 127 and c != "?":  # '?' escaped against trigraphs
+            out.append(c)
+        else:
+            out.append(f"\\{ch:03o}")
+    return '"' + "".join(out) + '"'
+
+
+class CWriter:
+    """Static const arrays and the initializers that point to them."""
+
+    def __init__(self):
+        self.lines: list[str] = []
+        self._n = 0
+
+    def array(self, ctype: str, values, fmt, hint: str) -> str:
+        values = list(values)
+        if not values:
+            return "NULL"
+        self._n += 1
+        name = f"{hint}_{self._n}"
+        body = []
+        row = []
+        for i, v in enumerate(values):
+            row.append(fmt(v))
+            if len(row) == 8 or i == len(values) - 1:
+                body.append("    " + ", ".join(row) + ",")
+                row = []
+        self.lines.append(f"static const {ctype} {name}[{len(values)}] = {{\n" + "\n".join(body) + "\n};")
+        return name
+
+    def doubles(self, values, hint="d") -> str:
+        return self.array("double", np.asarray(values, np.float64).ravel(), c_double, hint)
+
+    def ints(self, values, hint="i") -> str:
+        return self.array("ln_int", np.asarray(values, np.int64).ravel(), lambda v: str(int(v)), hint)
+
+    def bytes_(self, values, hint="b") -> str:
+        return self.array("uint8_t", np.asarray(values, np.uint8).ravel(), lambda v: str(int(v)), hint)
+
+    def strings(self, values, hint="s") -> str:
+        return self.array("char *const", values, c_string, hint)
+
+
+def _pointer_values(ptr, n: int, ctype):
+    if not ptr or n == 0:
+        return None
+    return np.ctypeslib.as_array(ctypes.cast(ptr, ctypes.POINTER(ctype)), (n,)).copy()
+
+
+def struct_initializer(w: CWriter, struct, lengths: dict, skip: set, hint: str) -> str:
+    """A C designated initializer of a ctypes mirror of a core struct, field by field. Pointer fields need a
+    known length (``lengths``: field -> number of entries, from the struct's own counts) or are set at
+    instantiation (``skip``); a field of a kind not known here stops the build, so that a field the core adds
+    cannot be silently dropped."""
+    parts = []
+    for name, ctype in type(struct)._fields_:
+        value = getattr(struct, name)
+        if name in skip:
+            continue
+        if ctype in (ctypes.c_int64, ctypes.c_int, ctypes.c_int32, ctypes.c_uint8):
+            parts.append(f".{name} = {int(value)}")
+        elif ctype is ctypes.c_double:
+            parts.append(f".{name} = {c_double(value)}")
+        elif isinstance(ctype, type) and issubclass(ctype, ctypes.Array):
+            if ctype._type_ is not ctypes.c_double:
+                raise NativeBuildError(f"{type(struct).__name__}.{name}: array of {ctype._type_} not handled")
+            parts.append(f".{name} = {{{', '.join(c_double(v) for v in value)}}}")
+        elif isinstance(ctype, type) and issubclass(ctype, ctypes._Pointer):
+            if name not in lengths:
+                raise NativeBuildError(f"{type(struct).__name__}.{name}: a pointer field fmu_src/native/build.py does "
+                                       "not know the length of (the core's struct changed: teach build.py)")
+            target = ctype._type_
+            values = _pointer_values(value, int(lengths[name]), target)
+            if values is None:
+                continue
+            if target is ctypes.c_double:
+                ref = w.doubles(values, f"{hint}_{name}")
+            elif target is ctypes.c_int64:
+                ref = w.ints(values, f"{hint}_{name}")
+            elif target is ctypes.c_uint8:
+                ref = w.bytes_(values, f"{hint}_{name}")
+            else:
+                raise NativeBuildError(f"{type(struct).__name__}.{name}: pointer to {target} not handled")
+            parts.append(f".{name} = {ref}")
+        elif ctype is ctypes.c_void_p:
+            raise NativeBuildError(f"{type(struct).__name__}.{name}: an opaque pointer fmu_src/native/build.py does not "
+                                   "know how to rebuild (the core's struct changed: teach build.py)")
+        else:
+            raise NativeBuildError(f"{type(struct).__name__}.{name}: field type {ctype} not handled")
+    return "{\n    " + ",\n    ".join(parts) + "\n}"
+
+
+# ---------------------------------------------------------------------------- the scene as data
+def _simulators(scene, cfg):
+    """One linknet_core Simulator per integrator, as the pythonfmu FMU builds them (dt = step, or rtol =
+    tolerance), sharing one Dynamics (the structure is analysed once)."""
+    import linknet_core as ln
+    sims = {}
+    dyn = None
+    for name in [cfg["integrator"]] + [n for n in cfg["integrators"] if n != cfg["integrator"]]:
+        kwargs = dict(rtol=cfg["tolerance"]) if ln.METHODS[name].adaptive else dict(dt=cfg["step"])
+        sims[name] = ln.Simulator(scene, method=name, dynamics=dyn, **kwargs)
+        dyn = sims[name].dyn
+    return sims
+
+
+def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
+    """The generated C file (without its identity lines) and facts about the scene for the caller."""
+    import linknet_core as ln
+    import linknet_core.native.library as library
+    import linknet_core.native.model as native_model
+
+    sims = _simulators(scene, cfg)
+    sim = sims[cfg["integrator"]]
+    integ = sim.integrator
+    kind = sim.specialisation.kind
+    spec = {"none": 0, "static": 1, "rigid": 2}.get(kind)
+    if spec is None:
+        raise NativeBuildError(f"unknown specialisation {kind!r} of the Simulator: teach fmu_src/native/build.py")
+    model = integ.model.struct
+    K, L = int(model.K), int(model.L)
+    n_pairs, n_el, n_fixed, n_free = int(model.n_pairs), int(model.n_elements), int(model.n_fixed), int(model.n_free)
+    P = force_parameters(src)
+    model_lengths = {"k1": L, "k2": L, "R": L, "inv_R": L, "inv_m": K, "free_idx": n_free, "fixed_idx": n_fixed,
+                     "is_fixed": K, "F_scene": 3 * K, "element_kind": n_el, "element_mass": 2 * n_el,
+                     "element_param": P * n_el, "pair_first": n_pairs, "pair_second": n_pairs,
+                     "pair_weight": n_pairs, "chain_order": L, "chain_diag_weight": L, "chain_off_weight": L}
+    w = CWriter()
+    model_init = struct_initializer(w, model, model_lengths, {"ldl", "rigid"}, "model")
+
+    # the elimination order the sparse LDL^T was analysed in (rebuilt at instantiation with ln_ldl_analyse)
+    ordering = "NULL"
+    if model.ldl:
+        order = np.zeros(L, np.int64)
+        library.ldl_get_ordering(model.ldl, order.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)))
+        ordering = w.ints(order, "ldl_ordering")
+
+    # which mass and sign each pair weight of A (25) comes from: a changed mass rebuilds the weights
+    pairs = native_model.link_pairs(scene)
+    first = _pointer_values(model.pair_first, n_pairs, ctypes.c_int64)
+    second = _pointer_values(model.pair_second, n_pairs, ctypes.c_int64)
+    weight = _pointer_values(model.pair_weight, n_pairs, ctypes.c_double)
+    if n_pairs and not (np.array_equal(pairs.first, first) and np.array_equal(pairs.second, second)
+                        and np.array_equal(pairs.sign * scene.inv_mass[pairs.mass], weight)):
+        raise NativeBuildError("the native model's pair table no longer matches linknet_core's link_pairs: "
+                               "fmu_src/native/build.py needs the new rule for the pair weights")
+    pair_mass = w.ints(pairs.mass, "pair_mass") if n_pairs else "NULL"
+    pair_sign = w.doubles(pairs.sign, "pair_sign") if n_pairs else "NULL"
+
+    rigid_ref, Y0_ref, n_bodies = "NULL", "NULL", 0
+    if spec == 2:
+        rstruct = integ.rigid.struct
+        n_bodies = int(rstruct.n_bodies)
+        rigid_init = struct_initializer(w, rstruct, {"body_of": K, "r": 3 * K, "inertia": 3 * n_bodies,
+                                                     "body_mass": n_bodies, "kind": n_bodies}, set(), "rigid")
+        w.lines.append(f"static const struct ln_rigid_model rigid = {rigid_init};")
+        rigid_ref = "&rigid"
+        Y0_ref = w.doubles(integ.body_states(), "Y0")
+
+    internals = integ.internals()["native"]
+    methods = []
+    for name in cfg["integrators"]:
+        s = sims[name]
+        mstruct = s.integrator.method.struct
+        ns = int(mstruct.n_stages)
+        init = struct_initializer(w, mstruct, {"gammas": int(mstruct.n_gammas), "AB": (ns + 1) * ns, "E1": ns + 1,
+                                               "E2": ns + 1}, set(), f"method_{name}")
+        adaptive = int(bool(ln.METHODS[name].adaptive))
+        methods.append(f"{{{c_string(name)}, {adaptive}, {init}}}")
+    kinds = {"F": 0, "X": 1, "U": 2, "T": 3, "Freact": 4, "M": 5, "R": 6, "g": 7}
+    var_rows = {}
+    fixed_idx = _pointer_values(model.fixed_idx, n_fixed, ctypes.c_int64)
+    fixed_row = {int(k): j for j, k in enumerate([] if fixed_idx is None else fixed_idx)}
+    for vrs, masses, kind_name in ((layout.F_vr, layout.input_masses, "F"), (layout.X_vr, layout.output_masses, "X"),
+                                   (layout.U_vr, layout.output_masses, "U")):
+        for row, k in zip(vrs, masses):
+            for i, vr in enumerate(row):
+                var_rows[int(vr)] = (kinds[kind_name], 3 * int(k) + i)
+    for row, k in zip(layout.Freact_vr, layout.fixed_indices):
+        for i, vr in enumerate(row):
+            var_rows[int(vr)] = (kinds["Freact"], 3 * fixed_row[int(k)] + i)
+    for l, vr in enumerate(layout.T_vr):
+        var_rows[int(vr)] = (kinds["T"], l)
+    for vr, k in zip(layout.M_vr, layout.free_indices):
+        var_rows[int(vr)] = (kinds["M"], int(k))
+    for l, vr in enumerate(layout.R_vr):
+        var_rows[int(vr)] = (kinds["R"], l)
+    for i, vr in enumerate(layout.g_vr):
+        var_rows[int(vr)] = (kinds["g"], i)
+    var_rows[int(layout.tolerance_vr)] = (8, 0)
+    var_rows[int(layout.step_vr)] = (9, 0)
+    if sorted(var_rows) != list(range(layout.n_real)):
+        raise NativeBuildError("the layout's Real variables are not all mapped: teach fmu_src/native/build.py")
+    variables = ",\n".join(f"    {{{c_string(layout.reals[vr].name)}, {var_rows[vr][0]}, {var_rows[vr][1]}}}"
+                           for vr in range(layout.n_real))
+
+    length_tol = inspect.signature(ln.Simulator).parameters["length_tol"].default
+    out = [
+        f"/* {scene.name}: {K} masses, {L} links, solver {'none chain ldl min-norm'.split()[int(model.solver)]}, "
+        f"specialisation {kind}. Generated by fmu_src/native/build.py: data only, no code. */",
+        "#include <math.h>",
+        "#include <stddef.h>",
+        "#include <stdint.h>",
+        "",
+        '#include "fmu_model.h"',
+        '#include "lnfmu_scene.h"',
+        "",
+    ]
+    names = w.strings(scene.mass_names, "mass_names") if K else "NULL"
+    scene_mass = w.doubles(scene.mass, "scene_mass") if K else "NULL"
+    scene_length = w.doubles(scene.length, "scene_length") if L else "NULL"
+    scene_force = w.doubles(scene.force, "scene_force") if K else "NULL"
+    X0 = w.doubles(scene.X0, "scene_X0") if K else "NULL"
+    U0 = w.doubles(scene.U0, "scene_U0") if K else "NULL"
+    X_init = w.doubles(sim.state.X, "X_init") if K else "NULL"
+    U_init = w.doubles(sim.state.U, "U_init") if K else "NULL"
+    if sim.state.t != 0.0:
+        raise NativeBuildError("the Simulator does not start at t = 0")
+    w.lines.append(f"static const ln_model model = {model_init};")
+    w.lines.append("static const lnfmu_method methods[] = {\n" + ",\n".join(methods) + "\n};")
+    w.lines.append("static const lnfmu_variable variables[] = {\n" + variables + "\n};")
+    out += w.lines
+    project = bool(scene.options.get("project_initial_positions", False))
+    scene_init = f"""const lnfmu_scene lnfmu_scene_data = {{
+    .model_identifier = {c_string(cfg['model_identifier'])},
+    .scene_name = {c_string(str(scene.name))},
+    .guid = LNFMU_GUID,
+    .fingerprint = LNFMU_FINGERPRINT,
+    .K = {K}, .L = {L},
+    .mass_names = {names},
+    .mass = {scene_mass},
+    .length = {scene_length},
+    .gravity = {{{', '.join(c_double(g) for g in scene.gravity)}}},
+    .force = {scene_force},
+    .X0 = {X0}, .U0 = {U0},
+    .project_initial = {int(project)},
+    .length_tol = {c_double(length_tol)},
+    .model = &model,
+    .ldl_ordering = {ordering},
+    .pair_mass = {pair_mass},
+    .pair_sign = {pair_sign},
+    .specialisation = {spec},
+    .rigid = {rigid_ref},
+    .Y0 = {Y0_ref},
+    .X_init = {X_init}, .U_init = {U_init},
+    .h_next_init = {c_double(internals.h_next)},
+    .planar_init = {int(internals.planar)},
+    .max_steps = {int(sim.max_steps_per_call)},
+    .n_methods = {len(methods)},
+    .methods = methods,
+    .default_method = {cfg['integrators'].index(cfg['integrator'])},
+    .default_step = {c_double(cfg['step'])},
+    .default_tolerance = {c_double(cfg['tolerance'])},
+    .n_real = {layout.n_real},
+    .variables = variables,
+}};
+
+const fmu_model_info lnfmu_info = {{{c_string(cfg['model_identifier'])}, LNFMU_GUID, LNFMU_FINGERPRINT, {layout.n_real}, 1}};
+"""
+    out.append(scene_init)
+    facts = dict(specialisation=kind, solver=int(model.solver), K=K, L=L, bodies=n_bodies,
+                 planar=bool(model.planar))
+    return "\n".join(out), facts
+
+
+# ---------------------------------------------------------------------------- modelDescription.xml
+def _start(value: float) -> str:
+    """pythonfmu's format (16 significant digits) where it is exact, else 17."""
+    text = f"{value:.16g}"
+    return text if float(text) == value else f"{value:.17g}"
+
+
+def raw_model_description(cfg, layout, guid: str, sources: list[str], start_values: dict) -> bytes:
+    """ModelVariables as the pythonfmu FMU writes them (same names, order, value references, attributes);
+    build_fmu.postprocess_model_description then adds units, types, DefaultExperiment and ModelStructure."""
+    now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    root = ET.Element("fmiModelDescription", dict(
+        fmiVersion="2.0", modelName=cfg["model_identifier"], guid=guid,
+        generationTool="linknet build_fmu.py --native", generationDateAndTime=now,
+        variableNamingConvention="structured", description=cfg["description"], version=str(cfg.get("version", "1"))))
+    cs = ET.SubElement(root, "CoSimulation", dict(
+        modelIdentifier=cfg["model_identifier"], needsExecutionTool="false",
+        canHandleVariableCommunicationStepSize="true", canInterpolateInputs="false", maxOutputDerivativeOrder="0",
+        canRunAsynchronuously="false", canBeInstantiatedOnlyOncePerProcess="false",
+        canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="true", canSerializeFMUstate="true",
+        providesDirectionalDerivative="false"))
+    files = ET.SubElement(cs, "SourceFiles")
+    for name in sources:
+        ET.SubElement(files, "File", name=name)
+    cats = ET.SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES:
+        ET.SubElement(cats, "Category", name=name, description=text)
+    variables = ET.SubElement(root, "ModelVariables")
+    for v in layout.reals:
+        attrs = dict(name=v.name, valueReference=str(v.vr), description=v.description, causality=v.causality,
+                     variability=v.variability)
+        if v.initial:
+            attrs["initial"] = v.initial
+        sv = ET.SubElement(variables, "ScalarVariable", attrs)
+        real = {}
+        if v.causality in ("input", "parameter"):
+            real["start"] = _start(start_values[v.vr])
+        ET.SubElement(sv, "Real", real)
+    sv = ET.SubElement(variables, "ScalarVariable", dict(
+        name="integrator", valueReference=str(layout.integrator_vr),
+        description="integration method: " + ", ".join(cfg["integrators"]), causality="parameter",
+        variability="fixed", initial="exact"))
+    ET.SubElement(sv, "String", start=cfg["integrator"])
+    ET.SubElement(root, "ModelStructure")
+    return ET.tostring(root, encoding="UTF-8")
+
+
+def start_values(scene, cfg, layout) -> dict:
+    out = {}
+    for vr in layout.F_vr.ravel():
+        out[int(vr)] = 0.0
+    for vr, k in zip(layout.M_vr, layout.free_indices):
+        out[int(vr)] = float(scene.mass[k])
+    for l, vr in enumerate(layout.R_vr):
+        out[int(vr)] = float(scene.length[l])
+    for i, vr in enumerate(layout.g_vr):
+        out[int(vr)] = float(scene.gravity[i])
+    out[int(layout.tolerance_vr)] = float(cfg["tolerance"])
+    out[int(layout.step_vr)] = float(cfg["step"])
+    return out
+
+
+# ---------------------------------------------------------------------------- compile and pack
+def platform_folder() -> str | None:
+    """FMI 2.0 binaries/ folder of this machine, where a binary is built and tested (Linux x86-64 only)."""
+    if sys.platform.startswith("linux") and platform.machine() in ("x86_64", "AMD64"):
+        return "linux64"
+    return None
+
+
+def compiler() -> str:
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
+    if not cc:
+        raise NativeBuildError("no C compiler found (set CC, or install gcc or clang)")
+    return cc
+
+
+def _cache_dir() -> Path:
+    root = os.environ.get("LINKNET_FMU_CACHE") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "linknet", "native-fmu")
+    return Path(root)
+
+
+def _compile_object(cmd: list[str]) -> None:
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise NativeBuildError(f"compiling the native FMU failed ({' '.join(cmd)}):\n{proc.stderr[-4000:]}")
+    if proc.stderr.strip():
+        print(proc.stderr.strip(), file=sys.stderr)
+
+
+def compile_binary(sources_dir: Path, units: list[str], out: Path, cc: str | None = None,
+                   flags: list[str] | None = None, cache: bool = True) -> None:
+    """The FMU's shared library from its sources/ alone; only the fmi2 functions are exported.
+
+    The objects of everything but the scene's data are the same for every scene of one checkout: they are
+    kept in a per-user cache (LINKNET_FMU_CACHE, default ~/.cache/linknet/native-fmu), keyed by the compiler,
+    the flags and the content of every source file, so that building a second scene compiles one file."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    cc = cc or compiler()
+    flags = (CFLAGS + WARNINGS if flags is None else list(flags)) + ["-fPIC", "-fvisibility=hidden",
+                                                                    "-I", str(sources_dir)]
+    shared = [u for u in units if u != SCENE_FILE]
+    h = hashlib.sha256()
+    version = subprocess.run([cc, "--version"], capture_output=True, text=True).stdout
+    h.update(("\0".join([shutil.which(cc) or cc, version] + flags[:-2]) + "\0").encode())
+    for p in sorted(sources_dir.rglob("*")):
+        if p.is_file() and p.name != SCENE_FILE:
+            h.update(p.relative_to(sources_dir).as_posix().encode() + b"\0" + p.read_bytes())
+    key = h.hexdigest()[:32]
+    with tempfile.TemporaryDirectory(prefix="linknet_objects_") as tmp:
+        tmp = Path(tmp)
+        store = _cache_dir() / key if cache else tmp / "objects"
+        objects = {u: store / (u.replace("/", "__") + ".o") for u in shared}
+        missing = [u for u in shared if not objects[u].exists()]
+        if missing:
+            work = tmp / "new"
+            work.mkdir()
+            jobs = [[cc] + flags + ["-c", str(sources_dir / u), "-o", str(work / objects[u].name)] for u in missing]
+            with ThreadPoolExecutor(max_workers=os.cpu_count() or 2) as pool:
+                list(pool.map(_compile_object, jobs))
+            store.mkdir(parents=True, exist_ok=True)
+            for u in missing:  # rename is atomic: a concurrent build never sees half an object
+                os.replace(work / objects[u].name, objects[u])
+        scene_object = tmp / "scene.o"
+        if SCENE_FILE in units:
+            _compile_object([cc] + flags + ["-c", str(sources_dir / SCENE_FILE), "-o", str(scene_object)])
+        link = ([cc, "-shared", "-o", str(out)] + [str(objects[u]) for u in shared]
+                + ([str(scene_object)] if SCENE_FILE in units else []) + ["-Wl,--no-undefined", "-s", "-lm"])
+        _compile_object(link)
+
+
+def stage_sources(scene_c: str, dest: Path) -> list[str]:
+    """sources/: the core's src tree as it is, the glue, the generated scene; returns the files to compile."""
+    src = core_source_dir()
+    shutil.copytree(src, dest, ignore=shutil.ignore_patterns("__pycache__", "*.o", "*.so"))
+    for name in GLUE_FILES:
+        if (dest / name).exists():
+            raise NativeBuildError(f"the core's sources now have a file named {name}, as the FMU glue does: rename one")
+        shutil.copy2(HERE / name, dest / name)
+    (dest / SCENE_FILE).write_text(scene_c)
+    return translation_units(dest)
+
+
+def fingerprint(sources_dir: Path, scene_c: str) -> bytes:
+    """16 bytes identifying this FMU's build: every source file and the scene data (and the state format)."""
+    h = hashlib.blake2b(digest_size=16)
+    h.update(f"linknet native FMU state format {STATE_FORMAT}\n".encode())
+    for p in sorted(sources_dir.rglob("*")):
+        if p.is_file() and p.name != SCENE_FILE:
+            h.update(p.relative_to(sources_dir).as_posix().encode() + b"\0" + p.read_bytes())
+    h.update(scene_c.encode())
+    return h.digest()
+
+
+def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, postprocess, quiet: bool = False,
+                     cc: str | None = None) -> Path:
+    """Write the native FMU of ``scene`` to ``out``. ``cfg``, ``layout`` and ``experiment`` are build_fmu.py's
+    (identifier, description, integrators and defaults; the variables; DefaultExperiment); ``postprocess`` is
+    build_fmu.postprocess_model_description."""
+    out = Path(out)
+    src = core_source_dir()
+    try:
+        scene_c, facts = scene_source(scene, cfg, layout, src)
+    except NativeBuildError:
+        raise
+    except Exception as e:  # a scene the library itself refuses (e.g. an inconsistent initial state)
+        raise NativeBuildError(f"{scene.name}: {e}") from None
+    ident = cfg["model_identifier"]
+    with tempfile.TemporaryDirectory(prefix="linknet_native_fmu_") as tmp:
+        tmp = Path(tmp)
+        sources = tmp / "fmu" / "sources"
+        units = stage_sources("", sources)
+        digest = fingerprint(sources, scene_c)
+        guid = "{" + str(uuid.UUID(bytes=digest)) + "}"
+        finger = int.from_bytes(digest[:8], "little")
+        header = (f"#define LNFMU_GUID {c_string(guid)}\n"
+                  f"#define LNFMU_FINGERPRINT UINT64_C(0x{finger:016x})\n")
+        text = scene_c.replace('#include "fmu_model.h"', header + '#include "fmu_model.h"', 1)
+        (sources / SCENE_FILE).write_text(text)
+        folder = platform_folder()
+        binary = None
+        if folder:
+            binary = tmp / "fmu" / "binaries" / folder / f"{ident}.so"
+            binary.parent.mkdir(parents=True)
+            compile_binary(sources, units, binary, cc)
+        elif not quiet:
+            print("build_fmu: WARNING: no binary built for this platform (only linux64 is); the FMU carries its "
+                  "sources/ for the importing tool to compile", file=sys.stderr)
+        raw = raw_model_description(cfg, layout, guid, units, start_values(scene, cfg, layout))
+        inv_mass = scene.inv_mass
+        md = postprocess(raw, {v.name: v.declared_type for v in layout.reals}, layout.dependencies(inv_mass),
+                         layout.initial_dependencies(inv_mass), experiment, cfg["description"])
+        (tmp / "fmu" / "modelDescription.xml").write_bytes(md)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+            z.write(tmp / "fmu" / "modelDescription.xml", "modelDescription.xml")
+            if binary is not None:
+                z.write(binary, f"binaries/{folder}/{ident}.so")
+            for p in sorted(sources.rglob("*")):
+                if p.is_file():
+                    z.write(p, "sources/" + p.relative_to(sources).as_posix())
+    if not quiet:
+        size = out.stat().st_size
+        print(f"built {out} (native model {ident}: {len(layout.F_vr) * 3} inputs, "
+              f"{sum(v.causality == 'output' for v in layout.reals)} outputs; {facts['specialisation']} "
+              f"specialisation; {size / 1024:.0f} KiB; no Python needed by hosts)")
+    return out

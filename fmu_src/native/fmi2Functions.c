@@ -1,0 +1,599 @@
+/* FMI 2.0 Co-Simulation glue, written once for every linknet scene and ignorant of the physics: it drives
+ * the model of fmu_model.h (linknet_model.c with a scene's baked data) the way the Modelica Reference-FMUs'
+ * fmi2Functions.c drives each model.c.
+ *
+ * Contract (docs: fmu_src/native/README.md):
+ * - no call ever returns fmi2Fatal or brings the process down: a bad argument, a bad value or a call out of
+ *   order returns fmi2Error with a logged message and changes nothing, so the instance stays usable; a
+ *   step the solver cannot complete returns fmi2Discard and leaves the state where it was;
+ * - errors, discards and warnings always reach the host's logger (with loggingOn or not); other messages
+ *   only with logging on;
+ * - instances share no mutable data: several instances, on several threads, are independent (one
+ *   instance must not be called from two threads at once, as FMI requires);
+ * - an FMU state is a block of bytes with a header (format version, byte order, the model's fingerprint,
+ *   size) that fmi2SetFMUstate and fmi2DeSerializeFMUstate check, so a state of another FMU is refused.
+ */
+#include <math.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi2_api.h"
+#include "fmu_model.h"
+
+enum mode { MODE_INSTANTIATED = 0, MODE_INITIALIZATION = 1, MODE_STEPPING = 2, MODE_TERMINATED = 3 };
+static const char *const mode_names[] = {"instantiated (before fmi2EnterInitializationMode)",
+                                         "initialization mode", "step mode", "terminated"};
+
+#define INSTANCE_MAGIC 0x6c6e4b49u  /* a live instance; cleared when it is freed */
+
+typedef struct instance {
+    unsigned magic;
+    char *name;
+    fmi2CallbackLogger logger;
+    fmi2ComponentEnvironment environment;
+    int logging_on;
+    int mode;
+    fmu_model *model;
+    char msg[FMU_MESSAGE];              /* the model's reason for a refusal */
+    char line[2 * FMU_MESSAGE + 256];   /* the logged message, format characters escaped */
+} instance;
+
+/* ---- logging ------------------------------------------------------------------------------------- */
+
+static const char *category_of(fmi2Status status)
+{
+    switch (status) {
+    case fmi2Warning: return "logStatusWarning";
+    case fmi2Discard: return "logStatusDiscard";
+    case fmi2Error: return "logStatusError";
+    case fmi2Fatal: return "logStatusFatal";
+    default: return "logAll";
+    }
+}
+
+/* The logger's message is a printf format with FMI's #<type><vr># references: a message that is plain text
+   has its '%' and '#' doubled, so that hosts which expand them print it as written. */
+static void emit(instance *self, fmi2Status status, const char *text)
+{
+    if (status == fmi2OK && !self->logging_on) return;
+    size_t j = 0;
+    const size_t cap = sizeof self->line - 1;
+    for (const char *p = text; *p && j + 2 < cap; p++) {
+        if (*p == '%' || *p == '#') self->line[j++] = *p;
+        self->line[j++] = *p;
+    }
+    self->line[j] = '\0';
+    if (self->logger)
+        self->logger(self->environment, self->name, status, category_of(status), self->line);
+    else
+        fprintf(stderr, "[%s] %s: %s\n", self->name, category_of(status), text);
+}
+
+static void logf_status(instance *self, fmi2Status status, const char *format, ...)
+{
+    char text[FMU_MESSAGE + 256];
+    va_list args;
+    va_start(args, format);
+    vsnprintf(text, sizeof text, format, args);
+    va_end(args);
+    emit(self, status, text);
+}
+
+static fmi2Status refuse(instance *self, const char *function, const char *format, ...)
+{
+    char text[FMU_MESSAGE];
+    va_list args;
+    va_start(args, format);
+    vsnprintf(text, sizeof text, format, args);
+    va_end(args);
+    logf_status(self, fmi2Error, "%s: %s", function, text);
+    return fmi2Error;
+}
+
+/* A model result as an FMI status, with the model's reason logged. */
+static fmi2Status report(instance *self, const char *function, int result)
+{
+    switch (result) {
+    case FMU_OK: return fmi2OK;
+    case FMU_WARNING: logf_status(self, fmi2Warning, "%s: %s", function, self->msg); return fmi2Warning;
+    case FMU_DISCARD: logf_status(self, fmi2Discard, "%s: %s", function, self->msg); return fmi2Discard;
+    default: logf_status(self, fmi2Error, "%s: %s", function, self->msg); return fmi2Error;
+    }
+}
+
+/* The instance behind a component handle, or NULL for a handle that is not a live instance of this FMU (no
+   logger can be reached through such a handle). */
+static instance *checked(fmi2Component c)
+{
+    instance *self = (instance *)c;
+    if (self == NULL || self->magic != INSTANCE_MAGIC) return NULL;
+    self->msg[0] = '\0';
+    return self;
+}
+
+static int mode_allows(instance *self, const char *function, unsigned allowed)
+{
+    if (allowed & (1u << self->mode)) return 1;
+    refuse(self, function, "not allowed in %s", mode_names[self->mode]);
+    return 0;
+}
+
+#define IN(mode) (1u << (mode))
+#define ANY_MODE (IN(MODE_INSTANTIATED) | IN(MODE_INITIALIZATION) | IN(MODE_STEPPING) | IN(MODE_TERMINATED))
+
+#define ENTER(function)                           \
+    instance *self = checked(c);                  \
+    if (self == NULL) return fmi2Error;           \
+    const char *const fn = function
+
+/* ---- common functions ---------------------------------------------------------------------------- */
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+static const char *const log_categories[] = {"logStatusWarning", "logStatusDiscard", "logStatusError",
+                                             "logStatusFatal", "logAll"};
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[])
+{
+    ENTER("fmi2SetDebugLogging");
+    if (nCategories > 0 && categories == NULL) return refuse(self, fn, "categories is NULL");
+    for (size_t i = 0; i < nCategories; i++) {
+        int known = 0;
+        for (size_t k = 0; k < sizeof log_categories / sizeof log_categories[0]; k++)
+            known |= categories[i] != NULL && strcmp(categories[i], log_categories[k]) == 0;
+        if (!known)
+            return refuse(self, fn, "unknown log category \"%s\" (known: logStatusWarning, logStatusDiscard, "
+                          "logStatusError, logStatusFatal, logAll)", categories[i] ? categories[i] : "(null)");
+    }
+    self->logging_on = loggingOn != fmi2False;
+    return fmi2OK;
+}
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                              fmi2Boolean visible, fmi2Boolean loggingOn)
+{
+    (void)fmuResourceLocation;  /* everything the FMU needs is compiled in */
+    (void)visible;
+    const fmu_model_info *info = fmu_model_info_get();
+    instance probe;  /* for messages before the instance exists */
+    memset(&probe, 0, sizeof probe);
+    probe.name = (char *)(instanceName ? instanceName : info->model_identifier);
+    probe.logger = functions ? functions->logger : NULL;
+    probe.environment = functions ? functions->componentEnvironment : NULL;
+    if (fmuType != fmi2CoSimulation) {
+        logf_status(&probe, fmi2Error, "fmi2Instantiate: %s is a Co-Simulation FMU only (fmuType %d requested)",
+                    info->model_identifier, (int)fmuType);
+        return NULL;
+    }
+    if (fmuGUID == NULL || strcmp(fmuGUID, info->guid) != 0) {
+        logf_status(&probe, fmi2Error, "fmi2Instantiate: GUID \"%s\" is not this FMU's (%s): the "
+                    "modelDescription.xml and the binary come from different builds",
+                    fmuGUID ? fmuGUID : "(null)", info->guid);
+        return NULL;
+    }
+    instance *self = calloc(1, sizeof *self);
+    const char *name = instanceName ? instanceName : info->model_identifier;
+    char *copy = self ? malloc(strlen(name) + 1) : NULL;
+    if (copy == NULL) {
+        free(self);
+        logf_status(&probe, fmi2Error, "fmi2Instantiate: out of memory");
+        return NULL;
+    }
+    strcpy(copy, name);
+    self->name = copy;
+    self->logger = probe.logger;
+    self->environment = probe.environment;
+    self->logging_on = loggingOn != fmi2False;
+    self->mode = MODE_INSTANTIATED;
+    self->model = fmu_model_new(self->msg);
+    if (self->model == NULL) {
+        logf_status(self, fmi2Error, "fmi2Instantiate: %s", self->msg);
+        free(self->name);
+        free(self);
+        return NULL;
+    }
+    self->magic = INSTANCE_MAGIC;
+    return self;
+}
+
+void fmi2FreeInstance(fmi2Component c)
+{
+    instance *self = checked(c);
+    if (self == NULL) return;
+    self->magic = 0;
+    fmu_model_free(self->model);
+    free(self->name);
+    free(self);
+}
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
+{
+    /* the integrator's tolerance is the FMU's "tolerance" parameter (as in the pythonfmu FMU); the stop
+       time bounds nothing: any doStep is integrated */
+    (void)toleranceDefined;
+    (void)tolerance;
+    ENTER("fmi2SetupExperiment");
+    if (!mode_allows(self, fn, IN(MODE_INSTANTIATED))) return fmi2Error;
+    if (!isfinite(startTime)) return refuse(self, fn, "startTime = %g is not finite", startTime);
+    if (stopTimeDefined && !(isfinite(stopTime) && stopTime >= startTime))
+        return refuse(self, fn, "stopTime = %g must be finite and >= startTime = %g", stopTime, startTime);
+    return report(self, fn, fmu_model_set_start_time(self->model, startTime, self->msg));
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    ENTER("fmi2EnterInitializationMode");
+    if (!mode_allows(self, fn, IN(MODE_INSTANTIATED))) return fmi2Error;
+    self->mode = MODE_INITIALIZATION;
+    return fmi2OK;
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    ENTER("fmi2ExitInitializationMode");
+    if (!mode_allows(self, fn, IN(MODE_INITIALIZATION))) return fmi2Error;
+    const fmi2Status status = report(self, fn, fmu_model_initialize(self->model, self->msg));
+    if (status <= fmi2Warning) self->mode = MODE_STEPPING;  /* else: still in initialization mode, fix and retry */
+    return status;
+}
+
+fmi2Status fmi2Terminate(fmi2Component c)
+{
+    ENTER("fmi2Terminate");
+    if (!mode_allows(self, fn, IN(MODE_STEPPING))) return fmi2Error;
+    self->mode = MODE_TERMINATED;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Reset(fmi2Component c)
+{
+    ENTER("fmi2Reset");
+    const fmi2Status status = report(self, fn, fmu_model_reset(self->model, self->msg));
+    if (status <= fmi2Warning) self->mode = MODE_INSTANTIATED;
+    return status;
+}
+
+/* ---- values -------------------------------------------------------------------------------------- */
+
+static int vr_arguments(instance *self, const char *fn, const void *vr, size_t nvr, const void *value)
+{
+    if (nvr > 0 && (vr == NULL || value == NULL)) {
+        refuse(self, fn, "%s is NULL with nvr = %zu", vr == NULL ? "vr" : "value", nvr);
+        return 0;
+    }
+    return 1;
+}
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    ENTER("fmi2GetReal");
+    if (!vr_arguments(self, fn, vr, nvr, value)) return fmi2Error;
+    return report(self, fn, fmu_model_get_real(self->model, vr, nvr, value, self->mode >= MODE_STEPPING, self->msg));
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
+{
+    ENTER("fmi2SetReal");
+    if (!mode_allows(self, fn, IN(MODE_INSTANTIATED) | IN(MODE_INITIALIZATION) | IN(MODE_STEPPING))) return fmi2Error;
+    if (!vr_arguments(self, fn, vr, nvr, value)) return fmi2Error;
+    return report(self, fn, fmu_model_set_real(self->model, vr, nvr, value, self->mode >= MODE_STEPPING, self->msg));
+}
+
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
+{
+    ENTER("fmi2GetString");
+    if (!vr_arguments(self, fn, vr, nvr, value)) return fmi2Error;
+    return report(self, fn, fmu_model_get_string(self->model, vr, nvr, value, self->msg));
+}
+
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[])
+{
+    ENTER("fmi2SetString");
+    if (!mode_allows(self, fn, IN(MODE_INSTANTIATED) | IN(MODE_INITIALIZATION) | IN(MODE_STEPPING))) return fmi2Error;
+    if (!vr_arguments(self, fn, vr, nvr, value)) return fmi2Error;
+    return report(self, fn, fmu_model_set_string(self->model, vr, nvr, value, self->mode >= MODE_STEPPING, self->msg));
+}
+
+/* The model has Real and String variables only. */
+static fmi2Status no_such_type(instance *self, const char *fn, const char *type, const fmi2ValueReference vr[],
+                               size_t nvr)
+{
+    if (nvr == 0) return fmi2OK;
+    if (vr == NULL) return refuse(self, fn, "vr is NULL with nvr = %zu", nvr);
+    return refuse(self, fn, "value reference %u is not a variable of type %s (this FMU has Real and String "
+                  "variables only)", vr[0], type);
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
+{
+    (void)value;
+    ENTER("fmi2GetInteger");
+    return no_such_type(self, fn, "Integer", vr, nvr);
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
+{
+    (void)value;
+    ENTER("fmi2GetBoolean");
+    return no_such_type(self, fn, "Boolean", vr, nvr);
+}
+
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[])
+{
+    (void)value;
+    ENTER("fmi2SetInteger");
+    return no_such_type(self, fn, "Integer", vr, nvr);
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[])
+{
+    (void)value;
+    ENTER("fmi2SetBoolean");
+    return no_such_type(self, fn, "Boolean", vr, nvr);
+}
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
+                                        const fmi2ValueReference vKnown_ref[], size_t nKnown,
+                                        const fmi2Real dvKnown[], fmi2Real dvUnknown[])
+{
+    (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown, (void)dvUnknown;
+    ENTER("fmi2GetDirectionalDerivative");
+    return refuse(self, fn, "not provided (providesDirectionalDerivative is false)");
+}
+
+/* ---- FMU states ---------------------------------------------------------------------------------- */
+
+#define STATE_FORMAT 1u
+#define STATE_BYTE_ORDER 0x01020304u
+static const char state_magic[8] = {'L', 'N', 'K', 'F', 'M', 'U', 'S', 'T'};
+
+typedef struct state_header {
+    char magic[8];
+    uint32_t format;        /* STATE_FORMAT */
+    uint32_t byte_order;    /* STATE_BYTE_ORDER as the writer stored it */
+    uint64_t fingerprint;   /* the model's: which FMU build wrote the state */
+    uint64_t size;          /* bytes, this header included */
+    uint32_t mode;          /* the instance's mode when the state was taken */
+    uint32_t reserved;
+    uint64_t self;          /* in memory: the state's own address (0 when serialized) */
+    uint64_t checksum;      /* serialized: FNV-1a of the bytes after the header (0 in memory) */
+} state_header;
+
+/* FNV-1a, 64 bits: a serialized state damaged in storage or transit is refused rather than run. */
+static uint64_t checksum_of(const unsigned char *p, size_t n)
+{
+    uint64_t h = 1469598103934665603ull;
+    for (size_t i = 0; i < n; i++) h = (h ^ p[i]) * 1099511628211ull;
+    return h;
+}
+
+static size_t state_size(const instance *self)
+{
+    return sizeof(state_header) + fmu_model_state_size(self->model);
+}
+
+/* Why the bytes at h (n of them) are not a state of this FMU, or NULL. */
+static const char *state_problem(const instance *self, const state_header *h, size_t n)
+{
+    const fmu_model_info *info = fmu_model_info_get();
+    if (n < sizeof *h || memcmp(h->magic, state_magic, sizeof state_magic) != 0)
+        return "not a linknet FMU state";
+    if (h->byte_order != STATE_BYTE_ORDER) return "a state written on a machine of another byte order";
+    if (h->format != STATE_FORMAT) return "a state of another format version (another linknet FMU release)";
+    if (h->fingerprint != info->fingerprint)
+        return "a state of another FMU (its scene fingerprint differs: another scene, other options or another "
+               "build)";
+    if (h->size != state_size(self) || h->size != n) return "a state of the wrong size";
+    if (h->mode > MODE_TERMINATED) return "a state with an invalid mode";
+    return NULL;
+}
+
+/* A state handle given by the host: one this FMU made (in memory), or NULL after logging why not. */
+static state_header *live_state(instance *self, const char *fn, fmi2FMUstate FMUstate)
+{
+    state_header *h = (state_header *)FMUstate;
+    if (h == NULL) {
+        refuse(self, fn, "FMUstate is NULL");
+        return NULL;
+    }
+    if (memcmp(h->magic, state_magic, sizeof state_magic) != 0 || h->self != (uint64_t)(uintptr_t)h) {
+        refuse(self, fn, "not an FMU state of this FMU (made by fmi2GetFMUstate or fmi2DeSerializeFMUstate)");
+        return NULL;
+    }
+    const char *problem = state_problem(self, h, (size_t)h->size);
+    if (problem) {
+        refuse(self, fn, "refused: %s", problem);
+        return NULL;
+    }
+    return h;
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
+{
+    ENTER("fmi2GetFMUstate");
+    if (FMUstate == NULL) return refuse(self, fn, "FMUstate is NULL");
+    state_header *h = NULL;
+    if (*FMUstate != NULL) {  /* a state of this FMU to overwrite */
+        if ((h = live_state(self, fn, *FMUstate)) == NULL) return fmi2Error;
+    } else {
+        h = calloc(1, state_size(self));
+        if (h == NULL) return refuse(self, fn, "out of memory for a state of %zu bytes", state_size(self));
+    }
+    memcpy(h->magic, state_magic, sizeof state_magic);
+    h->format = STATE_FORMAT;
+    h->byte_order = STATE_BYTE_ORDER;
+    h->fingerprint = fmu_model_info_get()->fingerprint;
+    h->size = state_size(self);
+    h->mode = (uint32_t)self->mode;
+    h->self = (uint64_t)(uintptr_t)h;
+    h->checksum = 0;
+    fmu_model_state_save(self->model, (unsigned char *)(h + 1));
+    *FMUstate = h;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
+{
+    ENTER("fmi2SetFMUstate");
+    const state_header *h = live_state(self, fn, FMUstate);
+    if (h == NULL) return fmi2Error;
+    const int result = fmu_model_state_restore(self->model, (const unsigned char *)(h + 1),
+                                               (size_t)h->size - sizeof *h, self->msg);
+    if (result != FMU_OK) return report(self, fn, result);
+    self->mode = (int)h->mode;
+    return fmi2OK;
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
+{
+    ENTER("fmi2FreeFMUstate");
+    if (FMUstate == NULL) return refuse(self, fn, "FMUstate is NULL");
+    if (*FMUstate == NULL) return fmi2OK;
+    state_header *h = live_state(self, fn, *FMUstate);
+    if (h == NULL) return fmi2Error;
+    memset(h, 0, sizeof *h);  /* a freed state is never taken for a live one */
+    free(h);
+    *FMUstate = NULL;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
+{
+    ENTER("fmi2SerializedFMUstateSize");
+    if (size == NULL) return refuse(self, fn, "size is NULL");
+    const state_header *h = live_state(self, fn, FMUstate);
+    if (h == NULL) return fmi2Error;
+    *size = (size_t)h->size;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size)
+{
+    ENTER("fmi2SerializeFMUstate");
+    const state_header *h = live_state(self, fn, FMUstate);
+    if (h == NULL) return fmi2Error;
+    if (serializedState == NULL) return refuse(self, fn, "serializedState is NULL");
+    if (size < h->size) return refuse(self, fn, "buffer of %zu bytes for a state of %zu", size, (size_t)h->size);
+    memcpy(serializedState, h, (size_t)h->size);
+    state_header copy;
+    memcpy(&copy, h, sizeof copy);
+    copy.self = 0;
+    copy.checksum = checksum_of((const unsigned char *)(h + 1), (size_t)h->size - sizeof *h);
+    memcpy(serializedState, &copy, sizeof copy);
+    return fmi2OK;
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
+                                   fmi2FMUstate *FMUstate)
+{
+    ENTER("fmi2DeSerializeFMUstate");
+    if (FMUstate == NULL) return refuse(self, fn, "FMUstate is NULL");
+    if (serializedState == NULL) return refuse(self, fn, "serializedState is NULL");
+    state_header header;
+    memset(&header, 0, sizeof header);
+    memcpy(&header, serializedState, size < sizeof header ? size : sizeof header);
+    const char *problem = state_problem(self, &header, size);
+    if (problem) return refuse(self, fn, "refused: %s", problem);
+    if (header.checksum != checksum_of((const unsigned char *)serializedState + sizeof header, size - sizeof header))
+        return refuse(self, fn, "refused: the state's bytes are damaged (checksum mismatch)");
+    state_header *h = malloc(size);
+    if (h == NULL) return refuse(self, fn, "out of memory for a state of %zu bytes", size);
+    memcpy(h, serializedState, size);
+    h->self = (uint64_t)(uintptr_t)h;
+    h->checksum = 0;
+    *FMUstate = h;
+    return fmi2OK;
+}
+
+/* ---- co-simulation ------------------------------------------------------------------------------- */
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[])
+{
+    (void)vr, (void)order, (void)value;
+    ENTER("fmi2SetRealInputDerivatives");
+    if (nvr == 0) return fmi2OK;
+    return refuse(self, fn, "inputs are held constant over a step (canInterpolateInputs is false)");
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                        const fmi2Integer order[], fmi2Real value[])
+{
+    (void)vr, (void)order, (void)value;
+    ENTER("fmi2GetRealOutputDerivatives");
+    if (nvr == 0) return fmi2OK;
+    return refuse(self, fn, "not provided (maxOutputDerivativeOrder is 0)");
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
+                      fmi2Boolean noSetFMUStatePriorToCurrentPoint)
+{
+    (void)noSetFMUStatePriorToCurrentPoint;
+    ENTER("fmi2DoStep");
+    if (self->mode != MODE_STEPPING) {
+        if (self->mode == MODE_INSTANTIATED || self->mode == MODE_INITIALIZATION)
+            return refuse(self, fn, "called in %s: call fmi2ExitInitializationMode first", mode_names[self->mode]);
+        return refuse(self, fn, "called after fmi2Terminate (fmi2Reset starts again)");
+    }
+    const double t = currentCommunicationPoint, h = communicationStepSize;
+    if (!(isfinite(h) && h > 0.0))
+        return refuse(self, fn, "communication step size h=%.17g must be finite and > 0", h);
+    const double t_fmu = fmu_model_time(self->model);
+    if (!isfinite(t) || fabs(t - t_fmu) > 1e-9 * fmax(1.0, fabs(t_fmu)))
+        return refuse(self, fn, "currentCommunicationPoint t=%.17g differs from the FMU's time %.17g", t, t_fmu);
+    if (!isfinite(t + h)) return refuse(self, fn, "t + h = %.17g is not finite", t + h);
+    return report(self, fn, fmu_model_do_step(self->model, t, h, self->msg));
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    ENTER("fmi2CancelStep");
+    return refuse(self, fn, "no asynchronous step to cancel (steps complete within fmi2DoStep)");
+}
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
+{
+    (void)value;
+    ENTER("fmi2GetStatus");
+    return refuse(self, fn, "status kind %d is not provided (steps are never pending)", (int)s);
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
+{
+    ENTER("fmi2GetRealStatus");
+    if (value == NULL) return refuse(self, fn, "value is NULL");
+    if (s != fmi2LastSuccessfulTime) return refuse(self, fn, "status kind %d is not a Real status", (int)s);
+    *value = fmu_model_time(self->model);  /* a refused or discarded step leaves the FMU at its start */
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
+{
+    (void)value;
+    ENTER("fmi2GetIntegerStatus");
+    return refuse(self, fn, "status kind %d is not an Integer status", (int)s);
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
+{
+    ENTER("fmi2GetBooleanStatus");
+    if (value == NULL) return refuse(self, fn, "value is NULL");
+    if (s != fmi2Terminated) return refuse(self, fn, "status kind %d is not a Boolean status", (int)s);
+    *value = fmi2False;  /* the model never asks the master to stop */
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
+{
+    (void)value;
+    ENTER("fmi2GetStringStatus");
+    return refuse(self, fn, "status kind %d is not a String status", (int)s);
+}

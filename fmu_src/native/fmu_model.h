@@ -1,0 +1,65 @@
+/* What the FMI glue (fmi2Functions.c) needs from a model, and nothing of FMI beyond value references.
+ *
+ * The glue owns the FMI side: instances, callbacks and logging, the order of calls (instantiated,
+ * initialization mode, stepping, terminated), argument checks, and FMU state objects (their header,
+ * identity check and serialization). The model owns its variables and its physics: it reads and writes
+ * values by value reference, applies parameters at the end of initialization, steps, and saves and
+ * restores its state as plain bytes. linknet_model.c is the only model; the glue never names it.
+ *
+ * Every function that can fail returns an fmu_result and, when it is not FMU_OK, writes one line saying
+ * why (naming the variable and the rule) into msg, a buffer of FMU_MESSAGE bytes.
+ */
+#ifndef LINKNET_FMU_MODEL_H
+#define LINKNET_FMU_MODEL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define FMU_MESSAGE 2048
+
+enum fmu_result {
+    FMU_OK = 0,
+    FMU_WARNING = 1,    /* done, with something worth saying in msg */
+    FMU_DISCARD = 2,    /* the step could not be completed; nothing changed */
+    FMU_ERROR = 3       /* refused (bad argument or value); nothing changed */
+};
+
+typedef struct fmu_model fmu_model;
+
+typedef struct fmu_model_info {
+    const char *model_identifier;
+    const char *guid;
+    uint64_t fingerprint;       /* identity of the model's build: a state carries it and is refused by others */
+    unsigned n_real;            /* Real variables have value references 0 .. n_real - 1 */
+    unsigned n_string;          /* String variables follow: n_real .. n_real + n_string - 1 */
+} fmu_model_info;
+
+const fmu_model_info *fmu_model_info_get(void);
+
+/* A new model at its start values, or NULL with the reason in msg. */
+fmu_model *fmu_model_new(char *msg);
+void fmu_model_free(fmu_model *m);
+/* Back to the start values and the initial state (fmi2Reset). */
+int fmu_model_reset(fmu_model *m, char *msg);
+/* The time the initial state is given at (fmi2SetupExperiment). */
+int fmu_model_set_start_time(fmu_model *m, double start_time, char *msg);
+
+/* `initialized`: initialization has ended (parameters are fixed from then on). */
+int fmu_model_get_real(fmu_model *m, const unsigned *vr, size_t n, double *value, int initialized, char *msg);
+int fmu_model_set_real(fmu_model *m, const unsigned *vr, size_t n, const double *value, int initialized, char *msg);
+int fmu_model_get_string(fmu_model *m, const unsigned *vr, size_t n, const char **value, char *msg);
+int fmu_model_set_string(fmu_model *m, const unsigned *vr, size_t n, const char *const *value, int initialized,
+                         char *msg);
+
+/* End of initialization: the parameters set so far take effect. */
+int fmu_model_initialize(fmu_model *m, char *msg);
+/* One communication step from t to t + h with the inputs held. All or nothing. */
+int fmu_model_do_step(fmu_model *m, double t, double h, char *msg);
+double fmu_model_time(const fmu_model *m);
+
+/* The model's whole state as bytes (size fixed per model), and back. restore checks what it reads. */
+size_t fmu_model_state_size(const fmu_model *m);
+void fmu_model_state_save(const fmu_model *m, unsigned char *buffer);
+int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t size, char *msg);
+
+#endif
