@@ -5,21 +5,34 @@
  * bitwise the same factorisation.
  */
 
-/* C(0:TILE_ROWS, 0:JB) -= A(0:TILE_ROWS, 0:k) B^T with B packed as bp[4 c + j]: the tile's products
-   accumulate in registers, each load of A feeding JB multiply-adds. JB is a constant where it is called. */
-LDL_TARGET static inline void LDL_FN(tile)(const int JB, ln_int k, const double *restrict A, ln_int lda,
-                                           const double *restrict bp, double *restrict C, ln_int ldc)
+/* C(0:R, 0:JB) -= A(0:R, 0:k) B^T with B packed as bp[4 c + j]: the tile's products accumulate in
+   registers, each load of A feeding JB multiply-adds. R <= TILE_ROWS and JB <= 4 are constants where it is
+   called. */
+LDL_TARGET static inline void LDL_FN(tile)(const int R, const int JB, ln_int k, const double *restrict A,
+                                           ln_int lda, const double *restrict bp, double *restrict C, ln_int ldc)
 {
     double acc[4][TILE_ROWS];
     for (int jj = 0; jj < JB; jj++)
-        for (int ii = 0; ii < TILE_ROWS; ii++) acc[jj][ii] = 0.0;
+        for (int ii = 0; ii < R; ii++) acc[jj][ii] = 0.0;
     for (ln_int c = 0; c < k; c++) {
         const double *a = A + c * lda, *b = bp + 4 * c;
         for (int jj = 0; jj < JB; jj++)
-            for (int ii = 0; ii < TILE_ROWS; ii++) acc[jj][ii] += a[ii] * b[jj];
+            for (int ii = 0; ii < R; ii++) acc[jj][ii] += a[ii] * b[jj];
     }
     for (int jj = 0; jj < JB; jj++)
-        for (int ii = 0; ii < TILE_ROWS; ii++) C[ii + jj * ldc] -= acc[jj][ii];
+        for (int ii = 0; ii < R; ii++) C[ii + jj * ldc] -= acc[jj][ii];
+}
+
+/* One row band of R rows of syrk_lower_sub below, for the band's column count jb. */
+LDL_TARGET static inline void LDL_FN(band)(const int R, int jb, ln_int k, const double *A, ln_int lda,
+                                           const double *bp, double *C, ln_int ldc)
+{
+    switch (jb) {
+    case 1: LDL_FN(tile)(R, 1, k, A, lda, bp, C, ldc); break;
+    case 2: LDL_FN(tile)(R, 2, k, A, lda, bp, C, ldc); break;
+    case 3: LDL_FN(tile)(R, 3, k, A, lda, bp, C, ldc); break;
+    default: LDL_FN(tile)(R, 4, k, A, lda, bp, C, ldc); break;
+    }
 }
 
 /* C -= A D A(0:nc, :)^T on the lower part: C[i + j ldc] -= sum_c A[i + c lda] D[c] A[j + c lda] for
@@ -37,26 +50,12 @@ LDL_TARGET static void LDL_FN(syrk_lower_sub)(ln_int m, ln_int nc, ln_int k, con
         }
         double *Cj = C + j0 * ldc;
         ln_int i0 = j0;
-        for (; i0 + TILE_ROWS <= m; i0 += TILE_ROWS) {
-            switch (jb) {
-            case 1: LDL_FN(tile)(1, k, A + i0, lda, bp, Cj + i0, ldc); break;
-            case 2: LDL_FN(tile)(2, k, A + i0, lda, bp, Cj + i0, ldc); break;
-            case 3: LDL_FN(tile)(3, k, A + i0, lda, bp, Cj + i0, ldc); break;
-            default: LDL_FN(tile)(4, k, A + i0, lda, bp, Cj + i0, ldc); break;
-            }
+        for (; i0 + TILE_ROWS <= m; i0 += TILE_ROWS) LDL_FN(band)(TILE_ROWS, jb, k, A + i0, lda, bp, Cj + i0, ldc);
+        if (i0 + 2 <= m) {
+            LDL_FN(band)(2, jb, k, A + i0, lda, bp, Cj + i0, ldc);
+            i0 += 2;
         }
-        for (; i0 < m; i0++) {
-            double c0 = 0, c1 = 0, c2 = 0, c3 = 0;
-            for (ln_int c = 0; c < k; c++) {
-                const double ai = A[i0 + c * lda];
-                const double *b = bp + 4 * c;
-                c0 += ai * b[0]; c1 += ai * b[1]; c2 += ai * b[2]; c3 += ai * b[3];
-            }
-            Cj[i0] -= c0;
-            if (jb > 1) Cj[i0 + ldc] -= c1;
-            if (jb > 2) Cj[i0 + 2 * ldc] -= c2;
-            if (jb > 3) Cj[i0 + 3 * ldc] -= c3;
-        }
+        if (i0 < m) LDL_FN(band)(1, jb, k, A + i0, lda, bp, Cj + i0, ldc);
     }
 }
 
@@ -92,7 +91,8 @@ LDL_TARGET static void LDL_FN(update_from)(const double *Xd, ln_int ldd, ln_int 
 }
 
 /* LDL^T of a supernode's block in place (nrow x ncol, column-major), pivots into D, Dinv: panels of PANEL
-   columns, each updated by the panels before it (syrk_lower_sub), then factored column by column. */
+   columns, each updated by the panels before it (syrk_lower_sub), then factored column by column. A zeroed
+   pivot leaves a zero column below it, so it updates nothing after it. */
 LDL_TARGET static ln_int LDL_FN(factor_block)(double *X, ln_int nrow, ln_int ncol, const double *Adiag,
                                               double pivot_tol, double *D, double *Dinv, double *bp)
 {
@@ -101,24 +101,32 @@ LDL_TARGET static ln_int LDL_FN(factor_block)(double *X, ln_int nrow, ln_int nco
         const ln_int c1 = ncol - c0 < PANEL ? ncol : c0 + PANEL;
         if (c0 > 0)
             LDL_FN(syrk_lower_sub)(nrow - c0, c1 - c0, c0, X + c0, nrow, D, X + c0 + c0 * nrow, nrow, bp);
-        for (ln_int k = c0; k < c1; k++) {
-            double *ck = X + k * nrow;
-            const double dk = ck[k];
+        /* within the panel, left-looking: column j takes the updates of the panel's columns before it,
+           four at a time, then its pivot */
+        for (ln_int j = c0; j < c1; j++) {
+            double *cj = X + j * nrow;
+            ln_int k = c0;
+            for (; k + 4 <= j; k += 4) {
+                const double *a0 = X + k * nrow, *a1 = a0 + nrow, *a2 = a1 + nrow, *a3 = a2 + nrow;
+                const double u0 = a0[j] * D[k], u1 = a1[j] * D[k + 1], u2 = a2[j] * D[k + 2], u3 = a3[j] * D[k + 3];
+                for (ln_int i = j; i < nrow; i++) cj[i] -= a0[i] * u0 + a1[i] * u1 + a2[i] * u2 + a3[i] * u3;
+            }
+            for (; k < j; k++) {
+                const double *a = X + k * nrow;
+                const double u = a[j] * D[k];
+                for (ln_int i = j; i < nrow; i++) cj[i] -= a[i] * u;
+            }
+            const double dj = cj[j];
             double dinv;
-            if (!(dk > pivot_tol * fabs(Adiag[k]))) {
-                if (bad == -1) bad = k;
+            if (!(dj > pivot_tol * fabs(Adiag[j]))) {
+                if (bad == -1) bad = j;
                 dinv = 0.0;
             } else {
-                dinv = 1.0 / dk;
+                dinv = 1.0 / dj;
             }
-            D[k] = dk;
-            Dinv[k] = dinv;
-            for (ln_int j = k + 1; j < c1; j++) {
-                const double u = ck[j] * dinv;  /* L(j,k); ck holds L(:,k) d_k until scaled below */
-                double *cj = X + j * nrow;
-                for (ln_int i = j; i < nrow; i++) cj[i] -= ck[i] * u;
-            }
-            for (ln_int i = k + 1; i < nrow; i++) ck[i] *= dinv;
+            D[j] = dj;
+            Dinv[j] = dinv;
+            for (ln_int i = j + 1; i < nrow; i++) cj[i] *= dinv;
         }
     }
     return bad;
