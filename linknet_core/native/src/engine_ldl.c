@@ -747,34 +747,40 @@ static void gemv_sub(ln_int m, ln_int nk, const double *restrict A, ln_int lda, 
 }
 
 /* y[0..nk) -= A(0:m, 0:nk)^T w, A column-major: four columns per pass over w, each dot product summed in
-   four interleaved partial sums (a fixed association, so that vector code gives the same result). */
+   two interleaved partial sums (even and odd rows). */
 static void gemv_t_sub(ln_int m, ln_int nk, const double *restrict A, ln_int lda, const double *restrict w,
                        double *restrict y)
 {
-    const ln_int m4 = m - m % 4;
+    const ln_int m2 = m - m % 2;
     ln_int k = 0;
-    for (; k + 2 <= nk; k += 2) {
-        const double *a0 = A + k * lda, *a1 = a0 + lda;
-        double s00 = 0, s01 = 0, s02 = 0, s03 = 0, s10 = 0, s11 = 0, s12 = 0, s13 = 0;
-        for (ln_int i = 0; i < m4; i += 4) {
-            s00 += a0[i] * w[i]; s01 += a0[i + 1] * w[i + 1]; s02 += a0[i + 2] * w[i + 2]; s03 += a0[i + 3] * w[i + 3];
-            s10 += a1[i] * w[i]; s11 += a1[i + 1] * w[i + 1]; s12 += a1[i + 2] * w[i + 2]; s13 += a1[i + 3] * w[i + 3];
+    for (; k + 4 <= nk; k += 4) {
+        const double *a0 = A + k * lda, *a1 = a0 + lda, *a2 = a1 + lda, *a3 = a2 + lda;
+        double s00 = 0, s01 = 0, s10 = 0, s11 = 0, s20 = 0, s21 = 0, s30 = 0, s31 = 0;
+        for (ln_int i = 0; i < m2; i += 2) {
+            const double w0 = w[i], w1 = w[i + 1];
+            s00 += a0[i] * w0; s01 += a0[i + 1] * w1;
+            s10 += a1[i] * w0; s11 += a1[i + 1] * w1;
+            s20 += a2[i] * w0; s21 += a2[i + 1] * w1;
+            s30 += a3[i] * w0; s31 += a3[i + 1] * w1;
         }
-        for (ln_int i = m4; i < m; i++) {
-            s00 += a0[i] * w[i];
-            s10 += a1[i] * w[i];
+        if (m2 < m) {
+            const double wl = w[m2];
+            s00 += a0[m2] * wl; s10 += a1[m2] * wl; s20 += a2[m2] * wl; s30 += a3[m2] * wl;
         }
-        y[k] -= (s00 + s01) + (s02 + s03);
-        y[k + 1] -= (s10 + s11) + (s12 + s13);
+        y[k] -= s00 + s01;
+        y[k + 1] -= s10 + s11;
+        y[k + 2] -= s20 + s21;
+        y[k + 3] -= s30 + s31;
     }
     for (; k < nk; k++) {
         const double *a = A + k * lda;
-        double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
-        for (ln_int i = 0; i < m4; i += 4) {
-            s0 += a[i] * w[i]; s1 += a[i + 1] * w[i + 1]; s2 += a[i + 2] * w[i + 2]; s3 += a[i + 3] * w[i + 3];
+        double s0 = 0, s1 = 0;
+        for (ln_int i = 0; i < m2; i += 2) {
+            s0 += a[i] * w[i];
+            s1 += a[i + 1] * w[i + 1];
         }
-        for (ln_int i = m4; i < m; i++) s0 += a[i] * w[i];
-        y[k] -= (s0 + s1) + (s2 + s3);
+        if (m2 < m) s0 += a[m2] * w[m2];
+        y[k] -= s0 + s1;
     }
 }
 
@@ -798,8 +804,17 @@ static void solve_supernodal(const struct ln_ldl_symbolic *s, const struct ln_ld
         for (ln_int i = ncol; i < nrow; i++) w[i] = 0.0;
         for (ln_int k = 0; k < ncol; k += SOLVE_GROUP) {
             const ln_int kend = ncol - k < SOLVE_GROUP ? ncol : k + SOLVE_GROUP;
-            for (ln_int kk = k; kk < kend; kk++)
-                for (ln_int i = kk + 1; i < kend; i++) w[i] -= X[i + kk * nrow] * w[kk];
+            if (kend - k == 4) {  /* the group's triangle in registers */
+                const double *c0 = X + k + k * nrow, *c1 = c0 + nrow, *c2 = c1 + nrow;
+                const double w0 = w[k], w1 = w[k + 1] - c0[1] * w0;
+                const double w2 = w[k + 2] - c0[2] * w0 - c1[2] * w1;
+                w[k + 1] = w1;
+                w[k + 2] = w2;
+                w[k + 3] = w[k + 3] - c0[3] * w0 - c1[3] * w1 - c2[3] * w2;
+            } else {
+                for (ln_int kk = k; kk < kend; kk++)
+                    for (ln_int i = kk + 1; i < kend; i++) w[i] -= X[i + kk * nrow] * w[kk];
+            }
             gemv_sub(nrow - kend, kend - k, X + kend + k * nrow, nrow, w + k, w + kend);
         }
         for (ln_int i = 0; i < ncol; i++) x[fc + i] = w[i];
@@ -816,10 +831,19 @@ static void solve_supernodal(const struct ln_ldl_symbolic *s, const struct ln_ld
         for (ln_int k = ((ncol - 1) / SOLVE_GROUP) * SOLVE_GROUP; k >= 0; k -= SOLVE_GROUP) {
             const ln_int kend = ncol - k < SOLVE_GROUP ? ncol : k + SOLVE_GROUP;
             gemv_t_sub(nrow - kend, kend - k, X + kend + k * nrow, nrow, w + kend, w + k);
-            for (ln_int kk = kend - 1; kk >= k; kk--) {
-                double sum = 0.0;
-                for (ln_int i = kk + 1; i < kend; i++) sum += X[i + kk * nrow] * w[i];
-                w[kk] -= sum;
+            if (kend - k == 4) {
+                const double *c0 = X + k + k * nrow, *c1 = c0 + nrow, *c2 = c1 + nrow;
+                const double w3 = w[k + 3], w2 = w[k + 2] - c2[3] * w3;
+                const double w1 = w[k + 1] - (c1[2] * w2 + c1[3] * w3);
+                w[k + 2] = w2;
+                w[k + 1] = w1;
+                w[k] -= c0[1] * w1 + c0[2] * w2 + c0[3] * w3;
+            } else {
+                for (ln_int kk = kend - 1; kk >= k; kk--) {
+                    double sum = 0.0;
+                    for (ln_int i = kk + 1; i < kend; i++) sum += X[i + kk * nrow] * w[i];
+                    w[kk] -= sum;
+                }
             }
         }
         for (ln_int i = 0; i < ncol; i++) x[fc + i] = w[i];
