@@ -114,21 +114,24 @@ void ln_ldl_symbolic_free(struct ln_ldl_symbolic *s)
 
 /* ---- the supernodal numeric factorisation, portable and AVX2 ---------------------------------------- */
 
-/* Rows of one register tile of the dense kernels (columns: 4). */
-#define TILE_ROWS 4
-
+/* TILE_ROWS: rows of one register tile of the dense kernels (columns: 4), enough independent sums to hide
+   the latency of the additions: 8 two-double vectors (SSE2), or 8 four-double vectors (AVX2). */
 #define LDL_FN(name) name##_generic
 #define LDL_TARGET
+#define TILE_ROWS 4
 #include "engine_ldl_supernodal.h"
 #undef LDL_FN
 #undef LDL_TARGET
+#undef TILE_ROWS
 
 #if LN_LDL_AVX2
 #define LDL_FN(name) name##_avx2
 #define LDL_TARGET __attribute__((target("avx2")))
+#define TILE_ROWS 8
 #include "engine_ldl_supernodal.h"
 #undef LDL_FN
 #undef LDL_TARGET
+#undef TILE_ROWS
 #endif
 
 static int use_vector_kernels = 1;

@@ -51,6 +51,10 @@ LDL_TARGET static void LDL_FN(syrk_lower_sub)(ln_int m, ln_int nc, ln_int k, con
         double *Cj = C + j0 * ldc;
         ln_int i0 = j0;
         for (; i0 + TILE_ROWS <= m; i0 += TILE_ROWS) LDL_FN(band)(TILE_ROWS, jb, k, A + i0, lda, bp, Cj + i0, ldc);
+        if (TILE_ROWS > 4 && i0 + 4 <= m) {
+            LDL_FN(band)(4, jb, k, A + i0, lda, bp, Cj + i0, ldc);
+            i0 += 4;
+        }
         if (i0 + 2 <= m) {
             LDL_FN(band)(2, jb, k, A + i0, lda, bp, Cj + i0, ldc);
             i0 += 2;
