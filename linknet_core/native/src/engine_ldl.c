@@ -48,8 +48,6 @@
    the solves, which read every stored zero. */
 #define RELAX_COLUMNS 4
 
-/* Columns of the update buffer handled at once (bounds it to max_nrow x UPDATE_CHUNK values). */
-#define UPDATE_CHUNK 32
 /* Columns of a supernode factored at once before the rest of the supernode is updated with them. */
 #define PANEL 16
 
@@ -88,7 +86,7 @@ struct ln_ldl_symbolic {
 
 struct ln_ldl_numeric {
     double *Ax, *Lx, *D, *Dinv, *x;
-    double *w;                      /* columns: the row being factored; supernodal: update and solve buffer */
+    double *w;                      /* columns: the row being factored; supernodal: solve buffer */
     double *Adiag;                  /* supernodal: A's diagonal (pivot test) */
     ln_int *head, *next, *lpos, *map, *rel;  /* supernodal: descendant lists, relative row positions */
     double *pack;                   /* supernodal: 4 packed columns of the dense kernels */
@@ -627,7 +625,7 @@ struct ln_ldl_numeric *ln_ldl_numeric_new(const struct ln_ldl_symbolic *s)
         const ln_int ns = s->n_super;
         f->Lx = alloc(s->nnz_stored, sizeof(double));
         f->Adiag = alloc(n, sizeof(double));
-        f->w = alloc(s->max_nrow * UPDATE_CHUNK, sizeof(double));
+        f->w = alloc(s->max_nrow, sizeof(double));
         f->head = alloc(ns, sizeof(ln_int));
         f->next = alloc(ns, sizeof(ln_int));
         f->lpos = alloc(ns, sizeof(ln_int));

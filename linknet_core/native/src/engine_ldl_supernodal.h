@@ -5,11 +5,13 @@
  * bitwise the same factorisation.
  */
 
-/* C(0:R, 0:JB) -= A(0:R, 0:k) B^T with B packed as bp[4 c + j]: the tile's products accumulate in
-   registers, each load of A feeding JB multiply-adds. R <= TILE_ROWS and JB <= 4 are constants where it is
-   called. */
+/* C(rows, 0:JB) -= A(0:R, 0:k) B^T with B packed as bp[4 c + j]: the tile's products accumulate in
+   registers, each load of A feeding JB multiply-adds, and are subtracted from column jj of C at cp[jj],
+   rows 0..R-1 there, or rows ri[0..R-1] if ri is given. R <= TILE_ROWS and JB <= 4 are constants where it
+   is called. */
 LDL_TARGET static inline void LDL_FN(tile)(const int R, const int JB, ln_int k, const double *restrict A,
-                                           ln_int lda, const double *restrict bp, double *restrict C, ln_int ldc)
+                                           ln_int lda, const double *restrict bp, double *const *cp,
+                                           const ln_int *ri)
 {
     double acc[4][TILE_ROWS];
     for (int jj = 0; jj < JB; jj++)
@@ -19,28 +21,39 @@ LDL_TARGET static inline void LDL_FN(tile)(const int R, const int JB, ln_int k, 
         for (int jj = 0; jj < JB; jj++)
             for (int ii = 0; ii < R; ii++) acc[jj][ii] += a[ii] * b[jj];
     }
-    for (int jj = 0; jj < JB; jj++)
-        for (int ii = 0; ii < R; ii++) C[ii + jj * ldc] -= acc[jj][ii];
-}
-
-/* One row band of R rows of syrk_lower_sub below, for the band's column count jb. */
-LDL_TARGET static inline void LDL_FN(band)(const int R, int jb, ln_int k, const double *A, ln_int lda,
-                                           const double *bp, double *C, ln_int ldc)
-{
-    switch (jb) {
-    case 1: LDL_FN(tile)(R, 1, k, A, lda, bp, C, ldc); break;
-    case 2: LDL_FN(tile)(R, 2, k, A, lda, bp, C, ldc); break;
-    case 3: LDL_FN(tile)(R, 3, k, A, lda, bp, C, ldc); break;
-    default: LDL_FN(tile)(R, 4, k, A, lda, bp, C, ldc); break;
+    for (int jj = 0; jj < JB; jj++) {
+        double *c = cp[jj];
+        if (ri)
+            for (int ii = 0; ii < R; ii++) c[ri[ii]] -= acc[jj][ii];
+        else
+            for (int ii = 0; ii < R; ii++) c[ii] -= acc[jj][ii];
     }
 }
 
-/* C -= A D A(0:nc, :)^T on the lower part: C[i + j ldc] -= sum_c A[i + c lda] D[c] A[j + c lda] for
-   0 <= j < nc, j <= i < m (A is m x k, column-major). Four columns of D A^T at a time are packed into bp
-   (4 k values), then swept down the rows in register tiles; tiles on the diagonal also write the few
-   entries above it (i < j), which the callers never read. */
+/* One band of R rows starting at row i0 of syrk_lower_sub below, for the band's column count jb. */
+LDL_TARGET static inline void LDL_FN(band)(const int R, int jb, ln_int k, const double *A, ln_int lda,
+                                           const double *bp, double *const *cols, ln_int i0, const ln_int *rel)
+{
+    double *cp[4];
+    const ln_int *ri = rel ? rel + i0 : NULL;
+    for (int jj = 0; jj < 4; jj++) cp[jj] = rel ? cols[jj] : cols[jj] + i0;
+    switch (jb) {
+    case 1: LDL_FN(tile)(R, 1, k, A + i0, lda, bp, cp, ri); break;
+    case 2: LDL_FN(tile)(R, 2, k, A + i0, lda, bp, cp, ri); break;
+    case 3: LDL_FN(tile)(R, 3, k, A + i0, lda, bp, cp, ri); break;
+    default: LDL_FN(tile)(R, 4, k, A + i0, lda, bp, cp, ri); break;
+    }
+}
+
+/* C -= A D A(0:nc, :)^T on the lower part: for 0 <= j < nc, j <= i < m (A is m x k, column-major)
+   entry (i, j) of C, at C[i + j ldc], or at C[rel[i] + rel[j] ldc] if rel is given (rows and columns of a
+   supernode that receive a descendant's update), takes -sum_c A[i + c lda] D[c] A[j + c lda]. Four columns
+   of D A^T at a time are packed into bp (4 k values), then swept down the rows in register tiles; tiles on
+   the diagonal also update a few entries above it (i < j), which land in the upper triangle of the
+   supernode's diagonal block, never read. */
 LDL_TARGET static void LDL_FN(syrk_lower_sub)(ln_int m, ln_int nc, ln_int k, const double *A, ln_int lda,
-                                              const double *D, double *C, ln_int ldc, double *restrict bp)
+                                              const double *D, double *C, ln_int ldc, const ln_int *rel,
+                                              double *restrict bp)
 {
     for (ln_int j0 = 0; j0 < nc; j0 += 4) {
         const int jb = nc - j0 < 4 ? (int) (nc - j0) : 4;
@@ -48,50 +61,38 @@ LDL_TARGET static void LDL_FN(syrk_lower_sub)(ln_int m, ln_int nc, ln_int k, con
             const double *a = A + c * lda + j0;
             for (int jj = 0; jj < 4; jj++) bp[4 * c + jj] = jj < jb ? a[jj] * D[c] : 0.0;
         }
-        double *Cj = C + j0 * ldc;
+        double *cols[4];
+        for (int jj = 0; jj < 4; jj++) cols[jj] = C + (jj < jb ? (rel ? rel[j0 + jj] : j0 + jj) : 0) * ldc;
         ln_int i0 = j0;
-        for (; i0 + TILE_ROWS <= m; i0 += TILE_ROWS) LDL_FN(band)(TILE_ROWS, jb, k, A + i0, lda, bp, Cj + i0, ldc);
+        for (; i0 + TILE_ROWS <= m; i0 += TILE_ROWS) LDL_FN(band)(TILE_ROWS, jb, k, A, lda, bp, cols, i0, rel);
         if (TILE_ROWS > 4 && i0 + 4 <= m) {
-            LDL_FN(band)(4, jb, k, A + i0, lda, bp, Cj + i0, ldc);
+            LDL_FN(band)(4, jb, k, A, lda, bp, cols, i0, rel);
             i0 += 4;
         }
         if (i0 + 2 <= m) {
-            LDL_FN(band)(2, jb, k, A + i0, lda, bp, Cj + i0, ldc);
+            LDL_FN(band)(2, jb, k, A, lda, bp, cols, i0, rel);
             i0 += 2;
         }
-        if (i0 < m) LDL_FN(band)(1, jb, k, A + i0, lda, bp, Cj + i0, ldc);
+        if (i0 < m) LDL_FN(band)(1, jb, k, A, lda, bp, cols, i0, rel);
     }
 }
 
-/* Subtract from supernode t's block (Xt, nrow rows, local row of each row index in map)
-   the update of descendant d: rows rd[0..n2) of d's block Xd (leading dimension ldd, ncd columns, pivots
-   Dd), of which the first n1 lie in t's columns. The update is L_d(rows, :) D_d L_d(rows in t, :)^T. Where
-   d's rows are consecutive rows of t it goes straight into t's block; otherwise it is computed into w and
-   added through the relative positions rel. */
+/* Subtract from supernode t's block (Xt, nrow rows, local row of each row index in map) the update of
+   descendant d: rows rd[0..n2) of d's block Xd (leading dimension ldd, ncd columns, pivots Dd), of which the
+   first n1 lie in t's columns. The update is L_d(rows, :) D_d L_d(rows in t, :)^T, subtracted in place
+   through the local rows rel of d's rows in t (a local row in t's first ncol rows is also t's local
+   column). */
 LDL_TARGET static void LDL_FN(update_from)(const double *Xd, ln_int ldd, ln_int ncd, const double *Dd,
                                            const ln_int *rd, ln_int n1, ln_int n2, double *Xt, ln_int nrow,
-                                           const ln_int *map, ln_int *rel, double *w, double *bp)
+                                           const ln_int *map, ln_int *rel, double *bp)
 {
     int consecutive = 1;
     for (ln_int i = 0; i < n2; i++) {
         rel[i] = map[rd[i]];
         consecutive &= rel[i] == rel[0] + i;
     }
-    if (consecutive) {
-        LDL_FN(syrk_lower_sub)(n2, n1, ncd, Xd, ldd, Dd, Xt + rel[0] * (nrow + 1), nrow, bp);
-        return;
-    }
-    for (ln_int j0 = 0; j0 < n1; j0 += UPDATE_CHUNK) {
-        const ln_int nc = n1 - j0 < UPDATE_CHUNK ? n1 - j0 : UPDATE_CHUNK, m = n2 - j0;
-        memset(w, 0, (size_t) (m * nc) * sizeof(double));
-        LDL_FN(syrk_lower_sub)(m, nc, ncd, Xd + j0, ldd, Dd, w, m, bp);
-        for (ln_int j = 0; j < nc; j++) {
-            double *target = Xt + rel[j0 + j] * nrow;  /* t's column rd[j0 + j] - f */
-            const double *wj = w + j * m;
-            const ln_int *relj = rel + j0;
-            for (ln_int i = j; i < m; i++) target[relj[i]] += wj[i];
-        }
-    }
+    if (consecutive) LDL_FN(syrk_lower_sub)(n2, n1, ncd, Xd, ldd, Dd, Xt + rel[0] * (nrow + 1), nrow, NULL, bp);
+    else LDL_FN(syrk_lower_sub)(n2, n1, ncd, Xd, ldd, Dd, Xt, nrow, rel, bp);
 }
 
 /* LDL^T of a supernode's block in place (nrow x ncol, column-major), pivots into D, Dinv: panels of PANEL
@@ -104,7 +105,7 @@ LDL_TARGET static ln_int LDL_FN(factor_block)(double *X, ln_int nrow, ln_int nco
     for (ln_int c0 = 0; c0 < ncol; c0 += PANEL) {
         const ln_int c1 = ncol - c0 < PANEL ? ncol : c0 + PANEL;
         if (c0 > 0)
-            LDL_FN(syrk_lower_sub)(nrow - c0, c1 - c0, c0, X + c0, nrow, D, X + c0 + c0 * nrow, nrow, bp);
+            LDL_FN(syrk_lower_sub)(nrow - c0, c1 - c0, c0, X + c0, nrow, D, X + c0 + c0 * nrow, nrow, NULL, bp);
         /* within the panel, left-looking: column j takes the updates of the panel's columns before it,
            four at a time, then its pivot */
         for (ln_int j = c0; j < c1; j++) {
@@ -164,7 +165,7 @@ LDL_TARGET static ln_int LDL_FN(factor_supernodal)(const struct ln_ldl_symbolic 
             while (p < pend && rows[p] < lc) p++;
             const ln_int ldd = row_ptr[d + 1] - row_ptr[d], ncd = first[d + 1] - first[d];
             LDL_FN(update_from)(Lx + x_ptr[d] + (pd - row_ptr[d]), ldd, ncd, D + first[d], rows + pd, p - pd,
-                                pend - pd, Xt, nrow, map, f->rel, f->w, f->pack);
+                                pend - pd, Xt, nrow, map, f->rel, f->pack);
             if (p < pend) {
                 const ln_int owner = s->col_super[rows[p]];
                 lpos[d] = p;
