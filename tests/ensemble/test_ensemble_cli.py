@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from conftest import MODELS, ROOT
+from .ensemble_support import MODELS, ROOT
 
 
 def linknet(*args, timeout=180):

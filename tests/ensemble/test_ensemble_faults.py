@@ -8,7 +8,7 @@ import numpy as np
 import linknet_core as ln
 from linknet_core.ensemble import summary
 
-from conftest import MODELS, assert_member_equals, serial_run
+from .ensemble_support import MODELS, assert_member_equals, serial_run
 
 T_END, N_OUT = 0.5, 26
 
@@ -42,8 +42,9 @@ def test_killed_worker_costs_only_its_members_retries(process_client):
     def kill_after_third_result(progress):
         if progress.done >= 3 and not killed:
             busy = [w for w, keys in process_client.processing().items() if keys and w in pids]
-            killed["address"] = busy[0]
-            os.kill(pids[busy[0]], signal.SIGKILL)
+            if busy:  # else at the next result
+                killed["address"] = busy[0]
+                os.kill(pids[busy[0]], signal.SIGKILL)
 
     masses = np.linspace(0.5, 2.0, 12)
     ds = ln.ensemble(scene, vary={"M[11]": masses}, t_end=t_end, n_out=N_OUT, dt=dt, client=process_client,

@@ -7,7 +7,7 @@ import pytest
 
 import linknet_core as ln
 
-from conftest import MODELS, ROOT
+from .ensemble_support import MODELS, ROOT
 
 T_END, N_OUT = 0.5, 26
 

@@ -6,7 +6,7 @@ import linknet_core as ln
 from linknet_core.ensemble import make_plan, parse_name, parse_values
 from linknet_core.ensemble.parameters import member_forces, member_scene
 
-from conftest import MODELS
+from .ensemble_support import MODELS
 
 
 @pytest.fixture(scope="module")

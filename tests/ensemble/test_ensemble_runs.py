@@ -8,7 +8,7 @@ import xarray as xr
 
 import linknet_core as ln
 
-from conftest import MODELS, assert_member_equals, serial_run
+from .ensemble_support import MODELS, assert_member_equals, serial_run
 
 T_END, N_OUT = 0.5, 26
 

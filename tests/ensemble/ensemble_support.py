@@ -1,0 +1,54 @@
+"""Helpers of the ensemble tests: the serial in-process runs the members are compared with."""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import linknet_core as ln
+
+ROOT = Path(__file__).resolve().parents[2]
+MODELS = ROOT / "models"
+
+
+def _span(text: str) -> slice:
+    """'3' or '1..10' (1-based, inclusive) -> a 0-based slice."""
+    first, _, last = text.partition("..")
+    return slice(int(first) - 1, int(last or first))
+
+
+def serial_run(scene, setting: dict, t_end: float, n_out: int, method="rattle", dt=1e-3, rtol=None,
+               project_initial=None):
+    """The member run serially in this process through the library's public API only (its own reading of
+    the parameter names, not the ensemble module's): ``ln.simulate`` on the scene with the member's values."""
+    mass, length, gravity = np.array(scene.mass), np.array(scene.length), np.array(scene.gravity)
+    U0 = np.array(scene.U0)
+    forces = np.zeros((scene.K, 3))
+    data = scene.to_dict()
+    for name, value in setting.items():
+        family, index = re.fullmatch(r"(\w+)(?:\[(.*)\])?", name).groups()
+        slots = tuple(_span(s) for s in index.split(",")) if index else ()
+        target = {"M": mass, "R": length, "g": gravity, "F": forces, "U0": U0}.get(family)
+        if target is not None:
+            target[slots] = value
+        elif family == "stiffness":
+            for spring in data["springs"][slots[0]]:
+                spring["stiffness"] = value
+        else:
+            raise AssertionError(f"serial_run does not know {name}")
+    changed = ln.Scene.from_dict(data).with_parameters(mass=mass, length=length, gravity=gravity).with_state(U0=U0)
+    return ln.simulate(changed, t_end, method=method, dt=dt, rtol=rtol, n_out=n_out,
+                       forces=forces if any(n.startswith("F[") for n in setting) else None,
+                       project_initial=project_initial)
+
+
+def assert_member_equals(ds, member: int, reference, atol=1e-12) -> None:
+    """X, U, T of one member against a serial run, to round-off."""
+    np.testing.assert_allclose(ds["X"].values[member], reference.X, rtol=0, atol=atol)
+    np.testing.assert_allclose(ds["U"].values[member], reference.U, rtol=0, atol=atol * 100)
+    np.testing.assert_allclose(ds["T"].values[member], reference.T, rtol=1e-10, atol=atol * 100)
+    assert ds["max_tension"].values[member] == pytest.approx(reference.T.max(), rel=1e-10)
+    tip = int(ds.attrs["tip_mass"]) - 1
+    np.testing.assert_allclose(ds["tip_final"].values[member], reference.X[-1, tip], rtol=0, atol=atol)
