@@ -38,9 +38,10 @@
 #endif
 
 /* Average entries per column of L below the diagonal from which the supernodal algorithm pays for its
-   per-block overhead. Chains and trees have at most a few; in the AMD order net_10x10 has 7.9 (columns:
-   faster), a 30 x 30 net 14 (about even) and a 100 x 100 net 24 (supernodal: 2.4x faster factorisation). */
-#define SUPERNODAL_MIN_MEAN_COUNT 8.0
+   per-block overhead. Chains and trees have at most a few. In the AMD order (factor + 2 solves, measured):
+   net_10x10 has 7.9 and a 15 x 15 net 10.2 (columns 40 % and 10 % faster), a 20 x 20 net 12.1 (supernodal
+   12 % faster), a 100 x 100 net 24 (supernodal 3x faster). */
+#define SUPERNODAL_MIN_MEAN_COUNT 11.0
 
 /* Relaxed amalgamation: a supernode merges with its parent (when the parent starts right after it) if the
    merged block has at most this many columns, or if merging adds no explicit zero. CHOLMOD's larger
