@@ -241,3 +241,22 @@ def test_zero_pivots_helper_counts_self_stresses():
     scene = load_scene(Path(MODELS[0]).parent / "redundant_truss.json")
     first, second, values = pair_values(scene, scene.X0)
     assert zero_pivots(scene.L, first, second, values) == analyse(scene).self_stresses
+
+
+def test_small_and_degenerate_patterns():
+    """No links; a diagonal matrix; repeated pairs (their values add up); an indefinite matrix."""
+    empty = NativeLDL(0, np.zeros(0, np.int64), np.zeros(0, np.int64))
+    assert empty.factor(np.zeros(0)) == -1 and empty.solve(np.zeros(0)).size == 0 and empty.nnz_L == 0
+    diagonal = NativeLDL(3, [0, 1, 2], [0, 1, 2])
+    assert diagonal.nnz_L == 0 and diagonal.factor([2.0, 4.0, 8.0]) == -1
+    assert np.allclose(diagonal.solve([1.0, 1.0, 1.0]), [0.5, 0.25, 0.125])
+    # the 2 x 2 matrix [[3, 1], [1, 2]] with its diagonal and off-diagonal entries split over repeated pairs,
+    # given in both orders
+    first, second = [0, 0, 1, 0, 1, 1], [0, 0, 0, 1, 1, 1]
+    repeated = NativeLDL(2, first, second)
+    assert repeated.factor([1.0, 2.0, 0.25, 0.75, 1.5, 0.5]) == -1
+    assert np.allclose(repeated.solve([1.0, 2.0]), np.linalg.solve([[3.0, 1.0], [1.0, 2.0]], [1.0, 2.0]))
+    # [[1, 2], [2, 1]] is indefinite: the second pivot, 1 - 4 = -3, is not above pivot_tol |A_11|
+    indefinite = NativeLDL(2, [0, 0, 1], [0, 1, 1], [0, 1])
+    assert indefinite.factor([1.0, 2.0, 1.0]) == 1
+    assert indefinite.pivots()[1] == 1
