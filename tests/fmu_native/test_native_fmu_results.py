@@ -1,0 +1,67 @@
+"""Native FMU == pythonfmu FMU == library, on every shipped scene, every integrator, with a force input.
+
+The native FMU runs in the plain C host (tests/fmu_native/native_host.c) with no Python in its process or its
+environment; the pythonfmu FMU runs in fmpy (one client process for all scenes); the library is
+linknet_core's Simulator in this process. A few communication steps each, every output compared."""
+import numpy as np
+import pytest
+
+from conftest import (METHODS, MODELS, N_STEPS, SCENES, H, assert_round_off, built, host_options, input_force,
+                      input_mass, library_rows, output_names, parse_rows, run_host)
+from fmu_harness import FMU_CLIENT_LIB, run_client
+import linknet_core as ln
+
+
+@pytest.fixture(scope="module")
+def pythonfmu_rows(fmu_root):
+    """Every scene and integrator through the pythonfmu FMUs, in one fmpy client process."""
+    fmus = {scene: built(fmu_root, scene, native=False) for scene in SCENES}
+    jobs = {scene: (str(f.path), output_names(f), input_mass(f)) for scene, f in fmus.items()}
+    code = f"""
+{FMU_CLIENT_LIB}
+import math
+jobs = {jobs!r}
+for scene, (path, names, k) in jobs.items():
+    for method in {METHODS!r}:
+        f = Fmu(path, scene + '_' + method)
+        f.init(strings={{'integrator': method}})
+        rows = []
+        for n in range({N_STEPS} + 1):
+            t = n * {H!r}
+            f.set({{f'F[{{k}},1]': {0.5!r}, f'F[{{k}},3]': {2.0!r} * math.cos({20.0!r} * t)}})
+            rows.append([t] + list(f.get(names)))
+            if n < {N_STEPS}:
+                f.step(t, {H!r})
+        f.slave.terminate()
+        f.slave.freeInstance()
+        save(**{{scene + '__' + method: np.array(rows)}})
+"""
+    return run_client(code, fmu_root / "pythonfmu_client", timeout=900), fmus
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_native_fmu_equals_library_and_pythonfmu_fmu(scene, fmu_root, host, no_python_env, pythonfmu_rows):
+    rows, py_fmus = pythonfmu_rows
+    fmu = built(fmu_root, scene)
+    assert output_names(fmu) == output_names(py_fmus[scene])  # one Layout: the same variables
+    sc = ln.load_scene(MODELS / f"{scene}.json")
+    k = input_mass(fmu)
+    assert np.any(input_force(k, sc.K, 0.0) != 0.0)
+    for method in METHODS:
+        native = parse_rows(run_host(host, no_python_env, "run", fmu, 0.0, N_STEPS, H, *host_options(fmu, method)))
+        library = library_rows(sc, fmu, method)
+        assert_round_off(native, library, f"{scene}, {method}: native FMU vs library")
+        assert_round_off(rows[f"{scene}__{method}"], library, f"{scene}, {method}: pythonfmu FMU vs library")
+        assert np.ptp(native[:, 1:], axis=0).max() > 0.0  # something responds over the run
+
+
+def test_native_fmu_is_bit_identical_to_the_library_at_default_parameters(fmu_root, host, no_python_env):
+    """The FMU runs the library's ln_model and ln_method (read from the library's own structs) through the same
+    core compiled with the same flags: not just round-off, every bit, including the 2-D planar path (chain_10),
+    the general sparse LDL^T (net_10x10), the minimum-norm static truss and the rigid-body path."""
+    for scene, method in (("chain_10", "rattle"), ("net_10x10", "dop853"), ("redundant_truss", "rattle"),
+                          ("spinning_tetrahedron", "yoshida4"), ("spinning_tetrahedron", "dop853")):
+        fmu = built(fmu_root, scene)
+        native = parse_rows(run_host(host, no_python_env, "run", fmu, 0.0, N_STEPS, H, *host_options(fmu, method)))
+        library = library_rows(ln.load_scene(MODELS / f"{scene}.json"), fmu, method)
+        np.testing.assert_array_equal(native, library, err_msg=f"{scene}, {method}")
