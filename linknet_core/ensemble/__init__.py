@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import LinknetError
-from ..integrators import METHODS
-from ..scene import Scene, load_scene
-from .parameters import FAMILIES, Plan, changes_positions, make_plan, parse_name, parse_values
+from linknet_core.errors import LinknetError
+from linknet_core.integrators import METHODS
+from linknet_core.scene.description import Scene, load_scene
+from linknet_core.ensemble.parameters import FAMILIES, Plan, changes_positions, make_plan, parse_name, parse_values
 
 DEFAULT_OUTPUTS = ("X", "U", "T")
 
@@ -59,10 +59,10 @@ def ensemble(scene, vary=None, samples=None, *, t_end: float, method: str | None
     Bad names, indices or options raise LinknetError before anything runs; a member whose values make an
     invalid scene, or whose run fails, is recorded with its error and the others complete.
     """
-    from .engine import Engine, run_study
-    from .members import OUTPUTS, StudySpec
-    from .report import ProgressBar
-    from .store import StudyFile
+    from linknet_core.ensemble.engine import Engine, run_study
+    from linknet_core.ensemble.members import OUTPUTS, StudySpec
+    from linknet_core.ensemble.report import ProgressBar
+    from linknet_core.ensemble.store import StudyFile
 
     base, fmu_bytes, fmu_config, source = load_source(scene)
     plan = make_plan(base, vary, samples)
@@ -141,7 +141,7 @@ def _open(path: Path, keep_in_memory: bool):
 
 def load_source(scene):
     """(scene, FMU bytes or None, FMU build settings, description of the source)."""
-    from .members import fmu_contents
+    from linknet_core.ensemble.members import fmu_contents
 
     if isinstance(scene, Scene):
         return scene, None, {}, f"scene {scene.name}"
@@ -215,7 +215,7 @@ def _tip(scene: Scene, tip) -> int:
     raise LinknetError(f"no mass {tip!r} in {scene.name} (give a 1-based number or a name)")
 
 
-from .report import plot, summary  # noqa: E402  (matplotlib is imported only when plotting)
+from linknet_core.ensemble.report import plot, summary  # noqa: E402  (matplotlib is imported only when plotting)
 
 __all__ = ["ensemble", "summary", "plot", "make_plan", "parse_name", "parse_values", "FAMILIES",
            "DEFAULT_OUTPUTS"]

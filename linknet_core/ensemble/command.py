@@ -10,7 +10,7 @@ import sys
 
 import numpy as np
 
-from ..errors import LinknetError
+from linknet_core.errors import LinknetError
 
 _DISTRIBUTIONS = {
     "uniform": lambda rng, a, b, n: rng.uniform(a, b, n),
@@ -60,7 +60,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _vary(texts, scene) -> dict:
-    from .parameters import parse_name, parse_values
+    from linknet_core.ensemble.parameters import parse_name, parse_values
 
     vary = {}
     for text in texts:
@@ -73,7 +73,7 @@ def _vary(texts, scene) -> dict:
 
 
 def _samples(args, scene) -> dict | None:
-    from .parameters import check_values, parse_name
+    from linknet_core.ensemble.parameters import check_values, parse_name
 
     columns: dict = {}
     if args.samples:
@@ -111,7 +111,7 @@ def _samples(args, scene) -> dict | None:
 
 
 def cmd_ensemble(args) -> int:
-    from . import load_source, ensemble, plot, summary
+    from linknet_core.ensemble import load_source, ensemble, plot, summary
 
     if args.plot and not args.plot.lower().endswith(".png"):
         raise LinknetError(f"--plot {args.plot}: the plot is a PNG file")

@@ -8,8 +8,9 @@
   first result comes as soon as possible); later batches are sized from the measured member time to about
   ``TASK_SECONDS`` each, which keeps Dask's per-task cost (a few ms of scheduler and network time) small
   against the work, and never so large that the last batches leave workers idle.
-* Results are taken as they finish and handed to the sink (the study file) at once, then released, so the
-  cluster never holds more than the batches in flight.
+* Results are fetched as they finish and handed to the sink (the study file) at once, then released, so the
+  cluster never holds more than the batches in flight. A fetch that fails (a connection fault) is tried
+  again, and after FETCH_ATTEMPTS the batch runs again: a study never waits on a result that cannot come.
 * When a worker dies, the scheduler reruns the batches it was running and any finished result not yet
   fetched from it (the "remove-worker" event names those tasks; this module listens to it): those members
   are the study's retried members. A batch whose workers keep dying (``KilledWorker``) is split into single
@@ -26,9 +27,9 @@ from collections import deque
 from concurrent.futures import CancelledError
 from dataclasses import dataclass, field
 
-from ..errors import LinknetError
-from .members import StudyPayload, StudySpec, error_text, run_batch
-from .parameters import Plan
+from linknet_core.errors import LinknetError
+from linknet_core.ensemble.members import StudyPayload, StudySpec, error_text, run_batch
+from linknet_core.ensemble.parameters import Plan
 
 TASK_SECONDS = 0.25  # target work per task once the member time is known
 # A scheduler spends ~0.2-1 ms per task (benchmarks/bench_ensemble.py measures it): a study keeps below this
@@ -169,9 +170,10 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
     lock = threading.Lock()  # the event handler runs on the client's event-loop thread
     in_flight: dict[str, tuple[int, int]] = {}  # task key -> (first member, count)
     retried: set[int] = set()
-    singles: deque[int] = deque()  # members of batches that kept killing workers, to run one by one
+    # batches to run again: single members of a batch that kept killing workers, a batch whose result could
+    # not be fetched
+    again: deque[tuple[int, int]] = deque()
     cursor = 0
-    resubmissions = 0
     last_thread_check = time.perf_counter()
 
     def on_event(event):
@@ -186,16 +188,14 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
                     retried.update(range(first, first + count))
 
     def submit(ac) -> None:
-        nonlocal cursor, resubmissions
-        if singles:
-            first, count = singles.popleft(), 1
-            resubmissions += 1
-            key = f"linknet-ensemble-{spec.study_id}-{first}-single{resubmissions}"
+        nonlocal cursor
+        if again:
+            (first, count), suffix = again.popleft(), f"-again{progress.tasks}"
         else:
-            first = cursor
+            first, suffix = cursor, ""
             count = min(sizer.size(plan.n_members - cursor, threads), plan.n_members - cursor)
             cursor += count
-            key = f"linknet-ensemble-{spec.study_id}-{first}-{count}"
+        key = f"linknet-ensemble-{spec.study_id}-{first}-{count}{suffix}"
         settings = [plan.setting(m) for m in range(first, first + count)]
         future = client.submit(run_batch, spec.study_id, first, settings, key=key)
         progress.tasks += 1
@@ -206,41 +206,48 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
     def record_failure(first: int, count: int, message: str) -> None:
         sink.write({"first": first, "count": count, "outputs": {}, "error": [message] * count,
                     "run_seconds": [math.nan] * count, "worker": ""})
+        progress.failed += count
 
     client.subscribe_topic("all", on_event)
-    ac = as_completed(with_results=True, raise_errors=False)
+    # without with_results: as_completed fetching in the background would leave the study waiting forever if
+    # a fetch failed (seen once under load: an AssertionError inside tornado's stream); here it is retried
+    ac = as_completed()
     try:
         while len(in_flight) < 2 * threads and cursor < plan.n_members:
             submit(ac)
-        for future, result in ac:
+        for future in ac:
             with lock:
                 first, count = in_flight.pop(future.key)
-            if future.status == "finished":
+            result, failure = _fetch(future)
+            future.release()
+            if result is not None:
                 sink.write(result)
                 sizer.record([s for s, e in zip(result["run_seconds"], result["error"]) if not e])
                 progress.failed += sum(1 for e in result["error"] if e)
-            elif isinstance(result, KilledWorker) and count > 1:
-                singles.extend(range(first, first + count))  # find the member that kills its workers
-                count = 0
-            elif isinstance(result, KilledWorker):
+                progress.done += count
+            elif isinstance(failure, KilledWorker) and count > 1:
+                again.extend((m, 1) for m in range(first, first + count))  # find the member that kills workers
+            elif isinstance(failure, KilledWorker):
                 record_failure(first, count, f"KilledWorker: every worker that ran this member died "
-                                             f"({result}); it may crash its process (e.g. a fault in an FMU)")
-                progress.failed += count
-            elif isinstance(result, CancelledError):
+                                             f"({failure}); it may crash its process (e.g. a fault in an FMU)")
+                progress.done += count
+            elif isinstance(failure, CancelledError):
                 raise LinknetError("the Dask scheduler cancelled the study (connection to it lost?)")
+            elif isinstance(failure, _FetchFailed):
+                with lock:
+                    retried.update(range(first, first + count))
+                again.append((first, count))
             else:  # the task itself failed, not a member (members record their own errors)
-                record_failure(first, count, error_text(result))
-                progress.failed += count
-            future.release()
+                record_failure(first, count, error_text(failure))
+                progress.done += count
             with lock:
                 progress.retried = len(retried)
-            progress.done += count
-            if progress.first_result_seconds is None and count:
+            if progress.first_result_seconds is None and progress.done:
                 progress.first_result_seconds = progress.elapsed
             if time.perf_counter() - last_thread_check > 2.0:  # workers may join or leave an existing cluster
                 threads, last_thread_check = engine.threads(), time.perf_counter()
                 progress.workers = threads
-            while len(in_flight) < 2 * threads and (singles or cursor < plan.n_members):
+            while len(in_flight) < 2 * threads and (again or cursor < plan.n_members):
                 submit(ac)
             if on_progress is not None:
                 on_progress(progress)
@@ -254,3 +261,29 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
             pass
     sink.mark_retried(retried)
     return progress
+
+
+class _FetchFailed(Exception):
+    """A finished batch whose result could not be brought to the client."""
+
+
+FETCH_ATTEMPTS = 3
+FETCH_TIMEOUT = 120.0  # seconds for one fetch of a finished batch's result
+
+
+def _fetch(future):
+    """(result, None) for a finished batch, (None, exception) for a task that failed or was cancelled, and
+    (None, _FetchFailed) when fetching the result failed FETCH_ATTEMPTS times (the batch then runs again).
+    A task's own failure is read with ``exception()``, so whatever ``result()`` raises here is the fetch."""
+    last = None
+    for attempt in range(FETCH_ATTEMPTS):
+        try:
+            if future.status == "error":
+                return None, future.exception(timeout=FETCH_TIMEOUT)
+            if future.status == "cancelled":
+                return None, CancelledError(future.key)
+            return future.result(timeout=FETCH_TIMEOUT), None
+        except Exception as exc:  # a connection fault, a timeout: try again
+            last = exc
+            time.sleep(0.2 * 2 ** attempt)
+    return None, _FetchFailed(error_text(last))

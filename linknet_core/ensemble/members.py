@@ -21,11 +21,11 @@ from dataclasses import dataclass
 import numpy as np
 from distributed import WorkerPlugin, get_worker
 
-from ..errors import LinknetError, SceneError
-from ..integrators import METHODS
-from ..scene import Scene
-from ..simulator import Simulator
-from .parameters import Parameter, member_forces, member_scene
+from linknet_core.errors import LinknetError, SceneError
+from linknet_core.integrators import METHODS
+from linknet_core.scene.description import Scene
+from linknet_core.simulator.simulator import Simulator
+from linknet_core.ensemble.parameters import Parameter, member_forces, member_scene
 
 OUTPUTS = ("X", "U", "T", "Freact")  # what a study can keep per member and time
 

@@ -18,9 +18,9 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..errors import LinknetError
-from ..integrators import METHODS
-from ..scene import Scene
+from linknet_core.errors import LinknetError
+from linknet_core.integrators import METHODS
+from linknet_core.scene.description import Scene
 
 
 @dataclass(frozen=True)
@@ -75,15 +75,18 @@ class Parameter:
 
     def describe(self, scene: Scene) -> str:
         """Long name for the dataset: what it sets, with mass and link names."""
-        where = []
-        for target in self.targets[:3]:
-            parts = []
-            for slot, i in zip(self.family.slots, target):
-                parts.append({"mass": lambda: scene.mass_label(i), "link": lambda: scene.link_label(i),
-                              "axis": lambda: _AXES[i], "spring": lambda: f"spring {i + 1}"}[slot]())
-            where.append(" ".join(parts))
+        where = [" ".join(_entry_label(scene, slot, i) for slot, i in zip(self.family.slots, target))
+                 for target in self.targets[:3]]
         more = f" and {len(self.targets) - 3} more" if len(self.targets) > 3 else ""
-        return self.family.meaning + (f": {', '.join(where)}{more}" if where else "")
+        return self.family.meaning + (f": {', '.join(where)}{more}" if self.family.slots else "")
+
+
+def _entry_label(scene: Scene, slot: str, i: int) -> str:
+    if slot == "mass":
+        return scene.mass_label(i)
+    if slot == "link":
+        return scene.link_label(i)
+    return _AXES[i] if slot == "axis" else f"spring {i + 1}"
 
 
 def _slot_range(text: str, slot: str, count: int, name: str) -> range:

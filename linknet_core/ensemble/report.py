@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 
 import numpy as np
 
@@ -11,13 +12,21 @@ VALUE_LIMIT = 20  # a parameter with more values is summarised per tenth of its 
 
 
 class ProgressBar:
-    """One line on stderr, redrawn after each finished batch: members done, failed, retried, rate, time left."""
+    """One line on stderr, redrawn after finished batches (at most 5 times a second, and at the end): members
+    done, failed, retried, rate, time left."""
+
+    REDRAW_SECONDS = 0.2
 
     def __init__(self, stream=None):
         self.stream = stream or sys.stderr
         self._shown = False
+        self._last = -1.0
 
     def __call__(self, progress) -> None:
+        now = time.monotonic()
+        if now - self._last < self.REDRAW_SECONDS and progress.done < progress.total:
+            return
+        self._last = now
         frac = progress.done / progress.total
         width = 28
         bar = "#" * int(width * frac) + "-" * (width - int(width * frac))

@@ -13,10 +13,10 @@ import time
 
 import numpy as np
 
-from .. import __version__
-from ..scene import Scene
-from .members import OUTPUTS, StudySpec
-from .parameters import Plan
+from linknet_core.version import __version__
+from linknet_core.scene.description import Scene
+from linknet_core.ensemble.members import OUTPUTS, StudySpec
+from linknet_core.ensemble.parameters import Plan
 
 _AXES = np.array(["x", "y", "z"])
 

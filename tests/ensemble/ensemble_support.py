@@ -33,9 +33,12 @@ def serial_run(scene, setting: dict, t_end: float, n_out: int, method="rattle", 
         target = {"M": mass, "R": length, "g": gravity, "F": forces, "U0": U0}.get(family)
         if target is not None:
             target[slots] = value
-        elif family == "stiffness":
+        elif family in ("stiffness", "damping", "rest_length"):
             for spring in data["springs"][slots[0]]:
-                spring["stiffness"] = value
+                spring[family] = value
+        elif family == "drag":
+            for entry in data["masses"][slots[0]]:
+                entry["drag"] = value
         else:
             raise AssertionError(f"serial_run does not know {name}")
     changed = ln.Scene.from_dict(data).with_parameters(mass=mass, length=length, gravity=gravity).with_state(U0=U0)

@@ -61,3 +61,28 @@ def test_killed_worker_costs_only_its_members_retries(process_client):
     for m in range(12):
         assert_member_equals(ds, m, serial_run(scene, {"M[11]": masses[m]}, t_end, N_OUT, dt=dt))
     process_client.wait_for_workers(2, timeout=60)  # the nanny restarted the killed worker
+
+
+class _FlakyFuture:
+    """A finished batch whose result fetch fails `failures` times (as a connection fault would)."""
+
+    status, key = "finished", "linknet-ensemble-x-0-1"
+
+    def __init__(self, failures):
+        self.failures = failures
+
+    def result(self, timeout):
+        if self.failures:
+            self.failures -= 1
+            raise AssertionError("comm fault while fetching")
+        return {"first": 0}
+
+
+def test_a_failed_fetch_is_tried_again_then_the_batch_reruns():
+    """A fault while fetching a finished batch's result is not the members' failure and does not leave the
+    study waiting: the fetch is tried again, and after FETCH_ATTEMPTS the batch is marked to run again."""
+    from linknet_core.ensemble.engine import FETCH_ATTEMPTS, _fetch, _FetchFailed
+
+    assert _fetch(_FlakyFuture(FETCH_ATTEMPTS - 1)) == ({"first": 0}, None)
+    result, failure = _fetch(_FlakyFuture(FETCH_ATTEMPTS))
+    assert result is None and isinstance(failure, _FetchFailed) and "comm fault" in str(failure)

@@ -90,3 +90,14 @@ def test_only_quantities_of_interest_kept(local_client):
         assert ds["max_tension"].values[m] == pytest.approx(reference.T.max(), rel=1e-12)
         assert ds["max_tension_link"].values[m] == np.unravel_index(reference.T.argmax(), reference.T.shape)[1] + 1
         np.testing.assert_allclose(ds["tip_final"].values[m], reference.X[-1, 5], rtol=0, atol=1e-12)
+
+
+def test_spring_and_drag_constants(local_client):
+    """The names the FMU does not have: a spring-damper's constants and a mass's drag reach the members."""
+    data = ln.load_scene(MODELS / "double_pendulum.json").to_dict()
+    data["springs"] = [{"a": 1, "b": 3, "stiffness": 10.0, "rest_length": 1.5, "damping": 0.2}]
+    scene = ln.Scene.from_dict(data)
+    ds = ln.ensemble(scene, vary={"stiffness[1]": [5.0, 40.0], "damping[1]": [0.0, 1.0], "drag[2]": [0.3]},
+                     t_end=T_END, n_out=N_OUT, client=local_client)
+    _check_against_serial(ds, scene)
+    assert np.ptp(ds["tip_final"].values[:, 0]) > 0.01  # the constants mattered
