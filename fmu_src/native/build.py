@@ -521,6 +521,11 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
     (identifier, description, integrators and defaults; the variables; DefaultExperiment); ``postprocess`` is
     build_fmu.postprocess_model_description."""
     out = Path(out)
+    step, tolerance = float(cfg["step"]), float(cfg["tolerance"])
+    if not (math.isfinite(step) and step > 0):  # the FMU's own rules for its parameters (linknet_model.c)
+        raise NativeBuildError(f"step = {step!r} must be finite and > 0 (seconds)")
+    if not (1e-15 <= tolerance < 0.1):
+        raise NativeBuildError(f"tolerance = {tolerance!r} must lie in [1e-15, 0.1)")
     src = core_source_dir()
     try:
         scene_c, facts = scene_source(scene, cfg, layout, src)

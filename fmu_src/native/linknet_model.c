@@ -647,6 +647,13 @@ int fmu_model_set_start_time(fmu_model *m, double start_time, char *msg)
 
 double fmu_model_time(const fmu_model *m) { return m->d->t; }
 
+void lnfmu_core(fmu_model *m, const ln_model **model, const ln_method **method, ln_data **data)
+{
+    *model = &m->model;
+    *method = &m->method;
+    *data = m->d;
+}
+
 /* ---- values -------------------------------------------------------------------------------------- */
 
 static int evaluate_outputs(fmu_model *m, char *msg)

@@ -90,4 +90,9 @@ typedef struct lnfmu_scene {
 
 extern const lnfmu_scene lnfmu_scene_data;
 
+/* The core structs a model runs on (linknet_model.c), for a benchmark that times ln_advance itself next to
+   fmi2DoStep from the same sources. */
+struct fmu_model;
+void lnfmu_core(struct fmu_model *m, const ln_model **model, const ln_method **method, ln_data **data);
+
 #endif
