@@ -21,7 +21,7 @@ import numpy as np
 
 from linknet_core.errors import LinknetError
 from linknet_core.integrators import METHODS
-from linknet_core.scene.description import Scene, load_scene
+from linknet_core.scene import Scene, load_scene
 from linknet_core.ensemble.parameters import FAMILIES, Plan, changes_positions, make_plan, parse_name, parse_values
 
 DEFAULT_OUTPUTS = ("X", "U", "T")

@@ -23,8 +23,8 @@ from distributed import WorkerPlugin, get_worker
 
 from linknet_core.errors import LinknetError, SceneError
 from linknet_core.integrators import METHODS
-from linknet_core.scene.description import Scene
-from linknet_core.simulator.simulator import Simulator
+from linknet_core.scene import Scene
+from linknet_core.simulator import Simulator
 from linknet_core.ensemble.parameters import Parameter, member_forces, member_scene
 
 OUTPUTS = ("X", "U", "T", "Freact")  # what a study can keep per member and time

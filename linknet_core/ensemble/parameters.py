@@ -20,7 +20,7 @@ import numpy as np
 
 from linknet_core.errors import LinknetError
 from linknet_core.integrators import METHODS
-from linknet_core.scene.description import Scene
+from linknet_core.scene import Scene
 
 
 @dataclass(frozen=True)
