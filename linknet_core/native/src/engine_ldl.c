@@ -29,7 +29,8 @@
 #include "amd/amd.h"
 
 /* On x86 with GCC or Clang the supernodal factorisation is also compiled for AVX2 and chosen at run time
-   when the processor has it (bitwise the same results, about 15 % faster on a 100 x 100 net). */
+   when the processor has it (bitwise the same results, its factorisation of a 100 x 100 net about 25 %
+   faster). */
 #if !defined(LN_LDL_PORTABLE) && (defined(__x86_64__) || defined(__i386__)) && \
     ((defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 6) || (defined(__clang__) && __clang_major__ >= 7))
 #define LN_LDL_AVX2 1
