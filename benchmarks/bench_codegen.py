@@ -25,9 +25,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import linknet_core as ln  # noqa: E402
-from linknet_core import codegen  # noqa: E402
-from linknet_core.checks import sample_states  # noqa: E402
-from linknet_core.symbolic import SymbolicTensionSystem  # noqa: E402
+from linknet_core.symbolic import codegen  # noqa: E402
+from linknet_core.symbolic.check import sample_states  # noqa: E402
+from linknet_core.symbolic.derivation import SymbolicTensionSystem  # noqa: E402
 
 
 def time_per_call(fn, min_time=0.3, repeat=5):

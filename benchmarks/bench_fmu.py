@@ -38,7 +38,7 @@ sys.path.insert(0, str(ROOT / "fmu_src"))
 
 import build_fmu  # noqa: E402
 import linknet_core as ln  # noqa: E402
-from linknet_core.codegen import compiler  # noqa: E402
+from linknet_core.symbolic.codegen import compiler  # noqa: E402
 
 
 def _best_time(fn, repeats):
@@ -57,7 +57,7 @@ C_HOST_FLAGS = ["-O2", "-Wall"]
 
 def build_c_timing_host(build_dir: Path):
     """Compile the C timing host; returns (executable or None, compiler command line or the reason it is missing)."""
-    cc = compiler()  # $CC, cc, gcc or clang (linknet_core.codegen)
+    cc = compiler()  # $CC, cc, gcc or clang (linknet_core.symbolic.codegen)
     if cc is None:
         return None, "no C compiler (cc, gcc or clang) on PATH"
     exe = build_dir / "fmi2_timing_host"

@@ -10,7 +10,7 @@ import argparse
 import time
 
 import linknet_core as ln
-from linknet_core import builders
+from linknet_core.scene import builders
 
 
 def main(argv=None):

@@ -103,7 +103,7 @@ def quick_dts(order):
 # ------------------------------------------------------------------------------------------------ scenes
 def load_benchmark_scene(name: str) -> SceneSpec:
     """models/<name>.json through linknet_core when it imports (so the benchmark sees exactly what linknet
-    sees), else through the plain JSON reader; chain_1000 from linknet_core.builders."""
+    sees), else through the plain JSON reader; chain_1000 from linknet_core.scene.builders."""
     try:
         import linknet_core as ln
     except Exception:
@@ -123,10 +123,10 @@ def _renamed(spec, name):
 
 
 def _chain_1000(ln) -> SceneSpec:
-    """A 1000-link chain released from horizontal: linknet_core.builders.chain(1000) with the same total
+    """A 1000-link chain released from horizontal: linknet_core.scene.builders.chain(1000) with the same total
     length and total mass as models/chain_100.json (= builders.chain(100))."""
     if ln is None or not hasattr(ln, "builders"):
-        raise FileNotFoundError("chain_1000 needs linknet_core.builders.chain")
+        raise FileNotFoundError("chain_1000 needs linknet_core.scene.builders.chain")
     kw = {}
     if (MODELS / "chain_100.json").exists():
         ref = load_benchmark_scene("chain_100")

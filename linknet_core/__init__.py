@@ -1,15 +1,13 @@
 """linknet_core: networks of point masses joined by rigid links (seed: Peskin, 'Mechanics of a network of
 rigid links with point masses at the vertices'). Knows nothing of FMI."""
-from .dynamics import Dynamics
-from .errors import ConsistencyError, LinknetError, SceneError, SolverError
-from .integrators import METHODS, make_integrator
-from .scene import Scene, load_scene
-from .simulator import Result, Simulator, simulate
-from .state import State
-from . import builders
-from .ensemble import ensemble  # Dask, xarray and h5netcdf are imported only when a study runs
-
-__version__ = "0.1.0"
+from linknet_core.dynamics import Dynamics
+from linknet_core.errors import ConsistencyError, LinknetError, SceneError, SolverError
+from linknet_core.integrators import METHODS, make_integrator
+from linknet_core.scene import Scene, builders, load_scene
+from linknet_core.simulator import Result, Simulator, simulate
+from linknet_core.state import State
+from linknet_core.version import __version__
+from linknet_core.ensemble import ensemble  # Dask, xarray and h5netcdf are imported only when a study runs
 
 __all__ = ["Dynamics", "Scene", "load_scene", "State", "Simulator", "simulate", "Result", "METHODS",
            "make_integrator", "builders", "ensemble", "LinknetError", "SceneError", "ConsistencyError",

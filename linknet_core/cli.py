@@ -6,9 +6,9 @@ import sys
 
 import numpy as np
 
-from . import visual  # light: matplotlib and plotly are imported only when a picture is drawn
-from .ensemble import command as ensemble_command  # light: Dask and xarray are imported only when a study runs
-from .errors import LinknetError
+from linknet_core import visual  # light: matplotlib and plotly are imported only when a picture is drawn
+from linknet_core.ensemble import command as ensemble_command  # light: Dask and xarray are imported only when a study runs
+from linknet_core.errors import LinknetError
 
 
 def _add_simulate(sub):
@@ -41,7 +41,7 @@ def _add_analyze(sub):
 
 def _add_check(sub):
     p = sub.add_parser("check", help="check the numeric tension system against its casadi derivation")
-    from . import checks
+    from linknet_core.symbolic import check as checks
 
     checks.add_arguments(p)
 
@@ -62,8 +62,8 @@ def _add_ensemble(sub):
 
 
 def cmd_simulate(args) -> int:
-    from .scene import load_scene
-    from .simulator import simulate
+    from linknet_core.scene.description import load_scene
+    from linknet_core.simulator.simulator import simulate
 
     if args.animate:  # refuse a bad animation path (or MP4 without ffmpeg) before the run, not after it
         visual.check_animation_path(args.animate)
@@ -71,7 +71,7 @@ def cmd_simulate(args) -> int:
     method = args.method or ("dop853" if args.rtol is not None else "rattle")
     dt = args.dt
     if dt is None and args.rtol is None:
-        from .integrators import METHODS
+        from linknet_core.integrators import METHODS
 
         if not METHODS[method].adaptive:
             dt = 1e-3
@@ -125,8 +125,8 @@ def plot_result(res, path) -> None:
 
 
 def cmd_analyze(args) -> int:
-    from .analysis import analyze_scene
-    from .scene import load_scene
+    from linknet_core.simulator.analysis import analyze_scene
+    from linknet_core.scene.description import load_scene
 
     report = analyze_scene(load_scene(args.scene))
     print(report.text())
@@ -134,7 +134,7 @@ def cmd_analyze(args) -> int:
 
 
 def cmd_check(args) -> int:
-    from . import checks
+    from linknet_core.symbolic import check as checks
 
     return int(checks.main(args))
 

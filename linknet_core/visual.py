@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import LinknetError
+from linknet_core.errors import LinknetError
 
 VIEWS = ("auto", "xz", "xy", "yz", "3d")
 PLANES = {"xz": (0, 2), "xy": (0, 1), "yz": (1, 2)}  # the two coordinates a flat view shows

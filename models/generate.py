@@ -1,7 +1,7 @@
 """Regenerate the shipped scene files from the parametric builders: python models/generate.py"""
 from pathlib import Path
 
-from linknet_core.builders import shipped_scenes
+from linknet_core.scene.builders import shipped_scenes
 
 if __name__ == "__main__":
     here = Path(__file__).resolve().parent

@@ -3,11 +3,11 @@ from __future__ import annotations
 
 import math
 
-from ..errors import SolverError
-from .base import FixedStepIntegrator, Integrator
-from .composition import Composition, Suzuki4, Yoshida4, Yoshida6, Yoshida8
-from .rattle import Rattle
-from .runge_kutta import DOP853, DOPRI5, ProjectedRungeKutta
+from linknet_core.errors import SolverError
+from linknet_core.integrators.base import FixedStepIntegrator, Integrator
+from linknet_core.integrators.composition import Composition, Suzuki4, Yoshida4, Yoshida6, Yoshida8
+from linknet_core.integrators.rattle import Rattle
+from linknet_core.integrators.runge_kutta import DOP853, DOPRI5, ProjectedRungeKutta
 
 METHODS = {cls.name: cls for cls in (Rattle, Yoshida4, Suzuki4, Yoshida6, Yoshida8, DOPRI5, DOP853)}
 

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..dynamics import Dynamics
-from ..errors import SolverError
-from ..native.library import fixed_step_count
-from ..state import State
+from linknet_core.dynamics.equations import Dynamics
+from linknet_core.errors import SolverError
+from linknet_core.native.library import fixed_step_count
+from linknet_core.state import State
 
 
 @dataclass

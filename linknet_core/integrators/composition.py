@@ -6,7 +6,7 @@ size h is RATTLE steps of gamma_i h in turn. Yoshida (1990) and Suzuki (1990) gi
 from __future__ import annotations
 
 
-from .rattle import Rattle
+from linknet_core.integrators.rattle import Rattle
 
 
 def _triple_jump(order_below: int) -> tuple[float, float]:

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import SolverError
-from ..forces import has_velocity_dependent_forces
-from .base import FixedStepIntegrator
+from linknet_core.errors import SolverError
+from linknet_core.dynamics.forces import has_velocity_dependent_forces
+from linknet_core.integrators.base import FixedStepIntegrator
 
 
 class Rattle(FixedStepIntegrator):

@@ -18,8 +18,8 @@ import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _dop853
 from scipy.integrate._ivp.rk import RK45 as _RK45
 
-from ..errors import SolverError
-from .base import Integrator
+from linknet_core.errors import SolverError
+from linknet_core.integrators.base import Integrator
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 

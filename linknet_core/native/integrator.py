@@ -11,10 +11,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import SolverError
-from ..integrators.base import Integrator, StepStats
-from . import library as lib
-from .model import NativeData, NativeMethod, NativeModel
+from linknet_core.errors import SolverError
+from linknet_core.integrators.base import Integrator, StepStats
+from linknet_core.native import library as lib
+from linknet_core.native.model import NativeData, NativeMethod, NativeModel
 
 
 @dataclass

@@ -14,12 +14,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from ..forces import has_velocity_dependent_forces
-from ..integrators.runge_kutta import MAX_FACTOR, MIN_FACTOR, SAFETY
-from ..structure import PLANE_TOL, SINGULAR_RCOND, link_pairs
-from ..tensions import DENSE_MIN_NORM_LIMIT, PIVOT_TOL
-from . import library as lib
-from .library import float_array, int_array, pointer
+from linknet_core.dynamics.forces import has_velocity_dependent_forces
+from linknet_core.integrators.runge_kutta import MAX_FACTOR, MIN_FACTOR, SAFETY
+from linknet_core.structure.topology import PLANE_TOL, SINGULAR_RCOND, link_pairs
+from linknet_core.dynamics.tensions import DENSE_MIN_NORM_LIMIT, PIVOT_TOL
+from linknet_core.native import library as lib
+from linknet_core.native.library import float_array, int_array, pointer
 
 
 def scene_plane(scene, normal):

@@ -1,7 +1,7 @@
 """The free-rigid-body part of the native core (src/rigid.h, src/engine_rigid.c) as Python builds and reads it.
 
 Everything about the bodies that is fixed for a run is computed once here, with the geometry of
-:mod:`linknet_core.rigid` (principal axes, body frames, top kinds, the masses' body-frame positions, the Kabsch
+:mod:`linknet_core.structure.bodies` (principal axes, body frames, top kinds, the masses' body-frame positions, the Kabsch
 fit of a body state to a mass state), and handed to C as ``struct ln_rigid_model``; the C side only steps the
 body states. :func:`rigid_model` builds what ``ln_model.rigid`` points to; :class:`RigidFunctions` calls
 rigid.h's state functions on a loaded library; :class:`NativeRigidIntegrator` is the native integrator of a
@@ -17,12 +17,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..dynamics import Dynamics
-from ..errors import SolverError
-from ..rigid import BodyGeometry, BodyLayout, body_geometry, fit_bodies, freeze_initial_state
-from . import library as lib
-from .integrator import NativeIntegrator
-from .model import NativeModel
+from linknet_core.dynamics.equations import Dynamics
+from linknet_core.errors import SolverError
+from linknet_core.structure.bodies import BodyGeometry, BodyLayout, body_geometry, fit_bodies, freeze_initial_state
+from linknet_core.native import library as lib
+from linknet_core.native.integrator import NativeIntegrator
+from linknet_core.native.model import NativeModel
 
 STATE_SIZE = 13  # LN_RIGID_STATE
 MAX_STAGES = 32  # LN_RIGID_MAX_STAGES: Runge-Kutta stages the C side's body-state scratch holds
@@ -66,7 +66,7 @@ def body_states(scene, bodies: BodyLayout, geometry: BodyGeometry, X, U) -> np.n
 
 
 def rigid_model(dynamics: Dynamics, bodies: BodyLayout, X0, U0) -> NativeRigid:
-    """``struct ln_rigid_model`` for the bodies of ``bodies`` (linknet_core.rigid.free_rigid_bodies), frozen in
+    """``struct ln_rigid_model`` for the bodies of ``bodies`` (linknet_core.structure.bodies.free_rigid_bodies), frozen in
     the initial state (X0, U0), and the initial body states. ``dynamics`` is the scene's (numpy) Dynamics: it
     projects an initial state whose link lengths are off by more than round-off before the bodies are frozen."""
     scene = dynamics.scene

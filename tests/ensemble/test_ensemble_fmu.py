@@ -1,5 +1,6 @@
 """The same study through a built FMU (every member one FMU run through fmpy on a worker) gives the same
-numbers as through the library."""
+numbers as through the library: for an FMU on pythonfmu (which carries its scene) and a native one (given
+the scene it was built from)."""
 import sys
 
 import numpy as np
@@ -10,23 +11,44 @@ import linknet_core as ln
 from .ensemble_support import MODELS, ROOT
 
 T_END, N_OUT = 0.5, 26
+OUTPUTS = ["X", "U", "T", "Freact"]
 
 
 @pytest.fixture(scope="module")
-def chain_fmu(tmp_path_factory):
+def build(tmp_path_factory):
     sys.path.insert(0, str(ROOT))
     import build_fmu
 
-    return build_fmu.build_scene_fmu(MODELS / "chain_10.json", tmp_path_factory.mktemp("fmu") / "chain_10.fmu",
-                                     step=1e-3, quiet=True)
+    folder = tmp_path_factory.mktemp("fmu")
+    built = {}
+
+    def fmu(native: bool):
+        if native not in built:
+            built[native] = build_fmu.build_scene_fmu(MODELS / "chain_10.json", folder / f"chain_10_{native}.fmu",
+                                                      step=1e-3, quiet=True, native=native)
+        return built[native]
+    return fmu
 
 
-def test_fmu_study_equals_library_study(chain_fmu, local_client):
+@pytest.fixture(scope="module")
+def chain_fmu(build):
+    return build(False)
+
+
+@pytest.fixture(scope="module")
+def library_study(local_client):
     vary = {"M[11]": [0.5, 2.0], "g[3]": [-9.81, -3.0], "F[11,3]": [0.0, 1.5]}
-    through_fmu = ln.ensemble(chain_fmu, vary=vary, t_end=T_END, n_out=N_OUT, client=local_client,
-                              outputs=["X", "U", "T", "Freact"])
-    library = ln.ensemble(MODELS / "chain_10.json", vary=vary, t_end=T_END, n_out=N_OUT, dt=1e-3,
-                          client=local_client, outputs=["X", "U", "T", "Freact"])
+    return vary, ln.ensemble(MODELS / "chain_10.json", vary=vary, t_end=T_END, n_out=N_OUT, dt=1e-3,
+                             client=local_client, outputs=OUTPUTS)
+
+
+@pytest.mark.parametrize("native", [False, True], ids=["pythonfmu", "native"])
+def test_fmu_study_equals_library_study(native, build, library_study, local_client):
+    vary, library = library_study
+    fmu = build(native)
+    scene = MODELS / "chain_10.json" if native else None  # the pythonfmu FMU carries its scene
+    through_fmu = ln.ensemble(scene, fmu=fmu, vary=vary, t_end=T_END, n_out=N_OUT, client=local_client,
+                              outputs=OUTPUTS)
     assert through_fmu.attrs["runs_through"] == "FMU (fmpy)" and "the FMU's" in through_fmu.attrs["solver"]
     assert list(through_fmu["status"].values) == ["ok"] * 8, list(through_fmu["error"].values)
     # same solver, same held inputs, same communication points: agreement to round-off (the FMU reaches
@@ -47,8 +69,27 @@ def test_fmu_refusal_is_the_members_error(chain_fmu, local_client):
     assert ds["error"].values[2].startswith("FmuError:")
 
 
-def test_fmu_study_refuses_what_the_fmu_cannot_take(chain_fmu):
+def test_fmu_study_refuses_what_the_fmu_cannot_take(chain_fmu, build):
     with pytest.raises(ln.LinknetError, match="no parameter for U0"):
         ln.ensemble(chain_fmu, vary={"U0[11,1]": [0.1]}, t_end=0.1)
     with pytest.raises(ln.LinknetError, match="project_initial_positions"):
         ln.ensemble(chain_fmu, vary={"R[1..10]": [0.09, 0.11]}, t_end=0.1)
+    with pytest.raises(ln.LinknetError, match="was not built from scene chain_100"):
+        ln.ensemble(MODELS / "chain_100.json", fmu=chain_fmu, vary={"M[3]": [1.0]}, t_end=0.1)
+    with pytest.raises(ln.LinknetError, match="carries no scene"):
+        ln.ensemble(fmu=build(True), vary={"M[3]": [1.0]}, t_end=0.1)
+
+
+def test_fmu_study_from_the_command_line(build, process_cluster, tmp_path):
+    import subprocess
+    import xarray as xr
+
+    out = tmp_path / "fmu.nc"
+    run = subprocess.run([sys.executable, "-m", "linknet_core.cli", "ensemble", str(MODELS / "chain_10.json"),
+                          "--fmu", str(build(True)), "--vary", "M[11]=0.2,0.4", "--t-end", "0.3", "--n-out", "4",
+                          "--scheduler", process_cluster, "--out", str(out), "--no-progress"],
+                         capture_output=True, text=True, cwd=str(ROOT), timeout=180)
+    assert run.returncode == 0, run.stderr
+    assert "2 members through the FMU (fmpy)" in run.stdout
+    ds = xr.open_dataset(out, engine="h5netcdf")
+    assert list(ds["status"].values) == ["ok", "ok"] and ds.attrs["source"].endswith(".fmu")

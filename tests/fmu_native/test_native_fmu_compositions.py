@@ -6,7 +6,7 @@ native network FMUs (built with the same options as the scripts' own build()) ne
 controller, spring-damper, which exist as pythonfmu FMUs only), and give the pythonfmu compositions' results."""
 import numpy as np
 
-from conftest import ROOT
+from native_fmu_support import ROOT
 from fmu_harness import run_client
 import build_fmu
 

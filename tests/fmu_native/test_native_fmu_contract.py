@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from conftest import (MODELS, N_STEPS, H, assert_round_off, built, host_options, library_rows, output_names,
-                      parse_rows, run_host)
+from native_fmu_support import (MODELS, N_STEPS, H, assert_round_off, built, host_options, library_rows, output_names,
+                                parse_rows, run_host)
 import linknet_core as ln
 
 OK, DISCARD, ERROR, FATAL = 0, 2, 3, 4

@@ -6,8 +6,8 @@ linknet_core's Simulator in this process. A few communication steps each, every 
 import numpy as np
 import pytest
 
-from conftest import (METHODS, MODELS, N_STEPS, SCENES, H, assert_round_off, built, host_options, input_force,
-                      input_mass, library_rows, output_names, parse_rows, run_host)
+from native_fmu_support import (METHODS, MODELS, N_STEPS, SCENES, H, assert_round_off, built, host_options,
+                                input_force, input_mass, library_rows, output_names, parse_rows, run_host)
 from fmu_harness import FMU_CLIENT_LIB, run_client
 import linknet_core as ln
 

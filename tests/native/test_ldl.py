@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from linknet_core import builders
+from linknet_core.scene import builders
 from linknet_core.native.ldl import PIVOT_TOL, NativeLDL, amd_ordering, vector_kernels, zero_pivots
-from linknet_core.scene import Scene, load_scene
-from linknet_core.structure import _dense_rank, _rank_from_pivots, analyse, link_pairs
+from linknet_core.scene.description import Scene, load_scene
+from linknet_core.structure.topology import _dense_rank, _rank_from_pivots, analyse, link_pairs
 
 MODELS = sorted((Path(__file__).resolve().parents[2] / "models").glob("*.json"))
 

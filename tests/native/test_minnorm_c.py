@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from linknet_core import builders
-from linknet_core.scene import Scene
-from linknet_core.structure import SINGULAR_RCOND, link_pairs
+from linknet_core.scene import builders
+from linknet_core.scene.description import Scene
+from linknet_core.structure.topology import SINGULAR_RCOND, link_pairs
 
 HERE = Path(__file__).resolve().parent
 SOURCE_DIR = HERE.parents[1] / "linknet_core" / "native" / "src"

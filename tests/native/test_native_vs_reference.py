@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 
 import linknet_core as ln
-from linknet_core import builders
+from linknet_core.scene import builders
+from linknet_core.dynamics.tensions import reference_tensions
 from linknet_core.native import library
+from scene_builders import parallelogram, rotated, rotation
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 FIXED = [("rattle", {"dt": 2e-3}), ("yoshida4", {"dt": 2e-3}), ("suzuki4", {"dt": 4e-3})]
@@ -87,27 +89,10 @@ def test_drag_springs_and_inputs_agree_with_the_reference(method, kw):
     _assert_same(native, reference, F)
 
 
-def _rotated(scene, Q, name):
-    """The same scene turned rigidly by Q: a tilted plane."""
-    d = scene.to_dict()
-    for m in d["masses"]:
-        for key in ("position", "velocity", "force"):
-            if key in m:
-                m[key] = (Q @ np.asarray(m[key], float)).tolist()
-    d["gravity"] = (Q @ np.asarray(d.get("gravity", [0, 0, -9.81]), float)).tolist()
-    d["name"] = name
-    return ln.Scene.from_dict(d)
-
-
-def _rotation(ax=0.5, az=0.3):
-    cx, sx, cz, sz = np.cos(ax), np.sin(ax), np.cos(az), np.sin(az)
-    return np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]]) @ np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-
-
 @pytest.mark.parametrize("method,kw", [("rattle", {"dt": 2e-3}), ("dop853", {"rtol": 1e-9})])
 def test_planar_scenes_run_in_2d_with_the_reference_trajectory(method, kw):
-    for scene in (ln.load_scene(MODELS / "chain_10.json"), _rotated(ln.load_scene(MODELS / "chain_10.json"),
-                                                                   _rotation(), "tilted")):
+    for scene in (ln.load_scene(MODELS / "chain_10.json"), rotated(ln.load_scene(MODELS / "chain_10.json"),
+                                                                   rotation(), "tilted")):
         native, reference = _run_both(scene, method, kw, [0.05, 0.1])
         assert native.integrator.model.plane is not None and native.integrator.data.struct.planar == 1
         _assert_same(native, reference)
@@ -147,19 +132,12 @@ def test_trees_take_the_sparse_ldl_path_and_agree(method, kw):
     _assert_same(native, reference)
 
 
-def _parallelogram(speed=5.0):
-    """Crank = rocker, coupler = ground, no gravity: theta = theta0 + w t exactly; at theta = 180 deg every
-    link is collinear and A of (25) is singular."""
-    return builders.four_bar(ground=1.0, crank=0.4, coupler=1.0, rocker=0.4, crank_angle_deg=60.0,
-                             crank_speed=speed, gravity=(0.0, 0.0, 0.0), name="parallelogram")
-
-
 @pytest.mark.parametrize("method,rtol,tol", [("dop853", 1e-10, 1e-9), ("dopri5", 1e-8, 1e-7)])
 def test_a_singular_passage_follows_the_exact_motion(method, rtol, tol):
     """An output point exactly at the flat position: the native core meets the vanishing pivot, takes the
     minimum-norm path there, and follows the exact motion through it and the next collinear position."""
     speed, t_end = 5.0, 1.5
-    scene = _parallelogram(speed)
+    scene = parallelogram(speed)
     t_flat = math.radians(120.0) / speed
     native, reference = _run_both(scene, method, {"rtol": rtol}, [t_flat, t_end])
     th = math.radians(60.0) + speed * t_end
@@ -172,12 +150,12 @@ def test_a_singular_passage_follows_the_exact_motion(method, rtol, tol):
 
 
 def test_the_tensions_at_the_flat_position_are_the_minimum_norm_ones():
-    scene = _parallelogram()
+    scene = parallelogram()
     sim = ln.Simulator(scene, method="dop853", rtol=1e-10)
     sim.advance(math.radians(120.0) / 5.0)
     X, U = sim.state.X, sim.state.U
     T = sim.outputs()["T"]
-    np.testing.assert_allclose(T, ln.tensions.reference_tensions(scene, X, U, sim.dyn.forces(X, U)),
+    np.testing.assert_allclose(T, reference_tensions(scene, X, U, sim.dyn.forces(X, U)),
                                rtol=1e-6, atol=1e-6 * np.abs(T).max())
 
 
@@ -188,7 +166,7 @@ def test_a_static_redundant_truss_reports_minimum_norm_tensions():
     sim.advance(0.5)
     np.testing.assert_array_equal(sim.state.X, scene.X0)
     T = sim.outputs()["T"]
-    reference = ln.tensions.reference_tensions(scene, scene.X0, np.zeros_like(scene.X0),
+    reference = reference_tensions(scene, scene.X0, np.zeros_like(scene.X0),
                                                sim.dyn.forces(scene.X0, np.zeros_like(scene.X0)))
     np.testing.assert_allclose(T, reference, rtol=1e-9, atol=1e-9 * np.abs(reference).max())
 

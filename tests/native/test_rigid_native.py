@@ -16,32 +16,19 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import linknet_core as ln
-from linknet_core import builders
+from linknet_core.scene import builders
 from linknet_core.integrators import METHODS
 from linknet_core.native import library as lib
 from linknet_core.native.rigid import NativeRigidIntegrator, RigidFunctions, RigidModel, body_states
-from linknet_core.rigid import free_rigid_bodies
-from linknet_core.simulator import prepare_initial_state
+from linknet_core.structure.bodies import free_rigid_bodies
+from linknet_core.simulator.simulator import prepare_initial_state
+from scene_builders import IRREGULAR, body
 
 ROOT = Path(__file__).resolve().parents[2]
 FN = RigidFunctions(lib.lib)
 G = np.array([0.0, 0.0, -9.81])
-IRREGULAR = [[0.0, 0.0, 0.0], [1.1, 0.1, 0.0], [0.2, 0.9, 0.1], [0.3, 0.2, 0.8]]
 
 # ---- scenes --------------------------------------------------------------------------------------
-
-def body(points, masses, name="body", velocity=(0, 0, 0), spin=(0, 0, 0), offset=(0, 0, 0)):
-    """Masses fully linked (every pair) at ``points + offset``, moving rigidly with ``velocity`` and ``spin``
-    about their centre of mass: (masses, links) entries of a scene dict, names prefixed by ``name``."""
-    P = np.asarray(points, float) + np.asarray(offset, float)
-    m = np.asarray(masses, float)
-    c = (m[:, None] * P).sum(axis=0) / m.sum()
-    U = np.asarray(velocity, float) + np.cross(np.asarray(spin, float), P - c)
-    entries = [{"name": f"{name}{i}", "position": P[i].tolist(), "mass": float(m[i]), "velocity": U[i].tolist()}
-               for i in range(len(m))]
-    links = [{"a": f"{name}{i}", "b": f"{name}{j}"} for i in range(len(m)) for j in range(i + 1, len(m))]
-    return entries, links
-
 
 def scene_of(name, masses, links, **extra):
     return ln.Scene.from_dict({"name": name, "masses": masses, "links": links, **extra})

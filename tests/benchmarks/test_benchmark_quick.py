@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 # the benchmarks package lives at the repository root, beside tests/ (pytest run from anywhere)
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from benchmarks import work_precision as wp
 from benchmarks.index1 import Index1System

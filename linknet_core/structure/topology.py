@@ -18,8 +18,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, breadth_first_order
 
-from .native.ldl import amd_ordering, zero_pivots
-from .scene import Scene
+from linknet_core.native.ldl import amd_ordering, zero_pivots
+from linknet_core.scene.description import Scene
 
 DENSE_RANK_LIMIT = 2500  # links; above it, rank is estimated from the LDL pivots
 # One cut decides "singular" everywhere (rank, self-stresses, minimum-norm solve, hypothesis (35)): an
@@ -225,10 +225,8 @@ def analyse(scene: Scene) -> Structure:
 
 def _dense_rank(scene: Scene, ordering: np.ndarray, rtol: float = SINGULAR_RCOND) -> int:
     """rank(G) = rank(A), A = C M^-1 C^T (M^-1 is positive on the free masses): eigenvalues of the L x L A."""
-    from .tensions import TensionAssembly
-
-    E = (scene.X0[scene.k2] - scene.X0[scene.k1]) / scene.length[:, None]
-    w = np.linalg.eigvalsh(TensionAssembly(scene, ordering).matrix(E).toarray())
+    C = constraint_jacobian(scene, scene.X0).toarray()  # free columns: M^-1 is positive there
+    w = np.linalg.eigvalsh((C * np.repeat(scene.inv_mass[scene.free_indices], 3)) @ C.T)
     return int(np.sum(w > rtol * max(w.max(), 1e-300)))
 
 

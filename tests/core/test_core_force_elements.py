@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import linknet_core as ln
-from linknet_core import builders
+from linknet_core.scene import builders
 
 G = 9.81
 

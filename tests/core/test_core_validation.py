@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 import linknet_core as ln
-from linknet_core import builders
+from linknet_core.scene import builders
 from linknet_core.native.model import NativeModel
-from linknet_core.structure import link_pairs
+from linknet_core.structure.topology import link_pairs
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def base():

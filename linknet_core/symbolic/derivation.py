@@ -96,7 +96,7 @@ class SymbolicTensionSystem:
 
     Parameters
     ----------
-    scene : linknet_core.scene.Scene (or anything with K, L, k1, k2, length, inv_mass, X0)
+    scene : linknet_core.scene.description.Scene (or anything with K, L, k1, k2, length, inv_mass, X0)
     basis : (3, d) array with orthonormal columns spanning the coordinates kept; the identity (d = 3)
         in general, two columns for a planar scene (its plane). Reduced coordinates of a point X are
         ``(X - origin) @ basis``.

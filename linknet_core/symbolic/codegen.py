@@ -4,7 +4,7 @@ For one scene, :func:`compiled_rhs` generates C code for
 
     (X, U, F_input) -> forces F_k (9) -> A(X) (25), B(X, U, F) (26) -> A T = B -> dU/dt (9)
 
-from the symbolic derivation of :mod:`linknet_core.symbolic`, compiles it with the system's C compiler,
+from the symbolic derivation of :mod:`linknet_core.symbolic.derivation`, compiles it with the system's C compiler,
 caches the shared library on disk and calls it through ctypes (no casadi in the call path, no Python
 loop; the caller's (K,3) arrays are passed by pointer, and the gather of the free coordinates, the
 scatter of the accelerations and the input validation happen in the generated code). The kernel
@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 import casadi as ca
 
-from .symbolic import SymbolicTensionSystem
+from linknet_core.symbolic.derivation import SymbolicTensionSystem
 
 __all__ = [
     "CodegenUnavailable",
@@ -58,7 +58,7 @@ CFLAGS = ["-O2", "-fPIC", "-shared"]
 
 
 try:  # the core's error hierarchy, when present
-    from .errors import LinknetError as _Base
+    from linknet_core.errors import LinknetError as _Base
 except ImportError:  # pragma: no cover - symbolic/codegen developed before the core landed
     _Base = ValueError
 

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import SceneError
+from linknet_core.errors import SceneError
 
 _MASS_KEYS = {"name", "mass", "position", "velocity", "fixed", "force", "drag", "quadratic_drag"}
 _LINK_KEYS = {"a", "b", "length", "name"}
@@ -65,7 +65,7 @@ FORCE_ELEMENT_PARAMETERS = 4  # parameters per force element (their meaning is t
 @dataclass(frozen=True)
 class ForceElements:
     """The state-dependent force elements of F_k (9) as one table, the form both force paths take: a kind per
-    element (its formula is in linknet_core.forces and in the native core's stages/forces.c), the masses it
+    element (its formula is in linknet_core.dynamics.forces and in the native core's stages/forces.c), the masses it
     acts on (two columns, -1 where unused, 0-based) and its parameters (FORCE_ELEMENT_PARAMETERS columns,
     their meaning the kind's). Gravity, constant and input forces are not elements: they do not depend on
     the state."""

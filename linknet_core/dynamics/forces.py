@@ -9,7 +9,7 @@ from typing import Callable
 
 import numpy as np
 
-from .scene import Scene
+from linknet_core.scene.description import Scene
 
 
 def scatter_add(K: int, index: np.ndarray, vectors: np.ndarray) -> np.ndarray:

@@ -82,7 +82,7 @@ def test_component_fmus_follow_their_laws_and_refuse_bad_parameters(tmp_path):
     FMU its control law, for random arguments; bad parameters are refused by name."""
     from fmu_harness import build_cached, FMU_CLIENT_LIB
     import linknet_core as ln
-    from linknet_core.forces import element_forces
+    from linknet_core.dynamics.forces import element_forces
 
     spring = build_cached(tmp_path, "spring_damper")
     pd = build_cached(tmp_path, "pd_controller")

@@ -8,7 +8,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from .scene import Scene
+from linknet_core.scene.description import Scene
 
 G_EARTH = (0.0, 0.0, -9.81)
 

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import linknet_core as ln
-from linknet_core import checks
-from linknet_core.symbolic import SymbolicTensionSystem, sign_pattern
+from linknet_core.symbolic import check as checks
+from linknet_core.symbolic.derivation import SymbolicTensionSystem, sign_pattern
 
-MODELS = Path(__file__).resolve().parents[1] / "models"
+MODELS = Path(__file__).resolve().parents[2] / "models"
 SCENES = sorted(MODELS.glob("*.json"))
 
 
@@ -134,7 +134,7 @@ def test_cli_refuses_a_missing_file_and_handles_a_scene_without_links(capsys, tm
 
 
 def test_kernel_line_of_the_checker(tmp_path, monkeypatch):
-    from linknet_core import codegen
+    from linknet_core.symbolic import codegen
 
     monkeypatch.setenv("LINKNET_CACHE_DIR", str(tmp_path))
     scene = ln.load_scene(MODELS / "pendulum.json")

@@ -9,16 +9,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .dynamics import Dynamics
-from .errors import SceneError, SolverError
-from .forces import kinetic_energy
-from .integrators import make_integrator, method_settings
-from .native.integrator import NativeIntegrator
-from .native.model import NativeModel
-from .native.rigid import NativeRigidIntegrator
-from .rigid import RIGID, STATIC, choose_specialisation
-from .scene import Scene
-from .state import State
+from linknet_core.dynamics.equations import Dynamics
+from linknet_core.errors import SceneError, SolverError
+from linknet_core.dynamics.forces import kinetic_energy
+from linknet_core.integrators import make_integrator, method_settings
+from linknet_core.native.integrator import NativeIntegrator
+from linknet_core.native.model import NativeModel
+from linknet_core.native.rigid import NativeRigidIntegrator
+from linknet_core.simulator.specialisation import RIGID, STATIC, choose_specialisation
+from linknet_core.scene.description import Scene
+from linknet_core.state import State
 
 DEFAULT_LENGTH_TOL = 1e-6
 BACKENDS = ("auto", "native", "numpy")  # relative violation of (11) accepted in a scene's initial positions
@@ -106,7 +106,7 @@ class Simulator:
     held constant (zero-order hold), which is exactly what an FMI co-simulation step does.
 
     ``specialise`` (default True): a static scene (0 degrees of freedom) or a scene of free rigid bodies
-    takes the specialised path of :mod:`linknet_core.rigid`, chosen once here and reported in
+    takes the specialised path of :mod:`linknet_core.simulator.specialisation`, chosen once here and reported in
     ``specialisation`` and ``summary()``; False (or an explicit ``backend`` naming a point-mass loop)
     keeps the point-mass path.
     """

@@ -1,4 +1,4 @@
-"""Structure specialisation (linknet_core.rigid): static scenes and free rigid bodies.
+"""Structure specialisation (linknet_core.simulator.specialisation): static scenes and free rigid bodies.
 
 Physics checks: exact rigid rotation, analytic centripetal tensions, conservation laws, measured orders
 against an independent point-mass reference, agreement with the point-mass path under springs, dampers,
@@ -14,31 +14,18 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import linknet_core as ln
-from linknet_core import builders
-from linknet_core.analysis import analyze_scene
+from linknet_core.scene import builders
+from linknet_core.simulator.analysis import analyze_scene
 from linknet_core.integrators import Rattle
 from linknet_core.native.integrator import NativeIntegrator
 from linknet_core.native.rigid import NativeRigidIntegrator
-from linknet_core.rigid import choose_specialisation
-from linknet_core.structure import constraint_jacobian
+from linknet_core.simulator.specialisation import choose_specialisation
+from linknet_core.structure.topology import constraint_jacobian
+from scene_builders import IRREGULAR, body
 
 G = np.array([0.0, 0.0, -9.81])
 
 
-def body(points, masses, name="body", velocity=(0, 0, 0), spin=(0, 0, 0), offset=(0, 0, 0)):
-    """Masses fully linked (every pair) at ``points + offset``, moving rigidly with ``velocity`` and ``spin``
-    about their centre of mass; returns (masses, links) entries of a scene dict, names prefixed by ``name``."""
-    P = np.asarray(points, float) + np.asarray(offset, float)
-    m = np.asarray(masses, float)
-    c = (m[:, None] * P).sum(axis=0) / m.sum()
-    U = np.asarray(velocity, float) + np.cross(np.asarray(spin, float), P - c)
-    entries = [{"name": f"{name}{i}", "position": P[i].tolist(), "mass": float(m[i]), "velocity": U[i].tolist()}
-               for i in range(len(m))]
-    links = [{"a": f"{name}{i}", "b": f"{name}{j}"} for i in range(len(m)) for j in range(i + 1, len(m))]
-    return entries, links
-
-
-IRREGULAR = [[0.0, 0.0, 0.0], [1.1, 0.1, 0.0], [0.2, 0.9, 0.1], [0.3, 0.2, 0.8]]
 
 
 def asymmetric_top(spin=(3.0, -5.0, 7.0), velocity=(0.3, 0.1, -0.2)):

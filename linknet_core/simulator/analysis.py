@@ -13,10 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .dynamics import Dynamics
-from .native.model import NativeModel
-from .rigid import Specialisation, choose_specialisation
-from .scene import Scene
+from linknet_core.dynamics.equations import Dynamics
+from linknet_core.native.model import NativeModel
+from linknet_core.simulator.specialisation import Specialisation, choose_specialisation
+from linknet_core.scene.description import Scene
 
 
 @dataclass
@@ -34,7 +34,7 @@ class RigidityReport:
     self_stresses: int
     condition_A: float
     condition_note: str
-    specialisation: Specialisation  # the path a Simulator takes for this scene (linknet_core.rigid)
+    specialisation: Specialisation  # the path a Simulator takes for this scene (linknet_core.simulator.specialisation)
 
     @property
     def rigid(self) -> bool:

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 import linknet_core as ln
-from linknet_core import codegen
-from linknet_core.checks import sample_states
-from linknet_core.symbolic import SymbolicTensionSystem
+from linknet_core.symbolic import codegen
+from linknet_core.symbolic.check import sample_states
+from linknet_core.symbolic.derivation import SymbolicTensionSystem
 
-MODELS = Path(__file__).resolve().parents[1] / "models"
+MODELS = Path(__file__).resolve().parents[2] / "models"
 SCENES = sorted(MODELS.glob("*.json"))
 
 needs_cc = pytest.mark.skipif(codegen.compiler() is None, reason="no C compiler")

@@ -1,7 +1,7 @@
 """``linknet check SCENE``: the solver's numeric tension system against the symbolic derivation.
 
 Every check compares two independent paths: the numeric assembly of the solver (``Dynamics``:
-index-array assembly of (25)-(26)) and the casadi derivation of :mod:`linknet_core.symbolic`, which
+index-array assembly of (25)-(26)) and the casadi derivation of :mod:`linknet_core.symbolic.derivation`, which
 differentiates the constraints (11) twice in time by AD (12)-(13) and substitutes (9)/(14). The theory
 checks (symmetry, positive semidefiniteness, self-stresses, existence) use the constraint Jacobian G
 obtained by AD of (11), never the solver's own matrices, as the reference.
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .symbolic import SymbolicTensionSystem, sign_pattern
+from linknet_core.symbolic.derivation import SymbolicTensionSystem, sign_pattern
 
 __all__ = ["CheckResult", "run_checks", "add_arguments", "main", "sample_states", "taut_string_scene"]
 
@@ -231,7 +231,7 @@ def taut_string_scene():
     Two links of length 1 between anchors 2 apart: the only position is straight, velocities with the
     middle mass moving sideways satisfy (12) but admit no consistent accelerations (35).
     """
-    from .scene import Scene
+    from linknet_core.scene.description import Scene
 
     return Scene.from_dict({
         "name": "taut_string",
@@ -243,7 +243,7 @@ def taut_string_scene():
 
 
 def _default_dynamics(scene):
-    from .dynamics import Dynamics
+    from linknet_core.dynamics.equations import Dynamics
 
     return Dynamics(scene)
 
@@ -503,7 +503,7 @@ def _check_existence(scene, sym, dyn, states, nulls, factory):
         else:
             n_inconsistent += 1
             if hasattr(dyn, "check_consistent_velocities"):
-                from .errors import ConsistencyError
+                from linknet_core.errors import ConsistencyError
 
                 try:
                     dyn.check_consistent_velocities(X, U)
@@ -534,7 +534,7 @@ def _check_existence(scene, sym, dyn, states, nulls, factory):
     detected = violation > 1e-6 and v12 <= 1e-12
     refused = None
     if hasattr(vdyn, "check_consistent_velocities"):
-        from .errors import ConsistencyError
+        from linknet_core.errors import ConsistencyError
 
         try:
             vdyn.check_consistent_velocities(Xv, Uv)
@@ -584,7 +584,7 @@ def _check_accelerations(scene, sym, dyn, Ffn, states):
 
 def _check_kernel(scene, dyn, states):
     """The casadi-generated compiled kernel (codegen) against the solver's numeric accelerations."""
-    from . import codegen
+    from linknet_core.symbolic import codegen
 
     name = "generated kernel = numeric accelerations"
     try:
@@ -665,7 +665,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args) -> int:
-    from .scene import load_scene
+    from linknet_core.scene.description import load_scene
 
     if args.samples < 1:
         print("linknet check: --samples must be at least 1", file=sys.stderr)
@@ -691,7 +691,7 @@ def main(args) -> int:
     return 1 if failed else 0
 
 
-if __name__ == "__main__":  # python -m linknet_core.checks SCENE
+if __name__ == "__main__":  # python -m linknet_core.symbolic.check SCENE
     p = argparse.ArgumentParser(prog="linknet check")
     add_arguments(p)
     sys.exit(main(p.parse_args()))

@@ -8,7 +8,7 @@ import pytest
 from scipy.special import ellipk
 
 import linknet_core as ln
-from linknet_core import builders
+from linknet_core.scene import builders
 from linknet_core.integrators import METHODS, make_integrator
 
 G = 9.81
@@ -139,7 +139,7 @@ def test_redundant_truss_minimum_norm_tensions_and_unique_forces():
     F = dyn.forces(X, U)
     T = dyn.tensions(X, U)
     # minimum-norm: compare with an independent dense pseudo-inverse of C M^-1 C^T
-    from linknet_core.structure import constraint_jacobian, rank_and_nullspace
+    from linknet_core.structure.topology import constraint_jacobian, rank_and_nullspace
 
     C = constraint_jacobian(scene, X, free_only=False).toarray()
     A = (C * np.repeat(scene.inv_mass, 3)) @ C.T
@@ -175,7 +175,7 @@ def test_wall_reaction_balances_the_weight_of_the_cantilever():
 
 
 def test_solvers_agree_with_dense_reference_at_random_states():
-    from linknet_core.tensions import reference_tensions
+    from linknet_core.dynamics.tensions import reference_tensions
 
     rng = np.random.default_rng(11)
     for name, scene in builders.shipped_scenes().items():

@@ -18,8 +18,8 @@ import scipy.linalg
 import scipy.sparse as sp
 
 from scipy.sparse.linalg import splu
-from .scene import Scene
-from .structure import SINGULAR_RCOND, Structure, link_pairs
+from linknet_core.scene.description import Scene
+from linknet_core.structure.topology import SINGULAR_RCOND, Structure, link_pairs
 
 DENSE_MIN_NORM_LIMIT = 2500  # links; above it the redundant path uses MINRES (min-norm from x0 = 0)
 PIVOT_TOL = 1e-11  # a pivot below this times its diagonal entry means A is singular (as the native core)
@@ -185,7 +185,7 @@ def make_solver(scene: Scene, structure: Structure) -> TensionSolver:
 
 def reference_tensions(scene: Scene, X, U, F) -> np.ndarray:
     """Independent dense path (tests): minimum-norm solution of C M^-1 C^T T = B by SVD least squares."""
-    from .structure import constraint_jacobian
+    from linknet_core.structure.topology import constraint_jacobian
 
     C = constraint_jacobian(scene, X, free_only=False).toarray()
     minv = np.repeat(scene.inv_mass, 3)
