@@ -27,14 +27,16 @@ from linknet_core.ensemble.parameters import FAMILIES, Plan, changes_positions, 
 DEFAULT_OUTPUTS = ("X", "U", "T")
 
 
-def ensemble(scene, vary=None, samples=None, *, t_end: float, method: str | None = None, dt: float | None = None,
-             rtol: float | None = None, atol: float | None = None, n_out: int = 201, output_dt: float | None = None,
-             outputs=DEFAULT_OUTPUTS, tip=None, project_initial: bool | None = None, out=None, client=None,
-             workers: int | None = None, members_per_task: int | None = None, progress=None):
+def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, method: str | None = None,
+             dt: float | None = None, rtol: float | None = None, atol: float | None = None, n_out: int = 201,
+             output_dt: float | None = None, outputs=DEFAULT_OUTPUTS, tip=None, project_initial: bool | None = None,
+             out=None, client=None, workers: int | None = None, members_per_task: int | None = None, progress=None):
     """Run a study: one member per parameter set, each a ``Simulator`` run (or an FMU run through fmpy).
 
-    scene: a :class:`Scene`, a scene JSON file, or a linknet FMU (``.fmu``, from build_fmu.py): then every
-        member runs through the FMU, with the scene it carries.
+    scene: a :class:`Scene` or a scene JSON file.
+    fmu: a linknet FMU (build_fmu.py, pythonfmu or ``--native``) built from that scene: every member then runs
+        through it with fmpy. An FMU built on pythonfmu carries its scene, so ``scene`` may be left out (or be
+        the ``.fmu`` itself); a native FMU needs the scene. A scene the FMU was not built from is refused.
     vary: ``{name: values}``, a full factorial grid (first name slowest). Names are the FMU's: ``M[3]``,
         ``R[1..10]`` (a range set to one value), ``g[3]``, ``F[11,3]`` (constant input force), ``integrator``,
         ``step``, ``tolerance``; library members also take ``X0[k,i]``, ``U0[k,i]``, ``drag[k]``,
@@ -64,7 +66,7 @@ def ensemble(scene, vary=None, samples=None, *, t_end: float, method: str | None
     from linknet_core.ensemble.report import ProgressBar
     from linknet_core.ensemble.store import StudyFile
 
-    base, fmu_bytes, fmu_config, source = load_source(scene)
+    base, fmu_bytes, fmu_config, source = load_source(scene, fmu)
     plan = make_plan(base, vary, samples)
     if not (isinstance(t_end, (int, float)) and math.isfinite(t_end) and t_end > 0):
         raise LinknetError(f"t_end must be a positive finite time, got {t_end!r}")
@@ -139,21 +141,33 @@ def _open(path: Path, keep_in_memory: bool):
     return ds
 
 
-def load_source(scene):
-    """(scene, FMU bytes or None, FMU build settings, description of the source)."""
-    from linknet_core.ensemble.members import fmu_contents
+def load_source(scene, fmu=None):
+    """(scene, FMU bytes or None, the FMU's own integrator/step/tolerance, description of the source).
+    A ``.fmu`` given as the scene is the FMU, with the scene it carries."""
+    from linknet_core.ensemble.members import read_fmu
 
-    if isinstance(scene, Scene):
-        return scene, None, {}, f"scene {scene.name}"
-    path = Path(scene)
-    if path.suffix == ".fmu":
-        try:
-            data = path.read_bytes()
-        except OSError as exc:
-            raise LinknetError(f"cannot read FMU {path}: {exc.strerror}") from None
-        scene_dict, config = fmu_contents(data)
-        return Scene.from_dict(scene_dict, source=str(path)), data, config, str(path)
-    return load_scene(path), None, {}, str(path)
+    if fmu is None and not isinstance(scene, Scene) and scene is not None and str(scene).endswith(".fmu"):
+        scene, fmu = None, scene
+    if fmu is None:
+        if scene is None:
+            raise LinknetError("give a scene (a Scene or a scene JSON file), or an FMU")
+        return (scene, None, {}, f"scene {scene.name}") if isinstance(scene, Scene) else \
+            (load_scene(scene), None, {}, str(scene))
+    try:
+        data = Path(fmu).read_bytes()
+    except OSError as exc:
+        raise LinknetError(f"cannot read FMU {fmu}: {exc.strerror}") from None
+    facts = read_fmu(data, str(fmu))
+    if scene is None:
+        if facts.scene is None:
+            raise LinknetError(f"{fmu} carries no scene (a native FMU): give the scene it was built from too, "
+                               f"e.g. ln.ensemble('models/NAME.json', fmu='{fmu}') or linknet ensemble "
+                               f"models/NAME.json --fmu {fmu}")
+        base = Scene.from_dict(facts.scene, source=str(fmu))
+    else:
+        base = scene if isinstance(scene, Scene) else load_scene(scene)
+    facts.check_matches(base, str(fmu))
+    return base, data, facts.defaults(), str(fmu)
 
 
 def _output_times(t_end: float, n_out: int, output_dt: float | None) -> np.ndarray:

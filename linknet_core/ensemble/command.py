@@ -1,7 +1,7 @@
 """``linknet ensemble``: a parameter study or Monte Carlo run from the command line.
 
     linknet ensemble models/chain_10.json --vary M[3]=0.5:2:10 --vary R[1..10]=0.09:0.11:5 --t-end 2 \\
-        --out study.nc [--scheduler tcp://host:8786] [--plot study.png]
+        --out study.nc [--scheduler tcp://host:8786] [--plot study.png] [--fmu chain_10.fmu]
 """
 from __future__ import annotations
 
@@ -19,8 +19,10 @@ _DISTRIBUTIONS = {
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", help="scene JSON file, or a linknet FMU (.fmu, from build_fmu.py) to run every member "
-                                 "through")
+    p.add_argument("scene", nargs="?", help="scene JSON file (with --fmu, the scene the FMU was built from; an FMU "
+                                            "built on pythonfmu carries its scene, and may stand here itself)")
+    p.add_argument("--fmu", metavar="FMU", help="run every member through this linknet FMU (build_fmu.py, pythonfmu "
+                                                "or --native) with fmpy")
     p.add_argument("--vary", action="append", default=[], metavar="NAME=VALUES",
                    help="a grid axis: M[3]=0.5:2:10 (start:stop:count, both ends included), R[1..10]=0.09,0.1 "
                         "(a list; a..b sets a range of indices to the same value), g[3]=-1.62, F[11,3]=0:5:6 "
@@ -115,7 +117,7 @@ def cmd_ensemble(args) -> int:
 
     if args.plot and not args.plot.lower().endswith(".png"):
         raise LinknetError(f"--plot {args.plot}: the plot is a PNG file")
-    scene = load_source(args.scene)[0]
+    scene = load_source(args.scene, args.fmu)[0]
     vary = _vary(args.vary, scene)
     samples = _samples(args, scene)
     if not vary and not samples:
@@ -123,8 +125,8 @@ def cmd_ensemble(args) -> int:
     outputs = [] if args.outputs.strip().lower() == "none" else [o.strip() for o in args.outputs.split(",")
                                                                   if o.strip()]
     try:
-        ds = ensemble(args.scene, vary=vary, samples=samples, t_end=args.t_end, method=args.method, dt=args.dt,
-                      rtol=args.rtol, atol=args.atol, n_out=args.n_out, outputs=outputs, tip=args.tip,
+        ds = ensemble(args.scene, fmu=args.fmu, vary=vary, samples=samples, t_end=args.t_end, method=args.method,
+                      dt=args.dt, rtol=args.rtol, atol=args.atol, n_out=args.n_out, outputs=outputs, tip=args.tip,
                       project_initial=args.project_initial, out=args.out, client=args.scheduler,
                       workers=args.workers, members_per_task=args.members_per_task, progress=not args.no_progress)
     except KeyboardInterrupt:

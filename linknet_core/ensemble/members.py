@@ -327,14 +327,54 @@ class _OutputMap:
         return X, U, T, Freact
 
 
-def fmu_contents(fmu_bytes: bytes) -> tuple[dict, dict]:
-    """The scene an FMU built by build_fmu.py carries, and its build settings (integrator, step, tolerance)."""
+@dataclass(frozen=True)
+class FmuFacts:
+    """What a study needs to know of an FMU before running it: its variables' start values (parameters, the
+    integrator's name) and, for an FMU built by build_fmu.py on pythonfmu, the scene it carries (a native FMU
+    carries none)."""
+
+    starts: dict  # variable name -> start value (float, or str for the integrator)
+    scene: dict | None
+
+    def defaults(self) -> dict:
+        """The FMU's own integrator, step and tolerance."""
+        return {name: self.starts[name] for name in ("integrator", "step", "tolerance") if name in self.starts}
+
+    def check_matches(self, scene: Scene, source: str) -> None:
+        """Refuse a scene the FMU was not built from: its masses, lengths and gravity must be the FMU's
+        parameter start values."""
+        expected = {f"M[{k + 1}]": scene.mass[k] for k in scene.free_indices}
+        expected.update({f"R[{l + 1}]": scene.length[l] for l in range(scene.L)})
+        expected.update({f"g[{i + 1}]": scene.gravity[i] for i in range(3)})
+        extra = sorted(n for n in self.starts if n[:2] in ("M[", "R[") and n not in expected)
+        for name, value in expected.items():
+            if name not in self.starts or not np.isclose(self.starts[name], value, rtol=1e-12, atol=0):
+                found = f"is {self.starts[name]:g}" if name in self.starts else "does not exist"
+                raise LinknetError(f"{source} was not built from scene {scene.name}: its {name} {found}, the scene's "
+                                   f"is {value:g}; give the scene the FMU was built from")
+        if extra:
+            raise LinknetError(f"{source} was not built from scene {scene.name}: it has {extra[0]}, the scene has no "
+                               "such mass or link")
+
+
+def read_fmu(fmu_bytes: bytes, source: str) -> FmuFacts:
+    """Start values from modelDescription.xml, and resources/linknet_scene.json when the FMU has one."""
     import io
+    import xml.etree.ElementTree as ET
 
     try:
         with zipfile.ZipFile(io.BytesIO(fmu_bytes)) as z:
-            scene = json.loads(z.read("resources/linknet_scene.json"))
-            config = json.loads(z.read("resources/linknet_fmu.json"))
-    except (zipfile.BadZipFile, KeyError, json.JSONDecodeError) as exc:
-        raise LinknetError(f"not a linknet FMU (built by build_fmu.py from a scene): {exc}") from None
-    return scene, config
+            root = ET.fromstring(z.read("modelDescription.xml"))
+            scene = json.loads(z.read("resources/linknet_scene.json")) if "resources/linknet_scene.json" in \
+                z.namelist() else None
+    except (zipfile.BadZipFile, KeyError, ET.ParseError, json.JSONDecodeError) as exc:
+        raise LinknetError(f"{source} is not an FMU: {exc}") from None
+    starts = {}
+    for variable in root.iter("ScalarVariable"):
+        for kind, convert in (("Real", float), ("String", str)):
+            value = variable.find(kind)
+            if value is not None and value.get("start") is not None:
+                starts[variable.get("name")] = convert(value.get("start"))
+    if not any(name.startswith("R[") or name.startswith("M[") for name in starts):
+        raise LinknetError(f"{source} is not a linknet network FMU (it has no parameters M[k], R[l])")
+    return FmuFacts(starts, scene)
