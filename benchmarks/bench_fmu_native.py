@@ -233,7 +233,8 @@ def report(results: dict) -> None:
                   f"{g['core_all_inputs_ns']:.0f} ({g['n_inputs']}) | {g['fmu_setreal_dostep_all_inputs_ns']:.0f} | "
                   f"{g['fmu_setreal_dostep_all_inputs_ns'] - g['core_all_inputs_ns']:+.0f} | {g['identical']} |")
     print("\nFrom the C host (dlopen), per setReal(1 input) + doStep, against Simulator.advance in Python (us):\n")
-    print("| scene | RATTLE steps | native FMU | pythonfmu FMU | Simulator.advance | pythonfmu over Simulator.advance |")
+    print("| scene | RATTLE steps | native FMU | pythonfmu FMU | Simulator.advance "
+          "| pythonfmu over Simulator.advance |")
     print("|---|---|---|---|---|---|")
     for name, r in results["scenes"].items():
         for label in ("1 step", "10 steps"):

@@ -179,8 +179,8 @@ def struct_initializer(w: CWriter, struct, lengths: dict, skip: set, hint: str) 
                 raise NativeBuildError(f"{type(struct).__name__}.{name}: pointer to {target} not handled")
             parts.append(f".{name} = {ref}")
         elif ctype is ctypes.c_void_p:
-            raise NativeBuildError(f"{type(struct).__name__}.{name}: an opaque pointer fmu_src/native/build.py does not "
-                                   "know how to rebuild (the core's struct changed: teach build.py)")
+            raise NativeBuildError(f"{type(struct).__name__}.{name}: an opaque pointer fmu_src/native/build.py does "
+                                   "not know how to rebuild (the core's struct changed: teach build.py)")
         else:
             raise NativeBuildError(f"{type(struct).__name__}.{name}: field type {ctype} not handled")
     return "{\n    " + ",\n    ".join(parts) + "\n}"
@@ -351,7 +351,9 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
     .variables = variables,
 }};
 
-const fmu_model_info lnfmu_info = {{{c_string(cfg['model_identifier'])}, LNFMU_GUID, LNFMU_FINGERPRINT, {layout.n_real}, 1}};
+const fmu_model_info lnfmu_info = {{
+    {c_string(cfg['model_identifier'])}, LNFMU_GUID, LNFMU_FINGERPRINT, {layout.n_real}, 1
+}};
 """
     out.append(scene_init)
     facts = dict(specialisation=kind, solver=int(model.solver), K=K, L=L, bodies=n_bodies,
@@ -527,11 +529,10 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
     if not (1e-15 <= tolerance < 0.1):
         raise NativeBuildError(f"tolerance = {tolerance!r} must lie in [1e-15, 0.1)")
     src = core_source_dir()
+    import linknet_core as ln
     try:
         scene_c, facts = scene_source(scene, cfg, layout, src)
-    except NativeBuildError:
-        raise
-    except Exception as e:  # a scene the library itself refuses (e.g. an inconsistent initial state)
+    except ln.LinknetError as e:  # a scene the library itself refuses (e.g. inconsistent initial velocities)
         raise NativeBuildError(f"{scene.name}: {e}") from None
     ident = cfg["model_identifier"]
     with tempfile.TemporaryDirectory(prefix="linknet_native_fmu_") as tmp:
