@@ -23,6 +23,15 @@ _MASS_KEYS = {"name", "mass", "position", "velocity", "fixed", "force", "drag", 
 _LINK_KEYS = {"a", "b", "length", "name"}
 _SPRING_KEYS = {"a", "b", "stiffness", "rest_length", "damping", "name"}
 _SCENE_KEYS = {"name", "description", "gravity", "masses", "links", "springs", "options"}
+# "options": key -> what its value must be (each is a JSON boolean)
+_OPTION_KEYS = {"project_initial_positions": "a JSON boolean (true or false)"}
+
+# Largest magnitude of any number in a scene (SI units). The physics multiplies up to three of them (the energy
+# M |U|^2, a force M g on a lever X): below 1e100 every such product stays far from the 1.8e308 where floats
+# overflow, so a scene is refused here, naming the field, rather than failing later with numpy overflow warnings
+# and a misleading solver error. Positive quantities (masses, lengths) must also be at least 1/MAX_MAGNITUDE, as
+# the solver divides by them.
+MAX_MAGNITUDE = 1e100
 
 
 def _frozen(array) -> np.ndarray:
@@ -244,30 +253,53 @@ def load_scene(path: str | Path) -> Scene:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise SceneError(f"{path}: not valid JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise SceneError(f"{path}: a scene must be a JSON object {{...}}, got a JSON {_json_type(data)}")
     data.setdefault("name", path.stem)
     return Scene.from_dict(data, source=str(path))
 
 
+def _json_type(value) -> str:
+    """The JSON name of a parsed value's type, for messages."""
+    if isinstance(value, bool):
+        return "boolean"
+    if value is None:
+        return "null"
+    return {dict: "object", list: "array", str: "string", int: "number", float: "number"}.get(type(value),
+                                                                                        type(value).__name__)
+
+
 # ---- parsing and validation ----------------------------------------------------------------------
+
+def _is_number(value) -> bool:
+    """A JSON number (a bool is not one, although Python counts it as an int; nor is a numeric string)."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
 
 def _vector(value, what: str, source: str, default=None) -> np.ndarray:
     if value is None:
         if default is None:
             raise SceneError(f"{source}: {what} is missing")
         return np.array(default, float)
-    try:
-        vec = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise SceneError(f"{source}: {what} must be a list of 3 numbers, got {value!r}") from None
-    if vec.shape != (3,):
-        raise SceneError(f"{source}: {what} must have 3 components, got {value!r}")
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        raise SceneError(f"{source}: {what} must be a list of 3 numbers, got {value!r}")
+    for x in value:
+        if not _is_number(x):
+            raise SceneError(f"{source}: {what} must be a list of 3 numbers, got {value!r} "
+                             f"({x!r} is a JSON {_json_type(x)})")
+    vec = np.array([float(x) for x in value])
     if not np.all(np.isfinite(vec)):
         raise SceneError(f"{source}: {what} must be finite (no NaN or infinity), got {value!r}")
+    if np.any(np.abs(vec) > MAX_MAGNITUDE):
+        raise SceneError(f"{source}: {what} = {value!r} is too large: every component must have magnitude "
+                         f"<= {MAX_MAGNITUDE:g} (beyond it the computation would overflow)")
     return vec
 
 
 def _number(value, what: str, source: str, *, positive=False, nonnegative=False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if not _is_number(value):
         raise SceneError(f"{source}: {what} must be a number, got {value!r}")
     x = float(value)
     if not math.isfinite(x):
@@ -276,7 +308,29 @@ def _number(value, what: str, source: str, *, positive=False, nonnegative=False)
         raise SceneError(f"{source}: {what} must be positive, got {value!r}")
     if nonnegative and x < 0:
         raise SceneError(f"{source}: {what} must not be negative, got {value!r}")
+    if abs(x) > MAX_MAGNITUDE:
+        raise SceneError(f"{source}: {what} = {value!r} is too large: its magnitude must be <= {MAX_MAGNITUDE:g} "
+                         "(beyond it the computation would overflow)")
+    if positive and x < 1.0 / MAX_MAGNITUDE:
+        raise SceneError(f"{source}: {what} = {value!r} is too small: it must be >= {1.0 / MAX_MAGNITUDE:g} "
+                         "(the solver divides by it)")
     return x
+
+
+def _boolean(value, what: str, source: str) -> bool:
+    """A JSON boolean: "false" (a string) or 0 would silently mean true or false."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise SceneError(f"{source}: {what} must be a JSON boolean (true or false), got {value!r} "
+                         f"(a JSON {_json_type(value)})")
+    return bool(value)
+
+
+def _text(value, what: str, source: str, default: str) -> str:
+    if value is None and default is not None:
+        return default
+    if not isinstance(value, str):
+        raise SceneError(f"{source}: {what} must be a string, got {value!r} (a JSON {_json_type(value)})")
+    return value
 
 
 def _check_keys(entry: dict, allowed: set, what: str, source: str) -> None:
@@ -287,7 +341,7 @@ def _check_keys(entry: dict, allowed: set, what: str, source: str) -> None:
 
 def _parse_scene(data: dict, source: str) -> Scene:
     if not isinstance(data, dict):
-        raise SceneError(f"{source}: a scene must be a JSON object")
+        raise SceneError(f"{source}: a scene must be a JSON object {{...}}, got a JSON {_json_type(data)}")
     _check_keys(data, _SCENE_KEYS, "the scene", source)
     masses = data.get("masses")
     if not isinstance(masses, list) or not masses:
@@ -310,13 +364,13 @@ def _parse_scene(data: dict, source: str) -> Scene:
         if not isinstance(entry, dict):
             raise SceneError(f"{source}: mass {k + 1} must be an object")
         _check_keys(entry, _MASS_KEYS, f"mass {k + 1}", source)
-        name = str(entry.get("name", f"m{k + 1}"))
+        name = _text(entry.get("name"), f"mass {k + 1} name", source, f"m{k + 1}")
         label = f'mass {k + 1} ("{name}")'
         if name in index_of:
             raise SceneError(f"{source}: {label} repeats the name of mass {index_of[name] + 1}; names must be unique")
         index_of[name] = k
         names.append(name)
-        fixed[k] = bool(entry.get("fixed", False))
+        fixed[k] = _boolean(entry.get("fixed", False), f"{label} fixed", source)
         X0[k] = _vector(entry.get("position"), f"{label} position", source)
         if fixed[k]:
             mass[k] = math.inf
@@ -384,7 +438,7 @@ def _parse_scene(data: dict, source: str) -> Scene:
                 raise SceneError(f"{source}: {label} has no length and its ends coincide, so the default "
                                  "(initial distance) would be zero")
             length[l] = distance
-        link_names.append(str(entry.get("name", f"l{l + 1}")))
+        link_names.append(_text(entry.get("name"), f"{label} name", source, f"l{l + 1}"))
 
     springs_data = data.get("springs", [])
     if not isinstance(springs_data, list):
@@ -404,18 +458,20 @@ def _parse_scene(data: dict, source: str) -> Scene:
         damping[s] = _number(entry.get("damping", 0.0), f"spring {s + 1} damping", source, nonnegative=True)
         d0 = float(np.linalg.norm(X0[sb[s]] - X0[sa[s]]))
         rest[s] = _number(entry.get("rest_length", d0), f"spring {s + 1} rest_length", source, nonnegative=True)
-        spring_names.append(str(entry.get("name", f"s{s + 1}")))
+        spring_names.append(_text(entry.get("name"), f"spring {s + 1} name", source, f"s{s + 1}"))
 
     gravity = _vector(data.get("gravity"), "gravity", source, default=[0, 0, 0])
     options = data.get("options", {})
     if not isinstance(options, dict):
         raise SceneError(f"{source}: 'options' must be an object")
+    _check_keys(options, set(_OPTION_KEYS), "'options'", source)
+    options = {key: _boolean(value, f"options {key!r}", source) for key, value in options.items()}
     if not np.any(~fixed):
         raise SceneError(f"{source}: every mass is anchored; there is nothing to simulate")
 
     return Scene(
-        name=str(data.get("name", "scene")),
-        description=str(data.get("description", "")),
+        name=_text(data.get("name"), "the scene's name", source, "scene"),
+        description=_text(data.get("description"), "the scene's description", source, ""),
         mass_names=tuple(names),
         mass=_frozen(mass),
         fixed=_frozen_bool(fixed),
