@@ -22,6 +22,7 @@ from linknet_core.scene.description import Scene
 from linknet_core.structure.topology import SINGULAR_RCOND, Structure, link_pairs
 
 DENSE_MIN_NORM_LIMIT = 2500  # links; above it the redundant path uses MINRES (min-norm from x0 = 0)
+DENSE_FACTOR_LIMIT = 200  # links; up to here the reference factors A densely
 PIVOT_TOL = 1e-11  # a pivot below this times its diagonal entry means A is singular (as the native core)
 
 
@@ -93,8 +94,9 @@ class TensionSolver:
 
 
 class SparseSolver(TensionSolver):
-    """Chains, trees and general graphs: a sparse factorisation of the positive definite A in the structure's
-    elimination order (SuperLU without pivoting, so its pivots are those of LDL^T).
+    """Chains, trees and general graphs: a factorisation of the positive definite A in the structure's
+    elimination order without pivoting, so that its pivots are those of LDL^T: dense Cholesky up to
+    DENSE_FACTOR_LIMIT links (cheaper than a sparse factorisation's set-up there), SuperLU above.
 
     If a pivot falls below PIVOT_TOL times its diagonal entry (the configuration has become singular, e.g. a
     loop passing through a flat position) the solver switches to the minimum-norm path for that evaluation,
@@ -112,11 +114,18 @@ class SparseSolver(TensionSolver):
 
     def factor(self, E: np.ndarray) -> None:
         order = self.assembly.ordering
-        A = self.assembly.matrix(E)[order][:, order].tocsc()
+        A = self.assembly.matrix(E)[order][:, order]
+        diagonal = np.abs(A.diagonal())
         try:
-            self._lu = splu(A, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-            self._singular = not np.all(self._lu.U.diagonal() > PIVOT_TOL * np.abs(A.diagonal()))
-        except RuntimeError:  # an exactly zero pivot
+            if self.scene.L <= DENSE_FACTOR_LIMIT:
+                self._lu = None
+                self._cholesky = scipy.linalg.cho_factor(A.toarray(), lower=True, check_finite=False)
+                pivots = np.diagonal(self._cholesky[0]) ** 2
+            else:
+                self._lu = splu(A.tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+                pivots = self._lu.U.diagonal()
+            self._singular = not np.all(pivots > PIVOT_TOL * diagonal)
+        except (RuntimeError, np.linalg.LinAlgError):  # a zero or negative pivot
             self._singular = True
         if self._singular:
             self.singular_events += 1
@@ -129,7 +138,9 @@ class SparseSolver(TensionSolver):
             return self._fallback.solve(b)
         order = self.assembly.ordering
         out = np.empty(b.shape[0])
-        out[order] = self._lu.solve(np.ascontiguousarray(b[order], dtype=float))
+        b_ordered = np.ascontiguousarray(b[order], dtype=float)
+        out[order] = (self._lu.solve(b_ordered) if self._lu is not None
+                      else scipy.linalg.cho_solve(self._cholesky, b_ordered, check_finite=False))
         return out
 
 

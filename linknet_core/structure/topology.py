@@ -12,6 +12,7 @@ therefore tells the solver what it faces:
 """
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -178,8 +179,23 @@ def planar_normal(scene: Scene, tol: float = PLANE_TOL) -> np.ndarray | None:
     return None
 
 
+_analysed: dict[int, tuple[weakref.ref, Structure]] = {}
+
+
 def analyse(scene: Scene) -> Structure:
-    """Classify the scene once, from its topology and its initial configuration."""
+    """Classify the scene once, from its topology and its initial configuration. A scene is immutable, so
+    its analysis is kept while the scene lives: every Simulator, Dynamics and native model of the same scene
+    (an ensemble's members, a reset FMU) shares it."""
+    key = id(scene)
+    kept = _analysed.get(key)
+    if kept is not None and kept[0]() is scene:
+        return kept[1]
+    structure = _analyse(scene)
+    _analysed[key] = (weakref.ref(scene, lambda _, key=key: _analysed.pop(key, None)), structure)
+    return structure
+
+
+def _analyse(scene: Scene) -> Structure:
     graph, node_of_end, n_free = _cut_graph(scene)
     n_nodes = graph.shape[0]
     n_comp, _ = connected_components(graph, directed=False)
