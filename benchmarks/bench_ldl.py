@@ -3,7 +3,7 @@
 A RATTLE step of a general scene does one numeric factorisation of A and a few solves with it (the 100 x 100
 net: 1 and 2, counted on the native core's calls), so the table gives factor, solve and factor + 6 solves
 (the upper end of 3-8 solves per step). Scenes: a 100 x 100 net (10000 masses, 19800 links) in AMD's order
-(what linknet_core.structure chooses) and in the order chosen before AMD (SuperLU's multiple minimum degree on
+(what linknet_core.structure.topology chooses) and in the order chosen before AMD (SuperLU's multiple minimum degree on
 A + A^T or reverse Cuthill-McKee, whichever fills less, reproduced here), models/net_10x10.json,
 models/chain_100.json and a binary tree hanging from one anchor (both leaves-first, no fill). A's entries are
 those of a random configuration near the initial one. Times are the best of several repeats of CPU time of
@@ -24,10 +24,10 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from linknet_core import builders
+from linknet_core.scene import builders
 from linknet_core.native.ldl import NativeLDL, vector_kernels
-from linknet_core.scene import Scene, load_scene
-from linknet_core.structure import analyse, link_pairs
+from linknet_core.scene.description import Scene, load_scene
+from linknet_core.structure.topology import analyse, link_pairs
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 

@@ -39,7 +39,7 @@ def declare(lib: ctypes.CDLL) -> ctypes.CDLL:
 
 
 def _package_library() -> ctypes.CDLL:
-    from .library import lib
+    from linknet_core.native.library import lib
 
     return declare(lib)
 
