@@ -126,6 +126,18 @@ def local_cluster(workers: int):
     return cluster, Client(cluster)
 
 
+def import_seconds() -> float:
+    """What a cold worker imports to run a member (the study's module, linknet_core with its native library,
+    numpy, scipy, Dask's worker side), in a fresh interpreter: best of 3."""
+    import subprocess
+    import sys
+
+    code = ("import time; t = time.perf_counter(); import linknet_core.ensemble.members; "
+            "print(time.perf_counter() - t)")
+    return min(float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                                    cwd=str(ROOT)).stdout) for _ in range(3))
+
+
 def scheduler_seconds_per_task(client, n=2000) -> float:
     """Wall time per empty task through submit, scheduling, run and gather (the floor of any task)."""
     client.gather(client.map(int, range(50), pure=False))  # warm
@@ -183,7 +195,11 @@ def main(argv=None) -> int:
     bare = results["bare_member_s"]
     # both clusters alive, studies alternating between them: the machine's load (other jobs on the shared
     # cores) moves over minutes, so each cluster keeps its best of the rounds
-    clusters = {workers: local_cluster(workers) for workers in (1, 2)}
+    started = time.perf_counter()
+    clusters = {1: local_cluster(1)}
+    results["cluster_start_1_s"] = time.perf_counter() - started  # scheduler, one worker process, its imports
+    clusters[2] = local_cluster(2)
+    results["worker_import_s"] = import_seconds()
     try:
         with tempfile.TemporaryDirectory() as folder:
             for workers, (_, client) in clusters.items():
@@ -210,6 +226,9 @@ def main(argv=None) -> int:
     results["ceiling_2_per_s"] = min(2 / two["worker_cpu_member_s"],
                                      2 / (two["worker_cpu_member_s"] + two["client_cpu_member_s"]))
     results["overhead_member_s"] = one["wall_s"] / one["members"] - bare
+    # in CPU time, which other jobs on the machine do not inflate: what a member costs beyond its bare run
+    results["overhead_worker_cpu_member_s"] = one["worker_cpu_member_s"] - results["bare_cpu_member_s"]
+    results["bookkeeping_cpu_member_s"] = results["study_cpu_member_s"] - results["bare_cpu_member_s"]
     results["load_after"] = os.getloadavg()[0]
 
     if args.quick:  # correctness of what was timed: one member against its serial run
@@ -237,9 +256,15 @@ def main(argv=None) -> int:
     print(f"  scaling efficiency 1 -> 2 workers: {results['scaling_efficiency'] * 100:.1f} % (CPU-time ceilings: "
           f"{results['ceiling_1_per_s']:.0f}/s on 1 worker, {results['ceiling_2_per_s']:.0f}/s on 2 workers sharing "
           f"these 2 cores with the client: {ceiling_efficiency * 100:.0f} %)")
-    print(f"  overhead per member over the bare run (1 worker, wall): {results['overhead_member_s'] * ms:.2f} ms")
+    print(f"  overhead per member over the bare run, CPU time (1 worker): "
+          f"{results['overhead_worker_cpu_member_s'] * ms:.2f} ms in the worker (the study's own part "
+          f"{results['bookkeeping_cpu_member_s'] * ms:.2f} ms, the rest Dask's), "
+          f"{one['client_cpu_member_s'] * ms:.2f} ms in client and scheduler; wall time (load-dependent): "
+          f"{results['overhead_member_s'] * ms:.2f} ms")
     print(f"  cold start to first result (ln.ensemble with client=None, 1 worker): {cold['first_result_s']:.2f} s "
           f"(of which the member itself {cold['worker_member_s'] * ms:.1f} ms)")
+    print(f"  of which: a LocalCluster with 1 worker starts in {results['cluster_start_1_s']:.2f} s; a fresh "
+          f"interpreter imports what a member needs in {results['worker_import_s']:.2f} s")
     print(f"  scheduler round trip per empty task (2 workers): {results['scheduler_task_s'] * ms:.3f} ms")
     print(f"  client, per member written to netCDF (X, U, T, 122 kB): {results['client_write_member_s'] * ms:.3f} ms")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
