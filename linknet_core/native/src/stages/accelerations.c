@@ -50,33 +50,15 @@ static int chain_tensions(const ln_model *m, ln_data *d, const double *X, const 
 {
     const ln_int L = m->L;
     const ln_int *order = m->chain_order;
-    double *w = d->work, *sub = d->chain_sub, *Dinv = d->chain_Dinv;
+    double *w = d->work;
+    const double *sub = d->chain_sub, *Dinv = d->chain_Dinv;
     int singular = 0;
     for (ln_int i = 0; i < L; i++) {
         const ln_int l = order[i];
         double rhs;
         const double sq = link_terms(m, X, U, F, l, E, &rhs);
-        if (refactor) {
-            const double diag = m->chain_diag_weight[i] * sq;
-            double pivot = diag;
-            const double wt = m->chain_off_weight[i];
-            if (wt != 0.0) {
-                double off = 0.0;
-                for (int e = 0; e < DIM; e++) off += E[order[i - 1] * DIM + e] * E[l * DIM + e];
-                off *= wt;
-                const double mult = off * Dinv[i - 1];
-                sub[i] = mult;
-                pivot -= mult * off;
-            } else {
-                sub[i] = 0.0;
-            }
-            if (pivot > m->pivot_tol * fabs(diag)) {
-                Dinv[i] = 1.0 / pivot;
-            } else {
-                Dinv[i] = 0.0;
-                singular = 1;
-            }
-        }
+        if (refactor && !chain_pivot(m, d, i, m->chain_diag_weight[i] * sq, i > 0 ? chain_off(m, E, i) : 0.0))
+            singular = 1;
         if (i > 0) rhs -= sub[i] * w[i - 1];
         w[i] = rhs;
     }

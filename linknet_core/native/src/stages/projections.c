@@ -59,6 +59,26 @@ static void record_failure(const ln_model *m, ln_data *d, const double *Xc, ln_i
     d->fail_iterations = iterations;
 }
 
+/* The chain's back substitution with the multipliers applied as soon as each is known:
+   V += scale M^-1 C(E)^T x, x = A^-1 w (w forward-substituted already). */
+static inline void chain_back_substitution(const ln_model *m, const ln_data *d, const double *w, const double *E,
+                                           double scale, double *V)
+{
+    const ln_int L = m->L;
+    const ln_int *order = m->chain_order;
+    const double *sub = d->chain_sub, *Dinv = d->chain_Dinv;
+    double x = 0.0;
+    for (ln_int i = L - 1; i >= 0; i--) {
+        x = (i == L - 1) ? w[i] * Dinv[i] : w[i] * Dinv[i] - sub[i + 1] * x;
+        const ln_int l = order[i], a = m->k1[l], b = m->k2[l];
+        const double fa = scale * x * m->inv_m[a], fb = scale * x * m->inv_m[b];
+        for (int e = 0; e < DIM; e++) {
+            V[a * DIM + e] += fa * E[l * DIM + e];
+            V[b * DIM + e] -= fb * E[l * DIM + e];
+        }
+    }
+}
+
 /* The chain's Newton iteration: the residuals of (11), the convergence test and the forward substitution in
    one sweep; the back substitution, each multiplier applied as soon as it is known, in the other. */
 static int project_positions_chain(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
@@ -67,7 +87,7 @@ static int project_positions_chain(const ln_model *m, ln_data *d, double *Xc, co
     const ln_int L = m->L;
     const ln_int *order = m->chain_order;
     double *w = d->work, *inv_scale = d->scale;
-    const double *sub = d->chain_sub, *Dinv = d->chain_Dinv;
+    const double *sub = d->chain_sub;
     residual_floor(m, Xc, tol, inv_scale);
     double previous = 1e300;
     for (ln_int it = 0; it < max_iter; it++) {
@@ -84,16 +104,7 @@ static int project_positions_chain(const ln_model *m, ln_data *d, double *Xc, co
         if (worst <= 1.0) return LN_OK;
         if (!(worst < 1e300) || (it > 2 && worst > 0.3 * previous)) break;
         previous = worst;
-        double x = 0.0;
-        for (ln_int i = L - 1; i >= 0; i--) {
-            x = (i == L - 1) ? w[i] * Dinv[i] : w[i] * Dinv[i] - sub[i + 1] * x;
-            const ln_int l = order[i], a = m->k1[l], b = m->k2[l];
-            const double fa = x * m->inv_m[a], fb = x * m->inv_m[b];
-            for (int e = 0; e < DIM; e++) {
-                Xc[a * DIM + e] += fa * E_dir[l * DIM + e];
-                Xc[b * DIM + e] -= fb * E_dir[l * DIM + e];
-            }
-        }
+        chain_back_substitution(m, d, w, E_dir, 1.0, Xc);
     }
     return LN_PROJECTION_FAILED;
 }
@@ -271,7 +282,7 @@ static int project_velocities_chain(const ln_model *m, ln_data *d, const double 
 {
     const ln_int L = m->L;
     const ln_int *order = m->chain_order;
-    double *w = d->work, *sub = d->chain_sub, *Dinv = d->chain_Dinv;
+    double *w = d->work;
     int singular = 0;
     for (ln_int i = 0; i < L; i++) {
         const ln_int l = order[i], a = m->k1[l], b = m->k2[l];
@@ -283,39 +294,12 @@ static int project_velocities_chain(const ln_model *m, ln_data *d, const double 
             sq += u * u;
             rhs += u * (U[a * DIM + e] - U[b * DIM + e]);
         }
-        const double diag = m->chain_diag_weight[i] * sq;
-        double pivot = diag;
-        const double wt = m->chain_off_weight[i];
-        if (wt != 0.0) {
-            double off = 0.0;
-            for (int e = 0; e < DIM; e++) off += E[order[i - 1] * DIM + e] * E[l * DIM + e];
-            off *= wt;
-            const double mult = off * Dinv[i - 1];
-            sub[i] = mult;
-            pivot -= mult * off;
-            rhs -= mult * w[i - 1];
-        } else {
-            sub[i] = 0.0;
-        }
-        if (pivot > m->pivot_tol * fabs(diag)) {
-            Dinv[i] = 1.0 / pivot;
-        } else {
-            Dinv[i] = 0.0;
-            singular = 1;
-        }
+        if (!chain_pivot(m, d, i, m->chain_diag_weight[i] * sq, i > 0 ? chain_off(m, E, i) : 0.0)) singular = 1;
+        if (i > 0) rhs -= d->chain_sub[i] * w[i - 1];
         w[i] = rhs;
     }
     if (singular) return 1;
-    double x = 0.0;
-    for (ln_int i = L - 1; i >= 0; i--) {
-        x = (i == L - 1) ? w[i] * Dinv[i] : w[i] * Dinv[i] - sub[i + 1] * x;
-        const ln_int l = order[i], a = m->k1[l], b = m->k2[l];
-        const double fa = x * m->inv_m[a], fb = x * m->inv_m[b];
-        for (int e = 0; e < DIM; e++) {
-            U[a * DIM + e] -= fa * E[l * DIM + e];
-            U[b * DIM + e] += fb * E[l * DIM + e];
-        }
-    }
+    chain_back_substitution(m, d, w, E, -1.0, U);
     d->singular = 0;
     return 0;
 }
