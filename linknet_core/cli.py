@@ -2,7 +2,10 @@
 from __future__ import annotations
 
 import argparse
+import os
+import re
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -11,24 +14,154 @@ from linknet_core.ensemble import command as ensemble_command  # light: Dask and
 from linknet_core.errors import LinknetError
 
 
+# ---- one validated type per option -------------------------------------------------------------------------------
+# Every option that takes a value is parsed by one of these (or by argparse's `choices`): a bad value is answered at
+# once, naming the option and its rule, before anything is computed (tests/contract checks every option of the
+# parser). Each is marked with the rule it applies.
+
+def _validated(rule: str):
+    def mark(convert):
+        convert.rule = rule
+        convert.__name__ = rule  # argparse names the type in "invalid <name> value" messages
+        return convert
+    return mark
+
+
+def _float_text(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
+@_validated("positive number")
+def positive_number(text: str) -> float:
+    from linknet_core.integrators import positive_problem
+
+    x = _float_text(text)
+    if positive_problem(x):
+        raise argparse.ArgumentTypeError(f"{text!r} must be a positive finite number")
+    return x
+
+
+@_validated("relative tolerance")
+def relative_tolerance(text: str) -> float:
+    from linknet_core.integrators import RTOL_MAX, RTOL_MIN, rtol_problem
+
+    x = _float_text(text)
+    if rtol_problem(x):
+        raise argparse.ArgumentTypeError(f"{text!r} must lie in [{RTOL_MIN:g}, {RTOL_MAX:g}) "
+                                         "(a relative tolerance)")
+    return x
+
+
+@_validated("sample count")
+def sample_count(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if n < 2:
+        raise argparse.ArgumentTypeError(f"{text!r} must be at least 2 (the samples at t = 0 and at --t-end)")
+    return n
+
+
+@_validated("readable file")
+def readable_file(text: str) -> str:
+    path = Path(text)
+    if not path.is_file():
+        raise argparse.ArgumentTypeError(f"{text!r} is not a file" + ("" if path.exists() else " (it does not exist)"))
+    if not os.access(path, os.R_OK):
+        raise argparse.ArgumentTypeError(f"{text!r} cannot be read (permissions)")
+    return text
+
+
+def writable_path_problem(text: str) -> str | None:
+    """Why a file could not be written at path `text` (None if it can): a folder there, an ancestor that is a file,
+    or no write permission on the nearest existing folder (missing folders are created when writing)."""
+    path = Path(os.path.abspath(Path(text).expanduser()))
+    if str(text).strip() == "":
+        return "is empty"
+    if path.is_dir():
+        return "is a folder"
+    if path.exists():
+        return None if os.access(path, os.W_OK) else "exists and cannot be overwritten (permissions)"
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"cannot be created: {parent} is not a folder"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f"cannot be created: no write permission in {parent}"
+    return None
+
+
+def _output(suffixes: tuple, what: str):
+    @_validated(f"writable {what} path")
+    def convert(text: str) -> str:
+        problem = writable_path_problem(text)
+        if problem:
+            raise argparse.ArgumentTypeError(f"{text!r} {problem}")
+        if suffixes and Path(text).suffix.lower() not in suffixes:
+            raise argparse.ArgumentTypeError(f"{text!r}: {what} is written as {' or '.join(suffixes)}")
+        return text
+    return convert
+
+
+npz_path = _output((".npz",), "the result arrays file")
+plot_path = _output((".png", ".pdf", ".svg"), "the plot")
+
+
+@_validated("writable animation path")
+def animation_path(text: str) -> str:
+    problem = writable_path_problem(text)
+    if problem:
+        raise argparse.ArgumentTypeError(f"{text!r} {problem}")
+    try:
+        visual.check_animation_path(text)
+    except LinknetError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+# argparse reads "-1e-3" as an option name (its number pattern has no exponent) and answers "expected one
+# argument"; with this pattern a negative number is a value, which its option's type then refuses by its rule.
+_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
+
+
+def _numbers_may_be_negative(parser: argparse.ArgumentParser) -> None:
+    parser._negative_number_matcher = _NEGATIVE_NUMBER
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                _numbers_may_be_negative(sub)
+
+
+
 def _add_simulate(sub):
+    from linknet_core.integrators import METHODS
+
     p = sub.add_parser("simulate", help="simulate a scene and write t, X, U, T and diagnostics")
-    p.add_argument("scene", help="scene JSON file")
-    p.add_argument("--t-end", type=float, required=True, help="end time, s")
-    p.add_argument("--method", default=None, help="rattle (default with --dt), yoshida4, suzuki4, yoshida6, yoshida8, "
-                                                 "dopri5, dop853 (default with --rtol)")
+    p.add_argument("scene", type=readable_file, help="scene JSON file")
+    p.add_argument("--t-end", type=positive_number, required=True, help="end time, s (> 0)")
+    p.add_argument("--method", default=None, choices=sorted(METHODS),
+                   help="rattle (default with --dt), yoshida4, suzuki4, yoshida6, yoshida8, dopri5, dop853 "
+                        "(default with --rtol)")
     step = p.add_mutually_exclusive_group()
-    step.add_argument("--dt", type=float, help="step of a fixed-step method, s")
-    step.add_argument("--rtol", type=float, help="tolerance of an adaptive method (SI units; atol defaults to it)")
-    p.add_argument("--atol", type=float, help="absolute tolerance of an adaptive method")
-    p.add_argument("--n-out", type=int, default=201, help="number of output samples (default 201)")
-    p.add_argument("--out", help="write arrays to this .npz")
-    p.add_argument("--plot", help="write a PNG of positions and tensions against time")
-    p.add_argument("--animate", metavar="PATH", help="write an animation of the network (.gif, or .mp4 with ffmpeg); "
-                                                    "`linknet animate` has the options")
+    step.add_argument("--dt", type=positive_number, help="step of a fixed-step method, s (> 0)")
+    step.add_argument("--rtol", type=relative_tolerance,
+                      help="tolerance of an adaptive method, in [1e-15, 0.1) (SI units; atol defaults to it)")
+    p.add_argument("--atol", type=positive_number, help="absolute tolerance of an adaptive method (> 0)")
+    p.add_argument("--n-out", type=sample_count, default=201, help="number of output samples, >= 2 (default 201)")
+    p.add_argument("--out", type=npz_path, help="write arrays to this .npz (checked before the run)")
+    p.add_argument("--plot", type=plot_path, help="write a PNG (or PDF, SVG) of positions and tensions against time")
+    p.add_argument("--animate", metavar="PATH", type=animation_path,
+                   help="write an animation of the network (.gif, or .mp4 with ffmpeg); `linknet animate` has the "
+                        "options")
     p.add_argument("--project-initial", action="store_true",
                    help="project initial positions onto the link lengths instead of refusing them")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress bar (shown by default on a terminal, on stderr, for runs longer than a second)")
     p.add_argument("--rhs-kernel", choices=["numpy", "casadi"], default="numpy",
                    help="right-hand side of the Runge-Kutta methods: numpy, or a casadi-generated C kernel "
                         "specialised to the scene (compiled once, cached)")
@@ -36,7 +169,7 @@ def _add_simulate(sub):
 
 def _add_analyze(sub):
     p = sub.add_parser("analyze", help="rigidity and structure of a scene (Maxwell-Calladine counts)")
-    p.add_argument("scene", help="scene JSON file")
+    p.add_argument("scene", type=readable_file, help="scene JSON file")
 
 
 def _add_check(sub):
@@ -62,35 +195,48 @@ def _add_ensemble(sub):
 
 
 def cmd_simulate(args) -> int:
+    from linknet_core.integrators import METHODS
     from linknet_core.scene.description import load_scene
-    from linknet_core.simulator.simulator import simulate
+    from linknet_core.simulator.simulator import SimulationInterrupted, simulate
 
-    if args.animate:  # refuse a bad animation path (or MP4 without ffmpeg) before the run, not after it
-        visual.check_animation_path(args.animate)
     scene = load_scene(args.scene)
     method = args.method or ("dop853" if args.rtol is not None else "rattle")
     dt = args.dt
-    if dt is None and args.rtol is None:
-        from linknet_core.integrators import METHODS
-
-        if not METHODS[method].adaptive:
-            dt = 1e-3
-    res = simulate(scene, args.t_end, method=method, dt=dt, rtol=args.rtol, atol=args.atol, n_out=args.n_out,
-                   progress=None if not args.no_progress else False, project_initial=args.project_initial or None,
-                   rhs_kernel=args.rhs_kernel)
+    if dt is None and args.rtol is None and not METHODS[method].adaptive:
+        dt = 1e-3
+    interrupted = False
+    try:
+        res = simulate(scene, args.t_end, method=method, dt=dt, rtol=args.rtol, atol=args.atol, n_out=args.n_out,
+                       progress=False if args.no_progress else None, project_initial=args.project_initial or None,
+                       rhs_kernel=args.rhs_kernel)
+    except SimulationInterrupted as stop:  # Ctrl-C: keep what was computed
+        res, interrupted = stop.result, True
     if res.stats.get("initial"):
         for line in res.stats["initial"]:
             print("note:", line)
     print(res.summary())
-    if args.out:
-        res.save_npz(args.out)
-        print(f"wrote {args.out}")
-    if args.plot:
-        plot_result(res, args.plot)
-        print(f"wrote {args.plot}")
-    if args.animate:
-        visual.animate_result(res, args.animate)
+    written = _write_outputs(res, args)
+    if interrupted:
+        what = f"wrote the {res.t.size} samples computed so far ({', '.join(written)})" if written else \
+            "nothing was asked to be written"
+        print(f"linknet simulate: interrupted at t = {res.t[-1]:g} s of {args.t_end:g} s; {what}", file=sys.stderr)
+        return 130
     return 0
+
+
+def _write_outputs(res, args) -> list:
+    """Write what the options ask for; every path was checked before the run (its type)."""
+    written = []
+    for path, write in ((args.out, res.save_npz), (args.plot, lambda p: plot_result(res, p)),
+                        (args.animate, lambda p: visual.animate_result(res, p))):
+        if not path:
+            continue
+        Path(os.path.abspath(Path(path).expanduser())).parent.mkdir(parents=True, exist_ok=True)
+        write(path)
+        if path is not args.animate:
+            print(f"wrote {path}")
+        written.append(path)
+    return written
 
 
 def plot_result(res, path) -> None:
@@ -148,6 +294,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_ensemble(sub)
     _add_animate(sub)
     _add_view(sub)
+    _numbers_may_be_negative(parser)
     return parser
 
 
@@ -161,6 +308,12 @@ def main(argv=None) -> int:
     except LinknetError as exc:
         print(f"linknet {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # before the first sample: nothing to keep
+        print(f"linknet {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except OSError as exc:  # a write failing despite the checks (disk full, a path removed meanwhile)
+        print(f"linknet {args.command}: error: {exc}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -11,30 +11,79 @@ from linknet_core.integrators.runge_kutta import DOP853, DOPRI5, ProjectedRungeK
 
 METHODS = {cls.name: cls for cls in (Rattle, Yoshida4, Suzuki4, Yoshida6, Yoshida8, DOPRI5, DOP853)}
 
+# The rules for the settings, written once: the library, the CLI, the FMUs' parameter checks and build_fmu.py all
+# ask these functions. rtol lies in [RTOL_MIN, RTOL_MAX): below, double precision cannot deliver it; from 0.1 on
+# the error control accepts steps whose projections onto the link lengths no longer converge, so the run fails
+# later with a projection error instead of being refused here.
+RTOL_MIN, RTOL_MAX = 1e-15, 0.1
+
+
+def real_number(value) -> float | None:
+    """value as a float if it is a real number (Python or numpy scalar, or a 0-d array; not a bool), else None."""
+    try:
+        import numpy as np
+        if isinstance(value, np.ndarray) and value.ndim == 0:
+            value = value[()]
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+            return None
+    except ImportError:  # pragma: no cover (numpy is a dependency)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            return None
+    return float(value)
+
+
+def rtol_problem(value) -> str | None:
+    """Why value is no relative tolerance (None if it is one)."""
+    x = real_number(value)
+    if x is None or not math.isfinite(x) or x <= 0:
+        return f"must be a positive finite tolerance in [{RTOL_MIN:g}, {RTOL_MAX:g}), got {value!r}"
+    if x < RTOL_MIN:
+        return f"= {value!r} is below what double precision can deliver ({RTOL_MIN:g})"
+    if x >= RTOL_MAX:
+        return f"= {value!r} must be < {RTOL_MAX:g} (looser tolerances let the projections onto the lengths fail)"
+    return None
+
+
+def positive_problem(value) -> str | None:
+    """Why value is no positive finite number, such as a step dt or an absolute tolerance (None if it is one)."""
+    x = real_number(value)
+    if x is None or not math.isfinite(x):
+        return f"must be a positive finite number, got {value!r}"
+    if not x > 0:
+        return f"= {value!r} must be > 0"
+    return None
+
+
+def method_problem(name) -> str | None:
+    """Why name is no integration method (None if it is one)."""
+    if isinstance(name, str) and name in METHODS:
+        return None
+    return f"= {name!r} is not one of {', '.join(sorted(METHODS))}"
+
 
 def method_settings(method: str, dt=None, rtol=None, atol=None):
     """The method's class and its validated settings (dt for fixed-step methods; rtol, atol for adaptive
     ones, atol defaulting to rtol): one set of rules for every backend."""
-    if method not in METHODS:
+    if method_problem(method):
         raise SolverError(f"unknown integration method {method!r}; choose one of {sorted(METHODS)}")
     cls = METHODS[method]
     if cls.adaptive:
         if dt is not None:
             raise SolverError(f"method {method!r} chooses its own steps: give rtol (and atol), not dt")
         rtol = 1e-8 if rtol is None else rtol
-        for name, value in (("rtol", rtol), ("atol", atol)):
-            if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise SolverError(f"{name} must be a positive finite tolerance, got {value!r}")
-        if rtol < 1e-15:
-            raise SolverError(f"rtol = {rtol!r} is below what double precision can deliver (1e-15)")
-        return cls, None, float(rtol), float(atol if atol is not None else rtol)
+        if rtol_problem(rtol):
+            raise SolverError(f"rtol {rtol_problem(rtol)}")
+        if atol is not None and positive_problem(atol):
+            raise SolverError(f"atol must be a positive finite tolerance, got {atol!r}")
+        rtol = real_number(rtol)
+        return cls, None, rtol, (real_number(atol) if atol is not None else rtol)
     if rtol is not None or atol is not None:
         raise SolverError(f"method {method!r} has a fixed step: give dt, not rtol/atol")
     if dt is None:
         raise SolverError(f"method {method!r} has a fixed step: give dt (seconds)")
-    if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+    if positive_problem(dt):
         raise SolverError(f"dt must be a positive finite step in seconds, got {dt!r}")
-    return cls, float(dt), None, None
+    return cls, real_number(dt), None, None
 
 
 def make_integrator(method: str, dynamics, dt=None, rtol=None, atol=None) -> Integrator:
@@ -46,5 +95,6 @@ def make_integrator(method: str, dynamics, dt=None, rtol=None, atol=None) -> Int
     return cls(dynamics, dt=dt)
 
 
-__all__ = ["METHODS", "make_integrator", "method_settings", "Integrator", "FixedStepIntegrator", "Rattle", "Composition",
+__all__ = ["METHODS", "make_integrator", "method_settings", "RTOL_MIN", "RTOL_MAX", "real_number", "rtol_problem",
+           "positive_problem", "method_problem", "Integrator", "FixedStepIntegrator", "Rattle", "Composition",
            "Yoshida4", "Suzuki4", "Yoshida6", "Yoshida8", "ProjectedRungeKutta", "DOPRI5", "DOP853"]

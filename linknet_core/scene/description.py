@@ -138,6 +138,15 @@ class Scene:
         parameters.setflags(write=False)
         return ForceElements(tuple(kind for kind, _, _ in rows), masses, parameters)
 
+    @cached_property
+    def fingerprint(self) -> str:
+        """A hash of everything that defines the scene (topology, masses, lengths, forces, initial state, options):
+        snapshots and FMU states carry it, so a state of another scene is recognised and refused."""
+        import hashlib
+
+        text = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()[:32]
+
     @property
     def K(self) -> int:
         return int(self.mass.shape[0])

@@ -12,7 +12,7 @@ import numpy as np
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import SceneError, SolverError
 from linknet_core.dynamics.forces import kinetic_energy
-from linknet_core.integrators import make_integrator, method_settings
+from linknet_core.integrators import make_integrator, method_settings, real_number
 from linknet_core.native.integrator import NativeIntegrator
 from linknet_core.native.model import NativeModel
 from linknet_core.native.rigid import NativeRigidIntegrator
@@ -20,8 +20,24 @@ from linknet_core.simulator.specialisation import RIGID, STATIC, choose_speciali
 from linknet_core.scene.description import Scene
 from linknet_core.state import State
 
-DEFAULT_LENGTH_TOL = 1e-6
-BACKENDS = ("auto", "native", "numpy")  # relative violation of (11) accepted in a scene's initial positions
+DEFAULT_LENGTH_TOL = 1e-6  # relative violation of (11) accepted in a scene's initial positions
+BACKENDS = ("auto", "native", "numpy")
+# Snapshots (get_state) name the simulator they come from: this format, the scene's fingerprint, the method and the
+# path (backend and specialisation), so set_state refuses another scene's or another path's snapshot rather than
+# projecting foreign positions onto this scene's lengths. Raise the number when a snapshot's content changes.
+SNAPSHOT_FORMAT = "linknet-snapshot-2"
+# Input forces are refused beyond this magnitude (N), as scene values are (scene.description.MAX_MAGNITUDE): the
+# solver would overflow on them and report a projection failure that does not name the force.
+MAX_FORCE = 1e100
+
+
+class SimulationInterrupted(KeyboardInterrupt):
+    """Ctrl-C during ``simulate``: ``result`` holds the samples computed until then (a KeyboardInterrupt, so a
+    caller that does not look for it is interrupted as usual)."""
+
+    def __init__(self, result: "Result"):
+        super().__init__(f"interrupted at t = {result.t[-1]:g} s after {result.t.size} samples")
+        self.result = result
 
 
 @dataclass
@@ -87,6 +103,14 @@ def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: boo
     return X, U_projected, InitialReport(worst, projected, dv, worst_mass)
 
 
+def _as_time(value, what: str) -> float:
+    """A time given as any real number (Python or numpy scalar, 0-d array), as a float; refused otherwise."""
+    x = real_number(value)
+    if x is None:
+        raise SolverError(f"{what} must be a real number of seconds, got {value!r} ({type(value).__name__})")
+    return x
+
+
 def _all_finite(*arrays: np.ndarray) -> bool:
     """Whether every entry is finite and below ~1e154, in one dot product per array: a sum of squares is
     non-finite iff an entry is non-finite or beyond ~1e154, which is no physical state or force either. For the
@@ -115,7 +139,10 @@ class Simulator:
                  atol: float | None = None, *, project_initial: bool | None = None,
                  length_tol: float = DEFAULT_LENGTH_TOL, max_steps_per_call: int = 100_000_000,
                  dynamics: Dynamics | None = None, backend: str = "auto", rhs_kernel: str = "numpy",
-                 specialise: bool = True):
+                 specialise: bool = True, t0: float = 0.0):
+        t0 = _as_time(t0, "the start time t0")
+        if not math.isfinite(t0):
+            raise SolverError(f"the start time t0 must be finite, got {t0!r}")
         if backend not in BACKENDS:
             raise SolverError(f"backend must be one of {', '.join(map(repr, BACKENDS))}, got {backend!r}")
         self.scene = scene
@@ -143,7 +170,10 @@ class Simulator:
                                                    rtol=rtol, atol=atol, static=self.specialisation.kind == STATIC)
                 if self.specialisation.kind == STATIC:
                     U0 = np.zeros_like(U0)  # the only velocity (12) allows where nothing can move
-        self._initial = State(0.0, X0, U0)
+        # the scene is autonomous (no force depends on t), so starting at t0 is the scene's motion shifted in time
+        self._initial = State(t0, X0, U0)
+        self.identity = {"format": SNAPSHOT_FORMAT, "scene": scene.fingerprint, "method": method,
+                         "path": f"{self.backend} {self.specialisation.kind}"}
         self._initial_internals = copy.deepcopy(self.integrator.internals())
         self.max_steps_per_call = max_steps_per_call
         self.state = self._initial.copy()
@@ -162,25 +192,43 @@ class Simulator:
         F = F_input if type(F_input) is np.ndarray and F_input.dtype == np.float64 else np.asarray(F_input, float)
         if F.shape != (self.scene.K, 3):
             raise SolverError(f"input forces must have shape ({self.scene.K}, 3), got {F.shape}")
-        if _all_finite(F):  # the common case; else the entries are checked one by one below
+        v = F.ravel()
+        if float(v.dot(v)) <= MAX_FORCE * MAX_FORCE:  # the common case: every entry finite and below MAX_FORCE
             return F
-        bad = ~np.isfinite(F)
+        bad = ~np.isfinite(F) | (np.abs(np.nan_to_num(F)) > MAX_FORCE)
         bad[self.scene.fixed] = False
         if bad.any():
             k, i = np.argwhere(bad)[0]
-            raise SolverError(f"input force F[{k + 1},{i + 1}] on {self.scene.mass_label(int(k))} is {F[k, i]}: "
-                              "forces must be finite")
+            rule = "forces must be finite" if not np.isfinite(F[k, i]) else \
+                f"forces beyond {MAX_FORCE:g} N would overflow the solver"
+            raise SolverError(f"input force F[{k + 1},{i + 1}] on {self.scene.mass_label(int(k))} is {F[k, i]}: {rule}")
         return F
+
+    def _input_note(self, F) -> str:
+        """What to add to a solver failure under input forces: the largest one, by name."""
+        if F is None:
+            return ""
+        free = np.where(self.scene.fixed[:, None], 0.0, np.abs(F))
+        if not free.any():
+            return ""
+        k, i = np.unravel_index(int(np.argmax(free)), free.shape)
+        return (f" (the largest input force was F[{k + 1},{i + 1}] = {F[k, i]:.6g} N on "
+                f"{self.scene.mass_label(int(k))}: a force too large for the step or tolerance fails this way)")
 
     def advance(self, t_next: float, F_input=None) -> None:
         """Integrate to t_next with F_input held. On success the state is finite; on any error the simulator
         is left exactly as before the call (state and integrator internals)."""
         F = self.check_input(F_input)
-        t_next = float(t_next)
+        t_next = t_next if type(t_next) is float else _as_time(t_next, "the target time")
         state = self.state
         t_before = state.t
         if self.backend == "native":  # the native advance restores everything itself on failure
-            self.integrator.advance(state, t_next, F, self.max_steps_per_call)
+            try:
+                self.integrator.advance(state, t_next, F, self.max_steps_per_call)
+            except SolverError as exc:
+                if F is None:
+                    raise
+                raise SolverError(f"{exc}{self._input_note(F)}") from None
             return
         if not math.isfinite(t_next) or not t_next > t_before:
             raise SolverError(f"cannot advance from t = {t_before} to t = {t_next}: the target must be later "
@@ -194,10 +242,12 @@ class Simulator:
             if not _all_finite(state.X, state.U):
                 raise SolverError(f"the state became non-finite between t = {t_before} and t = {t_next} "
                                   f"(largest |X| {np.abs(state.X).max()} m); reduce the step or tolerance")
-        except Exception:
+        except Exception as exc:
             # leave the simulator where it was, so a caller can retry with other settings
             state.t, state.X, state.U = t_before, X_before, U_before
             self.integrator.set_internals(internals)
+            if isinstance(exc, SolverError) and F is not None:
+                raise SolverError(f"{exc}{self._input_note(F)}") from None
             raise
 
     def outputs(self, F_input=None) -> dict:
@@ -215,10 +265,29 @@ class Simulator:
     # ---- snapshots ---------------------------------------------------------------------------
     def get_state(self) -> dict:
         """Everything needed to continue bit-identically: time, positions, velocities, integrator internals."""
-        return {"state": self.state.copy(), "integrator": copy.deepcopy(self.integrator.internals()),
-                "rhs_evaluations": self.dyn.rhs_evaluations}
+        return {"identity": dict(self.identity), "state": self.state.copy(),
+                "integrator": copy.deepcopy(self.integrator.internals()), "rhs_evaluations": self.dyn.rhs_evaluations}
+
+    def snapshot_problem(self, snapshot) -> str | None:
+        """Why ``snapshot`` cannot be restored here (None if it can): not a snapshot, another format, another scene
+        (its fingerprint), another method or another path."""
+        if not isinstance(snapshot, dict) or not isinstance(snapshot.get("state"), State):
+            return f"not a Simulator snapshot (got {type(snapshot).__name__})"
+        identity = snapshot.get("identity")
+        if not isinstance(identity, dict) or identity.get("format") != SNAPSHOT_FORMAT:
+            return (f"a snapshot of format {identity.get('format') if isinstance(identity, dict) else None!r}, "
+                    f"not {SNAPSHOT_FORMAT!r}")
+        for key, what in (("scene", "another scene (its fingerprint differs: other masses, lengths, topology "
+                                    "or initial state)"), ("method", "another method"), ("path", "another path")):
+            if identity.get(key) != self.identity[key]:
+                return f"a snapshot of {what}: {identity.get(key)!r}, this simulator has {self.identity[key]!r}"
+        return None
 
     def set_state(self, snapshot: dict) -> None:
+        """Restore a snapshot of this simulator (get_state); one of another scene, method or path is refused."""
+        problem = self.snapshot_problem(snapshot)
+        if problem:
+            raise SolverError(f"{self.scene.name}: cannot restore {problem}")
         self.state = snapshot["state"].copy()
         self.integrator.set_internals(copy.deepcopy(snapshot["integrator"]))
         self.dyn.rhs_evaluations = snapshot.get("rhs_evaluations", self.dyn.rhs_evaluations)
@@ -291,15 +360,24 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
     output time and held until the next (piecewise constant, as an FMI master does). Outputs are taken
     at ``n_out`` equally spaced times (default 201) or every ``output_dt``.
     """
-    if not (isinstance(t_end, (int, float)) and math.isfinite(t_end) and t_end > 0):
+    t_end_value = real_number(t_end)
+    if t_end_value is None or not (math.isfinite(t_end_value) and t_end_value > 0):
         raise SolverError(f"t_end must be a positive finite time, got {t_end!r}")
+    t_end = t_end_value
+    if n_out is not None and (isinstance(n_out, bool) or not isinstance(n_out, (int, np.integer)) or n_out < 2):
+        raise SolverError(f"n_out must be a whole number >= 2 (the samples at 0 and t_end at least), got {n_out!r}")
+    if output_dt is not None:
+        output_dt_value = real_number(output_dt)
+        if output_dt_value is None or not (math.isfinite(output_dt_value) and output_dt_value > 0):
+            raise SolverError(f"output_dt must be a positive finite time, got {output_dt!r}")
+        output_dt = output_dt_value
     sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial,
                     backend=backend, rhs_kernel=rhs_kernel, specialise=specialise)
     if output_dt is not None:
         n = max(1, int(round(t_end / output_dt)))
         times = np.linspace(0.0, t_end, n + 1)
     else:
-        times = np.linspace(0.0, t_end, (n_out or 201))
+        times = np.linspace(0.0, t_end, 201 if n_out is None else int(n_out))
     if callable(forces):
         force_at = forces
     else:
@@ -314,32 +392,54 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
     kinetic = np.empty(n)
     residual = np.empty(n)
     vres = np.empty(n)
-    show = progress if progress is not None else False
+    # progress on stderr: always with progress=True, never with False; by default (None) on a terminal once the run
+    # has taken a second
+    auto = progress is None
+    show = sys.stderr.isatty() if auto else bool(progress)
+    drawn = False
     start = time.perf_counter()
     last_print = start
-    for i, t in enumerate(times):
-        if i > 0:
-            sim.advance(t, force_at(times[i - 1]))
-        # tensions feel the input directly: report them with the input of the step starting at t_i,
-        # and at the last sample with the input of the step that ended there
-        out = sim.outputs(force_at(times[min(i, n - 2)]))
-        X[i], U[i], T[i] = out["X"], out["U"], out["T"]
-        energy[i] = sim.dyn.energy(out["X"], out["U"])
-        kinetic[i] = kinetic_energy(scene, out["U"])
-        residual[i] = sim.dyn.constraint_residual(out["X"])
-        vres[i] = sim.dyn.velocity_residual(out["X"], out["U"])
-        now = time.perf_counter()
-        if show is not False and (show is True or now - start > 2.0) and (now - last_print > 0.2 or i == n - 1):
-            _progress_bar(i + 1, n, now - start)
-            last_print = now
+    done = 0
+    try:
+        for i, t in enumerate(times):
+            if i > 0:
+                sim.advance(t, force_at(times[i - 1]))
+            # tensions feel the input directly: report them with the input of the step starting at t_i,
+            # and at the last sample with the input of the step that ended there
+            out = sim.outputs(force_at(times[min(i, n - 2)]))
+            X[i], U[i], T[i] = out["X"], out["U"], out["T"]
+            energy[i] = sim.dyn.energy(out["X"], out["U"])
+            kinetic[i] = kinetic_energy(scene, out["U"])
+            residual[i] = sim.dyn.constraint_residual(out["X"])
+            vres[i] = sim.dyn.velocity_residual(out["X"], out["U"])
+            done = i + 1
+            now = time.perf_counter()
+            if show and (not auto or now - start > 1.0) and (now - last_print > 0.2 or i == n - 1):
+                _progress_bar(i + 1, n, now - start)
+                drawn, last_print = True, now
+    except KeyboardInterrupt:
+        if drawn:
+            sys.stderr.write("\n")
+        if done == 0:
+            raise
+        wall = time.perf_counter() - start
+        stats = _run_stats(sim, method, dt, rtol, scene, wall)
+        stats["interrupted"] = True
+        part = slice(0, done)
+        raise SimulationInterrupted(Result(scene, method, times[part], X[part], U[part], T[part], energy[part],
+                                           residual[part], vres[part], kinetic[part], stats)) from None
     wall = time.perf_counter() - start
-    if show is not False and wall > 2.0:
+    if drawn:
         sys.stderr.write("\n")
-    stats = dict(sim.integrator.stats.as_dict(), wall_time=wall, rhs_evaluations=sim.rhs_evaluations,
-                 structure=sim.dyn.structure.kind, method=method, dt=dt, rtol=rtol, rhs_kernel=sim.dyn.rhs_kernel,
-                 initial=sim.initial_report.lines(scene) + sim.specialisation.notes,
-                 specialisation=sim.specialisation.text())
+    stats = _run_stats(sim, method, dt, rtol, scene, wall)
     return Result(scene, method, times, X, U, T, energy, residual, vres, kinetic, stats)
+
+
+def _run_stats(sim, method, dt, rtol, scene, wall) -> dict:
+    return dict(sim.integrator.stats.as_dict(), wall_time=wall, rhs_evaluations=sim.rhs_evaluations,
+                structure=sim.dyn.structure.kind, method=method, dt=dt, rtol=rtol, rhs_kernel=sim.dyn.rhs_kernel,
+                initial=sim.initial_report.lines(scene) + sim.specialisation.notes,
+                specialisation=sim.specialisation.text())
 
 
 def _progress_bar(done: int, total: int, elapsed: float) -> None:
