@@ -16,6 +16,7 @@ double ln_controlled_step(double h_next, double t, double t_target)
 
 double ln_next_step_size(const ln_method *meth, double h, double h_next, double err)
 {
+    if (!isfinite(err)) return h * meth->min_factor;  /* the estimate itself blew up: shrink the most */
     if (err > 1.0) return h * fmax(meth->min_factor, meth->safety * pow(err, meth->exponent));
     const double factor = err == 0.0 ? meth->max_factor
                                      : fmin(meth->max_factor, meth->safety * pow(err, meth->exponent));

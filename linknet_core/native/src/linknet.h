@@ -197,7 +197,7 @@ int ln_evaluate_repeated(const ln_model *m, ln_data *d, int dim, const double *X
 
 /* controller.c: the step-size controller of the embedded Runge-Kutta pairs. The step taken next from t (h_next
    cut to land on t_target with no sliver of a last step; -1 on underflow within 16 ulps of t); the step
-   after one of size h with error norm err (grown when accepted, shrunk when rejected); Hairer-Wanner's
+   after one of size h with error norm err (grown when accepted, shrunk when rejected or not finite); Hairer-Wanner's
    starting step from the norms d0 = |y|, d1 = |f(y)|, d2 = |f(y + h0 f) - f(y)| / h0 of the state. */
 double ln_controlled_step(double h_next, double t, double t_target);
 double ln_next_step_size(const ln_method *meth, double h, double h_next, double err);

@@ -148,12 +148,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
             KU[s * size + j] = acc[j];
         }
         const double err = FN(ln_rk_error_norm)(m, meth, X, U, Xn, Un, KX, KU, h);
-        if (!isfinite(err)) {
-            d->rejected++;
-            d->h_next = h * meth->min_factor;
-            continue;
-        }
-        if (err > 1.0) {
+        if (!(err <= 1.0)) {  /* too large, or not finite */
             d->rejected++;
             d->h_next = ln_next_step_size(meth, h, d->h_next, err);
             continue;
