@@ -24,7 +24,7 @@ setup(
         sources=sorted(str(p) for p in [*SOURCE_DIR.glob("*.c"), *SOURCE_DIR.glob("amd/amd_l*.c")]),
         include_dirs=[str(SOURCE_DIR)],
         depends=sorted(str(p) for p in SOURCE_DIR.rglob("*.[ch]")),
-        extra_compile_args=["-std=c99", "-O3", "-fno-math-errno", "-ffp-contract=off", "-Wall", "-Wextra"],
+        extra_compile_args=["-std=c99", "-O3", "-fno-math-errno", "-ffp-contract=off", "-fvisibility=hidden", "-Wall", "-Wextra"],
     )],
     cmdclass={"build_ext": BuildNativeLibrary},
 )

@@ -28,6 +28,15 @@ extern "C" {
 
 typedef int64_t ln_int;
 
+/* The library's interface (what ctypes, the FMU glue and tests call) is exported; everything else, the
+   DIM-generic stages among it, stays inside the library (compiled with -fvisibility=hidden), so that the
+   calls between stages are direct and can be inlined. */
+#if defined(__GNUC__) || defined(__clang__)
+#define LN_API __attribute__((visibility("default")))
+#else
+#define LN_API
+#endif
+
 /* Status of a stage or of a whole advance. Keep in step with linknet_core/native/binding.py (STATUS). */
 enum ln_status {
     LN_OK = 0,
@@ -177,48 +186,48 @@ typedef struct ln_data {
 } ln_data;
 
 /* ---- data.c: allocation and the whole-interval advance ------------------------------------------ */
-ln_data *ln_data_new(const ln_model *m, ln_int n_stages);  /* NULL: out of memory */
-void ln_data_free(ln_data *d);
+LN_API ln_data *ln_data_new(const ln_model *m, ln_int n_stages);  /* NULL: out of memory */
+LN_API void ln_data_free(ln_data *d);
 
 /* Advance d from d->t to t_target with d->F_input held (zero-order hold), all or nothing: on any status
    but LN_OK the state and internals are those before the call, and the diagnostics say why. */
-int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps);
+LN_API int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps);
 
 /* The tensions T of (25)-(26) and accelerations (9) at X, U (K,3) with d->F_input held (the reported outputs:
    direct feedthrough of F), and the force the links exert on each anchor, sum_l T_l E_l (delta(k,k1(l)) -
    delta(k,k2(l))) of (9) at the anchored k. Minimum-norm where A is singular. Results in d->T, d->acc,
    d->reaction. */
-int ln_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U);
+LN_API int ln_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U);
 
 /* n evaluations of the right-hand side at the same state in one call, in dim = 3 or (planar scenes, X and U
    in the plane's coordinates, (K,2)) dim = 2 components: the right-hand side the integrators call, timed
    without a call from Python for each (benchmarks). Results in d->acc, d->T (in dim components). */
-int ln_evaluate_repeated(const ln_model *m, ln_data *d, int dim, const double *X, const double *U, ln_int n);
+LN_API int ln_evaluate_repeated(const ln_model *m, ln_data *d, int dim, const double *X, const double *U, ln_int n);
 
 /* controller.c: the step-size controller of the embedded Runge-Kutta pairs. The step taken next from t (h_next
    cut to land on t_target with no sliver of a last step; -1 on underflow within 16 ulps of t); the step
    after one of size h with error norm err (grown when accepted, shrunk when rejected or not finite); Hairer-Wanner's
    starting step from the norms d0 = |y|, d1 = |f(y)|, d2 = |f(y + h0 f) - f(y)| / h0 of the state. */
-double ln_controlled_step(double h_next, double t, double t_target);
-double ln_next_step_size(const ln_method *meth, double h, double h_next, double err);
-double ln_trial_step(double d0, double d1, double span);
-double ln_starting_step(const ln_method *meth, double h0, double d1, double d2, double span);
+LN_API double ln_controlled_step(double h_next, double t, double t_target);
+LN_API double ln_next_step_size(const ln_method *meth, double h, double h_next, double err);
+LN_API double ln_trial_step(double d0, double d1, double span);
+LN_API double ln_starting_step(const ln_method *meth, double h0, double d1, double d2, double span);
 
 /* Gravity, constant forces and the held input d->F_input: the part of F_k of (9) fixed over an interval, zero
    on anchors. 0 when it is not finite. */
-int ln_base_forces(const ln_model *m, const ln_data *d, double *F_base);
+LN_API int ln_base_forces(const ln_model *m, const ln_data *d, double *F_base);
 
 /* Equal steps no longer than dt that land on the target: how many (a whole number up to round-off is that
    number, not one more). */
-ln_int ln_fixed_step_count(double span, double dt);
+LN_API ln_int ln_fixed_step_count(double span, double dt);
 
-/* The code of a force element kind named as in linknet_core.forces (stages/forces.c), or -1. */
-ln_int ln_force_kind(const char *name);
+/* sizeof(ln_model), sizeof(ln_method) and the part of ln_data the Python binding mirrors (which = 0, 1, 2):
+   the binding checks its struct layouts against these. */
+LN_API size_t ln_sizeof(int which);
 
-/* ---- DIM-generic stages (the 3-D copies; the 2-D ones end in _2d) -------------------------------- */
-void ln_scene_forces_3d(const ln_model *m, const double *X, const double *U, const double *F_base, double *F);
-int ln_accelerations_3d(const ln_model *m, ln_data *d, const double *X, const double *U, const double *F_base,
-                        double *acc, double *T, int refactor);
+/* The code of a force element kind named as in linknet_core.dynamics.forces (stages/forces.c), or -1. */
+LN_API ln_int ln_force_kind(const char *name);
+
 
 #ifdef __cplusplus
 }

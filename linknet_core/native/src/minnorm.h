@@ -10,8 +10,8 @@
 
 #include "linknet.h"
 
-void ln_minnorm_free(struct ln_minnorm_work *w);
+LN_API void ln_minnorm_free(struct ln_minnorm_work *w);
 /* Rank of the last factorisation (-1 on the iterative path, which does not reveal it). */
-ln_int ln_minnorm_rank(const struct ln_minnorm_work *w);
+LN_API ln_int ln_minnorm_rank(const struct ln_minnorm_work *w);
 
 #endif

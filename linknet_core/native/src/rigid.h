@@ -50,8 +50,8 @@ struct ln_rigid_data {
     double *KY;                     /* (n_stages+1, B, 13) Runge-Kutta stage derivatives */
 };
 
-struct ln_rigid_data *ln_rigid_data_new(const ln_model *m, ln_int n_stages);  /* stages of the method */
-void ln_rigid_data_free(struct ln_rigid_data *r);
+LN_API struct ln_rigid_data *ln_rigid_data_new(const ln_model *m, ln_int n_stages);  /* stages of the method */
+LN_API void ln_rigid_data_free(struct ln_rigid_data *r);
 
 /* Advance the bodies from d->t to t_target with the base forces d->F_base (K,3; zero on anchors) held,
    the state-dependent forces (drag, springs) evaluated as they change; fixed-step compositions
@@ -60,26 +60,26 @@ void ln_rigid_data_free(struct ln_rigid_data *r);
    On a status other than LN_OK the caller restores X, U and calls ln_rigid_restore. Statuses: LN_OK,
    LN_NON_FINITE, LN_IMPLICIT_KICK_FAILED, LN_STEP_UNDERFLOW, LN_TOO_MANY_STEPS, LN_BAD_ARGUMENT (no bodies,
    a method of no known kind, more stages than ln_data_new was given). */
-int ln_rigid_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps,
+LN_API int ln_rigid_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps,
                      ln_int *steps);
 
 /* Put the body states back to where the last ln_rigid_advance started. */
-void ln_rigid_restore(const ln_model *m, ln_data *d);
+LN_API void ln_rigid_restore(const ln_model *m, ln_data *d);
 
 /* The body states (B,13) into Y. */
-void ln_rigid_get_state(const ln_model *m, const ln_data *d, double *Y);
+LN_API void ln_rigid_get_state(const ln_model *m, const ln_data *d, double *Y);
 
 /* Set the body states from Y (B,13), for a state set from outside (fitted to the masses in Python) or a
    snapshot, and write the masses' d->X, d->U from them. LN_BAD_ARGUMENT (nothing changed) if the model has
    no bodies, or Y has a non-finite number or a zero quaternion. */
-int ln_rigid_set_state(const ln_model *m, ln_data *d, const double *Y);
+LN_API int ln_rigid_set_state(const ln_model *m, ln_data *d, const double *Y);
 
 /* n steps of exactly h of the method's Runge-Kutta tableau with no error control, the quaternion
    renormalised after each (order measurements). Moves d->t by n h, the bodies and d->X, d->U; d->h_next is
    left as it is. LN_OK, LN_NON_FINITE or LN_BAD_ARGUMENT (not a Runge-Kutta method, n < 1 or h <= 0). */
-int ln_rigid_rk_fixed_steps(const ln_model *m, const ln_method *meth, ln_data *d, double h, ln_int n);
+LN_API int ln_rigid_rk_fixed_steps(const ln_model *m, const ln_method *meth, ln_data *d, double h, ln_int n);
 
 /* sizeof(struct ln_rigid_model): the ctypes mirror's size is checked against it */
-size_t ln_rigid_model_size(void);
+LN_API size_t ln_rigid_model_size(void);
 
 #endif
