@@ -454,7 +454,8 @@ def _compile_object(cmd: list[str]) -> None:
 
 def compile_binary(sources_dir: Path, units: list[str], out: Path, cc: str | None = None,
                    flags: list[str] | None = None, cache: bool = True) -> None:
-    """The FMU's shared library from its sources/ alone; only the fmi2 functions are exported.
+    """The FMU's shared library from its sources/ alone; only the fmi2 functions are exported (a GNU linker
+    version script).
 
     The objects of everything but the scene's data are the same for every scene of one checkout: they are
     kept in a per-user cache (LINKNET_FMU_CACHE, default ~/.cache/linknet/native-fmu), keyed by the compiler,
@@ -489,8 +490,13 @@ def compile_binary(sources_dir: Path, units: list[str], out: Path, cc: str | Non
         scene_object = tmp / "scene.o"
         if SCENE_FILE in units:
             _compile_object([cc] + flags + ["-c", str(sources_dir / SCENE_FILE), "-o", str(scene_object)])
+        # only the FMI functions leave the binary: the core marks its own interface visible (LN_API), and an
+        # exported ln_* could bind to another copy of the core loaded globally in the host's process
+        exports = tmp / "exports.map"
+        exports.write_text("{\n  global: fmi2*;\n  local: *;\n};\n")
         link = ([cc, "-shared", "-o", str(out)] + [str(objects[u]) for u in shared]
-                + ([str(scene_object)] if SCENE_FILE in units else []) + ["-Wl,--no-undefined", "-s", "-lm"])
+                + ([str(scene_object)] if SCENE_FILE in units else [])
+                + ["-Wl,--no-undefined", f"-Wl,--version-script={exports}", "-s", "-lm"])
         _compile_object(link)
 
 
@@ -560,14 +566,19 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
         md = postprocess(raw, {v.name: v.declared_type for v in layout.reals}, layout.dependencies(inv_mass),
                          layout.initial_dependencies(inv_mass), experiment, cfg["description"])
         (tmp / "fmu" / "modelDescription.xml").write_bytes(md)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+        packed = tmp / "out.fmu"  # written whole, then moved: a failed build leaves no half FMU behind
+        with zipfile.ZipFile(packed, "w", zipfile.ZIP_DEFLATED) as z:
             z.write(tmp / "fmu" / "modelDescription.xml", "modelDescription.xml")
             if binary is not None:
                 z.write(binary, f"binaries/{folder}/{ident}.so")
             for p in sorted(sources.rglob("*")):
                 if p.is_file():
                     z.write(p, "sources/" + p.relative_to(sources).as_posix())
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            shutil.move(str(packed), str(out))
+        except OSError as e:
+            raise NativeBuildError(f"cannot write {out}: {e.strerror or e}") from None
     if not quiet:
         size = out.stat().st_size
         print(f"built {out} (native model {ident}: {len(layout.F_vr) * 3} inputs, "
