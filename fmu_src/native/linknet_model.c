@@ -91,8 +91,8 @@ static const lnfmu_variable *variable(const lnfmu_scene *s, unsigned vr) { retur
 
 static int is_parameter(int kind) { return kind >= LNFMU_M; }
 
-/* Why value is out of range for a parameter of this kind, or NULL. */
-static const char *parameter_rule(int kind, double value)
+/* Why value is out of range for a parameter of this kind, or NULL (linknet_core's rules, baked). */
+static const char *parameter_rule(const lnfmu_scene *s, int kind, double value, char *why, size_t n)
 {
     if (!isfinite(value)) return "must be finite";
     switch (kind) {
@@ -100,8 +100,11 @@ static const char *parameter_rule(int kind, double value)
     case LNFMU_R:
     case LNFMU_STEP: return value > 0.0 ? NULL : "must be > 0";
     case LNFMU_TOLERANCE:
-        return (value >= 1e-15 && value < 0.1) ? NULL : "must lie in [1e-15, 0.1) (below 1e-15 double precision "
-                                                         "cannot deliver it)";
+        if (value >= s->tolerance_min && value < s->tolerance_max) return NULL;
+        snprintf(why, n, "must lie in [%g, %g) (below %g double precision cannot deliver it; from %g on the "
+                 "projections onto the lengths can fail)", s->tolerance_min, s->tolerance_max, s->tolerance_min,
+                 s->tolerance_max);
+        return why;
     default: return NULL;
     }
 }
@@ -721,6 +724,9 @@ int fmu_model_set_real(fmu_model *m, const unsigned *vr, size_t n, const double 
             if (!isfinite(x))
                 return fail(msg, FMU_ERROR, "%s = %g is not a finite force; nothing set (the inputs keep their "
                             "values)", v->name, x);
+            if (s->max_force > 0.0 && fabs(x) > s->max_force)
+                return fail(msg, FMU_ERROR, "%s = %g N: forces beyond %g N would overflow the solver; nothing set "
+                            "(the inputs keep their values)", v->name, x, s->max_force);
         } else if (!is_parameter(v->kind)) {
             return fail(msg, FMU_ERROR, "%s is an output and cannot be set (value %.17g); nothing set", v->name, x);
         } else if (initialized) {
@@ -729,7 +735,8 @@ int fmu_model_set_real(fmu_model *m, const unsigned *vr, size_t n, const double 
                             "(value %.17g, current %.17g); nothing set (fmi2Reset starts again)", v->name, x,
                             m->value[vr[i]]);
         } else {
-            const char *rule = parameter_rule(v->kind, x);
+            char why[256];
+            const char *rule = parameter_rule(s, v->kind, x, why, sizeof why);
             if (rule) return fail(msg, FMU_ERROR, "parameter %s = %.17g %s; nothing set", v->name, x, rule);
             if (v->kind == LNFMU_R && !length_fits(s, v->index, x, msg, v->name)) return FMU_ERROR;
         }
@@ -957,8 +964,10 @@ int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t si
         problem = "a non-finite state";
     for (size_t vr = 0; vr < n_real && !problem; vr++) {
         const int kind = s->variables[vr].kind;
+        char why[256];
         if (kind == LNFMU_F && !(isfinite(value[vr]) && isfinite(applied[vr]))) problem = "a non-finite input";
-        if (is_parameter(kind) && (parameter_rule(kind, value[vr]) || parameter_rule(kind, applied[vr])))
+        if (is_parameter(kind) && (parameter_rule(s, kind, value[vr], why, sizeof why)
+                                   || parameter_rule(s, kind, applied[vr], why, sizeof why)))
             problem = "a parameter out of range";
     }
     if (problem) {

@@ -62,6 +62,10 @@ typedef struct lnfmu_scene {
     int project_initial;            /* "options": {"project_initial_positions": true} */
     double length_tol;              /* relative violation of (11) accepted in the initial positions */
 
+    /* the library's rules for settings and inputs (linknet_core.integrators, Simulator) */
+    double tolerance_min, tolerance_max;    /* rtol lies in [tolerance_min, tolerance_max) */
+    double max_force;                       /* an input force beyond this (N) is refused; 0: no limit */
+
     /* the native model at the defaults; its ldl and rigid pointers are NULL (built at instantiation) */
     const ln_model *model;
     const ln_int *ldl_ordering;     /* (L) LN_SOLVER_LDL: the elimination order (position -> link) */

@@ -527,6 +527,8 @@ static int cmd_contract(int argc, char **argv)
     report("step_ok", F.do_step(c, 1.5, 0.01, 1));
     report("step_sub_ulp", F.do_step(c, 1.51, 1e-300, 1));
     x = 1e300;
+    report("set_input_beyond_limit", F.set_real(c, &vF, 1, &x));
+    x = 1e90;
     report("set_input_huge", F.set_real(c, &vF, 1, &x));
     s = F.do_step(c, 1.51, 0.01, 1);
     report("step_with_huge_input", s);

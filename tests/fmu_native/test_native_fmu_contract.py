@@ -55,6 +55,7 @@ EXPECTED = {
     "step_wrong_t": (ERROR, "differs from the FMU's time 1.5"),
     "step_ok": (OK, ""),
     "step_sub_ulp": (OK, ""),
+    "set_input_beyond_limit": (ERROR, "would overflow the solver"),
     "set_input_huge": (OK, ""),
     "step_with_huge_input": (DISCARD, "stays at t=1.51"),
     "set_input_zero": (OK, ""),
