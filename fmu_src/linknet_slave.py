@@ -7,32 +7,87 @@ Rules this file keeps (see docs/fmu.md):
 - no scene data in module globals: all pythonfmu FMUs of a process share one interpreter and
   one sys.modules, so this module (and linknet_core) may be the copy of another FMU's resources;
 - no exception ever leaves a method called by the FMI binary: pythonfmu 0.7.0 turns any Python
-  exception into fmi2Fatal. Bad input is logged with fmi2Error status naming the variable and
-  the next doStep returns fmi2Discard; the instance stays usable (and fmi2Reset restores it);
+  exception into fmi2Fatal. Every entry point is wrapped by `guarded` (an unexpected exception is logged
+  and answered with the entry point's neutral value); bad input is logged with fmi2Error status naming
+  the variable and the next doStep returns fmi2Discard; the instance stays usable (and fmi2Reset
+  restores it);
 - values live in one float array indexed by value reference, so get_real/set_real are array
   operations instead of pythonfmu's per-variable getter calls.
 """
 import linknet_fmu.libpython_global  # noqa: F401  first: C hosts need libpython's symbols global
 
 import copy
+import functools
+import hashlib
 import json
 import math
 import os
 import pickle
 import sys
 
-import numpy as np
+try:
+    import numpy as np
+    import linknet_core as ln
+except ImportError as _exc:  # say why fmi2Instantiate returns NULL, whether the host logs or not
+    sys.stderr.write(
+        f"[linknet FMU error] fmi2Instantiate: the FMU's Python cannot import {_exc.name or 'a module'} ({_exc}). "
+        f"The FMU needs CPython {sys.version_info.major}.{sys.version_info.minor} with numpy and scipy: this "
+        f"interpreter (prefix {sys.prefix}) searches {sys.path}; point PYTHONPATH at the site-packages that hold "
+        "numpy and scipy (or PYTHONHOME at that Python's prefix) in the host's environment.\n")
+    raise
 
 from pythonfmu import Fmi2Slave, Fmi2Causality, Fmi2Variability, Fmi2Initial, Real, String
 from pythonfmu.enums import Fmi2Status
 
-import linknet_core as ln
 from linknet_fmu import thread_state
 from linknet_fmu.layout import Layout
+from linknet_fmu.parameters import parameter_problem
 
 CONFIG_FILE = "linknet_fmu.json"
 SCENE_FILE = "linknet_scene.json"
-STATE_FORMAT = "linknet-fmu-state-1"
+# An FMU state names its format and the FMU it belongs to (a fingerprint of the scene, the exposed masses and the
+# model identifier): fmi2SetFMUstate refuses another FMU's state, and deserialization checks a header and a
+# checksum before unpickling anything. Raise the number when the state's content changes.
+STATE_FORMAT = "linknet-fmu-state-2"
+STATE_MAGIC = b"LINKNET-FMU-STATE\0"
+
+
+def guarded(neutral):
+    """Wrap an FMI entry point: no exception may reach pythonfmu 0.7.0, which would answer fmi2Fatal and leave
+    the instance unusable. An unexpected one is logged with fmi2Error status (and on stderr) and the entry point
+    returns `neutral(self, *args)` (a list of the right length for getters, False for doStep, None for setters)."""
+    def wrap(method):
+        @functools.wraps(method)
+        def entry(self, *args):
+            thread_state.keep()
+            try:
+                return method(self, *args)
+            except Exception as e:  # the last resort: the cases the slave knows are answered inside
+                try:
+                    self._error(f"{method.__name__} failed: {type(e).__name__}: {e}")
+                except Exception:  # noqa: S110 (logging itself failed: nothing left to report with)
+                    pass
+                return neutral(self, *args)
+        entry.guarded = True
+        return entry
+    return wrap
+
+
+def _none(self, *args):
+    return None
+
+
+def _false(self, *args):
+    return False
+
+
+def _values(fill):
+    def neutral(self, vrs=(), *args):
+        try:
+            return [fill] * len(vrs)
+        except TypeError:
+            return []
+    return neutral
 
 
 class LinknetNetwork(Fmi2Slave):
@@ -40,6 +95,14 @@ class LinknetNetwork(Fmi2Slave):
 
     def __init__(self, **kwargs):
         thread_state.keep()
+        try:
+            self._construct(**kwargs)
+        except Exception as e:  # pythonfmu returns NULL; say why even when the host does not log
+            sys.stderr.write(f"[linknet FMU error] fmi2Instantiate of {kwargs.get('instance_name')!r} failed: "
+                             f"{type(e).__name__}: {e}\n")
+            raise
+
+    def _construct(self, **kwargs):
         super().__init__(**kwargs)
         with open(os.path.join(self.resources, CONFIG_FILE)) as f:
             cfg = json.load(f)
@@ -62,6 +125,10 @@ class LinknetNetwork(Fmi2Slave):
         self._real[lay.tolerance_vr] = cfg["tolerance"]
         self._real[lay.step_vr] = cfg["step"]
         self._integrator = cfg["integrator"]
+        self._t0 = 0.0                 # fmi2SetupExperiment's startTime: the scene's initial state is given there
+        self._identity = hashlib.sha256(json.dumps(
+            [STATE_FORMAT, self._scene0.fingerprint, cfg["model_identifier"], cfg.get("inputs"), cfg.get("outputs")]
+        ).encode()).hexdigest()[:32]
         self._bad = {}                 # variable name -> reason; a pending bad input fails doStep
         self._broken = None            # reason the solver cannot continue (until reset / set state)
         self._initialized = False
@@ -97,7 +164,7 @@ class LinknetNetwork(Fmi2Slave):
             kwargs = dict(rtol=float(self._real[self._layout.tolerance_vr]))
         else:
             kwargs = dict(dt=float(self._real[self._layout.step_vr]))
-        self._sim = ln.Simulator(scene, method=method, **kwargs)
+        self._sim = ln.Simulator(scene, method=method, t0=self._t0, **kwargs)
         self._scene = scene
         self._F = np.zeros((scene.K, 3))
         self._F_flat = self._F.reshape(-1)  # a view: set_real writes the inputs through it
@@ -123,19 +190,15 @@ class LinknetNetwork(Fmi2Slave):
         self._outputs_stale = False
 
     def _check_parameter(self, vr, value):
-        """Reason why `value` is out of range for parameter vr, or None."""
+        """Reason why `value` is out of range for parameter vr, or None (the rules: linknet_fmu.parameters)."""
         lay = self._layout
-        if not math.isfinite(value):
-            return "must be finite"
-        if vr in lay.M_vr or vr in lay.R_vr or vr == lay.step_vr:
-            return None if value > 0 else "must be > 0"
-        if vr == lay.tolerance_vr:
-            return None if 0 < value < 0.1 else "must lie in (0, 0.1)"
-        return None
+        kind = ("M" if vr in lay.M_vr else "R" if vr in lay.R_vr else "step" if vr == lay.step_vr
+                else "tolerance" if vr == lay.tolerance_vr else "g")
+        return parameter_problem(kind, value)
 
     # ------------------------------------------------------------------ FMI: values
+    @guarded(_values(float("nan")))
     def get_real(self, vrs):
-        thread_state.keep()
         if self._parameters_dirty and not self._initialized:
             # initial unknowns read in initialization mode: T depends on M, R, g (ModelStructure)
             self._apply_parameters_safely()
@@ -159,8 +222,8 @@ class LinknetNetwork(Fmi2Slave):
             self._error(f"getReal: unknown value reference in {list(vrs)!r}")
             return [float("nan")] * len(vrs)
 
+    @guarded(_none)
     def set_real(self, vrs, values):
-        thread_state.keep()
         lay = self._layout
         if not self._bad:
             # the common call, every communication step: finite forces onto input variables. One array
@@ -189,7 +252,8 @@ class LinknetNetwork(Fmi2Slave):
         changed_parameter = False
         for vr, value in zip(vrs, values):
             if not 0 <= vr < lay.n_real:
-                self._error(f"setReal: unknown value reference {vr}")
+                what = "the String parameter integrator" if vr == lay.integrator_vr else "unknown"
+                self._error(f"setReal: value reference {vr} is {what} (no Real variable); value {value!r} ignored")
                 continue
             var = lay.reals[vr]
             if var.causality == "output":
@@ -212,7 +276,7 @@ class LinknetNetwork(Fmi2Slave):
                 continue
             reason = self._check_parameter(vr, value)
             if reason is not None:
-                self._bad[var.name] = f"= {value!r} {reason}"
+                self._bad[var.name] = reason if reason.startswith("=") else f"= {value!r}: {reason}"
                 self._error(f"parameter {var.name} {self._bad[var.name]}; the next doStep is refused")
                 continue
             self._bad.pop(var.name, None)
@@ -228,7 +292,7 @@ class LinknetNetwork(Fmi2Slave):
             self._bad["integrator"] = "is a fixed parameter and cannot be changed after initialization"
             self._error(f"integrator {self._bad['integrator']}")
             return
-        if value not in self._cfg["integrators"]:
+        if value not in self._cfg["integrators"] or parameter_problem("integrator", value):
             self._bad["integrator"] = f"= {value!r} is not one of {', '.join(self._cfg['integrators'])}"
             self._error(f"parameter integrator {self._bad['integrator']}")
             return
@@ -236,7 +300,79 @@ class LinknetNetwork(Fmi2Slave):
         self._integrator = value
         self._parameters_dirty = True
 
+    # Integer, Boolean and String: the FMU has one String (integrator) and no Integer or Boolean variable.
+    # pythonfmu's own versions raise on any other value reference (fmi2Fatal); these log and go on.
+    @guarded(_values(""))
+    def get_string(self, vrs):
+        out = []
+        for vr in vrs:
+            if vr == self._layout.integrator_vr:
+                out.append(self._integrator)
+            else:
+                self._error(f"getString: value reference {vr} is {self._kind_of(vr)}, not a String variable")
+                out.append("")
+        return out
+
+    @guarded(_none)
+    def set_string(self, vrs, values):
+        for vr, value in zip(vrs, values):
+            if vr == self._layout.integrator_vr:
+                self._set_integrator(value)
+            else:
+                self._error(f"setString: value reference {vr} is {self._kind_of(vr)}, not a String variable; "
+                            f"value {value!r} ignored")
+
+    @guarded(_values(0))
+    def get_integer(self, vrs):
+        self._error(f"getInteger: this FMU has no Integer variables (value references {list(vrs)!r})")
+        return [0] * len(vrs)
+
+    @guarded(_none)
+    def set_integer(self, vrs, values):
+        self._error(f"setInteger: this FMU has no Integer variables (value references {list(vrs)!r}); nothing set")
+
+    @guarded(_values(False))
+    def get_boolean(self, vrs):
+        self._error(f"getBoolean: this FMU has no Boolean variables (value references {list(vrs)!r})")
+        return [False] * len(vrs)
+
+    @guarded(_none)
+    def set_boolean(self, vrs, values):
+        self._error(f"setBoolean: this FMU has no Boolean variables (value references {list(vrs)!r}); nothing set")
+
+    def _kind_of(self, vr):
+        if isinstance(vr, int) and 0 <= vr < self._layout.n_real:
+            return f"the Real {self._layout.reals[vr].name}"
+        return "unknown"
+
     # ------------------------------------------------------------------ FMI: life cycle
+    @guarded(_none)
+    def setup_experiment(self, start_time=0.0, stop_time=None, tolerance=None):
+        """startTime is honoured: the scene's initial state is given at t0 (the scene is autonomous, so this is
+        its motion shifted in time). The experiment's tolerance is not used: the `tolerance` parameter is."""
+        if self._initialized:
+            self._error("setupExperiment after initialization is not allowed; ignored")
+            return
+        if start_time is None:
+            start_time = 0.0
+        if not (isinstance(start_time, (int, float)) and math.isfinite(start_time)):
+            self._bad["startTime"] = f"= {start_time!r} must be finite"
+            self._error(f"setupExperiment: startTime {self._bad['startTime']}")
+            return
+        self._bad.pop("startTime", None)
+        if float(start_time) != self._t0:
+            self._t0 = float(start_time)
+            self._parameters_dirty = True  # the simulator is rebuilt to start there
+
+    @guarded(_none)
+    def enter_initialization_mode(self):
+        pass
+
+    @guarded(_none)
+    def terminate(self):
+        pass
+
+    @guarded(_none)
     def exit_initialization_mode(self):
         """Rebuild the simulator if parameters changed; errors surface at the next doStep."""
         self._apply_parameters_safely()
@@ -261,18 +397,14 @@ class LinknetNetwork(Fmi2Slave):
         self._make_simulator(scene)
         self._broken = None  # parameters are applied before initialization ends: an earlier failure is gone
 
+    @guarded(_false)
     def do_step(self, current_time, step_size):
-        thread_state.keep()
-        try:
-            return self._do_step(current_time, step_size)
-        except Exception as e:  # last resort: an exception here would be fmi2Fatal
-            self._broken = f"unexpected error in doStep: {type(e).__name__}: {e}"
-            self._error(self._broken)
-            return False
+        return self._do_step(current_time, step_size)
 
     def _do_step(self, t, h):
         if not self._initialized:
-            self.exit_initialization_mode()
+            self._error("doStep refused: the FMU is not initialized (call fmi2ExitInitializationMode first)")
+            return False
         if self._bad:
             for name, reason in self._bad.items():
                 self._error(f"doStep refused: {name} {reason}")
@@ -284,7 +416,7 @@ class LinknetNetwork(Fmi2Slave):
             self._error(f"doStep refused: communication step size h={h!r} must be finite and > 0")
             return False
         t_fmu = self._sim.state.t
-        if not math.isfinite(t) or abs(t - t_fmu) > 1e-9 * max(1.0, abs(t_fmu)):
+        if not (isinstance(t, (int, float)) and math.isfinite(t)) or abs(t - t_fmu) > 1e-9 * max(1.0, abs(t_fmu)):
             self._error(f"doStep refused: currentCommunicationPoint t={t!r} differs from the FMU's time {t_fmu!r}")
             return False
         if t + h <= t_fmu:
@@ -303,29 +435,50 @@ class LinknetNetwork(Fmi2Slave):
     # ------------------------------------------------------------------ FMI: FMU state
     # pythonfmu's default saves registered variables only; the full state is the simulator
     # snapshot (positions, velocities, time, integrator internals) plus inputs and parameters.
+    @guarded(_none)
     def _get_fmu_state(self):
         return {
             "format": STATE_FORMAT,
+            "fmu": self._identity,
             "sim": copy.deepcopy(self._sim.get_state()),
             "real": self._real.copy(),
             "integrator": self._integrator,
+            "t0": self._t0,
             "scene": self._scene,
             "bad": dict(self._bad),
             "broken": self._broken,
             "initialized": self._initialized,
         }
 
+    def _state_problem(self, state):
+        """Why `state` is not one of this FMU's states (None if it is)."""
+        if not isinstance(state, dict):
+            return f"not an FMU state of this FMU (a {type(state).__name__})"
+        if state.get("format") != STATE_FORMAT:
+            return state.get("invalid") or f"not a linknet FMU state of format {STATE_FORMAT!r}"
+        if state.get("fmu") != self._identity:
+            return "a state of another FMU (another scene, other exposed masses or another model)"
+        return self._sim_problem(state)
+
+    def _sim_problem(self, state):
+        if not isinstance(state.get("real"), np.ndarray) or state["real"].shape != self._real.shape:
+            return "a damaged state (its values do not fit this FMU)"
+        return None
+
+    @guarded(_none)
     def _set_fmu_state(self, state):
+        problem = self._state_problem(state)
+        if problem:  # refused: the instance is left exactly as it was
+            self._error(f"setFMUstate refused: {problem}")
+            return
         try:
-            if not isinstance(state, dict) or state.get("format") != STATE_FORMAT:
-                self._error("setFMUstate: not a state saved by this FMU")
-                return
             lay = self._layout
             params = np.concatenate([lay.M_vr, lay.R_vr, lay.g_vr, [lay.tolerance_vr, lay.step_vr]])
-            same_setup = (state["integrator"] == self._integrator
+            same_setup = (state["integrator"] == self._integrator and state.get("t0", 0.0) == self._t0
                           and np.array_equal(state["real"][params], self._real[params]))
             self._real = state["real"].copy()
             self._integrator = state["integrator"]
+            self._t0 = state.get("t0", 0.0)
             if not same_setup:  # otherwise keep the simulator (building one analyses the structure)
                 self._make_simulator(state["scene"])
             self._F[lay.input_masses] = self._real[lay.F_vr]
@@ -339,12 +492,34 @@ class LinknetNetwork(Fmi2Slave):
             self._broken = f"setFMUstate failed: {e}"
             self._error(self._broken)
 
+    # Serialized: STATE_MAGIC, 8 bytes of payload length, 32 bytes of SHA-256 of the payload, the payload (pickle:
+    # every float bit-exact, so replay after deserialization is bit-identical). Header, length and checksum are
+    # checked before the payload is unpickled: garbage, truncated and damaged bytes are refused, and a state of
+    # another FMU (right format) is refused by fmi2SetFMUstate. pythonfmu calls these on the class: they cannot log,
+    # so a refused deserialization returns a marker that fmi2SetFMUstate refuses with the reason.
     @staticmethod
     def _fmu_state_to_bytes(state):
-        # pickle keeps every float bit-exact (replay after deserialization is bit-identical).
-        return pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
+        try:
+            payload = pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception as e:  # noqa: BLE001 (never fmi2Fatal)
+            sys.stderr.write(f"[linknet FMU error] serializeFMUstate failed: {e}\n")
+            payload = pickle.dumps({"format": None, "invalid": f"the state could not be serialized ({e})"})
+        return STATE_MAGIC + len(payload).to_bytes(8, "little") + hashlib.sha256(payload).digest() + payload
 
     @staticmethod
     def _fmu_state_from_bytes(data):
-        # Only deserialize states this host serialized from this FMU (pickle trusts its input).
-        return pickle.loads(data)
+        try:
+            data = bytes(data)
+            head = len(STATE_MAGIC)
+            if not data.startswith(STATE_MAGIC):
+                return {"format": None, "invalid": "not a linknet FMU state (the bytes do not start with its header)"}
+            size = int.from_bytes(data[head:head + 8], "little")
+            digest, payload = data[head + 8:head + 40], data[head + 40:]
+            if len(payload) != size:
+                return {"format": None, "invalid": f"a truncated or padded state ({len(payload)} bytes of payload, "
+                                                   f"its header says {size})"}
+            if hashlib.sha256(payload).digest() != digest:
+                return {"format": None, "invalid": "a damaged state (its checksum does not match)"}
+            return pickle.loads(payload)
+        except Exception as e:  # noqa: BLE001 (never fmi2Fatal)
+            return {"format": None, "invalid": f"not a readable linknet FMU state ({type(e).__name__}: {e})"}

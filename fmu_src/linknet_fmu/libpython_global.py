@@ -9,14 +9,18 @@ RTLD_GLOBAL promotes it. CPython's extension loader does exactly one dlopen(path
 with sys.getdlopenflags(); pointing it at libpython (which has no PyInit_ function) performs
 the promotion and then fails harmlessly with ImportError. Only builtin modules are used here.
 
-In an ordinary Python process the first `import math` succeeds and nothing is done.
+Whether to promote is decided by what is mapped, not by importing a module: a libpython shared library
+mapped into the process is re-opened with RTLD_GLOBAL (a no-op where it is global already: a Python host
+linked against it); a process with no libpython mapped (a python executable with the interpreter built in)
+has its symbols global already. (Testing `import math` missed Debian's libpython, which has math built in
+while numpy's extensions still need the symbols.)
 """
 import os
 import sys
 
 
 def _loaded_libpython():
-    """Full path of the libpython mapped into this process (the extension loader needs a path)."""
+    """Full path of the libpython mapped into this process (the extension loader needs a path), or None."""
     stem = f"libpython{sys.version_info.major}.{sys.version_info.minor}"
     try:
         with open("/proc/self/maps") as maps:
@@ -26,18 +30,15 @@ def _loaded_libpython():
                     return path
     except OSError:
         pass
-    import sysconfig
-    return os.path.join(sysconfig.get_config_var("LIBDIR"), sysconfig.get_config_var("INSTSONAME"))
+    return None
 
 
 def ensure_global_libpython():
-    try:
-        import math  # noqa: F401  (a C extension: importable iff libpython is global)
-        return False
-    except ImportError:
-        pass
+    """Promote the mapped libpython to the global scope; True if one was mapped (and so promoted)."""
     import importlib.machinery
     soname = _loaded_libpython()
+    if soname is None:
+        return False
     old = sys.getdlopenflags()
     sys.setdlopenflags(os.RTLD_NOW | os.RTLD_GLOBAL)
     try:
