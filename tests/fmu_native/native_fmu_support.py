@@ -111,10 +111,12 @@ def host_options(fmu: Built, method: str | None = None, parameters: dict | None 
     return opts
 
 
-def library_rows(scene, fmu: Built, method: str, step=1e-3, tolerance=1e-8, n=N_STEPS, h=H) -> np.ndarray:
+def library_rows(scene, fmu: Built, method: str, step=1e-3, tolerance=1e-8, n=N_STEPS, h=H, t0=0.0) -> np.ndarray:
     """The same run on linknet_core's Simulator: t, then the outputs in output_names order."""
     import linknet_core as ln
     kwargs = dict(rtol=tolerance) if ln.METHODS[method].adaptive else dict(dt=step)
+    if t0:
+        kwargs["t0"] = t0  # the scene's initial state given at t0
     sim = ln.Simulator(scene, method=method, **kwargs)
     k = input_mass(fmu)
     picks = []
@@ -125,7 +127,7 @@ def library_rows(scene, fmu: Built, method: str, step=1e-3, tolerance=1e-8, n=N_
     fixed_row = {int(m): j for j, m in enumerate(scene.fixed_indices)}
     rows = []
     for step_i in range(n + 1):
-        t = step_i * h
+        t = t0 + step_i * h
         F = input_force(k, scene.K, t)
         o = sim.outputs(F)
         row = [t]
