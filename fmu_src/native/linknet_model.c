@@ -277,7 +277,8 @@ static int rigid_geometry(fmu_model *m, const double *mass, const double *X, con
                 const double rho[3] = {X[3 * k] - c[0], X[3 * k + 1] - c[1], X[3 * k + 2] - c[2]};
                 const double sq = rho[0] * rho[0] + rho[1] * rho[1] + rho[2] * rho[2];
                 for (int i = 0; i < 3; i++)
-                    for (int j = 0; j < 3; j++) I[3 * i + j] += -mass[k] * rho[i] * rho[j] + (i == j ? mass[k] * sq : 0.0);
+                    for (int j = 0; j < 3; j++)
+                        I[3 * i + j] += -mass[k] * rho[i] * rho[j] + (i == j ? mass[k] * sq : 0.0);
             }
         double w[3], axes[9];
         eigh3(I, w, axes);
@@ -841,7 +842,8 @@ static void explain(const fmu_model *m, int status, double t, double t_target, c
                  "motion blew up); reduce the step or tolerance", span);
         break;
     case LN_BAD_ARGUMENT:
-        snprintf(out, n, "cannot advance from t = %.17g to t = %.17g: the target must be later and finite", t, t_target);
+        snprintf(out, n, "cannot advance from t = %.17g to t = %.17g: the target must be later and finite", t,
+                 t_target);
         break;
     case LN_NO_MEMORY:
         snprintf(out, n, "out of memory %s", span);
