@@ -32,8 +32,8 @@ from linknet_core.ensemble.members import StudyPayload, StudySpec, error_text, r
 from linknet_core.ensemble.parameters import Plan
 
 TASK_SECONDS = 0.25  # target work per task once the member time is known
-# A scheduler spends ~0.2-1 ms per task (benchmarks/bench_ensemble.py measures it): a study keeps below this
-# many tasks per second in all, so on a large cluster tasks grow to threads / MAX_TASKS_PER_SECOND seconds
+# Scheduler and client spend ~1.8 ms per task (benchmarks/bench_ensemble.py: empty tasks, 2 shared cores): a
+# study keeps below this many tasks per second, so on a large cluster tasks grow to threads / this seconds
 MAX_TASKS_PER_SECOND = 500
 WORKER_WAIT_SECONDS = 60.0  # how long a study waits for the first worker of an existing cluster
 
