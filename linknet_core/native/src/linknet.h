@@ -31,10 +31,12 @@ typedef int64_t ln_int;
 /* The library's interface (what ctypes, the FMU glue and tests call) is exported; everything else, the
    DIM-generic stages among it, stays inside the library (compiled with -fvisibility=hidden), so that the
    calls between stages are direct and can be inlined. */
+#ifndef LN_API  /* an embedder (the native FMU) may define it empty */
 #if defined(__GNUC__) || defined(__clang__)
 #define LN_API __attribute__((visibility("default")))
 #else
 #define LN_API
+#endif
 #endif
 
 /* Status of a stage or of a whole advance. Keep in step with linknet_core/native/binding.py (STATUS). */
