@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import copy
+import functools
 import math
 import sys
 import time
@@ -172,11 +173,17 @@ class Simulator:
                     U0 = np.zeros_like(U0)  # the only velocity (12) allows where nothing can move
         # the scene is autonomous (no force depends on t), so starting at t0 is the scene's motion shifted in time
         self._initial = State(t0, X0, U0)
-        self.identity = {"format": SNAPSHOT_FORMAT, "scene": scene.fingerprint, "method": method,
-                         "path": f"{self.backend} {self.specialisation.kind}"}
         self._initial_internals = copy.deepcopy(self.integrator.internals())
         self.max_steps_per_call = max_steps_per_call
         self.state = self._initial.copy()
+
+    @functools.cached_property
+    def identity(self) -> dict:
+        """What a snapshot of this simulator is checked against: the snapshot format, the scene's fingerprint,
+        the method and the path (computed at the first snapshot: hashing the scene costs more than building the
+        rest of a small simulator)."""
+        return {"format": SNAPSHOT_FORMAT, "scene": self.scene.fingerprint, "method": self.method,
+                "path": f"{self.backend} {self.specialisation.kind}"}
 
     @property
     def rhs_evaluations(self) -> int:
