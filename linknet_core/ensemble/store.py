@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from linknet_core import __version__
+from linknet_core.version import __version__
 from linknet_core.scene import Scene
 from linknet_core.ensemble.members import OUTPUTS, StudySpec
 from linknet_core.ensemble.parameters import Plan
