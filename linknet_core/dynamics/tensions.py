@@ -114,14 +114,17 @@ class SparseSolver(TensionSolver):
 
     def factor(self, E: np.ndarray) -> None:
         order = self.assembly.ordering
-        A = self.assembly.matrix(E)[order][:, order]
-        diagonal = np.abs(A.diagonal())
+        A = self.assembly.matrix(E)
         try:
             if self.scene.L <= DENSE_FACTOR_LIMIT:
                 self._lu = None
-                self._cholesky = scipy.linalg.cho_factor(A.toarray(), lower=True, check_finite=False)
+                A = A.toarray()[np.ix_(order, order)]
+                diagonal = np.abs(np.diagonal(A))
+                self._cholesky = scipy.linalg.cho_factor(A, lower=True, check_finite=False)
                 pivots = np.diagonal(self._cholesky[0]) ** 2
             else:
+                A = A[order][:, order]
+                diagonal = np.abs(A.diagonal())
                 self._lu = splu(A.tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
                 pivots = self._lu.U.diagonal()
             self._singular = not np.all(pivots > PIVOT_TOL * diagonal)

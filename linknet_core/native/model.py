@@ -11,9 +11,6 @@ from __future__ import annotations
 import ctypes
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
-
 from linknet_core.dynamics.forces import has_velocity_dependent_forces
 from linknet_core.integrators.runge_kutta import MAX_FACTOR, MIN_FACTOR, SAFETY
 from linknet_core.structure.topology import PLANE_TOL, SINGULAR_RCOND, link_pairs
@@ -51,13 +48,11 @@ def scene_plane(scene, normal):
     return P, o, n, length
 
 
-def chain_elimination(L, first, second, weight, ordering):
+def chain_elimination(L, first, second, weight, ordering, component):
     """Path order of a chain's links and the weights of its tridiagonal A, or None where A is not tridiagonal
-    in that order. The links of each path (a component of the graph cut at the anchors) come in the
-    structure's leaves-first order, which for a path is path order; the test below checks it."""
+    in that order. The links of each path (``component``: a component of the graph cut at the anchors) come in
+    the structure's leaves-first order, which for a path is path order; the test below checks it."""
     off = first != second
-    graph = sp.coo_matrix((np.ones(int(off.sum())), (first[off], second[off])), shape=(L, L))
-    _, component = connected_components(graph, directed=False)
     position_of = np.empty(L, np.int64)
     position_of[ordering] = np.arange(L)
     order = np.lexsort((position_of, component)).astype(np.int64)
@@ -131,7 +126,8 @@ class NativeModel:
         else:
             chain = None
             if structure.kind == "chain":
-                chain = chain_elimination(L, pairs.first, pairs.second, weight, structure.ordering)
+                chain = chain_elimination(L, pairs.first, pairs.second, weight, structure.ordering,
+                                          structure.link_component)
             if chain is not None:
                 order, diag_weight, off_weight = chain
                 self.solver = "chain"

@@ -45,7 +45,11 @@ class LinkPairs:
 
 
 def link_pairs(scene: Scene) -> LinkPairs:
-    """All (l, l', k) with links l, l' incident to the same free mass k (setup, not per step)."""
+    """All (l, l', k) with links l, l' incident to the same free mass k (setup, not per step; kept per scene)."""
+    return _kept(scene, "pairs", _link_pairs)
+
+
+def _link_pairs(scene: Scene) -> LinkPairs:
     L = scene.L
     if L == 0:
         empty = np.zeros(0, np.int64)
@@ -111,6 +115,7 @@ class Structure:
     rank_G: int
     rank_exact: bool  # False where rank was estimated from LDL pivots (very large scenes)
     planar_normal: np.ndarray | None = None  # unit normal when every mass and force stays in one plane
+    link_component: np.ndarray | None = None  # (L,) component of each link in the graph cut at the anchors
     notes: list = field(default_factory=list)
 
 
@@ -179,26 +184,31 @@ def planar_normal(scene: Scene, tol: float = PLANE_TOL) -> np.ndarray | None:
     return None
 
 
-_analysed: dict[int, tuple[weakref.ref, Structure]] = {}
-
-
 def analyse(scene: Scene) -> Structure:
     """Classify the scene once, from its topology and its initial configuration. A scene is immutable, so
     its analysis is kept while the scene lives: every Simulator, Dynamics and native model of the same scene
     (an ensemble's members, a reset FMU) shares it."""
-    key = id(scene)
-    kept = _analysed.get(key)
+    return _kept(scene, "structure", _analyse)
+
+
+def _kept(scene: Scene, what: str, compute):
+    """compute(scene), computed once per scene object and what, dropped with the scene."""
+    key = (id(scene), what)
+    kept = _per_scene.get(key)
     if kept is not None and kept[0]() is scene:
         return kept[1]
-    structure = _analyse(scene)
-    _analysed[key] = (weakref.ref(scene, lambda _, key=key: _analysed.pop(key, None)), structure)
-    return structure
+    value = compute(scene)
+    _per_scene[key] = (weakref.ref(scene, lambda _, key=key: _per_scene.pop(key, None)), value)
+    return value
+
+
+_per_scene: dict = {}
 
 
 def _analyse(scene: Scene) -> Structure:
     graph, node_of_end, n_free = _cut_graph(scene)
     n_nodes = graph.shape[0]
-    n_comp, _ = connected_components(graph, directed=False)
+    n_comp, node_component = connected_components(graph, directed=False)
     is_forest = scene.L == n_nodes - n_comp
     free_degree = np.bincount(np.concatenate([scene.k1, scene.k2]), minlength=scene.K)[scene.free_indices]
     max_free_degree = int(free_degree.max()) if free_degree.size else 0
@@ -236,7 +246,8 @@ def _analyse(scene: Scene) -> Structure:
     return Structure(kind=kind, topology=topology, ordering=np.asarray(ordering, np.int64),
                      max_free_degree=max_free_degree, closed_loops=closed_loops,
                      self_stresses=int(self_stresses), rank_G=int(rank), rank_exact=rank_exact,
-                     planar_normal=planar_normal(scene), notes=notes)
+                     planar_normal=planar_normal(scene), link_component=node_component[node_of_end[:, 0]],
+                     notes=notes)
 
 
 def _dense_rank(scene: Scene, ordering: np.ndarray, rtol: float = SINGULAR_RCOND) -> int:
