@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import shutil
 import subprocess
-import zipfile
 
 import pytest
 
@@ -35,13 +34,3 @@ def exit_host(contract_root):
     subprocess.run([CC, "-O1", "-Wall", "-Werror", "-o", str(exe), str(ROOT / "tests/contract/exit_host.c"), "-ldl"],
                    check=True)
     return exe
-
-
-def extract(fmu, where):
-    """Unzip an FMU once; returns (folder, model identifier, guid)."""
-    from fmpy import read_model_description
-    md = read_model_description(str(fmu))
-    if not where.exists():
-        with zipfile.ZipFile(fmu) as z:
-            z.extractall(where)
-    return where, md.coSimulation.modelIdentifier, md.guid

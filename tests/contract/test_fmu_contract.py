@@ -9,9 +9,8 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import MODELS, extract
+from contract_support import extract
 from fmu_harness import FMU_CLIENT_LIB, run_client
-import linknet_core as ln
 
 FATAL = 4
 

@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 
-from conftest import MODELS, ROOT
+from contract_support import MODELS, ROOT
 import build_fmu
 import linknet_core as ln
 from linknet_core import cli
