@@ -44,6 +44,18 @@ static void residual_floor(const ln_model *m, const double *Xc, double tol, doub
     }
 }
 
+/* phi_l of (11) for every link into phi; returns the largest |phi_l| in units of its convergence scale. */
+static double residuals(const ln_model *m, const double *Xc, const double *inv_scale, double *phi)
+{
+    double worst = 0.0;
+    for (ln_int l = 0; l < m->L; l++) {
+        phi[l] = length_residual(m, Xc, l);
+        const double r = fabs(phi[l]) * inv_scale[l];
+        if (!(r <= worst)) worst = r;
+    }
+    return worst;
+}
+
 static void record_failure(const ln_model *m, ln_data *d, const double *Xc, ln_int iterations, double before)
 {
     double worst = -1.0;
@@ -114,19 +126,13 @@ static int project_positions_chain(const ln_model *m, ln_data *d, double *Xc, co
 static int simplified_newton(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
                              ln_int max_iter, double *first)
 {
-    const ln_int L = m->L;
     if (m->solver == LN_SOLVER_CHAIN && !d->singular)
         return project_positions_chain(m, d, Xc, E_dir, tol, max_iter, first);
     double *phi = d->phi, *mu = d->mu, *inv_scale = d->scale;
     residual_floor(m, Xc, tol, inv_scale);
     double previous = 1e300;
     for (ln_int it = 0; it < max_iter; it++) {
-        double worst = 0.0;
-        for (ln_int l = 0; l < L; l++) {
-            phi[l] = length_residual(m, Xc, l);
-            const double r = fabs(phi[l]) * inv_scale[l];
-            if (!(r <= worst)) worst = r;
-        }
+        const double worst = residuals(m, Xc, inv_scale, phi);
         if (*first < 0) *first = worst * tol;
         if (worst <= 1.0) return LN_OK;
         if (!(worst < 1e300) || (it > 2 && worst > 0.3 * previous)) break;
@@ -241,17 +247,11 @@ static int newton_solve(const ln_model *m, ln_data *d, const double *Xc, const d
 static int exact_newton(const ln_model *m, ln_data *d, double *Xc, const double *X_start, const double *E_dir,
                         double tol, ln_int max_iter)
 {
-    const ln_int L = m->L;
     double *phi = d->phi, *mu = d->mu, *inv_scale = d->scale;
     for (ln_int i = 0; i < m->K * DIM; i++) Xc[i] = X_start[i];
     residual_floor(m, Xc, tol, inv_scale);
     for (ln_int it = 0; it < max_iter; it++) {
-        double worst = 0.0;
-        for (ln_int l = 0; l < L; l++) {
-            phi[l] = length_residual(m, Xc, l);
-            const double r = fabs(phi[l]) * inv_scale[l];
-            if (!(r <= worst)) worst = r;
-        }
+        const double worst = residuals(m, Xc, inv_scale, phi);
         if (worst <= 1.0) return LN_OK;
         if (!(worst < 1e300)) break;
         const int status = newton_solve(m, d, Xc, E_dir, phi, mu);
