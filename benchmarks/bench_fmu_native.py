@@ -79,7 +79,7 @@ def no_python_env(tmp: Path) -> dict:
 
 def python_env() -> dict:
     env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON") and k != "LD_PRELOAD"}
-    env["NATIVE_HOST_FAST_EXIT"] = "1"  # pythonfmu 0.7.0 can hang in a normal exit (issue 14)
+    env["NATIVE_HOST_FAST_EXIT"] = "1"  # pythonfmu 0.7.0 can hang in a normal exit (docs/contract.md)
     return env
 
 

@@ -1,4 +1,4 @@
-"""The pythonfmu FMU's contract (issue 14): every FMI entry point guarded (never fmi2Fatal, the instance usable
+"""The pythonfmu FMU's contract: every FMI entry point guarded (never fmi2Fatal, the instance usable
 after any bad call), misuse refused with a logged message, startTime honoured, FMU states carrying an identity,
 a C host that calls exit() ends, and the host requirements (libpython promotion, a clear reason for a failed
 fmi2Instantiate). FMU clients run in fresh processes (tests/fmu_harness.py)."""

@@ -1,5 +1,5 @@
 """Scene files, the CLI, build_fmu.py and the Python API answer every bad input at once, naming the field or option
-and its rule (issue 14); the general rules: every scene field type-checked, every option parsed by one validated
+and its rule; the general rules: every scene field type-checked, every option parsed by one validated
 type (checked over the parsers' actions)."""
 import argparse
 import json

@@ -105,7 +105,7 @@ def test_fmpy_simulates_it(fmu_root):
             sim.advance((n + 1) * 0.01, F)
     np.testing.assert_allclose(res["time"], np.arange(21) * 0.01, atol=1e-12)
     np.testing.assert_allclose(np.column_stack([res["X[11,3]"], res["T[1]"]]), np.array(ref), rtol=1e-10, atol=1e-12)
-    # a master that starts at t0 != 0 gets every row (issue 14: the pythonfmu FMU refused its first step)
+    # a master that starts at t0 != 0 gets every row: the FMU honours the start time of fmi2SetupExperiment
     late = fmpy.simulate_fmu(str(fmu.path), start_time=1.0, stop_time=1.1, output_interval=0.01, output=["X[11,3]"])
     assert len(late) == 11 and late["time"][0] == 1.0 and abs(late["time"][-1] - 1.1) < 1e-12
 
