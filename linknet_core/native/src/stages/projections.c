@@ -14,6 +14,13 @@
 #include "../dim.h"
 #include "../linknet.h"
 #include "../stages.h"
+/* The loops here run over a scene's K masses or L links a few times per RATTLE stage; on small scenes the
+   checks GCC's loop vectorizer adds before each of them (aliasing, trip count) cost more than they save
+   (measured: a pendulum's RATTLE step 50 -> 42 ns, no change from 100 links up). Clang is unaffected. */
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC push_options
+#pragma GCC optimize("no-tree-loop-vectorize")
+#endif
 
 #define EPS 2.220446049250313e-16
 #define KRYLOV_DIM 30        /* GMRES restart length of the exact-Newton solve */
@@ -330,3 +337,7 @@ int FN(ln_project_velocities)(const ln_model *m, ln_data *d, const double *X, do
     FN(ln_add_correction)(m, E, mu, -1.0, U);
     return LN_OK;
 }
+
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC pop_options
+#endif
