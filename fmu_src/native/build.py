@@ -63,10 +63,11 @@ def core_source_dir() -> Path:
 
 
 def translation_units(src: Path) -> list[str]:
-    """The .c files under src (relative paths) that no other .c file includes: the ones to compile."""
+    """The .c files under src (relative paths) that no other source file (.c or .h) includes: the ones to
+    compile."""
     files = sorted(p for p in src.rglob("*.c") if "__pycache__" not in p.parts)
     included = set()
-    for p in files:
+    for p in sorted(p for p in src.rglob("*.[ch]") if "__pycache__" not in p.parts):
         for name in re.findall(r'^\s*#\s*include\s+"([^"]+\.c)"', p.read_text(errors="replace"), re.M):
             included.add((p.parent / name).resolve())
     return [p.relative_to(src).as_posix() for p in files if p.resolve() not in included]
@@ -210,7 +211,7 @@ def _simulators(scene, cfg):
 def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
     """The generated C file (without its identity lines) and facts about the scene for the caller."""
     import linknet_core as ln
-    import linknet_core.native.library as library
+    from linknet_core.native.ldl import package_library
     import linknet_core.native.model as native_model
 
     sims = _simulators(scene, cfg)
@@ -235,7 +236,7 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
     ordering = "NULL"
     if model.ldl:
         order = np.zeros(L, np.int64)
-        library.ldl_get_ordering(model.ldl, order.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)))
+        package_library().ln_ldl_get_ordering(model.ldl, order.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)))
         ordering = w.ints(order, "ldl_ordering")
 
     # which mass and sign each pair weight of A (25) comes from: a changed mass rebuilds the weights

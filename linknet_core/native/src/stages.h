@@ -8,6 +8,8 @@ void FN(ln_scene_forces)(const ln_model *m, const double *X, const double *U, co
 /* stages/tension.c: A of (25), B of (26) and their solution */
 void FN(ln_unit_vectors)(const ln_model *m, const double *X, double *E);
 int FN(ln_factor_tension_matrix)(const ln_model *m, ln_data *d, const double *E);
+/* A(E) is singular (a pivot vanished): minimum-norm solves from here on, and the event counted. */
+int FN(ln_factor_singular)(const ln_model *m, ln_data *d, const double *E);
 void FN(ln_solve_tension_system)(const ln_model *m, ln_data *d, const double *b, double *x);
 void FN(ln_add_correction)(const ln_model *m, const double *E, const double *mu, double scale, double *V);
 

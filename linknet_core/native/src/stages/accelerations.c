@@ -97,9 +97,9 @@ int FN(ln_accelerations)(const ln_model *m, ln_data *d, const double *X, const d
     if (general) {
         FN(ln_unit_vectors)(m, X, E);
         if (refactor) {
-            const int status = (m->solver == LN_SOLVER_CHAIN)
-                ? (d->singular = 1, d->singular_events++, FN(ln_minnorm_factor)(m, d, E))
-                : FN(ln_factor_tension_matrix)(m, d, E);
+            /* a chain whose sweep just met a vanishing pivot goes straight to the minimum-norm path */
+            const int status = m->solver == LN_SOLVER_CHAIN ? FN(ln_factor_singular)(m, d, E)
+                                                            : FN(ln_factor_tension_matrix)(m, d, E);
             if (status != LN_OK) return status;
         }
         double *B = d->B;

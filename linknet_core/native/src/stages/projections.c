@@ -14,13 +14,8 @@
 #include "../dim.h"
 #include "../linknet.h"
 #include "../stages.h"
-/* The loops here run over a scene's K masses or L links a few times per RATTLE stage; on small scenes the
-   checks GCC's loop vectorizer adds before each of them (aliasing, trip count) cost more than they save
-   (measured: a pendulum's RATTLE step 50 -> 42 ns, no change from 100 links up). Clang is unaffected. */
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC push_options
-#pragma GCC optimize("no-tree-loop-vectorize")
-#endif
+
+LN_SCALAR_LOOPS_BEGIN
 
 #define EPS 2.220446049250313e-16
 #define KRYLOV_DIM 30        /* GMRES restart length of the exact-Newton solve */
@@ -317,14 +312,9 @@ int FN(ln_project_velocities)(const ln_model *m, ln_data *d, const double *X, do
     if (L == 0) return LN_OK;
     if (m->solver == LN_SOLVER_CHAIN && !project_velocities_chain(m, d, X, U, E)) return LN_OK;
     FN(ln_unit_vectors)(m, X, E);
-    int status;
-    if (m->solver == LN_SOLVER_CHAIN) {  /* a singular configuration of a chain */
-        d->singular = 1;
-        d->singular_events++;
-        status = FN(ln_minnorm_factor)(m, d, E);
-    } else {
-        status = FN(ln_factor_tension_matrix)(m, d, E);
-    }
+    /* a chain whose sweep just met a vanishing pivot goes straight to the minimum-norm path */
+    const int status = m->solver == LN_SOLVER_CHAIN ? FN(ln_factor_singular)(m, d, E)
+                                                    : FN(ln_factor_tension_matrix)(m, d, E);
     if (status != LN_OK) return status;
     double *rhs = d->phi, *mu = d->mu;
     for (ln_int l = 0; l < L; l++) {
@@ -338,6 +328,4 @@ int FN(ln_project_velocities)(const ln_model *m, ln_data *d, const double *X, do
     return LN_OK;
 }
 
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC pop_options
-#endif
+LN_SCALAR_LOOPS_END

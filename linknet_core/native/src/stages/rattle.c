@@ -15,13 +15,8 @@
 #include "../dim.h"
 #include "../linknet.h"
 #include "../stages.h"
-/* The loops here run over a scene's K masses or L links a few times per RATTLE stage; on small scenes the
-   checks GCC's loop vectorizer adds before each of them (aliasing, trip count) cost more than they save
-   (measured: a pendulum's RATTLE step 50 -> 42 ns, no change from 100 links up). Clang is unaffected. */
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC push_options
-#pragma GCC optimize("no-tree-loop-vectorize")
-#endif
+
+LN_SCALAR_LOOPS_BEGIN
 
 #define IMPLICIT_KICK_ITERATIONS 60
 
@@ -153,6 +148,4 @@ int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, do
     return LN_OK;
 }
 
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC pop_options
-#endif
+LN_SCALAR_LOOPS_END

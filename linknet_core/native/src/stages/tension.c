@@ -90,7 +90,7 @@ static void solve_chain(const ln_model *m, ln_data *d, const double *b, double *
     }
 }
 
-static int factor_singular(const ln_model *m, ln_data *d, const double *E)
+int FN(ln_factor_singular)(const ln_model *m, ln_data *d, const double *E)
 {
     d->singular = 1;
     d->singular_events++;
@@ -102,11 +102,11 @@ int FN(ln_factor_tension_matrix)(const ln_model *m, ln_data *d, const double *E)
     d->singular = 0;
     switch (m->solver) {
     case LN_SOLVER_CHAIN:
-        return factor_chain(m, d, E) < 0 ? LN_OK : factor_singular(m, d, E);
+        return factor_chain(m, d, E) < 0 ? LN_OK : FN(ln_factor_singular)(m, d, E);
     case LN_SOLVER_LDL:
         for (ln_int p = 0; p < m->n_pairs; p++)
             d->pair_values[p] = m->pair_weight[p] * dot_rows(E, m->pair_first[p], m->pair_second[p]);
-        return ln_ldl_factor(m->ldl, d->ldl, d->pair_values, m->pivot_tol) < 0 ? LN_OK : factor_singular(m, d, E);
+        return ln_ldl_factor(m->ldl, d->ldl, d->pair_values, m->pivot_tol) < 0 ? LN_OK : FN(ln_factor_singular)(m, d, E);
     case LN_SOLVER_MIN_NORM:
         d->singular = 1;  /* self-stresses: every solve is minimum-norm */
         return FN(ln_minnorm_factor)(m, d, E);
