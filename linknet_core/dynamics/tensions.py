@@ -19,11 +19,11 @@ import scipy.sparse as sp
 
 from scipy.sparse.linalg import splu
 from linknet_core.scene.description import Scene
+from linknet_core.native.ldl import PIVOT_TOL
 from linknet_core.structure.topology import SINGULAR_RCOND, Structure, link_pairs
 
 DENSE_MIN_NORM_LIMIT = 2500  # links; above it the redundant path uses MINRES (min-norm from x0 = 0)
 DENSE_FACTOR_LIMIT = 200  # links; up to here the reference factors A densely
-PIVOT_TOL = 1e-11  # a pivot below this times its diagonal entry means A is singular (as the native core)
 
 
 class TensionAssembly:

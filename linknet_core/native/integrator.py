@@ -34,7 +34,7 @@ class NativeIntegrator(Integrator):
     order, guarantees). ``static``: a scene with no degrees of freedom (an advance moves t only)."""
 
     def __init__(self, model: NativeModel, method_cls, *, dt=None, rtol=None, atol=None, static: bool = False):
-        super().__init__(dynamics=None)
+        self.dyn = None  # the native data keeps the statistics (Integrator.__init__ would set its own)
         self.model = model
         self.name, self.order, self.symplectic = method_cls.name, method_cls.order, method_cls.symplectic
         self.adaptive, self.guarantees = method_cls.adaptive, method_cls.guarantees
@@ -53,10 +53,6 @@ class NativeIntegrator(Integrator):
     def stats(self) -> StepStats:
         d = self._d
         return StepStats(int(d.steps), int(d.rejected), int(d.split_steps), int(d.finest_split))
-
-    @stats.setter
-    def stats(self, value) -> None:  # Integrator.__init__ sets it; the native data keeps its own
-        pass
 
     @property
     def rhs_evaluations(self) -> int:

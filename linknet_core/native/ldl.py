@@ -14,7 +14,7 @@ ln_int = ctypes.c_int64
 _ln_int_p = ctypes.POINTER(ln_int)
 _double_p = ctypes.POINTER(ctypes.c_double)
 
-PIVOT_TOL = 1e-11  # a pivot below this times its diagonal entry means A is singular (the model's pivot_tol)
+PIVOT_TOL = 1e-11  # a pivot below this times its diagonal entry means A is singular (every factorisation's rule)
 
 
 def declare(lib: ctypes.CDLL) -> ctypes.CDLL:
@@ -38,7 +38,8 @@ def declare(lib: ctypes.CDLL) -> ctypes.CDLL:
     return lib
 
 
-def _package_library() -> ctypes.CDLL:
+def package_library() -> ctypes.CDLL:
+    """The package's native library with the LDL^T functions declared."""
     from linknet_core.native.library import lib
 
     return declare(lib)
@@ -57,7 +58,7 @@ class NativeLDL:
     """
 
     def __init__(self, n: int, first, second, ordering=None, lib: ctypes.CDLL | None = None):
-        self._lib = declare(lib) if lib is not None else _package_library()
+        self._lib = declare(lib) if lib is not None else package_library()
         self.n = int(n)
         self._first, self._second = _ints(first), _ints(second)
         if self._first.shape != self._second.shape or self._first.ndim != 1:
@@ -139,7 +140,7 @@ class NativeLDL:
 def vector_kernels(enable: bool | None = None, lib: ctypes.CDLL | None = None) -> bool:
     """Whether analyses from now on use the AVX2 copy of the supernodal factorisation (where the processor has
     it); ``enable`` switches it for the whole process (tests and benchmarks: both copies agree bitwise)."""
-    lib = declare(lib) if lib is not None else _package_library()
+    lib = declare(lib) if lib is not None else package_library()
     return bool(lib.ln_ldl_vector_kernels(-1 if enable is None else int(bool(enable))))
 
 

@@ -118,10 +118,6 @@ evaluate_repeated = _declare("ln_evaluate_repeated", ctypes.c_int, Model_p, Data
 force_kind = _declare("ln_force_kind", ln_int, ctypes.c_char_p)
 fixed_step_count = _declare("ln_fixed_step_count", ln_int, ctypes.c_double, ctypes.c_double)
 sizeof = _declare("ln_sizeof", ctypes.c_size_t, ctypes.c_int)
-ldl_analyse = _declare("ln_ldl_analyse", ctypes.c_void_p, ln_int, ln_int, ln_int_p, ln_int_p, ln_int_p)
-ldl_symbolic_free = _declare("ln_ldl_symbolic_free", None, ctypes.c_void_p)
-ldl_nnz_L = _declare("ln_ldl_nnz_L", ln_int, ctypes.c_void_p)
-ldl_get_ordering = _declare("ln_ldl_get_ordering", None, ctypes.c_void_p, ln_int_p)
 
 
 def pointer(array: np.ndarray, ctype=ctypes.c_double):

@@ -14,7 +14,8 @@ import numpy as np
 from linknet_core.dynamics.forces import has_velocity_dependent_forces
 from linknet_core.integrators.runge_kutta import MAX_FACTOR, MIN_FACTOR, SAFETY
 from linknet_core.structure.topology import PLANE_TOL, SINGULAR_RCOND, link_pairs
-from linknet_core.dynamics.tensions import DENSE_MIN_NORM_LIMIT, PIVOT_TOL
+from linknet_core.dynamics.tensions import DENSE_MIN_NORM_LIMIT
+from linknet_core.native.ldl import PIVOT_TOL, package_library
 from linknet_core.native import library as lib
 from linknet_core.native.library import float_array, int_array, pointer
 
@@ -138,12 +139,15 @@ class NativeModel:
                 m.solver = lib.SOLVER_LDL
                 ordering = int_array(structure.ordering)
                 first, second = int_array(pairs.first), int_array(pairs.second)
-                self._ldl = lib.ldl_analyse(L, first.size, pointer(first, lib.ln_int), pointer(second, lib.ln_int),
-                                            pointer(ordering, lib.ln_int))
+                self._ldl = package_library().ln_ldl_analyse(L, first.size, pointer(first, lib.ln_int),
+                                                             pointer(second, lib.ln_int), pointer(ordering, lib.ln_int))
                 if not self._ldl:
                     raise MemoryError("the sparse LDL^T analysis of the tension matrix failed (out of memory)")
                 m.ldl = self._ldl
-        self.nnz_L = int(lib.ldl_nnz_L(self._ldl)) if self._ldl else (max(L - 1, 0) if self.solver == "chain" else 0)
+        if self._ldl:
+            self.nnz_L = int(package_library().ln_ldl_nnz_L(self._ldl))
+        else:  # a chain's L has one entry per link after the first; no links, no L
+            self.nnz_L = max(L - 1, 0) if self.solver == "chain" else 0
 
         plane = None if planar is False else scene_plane(scene, structure.planar_normal)
         self.plane = plane
@@ -160,7 +164,7 @@ class NativeModel:
 
     def __del__(self):
         if getattr(self, "_ldl", None):
-            lib.ldl_symbolic_free(self._ldl)
+            package_library().ln_ldl_symbolic_free(self._ldl)
             self._ldl = None
 
     def describe(self) -> str:
