@@ -27,6 +27,15 @@ static void combine(ln_int size, const double *Y0, double h, const double *coef,
     for (ln_int i = 0; i < size; i++) out[i] = Y0[i] + h * out[i];
 }
 
+/* Stage i's derivatives: dX/dt = U (10) and dU/dt = acc (9) into row i of KX, KU. */
+static inline void store_stage(ln_int size, ln_int i, const double *U, const double *acc, double *KX, double *KU)
+{
+    for (ln_int j = 0; j < size; j++) {
+        KX[i * size + j] = U[j];
+        KU[i * size + j] = acc[j];
+    }
+}
+
 static inline double weighted(const double *coef, ln_int n, const double *KY, ln_int size, ln_int i)
 {
     double s = 0.0;
@@ -115,10 +124,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
     *accepted = 0;
     d->n_rhs++;
     if ((status = FN(ln_accelerations)(m, d, X, U, F_base, acc, d->T, 1)) != LN_OK) return status;
-    for (ln_int i = 0; i < size; i++) {
-        KX[i] = U[i];
-        KU[i] = acc[i];
-    }
+    store_stage(size, 0, U, acc, KX, KU);
     if (d->h_next <= 0.0) {
         double h0;
         if ((status = starting_step(m, meth, d, X, U, F_base, acc, t_target - t, &h0)) != LN_OK) return status;
@@ -128,24 +134,15 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
         const double remaining = t_target - t;
         const double h = ln_controlled_step(d->h_next, t, t_target);
         if (h < 0.0) return LN_STEP_UNDERFLOW;
-        for (ln_int i = 1; i < s; i++) {
-            combine(size, X, h, meth->AB, i, i, s, KX, Xs);
-            combine(size, U, h, meth->AB, i, i, s, KU, Us);
+        /* the stages 1..s-1, then (row s: the weights b) the new point Xn, Un, whose evaluation also factors
+           A(Xn), which the position projection below reuses */
+        for (ln_int i = 1; i <= s; i++) {
+            double *Yx = i < s ? Xs : Xn, *Yu = i < s ? Us : Un;
+            combine(size, X, h, meth->AB, i, i, s, KX, Yx);
+            combine(size, U, h, meth->AB, i, i, s, KU, Yu);
             d->n_rhs++;
-            if ((status = FN(ln_accelerations)(m, d, Xs, Us, F_base, acc, d->T, 1)) != LN_OK) return status;
-            for (ln_int j = 0; j < size; j++) {
-                KX[i * size + j] = Us[j];
-                KU[i * size + j] = acc[j];
-            }
-        }
-        combine(size, X, h, meth->AB, s, s, s, KX, Xn);
-        combine(size, U, h, meth->AB, s, s, s, KU, Un);
-        d->n_rhs++;
-        /* this evaluation also factors A(Xn), which the position projection below reuses */
-        if ((status = FN(ln_accelerations)(m, d, Xn, Un, F_base, acc, d->T, 1)) != LN_OK) return status;
-        for (ln_int j = 0; j < size; j++) {
-            KX[s * size + j] = Un[j];
-            KU[s * size + j] = acc[j];
+            if ((status = FN(ln_accelerations)(m, d, Yx, Yu, F_base, acc, d->T, 1)) != LN_OK) return status;
+            store_stage(size, i, Yu, acc, KX, KU);
         }
         const double err = FN(ln_rk_error_norm)(m, meth, X, U, Xn, Un, KX, KU, h);
         if (!(err <= 1.0)) {  /* too large, or not finite */
@@ -178,10 +175,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
             /* the first stage of the next step; A(X) is factored already (velocity projection) */
             d->n_rhs++;
             if ((status = FN(ln_accelerations)(m, d, X, U, F_base, acc, d->T, 0)) != LN_OK) return status;
-            for (ln_int j = 0; j < size; j++) {
-                KX[j] = U[j];
-                KU[j] = acc[j];
-            }
+            store_stage(size, 0, U, acc, KX, KU);
         }
     }
     return LN_OK;
