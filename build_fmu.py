@@ -4,6 +4,7 @@
     python build_fmu.py models/chain_10.json [-o chain_10.fmu] [--integrator rattle --step 1e-3]
     python build_fmu.py --component pd_controller -o pd_controller.fmu
     python build_fmu.py --component spring_damper -o spring_damper.fmu
+    python build_fmu.py --component cart -o cart.fmu
     python build_fmu.py models/chain_10.json --native -o chain_10.fmu   # no Python on the host (C core inside)
 
 pythonfmu 0.7.0 writes the FMU; this script then
@@ -36,7 +37,7 @@ HERE = Path(__file__).resolve().parent
 FMU_SRC = HERE / "fmu_src"
 sys.path.insert(0, str(FMU_SRC))
 
-COMPONENTS = {"pd_controller": "pd_controller.py", "spring_damper": "spring_damper.py"}
+COMPONENTS = {"pd_controller": "pd_controller.py", "spring_damper": "spring_damper.py", "cart": "cart.py"}
 
 
 # ---------------------------------------------------------------------------- model description
@@ -329,7 +330,8 @@ def build_component_fmu(component: str, out=None, link_python=True, quiet=False)
     with zipfile.ZipFile(out) as z:
         xml = z.read("modelDescription.xml")
     md = postprocess_model_description(xml, module.DECLARED_TYPES, module.OUTPUT_DEPENDENCIES,
-                                       module.OUTPUT_DEPENDENCIES, module.DEFAULT_EXPERIMENT,
+                                       getattr(module, "INITIAL_DEPENDENCIES", module.OUTPUT_DEPENDENCIES),
+                                       module.DEFAULT_EXPERIMENT,
                                        module.DESCRIPTION)
     linked = rewrite_fmu(out, md, link_python)
     if not quiet:
