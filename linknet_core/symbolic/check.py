@@ -23,12 +23,13 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from linknet_core.symbolic.derivation import SymbolicTensionSystem, sign_pattern
 
-__all__ = ["CheckResult", "run_checks", "add_arguments", "main", "sample_states", "taut_string_scene"]
+__all__ = ["CheckResult", "Sample", "run_checks", "add_arguments", "main", "sample_states", "taut_string_scene"]
 
 # tolerances, relative to the scale of the compared quantity (round-off is ~1e-16 relative)
 RTOL_EXACT = 1e-11       # same formula, different arithmetic order
@@ -74,32 +75,54 @@ def _min_norm_solve(G, g):
     return Gs.T @ y
 
 
-def _project_positions(sym: SymbolicTensionSystem, x, tol=1e-14, max_iter=50):
-    """Gauss-Newton onto (11) with backtracking: x <- x + alpha G^+ g. Returns x or None.
+class Sample(NamedTuple):
+    """One sampled state: positions, velocities (driven anchors' rows hold P_a, V_a), input forces and the
+    driven anchors' accelerations A_a ((K, 3), zero on other rows; None for a scene without driven anchors)."""
 
+    X: np.ndarray
+    U: np.ndarray
+    F_input: np.ndarray
+    anchor_acc: np.ndarray | None
+
+
+def _project_positions(sym: SymbolicTensionSystem, x, p=None, tol=1e-14, max_iter=50, joint=False):
+    """Gauss-Newton onto (11) with backtracking: x <- x + alpha G^+ g. Returns (x, p) or None.
+
+    ``p``: the driven anchors' reduced positions (the scene's when None). They stay where they are
+    unless ``joint``: then (x, p) move together (an anchor placed where (11) cannot hold, e.g. a taut
+    rope between it and a standing anchor, is moved to the nearest place where it can).
     The backtracking matters near singular configurations (a taut row of a net, a redundant truss),
     where a full minimum-norm step overshoots along the nearly singular direction.
     """
+    import scipy.sparse as sp
+
     R = sym._R
+    p = sym.reduce(sym.scene.X0, True, sym.driven) if p is None else np.asarray(p, float)
+    n = x.size
 
     def residual(z):
-        g = np.asarray(sym.constraint_fn(z)).ravel()      # (|D|^2 - R^2)/(2R) ~ |D| - R
+        g = np.asarray(sym.constraint_fn(z[:n], z[n:])).ravel()   # (|D|^2 - R^2)/(2R) ~ |D| - R
         return g, float(np.max(np.abs(g) / R, initial=0.0))
 
-    g, r = residual(x)
+    z = np.concatenate([x, p])
+    g, r = residual(z)
     for _ in range(max_iter):
         if r <= tol:
-            return x
+            return z[:n], z[n:]
         # G = d(-g)/dx, so the Newton step for g(x + dx) = 0 is dx = G^+ g
-        dx = _min_norm_solve(sym.G(sym.full_positions(x)), g)
+        X = sym.full_positions(z[:n], z[n:])
+        J = sp.hstack([sym.G(X), sym.Gp(X)]) if joint else sym.G(X)
+        dz = _min_norm_solve(J, g)
+        if not joint:
+            dz = np.concatenate([dz, np.zeros(p.size)])
         alpha = 1.0
         while True:
-            g_new, r_new = residual(x + alpha * dx)
+            g_new, r_new = residual(z + alpha * dz)
             if r_new < r or alpha < 1e-3:
                 break
             alpha *= 0.5
-        x, g, r = x + alpha * dx, g_new, r_new
-    return x if r <= 1e3 * tol else None
+        z, g, r = z + alpha * dz, g_new, r_new
+    return (z[:n], z[n:]) if r <= 1e3 * tol else None
 
 
 def _null_projector_apply(G, v):
@@ -117,43 +140,132 @@ def _null_projector_apply(G, v):
     return v - rows.T @ (rows @ v)
 
 
+def _velocities_on_12(sym, X, u_random, v):
+    """Velocities (u, v) satisfying (12) G u + G_p v = 0 at X: u = -G^+ G_p v plus u_random projected onto
+    null(G). If the anchors' v admits no such u (a self-stress loads a driven anchor: the motion would
+    stretch a rigid path), (u, v) are projected onto (12) together."""
+    G = sym.G(X).toarray()
+    u = _null_projector_apply(G, u_random)
+    if sym.nd == 0:
+        return u, v
+    Gp = sym.Gp(X).toarray()
+    c = Gp @ v
+    u_drive = -np.linalg.lstsq(G, c, rcond=1e-12)[0] if G.shape[1] else np.zeros(0)
+    if np.abs(G @ u_drive + c).max(initial=0.0) <= 1e-12 * max(np.abs(c).max(initial=0.0), 1e-300):
+        return u + u_drive, v
+    z = _null_projector_apply(np.hstack([G, Gp]), np.concatenate([u, v]))
+    return z[:u.size], z[u.size:]
+
+
+def _motion_horizon(motion, ell):
+    """A scene-time span over which a motion shows its character (random sample times are drawn in it)."""
+    spec = motion.spec or {}
+    if motion.kind == "waypoints":
+        return 1.2 * float(spec["waypoints"][-1][0])
+    if motion.kind == "sine":
+        f = np.asarray(spec.get("frequency", [0, 0, 0]), float)
+        return 1.0 / float(f[f > 0].min()) if np.any(f > 0) else 1.0
+    if motion.kind == "velocity":
+        speed = float(np.linalg.norm(spec.get("velocity", [0, 0, 0])))
+        return ell / speed if speed > 0 else 1.0
+    return 1.0
+
+
+def _anchor_motion_sample(scene, sym, rng, ell, g):
+    """The driven anchors' (P, V, A), each (nd, 3): from their scene motion at a random scene time, random
+    for input-driven anchors (about their scene position, speeds of a link length per second,
+    accelerations of the order of g)."""
+    nd = sym.nd
+    P = np.array(scene.X0, float)[sym.driven]
+    V, A = np.zeros((nd, 3)), np.zeros((nd, 3))
+    motions = getattr(scene, "motions", ()) or ()
+    for j in range(nd):
+        motion = motions[j] if j < len(motions) else None
+        if motion is not None and motion.kind != "input":
+            P[j], V[j], A[j] = motion.evaluate(float(rng.uniform(0.0, _motion_horizon(motion, ell))))
+        else:
+            P[j] = P[j] + 0.3 * ell * rng.standard_normal(3)
+            V[j] = ell * rng.standard_normal(3)
+            A[j] = g * rng.standard_normal(3)
+    # keep the samples in the coordinates of the symbolic system (a planar basis drops the normal part)
+    Pb = (P - sym.origin) @ sym.basis
+    return Pb, V @ sym.basis, A @ sym.basis
+
+
 def sample_states(scene, sym: SymbolicTensionSystem, n, rng, on_manifold=True):
-    """n states (X, U, F_input) as (K,3) arrays; on the manifold (11)-(12) or deliberately off it."""
+    """n :class:`Sample` states; on the manifold (11)-(12) or deliberately off it.
+
+    Driven anchors: P, V, A from their scene motion at a random time (random for input-driven ones);
+    the free masses follow the anchors' mean displacement before the projection onto (11).
+    """
     R = np.asarray(scene.length, float)
     ell = float(np.median(R)) if R.size else 1.0
     speed = ell  # 1 link length per second
     mass_free = np.asarray(scene.mass, float)[sym.free]
     g = float(np.linalg.norm(scene.gravity)) or 9.81
     x0 = sym.reduce_positions(scene.X0)
+    p0 = sym.reduce(scene.X0, True, sym.driven)
+    driven = sym.nd > 0
+
+    def anchors():
+        if not driven:
+            return p0, np.zeros(0), np.zeros(0)
+        return tuple(z.ravel() for z in _anchor_motion_sample(scene, sym, rng, ell, g))
+
+    def anchor_acc(a):
+        if not driven:
+            return None
+        out = np.zeros((sym.K, 3))
+        out[sym.driven] = a.reshape(sym.nd, sym.dim) @ sym.basis.T
+        return out
+
+    def follow(p):
+        """x0 moved by the driven anchors' mean displacement (the network hangs from them)."""
+        if not driven or sym.nf == 0:
+            return x0
+        shift = (p - p0).reshape(sym.nd, sym.dim).mean(axis=0)
+        return x0 + np.tile(shift, sym.nf)
+
+    def forces():
+        return sym.expand((np.repeat(mass_free, sym.dim) * g) * rng.standard_normal(x0.size))
+
     out = []
     failures = 0
     while len(out) < n and failures < 2 + n:          # a manifold GN cannot reach: give up early
         sigma = 0.3 * ell / (1 + 3 * failures)               # smaller kicks if projection keeps failing
-        x = x0 + sigma * rng.standard_normal(x0.size)
-        x = _project_positions(sym, x)
-        if x is None:
+        p, v, a = anchors()
+        x = follow(p) + sigma * rng.standard_normal(x0.size)
+        xp = _project_positions(sym, x, p)
+        if xp is None and driven:
+            xp = _project_positions(sym, x, p, joint=True)
+        if xp is None:
             failures += 1
             continue
-        X = sym.full_positions(x)
-        G = sym.G(X).toarray()
-        u = _null_projector_apply(G, speed * rng.standard_normal(x0.size))
+        x, p = xp
+        X = sym.full_positions(x, p)
+        u, v = _velocities_on_12(sym, X, speed * rng.standard_normal(x0.size), v)
         U = sym.expand(u)
-        Fin = sym.expand((np.repeat(mass_free, sym.dim) * g) * rng.standard_normal(x0.size))
-        out.append((X, U, Fin))
+        if driven:
+            U[sym.driven] = v.reshape(sym.nd, sym.dim) @ sym.basis.T
+        out.append(Sample(X, U, forces(), anchor_acc(a)))
     if len(out) < n:
         # the manifold may be (locally) a single point (e.g. a taut string): use the scene's own state
         X = np.array(scene.X0, float)
-        G = sym.G(X).toarray()
         while len(out) < n:
-            u = _null_projector_apply(G, speed * rng.standard_normal(x0.size))
-            Fin = sym.expand((np.repeat(mass_free, sym.dim) * g) * rng.standard_normal(x0.size))
-            out.append((X, sym.expand(u), Fin))
+            _, v, a = anchors()
+            u, v = _velocities_on_12(sym, X, speed * rng.standard_normal(x0.size), 0.0 * v)
+            U = sym.expand(u)
+            out.append(Sample(X, U, forces(), anchor_acc(a)))
     if not on_manifold:
         # off (11)-(12): positions moved by a few per cent of the link lengths, arbitrary velocities
         moved = []
-        for X, U, Fin in out:
-            x = sym.reduce_positions(X) + 0.05 * ell * rng.standard_normal(x0.size)
-            moved.append((sym.full_positions(x), sym.expand(speed * rng.standard_normal(x0.size)), Fin))
+        for s in out:
+            x = sym.reduce_positions(s.X) + 0.05 * ell * rng.standard_normal(x0.size)
+            p = sym.reduce(s.X, True, sym.driven) + 0.05 * ell * rng.standard_normal(p0.size)
+            U = sym.expand(speed * rng.standard_normal(x0.size))
+            if driven:
+                U[sym.driven] = (speed * rng.standard_normal(p0.size)).reshape(sym.nd, sym.dim) @ sym.basis.T
+            moved.append(Sample(sym.full_positions(x, p), U, s.F_input, s.anchor_acc))
         out = moved
     return out
 
@@ -166,15 +278,50 @@ def _dense(M):
     return M.toarray() if hasattr(M, "toarray") else np.asarray(M, float)
 
 
+def _takes_anchor_acc(method) -> bool:
+    import inspect
+
+    try:
+        return "anchor_acc" in inspect.signature(method).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def _numeric_rhs(dyn, X, U, F, anchor_acc=None):
+    """B of (26) from the numeric side; with driven anchors through its ``anchor_acc`` (the module function
+    ``linknet_core.dynamics.tensions.rhs`` when the numeric object's ``tension_rhs`` takes none)."""
+    if anchor_acc is None:
+        return np.asarray(dyn.tension_rhs(X, U, F), float)
+    if _takes_anchor_acc(dyn.tension_rhs):
+        return np.asarray(dyn.tension_rhs(X, U, F, anchor_acc=anchor_acc), float)
+    from linknet_core.dynamics.tensions import rhs
+
+    return np.asarray(rhs(dyn.scene, X, U, F, anchor_acc=anchor_acc), float)
+
+
+def _numeric_tensions(dyn, X, U, F_input, anchor_acc=None):
+    if anchor_acc is None:
+        return np.asarray(dyn.tensions(X, U, F_input), float)
+    return np.asarray(dyn.tensions(X, U, F_input, anchor_acc=anchor_acc), float)
+
+
+def _numeric_accelerations(dyn, X, U, F_input, anchor_acc=None):
+    if anchor_acc is None:
+        acc, T = dyn.accelerations(X, U, F_input)
+    else:
+        acc, T = dyn.accelerations(X, U, F_input, anchor_acc=anchor_acc)
+    return np.asarray(acc, float), np.asarray(T, float)
+
+
 def _rel(diff, scale):
     return float(diff) / max(float(scale), 1e-300)
 
 
-def _force_scale(sym, X, U, F):
-    """Scale of the terms of B (26): |dU|^2/R and E.(F/M)."""
+def _force_scale(sym, X, U, F, anchor_acc=None):
+    """Scale of the terms of B (26): |dU|^2/R and E.(F/M) (E.A_a at a driven end)."""
     k1, k2, R, im = sym._k1, sym._k2, sym._R, sym._inv_mass
     dU = U[k2] - U[k1]
-    a = F * im[:, None]
+    a = F * im[:, None] + (0.0 if anchor_acc is None else anchor_acc)
     return max(float(np.max(np.einsum("ij,ij->i", dU, dU) / R, initial=0.0)),
                float(np.max(np.abs(a[k1]).sum(1) + np.abs(a[k2]).sum(1), initial=0.0)) * float(
                    np.max(np.linalg.norm(X[k2] - X[k1], axis=1) / R, initial=1.0)), 1e-300)
@@ -284,6 +431,8 @@ def _run_checks(scene, samples, seed, dynamics, dynamics_factory, sym, kernel):
     results.append(null_result)
     results.append(_check_existence(scene, sym, dyn, on, null_info, factory))
     results.append(_check_accelerations(scene, sym, dyn, Ffn, on))
+    if sym.nd:
+        results.append(_check_driven(scene, sym, dyn, Ffn, on, off))
     if kernel:
         results.append(_check_kernel(scene, dyn, on))
     return results
@@ -291,9 +440,9 @@ def _run_checks(scene, samples, seed, dynamics, dynamics_factory, sym, kernel):
 
 def _check_forces(scene, sym, dyn, Ffn, states):
     worst = 0.0
-    for X, U, Fin in states:
+    for X, U, Fin, _ in states:
         Fn = np.asarray(dyn.forces(X, U, Fin), float)
-        Fs = sym.expand(np.asarray(Ffn(sym.reduce_positions(X), sym.reduce(U), sym.reduce(Fin))).ravel())
+        Fs = sym.forces(Ffn, X, U, Fin)
         scale = np.abs(Fs).max() + np.abs(Fin).max()
         worst = max(worst, _rel(np.abs(Fn[sym.free] - Fs[sym.free]).max(initial=0.0), scale))
     return CheckResult("external forces F_k of (9) numeric = symbolic", worst <= RTOL_EXACT, worst, RTOL_EXACT,
@@ -302,14 +451,14 @@ def _check_forces(scene, sym, dyn, Ffn, states):
 
 def _check_on_manifold(scene, sym, dyn, states):
     worstA = worstB = 0.0
-    for X, U, Fin in states:
+    for X, U, Fin, Aa in states:
         F = np.asarray(dyn.forces(X, U, Fin), float)
         An = _dense(dyn.tension_matrix(X))
         As = sym.A(X).toarray()
         worstA = max(worstA, _rel(np.abs(An - As).max(initial=0.0), np.abs(As).max(initial=0.0)))
-        Bn = np.asarray(dyn.tension_rhs(X, U, F), float)
-        Bs = sym.B(X, U, F)
-        worstB = max(worstB, _rel(np.abs(Bn - Bs).max(initial=0.0), _force_scale(sym, X, U, F)))
+        Bn = _numeric_rhs(dyn, X, U, F, Aa)
+        Bs = sym.B(X, U, F, Aa)
+        worstB = max(worstB, _rel(np.abs(Bn - Bs).max(initial=0.0), _force_scale(sym, X, U, F, Aa)))
     worst = max(worstA, worstB)
     return CheckResult("A and B numeric = symbolic on the manifold", worst <= RTOL_EXACT, worst, RTOL_EXACT,
                        f"A: {worstA:.2e}, B: {worstB:.2e} relative, over {len(states)} states satisfying (11)-(12)")
@@ -318,7 +467,7 @@ def _check_on_manifold(scene, sym, dyn, states):
 def _check_off_manifold(scene, sym, dyn, states):
     """Off (11) the seed's (25) and G M^-1 G^T differ on the diagonal; find which one the solver uses."""
     to_gmg = to_25 = diag_gap = norm_gap = worstB = 0.0
-    for X, U, Fin in states:
+    for X, U, Fin, Aa in states:
         An = _dense(dyn.tension_matrix(X))
         Ag = sym.A(X).toarray()                    # AD of (11)-(13): = G M^-1 G^T at any X
         A25 = sym.A25(X).toarray()                 # literal (25) with diagonal 1/M_k1 + 1/M_k2
@@ -329,8 +478,8 @@ def _check_off_manifold(scene, sym, dyn, states):
         E = (X[sym._k2] - X[sym._k1]) / sym._R[:, None]
         norm_gap = max(norm_gap, float(np.abs(np.einsum("ij,ij->i", E, E) - 1).max(initial=0.0)))
         F = np.asarray(dyn.forces(X, U, Fin), float)
-        worstB = max(worstB, _rel(np.abs(np.asarray(dyn.tension_rhs(X, U, F)) - sym.B(X, U, F)).max(initial=0.0),
-                                  _force_scale(sym, X, U, F)))
+        worstB = max(worstB, _rel(np.abs(_numeric_rhs(dyn, X, U, F, Aa) - sym.B(X, U, F, Aa)).max(initial=0.0),
+                                  _force_scale(sym, X, U, F, Aa)))
     uses_gmg = to_gmg <= RTOL_EXACT
     uses_25 = to_25 <= RTOL_EXACT
     if uses_gmg:
@@ -361,7 +510,7 @@ def _check_symmetry_sign(scene, sym, dyn, states):
     worst_sym = worst_pattern = 0.0
     wrong_signs = 0
     first_wrong = None
-    for X, U, Fin in states:
+    for X, *_ in states:
         An = _dense(dyn.tension_matrix(X))
         scale = max(np.abs(An).max(initial=0.0), 1e-300)
         worst_sym = max(worst_sym, np.abs(An - An.T).max(initial=0.0) / scale)
@@ -394,7 +543,7 @@ def _check_gmg_psd(scene, sym, dyn, states):
     worst = 0.0
     min_eig = 0.0
     im_red = np.repeat(sym._inv_mass[sym.free], sym.dim)
-    for X, U, Fin in states:
+    for X, *_ in states:
         An = _dense(dyn.tension_matrix(X))
         G = sym.G(X).toarray()                       # AD of (11), not the solver's Jacobian
         GMG = (G * im_red) @ G.T
@@ -430,7 +579,7 @@ def _check_null_space(scene, sym, dyn, states):
     dims = []
     info = []
     W = _weights(sym)
-    for X, U, Fin in states:
+    for X, U, Fin, Aa in states:
         An = _dense(dyn.tension_matrix(X))
         w, N, wmax = _nullspace(0.5 * (An + An.T))
         ws = np.linalg.eigvalsh(sym.A(X).toarray())
@@ -442,7 +591,7 @@ def _check_null_space(scene, sym, dyn, states):
         f_null = G.T @ N                                   # force of each self-stress on the free masses
         worst31 = max(worst31, float(np.sqrt((W[:, None] * f_null ** 2).sum(0)).max() / np.sqrt(wmax)))
         max_force_abs = max(max_force_abs, float(np.abs(f_null).max()))
-        T1 = np.asarray(dyn.tensions(X, U, Fin), float)
+        T1 = _numeric_tensions(dyn, X, U, Fin, Aa)
         c = np.cos(np.arange(1, N.shape[1] + 1) * 1.7) * (1 + np.abs(T1).max())   # some other solution
         T2 = T1 + N @ c
         df = (np.asarray(dyn.link_forces(X, T2)) - np.asarray(dyn.link_forces(X, T1)))[sym.free].ravel()
@@ -475,29 +624,40 @@ def _violating_velocity(sym, X, N):
 def _check_existence(scene, sym, dyn, states, nulls, factory):
     """(32)-(36): B is orthogonal to null(A) when (35) can hold; a (35)-violating state is reported.
 
-    B = w + b_F with w_l = |dU_l|^2 / R_l and b_F = E_l.(F_k2/M_k2 - F_k1/M_k1). (33): N^T b_F = 0 for
-    any forces. (34)-(36): N^T w = 0 exactly when consistent accelerations (35) exist (w in range(G)).
+    B = w + b_F + b_A with w_l = |dU_l|^2 / R_l (relative velocity at a driven end),
+    b_F = E_l.(F_k2/M_k2 - F_k1/M_k1) and b_A = E_l.(A_k2 - A_k1) over driven ends. (33): N^T b_F = 0 for
+    any forces. (34)-(36): N^T (w + b_A) = 0 exactly when consistent accelerations (35) exist. Without
+    driven anchors b_A = 0. With them, a self-stress that loads a driven anchor (a rigid path from it to
+    another anchor) makes N^T b_A = 0 a condition on the prescribed motion: an anchor accelerating along
+    such a path would have to stretch it.
     """
     tol_F = np.sqrt(RTOL_NULL)
     worst_F = worst_consistent = 0.0
-    n_with_null = n_consistent = n_inconsistent = n_accepted = 0
+    n_with_null = n_consistent = n_inconsistent = n_accepted = n_motion = 0
     W = _weights(sym)
-    for (X, U, Fin), (N, wmax) in zip(states, nulls):
+    for (X, U, Fin, Aa), (N, wmax) in zip(states, nulls):
         if N.shape[1] == 0:
             continue
         n_with_null += 1
         F = np.asarray(dyn.forces(X, U, Fin), float)
-        B = np.asarray(dyn.tension_rhs(X, U, F), float)
+        B = _numeric_rhs(dyn, X, U, F, Aa)
         dU = U[sym._k2] - U[sym._k1]
         w = np.einsum("ij,ij->i", dU, dU) / sym._R
-        bF = B - w
+        bA = np.zeros(sym.L)
+        if Aa is not None:
+            E = (X[sym._k2] - X[sym._k1]) / sym._R[:, None]
+            bA = np.einsum("ij,ij->i", E, Aa[sym._k2] - Aa[sym._k1])
+        bF = B - w - bA
         Fr = sym.reduce(F)
         worst_F = max(worst_F, float(np.abs(N.T @ bF).max() / max(np.sqrt(wmax * (W * Fr ** 2).sum()), 1e-300)))
         # relative to |w|, or to the sampler's velocity scale (1 link length per second) where the
         # velocities are round-off (a rigid anchored scene: null(G) = {0})
         w_ref = float(np.median(sym._R))
         r_w = float(np.abs(N.T @ w).max() / max(np.abs(w).max(initial=0.0), w_ref))
-        if r_w <= 1e-6:
+        r_A = float(np.abs(N.T @ bA).max() / max(np.abs(bA).max(initial=0.0), 1e-300)) if bA.any() else 0.0
+        if r_w <= 1e-6 and r_A > 1e-6:
+            n_motion += 1              # velocities fine, the prescribed anchor accelerations load a self-stress
+        elif r_w <= 1e-6:
             n_consistent += 1
             worst_consistent = max(worst_consistent, float(np.abs(N.T @ B).max() / max(np.abs(B).max(), 1e-300)))
         else:
@@ -529,7 +689,7 @@ def _check_existence(scene, sym, dyn, states, nulls, factory):
     Av = _dense(vdyn.tension_matrix(Xv))
     _, Nv, _ = _nullspace(0.5 * (Av + Av.T))
     Bv = np.asarray(vdyn.tension_rhs(Xv, Uv, np.asarray(vdyn.forces(Xv, Uv, np.zeros_like(Xv)), float)), float)
-    v12 = float(np.abs(np.asarray(vsym.velocity_constraint_fn(vsym.reduce_positions(Xv), vsym.reduce(Uv)))).max())
+    v12 = float(np.abs(vsym.velocity_constraint(Xv, Uv)).max(initial=0.0))
     violation = float(np.abs(Nv.T @ Bv).max(initial=0.0) / max(np.abs(Bv).max(initial=0.0), 1e-300))
     detected = violation > 1e-6 and v12 <= 1e-12
     refused = None
@@ -547,6 +707,8 @@ def _check_existence(scene, sym, dyn, states, nulls, factory):
               f"(velocities in null(G) at singular positions"
               + (f"; the solver's check_consistent_velocities accepts {n_accepted} of them: its singularity cut "
                  "differs from this check's" if n_accepted else "")
+              + (f"; at {n_motion} more the driven anchors' accelerations load a self-stress (N^T b_A != 0: "
+                 "the prescribed motion would stretch a rigid path)" if n_motion else "")
               + f"). Violating state on {where}: (12) residual "
               f"{v12:.1e}, |N^T B|/|B| = {violation:.2e} -> (35) violation {'REPORTED' if detected else 'NOT detected'}")
     if refused is not None:
@@ -559,19 +721,21 @@ def _check_existence(scene, sym, dyn, states, nulls, factory):
 def _check_accelerations(scene, sym, dyn, Ffn, states):
     worst_acc = worst_T = 0.0
     worst_cond = 1.0
-    for X, U, Fin in states:
-        acc_n, T_n = dyn.accelerations(X, U, Fin)
-        acc_n = np.asarray(acc_n, float)
-        Fs = sym.expand(np.asarray(Ffn(sym.reduce_positions(X), sym.reduce(U), sym.reduce(Fin))).ravel())
-        acc_s, T_s = sym.solve(X, U, Fs)
+    for X, U, Fin, Aa in states:
+        acc_n, T_n = _numeric_accelerations(dyn, X, U, Fin, Aa)
+        Fs = sym.forces(Ffn, X, U, Fin)
+        acc_s, T_s = sym.solve(X, U, Fs, Aa)
         As = sym.A(X).toarray()
         w = np.linalg.eigvalsh(As)
         pos = w[w > RTOL_NULL * max(w.max(initial=0.0), 1e-300)]
         cond = float(pos.max() / pos.min()) if pos.size else 1.0
         worst_cond = max(worst_cond, cond)
         scale = max(np.abs(acc_s).max(initial=0.0), np.abs(Fs * sym._inv_mass[:, None]).max(initial=0.0), 1e-300)
-        worst_acc = max(worst_acc, np.abs(acc_n - acc_s).max() / scale / cond)
-        anchored = np.abs(acc_n[sym.fixed]).max(initial=0.0)
+        worst_acc = max(worst_acc, np.abs(acc_n[sym.free] - acc_s[sym.free]).max(initial=0.0) / scale / cond)
+        # anchors: standing ones do not accelerate, driven ones exactly as prescribed
+        anchored = np.abs(acc_n[sym.still]).max(initial=0.0)
+        if Aa is not None:
+            anchored = max(anchored, np.abs(acc_n[sym.driven] - Aa[sym.driven]).max(initial=0.0))
         worst_acc = max(worst_acc, anchored / scale)
         worst_T = max(worst_T, np.abs(np.asarray(T_n) - T_s).max(initial=0.0) / max(np.abs(T_s).max(initial=0.0),
                                                                                    1e-300) / cond)
@@ -580,6 +744,54 @@ def _check_accelerations(scene, sym, dyn, Ffn, states):
                        RTOL_SOLVE * 1e2,
                        f"differences divided by cond(A) (up to {worst_cond:.1e}): accelerations {worst_acc:.2e}, "
                        f"minimum-norm tensions {worst_T:.2e}; symbolic side: AD system, dense pseudo-inverse")
+
+
+def _check_driven(scene, sym, dyn, Ffn, on, off):
+    """Driven anchors: the terms the prescribed motion adds to (12) and (26), and the reactions on the anchors.
+
+    * (26): the anchors' part of B, B(X, U, F, A_a) - B(X, U with the anchors' rows at rest, F, 0), from the
+      numeric side and from AD, where AD differentiates |X_k - P_a(t)|^2 - R^2 twice along dP/dt = V,
+      dV/dt = A (never the numeric formula): |U_k - V_a|^2 / R and E.(a_k2 - a_k1) with a_a = A_a;
+    * (12): the numeric C U (``constraint_rows``, E_l.(U_k1 - U_k2)) against AD's d phi/dt / (2R) with the
+      anchors' velocities, and the sampled states' own (12) residual (the relative velocity vanishes
+      along every link on the manifold);
+    * the force the links exert on each driven anchor (``anchor_reactions``) against G_p^T T, G_p the
+      Jacobian of (11) in the anchors' positions by AD.
+    """
+    worst_B = worst_12 = worst_react = sample_12 = 0.0
+    share = 0.0
+    anchor_rows = np.searchsorted(sym.fixed, sym.driven)      # the driven anchors among all anchors
+    for X, U, Fin, Aa in on + off:
+        F = np.asarray(dyn.forces(X, U, Fin), float)
+        U_rest = np.array(U, float)
+        U_rest[sym.driven] = 0.0
+        dB_n = _numeric_rhs(dyn, X, U, F, Aa) - _numeric_rhs(dyn, X, U_rest, F, np.zeros_like(Aa))
+        dB_s = sym.B(X, U, F, Aa) - sym.B(X, U_rest, F, None)
+        scale = _force_scale(sym, X, U, F, Aa)
+        worst_B = max(worst_B, _rel(np.abs(dB_n - dB_s).max(initial=0.0), scale))
+        share = max(share, _rel(np.abs(dB_s).max(initial=0.0), np.abs(sym.B(X, U, F, Aa)).max(initial=0.0)))
+        c_s = sym.velocity_constraint(X, U)
+        v_scale = max(np.abs(U).max(initial=0.0), 1e-300)
+        if hasattr(dyn, "constraint_rows"):
+            worst_12 = max(worst_12, _rel(np.abs(np.asarray(dyn.constraint_rows(X, U)) + c_s).max(initial=0.0),
+                                          v_scale))
+        if hasattr(dyn, "anchor_reactions"):
+            _, T_s = sym.solve(X, U, sym.forces(Ffn, X, U, Fin), Aa)
+            on_anchors = (sym.Gp(X).T @ T_s).reshape(sym.nd, sym.dim) @ sym.basis.T
+            R_n = np.asarray(dyn.anchor_reactions(X, T_s), float)[anchor_rows]
+            worst_react = max(worst_react, _rel(np.abs(R_n - on_anchors).max(initial=0.0),
+                                                max(np.abs(on_anchors).max(initial=0.0), np.abs(T_s).max(initial=0.0))))
+    for X, U, *_ in on:
+        sample_12 = max(sample_12, _rel(np.abs(sym.velocity_constraint(X, U)).max(initial=0.0),
+                                        max(np.abs(U).max(initial=0.0), 1e-300)))
+    worst = max(worst_B, worst_12, worst_react)
+    passed = worst <= RTOL_EXACT and sample_12 <= 1e-12
+    kinds = sorted({m.kind for m in getattr(scene, "motions", ())}) or ["?"]
+    detail = (f"{sym.nd} driven anchor(s) ({', '.join(kinds)}), {len(on)} + {len(off)} states with P, V, A from "
+              f"the motion (random for inputs): anchors' part of B (26) (relative velocity, A_a) {worst_B:.2e} "
+              f"relative (it is up to {share:.0%} of B); (12) with V_a: C U vs AD {worst_12:.2e}, sampled states' "
+              f"residual {sample_12:.1e}; reactions on the driven anchors vs G_p^T T {worst_react:.2e}")
+    return CheckResult("driven anchors: (12) and (26) with V_a, A_a", passed, worst, RTOL_EXACT, detail)
 
 
 def _check_kernel(scene, dyn, states):
@@ -592,7 +804,7 @@ def _check_kernel(scene, dyn, states):
     except codegen.CodegenUnavailable as exc:
         return CheckResult(name, True, 0.0, 1e-10, f"no kernel: {exc}", skipped=True)
     worst = 0.0
-    for X, U, Fin in states:
+    for X, U, Fin, _ in states:
         if kernel.plane is not None:  # keep the state in the scene's plane: the 2-D kernel is tested
             basis, origin, _ = kernel.plane
             P = basis @ basis.T

@@ -67,6 +67,10 @@ class CodegenUnavailable(_Base):
     """No compiled kernel can be made for this scene here (no C compiler, singular tension matrix...)."""
 
 
+_DRIVEN_REFUSAL = ("scene {name!r} has driven anchors: the generated kernel takes no anchor motion "
+                   "(P, V, A); the numeric path is used")
+
+
 def compiler() -> str | None:
     """Path of the C compiler to use ($CC, else cc, else gcc), or None."""
     for candidate in (os.environ.get("CC"), "cc", "gcc", "clang"):
@@ -160,11 +164,14 @@ def build_rhs_function(scene, basis=None, origin=None, input_masses=None, name="
     x = reduce(Xm, free, True)
     u = reduce(Um, free, False)
     fin = reduce(Fm, inputs, False) if inputs.size else ca.MX(0, 1)
-    F = Ffn(x, u, fin)
-    A = sym.A_fn(x)
-    B = sym.B_fn(x, u, F)
+    if sym.nd:
+        raise CodegenUnavailable(_DRIVEN_REFUSAL.format(name=scene.name))
+    none = ca.MX(0, 1)                                  # no driven anchors: their p, v, a are empty
+    F = Ffn(x, u, fin, none, none)
+    A = sym.A_fn(x, none)
+    B = sym.B_fn(x, u, F, none, none, none)
     T = ca.solve(A, B, "ldl")  # sparse LDL^T on the scene's sparsity, analysed once here
-    acc_r = ca.reshape(sym.acc_fn(x, F, T), d, nf)
+    acc_r = ca.reshape(sym.acc_fn(x, F, T, none), d, nf)
     acc3 = acc_r if d == 3 and aligned and axes == [0, 1, 2] else ca.mtimes(ca.sparsify(ca.DM(P)), acc_r)
     scatter = ca.DM.triplet(list(range(nf)), free.tolist(), [1.0] * nf, nf, K)   # free column j -> mass
     acc_full = ca.reshape(ca.mtimes(acc3, scatter), 3 * K, 1)
@@ -384,6 +391,9 @@ def compiled_rhs(scene, input_masses=None, fallback=None, required=False, cache=
     try:
         if compiler() is None:
             raise CodegenUnavailable("no C compiler found ($CC, cc, gcc, clang): the numeric path is used")
+        driven = getattr(scene, "driven", None)
+        if driven is not None and np.any(driven):
+            raise CodegenUnavailable(_DRIVEN_REFUSAL.format(name=scene.name))
         _require_regular(scene)
         return CompiledRHS(scene, input_masses=input_masses, fallback=fallback, cache=cache)
     except CodegenUnavailable:
