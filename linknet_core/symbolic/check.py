@@ -433,6 +433,8 @@ def _run_checks(scene, samples, seed, dynamics, dynamics_factory, sym, kernel):
     results.append(_check_accelerations(scene, sym, dyn, Ffn, on))
     if sym.nd:
         results.append(_check_driven(scene, sym, dyn, Ffn, on, off))
+        if any(m.kind != "input" for m in getattr(scene, "motions", ())):
+            results.append(_check_motions(scene, sym, rng, samples))
     if kernel:
         results.append(_check_kernel(scene, dyn, on))
     return results
@@ -792,6 +794,88 @@ def _check_driven(scene, sym, dyn, Ffn, on, off):
               f"relative (it is up to {share:.0%} of B); (12) with V_a: C U vs AD {worst_12:.2e}, sampled states' "
               f"residual {sample_12:.1e}; reactions on the driven anchors vs G_p^T T {worst_react:.2e}")
     return CheckResult("driven anchors: (12) and (26) with V_a, A_a", passed, worst, RTOL_EXACT, detail)
+
+
+def _motion_expression(motion, tau):
+    """P(tau) of a motion written in casadi from the scene file's formula (velocity, sine), or None."""
+    import casadi as ca
+
+    X0 = ca.DM(np.asarray(motion.origin, float))
+    spec = motion.spec
+    if motion.kind == "velocity":
+        return X0 + ca.DM(np.asarray(spec["velocity"], float)) * tau
+    if motion.kind == "sine":
+        a = ca.DM(np.asarray(spec["amplitude"], float))
+        f = ca.DM(np.asarray(spec["frequency"], float))
+        phi = ca.DM(np.asarray(spec.get("phase", [0, 0, 0]), float))
+        return X0 + a * (ca.sin(2 * np.pi * f * tau + phi) - ca.sin(phi))
+    return None
+
+
+def _check_motions(scene, sym, rng, samples):
+    """The driven anchors' scene motions: V = dP/dtau and A = dV/dtau, and what each kind promises.
+
+    Velocity and sine: P(tau) written in casadi from the scene file's formula, V and A by AD, against
+    ``AnchorMotion.evaluate`` (the numbers both cores use). Waypoints: the clamped C2 cubic spline is the
+    only piecewise cubic through (0, X0) and the waypoints, twice continuously differentiable and at rest
+    at both ends, so those properties are checked (P at every waypoint, P, V, A continuous across every
+    knot, V = 0 at the ends, at rest after the last waypoint), and V, A against central differences of
+    P, V at random times (exact for a cubic up to h^2 P''' / 6 and round-off).
+    """
+    import casadi as ca
+
+    tau = ca.SX.sym("tau")
+    worst_ad = worst_fd = worst_spline = 0.0
+    kinds = []
+    h = 1e-5
+    for motion in getattr(scene, "motions", ()):
+        if motion.kind == "input":
+            continue
+        kinds.append(motion.kind)
+        horizon = _motion_horizon(motion, float(np.median(sym._R)) if sym.L else 1.0)
+        times = np.concatenate([[0.0], rng.uniform(0.0, horizon, samples)])
+        P_expr = _motion_expression(motion, tau)
+        if P_expr is not None:
+            V_expr = ca.jacobian(P_expr, tau)
+            fn = ca.Function("motion", [tau], [P_expr, V_expr, ca.jacobian(V_expr, tau)])
+            for t in times:
+                ref = [np.asarray(z, float).ravel() for z in fn(t)]
+                got = motion.evaluate(float(t))
+                scale = max(np.abs(motion.origin).max(), 1.0)
+                for r, g in zip(ref, got):
+                    worst_ad = max(worst_ad, float(np.abs(r - g).max()) / max(np.abs(r).max(), scale * 1e-3))
+            continue
+        knots = [0.0] + [float(w[0]) for w in motion.spec["waypoints"]]
+        points = [np.asarray(motion.origin, float)] + [np.asarray(w[1:], float) for w in motion.spec["waypoints"]]
+        span = max(float(np.abs(np.array(points) - points[0]).max()), 1e-300)
+        t_end = knots[-1]
+        for t, p in zip(knots, points):
+            worst_spline = max(worst_spline, float(np.abs(motion.evaluate(t)[0] - p).max()) / span)
+        delta = 1e-9 * t_end
+        for t in knots[1:-1]:
+            left, right = motion.evaluate(t - delta), motion.evaluate(t + delta)
+            for order, (a, b) in enumerate(zip(left, right)):
+                worst_spline = max(worst_spline, float(np.abs(a - b).max()) * t_end ** order / span)
+        for t in (0.0, t_end, t_end * 1.5):
+            P, V, A = motion.evaluate(t)
+            worst_spline = max(worst_spline, float(np.abs(V).max()) * t_end / span)
+            if t > t_end:
+                worst_spline = max(worst_spline, float(np.abs(P - points[-1]).max()) / span,
+                                   float(np.abs(A).max()) * t_end ** 2 / span)
+        for t in rng.uniform(h, t_end - h, samples):
+            if min(abs(t - k) for k in knots) < 2 * h:
+                continue
+            (Pm, Vm, _), (P0, V0, A0), (Pp, Vp, _) = (motion.evaluate(t + s) for s in (-h, 0.0, h))
+            worst_fd = max(worst_fd, float(np.abs((Pp - Pm) / (2 * h) - V0).max()) * t_end / span,
+                           float(np.abs((Vp - Vm) / (2 * h) - A0).max()) * t_end ** 2 / span)
+    tol_fd = 1e-6          # the finite differences' truncation and the knots' 1e-9 offsets, with margin
+    passed = worst_ad <= RTOL_EXACT and worst_fd <= tol_fd and worst_spline <= tol_fd
+    detail = (f"{len(kinds)} motion(s) ({', '.join(sorted(set(kinds)))}) at {samples + 1} times each: velocity/sine "
+              f"P, V, A vs AD of the scene formula {worst_ad:.2e} (tol {RTOL_EXACT:.0e}); waypoint splines: "
+              f"through the waypoints, C2 across the knots, at rest at the ends {worst_spline:.2e}, V and A vs "
+              f"central differences {worst_fd:.2e} (relative to the spline's span and duration)")
+    return CheckResult("driven anchors' motions: V = dP/dt, A = dV/dt", passed, max(worst_ad, worst_fd, worst_spline),
+                       tol_fd, detail)
 
 
 def _check_kernel(scene, dyn, states):
