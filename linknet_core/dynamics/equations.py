@@ -32,6 +32,9 @@ class Dynamics:
         if rhs_kernel not in ("numpy", "casadi"):
             raise SolverError(f"rhs_kernel must be 'numpy' or 'casadi', got {rhs_kernel!r}")
         self._compiled_rhs = None
+        if rhs_kernel == "casadi" and scene.driven.any():
+            raise SolverError("rhs_kernel='casadi' does not take driven anchors (its generated kernel has no anchor "
+                              "motion); use rhs_kernel='numpy' or the native backend")
         if rhs_kernel == "casadi" and self.structure.kind != "redundant":
             from linknet_core.symbolic.codegen import compiled_rhs
 
@@ -99,30 +102,34 @@ class Dynamics:
         return np.einsum("ij,ij->i", E, V[self._k1] - V[self._k2])
 
     # ---- the physics ----------------------------------------------------------------------------
-    def tensions(self, X, U, F_input=None, F=None, E=None) -> np.ndarray:
-        """Tensions T solving (25) with right-hand side (26); minimum-norm where A is singular."""
+    def tensions(self, X, U, F_input=None, F=None, E=None, anchor_acc=None) -> np.ndarray:
+        """Tensions T solving (25) with right-hand side (26); minimum-norm where A is singular. ``anchor_acc``
+        (K,3): driven anchors' accelerations (linknet_core.dynamics.drive), their X, U rows holding P and V."""
         if F is None:
             F = self.forces(X, U, F_input)
         if self.scene.L == 0:
             return np.zeros(0)
         if E is None:
             E = self.unit_vectors(X)
-        B = rhs(self.scene, X, U, F, E)
+        B = rhs(self.scene, X, U, F, E, anchor_acc)
         self.factor(X, E)
         return self.solver.solve(B)
 
-    def accelerations(self, X, U, F_input=None):
-        """(dU/dt of (9), T): accelerations of every mass (zero on anchored ones) and the tensions."""
+    def accelerations(self, X, U, F_input=None, anchor_acc=None):
+        """(dU/dt of (9), T): accelerations of every mass (zero on fixed anchors, ``anchor_acc`` on driven ones)
+        and the tensions."""
         self.rhs_evaluations += 1
         if self._compiled_rhs is not None:
             return self._compiled_rhs.accelerations(X, U, F_input)
-        return self._accelerations_numpy(X, U, F_input)
+        return self._accelerations_numpy(X, U, F_input, anchor_acc)
 
-    def _accelerations_numpy(self, X, U, F_input=None):
+    def _accelerations_numpy(self, X, U, F_input=None, anchor_acc=None):
         E = self.unit_vectors(X)  # once per evaluation: B, A and the link forces all use it
         F = self.forces(X, U, F_input)
-        T = self.tensions(X, U, F=F, E=E)
+        T = self.tensions(X, U, F=F, E=E, anchor_acc=anchor_acc)
         acc = (F + self._scatter(E, T)) * self._inv_mass3
+        if anchor_acc is not None:
+            acc = acc + anchor_acc
         if not np.all(np.isfinite(acc)):
             raise SolverError("non-finite accelerations: the state or the forces contain NaN or infinity")
         return acc, T
@@ -239,7 +246,7 @@ class Dynamics:
         return U - self._correction(E, mu)
 
     # ---- hypothesis (35) ------------------------------------------------------------------------
-    def check_consistent_velocities(self, X, U, rtol=1e-8) -> None:
+    def check_consistent_velocities(self, X, U, rtol=1e-8, anchor_acc=None) -> None:
         """Refuse (X, U) that admit no accelerations consistent with the constraints (35).
 
         Consistent accelerations exist iff b_l = |U_k2 - U_k1|^2 / R_l lies in the range of C, i.e. is
@@ -258,6 +265,8 @@ class Dynamics:
             return
         dU = U[self._k2] - U[self._k1]
         b = np.einsum("ij,ij->i", dU, dU) / self.scene.length
+        if anchor_acc is not None:  # driven anchors' prescribed accelerations are part of (35)'s right-hand side
+            b = b + np.einsum("ij,ij->i", self.unit_vectors(X), anchor_acc[self._k2] - anchor_acc[self._k1])
         scale = np.linalg.norm(b)
         proj = N.T @ b
         if scale > 0 and np.max(np.abs(proj)) > rtol * scale:

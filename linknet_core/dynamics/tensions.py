@@ -67,12 +67,16 @@ def unit_vectors(scene: Scene, X: np.ndarray) -> np.ndarray:
     return (X[scene.k2] - X[scene.k1]) / scene.length[:, None]
 
 
-def rhs(scene: Scene, X: np.ndarray, U: np.ndarray, F: np.ndarray, E: np.ndarray | None = None) -> np.ndarray:
-    """B of (26), with 1/M = 0 on anchored masses."""
+def rhs(scene: Scene, X: np.ndarray, U: np.ndarray, F: np.ndarray, E: np.ndarray | None = None,
+        anchor_acc: np.ndarray | None = None) -> np.ndarray:
+    """B of (26), with 1/M = 0 on anchored masses; ``anchor_acc`` (K,3): the accelerations A_a of driven anchors
+    (zero elsewhere), which take the place of F/M on their side of a link (linknet_core.dynamics.drive)."""
     if E is None:
         E = unit_vectors(scene, X)
     dU = U[scene.k2] - U[scene.k1]
     a_free = F * scene.inv_mass[:, None]
+    if anchor_acc is not None:
+        a_free = a_free + anchor_acc
     return np.einsum("ij,ij->i", dU, dU) / scene.length + np.einsum("ij,ij->i", E, a_free[scene.k2] - a_free[scene.k1])
 
 

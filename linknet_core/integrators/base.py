@@ -39,13 +39,21 @@ class Integrator:
     def __init__(self, dynamics: Dynamics):
         self.dyn = dynamics
         self.stats = StepStats()
+        # the driven anchors' motion (linknet_core.dynamics.drive.AnchorDrive), set by the Simulator of a scene
+        # that has driven anchors; None: every anchor stands still
+        self.drive = None
 
     # snapshot of whatever the integrator carries between calls (step-size guess, ...)
     def internals(self) -> dict:
-        return {"stats": self.stats.as_dict()}
+        out = {"stats": self.stats.as_dict()}
+        if self.drive is not None:
+            out["drive"] = self.drive.internals()
+        return out
 
     def set_internals(self, data: dict) -> None:
         self.stats = StepStats(**data["stats"])
+        if self.drive is not None and "drive" in data:
+            self.drive.set_internals(data["drive"])
 
     def advance(self, state: State, t_target: float, F_input: np.ndarray | None, max_steps: int) -> None:
         raise NotImplementedError
@@ -60,12 +68,15 @@ class FixedStepIntegrator(Integrator):
             raise SolverError(f"dt must be a positive finite step in seconds, got {dt!r}")
         self.dt = float(dt)
 
-    def step(self, X, U, h, F_input):
+    def step(self, X, U, h, F_input, t=0.0, t_end=None):
+        """One step of size h from (X, U) at time t to t_end (default t + h; the times matter only to driven
+        anchors)."""
         raise NotImplementedError
 
-    def _advance_steps(self, X, U, n, h, F_input):
-        for _ in range(n):
-            X, U = self.step(X, U, h, F_input)
+    def _advance_steps(self, X, U, n, h, F_input, t=0.0, t_target=None):
+        for i in range(n):  # the last step ends on the target itself: the driven anchors' final position
+            end = t_target if i == n - 1 and t_target is not None else t + (i + 1) * h
+            X, U = self.step(X, U, h, F_input, t + i * h, end)
         return X, U
 
     def advance(self, state, t_target, F_input, max_steps):
@@ -76,6 +87,6 @@ class FixedStepIntegrator(Integrator):
                               f"limit of {max_steps}; raise max_steps or the step")
         h = span / n
         # finiteness of the result is checked once, by Simulator.advance, for every path
-        X, U = self._advance_steps(state.X, state.U, n, h, F_input)
+        X, U = self._advance_steps(state.X, state.U, n, h, F_input, state.t, t_target)
         state.X, state.U, state.t = X, U, t_target
         self.stats.steps += n

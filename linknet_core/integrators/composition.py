@@ -24,9 +24,14 @@ def _yoshida_symmetric(w: list[float]) -> tuple[float, ...]:
 class Composition(Rattle):
     """A step is RATTLE steps of gamma_i h in turn (the compiled loop takes the same gammas)."""
 
-    def step(self, X, U, h, F_input):
-        for g in self.gammas:
-            X, U = Rattle.step(self, X, U, g * h, F_input)
+    def step(self, X, U, h, F_input, t=0.0, t_end=None):
+        t_end = t + h if t_end is None else t_end
+        fraction = 0.0
+        for i, g in enumerate(self.gammas):
+            start = t + fraction * h
+            fraction += g
+            end = t_end if i == len(self.gammas) - 1 else t + fraction * h
+            X, U = Rattle.step(self, X, U, g * h, F_input, start, end)
         return X, U
 
 

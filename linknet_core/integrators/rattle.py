@@ -24,30 +24,40 @@ class Rattle(FixedStepIntegrator):
     position_tol = 1e-14
     gammas: tuple[float, ...] = (1.0,)
 
-    def step(self, X, U, h, F_input):
-        dyn = self.dyn
+    def step(self, X, U, h, F_input, t=0.0, t_end=None):
+        dyn, drive = self.dyn, self.drive
+        t_end = t + h if t_end is None else t_end
         inv_m = dyn._inv_mass3
         F0 = dyn.forces(X, U, F_input)
         U_half = U + 0.5 * h * inv_m * F0
         X_free = X + h * U_half
+        if drive is not None:  # driven anchors: the position stage targets |X_k - P_a(t + h)| = R_l (11)
+            X_free = drive.place(t_end, X_free)
         # position stage: X_new = X_free + M^-1 C(X)^T mu on the manifold (11); mu = (h^2/2) * multipliers
         X_new, _ = dyn.project_positions(X_free, tol=self.position_tol, direction_at=X)
         U_half = (X_new - X) / h
-        # velocity stage: half kick with the new forces, then projection onto (12) at X_new
+        # velocity stage: half kick with the new forces, then projection onto (12) at X_new (relative to the
+        # driven anchors' V_a(t + h))
         F1 = dyn.forces(X_new, U_half, F_input)
-        U_new = dyn.project_velocities(X_new, U_half + 0.5 * h * inv_m * F1)
+        U_kicked = U_half + 0.5 * h * inv_m * F1
+        if drive is not None:
+            U_kicked = drive.move_velocities(t_end, U_kicked)
+        U_new = dyn.project_velocities(X_new, U_kicked)
         if has_velocity_dependent_forces(self.dyn.scene):
-            U_new = self._implicit_kick(X_new, U_half, U_new, h, F_input)
+            U_new = self._implicit_kick(X_new, U_half, U_new, h, F_input, t_end)
         return X_new, U_new
 
-    def _implicit_kick(self, X_new, U_half, U_new, h, F_input):
+    def _implicit_kick(self, X_new, U_half, U_new, h, F_input, t_end):
         """Second half kick with the forces at U_{n+1} itself (drag, dampers): the step stays symmetric and
         so second order (with the half-step velocity it is first order). Fixed-point iteration, contraction
         factor ~ h c / (2 m) for a damping coefficient c on a mass m."""
         dyn = self.dyn
         for _ in range(60):
             F1 = dyn.forces(X_new, U_new, F_input)
-            U_next = dyn.project_velocities(X_new, U_half + 0.5 * h * dyn._inv_mass3 * F1)
+            U_kicked = U_half + 0.5 * h * dyn._inv_mass3 * F1
+            if self.drive is not None:
+                U_kicked = self.drive.move_velocities(t_end, U_kicked)
+            U_next = dyn.project_velocities(X_new, U_kicked)
             change = float(np.abs(U_next - U_new).max())
             U_new = U_next
             if change <= 4e-16 * float(np.abs(U_new).max()) or change == 0.0:

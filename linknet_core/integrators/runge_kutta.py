@@ -59,11 +59,17 @@ class ProjectedRungeKutta(Integrator):
         self.h = data["h"]
 
     # ---- one attempted step ------------------------------------------------------------------
-    def _f(self, X, U, F_input):
-        acc, _ = self.dyn.accelerations(X, U, F_input)
+    def _f(self, X, U, F_input, t=0.0):
+        """(dX/dt, dU/dt) at (X, U, t). Driven anchors are known functions of time, not part of the integrated
+        state: their rows are set to the motion at t (and the derivatives there are its V and A)."""
+        if self.drive is None:
+            acc, _ = self.dyn.accelerations(X, U, F_input)
+            return U, acc
+        X, U, anchor_acc = self.drive.apply(t, X, U)
+        acc, _ = self.dyn.accelerations(X, U, F_input, anchor_acc)
         return U, acc
 
-    def _attempt(self, X, U, h, k0, F_input):
+    def _attempt(self, X, U, h, k0, F_input, t=0.0, t_end=None):
         s = self.n_stages
         KX = np.empty((s + 1,) + X.shape)
         KU = np.empty((s + 1,) + U.shape)
@@ -72,10 +78,13 @@ class ProjectedRungeKutta(Integrator):
             a = self.A[i, :i]
             Xi = X + h * np.tensordot(a, KX[:i], axes=1)
             Ui = U + h * np.tensordot(a, KU[:i], axes=1)
-            KX[i], KU[i] = self._f(Xi, Ui, F_input)
+            KX[i], KU[i] = self._f(Xi, Ui, F_input, t + self.C[i] * h)
         X_new = X + h * np.tensordot(self.B, KX[:s], axes=1)
         U_new = U + h * np.tensordot(self.B, KU[:s], axes=1)
-        KX[s], KU[s] = self._f(X_new, U_new, F_input)
+        t_end = t + h if t_end is None else t_end
+        if self.drive is not None:
+            X_new, U_new, _ = self.drive.apply(t_end, X_new, U_new)
+        KX[s], KU[s] = self._f(X_new, U_new, F_input, t_end)
         return X_new, U_new, KX, KU
 
     def _scale(self, X, U, X_new, U_new):
@@ -99,7 +108,7 @@ class ProjectedRungeKutta(Integrator):
         err = h * self._stage_errors(KX, KU, self.error_weights[0]) / scale
         return float(np.sqrt(np.mean(err ** 2)))
 
-    def _initial_step(self, X, U, k0, F_input, span):
+    def _initial_step(self, X, U, k0, F_input, span, t=0.0):
         """Hairer-Wanner's starting step (as scipy's select_initial_step)."""
         scale = self._scale(X, U, X, U)
         y = np.concatenate([X[self.free].ravel(), U[self.free].ravel()])
@@ -108,7 +117,7 @@ class ProjectedRungeKutta(Integrator):
         d1 = np.sqrt(np.mean((f0 / scale) ** 2))
         h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
         h0 = min(h0, span)
-        k1 = self._f(X + h0 * k0[0], U + h0 * k0[1], F_input)
+        k1 = self._f(X + h0 * k0[0], U + h0 * k0[1], F_input, t + h0)
         f1 = np.concatenate([k1[0][self.free].ravel(), k1[1][self.free].ravel()])
         d2 = np.sqrt(np.mean(((f1 - f0) / scale) ** 2)) / h0
         if d1 <= 1e-15 and d2 <= 1e-15:
@@ -117,18 +126,18 @@ class ProjectedRungeKutta(Integrator):
             h1 = (0.01 / max(d1, d2)) ** (1.0 / (self.error_estimator_order + 1))
         return min(100 * h0, h1, span)
 
-    def step(self, X, U, h, F_input=None):
+    def step(self, X, U, h, F_input=None, t=0.0, t_end=None):
         """One step of size h without error control, then the projections: used to measure the
         method's order (tests) and available to callers that want a fixed step."""
-        X_new, U_new, _, _ = self._attempt(X, U, h, self._f(X, U, F_input), F_input)
+        X_new, U_new, _, _ = self._attempt(X, U, h, self._f(X, U, F_input, t), F_input, t)
         X_new, _ = self.dyn.project_positions(X_new, tol=1e-14)
         return X_new, self.dyn.project_velocities(X_new, U_new)
 
-    def fixed_steps(self, X, U, h, n, F_input=None):
+    def fixed_steps(self, X, U, h, n, F_input=None, t=0.0):
         """n steps of size h without error control, each followed by the projections (order measurements).
         Returns (X, U)."""
-        for _ in range(n):
-            X, U = self.step(X, U, h, F_input)
+        for i in range(n):
+            X, U = self.step(X, U, h, F_input, t + i * h)
         return X, U
 
     # ---- driver ------------------------------------------------------------------------------
@@ -136,9 +145,9 @@ class ProjectedRungeKutta(Integrator):
         """From the state towards t_target with error control; leaves the next step size in self.h."""
         dyn = self.dyn
         X, U, t, t_start = state.X, state.U, state.t, state.t
-        k0 = self._f(X, U, F_input)
+        k0 = self._f(X, U, F_input, t)
         if self.h is None:
-            self.h = self._initial_step(X, U, k0, F_input, t_target - t)
+            self.h = self._initial_step(X, U, k0, F_input, t_target - t, t)
         exponent = -1.0 / (self.error_estimator_order + 1)
         steps = 0
         while t < t_target:
@@ -149,7 +158,8 @@ class ProjectedRungeKutta(Integrator):
             if h <= 16 * np.spacing(max(abs(t), 1.0)) and h < remaining:
                 raise SolverError(f"step size underflow at t = {t}: the tolerance rtol = {self.rtol} cannot be "
                                   "met (singular configuration or discontinuous input?)")
-            X_new, U_new, KX, KU = self._attempt(X, U, h, k0, F_input)
+            t_new = t_target if h == remaining else t + h
+            X_new, U_new, KX, KU = self._attempt(X, U, h, k0, F_input, t, t_new)
             err = self.error_norm(KX, KU, h, self._scale(X, U, X_new, U_new))
             if not math.isfinite(err):
                 self.stats.rejected += 1
@@ -158,7 +168,7 @@ class ProjectedRungeKutta(Integrator):
             if err <= 1.0:
                 X_new, _ = dyn.project_positions(X_new, tol=1e-14)  # onto (11)
                 U_new = dyn.project_velocities(X_new, U_new)  # onto (12)
-                t = t_target if h == remaining else t + h
+                t = t_new
                 X, U = X_new, U_new
                 factor = MAX_FACTOR if err == 0 else min(MAX_FACTOR, SAFETY * err ** exponent)
                 # a step shortened only to land on t_target says nothing against the longer step
@@ -169,7 +179,7 @@ class ProjectedRungeKutta(Integrator):
                     raise SolverError(f"more than {max_steps} steps between t = {t_start} and t = {t_target}; "
                                       "raise max_steps or the tolerance")
                 if t < t_target:  # the first stage of the next step (none after the last one)
-                    k0 = self._f(X, U, F_input)
+                    k0 = self._f(X, U, F_input, t)
             else:
                 self.stats.rejected += 1
                 self.h = h * max(MIN_FACTOR, SAFETY * err ** exponent)

@@ -7,10 +7,12 @@ is all or nothing), and hands out copies of the new state, so that no caller's a
 """
 from __future__ import annotations
 
+import ctypes
 from dataclasses import dataclass
 
 import numpy as np
 
+from linknet_core.dynamics.drive import call_motion
 from linknet_core.errors import SolverError
 from linknet_core.integrators.base import Integrator, StepStats
 from linknet_core.native import library as lib
@@ -27,13 +29,16 @@ class _Internals:
     n_rhs: int
     split_steps: int
     finest_split: int
+    jumps: int = 0
+    drive: tuple | None = None  # driven anchors: (hold time, P, V, A, callable) of the input-driven ones
 
 
 class NativeIntegrator(Integrator):
     """``method_cls``: the reference integrator class whose method this runs (its gammas or tableau, name,
     order, guarantees). ``static``: a scene with no degrees of freedom (an advance moves t only)."""
 
-    def __init__(self, model: NativeModel, method_cls, *, dt=None, rtol=None, atol=None, static: bool = False):
+    def __init__(self, model: NativeModel, method_cls, *, dt=None, rtol=None, atol=None, static: bool = False,
+                 t0: float = 0.0):
         self.dyn = None  # the native data keeps the statistics (Integrator.__init__ would set its own)
         self.model = model
         self.name, self.order, self.symplectic = method_cls.name, method_cls.order, method_cls.symplectic
@@ -47,6 +52,13 @@ class NativeIntegrator(Integrator):
         self._model_p, self._method_p, self._data_p = model.pointer, self.method.pointer, self.data._ptr
         self._d = self.data.struct
         self._out = (None, None)  # the arrays last handed out as the state (the data holds the same values)
+        # driven anchors: scene time 0 is t0; input-driven anchors are rows input_slots of the drive arrays
+        self._d.drive_t0 = self._d.drive_hold_t = t0
+        scene = model.scene
+        self._input_slots = np.flatnonzero([motion.kind == "input" for motion in scene.motions])
+        self._motion = None  # the user's callable of t, when the input-driven anchors follow one
+        self._motion_error = None  # what it raised inside the last advance
+        self._callback = lib.DRIVE_CALLBACK(self._call_motion)
 
     # ---- stats and internals: they live in the native data ------------------------------------
     @property
@@ -60,16 +72,61 @@ class NativeIntegrator(Integrator):
 
     def internals(self) -> dict:
         d = self._d
+        drive = None
+        if self._input_slots.size:
+            data = self.data
+            drive = (d.drive_hold_t, data.drive_P.copy(), data.drive_V.copy(), data.drive_A.copy(), self._motion)
         return {"native": _Internals(d.t, d.h_next, d.planar, d.steps, d.rejected, d.n_rhs, d.split_steps,
-                                     d.finest_split)}
+                                     d.finest_split, d.jumps, drive)}
 
     def set_internals(self, data: dict) -> None:
         saved = data["native"]
         d = self._d
         d.t, d.h_next, d.planar = saved.t, saved.h_next, saved.planar
         d.steps, d.rejected, d.n_rhs = saved.steps, saved.rejected, saved.n_rhs
-        d.split_steps, d.finest_split = saved.split_steps, saved.finest_split
+        d.split_steps, d.finest_split, d.jumps = saved.split_steps, saved.finest_split, saved.jumps
+        if saved.drive is not None:
+            d.drive_hold_t, P, V, A, motion = saved.drive
+            self.data.drive_P[...], self.data.drive_V[...], self.data.drive_A[...] = P, V, A
+            self._follow(motion)
         self._out = (None, None)  # the state may have been set from outside too: copy it in next time
+
+    # ---- driven anchors -----------------------------------------------------------------------------
+    def set_anchors(self, t: float, anchors) -> None:
+        """The input-driven anchors from t on: (P, V, A) (each (n_input, 3), checked by the caller) held as
+        P + V s + A s^2/2, s = t' - t; or a callable f(t') -> (P, V, A) called wherever the core needs them."""
+        if callable(anchors):
+            self._follow(anchors)
+            return
+        self._follow(None)
+        rows = self._input_slots
+        P, V, A = anchors
+        self.data.drive_P[rows], self.data.drive_V[rows], self.data.drive_A[rows] = P, V, A
+        self._d.drive_hold_t = t
+
+    def _follow(self, motion) -> None:
+        self._motion = motion
+        self._d.drive_callback = ctypes.cast(self._callback, ctypes.c_void_p) if motion is not None else None
+
+    def _call_motion(self, user, t, out) -> int:
+        """ln_data.drive_callback: the user's motion at t into P, V, A of each input-driven anchor (9 values
+        each); 1 on any failure, whose exception the advance raises."""
+        try:
+            n = self._input_slots.size
+            P, V, A = call_motion(self._motion, t, n)
+            values = np.ctypeslib.as_array(out, (n, 3, 3))
+            values[:, 0], values[:, 1], values[:, 2] = P, V, A
+            return 0
+        except BaseException as exc:  # noqa: BLE001 - C cannot unwind a Python exception; it is raised below
+            self._motion_error = exc
+            return 1
+
+    def anchor_report(self) -> dict:
+        """The driven anchors' last jump: the impulse each got (n_driven, 3), N s; the largest position and
+        velocity change; jumps counted over the run."""
+        d = self._d
+        return {"impulse": self.data.impulse.copy(), "jump_position": d.jump_position,
+                "jump_velocity": d.jump_velocity, "jumps": int(d.jumps)}
 
     # ---- stepping -------------------------------------------------------------------------------
     def _load(self, state, F_input) -> None:
@@ -87,6 +144,7 @@ class NativeIntegrator(Integrator):
         self._load(state, F_input)
         status = lib.advance(self._model_p, self._method_p, self._data_p, t_target, max_steps)
         if status != lib.OK:
+            self._raise_motion_error()
             raise SolverError(self.explain(status, state.t, t_target, max_steps))
         X, U = self.data.X.copy(), self.data.U.copy()
         state.X, state.U, state.t = X, U, t_target
@@ -107,8 +165,16 @@ class NativeIntegrator(Integrator):
         U = np.ascontiguousarray(U, np.float64)
         status = lib.evaluate(self._model_p, self._data_p, lib.pointer(X), lib.pointer(U))
         if status != lib.OK:
+            self._raise_motion_error()
             raise SolverError(f"the tensions (25)-(26) cannot be evaluated at this state: {lib.STATUS[status]}")
         return self.data.T.copy(), self.data.reaction.copy()
+
+    def _raise_motion_error(self) -> None:
+        error, self._motion_error = self._motion_error, None
+        if isinstance(error, (SolverError, KeyboardInterrupt)):
+            raise error
+        if error is not None:
+            raise SolverError(f"the anchors' motion callable failed: {type(error).__name__}: {error}") from error
 
     def explain(self, status: int, t_start: float, t_target: float, max_steps: int) -> str:
         """The failure of an advance in words, naming the link, the residuals and what may help."""

@@ -21,9 +21,10 @@ c_uint8_p = ctypes.POINTER(ctypes.c_uint8)
 
 # enum ln_status, as the messages name them
 STATUS = {0: "ok", 1: "projection failed", 2: "singular", 3: "non-finite", 4: "step underflow", 5: "too many steps",
-          6: "left the plane", 7: "implicit kick failed", 8: "bad argument", 9: "out of memory"}
+          6: "left the plane", 7: "implicit kick failed", 8: "bad argument", 9: "out of memory",
+          10: "anchor motion failed"}
 OK, PROJECTION_FAILED, SINGULAR, NON_FINITE, STEP_UNDERFLOW, TOO_MANY_STEPS = 0, 1, 2, 3, 4, 5
-LEFT_PLANE, IMPLICIT_KICK_FAILED, BAD_ARGUMENT, NO_MEMORY = 6, 7, 8, 9
+LEFT_PLANE, IMPLICIT_KICK_FAILED, BAD_ARGUMENT, NO_MEMORY, DRIVE_FAILED = 6, 7, 8, 9, 10
 SOLVER_NONE, SOLVER_CHAIN, SOLVER_LDL, SOLVER_MIN_NORM = 0, 1, 2, 3
 COMPOSITION, RUNGE_KUTTA, STATIC = 0, 1, 2
 RMS_ERROR, HAIRER_ERROR = 0, 1
@@ -52,6 +53,8 @@ class Model(ctypes.Structure):
         ("plane_P", ctypes.c_double * 6), ("plane_o", ctypes.c_double * 3), ("plane_n", ctypes.c_double * 3),
         ("plane_length", ctypes.c_double), ("plane_tol", ctypes.c_double),
         ("rigid", ctypes.c_void_p),
+        ("n_driven", ln_int), ("driven_idx", ln_int_p), ("motion_kind", ln_int_p), ("motion_pieces", ln_int_p),
+        ("piece", c_double_p), ("sine", c_double_p), ("accel_weight", c_double_p),
     ]
 
 
@@ -60,7 +63,7 @@ class Method(ctypes.Structure):
         ("kind", ctypes.c_int),
         ("dt", ctypes.c_double),
         ("n_gammas", ln_int), ("gammas", c_double_p),
-        ("n_stages", ln_int), ("AB", c_double_p), ("E1", c_double_p), ("E2", c_double_p),
+        ("n_stages", ln_int), ("AB", c_double_p), ("C", c_double_p), ("E1", c_double_p), ("E2", c_double_p),
         ("error_norm", ctypes.c_int),
         ("exponent", ctypes.c_double),
         ("safety", ctypes.c_double), ("min_factor", ctypes.c_double), ("max_factor", ctypes.c_double),
@@ -84,6 +87,12 @@ class Data(ctypes.Structure):
         ("fail_iterations", ln_int),
         ("fail_t", ctypes.c_double),
         ("T", c_double_p), ("acc", c_double_p), ("reaction", c_double_p),
+        ("drive_t0", ctypes.c_double), ("drive_hold_t", ctypes.c_double),
+        ("drive_P", c_double_p), ("drive_V", c_double_p), ("drive_A", c_double_p),
+        ("drive_callback", ctypes.c_void_p), ("drive_user", ctypes.c_void_p),
+        ("impulse", c_double_p),
+        ("jump_position", ctypes.c_double), ("jump_velocity", ctypes.c_double),
+        ("jumps", ln_int),
     ]
     # the scratch that follows in ln_data is the C side's own: ctypes never reads past these fields
 
@@ -118,6 +127,8 @@ evaluate_repeated = _declare("ln_evaluate_repeated", ctypes.c_int, Model_p, Data
 force_kind = _declare("ln_force_kind", ln_int, ctypes.c_char_p)
 fixed_step_count = _declare("ln_fixed_step_count", ln_int, ctypes.c_double, ctypes.c_double)
 sizeof = _declare("ln_sizeof", ctypes.c_size_t, ctypes.c_int)
+# int (*)(void *user, double t, double *PVA): the driven anchors' motion callback (ln_data.drive_callback)
+DRIVE_CALLBACK = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, c_double_p)
 
 
 def pointer(array: np.ndarray, ctype=ctypes.c_double):

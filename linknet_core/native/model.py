@@ -95,6 +95,7 @@ class NativeModel:
         m.k1, m.k2 = i8(scene.k1), i8(scene.k2)
         m.R, m.inv_R = f8(scene.length), f8(1.0 / scene.length if L else np.zeros(0))
         m.inv_m = f8(scene.inv_mass)
+        self._fill_driven(m, scene, f8, i8)
         m.n_free, m.free_idx = scene.free_indices.size, i8(scene.free_indices)
         m.n_fixed, m.fixed_idx = int(fixed.sum()), i8(np.flatnonzero(fixed))
         is_fixed = np.ascontiguousarray(fixed, np.uint8)
@@ -149,7 +150,8 @@ class NativeModel:
         else:  # a chain's L has one entry per link after the first; no links, no L
             self.nnz_L = max(L - 1, 0) if self.solver == "chain" else 0
 
-        plane = None if planar is False else scene_plane(scene, structure.planar_normal)
+        # driven anchors move where they are told, in or out of a plane: such scenes run in 3-D
+        plane = None if planar is False or m.n_driven else scene_plane(scene, structure.planar_normal)
         self.plane = plane
         if plane is not None:
             P, o, n, length = plane
@@ -161,6 +163,26 @@ class NativeModel:
         if rigid is not None:
             m.rigid = ctypes.cast(ctypes.pointer(rigid), ctypes.c_void_p)
         self.pointer = ctypes.pointer(m)
+
+    @staticmethod
+    def _fill_driven(m, scene, f8, i8) -> None:
+        """The driven anchors: their masses, motions as the tables of drive.c (linknet_core.scene.motion) and the
+        weights of a_k in B (26): 1/M_k, and 1 on driven anchors, whose base-force rows hold their accelerations."""
+        motions = scene.motions
+        m.n_driven = len(motions)
+        if not motions:
+            m.accel_weight = m.inv_m
+            return
+        from linknet_core.scene.motion import PIECE_COLUMNS, SINE_COLUMNS
+
+        m.driven_idx = i8(scene.driven_indices)
+        m.motion_kind = i8([motion.code for motion in motions])
+        m.motion_pieces = i8(np.concatenate([[0], np.cumsum([motion.pieces.shape[0] for motion in motions])]))
+        m.piece = f8(np.concatenate([motion.pieces for motion in motions]).reshape(-1, PIECE_COLUMNS))
+        m.sine = f8(np.array([motion.sine for motion in motions]).reshape(-1, SINE_COLUMNS))
+        weight = np.array(scene.inv_mass, np.float64)
+        weight[scene.driven_indices] = 1.0
+        m.accel_weight = f8(weight)
 
     def __del__(self):
         if getattr(self, "_ldl", None):
@@ -208,7 +230,9 @@ class NativeMethod:
             AB, E1, E2, exponent = embedded_pair(cls.A, cls.B, cls.error_weights, cls.error_estimator_order)
             self._keep += [AB, E1, E2]
             s.n_stages = self.n_stages = AB.shape[1]
-            s.AB, s.E1, s.E2 = pointer(AB), pointer(E1), pointer(E2)
+            C = float_array(cls.C)
+            self._keep.append(C)
+            s.AB, s.C, s.E1, s.E2 = pointer(AB), pointer(C), pointer(E1), pointer(E2)
             s.error_norm = lib.HAIRER_ERROR if cls.error_norm_kind == "hairer" else lib.RMS_ERROR
             s.exponent = exponent
             s.safety, s.min_factor, s.max_factor = SAFETY, MIN_FACTOR, MAX_FACTOR  # the reference's controller
@@ -260,6 +284,10 @@ class NativeData:
         self.acc = np.ctypeslib.as_array(d.acc, (K, 3)) if K else np.zeros((0, 3))
         n_fixed = int(model.struct.n_fixed)
         self.reaction = np.ctypeslib.as_array(d.reaction, (n_fixed, 3)) if n_fixed else np.zeros((0, 3))
+        n_driven = int(model.struct.n_driven)
+        views = [np.ctypeslib.as_array(p, (n_driven, 3)) if n_driven else np.zeros((0, 3))
+                 for p in (d.drive_P, d.drive_V, d.drive_A, d.impulse)]
+        self.drive_P, self.drive_V, self.drive_A, self.impulse = views
 
     def __del__(self):
         if getattr(self, "_ptr", None):

@@ -18,8 +18,9 @@ from typing import Any
 import numpy as np
 
 from linknet_core.errors import SceneError
+from linknet_core.scene.motion import AnchorMotion, parse_motion
 
-_MASS_KEYS = {"name", "mass", "position", "velocity", "fixed", "force", "drag", "quadratic_drag"}
+_MASS_KEYS = {"name", "mass", "position", "velocity", "fixed", "driven", "motion", "force", "drag", "quadratic_drag"}
 _LINK_KEYS = {"a", "b", "length", "name"}
 _SPRING_KEYS = {"a", "b", "stiffness", "rest_length", "damping", "name"}
 _SCENE_KEYS = {"name", "description", "gravity", "masses", "links", "springs", "options"}
@@ -100,7 +101,7 @@ class Scene:
     name: str
     mass_names: tuple[str, ...]
     mass: np.ndarray  # (K,) kg; inf for anchored masses
-    fixed: np.ndarray  # (K,) bool
+    fixed: np.ndarray  # (K,) bool: anchored (1/M = 0), standing still or driven
     k1: np.ndarray  # (L,) 0-based index of the first end of each link (5)
     k2: np.ndarray  # (L,) second end
     length: np.ndarray  # (L,) R_l (6)
@@ -114,6 +115,12 @@ class Scene:
     U0: np.ndarray  # (K,3) initial velocities
     description: str = ""
     options: dict = field(default_factory=dict)
+    driven: np.ndarray | None = None  # (K,) bool: anchors whose motion is prescribed (a subset of fixed)
+    motions: tuple[AnchorMotion, ...] = ()  # one per driven anchor, in driven_indices order
+
+    def __post_init__(self):
+        if self.driven is None:
+            object.__setattr__(self, "driven", _frozen_bool(np.zeros(self.K, bool)))
 
     # ---- derived, read-only views -------------------------------------------------------------
     @cached_property
@@ -168,7 +175,27 @@ class Scene:
 
     @property
     def fixed_indices(self) -> np.ndarray:
+        """Every anchored mass, standing still or driven."""
         return np.flatnonzero(self.fixed)
+
+    @cached_property
+    def driven_indices(self) -> np.ndarray:
+        """The driven anchors (their motion prescribed), in scene order: the order of ``motions``."""
+        return _frozen_int(np.flatnonzero(self.driven))
+
+    @cached_property
+    def input_driven_indices(self) -> np.ndarray:
+        """The driven anchors moved by inputs (motion kind "input"), in scene order."""
+        return _frozen_int([k for k, m in zip(self.driven_indices, self.motions) if m.kind == "input"])
+
+    def anchor_motion(self, tau: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(P, V, A), each (n_driven, 3): the driven anchors' scene motions at scene time tau (input-driven
+        anchors at rest at their scene position)."""
+        n = len(self.motions)
+        out = np.zeros((3, n, 3))
+        for i, motion in enumerate(self.motions):
+            out[:, i] = motion.evaluate(tau)
+        return out[0], out[1], out[2]
 
     def mass_label(self, k: int) -> str:
         """Human label of 0-based mass k: 'mass 3 ("b")'."""
@@ -187,7 +214,10 @@ class Scene:
         masses = []
         for k in range(self.K):
             entry: dict[str, Any] = {"name": self.mass_names[k], "position": self.X0[k].tolist()}
-            if self.fixed[k]:
+            if self.driven[k]:
+                entry["driven"] = True
+                entry["motion"] = dict(self.motions[int(np.searchsorted(self.driven_indices, k))].spec)
+            elif self.fixed[k]:
                 entry["fixed"] = True
             else:
                 entry["mass"] = float(self.mass[k])
@@ -369,6 +399,8 @@ def _parse_scene(data: dict, source: str) -> Scene:
     force = np.zeros((K, 3))
     drag = np.zeros(K)
     quadratic_drag = np.zeros(K)
+    driven = np.zeros(K, bool)
+    motions: list[AnchorMotion] = []
     for k, entry in enumerate(masses):
         if not isinstance(entry, dict):
             raise SceneError(f"{source}: mass {k + 1} must be an object")
@@ -380,12 +412,26 @@ def _parse_scene(data: dict, source: str) -> Scene:
         index_of[name] = k
         names.append(name)
         fixed[k] = _boolean(entry.get("fixed", False), f"{label} fixed", source)
+        driven[k] = _boolean(entry.get("driven", False), f"{label} driven", source)
         X0[k] = _vector(entry.get("position"), f"{label} position", source)
+        if driven[k]:  # an anchor (1/M = 0) whose motion is prescribed
+            if "fixed" in entry and not fixed[k]:
+                raise SceneError(f"{source}: {label} is driven, so it is an anchor: \"fixed\": false contradicts "
+                                 "\"driven\": true (leave \"fixed\" out)")
+            if "velocity" in entry:
+                raise SceneError(f"{source}: {label} is driven: its velocity comes from its motion, so it cannot "
+                                 "have a \"velocity\"; give the motion (e.g. {\"kind\": \"velocity\", ...})")
+            fixed[k] = True
+            motions.append(parse_motion(entry.get("motion"), X0[k], f"{label} motion", source, _vector, _number))
+        elif "motion" in entry:
+            raise SceneError(f"{source}: {label} has a \"motion\" but is not driven; add \"driven\": true to "
+                             "prescribe its motion")
         if fixed[k]:
             mass[k] = math.inf
             if "mass" in entry:  # an anchored mass may carry a nominal mass; it never moves
                 _number(entry["mass"], f"{label} mass", source, positive=True)
-            if "velocity" in entry and np.any(_vector(entry["velocity"], f"{label} velocity", source) != 0):
+            if not driven[k] and "velocity" in entry and np.any(_vector(entry["velocity"], f"{label} velocity",
+                                                                          source) != 0):
                 raise SceneError(f"{source}: {label} is fixed (anchored) and cannot have a non-zero velocity")
         else:
             if "mass" not in entry:
@@ -497,4 +543,6 @@ def _parse_scene(data: dict, source: str) -> Scene:
         X0=_frozen(X0),
         U0=_frozen(U0),
         options=dict(options),
+        driven=_frozen_bool(driven),
+        motions=tuple(motions),
     )

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from linknet_core.dynamics.drive import AnchorDrive, anchor_jump
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import SceneError, SolverError
 from linknet_core.dynamics.forces import kinetic_energy
@@ -73,6 +74,12 @@ def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: boo
     if project_positions is None:
         project_positions = bool(scene.options.get("project_initial_positions", False))
     X, U = np.array(scene.X0), np.array(scene.U0)
+    anchor_acc = None
+    if scene.driven.any():  # driven anchors start where and as fast as their motions say (scene time 0)
+        P, V, A = scene.anchor_motion(0.0)
+        X[scene.driven_indices], U[scene.driven_indices] = P, V
+        anchor_acc = np.zeros_like(X)
+        anchor_acc[scene.driven_indices] = A
     if scene.L == 0:
         return X, U, InitialReport(0.0, False, 0.0, -1)
     d = X[scene.k2] - X[scene.k1]
@@ -100,7 +107,7 @@ def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: boo
     dv = float(correction.max()) if correction.size else 0.0
     if dv <= 1e-14 * max(1.0, float(np.abs(U).max())):
         dv, worst_mass = 0.0, -1
-    dyn.check_consistent_velocities(X, U_projected)
+    dyn.check_consistent_velocities(X, U_projected, anchor_acc=anchor_acc)
     return X, U_projected, InitialReport(worst, projected, dv, worst_mass)
 
 
@@ -158,6 +165,8 @@ class Simulator:
         if self.backend == "numpy":
             self.specialisation = choose_specialisation(scene, self.dyn, method, enabled=False)
             self.integrator = make_integrator(method, self.dyn, dt=dt, rtol=rtol, atol=atol)
+            if scene.driven.any():
+                self.integrator.drive = AnchorDrive(scene, t0)
         else:
             self.specialisation = choose_specialisation(scene, self.dyn, method, enabled=specialise,
                                                         tolerances=(rtol, atol))
@@ -168,7 +177,8 @@ class Simulator:
                 self.specialisation.notes.extend(self.integrator.notes)
             else:
                 self.integrator = NativeIntegrator(NativeModel(scene, self.dyn.structure), method_cls, dt=dt,
-                                                   rtol=rtol, atol=atol, static=self.specialisation.kind == STATIC)
+                                                   rtol=rtol, atol=atol, static=self.specialisation.kind == STATIC,
+                                                   t0=t0)
                 if self.specialisation.kind == STATIC:
                     U0 = np.zeros_like(U0)  # the only velocity (12) allows where nothing can move
         # the scene is autonomous (no force depends on t), so starting at t0 is the scene's motion shifted in time
@@ -222,17 +232,54 @@ class Simulator:
         return (f" (the largest input force was F[{k + 1},{i + 1}] = {F[k, i]:.6g} N on "
                 f"{self.scene.mass_label(int(k))}: a force too large for the step or tolerance fails this way)")
 
-    def advance(self, t_next: float, F_input=None) -> None:
-        """Integrate to t_next with F_input held. On success the state is finite; on any error the simulator
-        is left exactly as before the call (state and integrator internals)."""
+    def check_anchors(self, anchors):
+        """Validate the input-driven anchors' motion for an advance: None (keep the last), a callable of t, or
+        (P, V, A), each (n_input, 3) with rows the input-driven anchors in scene order (scene.input_driven_indices)."""
+        if anchors is None:
+            return None
+        rows = self.scene.input_driven_indices
+        if rows.size == 0:
+            raise SolverError(f"{self.scene.name} has no input-driven anchors (a mass with \"driven\": true and "
+                              "motion kind \"input\"), so anchors= has nothing to move")
+        if callable(anchors):
+            return anchors
+        if not isinstance(anchors, (tuple, list)) or len(anchors) != 3:
+            raise SolverError("anchors must be (P, V, A): position, velocity and acceleration of the input-driven "
+                              f"anchors, each of shape ({rows.size}, 3), or a callable f(t) -> (P, V, A)")
+        out = []
+        for name, unit, value in zip("PVA", ("m", "m/s", "m/s2"), anchors):
+            a = np.asarray(value, float)
+            if a.shape != (rows.size, 3):
+                raise SolverError(f"anchors {name} must have shape ({rows.size}, 3) (one row per input-driven anchor: "
+                                  f"{', '.join(self.scene.mass_label(int(k)) for k in rows)}), got {a.shape}")
+            bad = ~np.isfinite(a) | (np.abs(np.nan_to_num(a)) > MAX_FORCE)
+            if bad.any():
+                i, j = np.argwhere(bad)[0]
+                raise SolverError(f"anchor input {name}[{rows[i] + 1},{j + 1}] of {self.scene.mass_label(int(rows[i]))} "
+                                  f"is {a[i, j]} {unit}: it must be finite and below {MAX_FORCE:g}")
+            out.append(a)
+        return tuple(out)
+
+    def advance(self, t_next: float, F_input=None, anchors=None) -> None:
+        """Integrate to t_next with F_input held. ``anchors``: the input-driven anchors' motion from now on, (P, V,
+        A) held as P + V s + A s^2/2 (s from the current time), or a callable f(t) -> (P, V, A); None keeps the
+        last. Where the anchors jump (a new V, or P), the velocities are projected onto (12) first: an inelastic
+        impulse, reported by ``anchor_report``. On success the state is finite; on any error the simulator is left
+        exactly as before the call (state, integrator internals and the anchors' held motion)."""
         F = self.check_input(F_input)
+        hold = self.check_anchors(anchors)
         t_next = t_next if type(t_next) is float else _as_time(t_next, "the target time")
         state = self.state
         t_before = state.t
         if self.backend == "native":  # the native advance restores everything itself on failure
+            saved = self.integrator.internals() if hold is not None else None
             try:
+                if hold is not None:
+                    self.integrator.set_anchors(t_before, hold)
                 self.integrator.advance(state, t_next, F, self.max_steps_per_call)
             except SolverError as exc:
+                if saved is not None:
+                    self.integrator.set_internals(saved)
                 if F is None:
                     raise
                 raise SolverError(f"{exc}{self._input_note(F)}") from None
@@ -244,7 +291,13 @@ class Simulator:
         # checks every path), so keeping references is the snapshot: copying cost ~1 us per call. Nor does a
         # later call write into what internals() hands out.
         X_before, U_before, internals = state.X, state.U, self.integrator.internals()
+        drive = self.integrator.drive
         try:
+            if drive is not None:
+                if hold is not None:
+                    drive.set_input(t_before, hold)
+                state.X, state.U, *drive.last_jump = anchor_jump(self.dyn, drive, t_before, state.X, state.U)
+                drive.jumps += drive.last_jump[1] > 0 or drive.last_jump[2] > 0
             self.integrator.advance(state, t_next, F, self.max_steps_per_call)
             if not _all_finite(state.X, state.U):
                 raise SolverError(f"the state became non-finite between t = {t_before} and t = {t_next} "
@@ -257,17 +310,52 @@ class Simulator:
                 raise SolverError(f"{exc}{self._input_note(F)}") from None
             raise
 
-    def outputs(self, F_input=None) -> dict:
-        """Positions, velocities, tensions (with direct feedthrough of F_input, since B of (26) contains F)
-        and the force the network exerts on each anchored mass."""
+    def outputs(self, F_input=None, anchors=None) -> dict:
+        """Positions, velocities, tensions (with direct feedthrough of F_input, since B of (26) contains F, and of
+        the driven anchors' motion) and the force the network exerts on each anchored mass (fixed and driven, scene
+        order). ``anchors``: as for :meth:`advance`, the input-driven anchors' motion to evaluate with (the held one
+        is kept); the driven anchors' rows are where their motion is at the current time."""
         F = self.check_input(F_input)
+        hold = self.check_anchors(anchors)
         X, U = self.state.X, self.state.U
+        t = self.state.t
         if self.backend == "native":
-            T, Freact = self.integrator.outputs(X, U, F)
+            saved = self.integrator.internals() if hold is not None else None
+            try:
+                if hold is not None:
+                    self.integrator.set_anchors(t, hold)
+                T, Freact = self.integrator.outputs(X, U, F)
+            finally:
+                if saved is not None:
+                    self.integrator.set_internals(saved)
         else:
-            T = self.dyn.tensions(X, U, F)
+            anchor_acc = None
+            drive = self.integrator.drive
+            if drive is not None:
+                saved = drive.internals()
+                try:
+                    if hold is not None:
+                        drive.set_input(t, hold)
+                    X, U, anchor_acc = drive.apply(t, X, U)
+                finally:
+                    drive.set_internals(saved)
+            T = self.dyn.tensions(X, U, F, anchor_acc=anchor_acc)
             Freact = self.dyn.anchor_reactions(X, T)
-        return {"t": self.state.t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": Freact}
+        out = {"t": t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": Freact}
+        if self.scene.driven.any():
+            out["impulse"] = self.anchor_report()["impulse"]
+        return out
+
+    def anchor_report(self) -> dict:
+        """The driven anchors' jump at the start of the last advance: "impulse" (n_driven, 3), what the links gave
+        each (N s); "jump_position" (m) and "jump_velocity" (m/s), the largest coordinate changes; "jumps", how
+        many advances of the run began with one."""
+        if self.backend == "native":
+            return self.integrator.anchor_report()
+        drive = self.integrator.drive
+        impulse, jump_position, jump_velocity = drive.last_jump
+        return {"impulse": impulse.copy(), "jump_position": jump_position, "jump_velocity": jump_velocity,
+                "jumps": drive.jumps}
 
     # ---- snapshots ---------------------------------------------------------------------------
     def get_state(self) -> dict:

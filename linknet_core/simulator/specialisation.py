@@ -65,6 +65,10 @@ def choose_specialisation(scene: Scene, dyn: Dynamics, method: str | None = None
     """
     if not enabled:
         return Specialisation(NONE, "specialise=False, or the numpy reference backend: the point-mass path")
+    if scene.driven.any():
+        n = int(scene.driven.sum())
+        return Specialisation(NONE, f"{_count(n, 'driven anchor', 'driven anchors')}: their motion enters (11), (12) "
+                                    "and (26) on the point-mass path (nothing stands still, no body is free)")
     st = dyn.structure
     n_free = int(scene.free_indices.size)
     if scene.L and st.rank_exact and st.rank_G == 3 * n_free:

@@ -4,6 +4,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "drive.h"
 #include "ldl.h"
 #include "linknet.h"
 #include "minnorm.h"
@@ -24,7 +25,7 @@ void ln_data_free(ln_data *d)
     double *arrays[] = {d->X, d->U, d->F_input, d->T, d->acc, d->reaction, d->X_start, d->U_start, d->X_step, d->U_step, d->Xp, d->Up, d->Fp,
                         d->F_base, d->F, d->Uh, d->Xc, d->U_iterate, d->acc1, d->Xs, d->Us, d->Xn, d->Un, d->E0,
                         d->E1, d->B, d->mu, d->phi, d->scale, d->work, d->KX, d->KU, d->pair_values, d->chain_sub,
-                        d->chain_Dinv, d->krylov};
+                        d->chain_Dinv, d->krylov, d->drive_P, d->drive_V, d->drive_A, d->impulse, d->drive_scratch};
     for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
     ln_ldl_numeric_free(d->ldl);
     ln_minnorm_free(d->minnorm);
@@ -51,12 +52,20 @@ ln_data *ln_data_new(const ln_model *m, ln_int n_stages)
     d->KU = doubles((d->n_stages_allocated + 1) * K3);
     d->pair_values = doubles(m->n_pairs);
     d->chain_sub = doubles(L); d->chain_Dinv = doubles(L);
+    const ln_int n_driven = m->n_driven;
+    d->drive_P = doubles(3 * n_driven); d->drive_V = doubles(3 * n_driven); d->drive_A = doubles(3 * n_driven);
+    d->impulse = doubles(3 * n_driven); d->drive_scratch = doubles(18 * n_driven);
     d->planar = m->planar;
     d->fail_link = -1;
     int ok = d->X && d->U && d->F_input && d->T && d->acc && d->reaction && d->X_start && d->U_start && d->X_step && d->U_step && d->Xp && d->Up && d->Fp
              && d->F_base && d->F && d->Uh && d->Xc && d->U_iterate && d->acc1 && d->Xs && d->Us && d->Xn && d->Un
              && d->E0 && d->E1 && d->B && d->mu && d->phi && d->scale && d->work && d->KX && d->KU
-             && d->pair_values && d->chain_sub && d->chain_Dinv;
+             && d->pair_values && d->chain_sub && d->chain_Dinv
+             && d->drive_P && d->drive_V && d->drive_A && d->impulse && d->drive_scratch;
+    /* input-driven anchors rest at their scene position until an input arrives: the first row of their
+       piece table (drive.c) holds it */
+    for (ln_int a = 0; ok && a < n_driven; a++)
+        for (int e = 0; e < 3; e++) d->drive_P[3 * a + e] = m->piece[14 * m->motion_pieces[a] + 2 + 4 * e];
     if (ok && m->solver == LN_SOLVER_LDL) ok = (d->ldl = ln_ldl_numeric_new(m->ldl)) != NULL;
     if (ok && m->rigid) ok = (d->rigid = ln_rigid_data_new(m, n_stages)) != NULL;
     if (!ok) {
@@ -89,6 +98,15 @@ int ln_base_forces(const ln_model *m, const ln_data *d, double *F_base)
 int ln_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U)
 {
     if (!ln_base_forces(m, d, d->F_base)) return LN_NON_FINITE;
+    if (m->n_driven) {  /* the driven anchors where they are at d->t, with their accelerations in B (26) */
+        const size_t bytes = (size_t)(3 * m->K) * sizeof(double);
+        memcpy(d->Xs, X, bytes);
+        memcpy(d->Us, U, bytes);
+        const int status = ln_drive_rows(m, d, d->t, d->Xs, d->Us, d->F_base, 3);
+        if (status != LN_OK) return status;
+        X = d->Xs;
+        U = d->Us;
+    }
     d->n_rhs++;
     const int status = ln_accelerations_3d(m, d, X, U, d->F_base, d->acc, d->T, 1);
     /* the link forces on the anchors, gathered in the rows of a (K,3) scratch (only anchors' rows used) */
@@ -187,8 +205,8 @@ static int run_interval(const ln_model *m, const ln_method *meth, ln_data *d, do
     if (meth->kind == LN_COMPOSITION) {
         const ln_int n = ln_fixed_step_count(span, meth->dt);
         if (n > max_steps) return LN_TOO_MANY_STEPS;
-        status = planar ? ln_rattle_steps_2d(m, meth, d, X, U, F_base, n, span / (double)n, steps)
-                        : ln_rattle_steps_3d(m, meth, d, X, U, F_base, n, span / (double)n, steps);
+        status = planar ? ln_rattle_steps_2d(m, meth, d, X, U, F_base, n, d->t, t_target, steps)
+                        : ln_rattle_steps_3d(m, meth, d, X, U, F_base, n, d->t, t_target, steps);
     } else {
         double t = d->t;
         status = planar ? ln_rk_steps_2d(m, meth, d, X, U, F_base, &t, t_target, max_steps, steps)
@@ -215,10 +233,13 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
     const double h_next = d->h_next;
     const int planar = d->planar;
     const ln_int rejected = d->rejected, n_rhs = d->n_rhs, split_steps = d->split_steps, finest_split = d->finest_split;
+    const ln_int jumps = d->jumps;
     memcpy(d->X_start, d->X, (size_t)n3 * sizeof(double));
     memcpy(d->U_start, d->U, (size_t)n3 * sizeof(double));
     ln_int steps = 0;
-    int status = m->rigid ? ln_rigid_advance(m, meth, d, t_target, max_steps, &steps)
+    int status = m->n_driven ? ln_drive_jump(m, meth, d) : LN_OK;
+    if (status == LN_OK)
+        status = m->rigid ? ln_rigid_advance(m, meth, d, t_target, max_steps, &steps)
                           : run_interval(m, meth, d, t_target, max_steps, &steps);
     if (status == LN_OK) {
         double total = 0.0;
@@ -234,6 +255,7 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
         d->n_rhs = n_rhs;
         d->split_steps = split_steps;
         d->finest_split = finest_split;
+        d->jumps = jumps;
         if (m->rigid) ln_rigid_restore(m, d);
         return d->status = status;
     }

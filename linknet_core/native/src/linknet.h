@@ -50,7 +50,8 @@ enum ln_status {
     LN_LEFT_PLANE = 6,          /* internal: the state or the input left the plane (the advance goes on in 3-D) */
     LN_IMPLICIT_KICK_FAILED = 7,/* RATTLE's implicit velocity half step (drag, dampers) did not converge */
     LN_BAD_ARGUMENT = 8,        /* a target time not after t, a negative count, ... */
-    LN_NO_MEMORY = 9
+    LN_NO_MEMORY = 9,
+    LN_DRIVE_FAILED = 10        /* the driven anchors' motion callback failed (or returned non-finite values) */
 };
 
 /* How A of (25) is factored, chosen once per scene from its structure. */
@@ -117,6 +118,18 @@ typedef struct ln_model {
     double plane_P[6], plane_o[3], plane_n[3], plane_length, plane_tol;
 
     const struct ln_rigid_model *rigid;     /* free rigid bodies, or NULL */
+
+    /* driven anchors (drive.c): anchored masses (1/M = 0, in fixed_idx) whose motion P_a(t) is prescribed. Their
+       rows of X and U hold P_a and V_a; in B of (26) a_k = accel_weight[k] F_k, which is F_k/M_k on a free mass
+       and, with weight 1, the anchor's acceleration A_a on a driven anchor, whose row of the base force holds it.
+       Scenes with driven anchors run in 3-D. */
+    ln_int n_driven;
+    const ln_int *driven_idx;       /* (n_driven) their masses */
+    const ln_int *motion_kind;      /* (n_driven) enum ln_motion_kind (drive.c) */
+    const ln_int *motion_pieces;    /* (n_driven + 1) offsets of each piecewise-cubic motion's rows in piece */
+    const double *piece;            /* (rows, 14): start, base, then c0..c3 of each axis in powers of tau - base */
+    const double *sine;             /* (n_driven, 12): origin, amplitude, angular frequency, phase (3 each) */
+    const double *accel_weight;     /* (K) 1/M_k; 1 on driven anchors (the same array as inv_m without them) */
 } ln_model;
 
 typedef struct ln_method {
@@ -126,6 +139,7 @@ typedef struct ln_method {
     const double *gammas;
     ln_int n_stages;                /* Runge-Kutta: s */
     const double *AB;               /* ((s+1) x s) the tableau's A with the weights b as row s */
+    const double *C;                /* (s) the nodes c_i: stage i is at t + c_i h (driven anchors' motion) */
     const double *E1, *E2;          /* (s+1) error weights (E2 zero for a single estimate) */
     int error_norm;                 /* enum ln_error_norm */
     double exponent;                /* step-size controller exponent, -1/(order of the estimate + 1) */
@@ -162,6 +176,18 @@ typedef struct ln_data {
     double *acc;                    /* (K,3) */
     double *reaction;               /* (n_fixed,3) the force the network exerts on each anchor (ln_evaluate) */
 
+    /* driven anchors (drive.c): scene motions run in scene time t - drive_t0; input-driven anchors follow the
+       held quadratic P + V s + A s^2/2, s = t - drive_hold_t (rows of drive_P, drive_V, drive_A), or, when
+       drive_callback is set, what it writes for them at t: P, V, A of each input-driven anchor in turn (9 values
+       per anchor); it returns 0 on success. */
+    double drive_t0, drive_hold_t;
+    double *drive_P, *drive_V, *drive_A;    /* (n_driven,3) */
+    int (*drive_callback)(void *user, double t, double *PVA);
+    void *drive_user;
+    double *impulse;                /* (n_driven,3) what the links gave each driven anchor at the last jump, N s */
+    double jump_position, jump_velocity;    /* the last advance's anchor jump: largest coordinate change, 0 if none */
+    ln_int jumps;                   /* advances that started with a jump of the anchors (counted over the run) */
+
     /* scratch (sized for DIM = 3; the 2-D path uses the first 2K or 2L entries) */
     double *X_start, *U_start;      /* (K,3) the state at the start of an advance (all-or-nothing) */
     double *X_step, *U_step;        /* (K,3) the state at the start of a fixed step (for splitting it) */
@@ -185,6 +211,7 @@ typedef struct ln_data {
 
     struct ln_minnorm_work *minnorm;
     struct ln_rigid_data *rigid;
+    double *drive_scratch;          /* (n_driven, 9) */
 } ln_data;
 
 /* ---- data.c: allocation and the whole-interval advance ------------------------------------------ */
@@ -218,6 +245,10 @@ LN_API double ln_starting_step(const ln_method *meth, double h0, double d1, doub
 /* Gravity, constant forces and the held input d->F_input: the part of F_k of (9) fixed over an interval, zero
    on anchors. 0 when it is not finite. */
 LN_API int ln_base_forces(const ln_model *m, const ln_data *d, double *F_base);
+
+/* drive.c: P, V, A (n_driven,3 each) of every driven anchor at t. LN_OK, or LN_DRIVE_FAILED when the callback
+   failed or gave non-finite values. */
+LN_API int ln_drive_at(const ln_model *m, ln_data *d, double t, double *P, double *V, double *A);
 
 /* Equal steps no longer than dt that land on the target: how many (a whole number up to round-off is that
    number, not one more). */

@@ -29,9 +29,9 @@ int FN(ln_project_positions)(const ln_model *m, ln_data *d, double *Xc, const do
                              ln_int max_iter);
 int FN(ln_project_velocities)(const ln_model *m, ln_data *d, const double *X, double *U, double *E);
 
-/* stages/rattle.c: RATTLE and its compositions, n_steps steps of size h on X, U in place */
+/* stages/rattle.c: RATTLE and its compositions, n_steps equal steps from t_start to t_end on X, U in place */
 int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
-                        const double *F_base, ln_int n_steps, double h, ln_int *completed);
+                        const double *F_base, ln_int n_steps, double t_start, double t_end, ln_int *completed);
 
 /* stages/runge_kutta.c: the embedded error estimate over the free masses' positions and velocities (stages KX,
    KU of (K,DIM) blocks, s + 1 of them), in the norm the method names; the mean is over 6 coordinates per free

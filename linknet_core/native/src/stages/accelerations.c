@@ -3,7 +3,8 @@
  *   M_k dU_k/dt = F_k + sum_l T_l E_l (delta(k,k1(l)) - delta(k,k2(l)))             (9)
  *   A T = B,   B_l = |U_k2 - U_k1|^2 / R_l + E_l . (F_k2/M_k2 - F_k1/M_k1)           (25), (26)
  *
- * Anchored masses have 1/M = 0, so they neither move nor enter A. On a chain the unit vectors, A's
+ * Anchored masses have 1/M = 0, so they neither move by the forces nor enter A. A driven anchor's row of F holds
+ * its prescribed acceleration A_a (drive.c), which B takes with weight 1 and which is its dU/dt. On a chain the unit vectors, A's
  * entries, its pivots, B and the forward substitution are one sweep along the path, and the back
  * substitution, adding each link's force as soon as T_l is known, is the other: the elimination's
  * dependency chain sets the speed, and the rest of the work fits in its shadow.
@@ -19,7 +20,7 @@ static inline double link_terms(const ln_model *m, const double *X, const double
                                 double *E, double *B_l)
 {
     const ln_int a = m->k1[l], b = m->k2[l];
-    const double r = m->inv_R[l], ia = m->inv_m[a], ib = m->inv_m[b];
+    const double r = m->inv_R[l], ia = m->accel_weight[a], ib = m->accel_weight[b];  /* 1/M; 1 on driven anchors */
     double sq = 0.0, du2 = 0.0, proj = 0.0;
     for (int e = 0; e < DIM; e++) {
         const double u = (X[b * DIM + e] - X[a * DIM + e]) * r;
@@ -115,5 +116,7 @@ int FN(ln_accelerations)(const ln_model *m, ln_data *d, const double *X, const d
             total += acc[k * DIM + e];
         }
     }
+    for (ln_int a = 0; a < m->n_driven; a++)
+        for (int e = 0; e < DIM; e++) acc[m->driven_idx[a] * DIM + e] = F[m->driven_idx[a] * DIM + e];
     return isfinite(total) ? LN_OK : LN_NON_FINITE;
 }

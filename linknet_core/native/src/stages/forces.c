@@ -71,7 +71,10 @@ void FN(ln_scene_forces)(const ln_model *m, const double *X, const double *U, co
             break;
         }
     }
-    if (m->n_elements > 0)  /* elements may act on anchors (a spring's hook), where no force acts */
+    if (m->n_elements > 0) {  /* elements may act on anchors (a spring's hook), where no force acts */
         for (ln_int i = 0; i < m->n_fixed; i++)
             for (int e = 0; e < DIM; e++) F[m->fixed_idx[i] * DIM + e] = 0.0;
+        for (ln_int i = 0; i < m->n_driven; i++)  /* a driven anchor's row holds its acceleration (drive.c) */
+            for (int e = 0; e < DIM; e++) F[m->driven_idx[i] * DIM + e] = F_base[m->driven_idx[i] * DIM + e];
+    }
 }

@@ -13,6 +13,7 @@
 #include <math.h>
 
 #include "../dim.h"
+#include "../drive.h"
 #include "../linknet.h"
 #include "../stages.h"
 
@@ -29,17 +30,22 @@ static inline const double *rattle_forces(const ln_model *m, ln_data *d, const d
     return d->F;
 }
 
-/* One step of size h: the composition's RATTLE stages in turn, with A(X) factored at *E0 on entry and, on
-   success, at the new X on exit (the pointers swap with every stage). */
+/* One step of size h from t to t_end: the composition's RATTLE stages in turn, with A(X) factored at *E0 on
+   entry and, on success, at the new X on exit (the pointers swap with every stage). Driven anchors: each stage's
+   position stage targets their P at the stage's end and its velocity stage their V there (drive.c). */
 static int composition_step(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
-                            const double *F_base, double h, double **E0_inout, double **E1_inout)
+                            const double *F_base, double h, double t, double t_end, double **E0_inout,
+                            double **E1_inout)
 {
     const ln_int K = m->K;
     const double *inv_m = m->inv_m;
     double *E0 = *E0_inout, *E1 = *E1_inout, *Uh = d->Uh, *Xc = d->Xc, *U_iterate = d->U_iterate;
     int status;
+    double fraction = 0.0;
     for (ln_int g = 0; g < meth->n_gammas; g++) {
         const double hs = meth->gammas[g] * h;
+        fraction += meth->gammas[g];
+        const double stage_end = g == meth->n_gammas - 1 ? t_end : t + fraction * h;
         const double *F = rattle_forces(m, d, X, U, F_base);
         for (ln_int k = 0; k < K; k++)
             for (int e = 0; e < DIM; e++) {
@@ -47,6 +53,7 @@ static int composition_step(const ln_model *m, const ln_method *meth, ln_data *d
                 Uh[i] = U[i] + 0.5 * hs * inv_m[k] * F[i];
                 Xc[i] = X[i] + hs * Uh[i];
             }
+        if (m->n_driven && (status = ln_drive_rows(m, d, stage_end, Xc, NULL, NULL, DIM)) != LN_OK) return status;
         /* position stage: Xc + M^-1 C(X)^T mu on (11), simplified Newton with A(X) factored */
         status = FN(ln_project_positions)(m, d, Xc, E0, meth->position_tol, meth->max_projection_iter);
         if (status != LN_OK) return status;
@@ -59,6 +66,7 @@ static int composition_step(const ln_model *m, const ln_method *meth, ln_data *d
                 U[i] = Uh[i] + 0.5 * hs * inv_m[k] * F[i];
                 X[i] = Xc[i];
             }
+        if (m->n_driven && (status = ln_drive_rows(m, d, stage_end, NULL, U, NULL, DIM)) != LN_OK) return status;
         if ((status = FN(ln_project_velocities)(m, d, X, U, E1)) != LN_OK) return status;
         if (m->velocity_dependent) {
             /* U_new = P(U_half + hs/2 M^-1 F(X_new, U_new)): contraction factor ~ hs c / (2 m) */
@@ -72,6 +80,8 @@ static int composition_step(const ln_model *m, const ln_method *meth, ln_data *d
                         U_iterate[i] = Uh[i] + 0.5 * hs * inv_m[k] * d->F[i];
                         size = fmax(size, fabs(U[i]));
                     }
+                if (m->n_driven && (status = ln_drive_rows(m, d, stage_end, NULL, U_iterate, NULL, DIM)) != LN_OK)
+                    return status;
                 if ((status = FN(ln_project_velocities)(m, d, X, U_iterate, E1)) != LN_OK) return status;
                 double change = 0.0;
                 for (ln_int i = 0; i < K * DIM; i++) {
@@ -98,7 +108,7 @@ static int composition_step(const ln_model *m, const ln_method *meth, ln_data *d
 #define MAX_SPLIT_LEVEL 6
 
 static int split_step(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
-                      const double *F_base, double h, double **E0, double **E1, int status)
+                      const double *F_base, double h, double t, double t_end, double **E0, double **E1, int status)
 {
     const ln_int size = m->K * DIM;
     for (int level = 1; level <= MAX_SPLIT_LEVEL; level++) {
@@ -110,8 +120,10 @@ static int split_step(const ln_model *m, const ln_method *meth, ln_data *d, doub
         FN(ln_unit_vectors)(m, X, *E0);
         if ((status = FN(ln_factor_tension_matrix)(m, d, *E0)) != LN_OK) return status;
         status = LN_OK;
+        const double hp = h / (double)parts;
         for (ln_int part = 0; part < parts && status == LN_OK; part++)
-            status = composition_step(m, meth, d, X, U, F_base, h / (double)parts, E0, E1);
+            status = composition_step(m, meth, d, X, U, F_base, hp, t + (double)part * hp,
+                                      part == parts - 1 ? t_end : t + (double)(part + 1) * hp, E0, E1);
         if (status == LN_OK) {
             d->split_steps++;
             if (parts > d->finest_split) d->finest_split = parts;
@@ -123,9 +135,10 @@ static int split_step(const ln_model *m, const ln_method *meth, ln_data *d, doub
 }
 
 int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
-                        const double *F_base, ln_int n_steps, double h, ln_int *completed)
+                        const double *F_base, ln_int n_steps, double t_start, double t_end, ln_int *completed)
 {
     const ln_int size = m->K * DIM;
+    const double h = (t_end - t_start) / (double)n_steps;
     double *E0 = d->E0, *E1 = d->E1;
     int status;
     *completed = 0;
@@ -136,9 +149,12 @@ int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, do
             d->X_step[i] = X[i];
             d->U_step[i] = U[i];
         }
-        status = composition_step(m, meth, d, X, U, F_base, h, &E0, &E1);
+        /* the last step ends on t_end itself: the driven anchors' final position */
+        const double t = t_start + (double)step * h;
+        const double end = step == n_steps - 1 ? t_end : t_start + (double)(step + 1) * h;
+        status = composition_step(m, meth, d, X, U, F_base, h, t, end, &E0, &E1);
         if (status == LN_PROJECTION_FAILED || status == LN_IMPLICIT_KICK_FAILED)
-            status = split_step(m, meth, d, X, U, F_base, h, &E0, &E1, status);
+            status = split_step(m, meth, d, X, U, F_base, h, t, end, &E0, &E1, status);
         if (status != LN_OK) return status;
         double total = 0.0;
         for (ln_int i = 0; i < size; i++) total += X[i] + U[i];

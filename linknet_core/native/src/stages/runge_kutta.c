@@ -10,6 +10,7 @@
 #include <math.h>
 
 #include "../dim.h"
+#include "../drive.h"
 #include "../linknet.h"
 #include "../stages.h"
 
@@ -79,7 +80,7 @@ double FN(ln_rk_error_norm)(const ln_model *m, const ln_method *meth, const doub
 /* Hairer-Wanner's starting step (as scipy's select_initial_step), from f at (X, U) and at
    (X + h0 U, U + h0 acc0). */
 static int starting_step(const ln_model *m, const ln_method *meth, ln_data *d, const double *X, const double *U,
-                         const double *F_base, const double *acc0, double span, double *h_out)
+                         const double *F_base, const double *acc0, double t, double span, double *h_out)
 {
     const double n = 6.0 * (double)m->n_free;
     double d0 = 0.0, d1 = 0.0;
@@ -99,7 +100,9 @@ static int starting_step(const ln_model *m, const ln_method *meth, ln_data *d, c
         d->Us[i] = U[i] + h0 * acc0[i];
     }
     d->n_rhs++;
-    const int status = FN(ln_accelerations)(m, d, d->Xs, d->Us, F_base, d->acc1, d->T, 1);
+    int status;
+    if (m->n_driven && (status = ln_drive_rows(m, d, t + h0, d->Xs, d->Us, d->F_base, DIM)) != LN_OK) return status;
+    status = FN(ln_accelerations)(m, d, d->Xs, d->Us, F_base, d->acc1, d->T, 1);
     if (status != LN_OK) return status;
     double d2 = 0.0;
     for (ln_int f = 0; f < m->n_free; f++)
@@ -123,23 +126,30 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
     int status;
     *accepted = 0;
     d->n_rhs++;
+    /* driven anchors are known functions of time: each stage's rows of X, U and of the base force (their
+       accelerations) are set to the motion at the stage's time, t + c_i h */
+    if (m->n_driven && (status = ln_drive_rows(m, d, t, X, U, d->F_base, DIM)) != LN_OK) return status;
     if ((status = FN(ln_accelerations)(m, d, X, U, F_base, acc, d->T, 1)) != LN_OK) return status;
     store_stage(size, 0, U, acc, KX, KU);
     if (d->h_next <= 0.0) {
         double h0;
-        if ((status = starting_step(m, meth, d, X, U, F_base, acc, t_target - t, &h0)) != LN_OK) return status;
+        if ((status = starting_step(m, meth, d, X, U, F_base, acc, t, t_target - t, &h0)) != LN_OK) return status;
         d->h_next = h0;
     }
     while (t < t_target) {
         const double remaining = t_target - t;
         const double h = ln_controlled_step(d->h_next, t, t_target);
         if (h < 0.0) return LN_STEP_UNDERFLOW;
+        const double t_new = (h == remaining) ? t_target : t + h;
         /* the stages 1..s-1, then (row s: the weights b) the new point Xn, Un, whose evaluation also factors
            A(Xn), which the position projection below reuses */
         for (ln_int i = 1; i <= s; i++) {
             double *Yx = i < s ? Xs : Xn, *Yu = i < s ? Us : Un;
             combine(size, X, h, meth->AB, i, i, s, KX, Yx);
             combine(size, U, h, meth->AB, i, i, s, KU, Yu);
+            if (m->n_driven
+                && (status = ln_drive_rows(m, d, i < s ? t + meth->C[i] * h : t_new, Yx, Yu, d->F_base, DIM)) != LN_OK)
+                return status;
             d->n_rhs++;
             if ((status = FN(ln_accelerations)(m, d, Yx, Yu, F_base, acc, d->T, 1)) != LN_OK) return status;
             store_stage(size, i, Yu, acc, KX, KU);
@@ -162,7 +172,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
         }
         if (status != LN_OK) return status;
         if ((status = FN(ln_project_velocities)(m, d, Xn, Un, d->E1)) != LN_OK) return status;
-        t = (h == remaining) ? t_target : t + h;
+        t = t_new;
         d->h_next = ln_next_step_size(meth, h, d->h_next, err);
         for (ln_int j = 0; j < size; j++) {
             X[j] = Xn[j];
