@@ -265,6 +265,28 @@ class Scene:
             U0=self.U0 if U0 is None else _frozen(np.asarray(U0, float).reshape(self.K, 3)),
         )
 
+    def with_motions(self, motions: dict) -> "Scene":
+        """A copy in which the anchors named in ``motions`` (mass name or 1-based index -> a motion as the scene
+        file writes it, linknet_core.scene.motion) are driven by those motions; validated again."""
+        data = self.to_dict()
+        if not isinstance(motions, dict):
+            raise SceneError(f"{self.name}: motions must be a dict of anchor (name or 1-based index) -> motion, "
+                             f"got {type(motions).__name__}")
+        for ref, spec in motions.items():
+            if isinstance(ref, str) and ref in self.mass_names:
+                k = self.mass_names.index(ref)
+            elif isinstance(ref, (int, np.integer)) and not isinstance(ref, bool) and 1 <= ref <= self.K:
+                k = int(ref) - 1
+            else:
+                raise SceneError(f"{self.name}: motions names {ref!r}, which is neither a mass name nor an index "
+                                 f"1..{self.K}")
+            if not self.fixed[k]:
+                raise SceneError(f"{self.name}: {self.mass_label(k)} is free; only an anchor can be driven")
+            entry = data["masses"][k]
+            entry.pop("fixed", None)
+            entry["driven"], entry["motion"] = True, spec
+        return Scene.from_dict(data, source=self.name)
+
     def with_parameters(self, mass=None, length=None, gravity=None) -> "Scene":
         """A copy with changed masses (free masses only), link lengths or gravity, validated again."""
         data = self.to_dict()

@@ -396,6 +396,10 @@ class Simulator:
         lines = [f"{self.scene.name}: K={self.scene.K} masses, L={self.scene.L} links, method {self.method}, "
                  f"solver {self.dyn.structure.kind}, backend {self.backend}",
                  f"  specialisation: {self.specialisation.text()}"]
+        if self.scene.driven.any():
+            lines.append("  driven anchors: " + ", ".join(
+                f"{self.scene.mass_label(int(k))} ({motion.kind})"
+                for k, motion in zip(self.scene.driven_indices, self.scene.motions)))
         return "\n".join(lines + [f"  note: {n}" for n in self.specialisation.notes])
 
 
@@ -420,7 +424,8 @@ class Result:
 
     @property
     def energy_drift(self) -> float:
-        """(E(t_end) - E(0)) / energy_scale. Work of input forces and dissipation show up here too."""
+        """(E(t_end) - E(0)) / energy_scale. Work of input forces, of driven anchors and dissipation show up here
+        too."""
         return float(self.energy[-1] - self.energy[0]) / self.energy_scale
 
     def save_npz(self, path) -> None:
@@ -438,6 +443,8 @@ class Result:
                 f"wall time = {s.get('wall_time', 0):.3f} s\n"
                 + (f"  {s['split']} steps split into equal sub-steps where the position stage did not converge at "
                    f"full length (finest: {s['finest_split']} sub-steps)\n" if s.get("split") else "")
+                + (f"  driven anchors: {s['anchor_jumps']} jumps of their input motion (velocities projected onto (12): "
+                   "an inelastic impulse each)\n" if s.get("anchor_jumps") else "")
                 + f"  final energy drift = {self.energy_drift:.3e} (relative), max constraint residual = "
                 f"{float(self.residual.max()):.3e} (relative), max velocity residual = "
                 f"{float(self.velocity_residual.max()):.3e} m/s\n"
@@ -448,12 +455,18 @@ class Result:
 def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
              atol: float | None = None, n_out: int | None = None, output_dt: float | None = None,
              forces=None, progress: bool | None = None, project_initial: bool | None = None,
-             backend: str = "auto", rhs_kernel: str = "numpy", specialise: bool = True) -> Result:
+             backend: str = "auto", rhs_kernel: str = "numpy", specialise: bool = True, motions: dict | None = None,
+             anchors=None) -> Result:
     """Simulate ``scene`` from t = 0 to ``t_end``.
 
     ``forces``: None, a (K,3) array held constant, or a callable ``f(t) -> (K,3)`` evaluated at each
     output time and held until the next (piecewise constant, as an FMI master does). Outputs are taken
     at ``n_out`` equally spaced times (default 201) or every ``output_dt``.
+
+    Driven anchors: ``motions`` gives anchors (name or 1-based index) a motion as the scene file writes it
+    (``{"kind": "sine", ...}``, see linknet_core.scene.motion), replacing the scene's; ``anchors`` moves the
+    input-driven ones: a callable ``f(t) -> (P, V, A)`` followed wherever the integrator needs it, or (P, V, A)
+    held as P + V t + A t^2/2 from t = 0.
     """
     t_end_value = real_number(t_end)
     if t_end_value is None or not (math.isfinite(t_end_value) and t_end_value > 0):
@@ -466,8 +479,11 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
         if output_dt_value is None or not (math.isfinite(output_dt_value) and output_dt_value > 0):
             raise SolverError(f"output_dt must be a positive finite time, got {output_dt!r}")
         output_dt = output_dt_value
+    if motions:
+        scene = scene.with_motions(motions)
     sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial,
                     backend=backend, rhs_kernel=rhs_kernel, specialise=specialise)
+    anchor_hold = sim.check_anchors(anchors)
     if output_dt is not None:
         n = max(1, int(round(t_end / output_dt)))
         times = np.linspace(0.0, t_end, n + 1)
@@ -498,7 +514,7 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
     try:
         for i, t in enumerate(times):
             if i > 0:
-                sim.advance(t, force_at(times[i - 1]))
+                sim.advance(t, force_at(times[i - 1]), anchor_hold if i == 1 else None)
             # tensions feel the input directly: report them with the input of the step starting at t_i,
             # and at the last sample with the input of the step that ended there
             out = sim.outputs(force_at(times[min(i, n - 2)]))
@@ -531,7 +547,8 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
 
 
 def _run_stats(sim, method, dt, rtol, scene, wall) -> dict:
-    return dict(sim.integrator.stats.as_dict(), wall_time=wall, rhs_evaluations=sim.rhs_evaluations,
+    driven = {"anchor_jumps": sim.anchor_report()["jumps"]} if scene.driven.any() else {}
+    return dict(sim.integrator.stats.as_dict(), **driven, wall_time=wall, rhs_evaluations=sim.rhs_evaluations,
                 structure=sim.dyn.structure.kind, method=method, dt=dt, rtol=rtol, rhs_kernel=sim.dyn.rhs_kernel,
                 initial=sim.initial_report.lines(scene) + sim.specialisation.notes,
                 specialisation=sim.specialisation.text())
