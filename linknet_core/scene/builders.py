@@ -217,6 +217,25 @@ def taut_string(speed=1.0, mass=1.0, name="taut_string") -> Scene:
         "links": [{"a": "left", "b": "middle"}, {"a": "middle", "b": "right"}]})
 
 
+def crane(n_links=5, rope_length=2.0, load=10.0, rope_mass=1.0, travel=3.0, travel_time=3.0,
+          gravity=G_EARTH, name="crane") -> Scene:
+    """A trolley crane: a rope of ``n_links`` links hanging from a driven anchor (the trolley) with a load at its
+    end. The trolley travels ``travel`` m along x in ``travel_time`` s on a clamped spline (starting and stopping
+    at rest) and then stands: the load swings behind and after it."""
+    n = int(n_links)
+    h = rope_length / n
+    node = np.full(n + 1, rope_mass / n)
+    node[-1] = load
+    masses = [{"name": "trolley", "position": [0.0, 0.0, 0.0], "driven": True,
+               "motion": {"kind": "waypoints", "waypoints": [[travel_time, travel, 0.0, 0.0]]}}]
+    masses += [_mass(f"rope{i}" if i < n else "load", (0.0, 0.0, -i * h), node[i]) for i in range(1, n + 1)]
+    return Scene.from_dict({
+        "name": name, "description": f"trolley crane: {n}-link rope of {rope_length} m, {load} kg load, the trolley "
+                                     f"travels {travel} m in {travel_time} s (clamped spline) and stops",
+        "gravity": list(gravity), "masses": masses,
+        "links": [{"a": i + 1, "b": i + 2, "length": h} for i in range(n)]})
+
+
 def shipped_scenes() -> dict[str, Scene]:
     """The scenes in models/ (regenerate with ``python models/generate.py``)."""
     return {

@@ -52,7 +52,10 @@ class RigidityReport:
             specialisations.append(f"LDL^T with symbolic analysis once: nnz(L) = {native.nnz_L} "
                                    f"({'no fill, O(L)' if st.topology in ('chain', 'tree') else 'fill-reducing ordering'})")
         if st.planar_normal is not None:
-            specialisations.append(f"planar scene (normal {np.round(st.planar_normal, 6).tolist()})")
+            normal = np.round(st.planar_normal, 6).tolist()
+            specialisations.append(f"planar scene (normal {normal})" if native.plane is not None else
+                                   f"planar at the start (normal {normal}), run in 3-D: driven anchors may leave "
+                                   "the plane")
         if self.anchored:
             specialisations.append(f"{len(self.anchored)} anchored masses eliminated (1/M = 0)")
         lines = [
