@@ -23,7 +23,6 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 
@@ -75,14 +74,22 @@ def _min_norm_solve(G, g):
     return Gs.T @ y
 
 
-class Sample(NamedTuple):
+@dataclass
+class Sample:
     """One sampled state: positions, velocities (driven anchors' rows hold P_a, V_a), input forces and the
-    driven anchors' accelerations A_a ((K, 3), zero on other rows; None for a scene without driven anchors)."""
+    driven anchors' accelerations A_a ((K, 3), zero on other rows; None for a scene without driven anchors).
+    Unpacks as (X, U, F_input, anchor_acc). ``tau``: the scene time at which the anchors with a scene motion
+    were sampled (None without driven anchors); ``moved``: whether the projection onto (11) moved them."""
 
     X: np.ndarray
     U: np.ndarray
     F_input: np.ndarray
     anchor_acc: np.ndarray | None
+    tau: float | None = None
+    moved: bool = False
+
+    def __iter__(self):
+        return iter((self.X, self.U, self.F_input, self.anchor_acc))
 
 
 def _project_positions(sym: SymbolicTensionSystem, x, p=None, tol=1e-14, max_iter=50, joint=False):
@@ -172,24 +179,26 @@ def _motion_horizon(motion, ell):
 
 
 def _anchor_motion_sample(scene, sym, rng, ell, g):
-    """The driven anchors' (P, V, A), each (nd, 3): from their scene motion at a random scene time, random
-    for input-driven anchors (about their scene position, speeds of a link length per second,
-    accelerations of the order of g)."""
+    """The driven anchors' (P, V, A), each (nd, 3), and the scene time tau: the anchors with a scene motion
+    where it has them at a random tau (one for all), input-driven ones random (about their scene position,
+    speeds of a link length per second, accelerations of the order of g)."""
     nd = sym.nd
     P = np.array(scene.X0, float)[sym.driven]
     V, A = np.zeros((nd, 3)), np.zeros((nd, 3))
     motions = getattr(scene, "motions", ()) or ()
+    horizons = [_motion_horizon(m, ell) for m in motions if m.kind != "input"]
+    tau = float(rng.uniform(0.0, max(horizons, default=1.0)))
     for j in range(nd):
         motion = motions[j] if j < len(motions) else None
         if motion is not None and motion.kind != "input":
-            P[j], V[j], A[j] = motion.evaluate(float(rng.uniform(0.0, _motion_horizon(motion, ell))))
+            P[j], V[j], A[j] = motion.evaluate(tau)
         else:
             P[j] = P[j] + 0.3 * ell * rng.standard_normal(3)
             V[j] = ell * rng.standard_normal(3)
             A[j] = g * rng.standard_normal(3)
     # keep the samples in the coordinates of the symbolic system (a planar basis drops the normal part)
     Pb = (P - sym.origin) @ sym.basis
-    return Pb, V @ sym.basis, A @ sym.basis
+    return Pb, V @ sym.basis, A @ sym.basis, tau
 
 
 def sample_states(scene, sym: SymbolicTensionSystem, n, rng, on_manifold=True):
@@ -209,8 +218,9 @@ def sample_states(scene, sym: SymbolicTensionSystem, n, rng, on_manifold=True):
 
     def anchors():
         if not driven:
-            return p0, np.zeros(0), np.zeros(0)
-        return tuple(z.ravel() for z in _anchor_motion_sample(scene, sym, rng, ell, g))
+            return p0, np.zeros(0), np.zeros(0), None
+        P, V, A, tau = _anchor_motion_sample(scene, sym, rng, ell, g)
+        return P.ravel(), V.ravel(), A.ravel(), tau
 
     def anchor_acc(a):
         if not driven:
@@ -233,7 +243,7 @@ def sample_states(scene, sym: SymbolicTensionSystem, n, rng, on_manifold=True):
     failures = 0
     while len(out) < n and failures < 2 + n:          # a manifold GN cannot reach: give up early
         sigma = 0.3 * ell / (1 + 3 * failures)               # smaller kicks if projection keeps failing
-        p, v, a = anchors()
+        p, v, a, tau = anchors()
         x = follow(p) + sigma * rng.standard_normal(x0.size)
         xp = _project_positions(sym, x, p)
         if xp is None and driven:
@@ -241,21 +251,23 @@ def sample_states(scene, sym: SymbolicTensionSystem, n, rng, on_manifold=True):
         if xp is None:
             failures += 1
             continue
+        moved = not np.array_equal(xp[1], p)
         x, p = xp
         X = sym.full_positions(x, p)
-        u, v = _velocities_on_12(sym, X, speed * rng.standard_normal(x0.size), v)
+        u, v_12 = _velocities_on_12(sym, X, speed * rng.standard_normal(x0.size), v)
+        moved = moved or not np.array_equal(v_12, v)
         U = sym.expand(u)
         if driven:
-            U[sym.driven] = v.reshape(sym.nd, sym.dim) @ sym.basis.T
-        out.append(Sample(X, U, forces(), anchor_acc(a)))
+            U[sym.driven] = v_12.reshape(sym.nd, sym.dim) @ sym.basis.T
+        out.append(Sample(X, U, forces(), anchor_acc(a), tau, moved))
     if len(out) < n:
         # the manifold may be (locally) a single point (e.g. a taut string): use the scene's own state
         X = np.array(scene.X0, float)
         while len(out) < n:
-            _, v, a = anchors()
+            _, v, a, tau = anchors()
             u, v = _velocities_on_12(sym, X, speed * rng.standard_normal(x0.size), 0.0 * v)
             U = sym.expand(u)
-            out.append(Sample(X, U, forces(), anchor_acc(a)))
+            out.append(Sample(X, U, forces(), anchor_acc(a), tau, driven))
     if not on_manifold:
         # off (11)-(12): positions moved by a few per cent of the link lengths, arbitrary velocities
         moved = []
@@ -265,7 +277,7 @@ def sample_states(scene, sym: SymbolicTensionSystem, n, rng, on_manifold=True):
             U = sym.expand(speed * rng.standard_normal(x0.size))
             if driven:
                 U[sym.driven] = (speed * rng.standard_normal(p0.size)).reshape(sym.nd, sym.dim) @ sym.basis.T
-            moved.append(Sample(sym.full_positions(x, p), U, s.F_input, s.anchor_acc))
+            moved.append(Sample(sym.full_positions(x, p), U, s.F_input, s.anchor_acc, s.tau, driven))
         out = moved
     return out
 
@@ -399,18 +411,21 @@ def _default_dynamics(scene):
 # the checks
 # ------------------------------------------------------------------------------------------------
 
-def run_checks(scene, samples=5, seed=0, dynamics=None, dynamics_factory=None, sym=None, kernel=False):
+def run_checks(scene, samples=5, seed=0, dynamics=None, dynamics_factory=None, sym=None, kernel=False,
+               native=True):
     """Run every check on ``scene``; returns a list of :class:`CheckResult`.
 
     ``dynamics``: the numeric side (default ``Dynamics(scene)``); ``dynamics_factory(scene)`` makes the
     numeric side for the reference taut-string scene of the existence check (default: same class).
     ``kernel``: also compare the generated compiled kernel (codegen) with the numeric path.
+    ``native``: with driven anchors, also compare the native core's tensions and reactions (through
+    ``Simulator(backend="native")``; skipped with the reason when there is no native core).
     """
     with single_threaded_blas():
-        return _run_checks(scene, samples, seed, dynamics, dynamics_factory, sym, kernel)
+        return _run_checks(scene, samples, seed, dynamics, dynamics_factory, sym, kernel, native)
 
 
-def _run_checks(scene, samples, seed, dynamics, dynamics_factory, sym, kernel):
+def _run_checks(scene, samples, seed, dynamics, dynamics_factory, sym, kernel, native):
     factory = dynamics_factory or _default_dynamics
     dyn = dynamics if dynamics is not None else factory(scene)
     sym = sym or SymbolicTensionSystem(scene)
@@ -435,6 +450,8 @@ def _run_checks(scene, samples, seed, dynamics, dynamics_factory, sym, kernel):
         results.append(_check_driven(scene, sym, dyn, Ffn, on, off))
         if any(m.kind != "input" for m in getattr(scene, "motions", ())):
             results.append(_check_motions(scene, sym, rng, samples))
+        if native:
+            results.append(_check_native(scene, sym, Ffn, on))
     if kernel:
         results.append(_check_kernel(scene, dyn, on))
     return results
@@ -870,12 +887,81 @@ def _check_motions(scene, sym, rng, samples):
                            float(np.abs((Vp - Vm) / (2 * h) - A0).max()) * t_end ** 2 / span)
     tol_fd = 1e-6          # the finite differences' truncation and the knots' 1e-9 offsets, with margin
     passed = worst_ad <= RTOL_EXACT and worst_fd <= tol_fd and worst_spline <= tol_fd
-    detail = (f"{len(kinds)} motion(s) ({', '.join(sorted(set(kinds)))}) at {samples + 1} times each: velocity/sine "
-              f"P, V, A vs AD of the scene formula {worst_ad:.2e} (tol {RTOL_EXACT:.0e}); waypoint splines: "
-              f"through the waypoints, C2 across the knots, at rest at the ends {worst_spline:.2e}, V and A vs "
-              f"central differences {worst_fd:.2e} (relative to the spline's span and duration)")
+    parts = []
+    if set(kinds) & {"velocity", "sine"}:
+        parts.append(f"velocity/sine P, V, A vs AD of the scene formula {worst_ad:.2e} (tol {RTOL_EXACT:.0e})")
+    if "waypoints" in kinds:
+        parts.append(f"waypoint splines: through the waypoints, C2 across the knots, at rest at the ends "
+                     f"{worst_spline:.2e}, V and A vs central differences {worst_fd:.2e} (relative to the "
+                     "spline's span and duration)")
+    detail = f"{len(kinds)} motion(s) ({', '.join(sorted(set(kinds)))}) at {samples + 1} times each: " + "; ".join(parts)
     return CheckResult("driven anchors' motions: V = dP/dt, A = dV/dt", passed, max(worst_ad, worst_fd, worst_spline),
                        tol_fd, detail)
+
+
+def _check_native(scene, sym, Ffn, states):
+    """The native core's tensions and reactions with driven anchors against the symbolic system.
+
+    Through the public API: a native ``Simulator`` advanced to the sample's scene time (so that the anchors
+    with a scene motion are where the sample has them), the sample's positions and velocities put in by
+    a snapshot, then ``outputs(F_input, anchors=(P, V, A))`` for the input-driven anchors. The symbolic side
+    is evaluated at the state the core sees (anchors with a scene motion exactly at their motion's P, V, A).
+    """
+    from linknet_core.errors import SolverError
+
+    name = "native core with driven anchors = symbolic"
+    try:
+        from linknet_core.simulator.simulator import Simulator
+
+        Simulator(scene, method="rattle", dt=1e-3, backend="native")
+    except Exception as exc:  # noqa: BLE001 - any reason the native core is not here is reported, not raised
+        return CheckResult(name, True, 0.0, RTOL_SOLVE * 1e2, f"no native core: {type(exc).__name__}: {exc}",
+                           skipped=True)
+    inputs = np.asarray(getattr(scene, "input_driven_indices", np.zeros(0, np.int64)), np.int64)
+    with_motion = np.setdiff1d(sym.driven, inputs)
+    anchor_rows = np.searchsorted(sym.fixed, sym.driven)
+    worst_T = worst_react = 0.0
+    worst_cond = 1.0
+    used = unreached = 0
+    for s in states:
+        if s.tau is None:
+            continue
+        sim = Simulator(scene, method="rattle", dt=1e-3, backend="native")
+        if with_motion.size and s.tau > 0:   # only the scene motions run on the simulator's clock
+            try:
+                sim.advance(sim.state.t + s.tau)
+            except SolverError:
+                unreached += 1                   # the scene itself cannot run to that time (a singular start)
+                continue
+        X, U = np.array(s.X, float), np.array(s.U, float)
+        Aa = np.array(s.anchor_acc, float)
+        if with_motion.size:
+            P, V, A = scene.anchor_motion(s.tau)
+            rows = np.searchsorted(sym.driven, with_motion)
+            X[with_motion], U[with_motion], Aa[with_motion] = P[rows], V[rows], A[rows]
+        snapshot = sim.get_state()
+        snapshot["state"].X, snapshot["state"].U = X.copy(), U.copy()
+        sim.set_state(snapshot)
+        hold = (X[inputs], U[inputs], Aa[inputs]) if inputs.size else None
+        out = sim.outputs(F_input=s.F_input, anchors=hold)
+        _, T_s = sym.solve(X, U, sym.forces(Ffn, X, U, s.F_input), Aa)
+        w = np.linalg.eigvalsh(sym.A(X).toarray())
+        pos = w[w > RTOL_NULL * max(w.max(initial=0.0), 1e-300)]
+        cond = float(pos.max() / pos.min()) if pos.size else 1.0
+        worst_cond = max(worst_cond, cond)
+        scale_T = max(np.abs(T_s).max(initial=0.0), 1e-300)
+        worst_T = max(worst_T, float(np.abs(np.asarray(out["T"]) - T_s).max(initial=0.0)) / scale_T / cond)
+        on_anchors = (sym.Gp(X).T @ T_s).reshape(sym.nd, sym.dim) @ sym.basis.T
+        R_n = np.asarray(out["Freact"], float)[anchor_rows]
+        worst_react = max(worst_react, float(np.abs(R_n - on_anchors).max(initial=0.0)) / scale_T / cond)
+        used += 1
+    worst = max(worst_T, worst_react)
+    tol = RTOL_SOLVE * 1e2
+    detail = (f"{used} state(s) through Simulator(backend='native').outputs(anchors=...) at the samples' scene "
+              f"times: tensions {worst_T:.2e}, reactions on the driven anchors vs G_p^T T {worst_react:.2e} "
+              f"(relative, divided by cond(A) up to {worst_cond:.1e})"
+              + (f"; {unreached} sample time(s) the scene's own run could not reach" if unreached else ""))
+    return CheckResult(name, worst <= tol and used > 0, worst, tol, detail, skipped=used == 0)
 
 
 def _check_kernel(scene, dyn, states):

@@ -51,9 +51,9 @@ def test_generated_kernel_agrees_with_numeric_path(path, cache):
     sym = SymbolicTensionSystem(scene)
     states = sample_states(scene, sym, 3, np.random.default_rng(7))
     if kernel.plane is not None:
-        states = [_in_plane(scene, dyn, *s[:3]) for s in states]
+        states = [_in_plane(scene, dyn, s.X, s.U, s.F_input) for s in states]
     else:
-        states = [s[:3] for s in states]
+        states = [(s.X, s.U, s.F_input) for s in states]
     for X, U, F in [(np.array(scene.X0), np.array(scene.U0), np.zeros((scene.K, 3)))] + states:
         _agree(kernel, dyn, X, U, F)
     assert kernel.fallback_calls == 0 and kernel.calls_3d == 0
