@@ -452,6 +452,8 @@ def _run_checks(scene, samples, seed, dynamics, dynamics_factory, sym, kernel, n
             results.append(_check_motions(scene, sym, rng, samples))
         if native:
             results.append(_check_native(scene, sym, Ffn, on))
+        if len(getattr(scene, "input_driven_indices", ())) and sym.L:
+            results.append(_check_jump(scene, sym, on, rng))
     if kernel:
         results.append(_check_kernel(scene, dyn, on))
     return results
@@ -962,6 +964,74 @@ def _check_native(scene, sym, Ffn, states):
               f"(relative, divided by cond(A) up to {worst_cond:.1e})"
               + (f"; {unreached} sample time(s) the scene's own run could not reach" if unreached else ""))
     return CheckResult(name, worst <= tol and used > 0, worst, tol, detail, skipped=used == 0)
+
+
+def _check_jump(scene, sym, states, rng):
+    """A jump of the input-driven anchors' velocity: the impulse both cores report against the projection onto
+    (12) in the mass metric, derived here from AD's G and G_p: u+ = u - M^-1 G^T lambda with
+    (G M^-1 G^T) lambda = G u + G_p v+ (minimum norm), the links giving driven anchor a the impulse
+    -(G_p^T lambda)_a. Through the public API: a ``Simulator`` of each backend, the sample's state put in by
+    a snapshot (every driven anchor where its held motion is: no position jump), then an advance whose
+    anchors= keeps P and A and changes V, by a nanosecond (the impulse is taken at its start; a longer
+    step could fail afterwards where the new velocity drives the anchor against a taut path). Differences
+    are divided by cond(A), as for the other solved quantities."""
+    from linknet_core.errors import SolverError
+    from linknet_core.simulator.simulator import Simulator
+
+    name = "driven anchors' velocity jump: impulse = projection onto (12)"
+    inputs = np.asarray(scene.input_driven_indices, np.int64)
+    with_motion = np.setdiff1d(sym.driven, inputs)
+    ell = float(np.median(sym._R))
+    worst = {}
+    skipped, failed = {}, {}
+    used = 0
+    worst_cond = 1.0
+    for s in states:
+        X, U = np.array(s.X, float), np.array(s.U, float)
+        Aa = np.array(s.anchor_acc, float)
+        if with_motion.size:  # anchors with a scene motion stay where it has them at the simulator's start
+            P, V, A = scene.anchor_motion(0.0)
+            rows = np.searchsorted(sym.driven, with_motion)
+            X[with_motion], U[with_motion], Aa[with_motion] = P[rows], V[rows], A[rows]
+        jump = ell * rng.standard_normal((inputs.size, 3))
+        U_after = U.copy()
+        U_after[inputs] += jump
+        G, Gp = sym.G(X).toarray(), sym.Gp(X).toarray()
+        lam = np.linalg.lstsq(sym.A(X).toarray(), G @ sym.reduce(U) + Gp @ sym.reduce(U_after, rows=sym.driven),
+                              rcond=1e-12)[0]
+        J_s = -(Gp.T @ lam).reshape(sym.nd, sym.dim) @ sym.basis.T
+        w = np.linalg.eigvalsh(sym.A(X).toarray())
+        pos = w[w > RTOL_NULL * max(w.max(initial=0.0), 1e-300)]
+        cond = float(pos.max() / pos.min()) if pos.size else 1.0
+        worst_cond = max(worst_cond, cond)
+        scale = max(np.abs(J_s).max(initial=0.0), 1e-300) * cond
+        for backend in ("numpy", "native"):
+            if backend in skipped:
+                continue
+            try:
+                sim = Simulator(scene, method="rattle", dt=1e-3, backend=backend)
+            except Exception as exc:  # noqa: BLE001 - a missing native core is reported, not raised
+                skipped[backend] = f"{type(exc).__name__}: {exc}"
+                continue
+            snapshot = sim.get_state()
+            snapshot["state"].X, snapshot["state"].U = X.copy(), U.copy()
+            sim.set_state(snapshot)
+            try:
+                sim.advance(sim.state.t + 1e-9, anchors=(X[inputs], U_after[inputs], Aa[inputs]))
+            except SolverError as exc:
+                failed[backend] = (failed.get(backend, (0, ""))[0] + 1, str(exc))
+                continue
+            J_n = np.asarray(sim.anchor_report()["impulse"], float)
+            worst[backend] = max(worst.get(backend, 0.0), float(np.abs(J_n - J_s).max(initial=0.0)) / scale)
+        used += 1
+    tol = RTOL_SOLVE * 1e2
+    passed = bool(worst) and all(w <= tol for w in worst.values())
+    detail = (f"{used} state(s), velocity jumps of ~{ell:.2g} m/s on {inputs.size} input-driven anchor(s): "
+              + ", ".join(f"{b} {w:.2e}" for b, w in worst.items())
+              + f" relative to the largest impulse, divided by cond(A) (up to {worst_cond:.1e})"
+              + "".join(f"; {b}: not compared ({why})" for b, why in skipped.items())
+              + "".join(f"; {b}: {n} advance(s) failed (last: {why})" for b, (n, why) in failed.items()))
+    return CheckResult(name, passed, max(worst.values(), default=0.0), tol, detail, skipped=not worst)
 
 
 def _check_kernel(scene, dyn, states):

@@ -152,6 +152,7 @@ def test_driven_anchor_is_a_symbol_and_A_ignores_its_velocity_and_acceleration()
 
 DRIVEN_LINE = "driven anchors: (12) and (26) with V_a, A_a"
 NATIVE_LINE = "native core with driven anchors = symbolic"
+JUMP_LINE = "driven anchors' velocity jump: impulse = projection onto (12)"
 
 
 def test_every_check_passes_with_every_kind_of_motion():
@@ -178,7 +179,8 @@ def test_a_driven_anchor_on_a_rigid_path_to_a_post_is_reported(capsys, tmp_path)
     checks.add_arguments(parser)
     assert checks.main(parser.parse_args([str(path), "--samples", "2"])) == 0
     out = capsys.readouterr().out
-    assert out.count("PASS") + out.count("SKIP") == 10 and "FAIL" not in out and DRIVEN_LINE in out
+    assert out.count("PASS") + out.count("SKIP") == 11 and "FAIL" not in out and DRIVEN_LINE in out
+    assert JUMP_LINE in out
     assert "rope at its initial positions" in out
 
 
@@ -316,4 +318,24 @@ def test_native_line_catches_a_core_whose_reactions_are_wrong(hook_scene, monkey
     assert good.passed, good.line()
     monkeypatch.setattr(Simulator, "outputs", reactions_off)
     wrong = {r.name: r for r in checks.run_checks(hook_scene, samples=2, seed=0)}[NATIVE_LINE]
+    assert not wrong.passed
+
+
+def test_jump_line_compares_both_cores_and_catches_a_wrong_impulse(hook_scene, monkeypatch):
+    """The impulse of a velocity jump of the hook, numpy and native, against the mass-metric projection onto
+    (12) from AD's G and G_p; an impulse 0.1 % off is caught."""
+    from linknet_core.simulator.simulator import Simulator
+
+    good = {r.name: r for r in checks.run_checks(hook_scene, samples=2, seed=0)}[JUMP_LINE]
+    assert good.passed and not good.skipped, good.line()
+    assert "numpy" in good.detail and ("native" in good.detail or "not compared" in good.detail)
+    real = Simulator.anchor_report
+
+    def impulse_off(self):
+        report = real(self)
+        report["impulse"] = 1.001 * report["impulse"]
+        return report
+
+    monkeypatch.setattr(Simulator, "anchor_report", impulse_off)
+    wrong = {r.name: r for r in checks.run_checks(hook_scene, samples=2, seed=0)}[JUMP_LINE]
     assert not wrong.passed
