@@ -454,6 +454,8 @@ def _run_checks(scene, samples, seed, dynamics, dynamics_factory, sym, kernel, n
             results.append(_check_native(scene, sym, Ffn, on))
         if len(getattr(scene, "input_driven_indices", ())) and sym.L:
             results.append(_check_jump(scene, sym, on, rng))
+        if sym.L:
+            results.append(_check_rattle_targets(scene, sym, on))
     if kernel:
         results.append(_check_kernel(scene, dyn, on))
     return results
@@ -966,6 +968,11 @@ def _check_native(scene, sym, Ffn, states):
     return CheckResult(name, worst <= tol and used > 0, worst, tol, detail, skipped=used == 0)
 
 
+def _first_clause(exc) -> str:
+    """An error message up to its first colon: what failed, without the advice (kept short in a check line)."""
+    return str(exc).split(":")[0]
+
+
 def _check_jump(scene, sym, states, rng):
     """A jump of the input-driven anchors' velocity: the impulse both cores report against the projection onto
     (12) in the mass metric, derived here from AD's G and G_p: u+ = u - M^-1 G^T lambda with
@@ -1019,7 +1026,7 @@ def _check_jump(scene, sym, states, rng):
             try:
                 sim.advance(sim.state.t + 1e-9, anchors=(X[inputs], U_after[inputs], Aa[inputs]))
             except SolverError as exc:
-                failed[backend] = (failed.get(backend, (0, ""))[0] + 1, str(exc))
+                failed[backend] = (failed.get(backend, (0, ""))[0] + 1, _first_clause(exc))
                 continue
             J_n = np.asarray(sim.anchor_report()["impulse"], float)
             worst[backend] = max(worst.get(backend, 0.0), float(np.abs(J_n - J_s).max(initial=0.0)) / scale)
@@ -1032,6 +1039,72 @@ def _check_jump(scene, sym, states, rng):
               + "".join(f"; {b}: not compared ({why})" for b, why in skipped.items())
               + "".join(f"; {b}: {n} advance(s) failed (last: {why})" for b, (n, why) in failed.items()))
     return CheckResult(name, passed, max(worst.values(), default=0.0), tol, detail, skipped=not worst)
+
+
+def _check_rattle_targets(scene, sym, states):
+    """One RATTLE step of each core with driven anchors lands on (11) with P_a(t+h) and on (12) with V_a(t+h).
+
+    From each sample (anchors with a scene motion where it has them at the simulator's start, input-driven
+    ones held as the sample's P + V s + A s^2/2: no jump), one step h = 1e-3 through the public API. After
+    it the anchors' rows must be the motion at t + h (the scene motion's evaluate, the held quadratic),
+    and the state must satisfy AD's (11) and (12) with them: what RATTLE's position and velocity stages
+    target."""
+    from linknet_core.errors import SolverError
+    from linknet_core.simulator.simulator import Simulator
+
+    name = "RATTLE with driven anchors: (11) at P_a(t+h), (12) at V_a(t+h)"
+    h = 1e-3
+    inputs = np.asarray(getattr(scene, "input_driven_indices", np.zeros(0, np.int64)), np.int64)
+    with_motion = np.setdiff1d(sym.driven, inputs)
+    worst = {}
+    skipped, failed = {}, {}
+    for s in states:
+        X, U = np.array(s.X, float), np.array(s.U, float)
+        Aa = np.array(s.anchor_acc, float)
+        P_h, V_h = np.array(X[sym.driven]), np.array(U[sym.driven])
+        rows_in = np.searchsorted(sym.driven, inputs)
+        P_h[rows_in] = X[inputs] + h * U[inputs] + 0.5 * h * h * Aa[inputs]
+        V_h[rows_in] = U[inputs] + h * Aa[inputs]
+        if with_motion.size:
+            P0, V0, A0 = scene.anchor_motion(0.0)
+            P1, V1, _ = scene.anchor_motion(h)
+            rows = np.searchsorted(sym.driven, with_motion)
+            X[with_motion], U[with_motion] = P0[rows], V0[rows]
+            P_h[rows], V_h[rows] = P1[rows], V1[rows]
+        for backend in ("numpy", "native"):
+            if backend in skipped:
+                continue
+            try:
+                sim = Simulator(scene, method="rattle", dt=h, backend=backend)
+            except Exception as exc:  # noqa: BLE001 - a missing native core is reported, not raised
+                skipped[backend] = f"{type(exc).__name__}: {exc}"
+                continue
+            snapshot = sim.get_state()
+            snapshot["state"].X, snapshot["state"].U = X.copy(), U.copy()
+            sim.set_state(snapshot)
+            try:
+                sim.advance(sim.state.t + h, anchors=(X[inputs], U[inputs], Aa[inputs]) if inputs.size else None)
+            except SolverError as exc:
+                failed[backend] = (failed.get(backend, (0, ""))[0] + 1, _first_clause(exc))
+                continue
+            Xn, Un = sim.state.X, sim.state.U
+            ell = float(np.median(sym._R))
+            v_scale = max(np.abs(Un).max(initial=0.0), ell / 1.0)
+            at = max(float(np.abs(Xn[sym.driven] - P_h).max()) / ell, float(np.abs(Un[sym.driven] - V_h).max()) / v_scale)
+            c11 = float(np.abs(sym.constraint(Xn) / sym._R).max(initial=0.0))
+            c12 = float(np.abs(sym.velocity_constraint(Xn, Un)).max(initial=0.0)) / v_scale
+            a, b, c = worst.get(backend, (0.0, 0.0, 0.0))
+            worst[backend] = (max(a, at), max(b, c11), max(c, c12))
+    tol = 1e-12
+    passed = bool(worst) and all(max(w) <= tol for w in worst.values())
+    detail = ("one step h = 1e-3 from each sample: "
+              + "; ".join(f"{b}: anchors vs P(t+h), V(t+h) {w[0]:.1e}, (11) {w[1]:.1e}, (12) {w[2]:.1e}"
+                          for b, w in worst.items())
+              + " (relative to the median link length, the largest speed)"
+              + "".join(f"; {b}: not compared ({why})" for b, why in skipped.items())
+              + "".join(f"; {b}: {n} step(s) failed (last: {why})" for b, (n, why) in failed.items()))
+    return CheckResult(name, passed, max((max(w) for w in worst.values()), default=0.0), tol, detail,
+                       skipped=not worst)
 
 
 def _check_kernel(scene, dyn, states):

@@ -153,6 +153,7 @@ def test_driven_anchor_is_a_symbol_and_A_ignores_its_velocity_and_acceleration()
 DRIVEN_LINE = "driven anchors: (12) and (26) with V_a, A_a"
 NATIVE_LINE = "native core with driven anchors = symbolic"
 JUMP_LINE = "driven anchors' velocity jump: impulse = projection onto (12)"
+RATTLE_LINE = "RATTLE with driven anchors: (11) at P_a(t+h), (12) at V_a(t+h)"
 
 
 def test_every_check_passes_with_every_kind_of_motion():
@@ -162,6 +163,8 @@ def test_every_check_passes_with_every_kind_of_motion():
     line = next(r for r in results if r.name == DRIVEN_LINE)
     assert line.discrepancy < 1e-13
     assert "4 driven anchor(s) (input, sine, velocity, waypoints)" in line.detail
+    rattle = next(r for r in results if r.name == RATTLE_LINE)
+    assert not rattle.skipped and "numpy: anchors vs P(t+h), V(t+h)" in rattle.detail, rattle.line()
     native = next(r for r in results if r.name == NATIVE_LINE)
     assert native.skipped or "3 state(s) through Simulator(backend='native')" in native.detail, native.line()
 
@@ -179,8 +182,8 @@ def test_a_driven_anchor_on_a_rigid_path_to_a_post_is_reported(capsys, tmp_path)
     checks.add_arguments(parser)
     assert checks.main(parser.parse_args([str(path), "--samples", "2"])) == 0
     out = capsys.readouterr().out
-    assert out.count("PASS") + out.count("SKIP") == 11 and "FAIL" not in out and DRIVEN_LINE in out
-    assert JUMP_LINE in out
+    assert out.count("PASS") + out.count("SKIP") == 12 and "FAIL" not in out and DRIVEN_LINE in out
+    assert JUMP_LINE in out and RATTLE_LINE in out
     assert "rope at its initial positions" in out
 
 
