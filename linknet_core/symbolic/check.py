@@ -985,7 +985,7 @@ def _check_jump(scene, sym, states, rng):
     from linknet_core.errors import SolverError
     from linknet_core.simulator.simulator import Simulator
 
-    name = "driven anchors' velocity jump: impulse = projection onto (12)"
+    name = "anchor velocity jump: impulse, projection (12)"
     inputs = np.asarray(scene.input_driven_indices, np.int64)
     with_motion = np.setdiff1d(sym.driven, inputs)
     ell = float(np.median(sym._R))
@@ -1052,7 +1052,7 @@ def _check_rattle_targets(scene, sym, states):
     from linknet_core.errors import SolverError
     from linknet_core.simulator.simulator import Simulator
 
-    name = "RATTLE with driven anchors: (11) at P_a(t+h), (12) at V_a(t+h)"
+    name = "RATTLE: (11) at P_a(t+h), (12) at V_a(t+h)"
     h = 1e-3
     inputs = np.asarray(getattr(scene, "input_driven_indices", np.zeros(0, np.int64)), np.int64)
     with_motion = np.setdiff1d(sym.driven, inputs)

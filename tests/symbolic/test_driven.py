@@ -152,8 +152,8 @@ def test_driven_anchor_is_a_symbol_and_A_ignores_its_velocity_and_acceleration()
 
 DRIVEN_LINE = "driven anchors: (12) and (26) with V_a, A_a"
 NATIVE_LINE = "native core with driven anchors = symbolic"
-JUMP_LINE = "driven anchors' velocity jump: impulse = projection onto (12)"
-RATTLE_LINE = "RATTLE with driven anchors: (11) at P_a(t+h), (12) at V_a(t+h)"
+JUMP_LINE = "anchor velocity jump: impulse, projection (12)"
+RATTLE_LINE = "RATTLE: (11) at P_a(t+h), (12) at V_a(t+h)"
 
 
 def test_every_check_passes_with_every_kind_of_motion():
