@@ -737,8 +737,51 @@ def _check_existence(scene, sym, dyn, states, nulls, factory):
     if refused is not None:
         detail += ("; the solver refuses it with ConsistencyError" if refused else
                    "; the solver's check_consistent_velocities ACCEPTS it")
+    motion = _motion_violation(sym, dyn, X0, N0)
+    if motion is not None:
+        motion_detected, motion_refused, text = motion
+        passed = passed and motion_detected and motion_refused is not False
+        detail += text
     return CheckResult("existence (32)-(36) and hypothesis (35)", passed, max(worst_F, worst_consistent), tol_F,
                        detail)
+
+
+def _motion_violation(sym, dyn, X0, N0):
+    """A prescribed motion that (35) forbids, at the scene's initial positions: a self-stress n that loads a
+    driven anchor (G_p^T n != 0) and the anchors at rest accelerating with A = -G_p^T n, so that
+    N^T b_A = |G_p^T n|^2 > 0 (b_A = -G_p A: the anchors' part of B (26)). None without such a self-stress.
+    Returns (reported, refused (None: the numeric side has no such check), text)."""
+    if sym.nd == 0 or N0.shape[1] == 0:
+        return None
+    Gp = sym.Gp(X0).toarray()
+    loads = Gp.T @ N0                                   # each self-stress's force on the driven anchors
+    j = int(np.argmax(np.linalg.norm(loads, axis=0)))
+    if np.linalg.norm(loads[:, j]) <= 1e-8 * max(np.abs(N0[:, j]).max(), 1e-300):
+        return None
+    anchor_acc = np.zeros((sym.K, 3))
+    anchor_acc[sym.driven] = (-loads[:, j]).reshape(sym.nd, sym.dim) @ sym.basis.T
+    U0 = np.zeros((sym.K, 3))
+    F = np.zeros((sym.K, 3))
+    B = _numeric_rhs(dyn, X0, U0, F, anchor_acc)
+    violation = float(np.abs(N0.T @ B).max(initial=0.0) / max(np.abs(B).max(initial=0.0), 1e-300))
+    reported = violation > 1e-6
+    refused = None
+    check = getattr(dyn, "check_consistent_velocities", None)
+    if check is not None and _takes_anchor_acc(check):
+        from linknet_core.errors import ConsistencyError
+
+        try:
+            check(X0, U0, anchor_acc=anchor_acc)
+            refused = False
+        except ConsistencyError:
+            refused = True
+    text = (f". Driven anchors at rest at the initial positions, accelerating against a self-stress that loads "
+            f"them (A = -G_p^T n): |N^T B|/|B| = {violation:.2e} -> (35) violation by the prescribed motion "
+            f"{'REPORTED' if reported else 'NOT detected'}")
+    if refused is not None:
+        text += ("; the solver refuses it with ConsistencyError" if refused else
+                 "; the solver's check_consistent_velocities ACCEPTS it")
+    return reported, refused, text
 
 
 def _check_accelerations(scene, sym, dyn, Ffn, states):

@@ -171,7 +171,8 @@ def test_every_check_passes_with_every_kind_of_motion():
 
 def test_a_driven_anchor_on_a_rigid_path_to_a_post_is_reported(capsys, tmp_path):
     """Post - mass - driven hook in a straight line (a taut rope): the (35)-violating velocity of the middle
-    mass is found at the scene's own positions, and the CLI prints the driven line."""
+    mass and the (35)-violating acceleration of the hook are found at the scene's own positions, and the CLI
+    prints the driven lines."""
     path = tmp_path / "rope.json"
     path.write_text('{"name": "rope", "gravity": [0, 0, -9.81], "masses": ['
                     '{"name": "post", "position": [0, 0, 0], "fixed": true},'
@@ -185,6 +186,8 @@ def test_a_driven_anchor_on_a_rigid_path_to_a_post_is_reported(capsys, tmp_path)
     assert out.count("PASS") + out.count("SKIP") == 12 and "FAIL" not in out and DRIVEN_LINE in out
     assert JUMP_LINE in out and RATTLE_LINE in out
     assert "rope at its initial positions" in out
+    # the hook accelerating along the taut rope: no consistent accelerations, reported and refused
+    assert "violation by the prescribed motion REPORTED; the solver refuses it with ConsistencyError" in out
 
 
 class _NumericDouble:
