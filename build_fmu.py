@@ -13,7 +13,10 @@ pythonfmu 0.7.0 writes the FMU; this script then
      (pythonfmu writes none of these);
   2. links the FMU's binary against libpython (DT_NEEDED + RUNPATH via patchelf), so the FMU
      loads in a plain C host with no Python in the process (pythonfmu's binary leaves the
-     Python symbols undefined: `undefined symbol: _Py_NoneStruct`).
+     Python symbols undefined: `undefined symbol: _Py_NoneStruct`);
+  3. ships that binary as binaries/linux64/<model>_pythonfmu.so behind a small C front layer compiled here
+     (fmu_src/pythonfmu_front/front.c): the statuses the slave logs become the calls' statuses, bad
+     handles are refused in C, freed instances are reused (pythonfmu leaks on every instantiate).
 See docs/fmu.md.
 """
 from __future__ import annotations
@@ -156,7 +159,14 @@ def _system_library(soname: str) -> str | None:
 
 
 def rewrite_fmu(fmu: Path, model_description: bytes, link_python: bool) -> str | None:
-    """Replace modelDescription.xml and (optionally) relink the Linux binary, in place."""
+    """Replace modelDescription.xml, (optionally) relink pythonfmu's Linux binary and put the front layer
+    (fmu_src/pythonfmu_front) in front of it, in place."""
+    from linknet_fmu import layout
+    from pythonfmu_front.build import FrontBuildError, compile_front, inner_library_name
+    # a slave that takes input derivatives declares how they reach it through fmi2SetReal (see front.c)
+    derivative_vr_base = getattr(layout, "DERIVATIVE_VR_BASE", None)
+    root = ET.fromstring(model_description)
+    ident = root.find("CoSimulation").get("modelIdentifier")
     linked = None
     with tempfile.TemporaryDirectory(prefix="linknet_fmu_") as tmp:
         tmp = Path(tmp)
@@ -168,15 +178,22 @@ def rewrite_fmu(fmu: Path, model_description: bytes, link_python: bool) -> str |
                 data = model_description
             elif info.filename.startswith("binaries/win64/"):
                 continue  # only linux64 is built, linked and tested here (docs/fmu.md)
-            elif link_python and info.filename.startswith("binaries/linux64/") and info.filename.endswith(".so"):
+            elif info.filename == f"binaries/linux64/{ident}.so":
                 so = tmp / Path(info.filename).name
                 so.write_bytes(data)
+                if link_python:
+                    try:
+                        linked = link_libpython(so)
+                        data = so.read_bytes()
+                    except (RuntimeError, subprocess.CalledProcessError) as e:
+                        # still a working FMU for Python hosts (fmpy); C hosts would need libpython preloaded
+                        print(f"build_fmu: WARNING: binary not linked to libpython: {e}", file=sys.stderr)
                 try:
-                    linked = link_libpython(so)
-                    data = so.read_bytes()
-                except (RuntimeError, subprocess.CalledProcessError) as e:
-                    # still a working FMU for Python hosts (fmpy); C hosts would need libpython preloaded
-                    print(f"build_fmu: WARNING: binary not linked to libpython: {e}", file=sys.stderr)
+                    out.append((info.filename, compile_front(ident, root.get("guid"), derivative_vr_base)))
+                except FrontBuildError as e:
+                    raise SystemExit(f"build_fmu: {e}")
+                out.append((f"binaries/linux64/{inner_library_name(ident)}", data))
+                continue
             out.append((info.filename, data))
         with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zout:
             for name, data in out:

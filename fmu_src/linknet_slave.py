@@ -54,7 +54,7 @@ STATE_MAGIC = b"LINKNET-FMU-STATE\0"
 
 def guarded(neutral):
     """Wrap an FMI entry point: no exception may reach pythonfmu 0.7.0, which would answer fmi2Fatal and leave
-    the instance unusable. An unexpected one is logged with fmi2Error status (and on stderr) and the entry point
+    the instance unusable. An unexpected one is logged with fmi2Error status (the call's status) and the entry point
     returns `neutral(self, *args)` (a list of the right length for getters, False for doStep, None for setters)."""
     def wrap(method):
         @functools.wraps(method)
@@ -152,11 +152,10 @@ class LinknetNetwork(Fmi2Slave):
 
     # ------------------------------------------------------------------ helpers
     def _error(self, msg, status=Fmi2Status.error):
-        msg = f"{self.instance_name}: {msg}"
+        # The binary's front layer (fmu_src/pythonfmu_front) makes the worst status logged during a call the
+        # call's status, and hands errors, discards and warnings to the host's logger (with loggingOn or not),
+        # under the host's instance name: a reused instance keeps the self.instance_name it was made with.
         self.log(msg, status)
-        # pythonfmu 0.7.0 forwards log messages only when the host instantiated with
-        # loggingOn=true; errors also go to stderr so they are never silent.
-        sys.stderr.write(f"[linknet FMU error] {msg}\n")
 
     def _make_simulator(self, scene):
         method = self._integrator
@@ -406,8 +405,8 @@ class LinknetNetwork(Fmi2Slave):
             self._error("doStep refused: the FMU is not initialized (call fmi2ExitInitializationMode first)")
             return False
         if self._bad:
-            for name, reason in self._bad.items():
-                self._error(f"doStep refused: {name} {reason}")
+            for name, reason in self._bad.items():  # fmi2Discard: the master can set a good value and retry
+                self._error(f"doStep refused: {name} {reason}", Fmi2Status.discard)
             return False
         if self._broken:
             self._error(f"doStep refused: {self._broken}; call fmi2Reset (or restore a saved FMU state)")
@@ -427,7 +426,7 @@ class LinknetNetwork(Fmi2Slave):
             # after fmi2SetFMUstate or with other inputs) and guarantees a finite state when it returns
             self._sim.advance(t + h, self._F)
         except ln.LinknetError as e:
-            self._error(f"doStep from t={t!r} with h={h!r} failed: {e}")
+            self._error(f"doStep from t={t!r} with h={h!r} failed: {e}", Fmi2Status.discard)
             return False
         self._outputs_stale = True
         return True

@@ -1,8 +1,7 @@
 """What the small component FMUs (PD controller, spring-damper) share: a parameter set out of range is
-refused until corrected (the next doStep returns fmi2Discard), and errors reach the host whether or not it
-instantiated with logging on."""
+refused (fmi2Error) and remembered until corrected (the next doStep returns fmi2Discard), and errors reach the
+host whether or not it instantiated with logging on."""
 import math
-import sys
 
 from pythonfmu.enums import Fmi2Status
 
@@ -28,15 +27,15 @@ class GuardedComponent:
         self.bad.pop(name, None)
         self.values[name] = float(value)
 
-    def _error(self, msg):
-        # logged (seen with loggingOn) and on stderr (pythonfmu drops log messages otherwise)
-        self.log(f"{self.instance_name}: {msg}", Fmi2Status.error)
-        sys.stderr.write(f"[linknet FMU error] {self.instance_name}: {msg}\n")
+    def _error(self, msg, status=Fmi2Status.error):
+        # the binary's front layer (fmu_src/pythonfmu_front) makes the worst status logged during a call the
+        # call's status and hands errors to the host's logger, with loggingOn or not, under the host's name
+        self.log(msg, status)
 
     def do_step(self, current_time, step_size):
         if self.bad:
             for name, why in self.bad.items():
-                self._error(f"doStep refused: {name} {why}")
+                self._error(f"doStep refused: {name} {why}", Fmi2Status.discard)
             return False
         if not (math.isfinite(step_size) and step_size > 0):
             self._error(f"doStep refused: step size {step_size!r} must be > 0")

@@ -95,7 +95,7 @@ def test_fmu_carries_scene_core_and_linked_binary(fmu_dir):
     with zipfile.ZipFile(fmu) as z:
         files = set(z.namelist())
         scene = json.loads(z.read("resources/linknet_scene.json"))
-        so = z.read("binaries/linux64/chain_10.so")
+        so = z.read("binaries/linux64/chain_10_pythonfmu.so")  # pythonfmu's binary, behind the front layer
     assert "resources/linknet_core/__init__.py" in files and "resources/linknet_slave.py" in files
     assert scene == ln.load_scene(MODELS / "chain_10.json").to_dict()
     assert b"libpython3" in so  # DT_NEEDED added by build_fmu.link_libpython

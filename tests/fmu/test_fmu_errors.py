@@ -1,5 +1,5 @@
-"""Bad input gives fmi2Discard/fmi2Error with a logged message naming the variable, never
-fmi2Fatal or a crash, and the instance stays usable (or is usable again after fmi2Reset).
+"""Bad input gives fmi2Error (a step that cannot be taken fmi2Discard) with a logged message naming the variable,
+never fmi2Fatal or a crash, and the instance stays usable (or is usable again after fmi2Reset).
 Any communication step h > 0 works, down to 1e-13 s."""
 import numpy as np
 import pytest
@@ -36,10 +36,13 @@ t = 0.0
 attempt('ok', f, t, 0.01); t += 0.01
 for bad in (float('nan'), float('inf')):
     LOG.clear()
-    f.set({{'F[11,3]': bad}})
+    try:
+        f.set({{'F[11,3]': bad}}); set_status = 0
+    except FMICallException as e:
+        set_status = e.status
     set_log = list(LOG)
     attempt(f'force {{bad}}', f, t, 0.01)
-    cases[f'force {{bad}}']['set_log'] = [m for s, m in set_log]
+    cases[f'force {{bad}}'].update(set_log=[m for s, m in set_log], set_status=set_status)
 f.set({{'F[11,3]': 1.0}})
 attempt('after good force', f, t, 0.01); t += 0.01
 attempt('zero step', f, t, 0.0)
@@ -48,7 +51,10 @@ attempt('wrong time', f, t + 0.5, 0.01)
 attempt('tiny step', f, t, 1e-13); t += 1e-13
 attempt('normal again', f, t, 0.01); t += 0.01
 LOG.clear()
-f.set({{'M[3]': 2.0}})                      # fixed parameter after initialization
+try:
+    f.set({{'M[3]': 2.0}})                  # fixed parameter after initialization
+except FMICallException:
+    pass
 attempt('fixed parameter after init', f, t, 0.01)
 f.set({{'F[11,3]': 1e300}})
 f.slave.reset(); f.init()               # reset clears everything
@@ -64,29 +70,39 @@ g = Fmu({str(fmu)!r}, 'g')                 # parameters out of range before init
 g.slave.setupExperiment(startTime=0.0)
 g.slave.enterInitializationMode()
 LOG.clear()
-g.set({{'M[2]': -1.0, 'step': 0.0}})
-g.slave.setString([g.vr['integrator']], ['euler'])
+param_status = []
+for set_bad in (lambda: g.set({{'M[2]': -1.0, 'step': 0.0}}),
+                lambda: g.slave.setString([g.vr['integrator']], ['euler'])):
+    try:
+        set_bad(); param_status.append(0)
+    except FMICallException as e:
+        param_status.append(e.status)
 param_log = [m for s, m in LOG]
 g.slave.exitInitializationMode()
 attempt('bad parameters', g, 0.0, 0.01)
-cases['bad parameters']['set_log'] = param_log
+cases['bad parameters'].update(set_log=param_log, set_status=max(param_status))
 g.slave.reset(); g.init()
 attempt('bad parameters then reset', g, 0.0, 0.01)
 
 k = Fmu({str(fmu)!r}, 'k')                 # a link length the initial positions violate
-k.init(start={{'R[1]': 0.5}})
+try:
+    k.init(start={{'R[1]': 0.5}}); init_status = 0
+except FMICallException as e:                # fmi2ExitInitializationMode: no valid scene
+    init_status = e.status
 attempt('inconsistent length', k, 0.0, 0.01)
+cases['inconsistent length']['set_status'] = init_status
 k.slave.reset(); k.init(start={{'M[3]': 0.2, 'g[3]': -1.62}})
 attempt('valid parameters', k, 0.0, 0.01)
 save(cases=np.array(json.dumps(cases)))
 """, fmu_dir / "client_errors")
     import json
     cases = json.loads(str(out["cases"]))
-    DISCARD = 2
+    DISCARD, ERROR = 2, 3
 
-    def refused(label, *words):
+    def refused(label, *words, status=DISCARD):
         c = cases[label]
-        assert c["status"] == DISCARD, (label, c)
+        assert c["status"] == status, (label, c)
+        assert c.get("set_status", ERROR) == ERROR, (label, c)  # the bad value itself: fmi2Error
         text = " ".join(c["log"] + c.get("set_log", []))
         for w in words:
             assert w in text, (label, w, text)
@@ -97,13 +113,13 @@ save(cases=np.array(json.dumps(cases)))
         assert cases[label]["status"] == 0, (label, cases[label])
     refused("force nan", "F[11,3]", "finite")
     refused("force inf", "F[11,3]", "finite")
-    refused("zero step", "h=0.0", "> 0")
-    refused("negative step", "h=-0.01")
-    refused("wrong time", "currentCommunicationPoint")
+    refused("zero step", "h=0.0", "> 0", status=ERROR)
+    refused("negative step", "h=-0.01", status=ERROR)
+    refused("wrong time", "currentCommunicationPoint", status=ERROR)
     refused("fixed parameter after init", "M[3]", "after initialization")
     refused("absurd force", "doStep")
     refused("bad parameters", "M[2]", "> 0", "step", "integrator", "euler")
-    refused("inconsistent length", "link 1", "length")
+    refused("inconsistent length", "link 1", "length", status=ERROR)
 
 
 def test_variable_and_tiny_communication_steps_match_library(fmu_dir):
@@ -146,14 +162,20 @@ for n in range(20):
 LOG.clear()
 values = {{name: 0.0 for name in names}}
 values[names[5]] = float('nan')
-f.set(values)
+try:
+    f.set(values); nan_set_status = 0
+except FMICallException as e:
+    nan_set_status = e.status
 try:
     f.step(t, h); nan_status = 0
 except FMICallException as e:
     nan_status = e.status
 nan_log = [m for s, m in LOG]
 LOG.clear()
-f.slave.setReal([f.vr[names[0]], f.vr['X[3,1]']], [0.0, 5.0])   # an input and an output in one call
+try:
+    f.slave.setReal([f.vr[names[0]], f.vr['X[3,1]']], [0.0, 5.0])   # an input and an output in one call
+except FMICallException:
+    pass
 mixed_log = [m for s, m in LOG]
 f.set({{name: 0.0 for name in names}})
 f.step(t, h)
@@ -164,7 +186,7 @@ try:
 except FMICallException:
     bad_read = np.array([np.nan])
 bad_read_log = [m for s, m in LOG]
-save(X=np.array(X), nan_status=nan_status, nan_log=np.array(nan_log), mixed_log=np.array(mixed_log),
+save(X=np.array(X), nan_status=nan_status, nan_set_status=nan_set_status, nan_log=np.array(nan_log), mixed_log=np.array(mixed_log),
      names=np.array(names), bad_read=bad_read, bad_read_log=np.array(bad_read_log),
      good_read=np.array(f.slave.getReal(long_read)), X_last=f.get(f.names('X')))
 """, fmu_dir / "client_all_inputs")
@@ -182,7 +204,7 @@ save(X=np.array(X), nan_status=nan_status, nan_log=np.array(nan_log), mixed_log=
         X.append(sim.state.X.ravel().copy())
     np.testing.assert_allclose(out["X"], np.array(X), rtol=0, atol=1e-12)
     assert np.ptp(np.array(X)[:, -1]) > 1e-3      # the forces moved the chain
-    assert out["nan_status"] == 2                  # fmi2Discard
+    assert out["nan_set_status"] == 3 and out["nan_status"] == 2  # fmi2Error, then the step fmi2Discard
     assert any(names[5] in m and "finite" in m for m in out["nan_log"])
     assert any("X[3,1]" in m and "output" in m for m in out["mixed_log"])
     # a long read with an unknown value reference is refused (NaNs and a message), the next read is right

@@ -1,0 +1,593 @@
+/* The front layer of the pythonfmu FMU: the binary a host loads (binaries/linux64/<model>.so). It exports the
+ * FMI 2.0 functions and forwards each call to pythonfmu's own binary, shipped beside it (FRONT_INNER_LIBRARY,
+ * loaded with dlopen at the first fmi2Instantiate), adding what pythonfmu 0.7.0 cannot give a Python slave:
+ *
+ * - the status of a call is the worst of pythonfmu's answer and the statuses the slave logged during the call
+ *   (pythonfmu ignores what the slave's methods return, but each message the slave logs reaches pythonfmu's
+ *   logger callback before the call returns, and that callback is this layer's `relay`). So a refused
+ *   setReal/getReal/get or set String, Integer, Boolean returns the fmi2Error the slave logged;
+ * - arguments pythonfmu would dereference unchecked are checked first: a component handle that is not a live
+ *   instance of this FMU, NULL arrays, NULL or unknown fmi2FMUstate handles (pythonfmu takes any pointer for a
+ *   Python object), a serialization buffer smaller than the state. Refused with fmi2Error and a logged message;
+ * - messages: errors, discards and warnings always reach the host's logger, other messages only with logging
+ *   on, as in the native FMU (fmu_src/native/fmi2Functions.c). pythonfmu itself runs with logging always on,
+ *   so that every status the slave logs is seen here;
+ * - fmi2FreeInstance parks the instance and the next fmi2Instantiate with the same resources takes it back
+ *   through pythonfmu's fmi2Reset, which builds a new slave object from the class it already has. A real
+ *   pythonfmu instantiate executes the slave's module again and never frees what that creates (~75 KiB per
+ *   instantiate/free cycle); a reset does not (docs/fmu.md, tests/contract). A parked instance is reset when it
+ *   is parked, so it holds a fresh slave rather than a finished run.
+ *
+ * - fmi2SetRealInputDerivatives reaches a slave that takes input derivatives (FRONT_DERIVATIVE_VR_BASE defined)
+ *   as an fmi2SetReal of encoded value references (see the function).
+ *
+ * This file knows nothing of linknet: it is pythonfmu glue, compiled by build_fmu.py for every pythonfmu FMU
+ * (scenes and components) with FRONT_INNER_LIBRARY and FRONT_GUID defined.
+ */
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <limits.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi2_api.h"
+
+#ifndef FRONT_INNER_LIBRARY
+#error "define FRONT_INNER_LIBRARY: the file name of pythonfmu's binary, in the folder of this one"
+#endif
+#ifndef FRONT_GUID
+#error "define FRONT_GUID: the guid of the FMU's modelDescription.xml"
+#endif
+
+/* ---- pythonfmu's functions --------------------------------------------------------------------------- */
+
+#define INNER_FUNCTIONS(X)                                                                                      \
+    X(fmi2Instantiate) X(fmi2FreeInstance) X(fmi2SetupExperiment) X(fmi2EnterInitializationMode)                \
+    X(fmi2ExitInitializationMode) X(fmi2Terminate) X(fmi2Reset) X(fmi2GetReal) X(fmi2GetInteger)                \
+    X(fmi2GetBoolean) X(fmi2GetString) X(fmi2SetReal) X(fmi2SetInteger) X(fmi2SetBoolean) X(fmi2SetString)     \
+    X(fmi2GetFMUstate) X(fmi2SetFMUstate) X(fmi2FreeFMUstate) X(fmi2SerializedFMUstateSize)                     \
+    X(fmi2SerializeFMUstate) X(fmi2DeSerializeFMUstate) X(fmi2GetDirectionalDerivative)                         \
+    X(fmi2SetRealInputDerivatives) X(fmi2GetRealOutputDerivatives) X(fmi2DoStep) X(fmi2CancelStep)             \
+    X(fmi2GetStatus) X(fmi2GetRealStatus) X(fmi2GetIntegerStatus) X(fmi2GetBooleanStatus)                      \
+    X(fmi2GetStringStatus)
+
+static struct {
+#define DECLARE(name) __typeof__(name) *name;
+    INNER_FUNCTIONS(DECLARE)
+#undef DECLARE
+    void *library;
+    char problem[PATH_MAX + 512];  /* why it could not be loaded */
+} inner;
+
+static pthread_once_t inner_once = PTHREAD_ONCE_INIT;
+
+static void load_inner(void)
+{
+    Dl_info self_info;
+    char path[PATH_MAX];
+    if (!dladdr((void *)&load_inner, &self_info) || self_info.dli_fname == NULL) {
+        snprintf(inner.problem, sizeof inner.problem, "cannot find the folder of the FMU's binary (dladdr failed)");
+        return;
+    }
+    const char *slash = strrchr(self_info.dli_fname, '/');
+    const int folder = slash ? (int)(slash - self_info.dli_fname) : 1;
+    snprintf(path, sizeof path, "%.*s/%s", folder, slash ? self_info.dli_fname : ".", FRONT_INNER_LIBRARY);
+    void *library = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    if (library == NULL) {
+        snprintf(inner.problem, sizeof inner.problem, "cannot load pythonfmu's binary %s: %s", path, dlerror());
+        return;
+    }
+#define RESOLVE(name)                                                                                           \
+    if ((*(void **)&inner.name = dlsym(library, #name)) == NULL) {                                              \
+        snprintf(inner.problem, sizeof inner.problem, "%s does not export " #name, path);                       \
+        return;                                                                                                 \
+    }
+    INNER_FUNCTIONS(RESOLVE)
+#undef RESOLVE
+    inner.library = library;
+}
+
+/* ---- instances --------------------------------------------------------------------------------------- */
+
+#define FRONT_MAGIC 0x6c6e5046u  /* a live instance; cleared when it is freed (parked) */
+
+typedef struct front {
+    unsigned magic;
+    fmi2Component inner;              /* pythonfmu's instance */
+    char *name;
+    char *resources;                  /* the fmuResourceLocation it was made with: a parked one is reused for it */
+    fmi2CallbackLogger logger;        /* the host's */
+    fmi2ComponentEnvironment environment;
+    int logging_on;
+    fmi2Status worst;                 /* the worst status logged during the current call */
+    fmi2CallbackFunctions callbacks;  /* handed to pythonfmu (which keeps the pointer): its logger is relay() */
+    struct front *next_parked;
+    char line[4096];
+} front;
+
+static pthread_mutex_t registry_lock = PTHREAD_MUTEX_INITIALIZER;  /* the parked instances and the live states */
+static front *parked;
+
+static const char *category_of(fmi2Status status)
+{
+    switch (status) {
+    case fmi2Warning: return "logStatusWarning";
+    case fmi2Discard: return "logStatusDiscard";
+    case fmi2Error: return "logStatusError";
+    case fmi2Fatal: return "logStatusFatal";
+    default: return "logAll";
+    }
+}
+
+/* The logger's message is a printf format with FMI's #<type><vr># references: plain text has its '%' and '#'
+   doubled, so that hosts which expand them print it as written. */
+static void emit(front *self, fmi2Status status, const char *category, const char *text)
+{
+    if (status == fmi2OK && !self->logging_on) return;
+    size_t j = 0;
+    const size_t cap = sizeof self->line - 1;
+    for (const char *p = text ? text : ""; *p && j + 2 < cap; p++) {
+        if (*p == '%' || *p == '#') self->line[j++] = *p;
+        self->line[j++] = *p;
+    }
+    self->line[j] = '\0';
+    if (category == NULL || category[0] == '\0') category = category_of(status);
+    if (self->logger)
+        self->logger(self->environment, self->name, status, category, self->line);
+    else
+        fprintf(stderr, "[%s] %s: %s\n", self->name, category, text ? text : "");
+}
+
+/* pythonfmu's logger callback: pythonfmu passes the slave's message as the format (with no arguments). */
+static void relay(fmi2ComponentEnvironment environment, fmi2String instanceName, fmi2Status status,
+                  fmi2String category, fmi2String message, ...)
+{
+    (void)instanceName;  /* a reused instance keeps the name it was made with: the front's is the host's */
+    front *self = (front *)environment;
+    if (self == NULL) return;
+    if (status > self->worst && status <= fmi2Fatal) self->worst = status;
+    emit(self, status, category, message);
+}
+
+static fmi2Status refuse(front *self, const char *function, const char *format, ...)
+{
+    char text[1024];
+    int n = snprintf(text, sizeof text, "%s: ", function);
+    va_list args;
+    va_start(args, format);
+    vsnprintf(text + n, sizeof text - (size_t)n, format, args);
+    va_end(args);
+    if (fmi2Error > self->worst) self->worst = fmi2Error;
+    emit(self, fmi2Error, NULL, text);
+    return fmi2Error;
+}
+
+/* The answer of a forwarded call: pythonfmu's status or a worse one the slave logged meanwhile. */
+static fmi2Status answer(const front *self, fmi2Status status)
+{
+    return self->worst > status ? self->worst : status;
+}
+
+static front *checked(fmi2Component c)
+{
+    front *self = (front *)c;
+    if (self == NULL || self->magic != FRONT_MAGIC) return NULL;
+    self->worst = fmi2OK;
+    return self;
+}
+
+#define ENTER(function)                 \
+    front *self = checked(c);           \
+    if (self == NULL) return fmi2Error; \
+    const char *const fn = function
+
+static int arrays_given(front *self, const char *fn, size_t n, const void *vr, const void *value)
+{
+    if (n == 0 || (vr != NULL && value != NULL)) return 1;
+    refuse(self, fn, "%s is NULL with nvr = %zu", vr == NULL ? "vr" : "value", n);
+    return 0;
+}
+
+/* ---- FMU states: the handles this FMU handed out and has not freed ------------------------------------ */
+
+static fmi2FMUstate *live_states;
+static size_t n_live, live_capacity;
+
+static int state_is_live(fmi2FMUstate state)
+{
+    int found = 0;
+    pthread_mutex_lock(&registry_lock);
+    for (size_t i = 0; i < n_live && !found; i++) found = live_states[i] == state;
+    pthread_mutex_unlock(&registry_lock);
+    return found;
+}
+
+static int remember_state(fmi2FMUstate state)
+{
+    int ok = 1;
+    pthread_mutex_lock(&registry_lock);
+    if (n_live == live_capacity) {
+        const size_t capacity = live_capacity ? 2 * live_capacity : 16;
+        fmi2FMUstate *grown = realloc(live_states, capacity * sizeof *grown);
+        if (grown) {
+            live_states = grown;
+            live_capacity = capacity;
+        } else {
+            ok = 0;
+        }
+    }
+    if (ok) live_states[n_live++] = state;
+    pthread_mutex_unlock(&registry_lock);
+    return ok;
+}
+
+static void forget_state(fmi2FMUstate state)
+{
+    pthread_mutex_lock(&registry_lock);
+    for (size_t i = 0; i < n_live; i++)
+        if (live_states[i] == state) {
+            live_states[i] = live_states[--n_live];
+            break;
+        }
+    pthread_mutex_unlock(&registry_lock);
+}
+
+/* A state handle given by the host: live, or refused with the reason logged. */
+static int live_state(front *self, const char *fn, fmi2FMUstate state)
+{
+    if (state == NULL) {
+        refuse(self, fn, "FMUstate is NULL");
+        return 0;
+    }
+    if (!state_is_live(state)) {
+        refuse(self, fn, "FMUstate is not a live state of this FMU (one made by its fmi2GetFMUstate or "
+                         "fmi2DeSerializeFMUstate and not freed): a state of another FMU, or one already freed");
+        return 0;
+    }
+    return 1;
+}
+
+/* ---- common functions -------------------------------------------------------------------------------- */
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+static const char *const log_categories[] = {"logStatusWarning", "logStatusDiscard", "logStatusError",
+                                             "logStatusFatal", "logAll"};
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[])
+{
+    ENTER("fmi2SetDebugLogging");
+    if (nCategories > 0 && categories == NULL) return refuse(self, fn, "categories is NULL");
+    for (size_t i = 0; i < nCategories; i++) {
+        int known = 0;
+        for (size_t k = 0; k < sizeof log_categories / sizeof log_categories[0]; k++)
+            known |= categories[i] != NULL && strcmp(categories[i], log_categories[k]) == 0;
+        if (!known)
+            return refuse(self, fn, "unknown log category \"%s\" (known: logStatusWarning, logStatusDiscard, "
+                          "logStatusError, logStatusFatal, logAll)", categories[i] ? categories[i] : "(null)");
+    }
+    self->logging_on = loggingOn != fmi2False;  /* pythonfmu keeps logging everything to relay() */
+    return fmi2OK;
+}
+
+static char *copy_of(const char *text)
+{
+    char *copy = malloc(strlen(text) + 1);
+    if (copy) strcpy(copy, text);
+    return copy;
+}
+
+static front *take_parked(const char *resources)
+{
+    pthread_mutex_lock(&registry_lock);
+    front **link = &parked;
+    while (*link && strcmp((*link)->resources, resources) != 0) link = &(*link)->next_parked;
+    front *self = *link;
+    if (self) *link = self->next_parked;
+    pthread_mutex_unlock(&registry_lock);
+    return self;
+}
+
+static void destroy(front *self)
+{
+    if (self->inner) inner.fmi2FreeInstance(self->inner);
+    free(self->resources);
+    free(self->name);
+    free(self);
+}
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                              fmi2Boolean visible, fmi2Boolean loggingOn)
+{
+    const char *fn = "fmi2Instantiate";
+    front probe;  /* for messages before an instance exists */
+    memset(&probe, 0, sizeof probe);
+    probe.name = (char *)(instanceName ? instanceName : "(unnamed instance)");
+    probe.logger = functions ? functions->logger : NULL;
+    probe.environment = functions ? functions->componentEnvironment : NULL;
+    probe.logging_on = loggingOn != fmi2False;
+    if (fmuType != fmi2CoSimulation) {
+        refuse(&probe, fn, "this is a Co-Simulation FMU only (fmuType %d requested)", (int)fmuType);
+        return NULL;
+    }
+    if (fmuGUID == NULL || strcmp(fmuGUID, FRONT_GUID) != 0) {
+        refuse(&probe, fn, "GUID \"%s\" is not this FMU's (%s): the modelDescription.xml and the binary come from "
+               "different builds", fmuGUID ? fmuGUID : "(null)", FRONT_GUID);
+        return NULL;
+    }
+    if (fmuResourceLocation == NULL) {
+        refuse(&probe, fn, "fmuResourceLocation is NULL (the slave's Python code is in the FMU's resources)");
+        return NULL;
+    }
+    pthread_once(&inner_once, load_inner);
+    if (inner.library == NULL) {
+        refuse(&probe, fn, "%s", inner.problem);
+        return NULL;
+    }
+    char *name = copy_of(probe.name);
+    front *self = name ? take_parked(fmuResourceLocation) : NULL;
+    if (self == NULL && name) {
+        self = calloc(1, sizeof *self);
+        char *resources = self ? copy_of(fmuResourceLocation) : NULL;
+        if (resources == NULL) {
+            free(self);
+            self = NULL;
+        } else {
+            const fmi2CallbackFunctions callbacks = {relay, functions ? functions->allocateMemory : NULL,
+                                                     functions ? functions->freeMemory : NULL, NULL, self};
+            memcpy(&self->callbacks, &callbacks, sizeof callbacks);
+            self->resources = resources;
+        }
+    }
+    if (self == NULL) {
+        free(name);
+        refuse(&probe, fn, "out of memory");
+        return NULL;
+    }
+    self->name = name;
+    self->logger = probe.logger;
+    self->environment = probe.environment;
+    self->logging_on = probe.logging_on;
+    self->worst = fmi2OK;
+    if (self->inner == NULL) {
+        /* pythonfmu logs through relay() with this instance: it must log everything, the front filters */
+        self->inner = inner.fmi2Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, &self->callbacks,
+                                            visible, fmi2True);
+        if (self->inner == NULL) {
+            if (self->worst < fmi2Error) refuse(self, fn, "pythonfmu could not instantiate the slave");
+            destroy(self);
+            return NULL;
+        }
+    }
+    self->magic = FRONT_MAGIC;
+    return self;
+}
+
+void fmi2FreeInstance(fmi2Component c)
+{
+    front *self = checked(c);
+    if (self == NULL) return;
+    self->magic = 0;
+    free(self->name);
+    self->name = copy_of("(parked)");
+    self->logger = NULL;  /* messages of the reset below (there should be none) go to stderr */
+    self->logging_on = 0;
+    /* a fresh slave (and pythonfmu's default experiment) for the next instance; one that cannot be reset is
+       freed instead */
+    fmi2Status status = inner.fmi2Reset(self->inner);
+    if (status <= fmi2Warning) status = inner.fmi2SetupExperiment(self->inner, fmi2False, 0.0, 0.0, fmi2False, 0.0);
+    if (status > fmi2Warning || self->worst > fmi2Warning || self->name == NULL) {
+        destroy(self);
+        return;
+    }
+    pthread_mutex_lock(&registry_lock);
+    self->next_parked = parked;
+    parked = self;
+    pthread_mutex_unlock(&registry_lock);
+}
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
+{
+    ENTER("fmi2SetupExperiment");
+    (void)fn;
+    return answer(self, inner.fmi2SetupExperiment(self->inner, toleranceDefined, tolerance, startTime,
+                                                  stopTimeDefined, stopTime));
+}
+
+#define FORWARD_NO_ARGUMENTS(function)                              \
+    fmi2Status function(fmi2Component c)                            \
+    {                                                               \
+        ENTER(#function);                                           \
+        (void)fn;                                                   \
+        return answer(self, inner.function(self->inner));           \
+    }
+
+FORWARD_NO_ARGUMENTS(fmi2EnterInitializationMode)
+FORWARD_NO_ARGUMENTS(fmi2ExitInitializationMode)
+FORWARD_NO_ARGUMENTS(fmi2Terminate)
+FORWARD_NO_ARGUMENTS(fmi2Reset)
+FORWARD_NO_ARGUMENTS(fmi2CancelStep)
+
+/* ---- values ------------------------------------------------------------------------------------------ */
+
+#define FORWARD_VALUES(function, type)                                                              \
+    fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, type value[])   \
+    {                                                                                               \
+        ENTER(#function);                                                                           \
+        if (!arrays_given(self, fn, nvr, vr, value)) return fmi2Error;                              \
+        return answer(self, inner.function(self->inner, vr, nvr, value));                           \
+    }
+
+FORWARD_VALUES(fmi2GetReal, fmi2Real)
+FORWARD_VALUES(fmi2GetInteger, fmi2Integer)
+FORWARD_VALUES(fmi2GetBoolean, fmi2Boolean)
+FORWARD_VALUES(fmi2GetString, fmi2String)
+FORWARD_VALUES(fmi2SetReal, const fmi2Real)
+FORWARD_VALUES(fmi2SetInteger, const fmi2Integer)
+FORWARD_VALUES(fmi2SetBoolean, const fmi2Boolean)
+FORWARD_VALUES(fmi2SetString, const fmi2String)
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
+                                        const fmi2ValueReference vKnown_ref[], size_t nKnown,
+                                        const fmi2Real dvKnown[], fmi2Real dvUnknown[])
+{
+    ENTER("fmi2GetDirectionalDerivative");
+    (void)fn;
+    return answer(self, inner.fmi2GetDirectionalDerivative(self->inner, vUnknown_ref, nUnknown, vKnown_ref, nKnown,
+                                                           dvKnown, dvUnknown));
+}
+
+#ifdef FRONT_DERIVATIVE_VR_BASE
+/* pythonfmu 0.7.0 has no path from fmi2SetRealInputDerivatives to the slave: a slave that takes input derivatives
+   receives them as fmi2SetReal of the value reference order * FRONT_DERIVATIVE_VR_BASE + vr, and answers (refuses
+   orders or variables it does not take) itself. Only what cannot be encoded is refused here. */
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[])
+{
+    ENTER("fmi2SetRealInputDerivatives");
+    if (!arrays_given(self, fn, nvr, vr, value)) return fmi2Error;
+    if (nvr == 0) return fmi2OK;
+    if (order == NULL) return refuse(self, fn, "order is NULL with nvr = %zu", nvr);
+    const unsigned long base = (unsigned long)(FRONT_DERIVATIVE_VR_BASE);
+    const long max_order = (long)(((unsigned long)UINT_MAX - base + 1) / base);
+    fmi2ValueReference few[64];
+    fmi2ValueReference *encoded = nvr <= 64 ? few : malloc(nvr * sizeof *encoded);
+    if (encoded == NULL) return refuse(self, fn, "out of memory for %zu value references", nvr);
+    fmi2Status status = fmi2OK;
+    for (size_t i = 0; i < nvr && status == fmi2OK; i++) {
+        if (order[i] < 1 || order[i] > max_order || vr[i] >= base)
+            status = refuse(self, fn, "derivative of order %d of value reference %u refused: orders are 1 to %ld, "
+                            "value references below %lu", (int)order[i], vr[i], max_order, base);
+        else
+            encoded[i] = (fmi2ValueReference)((unsigned long)order[i] * base + vr[i]);
+    }
+    if (status == fmi2OK) status = answer(self, inner.fmi2SetReal(self->inner, encoded, nvr, value));
+    if (encoded != few) free(encoded);
+    return status;
+}
+#else
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[])
+{
+    ENTER("fmi2SetRealInputDerivatives");
+    (void)fn;
+    return answer(self, inner.fmi2SetRealInputDerivatives(self->inner, vr, nvr, order, value));
+}
+#endif
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                        const fmi2Integer order[], fmi2Real value[])
+{
+    ENTER("fmi2GetRealOutputDerivatives");
+    (void)fn;
+    return answer(self, inner.fmi2GetRealOutputDerivatives(self->inner, vr, nvr, order, value));
+}
+
+/* ---- FMU states -------------------------------------------------------------------------------------- */
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
+{
+    ENTER("fmi2GetFMUstate");
+    if (FMUstate == NULL) return refuse(self, fn, "FMUstate is NULL");
+    if (*FMUstate != NULL && !live_state(self, fn, *FMUstate)) return fmi2Error;  /* else: one to overwrite */
+    fmi2FMUstate fresh = NULL;
+    const fmi2Status status = answer(self, inner.fmi2GetFMUstate(self->inner, &fresh));
+    if (status > fmi2Warning || fresh == NULL || !remember_state(fresh)) {
+        if (fresh) inner.fmi2FreeFMUstate(self->inner, &fresh);
+        return status > fmi2Warning ? status : refuse(self, fn, "no state was made (out of memory?)");
+    }
+    if (*FMUstate != NULL) {
+        forget_state(*FMUstate);
+        inner.fmi2FreeFMUstate(self->inner, FMUstate);
+    }
+    *FMUstate = fresh;
+    return status;
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
+{
+    ENTER("fmi2SetFMUstate");
+    if (!live_state(self, fn, FMUstate)) return fmi2Error;
+    return answer(self, inner.fmi2SetFMUstate(self->inner, FMUstate));
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
+{
+    ENTER("fmi2FreeFMUstate");
+    if (FMUstate == NULL) return refuse(self, fn, "FMUstate is NULL");
+    if (*FMUstate == NULL) return fmi2OK;
+    if (!live_state(self, fn, *FMUstate)) return fmi2Error;
+    forget_state(*FMUstate);
+    const fmi2Status status = answer(self, inner.fmi2FreeFMUstate(self->inner, FMUstate));
+    *FMUstate = NULL;
+    return status;
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
+{
+    ENTER("fmi2SerializedFMUstateSize");
+    if (size == NULL) return refuse(self, fn, "size is NULL");
+    if (!live_state(self, fn, FMUstate)) return fmi2Error;
+    return answer(self, inner.fmi2SerializedFMUstateSize(self->inner, FMUstate, size));
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size)
+{
+    ENTER("fmi2SerializeFMUstate");
+    if (!live_state(self, fn, FMUstate)) return fmi2Error;
+    if (serializedState == NULL) return refuse(self, fn, "serializedState is NULL");
+    size_t needed = 0;  /* pythonfmu copies the whole state whatever the buffer's size */
+    fmi2Status status = answer(self, inner.fmi2SerializedFMUstateSize(self->inner, FMUstate, &needed));
+    if (status > fmi2Warning) return status;
+    if (size < needed) return refuse(self, fn, "a buffer of %zu bytes for a state of %zu", size, needed);
+    return answer(self, inner.fmi2SerializeFMUstate(self->inner, FMUstate, serializedState, size));
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
+                                   fmi2FMUstate *FMUstate)
+{
+    ENTER("fmi2DeSerializeFMUstate");
+    if (FMUstate == NULL) return refuse(self, fn, "FMUstate is NULL");
+    if (serializedState == NULL && size > 0) return refuse(self, fn, "serializedState is NULL");
+    fmi2FMUstate fresh = NULL;
+    const fmi2Status status = answer(self, inner.fmi2DeSerializeFMUstate(self->inner, serializedState, size, &fresh));
+    if (status > fmi2Warning || fresh == NULL || !remember_state(fresh)) {
+        if (fresh) inner.fmi2FreeFMUstate(self->inner, &fresh);
+        return status > fmi2Warning ? status : refuse(self, fn, "no state was made (out of memory?)");
+    }
+    *FMUstate = fresh;
+    return status;
+}
+
+/* ---- co-simulation ----------------------------------------------------------------------------------- */
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
+                      fmi2Boolean noSetFMUStatePriorToCurrentPoint)
+{
+    ENTER("fmi2DoStep");
+    (void)fn;
+    return answer(self, inner.fmi2DoStep(self->inner, currentCommunicationPoint, communicationStepSize,
+                                         noSetFMUStatePriorToCurrentPoint));
+}
+
+#define FORWARD_STATUS(function, type)                                              \
+    fmi2Status function(fmi2Component c, const fmi2StatusKind s, type *value)       \
+    {                                                                               \
+        ENTER(#function);                                                           \
+        if (value == NULL) return refuse(self, fn, "value is NULL");                \
+        return answer(self, inner.function(self->inner, s, value));                 \
+    }
+
+FORWARD_STATUS(fmi2GetStatus, fmi2Status)
+FORWARD_STATUS(fmi2GetRealStatus, fmi2Real)
+FORWARD_STATUS(fmi2GetIntegerStatus, fmi2Integer)
+FORWARD_STATUS(fmi2GetBooleanStatus, fmi2Boolean)
+FORWARD_STATUS(fmi2GetStringStatus, fmi2String)
