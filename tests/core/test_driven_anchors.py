@@ -112,7 +112,8 @@ def _galilean_pair(kind: str):
 @pytest.mark.parametrize("kind", ["pendulum", "chain"])
 def test_pivot_at_constant_velocity_is_the_fixed_pivot_in_the_moving_frame(kind, method, backend):
     """X(t) - v t and U(t) - v of the moving scene equal the fixed-pivot run's X(t), U(t) (and the tensions are
-    the same) to round-off: ~1e-13 m after 75 steps, the position stage's 1e-14 tolerance included."""
+    the same) to round-off: up to 3e-14 m and 7e-13 m/s after 75 steps, the position stage's 1e-14 tolerance
+    included."""
     fixed, moving = _galilean_pair(kind)
     at_rest = ln.Simulator(fixed, method=method, backend=backend, **GALILEAN[method])
     carried = ln.Simulator(moving, method=method, backend=backend, **GALILEAN[method])
@@ -129,7 +130,7 @@ def test_pivot_at_constant_velocity_is_the_fixed_pivot_in_the_moving_frame(kind,
     assert carried.integrator.stats.steps == at_rest.integrator.stats.steps
     print(f"\nGalilean {kind} {method} {backend}: |dX| {errors[0]:.1e} m, |dU| {errors[1]:.1e} m/s, "
           f"|dT|/T {errors[2]:.1e}")
-    assert errors[0] < 1e-12 and errors[1] < 2e-11 and errors[2] < 5e-12, errors
+    assert errors[0] < 2e-13 and errors[1] < 5e-12 and errors[2] < 2e-12, errors
 
 
 # ---- Kapitza pendulum -------------------------------------------------------------------------------------------
