@@ -201,10 +201,11 @@ def rewrite_fmu(fmu: Path, model_description: bytes, link_python: bool) -> str |
     return linked
 
 
-def _pythonfmu_build(script: Path, dest: Path, project_files) -> Path:
+def _pythonfmu_build(script: Path, dest: Path, project_files, interpolate_inputs: bool = False) -> Path:
     from pythonfmu.builder import FmuBuilder
     return Path(FmuBuilder.build_FMU(script, dest=dest, project_files=project_files,
-                                     canGetAndSetFMUstate=True, canSerializeFMUstate=True))
+                                     canGetAndSetFMUstate=True, canSerializeFMUstate=True,
+                                     canInterpolateInputs=interpolate_inputs))
 
 
 # ---------------------------------------------------------------------------- scenes
@@ -277,7 +278,11 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
     cfg = dict(
         model_identifier=ident,
         description=(f"linknet network '{name}': {scene.K} point masses, {scene.L} rigid links. "
-                     "Inputs F[k,i] (N) are held constant over each communication step."),
+                     "Inputs F[k,i] (N) are held constant over each communication step."
+                     + (" Inputs P[k,i] (m), V[k,i] (m/s), A[k,i] (m/s2) move driven anchor k as P + V tau + A tau^2/2 "
+                        "over each communication step; Freact[k,i] is the force on each anchor, Jreact[k,i] the "
+                        "impulse on a driven anchor at the last step's start."
+                        if len(scene.input_driven_indices) else "")),
         integrator=integrator,
         integrators=integrators,
         step=float(step if step is not None else fmu_opts.get("step", 1e-3)),
@@ -310,7 +315,9 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
         shutil.copytree(FMU_SRC / "linknet_fmu", stage / "linknet_fmu", ignore=ignore)
         project = [stage / "linknet_fmu.json", stage / "linknet_scene.json",
                    stage / "linknet_core", stage / "linknet_fmu"]
-        built = _pythonfmu_build(FMU_SRC / "linknet_slave.py", stage / "out", project)
+        # an input-driven anchor's P takes derivatives (its V and A): fmi2SetRealInputDerivatives, via the front layer
+        built = _pythonfmu_build(FMU_SRC / "linknet_slave.py", stage / "out", project,
+                                 interpolate_inputs=bool(layout.anchor_inputs.size))
         shutil.move(str(built), out)
 
     with zipfile.ZipFile(out) as z:
@@ -325,7 +332,7 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
     md = postprocess_model_description(xml, declared, deps, initial, experiment, cfg["description"])
     linked = rewrite_fmu(out, md, link_python)
     if not quiet:
-        print(f"built {out} (model {ident}: {len(layout.F_vr) * 3} inputs, "
+        print(f"built {out} (model {ident}: {sum(v.causality == 'input' for v in layout.reals)} inputs, "
               f"{sum(v.causality == 'output' for v in layout.reals)} outputs"
               + (f"; binary linked to {linked}" if linked else "; binary NOT linked to libpython") + ")")
     return out

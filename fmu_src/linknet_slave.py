@@ -40,7 +40,7 @@ from pythonfmu import Fmi2Slave, Fmi2Causality, Fmi2Variability, Fmi2Initial, Re
 from pythonfmu.enums import Fmi2Status
 
 from linknet_fmu import thread_state
-from linknet_fmu.layout import Layout
+from linknet_fmu.layout import DERIVATIVE_VR_BASE, Layout
 from linknet_fmu.parameters import parameter_problem
 
 CONFIG_FILE = "linknet_fmu.json"
@@ -48,8 +48,10 @@ SCENE_FILE = "linknet_scene.json"
 # An FMU state names its format and the FMU it belongs to (a fingerprint of the scene, the exposed masses and the
 # model identifier): fmi2SetFMUstate refuses another FMU's state, and deserialization checks a header and a
 # checksum before unpickling anything. Raise the number when the state's content changes.
-STATE_FORMAT = "linknet-fmu-state-2"
+STATE_FORMAT = "linknet-fmu-state-3"
 STATE_MAGIC = b"LINKNET-FMU-STATE\0"
+# an input's declared type -> what a refused value of it is called
+INPUT_QUANTITY = {"Force": "force", "Position": "position", "Velocity": "velocity", "Acceleration": "acceleration"}
 
 
 def guarded(neutral):
@@ -119,6 +121,7 @@ class LinknetNetwork(Fmi2Slave):
         self._real = np.zeros(lay.n_real)
         self._input_vrs = self._input_idx = self._input_force_idx = None  # the last inputs set (set_real)
         self._read_vrs = self._read_idx = None  # the last list of variables read (get_real)
+        self._real[lay.P_vr] = np.asarray(self._scene0.X0)[lay.anchor_inputs]  # at rest at the scene's position
         self._real[lay.M_vr] = np.asarray(self._scene0.mass)[lay.free_indices]
         self._real[lay.R_vr] = self._scene0.length
         self._real[lay.g_vr] = self._scene0.gravity
@@ -165,15 +168,24 @@ class LinknetNetwork(Fmi2Slave):
             kwargs = dict(dt=float(self._real[self._layout.step_vr]))
         self._sim = ln.Simulator(scene, method=method, t0=self._t0, **kwargs)
         self._scene = scene
+        self._restored_impulse = None  # Jreact of a restored FMU state, until the next step (see _set_fmu_state)
         self._F = np.zeros((scene.K, 3))
         self._F_flat = self._F.reshape(-1)  # a view: set_real writes the inputs through it
         self._F[self._layout.input_masses] = self._real[self._layout.F_vr]
         self._outputs_stale = True
 
+    def _anchors(self):
+        """The motion of the anchors driven by inputs as the Simulator takes it, (P, V, A) each (n, 3) in scene
+        order (held as P + V tau + A tau^2/2 over the step), or None for a scene without them."""
+        lay = self._layout
+        if not lay.anchor_inputs.size:
+            return None
+        return self._real[lay.P_vr], self._real[lay.V_vr], self._real[lay.A_vr]
+
     def _refresh_outputs(self):
         lay = self._layout
         try:
-            out = self._sim.outputs(self._F)
+            out = self._sim.outputs(self._F, anchors=self._anchors())
             X, U, T = out["X"], out["U"], out["T"]
             Freact = np.asarray(out["Freact"])
             if Freact.shape[0] == self._scene.K:          # (K,3) form: keep the anchored rows
@@ -182,9 +194,13 @@ class LinknetNetwork(Fmi2Slave):
             self._real[lay.U_vr] = U[lay.output_masses]
             self._real[lay.T_vr] = T
             self._real[lay.Freact_vr] = Freact
+            if lay.driven_indices.size:
+                impulse = out["impulse"] if self._restored_impulse is None else self._restored_impulse
+                self._real[lay.Jreact_vr] = impulse
         except Exception as e:  # never let an exception reach pythonfmu (fmi2Fatal)
             self._real[lay.T_vr] = np.nan
             self._real[lay.Freact_vr] = np.nan
+            self._real[lay.Jreact_vr] = np.nan
             self._error(f"tensions cannot be computed at t={self._sim.state.t!r}: {e}")
         self._outputs_stale = False
 
@@ -239,17 +255,25 @@ class LinknetNetwork(Fmi2Slave):
                     idx = force_idx = None
                 else:
                     force_idx = lay.force_index[idx]
+                    if not lay.is_force_input[idx].all():  # P, V, A among them: only the forces go to _F
+                        force_idx = (np.flatnonzero(force_idx >= 0), force_idx[force_idx >= 0])
                     self._input_vrs, self._input_idx, self._input_force_idx = list(vrs), idx, force_idx
             if idx is not None:
                 vals = np.asarray(values, dtype=float)
                 # finite (and below ~1e154, else the per-variable path below takes it) in one dot product
                 if vals.shape == idx.shape and math.isfinite(float(vals.dot(vals))):
                     self._real[idx] = vals
-                    self._F_flat[force_idx] = vals
+                    if isinstance(force_idx, tuple):
+                        self._F_flat[force_idx[1]] = vals[force_idx[0]]
+                    else:
+                        self._F_flat[force_idx] = vals
                     self._outputs_stale = True
                     return
         changed_parameter = False
         for vr, value in zip(vrs, values):
+            if vr >= DERIVATIVE_VR_BASE:  # fmi2SetRealInputDerivatives, through the binary's front layer
+                self.set_real_input_derivatives([vr % DERIVATIVE_VR_BASE], [vr // DERIVATIVE_VR_BASE], [value])
+                continue
             if not 0 <= vr < lay.n_real:
                 what = "the String parameter integrator" if vr == lay.integrator_vr else "unknown"
                 self._error(f"setReal: value reference {vr} is {what} (no Real variable); value {value!r} ignored")
@@ -259,8 +283,9 @@ class LinknetNetwork(Fmi2Slave):
                 self._error(f"{var.name} is an output and cannot be set; value {value!r} ignored")
                 continue
             if var.causality == "input":
-                if not math.isfinite(value):
-                    self._bad[var.name] = f"= {value!r} is not a finite force"
+                if not (isinstance(value, (int, float)) and math.isfinite(value)):
+                    what = INPUT_QUANTITY[var.declared_type]
+                    self._bad[var.name] = f"= {value!r} is not a finite {what}"
                     self._error(f"{var.name} {self._bad[var.name]}; the next doStep is refused (fmi2Discard)")
                     continue
                 self._bad.pop(var.name, None)
@@ -285,6 +310,36 @@ class LinknetNetwork(Fmi2Slave):
         self._outputs_stale = True
         if changed_parameter:
             self._parameters_dirty = True
+
+    @guarded(_none)
+    def set_real_input_derivatives(self, vrs, orders, values):
+        """fmi2SetRealInputDerivatives. An anchor's position input P[k,i] takes derivatives of order 1 (they set
+        V[k,i]) and 2 (A[k,i]): its motion over the step is the quadratic P + V tau + A tau^2/2. Every other input
+        is held constant over the step: a derivative of it is ignored with a warning, so that a master that sends
+        derivatives of all its inputs keeps working. Orders other than 1 and 2, outputs, parameters and unknown
+        value references are refused with an error naming them."""
+        lay = self._layout
+        for vr, order, value in zip(vrs, orders, values):
+            if not 0 <= vr < lay.n_real:
+                self._error(f"setRealInputDerivatives: value reference {vr} is not a Real variable of this FMU; "
+                            f"derivative of order {order} ({value!r}) ignored")
+                continue
+            var = lay.reals[vr]
+            if var.causality != "input":
+                what = "an output" if var.causality == "output" else "a parameter"
+                self._error(f"setRealInputDerivatives: {var.name} is {what}, not an input: derivative of order "
+                            f"{order} ({value!r}) ignored")
+                continue
+            if order not in (1, 2):
+                self._error(f"setRealInputDerivatives: derivative of order {order} of {var.name} refused: "
+                            "inputs take derivatives of order 1 and 2 only")
+                continue
+            target = int(lay.derivative_target[vr, order])
+            if target < 0:
+                self._error(f"setRealInputDerivatives: {var.name} is held constant over a communication step; its "
+                            f"derivative of order {order} ({value!r}) is ignored", Fmi2Status.warning)
+                continue
+            self.set_real([target], [value])
 
     def _set_integrator(self, value):
         if self._initialized:
@@ -424,10 +479,11 @@ class LinknetNetwork(Fmi2Slave):
         try:
             # Simulator.advance leaves the state at t when it raises (the step can be retried
             # after fmi2SetFMUstate or with other inputs) and guarantees a finite state when it returns
-            self._sim.advance(t + h, self._F)
+            self._sim.advance(t + h, self._F, anchors=self._anchors())
         except ln.LinknetError as e:
             self._error(f"doStep from t={t!r} with h={h!r} failed: {e}", Fmi2Status.discard)
             return False
+        self._restored_impulse = None
         self._outputs_stale = True
         return True
 
@@ -447,6 +503,9 @@ class LinknetNetwork(Fmi2Slave):
             "bad": dict(self._bad),
             "broken": self._broken,
             "initialized": self._initialized,
+            # Jreact: the driven anchors' impulse of the last step, which the Simulator's snapshot does not carry
+            "impulse": (self._sim.anchor_report()["impulse"] if self._restored_impulse is None
+                        else self._restored_impulse).copy() if self._layout.driven_indices.size else None,
         }
 
     def _state_problem(self, state):
@@ -482,6 +541,7 @@ class LinknetNetwork(Fmi2Slave):
                 self._make_simulator(state["scene"])
             self._F[lay.input_masses] = self._real[lay.F_vr]
             self._sim.set_state(copy.deepcopy(state["sim"]))
+            self._restored_impulse = None if state.get("impulse") is None else state["impulse"].copy()
             self._bad = dict(state["bad"])
             self._broken = state["broken"]
             self._initialized = state["initialized"]

@@ -3,7 +3,9 @@
 One `Layout` per FMU instance (never module-global: several scenes' FMUs share one
 interpreter and one sys.modules). Real variables get value references 0..n_real-1 in the
 order of `self.reals`; the one String parameter (`integrator`) comes last.
-Names are Modelica-style, 1-based: F[k,i], X[k,i], U[k,i], T[l], Freact[k,i], M[k], R[l], g[i].
+Names are Modelica-style, 1-based: F[k,i], P[k,i], V[k,i], A[k,i], X[k,i], U[k,i], T[l], Freact[k,i],
+Jreact[k,i], M[k], R[l], g[i]. P, V, A (the motion of an anchor driven by inputs) and Jreact (the impulse on a
+driven anchor) exist only for scenes with driven anchors, so a scene without them keeps its value references.
 """
 from __future__ import annotations
 
@@ -12,6 +14,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 AXES = ("x", "y", "z")
+
+# fmi2SetRealInputDerivatives reaches the pythonfmu slave as fmi2SetReal of the value reference
+# order * DERIVATIVE_VR_BASE + vr (pythonfmu's own binary has no path for it): the front layer of the binary
+# encodes, linknet_slave.py decodes and answers. Far above any FMU's value references.
+DERIVATIVE_VR_BASE = 1 << 28
 
 # declaredType -> (quantity, unit); written into TypeDefinitions by build_fmu.py
 TYPES = {
@@ -25,6 +32,7 @@ TYPES = {
     "Tolerance": ("Tolerance", "1"),
     "Stiffness": ("TranslationalSpringConstant", "N/m"),
     "Damping": ("TranslationalDampingConstant", "N.s/m"),
+    "Impulse": ("Impulse", "N.s"),
 }
 
 # unit -> SI base-unit exponents (UnitDefinitions)
@@ -38,6 +46,7 @@ UNITS = {
     "1": dict(),
     "N/m": dict(kg=1, s=-2),
     "N.s/m": dict(kg=1, s=-1),
+    "N.s": dict(kg=1, m=1, s=-1),
 }
 
 
@@ -58,6 +67,8 @@ class Layout:
 
     input_masses / output_masses: 0-based mass indices whose force input / position and
     velocity outputs are exposed (a scene may expose only some: "skip what a scene doesn't need").
+    driven_indices: the driven anchors (a subset of fixed_indices), scene order; anchor_inputs: those driven by
+    inputs (motion kind "input"), whose P, V, A are inputs, always all of them (they have no other motion).
     """
     K: int
     L: int
@@ -68,6 +79,8 @@ class Layout:
     k2: np.ndarray
     input_masses: np.ndarray
     output_masses: np.ndarray
+    driven_indices: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    anchor_inputs: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     reals: list = field(default_factory=list)
 
     @classmethod
@@ -85,7 +98,9 @@ class Layout:
         lay = cls(K=int(scene.K), L=int(scene.L), mass_names=list(scene.mass_names),
                   fixed_indices=fixed, free_indices=free,
                   k1=np.asarray(scene.k1, dtype=int), k2=np.asarray(scene.k2, dtype=int),
-                  input_masses=inp, output_masses=out)
+                  input_masses=inp, output_masses=out,
+                  driven_indices=np.asarray(scene.driven_indices, dtype=int),
+                  anchor_inputs=np.asarray(scene.input_driven_indices, dtype=int))
         lay._build()
         return lay
 
@@ -104,6 +119,15 @@ class Layout:
         self.F_vr = np.array([[self._add(f"F[{k + 1},{i + 1}]", "input", "continuous", None, "Force",
                                          f"external force on {self._mass_label(k)}, {AXES[i]} component, {held}")
                                for i in range(3)] for k in self.input_masses], dtype=int).reshape(-1, 3)
+        quadratic = ("the anchor moves as P + V tau + A tau^2/2 over each communication step (tau from its start); "
+                     "fmi2SetRealInputDerivatives of P[k,i] sets V[k,i] (order 1) and A[k,i] (order 2)")
+        self.P_vr, self.V_vr, self.A_vr = (
+            np.array([[self._add(f"{name}[{k + 1},{i + 1}]", "input", "continuous", None, dtype,
+                                 f"{what} of driven anchor {self._mass_label(k)}, {AXES[i]}, at the start of the "
+                                 f"communication step; {quadratic}")
+                       for i in range(3)] for k in self.anchor_inputs], dtype=int).reshape(-1, 3)
+            for name, dtype, what in (("P", "Position", "position"), ("V", "Velocity", "velocity"),
+                                      ("A", "Acceleration", "acceleration")))
         self.X_vr = np.array([[self._add(f"X[{k + 1},{i + 1}]", "output", "continuous", "calculated", "Position",
                                          f"position of {self._mass_label(k)}, {AXES[i]}")
                                for i in range(3)] for k in self.output_masses], dtype=int).reshape(-1, 3)
@@ -112,12 +136,20 @@ class Layout:
                                for i in range(3)] for k in self.output_masses], dtype=int).reshape(-1, 3)
         self.T_vr = np.array([self._add(f"T[{l + 1}]", "output", "continuous", "calculated", "Force",
                                         f"tension in link {l + 1} (masses {self.k1[l] + 1}-{self.k2[l] + 1}); "
-                                        "> 0 pulls the masses together; depends directly on the force inputs")
+                                        "> 0 pulls the masses together; depends directly on the inputs of its "
+                                        "group of links")
                               for l in range(self.L)], dtype=int)
+        anchor = {int(k): "driven anchor" for k in self.driven_indices}
         self.Freact_vr = np.array([[self._add(f"Freact[{k + 1},{i + 1}]", "output", "continuous", "calculated",
-                                              "Force", f"force the network exerts on anchored {self._mass_label(k)}, "
-                                              f"{AXES[i]}")
+                                              "Force", f"force the network exerts on {anchor.get(int(k), 'anchored')} "
+                                              f"{self._mass_label(k)}, {AXES[i]}")
                                     for i in range(3)] for k in self.fixed_indices], dtype=int).reshape(-1, 3)
+        self.Jreact_vr = np.array([[self._add(f"Jreact[{k + 1},{i + 1}]", "output", "continuous", "calculated",
+                                              "Impulse", f"impulse the network gave driven anchor "
+                                              f"{self._mass_label(k)}, {AXES[i]}, at the start of the last "
+                                              "communication step (a jump of its velocity input: the links take "
+                                              "it at once, as in an inelastic collision); 0 if none")
+                                    for i in range(3)] for k in self.driven_indices], dtype=int).reshape(-1, 3)
         self.M_vr = np.array([self._add(f"M[{k + 1}]", "parameter", "fixed", "exact", "Mass",
                                         f"mass of {self._mass_label(k)} (> 0)")
                               for k in self.free_indices], dtype=int)
@@ -136,6 +168,13 @@ class Layout:
         for v in self.reals:
             kinds[v.vr] = v.causality
         self.is_input = kinds == "input"
+        self.is_force_input = np.zeros(self.n_real, dtype=bool)
+        self.is_force_input[self.F_vr.reshape(-1)] = True
+        # fmi2SetRealInputDerivatives: derivative_target[vr, order] is the input that order of vr's derivative
+        # sets (P -> V for order 1, P -> A for order 2), -1 where there is none
+        self.derivative_target = np.full((self.n_real, 3), -1, dtype=np.int64)
+        self.derivative_target[self.P_vr.reshape(-1), 1] = self.V_vr.reshape(-1)
+        self.derivative_target[self.P_vr.reshape(-1), 2] = self.A_vr.reshape(-1)
         # value reference of an input -> its entry in the simulator's (K,3) force array, flattened (-1: none)
         self.force_index = np.full(self.n_real, -1, dtype=np.int64)
         self.force_index[self.F_vr.reshape(-1)] = (3 * np.asarray(self.input_masses, dtype=np.int64)[:, None]
@@ -171,13 +210,19 @@ class Layout:
     def dependencies(self, inv_mass) -> dict:
         """name -> list of names of the inputs it depends on at a communication point.
 
-        X and U are integrated states: no direct feedthrough. T (via B (26)) and Freact (= the
-        link forces on the anchored masses) depend on the force inputs on the free masses of
-        their coupled group of links.
+        X and U are integrated states: no direct feedthrough (the rows of a driven anchor are where its held
+        motion took it at the end of the step). T (via B (26)) and Freact (= the link forces on the anchored
+        masses) depend on the inputs of their coupled group of links: the forces on its free masses, and the
+        position, velocity and acceleration of its anchors driven by inputs (a driven anchor's P sets the link
+        directions E, its V the relative velocities in |U_k2 - U_k1|^2 / R and its A the term E.(a_k2 - a_k1)
+        of B (26)). Jreact is the impulse of the step that ended: no direct feedthrough.
         """
         comp = self.link_components(inv_mass)
         inputs_of_mass = {int(k): [self.reals[vr].name for vr in row]
                           for k, row in zip(self.input_masses, self.F_vr)}
+        for j, k in enumerate(self.anchor_inputs):
+            inputs_of_mass[int(k)] = [self.reals[vr].name for vrs in (self.P_vr, self.V_vr, self.A_vr)
+                                      for vr in vrs[j]]
         inputs_of_comp = {}
         for l in range(self.L):
             names = inputs_of_comp.setdefault(comp[l], [])
@@ -186,7 +231,7 @@ class Layout:
                     if n not in names:
                         names.append(n)
         deps = {}
-        for row in np.concatenate([self.X_vr.ravel(), self.U_vr.ravel()]):
+        for row in np.concatenate([self.X_vr.ravel(), self.U_vr.ravel(), self.Jreact_vr.ravel()]):
             deps[self.reals[row].name] = []
         for l in range(self.L):
             deps[self.reals[self.T_vr[l]].name] = inputs_of_comp[comp[l]]
