@@ -41,7 +41,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 GLUE_FILES = ("fmi2Functions.c", "linknet_model.c", "fmi2_api.h", "fmu_model.h", "lnfmu_scene.h")
 SCENE_FILE = "linknet_scene.c"
-STATE_FORMAT = 1  # keep equal to STATE_FORMAT in fmi2Functions.c (a part of the fingerprint)
+STATE_FORMAT = 2  # keep equal to STATE_FORMAT in fmi2Functions.c (a part of the fingerprint)
 # as setup.py compiles the core for the library: the same code generation, so the same results
 CFLAGS = ["-std=c99", "-O3", "-fno-math-errno", "-ffp-contract=off"]
 WARNINGS = ["-Wall", "-Wextra"]
@@ -213,6 +213,7 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
     import linknet_core as ln
     from linknet_core.native.ldl import package_library
     import linknet_core.native.model as native_model
+    from linknet_core.scene.motion import PIECE_COLUMNS, SINE_COLUMNS
 
     sims = _simulators(scene, cfg)
     sim = sims[cfg["integrator"]]
@@ -224,11 +225,16 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
     model = integ.model.struct
     K, L = int(model.K), int(model.L)
     n_pairs, n_el, n_fixed, n_free = int(model.n_pairs), int(model.n_elements), int(model.n_fixed), int(model.n_free)
+    n_driven = int(model.n_driven)
+    pieces = _pointer_values(model.motion_pieces, n_driven + 1, ctypes.c_int64) if n_driven else None
     P = force_parameters(src)
     model_lengths = {"k1": L, "k2": L, "R": L, "inv_R": L, "inv_m": K, "free_idx": n_free, "fixed_idx": n_fixed,
                      "is_fixed": K, "F_scene": 3 * K, "element_kind": n_el, "element_mass": 2 * n_el,
                      "element_param": P * n_el, "pair_first": n_pairs, "pair_second": n_pairs,
-                     "pair_weight": n_pairs, "chain_order": L, "chain_diag_weight": L, "chain_off_weight": L}
+                     "pair_weight": n_pairs, "chain_order": L, "chain_diag_weight": L, "chain_off_weight": L,
+                     "driven_idx": n_driven, "motion_kind": n_driven, "motion_pieces": n_driven + 1,
+                     "piece": PIECE_COLUMNS * int(pieces[-1]) if n_driven else 0, "sine": SINE_COLUMNS * n_driven,
+                     "accel_weight": K}
     w = CWriter()
     model_init = struct_initializer(w, model, model_lengths, {"ldl", "rigid"}, "model")
 
@@ -267,11 +273,12 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
         s = sims[name]
         mstruct = s.integrator.method.struct
         ns = int(mstruct.n_stages)
-        init = struct_initializer(w, mstruct, {"gammas": int(mstruct.n_gammas), "AB": (ns + 1) * ns, "E1": ns + 1,
-                                               "E2": ns + 1}, set(), f"method_{name}")
+        init = struct_initializer(w, mstruct, {"gammas": int(mstruct.n_gammas), "AB": (ns + 1) * ns, "C": ns,
+                                               "E1": ns + 1, "E2": ns + 1}, set(), f"method_{name}")
         adaptive = int(bool(ln.METHODS[name].adaptive))
         methods.append(f"{{{c_string(name)}, {adaptive}, {init}}}")
-    kinds = {"F": 0, "X": 1, "U": 2, "T": 3, "Freact": 4, "M": 5, "R": 6, "g": 7}
+    kinds = {"F": 0, "X": 1, "U": 2, "T": 3, "Freact": 4, "M": 5, "R": 6, "g": 7, "P": 10, "V": 11, "A": 12,
+             "Jreact": 13}  # enum lnfmu_kind
     var_rows = {}
     fixed_idx = _pointer_values(model.fixed_idx, n_fixed, ctypes.c_int64)
     fixed_row = {int(k): j for j, k in enumerate([] if fixed_idx is None else fixed_idx)}
@@ -283,6 +290,15 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
     for row, k in zip(layout.Freact_vr, layout.fixed_indices):
         for i, vr in enumerate(row):
             var_rows[int(vr)] = (kinds["Freact"], 3 * fixed_row[int(k)] + i)
+    # P, V, A, Jreact of a driven anchor: its row in the model's driven_idx (the data's drive_P, ..., impulse)
+    driven_idx = _pointer_values(model.driven_idx, n_driven, ctypes.c_int64)
+    driven_row = {int(k): j for j, k in enumerate([] if driven_idx is None else driven_idx)}
+    for kind_name, vrs, masses in (("P", layout.P_vr, layout.anchor_inputs), ("V", layout.V_vr, layout.anchor_inputs),
+                                   ("A", layout.A_vr, layout.anchor_inputs),
+                                   ("Jreact", layout.Jreact_vr, layout.driven_indices)):
+        for row, k in zip(vrs, masses):
+            for i, vr in enumerate(row):
+                var_rows[int(vr)] = (kinds[kind_name], 3 * driven_row[int(k)] + i)
     for l, vr in enumerate(layout.T_vr):
         var_rows[int(vr)] = (kinds["T"], l)
     for vr, k in zip(layout.M_vr, layout.free_indices):
@@ -390,7 +406,9 @@ def raw_model_description(cfg, layout, guid: str, sources: list[str], start_valu
         variableNamingConvention="structured", description=cfg["description"], version=str(cfg.get("version", "1"))))
     cs = ET.SubElement(root, "CoSimulation", dict(
         modelIdentifier=cfg["model_identifier"], needsExecutionTool="false",
-        canHandleVariableCommunicationStepSize="true", canInterpolateInputs="false", maxOutputDerivativeOrder="0",
+        canHandleVariableCommunicationStepSize="true",
+        # inputs an anchor's position takes derivatives of (fmi2SetRealInputDerivatives: its V and A)
+        canInterpolateInputs="true" if layout.anchor_inputs.size else "false", maxOutputDerivativeOrder="0",
         canRunAsynchronuously="false", canBeInstantiatedOnlyOncePerProcess="false",
         canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="true", canSerializeFMUstate="true",
         providesDirectionalDerivative="false"))
@@ -422,8 +440,11 @@ def raw_model_description(cfg, layout, guid: str, sources: list[str], start_valu
 
 def start_values(scene, cfg, layout) -> dict:
     out = {}
-    for vr in layout.F_vr.ravel():
+    for vr in np.concatenate([layout.F_vr.ravel(), layout.V_vr.ravel(), layout.A_vr.ravel()]):
         out[int(vr)] = 0.0
+    for row, k in zip(layout.P_vr, layout.anchor_inputs):  # the anchor starts at rest at its scene position
+        for i, vr in enumerate(row):
+            out[int(vr)] = float(scene.X0[k, i])
     for vr, k in zip(layout.M_vr, layout.free_indices):
         out[int(vr)] = float(scene.mass[k])
     for l, vr in enumerate(layout.R_vr):
@@ -594,7 +615,7 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
             raise NativeBuildError(f"cannot write {out}: {e.strerror or e}") from None
     if not quiet:
         size = out.stat().st_size
-        print(f"built {out} (native model {ident}: {len(layout.F_vr) * 3} inputs, "
+        print(f"built {out} (native model {ident}: {sum(v.causality == 'input' for v in layout.reals)} inputs, "
               f"{sum(v.causality == 'output' for v in layout.reals)} outputs; {facts['specialisation']} "
               f"specialisation; {size / 1024:.0f} KiB; no Python needed by hosts)")
     return out

@@ -351,7 +351,7 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 
 /* ---- FMU states ---------------------------------------------------------------------------------- */
 
-#define STATE_FORMAT 1u
+#define STATE_FORMAT 2u
 #define STATE_BYTE_ORDER 0x01020304u
 static const char state_magic[8] = {'L', 'N', 'K', 'F', 'M', 'U', 'S', 'T'};
 
@@ -518,10 +518,12 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[])
 {
-    (void)vr, (void)order, (void)value;
     ENTER("fmi2SetRealInputDerivatives");
-    if (nvr == 0) return fmi2OK;
-    return refuse(self, fn, "inputs are held constant over a step (canInterpolateInputs is false)");
+    if (!mode_allows(self, fn, IN(MODE_INITIALIZATION) | IN(MODE_STEPPING))) return fmi2Error;
+    if (nvr > 0 && order == NULL) return refuse(self, fn, "order is NULL with nvr = %zu", nvr);
+    if (!vr_arguments(self, fn, vr, nvr, value)) return fmi2Error;
+    return report(self, fn, fmu_model_set_real_input_derivatives(self->model, vr, nvr, order, value,
+                                                                 self->mode >= MODE_STEPPING, self->msg));
 }
 
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,

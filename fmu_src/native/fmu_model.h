@@ -47,6 +47,11 @@ int fmu_model_set_start_time(fmu_model *m, double start_time, char *msg);
 /* `initialized`: initialization has ended (parameters are fixed from then on). */
 int fmu_model_get_real(fmu_model *m, const unsigned *vr, size_t n, double *value, int initialized, char *msg);
 int fmu_model_set_real(fmu_model *m, const unsigned *vr, size_t n, const double *value, int initialized, char *msg);
+/* fmi2SetRealInputDerivatives: derivative of order order[i] of input vr[i]. Inputs the model holds constant over
+   a step take them with FMU_WARNING (ignored, said in msg); a refused one (an order the model does not take, not
+   an input, a non-finite value) is FMU_ERROR and nothing is set. */
+int fmu_model_set_real_input_derivatives(fmu_model *m, const unsigned *vr, size_t n, const int *order,
+                                         const double *value, int initialized, char *msg);
 int fmu_model_get_string(fmu_model *m, const unsigned *vr, size_t n, const char **value, char *msg);
 int fmu_model_set_string(fmu_model *m, const unsigned *vr, size_t n, const char *const *value, int initialized,
                          char *msg);

@@ -55,7 +55,7 @@ struct fmu_model {
     ln_int n_bodies;
 
     /* a model built from changed parameters points into these */
-    double *inv_m, *R, *inv_R, *F_scene, *pair_weight, *chain_diag, *chain_off;
+    double *inv_m, *R, *inv_R, *F_scene, *pair_weight, *chain_diag, *chain_off, *accel_weight;
     double *r, *inertia, *body_mass;
     ln_int *top;
     double *mass_full, *gravity;        /* (K), (3) the parameters being applied */
@@ -89,7 +89,34 @@ static const lnfmu_variable *variable(const lnfmu_scene *s, unsigned vr) { retur
 
 /* ---- parameters ---------------------------------------------------------------------------------- */
 
-static int is_parameter(int kind) { return kind >= LNFMU_M; }
+static int is_parameter(int kind) { return kind >= LNFMU_M && kind <= LNFMU_STEP; }
+
+static int is_anchor_input(int kind) { return kind == LNFMU_P || kind == LNFMU_V || kind == LNFMU_A; }
+
+static int is_input(int kind) { return kind == LNFMU_F || is_anchor_input(kind); }
+
+/* The data's row of an anchor input: the held motion P + V s + A s^2/2 of the input-driven anchors. */
+static double *anchor_input(const fmu_model *m, int kind)
+{
+    return kind == LNFMU_P ? m->d->drive_P : kind == LNFMU_V ? m->d->drive_V : m->d->drive_A;
+}
+
+static const char *input_quantity(int kind)
+{
+    return kind == LNFMU_P ? "position" : kind == LNFMU_V ? "velocity" : kind == LNFMU_A ? "acceleration" : "force";
+}
+
+/* The inputs as set (m->value) into the data: forces onto F_input, anchor motions onto the held drive. */
+static void load_inputs(fmu_model *m)
+{
+    const lnfmu_scene *s = m->s;
+    if (s->K) memset(m->d->F_input, 0, (size_t)(3 * s->K) * sizeof(double));
+    for (ln_int vr = 0; vr < s->n_real; vr++) {
+        const lnfmu_variable *v = &s->variables[vr];
+        if (v->kind == LNFMU_F) m->d->F_input[v->index] = m->value[vr];
+        else if (is_anchor_input(v->kind)) anchor_input(m, v->kind)[v->index] = m->value[vr];
+    }
+}
 
 /* Why value is out of range for a parameter of this kind, or NULL (linknet_core's rules, baked). */
 static const char *parameter_rule(const lnfmu_scene *s, int kind, double value, char *why, size_t n)
@@ -426,6 +453,10 @@ static int build(fmu_model *m, const double *values, ln_int integrator, char *ms
     for (ln_int l = 0; l < L; l++) m->inv_R[l] = 1.0 / R[l];
     for (ln_int p = 0; p < base->n_pairs; p++) m->pair_weight[p] = s->pair_sign[p] * m->inv_m[s->pair_mass[p]];
     m->model.inv_m = m->inv_m;
+    /* a_k of B (26) is accel_weight[k] times the base force: 1/M_k, and 1 on a driven anchor (its acceleration) */
+    for (ln_int k = 0; k < K; k++) m->accel_weight[k] = m->inv_m[k];
+    for (ln_int j = 0; j < base->n_driven; j++) m->accel_weight[base->driven_idx[j]] = 1.0;
+    m->model.accel_weight = m->accel_weight;
     m->model.R = R;
     m->model.inv_R = m->inv_R;
     m->model.F_scene = m->F_scene;
@@ -484,6 +515,10 @@ static int set_initial_state(fmu_model *m, char *msg)
         memcpy(d->U, m->U_init, n3 * sizeof(double));
     }
     d->t = m->start_time;
+    d->drive_t0 = d->drive_hold_t = m->start_time;  /* scene motions run in t - t0; the hold starts now */
+    if (s->model->n_driven) memset(d->impulse, 0, (size_t)(3 * s->model->n_driven) * sizeof(double));
+    d->jump_position = d->jump_velocity = 0.0;
+    d->jumps = 0;
     d->h_next = s->h_next_init;
     d->planar = s->planar_init && m->model.planar;
     d->steps = d->rejected = d->n_rhs = 0;
@@ -529,13 +564,14 @@ static void start_values(fmu_model *m)
         case LNFMU_G: x = s->gravity[v->index]; break;
         case LNFMU_TOLERANCE: x = s->default_tolerance; break;
         case LNFMU_STEP: x = s->default_step; break;
+        case LNFMU_P: x = s->X0[3 * s->model->driven_idx[v->index / 3] + v->index % 3]; break;  /* at rest */
         default: break;
         }
         m->value[vr] = x;
     }
     m->integrator = s->default_method;
     m->start_time = 0.0;
-    if (m->d && s->K) memset(m->d->F_input, 0, (size_t)(3 * s->K) * sizeof(double));
+    if (m->d) load_inputs(m);
 }
 
 /* ---- life cycle ---------------------------------------------------------------------------------- */
@@ -545,9 +581,9 @@ void fmu_model_free(fmu_model *m)
     if (!m) return;
     ln_data_free(m->d);
     ln_ldl_symbolic_free(m->ldl);
-    double *arrays[] = {m->value, m->applied, m->inv_m, m->R, m->inv_R, m->F_scene, m->pair_weight, m->chain_diag,
-                        m->chain_off, m->r, m->inertia, m->body_mass, m->mass_full, m->gravity, m->X_init,
-                        m->U_init, m->Y_init, m->Xo, m->Uo, m->E, m->Ys};
+    double *arrays[] = {m->value, m->applied, m->inv_m, m->accel_weight, m->R, m->inv_R, m->F_scene, m->pair_weight,
+                        m->chain_diag, m->chain_off, m->r, m->inertia, m->body_mass, m->mass_full, m->gravity,
+                        m->X_init, m->U_init, m->Y_init, m->Xo, m->Uo, m->E, m->Ys};
     for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
     free(m->top);
     free(m->position);
@@ -571,6 +607,7 @@ fmu_model *fmu_model_new(char *msg)
     m->value = doubles(s->n_real);
     m->applied = doubles(s->n_real);
     m->inv_m = doubles(K);
+    m->accel_weight = doubles(K);
     m->R = doubles(L);
     m->inv_R = doubles(L);
     m->F_scene = doubles(3 * K);
@@ -591,8 +628,8 @@ fmu_model *fmu_model_new(char *msg)
     m->E = doubles(3 * L);
     m->Ys = doubles(LN_RIGID_STATE * B);
     m->position = calloc((size_t)(L > 0 ? L : 1), sizeof(ln_int));
-    if (!(m->value && m->applied && m->inv_m && m->R && m->inv_R && m->F_scene && m->pair_weight && m->chain_diag
-          && m->chain_off && m->r && m->inertia && m->body_mass && m->top && m->mass_full && m->gravity
+    if (!(m->value && m->applied && m->inv_m && m->accel_weight && m->R && m->inv_R && m->F_scene && m->pair_weight
+          && m->chain_diag && m->chain_off && m->r && m->inertia && m->body_mass && m->top && m->mass_full && m->gravity
           && m->X_init && m->U_init && m->Y_init && m->Xo && m->Uo && m->E && m->Ys && m->position)) {
         fmu_model_free(m);
         fail(msg, FMU_ERROR, "out of memory");
@@ -645,6 +682,7 @@ int fmu_model_set_start_time(fmu_model *m, double start_time, char *msg)
     (void)msg;
     m->start_time = start_time;
     m->d->t = start_time;  /* the scene's initial state, at t0 */
+    m->d->drive_t0 = m->d->drive_hold_t = start_time;
     m->outputs_stale = 1;
     return FMU_OK;
 }
@@ -668,6 +706,7 @@ static int evaluate_outputs(fmu_model *m, char *msg)
         memcpy(m->Xo, m->d->X, n3 * sizeof(double));
         memcpy(m->Uo, m->d->U, n3 * sizeof(double));
     }
+    m->d->drive_hold_t = m->d->t;  /* the inputs as set hold from the current communication point */
     const int status = ln_evaluate(&m->model, m->d, m->Xo, m->Uo);
     if (status != LN_OK) {
         for (ln_int l = 0; l < s->L; l++) m->d->T[l] = NAN;
@@ -699,6 +738,7 @@ int fmu_model_get_real(fmu_model *m, const unsigned *vr, size_t n, double *value
         switch (v->kind) {
         case LNFMU_X: value[i] = d->X[v->index]; break;
         case LNFMU_U: value[i] = d->U[v->index]; break;
+        case LNFMU_JREACT: value[i] = d->impulse[v->index]; break;
         case LNFMU_T:
         case LNFMU_FREACT:
             if (m->outputs_stale && result == FMU_OK) result = evaluate_outputs(m, msg);
@@ -728,6 +768,13 @@ int fmu_model_set_real(fmu_model *m, const unsigned *vr, size_t n, const double 
             if (s->max_force > 0.0 && fabs(x) > s->max_force)
                 return fail(msg, FMU_ERROR, "%s = %g N: forces beyond %g N would overflow the solver; nothing set "
                             "(the inputs keep their values)", v->name, x, s->max_force);
+        } else if (is_anchor_input(v->kind)) {
+            if (!isfinite(x))
+                return fail(msg, FMU_ERROR, "%s = %g is not a finite %s; nothing set (the inputs keep their values)",
+                            v->name, x, input_quantity(v->kind));
+            if (s->max_force > 0.0 && fabs(x) > s->max_force)  /* the library's bound on anchor inputs too */
+                return fail(msg, FMU_ERROR, "%s = %g: an anchor's %s beyond %g would overflow the solver; nothing set "
+                            "(the inputs keep their values)", v->name, x, input_quantity(v->kind), s->max_force);
         } else if (!is_parameter(v->kind)) {
             return fail(msg, FMU_ERROR, "%s is an output and cannot be set (value %.17g); nothing set", v->name, x);
         } else if (initialized) {
@@ -748,11 +795,70 @@ int fmu_model_set_real(fmu_model *m, const unsigned *vr, size_t n, const double 
             m->value[vr[i]] = value[i];
             m->d->F_input[v->index] = value[i];
             m->outputs_stale = 1;
+        } else if (is_anchor_input(v->kind)) {
+            m->value[vr[i]] = value[i];
+            anchor_input(m, v->kind)[v->index] = value[i];
+            m->outputs_stale = 1;
         } else if (value[i] != m->value[vr[i]]) {
             m->value[vr[i]] = value[i];
             m->dirty = 1;
         }
     }
+    return FMU_OK;
+}
+
+/* The input an anchor position's derivative of order 1 (V) or 2 (A) sets: its value reference, or -1 for an
+   input held constant over a step. The layout puts P, V, A of an anchor at the same index. */
+static long derivative_target(const lnfmu_scene *s, unsigned vr, int order)
+{
+    const lnfmu_variable *v = variable(s, vr);
+    if (v->kind != LNFMU_P || (order != 1 && order != 2)) return -1;
+    const int kind = order == 1 ? LNFMU_V : LNFMU_A;
+    for (ln_int w = 0; w < s->n_real; w++)
+        if (s->variables[w].kind == kind && s->variables[w].index == v->index) return (long)w;
+    return -1;
+}
+
+int fmu_model_set_real_input_derivatives(fmu_model *m, const unsigned *vr, size_t n, const int *order,
+                                         const double *value, int initialized, char *msg)
+{
+    const lnfmu_scene *s = m->s;
+    /* all checked first: a refused call changes nothing */
+    size_t held = n;  /* the first input held constant whose derivative is ignored */
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] >= (unsigned)s->n_real)
+            return fail(msg, FMU_ERROR, "value reference %u is not a Real variable of this FMU (Reals are 0..%lld); "
+                        "nothing set", vr[i], (long long)(s->n_real - 1));
+        const lnfmu_variable *v = variable(s, vr[i]);
+        if (!is_input(v->kind))
+            return fail(msg, FMU_ERROR, "%s is %s, not an input: it takes no input derivative; nothing set", v->name,
+                        is_parameter(v->kind) ? "a parameter" : "an output");
+        if (order[i] != 1 && order[i] != 2)
+            return fail(msg, FMU_ERROR, "derivative of order %d of %s refused: inputs take derivatives of order 1 "
+                        "and 2 only; nothing set", order[i], v->name);
+        if (v->kind == LNFMU_P) {
+            const char *what = input_quantity(order[i] == 1 ? LNFMU_V : LNFMU_A);
+            if (!isfinite(value[i]))
+                return fail(msg, FMU_ERROR, "derivative of order %d of %s = %g is not a finite %s; nothing set",
+                            order[i], v->name, value[i], what);
+            if (s->max_force > 0.0 && fabs(value[i]) > s->max_force)
+                return fail(msg, FMU_ERROR, "derivative of order %d of %s = %g: an anchor's %s beyond %g would "
+                            "overflow the solver; nothing set", order[i], v->name, value[i], what, s->max_force);
+        } else if (held == n) {
+            held = i;
+        }
+    }
+    for (size_t i = 0; i < n; i++) {
+        const long target = derivative_target(s, vr[i], order[i]);
+        if (target < 0) continue;
+        const unsigned t = (unsigned)target;
+        const int result = fmu_model_set_real(m, &t, 1, &value[i], initialized, msg);
+        if (result != FMU_OK) return result;  /* checked above: not reached */
+    }
+    if (held < n)
+        return fail(msg, FMU_WARNING, "%s is held constant over a communication step: its derivative of order %d "
+                    "(%g) is ignored%s", variable(s, vr[held])->name, order[held], value[held],
+                    n > 1 ? " (as are those of any other input but an anchor's position P in this call)" : "");
     return FMU_OK;
 }
 
@@ -858,6 +964,7 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
 {
     const double t_fmu = m->d->t, t_target = t + h;
     if (t_target <= t_fmu) return FMU_OK;  /* h below half an ulp of t: nothing to integrate */
+    m->d->drive_hold_t = t_fmu;  /* the anchor inputs as set: P + V s + A s^2/2, s from the step's start */
     const int status = ln_advance(&m->model, &m->method, m->d, t_target, m->s->max_steps);
     if (status != LN_OK) {
         char why[FMU_MESSAGE - 128];
@@ -872,11 +979,13 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
 /* ---- state --------------------------------------------------------------------------------------- */
 
 /* start time; integrator, applied integrator, dirty; values; applied; t, h_next; planar, steps, rejected, n_rhs;
-   X, U; body states */
+   X, U; body states; the driven anchors' clock (t0, start of the hold), their last jump (position, velocity,
+   count), their held motion P, V, A and their impulse */
 size_t fmu_model_state_size(const fmu_model *m)
 {
     const lnfmu_scene *s = m->s;
-    return sizeof(double) * (size_t)(1 + 3 + 2 * s->n_real + 2 + 4 + 6 * s->K + LN_RIGID_STATE * m->n_bodies);
+    return sizeof(double) * (size_t)(1 + 3 + 2 * s->n_real + 2 + 4 + 6 * s->K + LN_RIGID_STATE * m->n_bodies + 5
+                                     + 12 * s->model->n_driven);
 }
 
 static void put(unsigned char **p, const void *x, size_t n)
@@ -924,6 +1033,16 @@ void fmu_model_state_save(const fmu_model *m, unsigned char *buffer)
         ln_rigid_get_state(&m->model, d, m->Ys);
         put(&p, m->Ys, (size_t)(LN_RIGID_STATE * m->n_bodies) * sizeof(double));
     }
+    const size_t nd = (size_t)(3 * s->model->n_driven) * sizeof(double);
+    put(&p, &d->drive_t0, sizeof(double));
+    put(&p, &d->drive_hold_t, sizeof(double));
+    put(&p, &d->jump_position, sizeof(double));
+    put(&p, &d->jump_velocity, sizeof(double));
+    put_int(&p, d->jumps);
+    put(&p, d->drive_P, nd);
+    put(&p, d->drive_V, nd);
+    put(&p, d->drive_A, nd);
+    put(&p, d->impulse, nd);
 }
 
 static int finite_all(const double *x, size_t n)
@@ -938,9 +1057,11 @@ int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t si
     const lnfmu_scene *s = m->s;
     if (size != fmu_model_state_size(m)) return fail(msg, FMU_ERROR, "a state of the wrong size");
     const size_t n_real = (size_t)s->n_real, n3 = (size_t)(3 * s->K), nb = (size_t)(LN_RIGID_STATE * m->n_bodies);
-    double *value = malloc((2 * n_real + 2 * n3 + nb + 1) * sizeof(double));
+    const size_t nd = (size_t)(3 * s->model->n_driven);
+    double *value = malloc((2 * n_real + 2 * n3 + nb + 4 * nd + 1) * sizeof(double));
     if (!value) return fail(msg, FMU_ERROR, "out of memory");
     double *applied = value + n_real, *X = applied + n_real, *U = X + n3, *Y = U + n3;
+    double *drive = Y + nb;  /* P, V, A, impulse: nd each */
     const unsigned char *p = buffer;
     double start_time, t, h_next;
     get(&p, &start_time, sizeof(double));
@@ -953,6 +1074,13 @@ int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t si
     get(&p, X, n3 * sizeof(double));
     get(&p, U, n3 * sizeof(double));
     get(&p, Y, nb * sizeof(double));
+    double drive_t0, drive_hold_t, jump_position, jump_velocity;
+    get(&p, &drive_t0, sizeof(double));
+    get(&p, &drive_hold_t, sizeof(double));
+    get(&p, &jump_position, sizeof(double));
+    get(&p, &jump_velocity, sizeof(double));
+    const ln_int jumps = get_int(&p);
+    get(&p, drive, 4 * nd * sizeof(double));
 
     /* what the state says must be possible for this FMU */
     const char *problem = NULL;
@@ -964,10 +1092,13 @@ int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t si
         problem = "a non-finite time or step";
     else if (!finite_all(X, 2 * n3) || !finite_all(Y, nb))
         problem = "a non-finite state";
+    else if (!(isfinite(drive_t0) && isfinite(drive_hold_t) && isfinite(jump_position) && isfinite(jump_velocity))
+             || jumps < 0 || !finite_all(drive, 4 * nd))
+        problem = "a non-finite or invalid motion of the driven anchors";
     for (size_t vr = 0; vr < n_real && !problem; vr++) {
         const int kind = s->variables[vr].kind;
         char why[256];
-        if (kind == LNFMU_F && !(isfinite(value[vr]) && isfinite(applied[vr]))) problem = "a non-finite input";
+        if (is_input(kind) && !(isfinite(value[vr]) && isfinite(applied[vr]))) problem = "a non-finite input";
         if (is_parameter(kind) && (parameter_rule(s, kind, value[vr], why, sizeof why)
                                    || parameter_rule(s, kind, applied[vr], why, sizeof why)))
             problem = "a parameter out of range";
@@ -1010,10 +1141,19 @@ int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t si
     if (n3) {
         memcpy(d->X, X, n3 * sizeof(double));
         memcpy(d->U, U, n3 * sizeof(double));
-        memset(d->F_input, 0, n3 * sizeof(double));
     }
-    for (size_t vr = 0; vr < n_real; vr++)
-        if (s->variables[vr].kind == LNFMU_F) d->F_input[s->variables[vr].index] = value[vr];
+    d->drive_t0 = drive_t0;
+    d->drive_hold_t = drive_hold_t;
+    d->jump_position = jump_position;
+    d->jump_velocity = jump_velocity;
+    d->jumps = jumps;
+    if (nd) {
+        memcpy(d->drive_P, drive, nd * sizeof(double));
+        memcpy(d->drive_V, drive + nd, nd * sizeof(double));
+        memcpy(d->drive_A, drive + 2 * nd, nd * sizeof(double));
+        memcpy(d->impulse, drive + 3 * nd, nd * sizeof(double));
+    }
+    load_inputs(m);
     m->outputs_stale = 1;
     free(value);
     return FMU_OK;

@@ -27,7 +27,12 @@ enum lnfmu_kind {
     LNFMU_R = 6,        /* parameter: length of link index */
     LNFMU_G = 7,        /* parameter: gravity component index */
     LNFMU_TOLERANCE = 8,/* parameter: rtol of the adaptive methods */
-    LNFMU_STEP = 9      /* parameter: internal step of the fixed-step methods */
+    LNFMU_STEP = 9,     /* parameter: internal step of the fixed-step methods */
+    LNFMU_P = 10,       /* input: position of an anchor driven by inputs; index 3 j + i, j its row in
+                           ln_model.driven_idx */
+    LNFMU_V = 11,       /* input: its velocity; index as P */
+    LNFMU_A = 12,       /* input: its acceleration; index as P */
+    LNFMU_JREACT = 13   /* output: impulse on a driven anchor at the last step's start; index as P */
 };
 
 /* The specialisation the library chose for the scene (linknet_core.Simulator). */
