@@ -35,6 +35,7 @@ class AnchorDrive:
         self.n = int(self.rows.size)
         is_input = np.array([m.kind == "input" for m in scene.motions], bool)
         self.input_slots = np.flatnonzero(is_input)  # positions among the driven anchors
+        self.input_labels = [scene.mass_label(int(k)) for k in scene.input_driven_indices]
         self.hold_t = self.t0
         P0 = np.asarray(scene.X0, float)[scene.input_driven_indices]
         self.hold = (P0.copy(), np.zeros_like(P0), np.zeros_like(P0))
@@ -65,7 +66,7 @@ class AnchorDrive:
     def input_at(self, t: float):
         """(P, V, A) of the input-driven anchors at t, each (n_input, 3)."""
         if self.callable is not None:
-            return call_motion(self.callable, t, self.input_slots.size)
+            return call_motion(self.callable, t, self.input_labels)
         P, V, A = self.hold
         s = t - self.hold_t
         return P + s * V + (0.5 * s * s) * A, V + s * A, A
@@ -100,18 +101,29 @@ class AnchorDrive:
         return U
 
 
-def call_motion(function, t: float, n: int):
-    """A user's motion callable at t, checked: three arrays (P, V, A) of shape (n, 3), finite."""
+def call_motion(function, t: float, labels) -> tuple:
+    """A user's motion callable at t, checked: three arrays (P, V, A) of shape (n, 3), finite, one row per
+    input-driven anchor (``labels`` names them). Whatever goes wrong is a SolverError that says what."""
+    n = len(labels)
     try:
-        P, V, A = (np.asarray(a, float) for a in function(t))
+        result = function(t)
+    except SolverError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - the user's code: any failure is reported, named, as a solver error
+        raise SolverError(f"the anchors' motion callable failed at t = {t}: {type(exc).__name__}: {exc}") from exc
+    try:
+        P, V, A = (np.asarray(a, float) for a in result)
     except (TypeError, ValueError) as exc:
-        raise SolverError(f"the anchors' motion callable must return (P, V, A) at t = {t}: {exc}") from None
-    for name, a in (("P", P), ("V", V), ("A", A)):
+        raise SolverError(f"the anchors' motion callable must return (P, V, A), three arrays of shape ({n}, 3), at "
+                          f"t = {t}; it returned {type(result).__name__} ({exc})") from None
+    for name, unit, a in (("P", "m", P), ("V", "m/s", V), ("A", "m/s2", A)):
         if a.shape != (n, 3):
             raise SolverError(f"the anchors' motion callable returned {name} of shape {a.shape} at t = {t}; "
-                              f"expected ({n}, 3): one row per input-driven anchor")
+                              f"expected ({n}, 3): one row per input-driven anchor ({', '.join(labels)})")
         if not np.all(np.isfinite(a)):
-            raise SolverError(f"the anchors' motion callable returned a non-finite {name} at t = {t}")
+            i, j = np.argwhere(~np.isfinite(a))[0]
+            raise SolverError(f"the anchors' motion callable returned {name} = {a[i, j]} {unit} on axis {j + 1} of "
+                              f"{labels[i]} at t = {t}: it must be finite")
     return P, V, A
 
 

@@ -56,6 +56,7 @@ class NativeIntegrator(Integrator):
         self._d.drive_t0 = self._d.drive_hold_t = t0
         scene = model.scene
         self._input_slots = np.flatnonzero([motion.kind == "input" for motion in scene.motions])
+        self._input_labels = [scene.mass_label(int(k)) for k in scene.input_driven_indices]
         self._motion = None  # the user's callable of t, when the input-driven anchors follow one
         self._motion_error = None  # what it raised inside the last advance
         self._callback = lib.DRIVE_CALLBACK(self._call_motion)
@@ -113,7 +114,7 @@ class NativeIntegrator(Integrator):
         each); 1 on any failure, whose exception the advance raises."""
         try:
             n = self._input_slots.size
-            P, V, A = call_motion(self._motion, t, n)
+            P, V, A = call_motion(self._motion, t, self._input_labels)
             values = np.ctypeslib.as_array(out, (n, 3, 3))
             values[:, 0], values[:, 1], values[:, 2] = P, V, A
             return 0

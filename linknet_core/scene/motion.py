@@ -9,7 +9,8 @@ tau = 0. The kinds, as a scene file writes them (``"motion": {...}`` on the mass
 * ``{"kind": "sine", "amplitude": [..], "frequency": [..], "phase": [..]}`` (per axis; Hz and rad):
   P_i = X0_i + a_i (sin(2 pi f_i tau + phi_i) - sin(phi_i)), so that P(0) = X0;
 * ``{"kind": "waypoints", "waypoints": [[t1, x, y, z], ...]}``: the C2 cubic spline through (0, X0) and the
-  waypoints, clamped (at rest at tau = 0 and at the last waypoint), at rest before 0 and after the last one.
+  waypoints, clamped (at rest at tau = 0 and at the last waypoint), at rest after the last one (before 0, where
+  only the inner stages of a composition look, its first piece continues).
 
 Every kind but "sine" is a piecewise cubic: a table of pieces (start, base, coefficients in powers of
 tau - base), the form the native core evaluates (linknet_core/native/src/drive.c) and :meth:`AnchorMotion.evaluate`
@@ -146,9 +147,11 @@ def _spline_pieces(waypoints, origin, what, source, number) -> np.ndarray:
         times.append(t)
         points.append([number(x, f"{label} coordinate {j + 1}", source) for j, x in enumerate(row[1:])])
     spline = CubicSpline(np.array(times), np.array(points, float), bc_type="clamped")
-    # scipy's c[m, i, axis] multiplies (tau - x_i)^(3 - m)
-    rows = [_at_rest(-math.inf, origin)]
+    # scipy's c[m, i, axis] multiplies (tau - x_i)^(3 - m). The first piece also covers tau < 0: the stages of a
+    # composition with negative step fractions look a little before the start, and a motion that is smooth
+    # there keeps the composition's order (a rest row before 0 would put an acceleration jump at tau = 0).
+    rows = []
     for i in range(len(times) - 1):
-        rows.append(_piece(times[i], times[i], spline.c[::-1, i, :].T))
+        rows.append(_piece(-math.inf if i == 0 else times[i], times[i], spline.c[::-1, i, :].T))
     rows.append(_at_rest(times[-1], points[-1]))
     return np.array(rows)

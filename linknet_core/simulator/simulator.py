@@ -263,7 +263,7 @@ class Simulator:
     def advance(self, t_next: float, F_input=None, anchors=None) -> None:
         """Integrate to t_next with F_input held. ``anchors``: the input-driven anchors' motion from now on, (P, V,
         A) held as P + V s + A s^2/2 (s from the current time), or a callable f(t) -> (P, V, A); None keeps the
-        last. Where the anchors jump (a new V, or P), the velocities are projected onto (12) first: an inelastic
+        last. A composition's inner stages may call it a little outside [t, t_next] (yoshida8: up to half a step). Where the anchors jump (a new V, or P), the velocities are projected onto (12) first: an inelastic
         impulse, reported by ``anchor_report``. On success the state is finite; on any error the simulator is left
         exactly as before the call (state, integrator internals and the anchors' held motion)."""
         F = self.check_input(F_input)

@@ -232,16 +232,11 @@ COUNTS = {2: [40, 80, 160, 320], 4: [20, 40, 80, 160], 5: [32, 64, 128], 6: [16,
 # inside the step keep their order across it when a step boundary falls on the knot
 ACROSS_A_KNOT = {"kind": "waypoints", "waypoints": [[0.2, 0.05, 0.02, 0.1], [0.5, 0.3, -0.1, 0.0],
                                                     [0.9, 0.2, 0.0, 0.0]]}
-# The waypoint spline is at rest before tau = 0 with A = 0, while its first piece starts with A(0+) != 0: its
-# acceleration jumps at tau = 0. The compositions' substeps reach before the step's start (partial sums of their
-# gammas down to -0.16 h for yoshida6, -0.50 h for yoshida8), so their first step crosses the jump and their order
-# falls (measured: yoshida6 6.04, 4.88, 3.87; yoshida8 9.27, 3.35, 2.68; with the first piece extrapolated to
-# tau < 0 instead: 6.14, 6.06, 6.03 and 9.03, 8.50, 8.25).
-_KINK_AT_START = pytest.mark.xfail(strict=True, reason="the waypoint motion's acceleration jumps at tau = 0 (at rest "
-                                   "before), which the compositions' backward substeps of the first step cross")
-ORDER_CASES = ([(m, "sine") for m in ALL_METHODS]
-               + [pytest.param(m, "waypoints", marks=_KINK_AT_START) if m in ("yoshida6", "yoshida8")
-                  else (m, "waypoints") for m in ALL_METHODS]
+# The waypoint spline's first piece continues before tau = 0, where the compositions' substeps of the first step
+# reach (partial sums of their gammas down to -0.16 h for yoshida6, -0.50 h for yoshida8): a rest row there would put
+# an acceleration jump at tau = 0 and cut their order (measured with it: yoshida6 6.04, 4.88, 3.87; yoshida8 9.27,
+# 3.35, 2.68).
+ORDER_CASES = ([(m, "sine") for m in ALL_METHODS] + [(m, "waypoints") for m in ALL_METHODS]
                + [(m, "waypoints across a knot") for m in ("rattle", "dopri5", "dop853")])
 _references = {}
 
