@@ -247,4 +247,5 @@ def shipped_scenes() -> dict[str, Scene]:
         "spinning_tetrahedron": tetrahedron(),
         "redundant_truss": redundant_truss(),
         "net_10x10": net(10, 10),
+        "crane": crane(),
     }
