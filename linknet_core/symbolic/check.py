@@ -19,6 +19,7 @@ The numeric side is anything with the ``Dynamics`` methods used here (``forces``
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -946,55 +947,87 @@ def _check_motions(scene, sym, rng, samples):
                        tol_fd, detail)
 
 
+def _condition(sym, X):
+    """cond(A) on its range (eigenvalues above the null-space cut): the scale of a solved quantity's error."""
+    w = np.linalg.eigvalsh(sym.A(X).toarray())
+    pos = w[w > RTOL_NULL * max(w.max(initial=0.0), 1e-300)]
+    return float(pos.max() / pos.min()) if pos.size else 1.0
+
+
+def _driven_groups(scene, sym):
+    """(input-driven anchors, anchors with a scene motion), mass indices in scene order."""
+    inputs = np.asarray(getattr(scene, "input_driven_indices", np.zeros(0, np.int64)), np.int64)
+    return inputs, np.setdiff1d(sym.driven, inputs)
+
+
+REACH_STEP = 0.01  # the largest RATTLE step of the runs that bring a simulator to a sample's scene time
+
+
+def _simulator_at(scene, sym, sample, backend):
+    """(sim, X, U, anchor_acc): a RATTLE ``Simulator`` of ``backend`` holding the sample's state at the sample's
+    scene time, through the public API only: run from the scene's start to tau (only the scene motions run on
+    the simulator's clock; what the run did to the free masses is then replaced; steps of at most
+    REACH_STEP, tau divided evenly), the sample's X, U put in by a snapshot, with the anchors that have a
+    scene motion exactly where it has them at tau (where the core places them). ``sim.dt`` is the step.
+    Raises SolverError when the scene's own run cannot reach tau."""
+    from linknet_core.simulator.simulator import Simulator
+
+    inputs, with_motion = _driven_groups(scene, sym)
+    tau = sample.tau if with_motion.size else 0.0
+    dt = tau / math.ceil(tau / REACH_STEP) if tau > 0 else REACH_STEP
+    sim = Simulator(scene, method="rattle", dt=dt, backend=backend)
+    sim.dt = dt
+    if with_motion.size and sample.tau > 0:
+        sim.advance(sim.state.t + sample.tau)
+    X, U = np.array(sample.X, float), np.array(sample.U, float)
+    Aa = np.array(sample.anchor_acc, float)
+    if with_motion.size:
+        P, V, A = scene.anchor_motion(sample.tau)
+        rows = np.searchsorted(sym.driven, with_motion)
+        X[with_motion], U[with_motion], Aa[with_motion] = P[rows], V[rows], A[rows]
+    snapshot = sim.get_state()
+    snapshot["state"].X, snapshot["state"].U = X.copy(), U.copy()
+    sim.set_state(snapshot)
+    return sim, X, U, Aa
+
+
+def _first_clause(exc) -> str:
+    """An error message up to its first colon: what failed, without the advice (kept short in a check line)."""
+    return str(exc).split(":")[0]
+
+
+def _backends_detail(worst, skipped, failed):
+    return ("".join(f"; {b}: not compared ({why})" for b, why in skipped.items())
+            + "".join(f"; {b}: {n} sample(s) not run (last: {why})" for b, (n, why) in failed.items()))
+
+
 def _check_native(scene, sym, Ffn, states):
     """The native core's tensions and reactions with driven anchors against the symbolic system.
 
-    Through the public API: a native ``Simulator`` advanced to the sample's scene time (so that the anchors
-    with a scene motion are where the sample has them), the sample's positions and velocities put in by
-    a snapshot, then ``outputs(F_input, anchors=(P, V, A))`` for the input-driven anchors. The symbolic side
-    is evaluated at the state the core sees (anchors with a scene motion exactly at their motion's P, V, A).
+    A native ``Simulator`` at each sample (:func:`_simulator_at`), then ``outputs(F_input, anchors=(P, V, A))``
+    for the input-driven anchors. The symbolic side is evaluated at the state the core sees.
     """
     from linknet_core.errors import SolverError
 
     name = "native core with driven anchors = symbolic"
-    try:
-        from linknet_core.simulator.simulator import Simulator
-
-        Simulator(scene, method="rattle", dt=1e-3, backend="native")
-    except Exception as exc:  # noqa: BLE001 - any reason the native core is not here is reported, not raised
-        return CheckResult(name, True, 0.0, RTOL_SOLVE * 1e2, f"no native core: {type(exc).__name__}: {exc}",
-                           skipped=True)
-    inputs = np.asarray(getattr(scene, "input_driven_indices", np.zeros(0, np.int64)), np.int64)
-    with_motion = np.setdiff1d(sym.driven, inputs)
+    inputs, _ = _driven_groups(scene, sym)
     anchor_rows = np.searchsorted(sym.fixed, sym.driven)
     worst_T = worst_react = 0.0
     worst_cond = 1.0
-    used = unreached = 0
+    used = 0
+    skipped, failed = {}, {}
     for s in states:
-        if s.tau is None:
+        try:
+            sim, X, U, Aa = _simulator_at(scene, sym, s, "native")
+        except SolverError as exc:
+            failed["native"] = (failed.get("native", (0, ""))[0] + 1, _first_clause(exc))
             continue
-        sim = Simulator(scene, method="rattle", dt=1e-3, backend="native")
-        if with_motion.size and s.tau > 0:   # only the scene motions run on the simulator's clock
-            try:
-                sim.advance(sim.state.t + s.tau)
-            except SolverError:
-                unreached += 1                   # the scene itself cannot run to that time (a singular start)
-                continue
-        X, U = np.array(s.X, float), np.array(s.U, float)
-        Aa = np.array(s.anchor_acc, float)
-        if with_motion.size:
-            P, V, A = scene.anchor_motion(s.tau)
-            rows = np.searchsorted(sym.driven, with_motion)
-            X[with_motion], U[with_motion], Aa[with_motion] = P[rows], V[rows], A[rows]
-        snapshot = sim.get_state()
-        snapshot["state"].X, snapshot["state"].U = X.copy(), U.copy()
-        sim.set_state(snapshot)
-        hold = (X[inputs], U[inputs], Aa[inputs]) if inputs.size else None
-        out = sim.outputs(F_input=s.F_input, anchors=hold)
+        except Exception as exc:  # noqa: BLE001 - any reason the native core is not here is reported, not raised
+            skipped["native"] = f"no native core: {type(exc).__name__}: {exc}"
+            break
+        out = sim.outputs(F_input=s.F_input, anchors=(X[inputs], U[inputs], Aa[inputs]) if inputs.size else None)
         _, T_s = sym.solve(X, U, sym.forces(Ffn, X, U, s.F_input), Aa)
-        w = np.linalg.eigvalsh(sym.A(X).toarray())
-        pos = w[w > RTOL_NULL * max(w.max(initial=0.0), 1e-300)]
-        cond = float(pos.max() / pos.min()) if pos.size else 1.0
+        cond = _condition(sym, X)
         worst_cond = max(worst_cond, cond)
         scale_T = max(np.abs(T_s).max(initial=0.0), 1e-300)
         worst_T = max(worst_T, float(np.abs(np.asarray(out["T"]) - T_s).max(initial=0.0)) / scale_T / cond)
@@ -1006,71 +1039,52 @@ def _check_native(scene, sym, Ffn, states):
     tol = RTOL_SOLVE * 1e2
     detail = (f"{used} state(s) through Simulator(backend='native').outputs(anchors=...) at the samples' scene "
               f"times: tensions {worst_T:.2e}, reactions on the driven anchors vs G_p^T T {worst_react:.2e} "
-              f"(relative, divided by cond(A) up to {worst_cond:.1e})"
-              + (f"; {unreached} sample time(s) the scene's own run could not reach" if unreached else ""))
+              f"(relative, divided by cond(A) up to {worst_cond:.1e})" + _backends_detail({}, skipped, failed))
     return CheckResult(name, worst <= tol and used > 0, worst, tol, detail, skipped=used == 0)
-
-
-def _first_clause(exc) -> str:
-    """An error message up to its first colon: what failed, without the advice (kept short in a check line)."""
-    return str(exc).split(":")[0]
 
 
 def _check_jump(scene, sym, states, rng):
     """A jump of the input-driven anchors' velocity: the impulse both cores report against the projection onto
     (12) in the mass metric, derived here from AD's G and G_p: u+ = u - M^-1 G^T lambda with
     (G M^-1 G^T) lambda = G u + G_p v+ (minimum norm), the links giving driven anchor a the impulse
-    -(G_p^T lambda)_a. Through the public API: a ``Simulator`` of each backend, the sample's state put in by
-    a snapshot (every driven anchor where its held motion is: no position jump), then an advance whose
-    anchors= keeps P and A and changes V, by a nanosecond (the impulse is taken at its start; a longer
-    step could fail afterwards where the new velocity drives the anchor against a taut path). Differences
-    are divided by cond(A), as for the other solved quantities."""
+    -(G_p^T lambda)_a. A ``Simulator`` of each backend at each sample (:func:`_simulator_at`: no position
+    jump), then an advance whose anchors= keeps P and A and changes V, by a nanosecond (the impulse is taken
+    at its start; a longer step could fail afterwards where the new velocity drives the anchor against a
+    taut path). Differences are divided by cond(A), as for the other solved quantities."""
     from linknet_core.errors import SolverError
-    from linknet_core.simulator.simulator import Simulator
 
     name = "anchor velocity jump: impulse, projection (12)"
-    inputs = np.asarray(scene.input_driven_indices, np.int64)
-    with_motion = np.setdiff1d(sym.driven, inputs)
+    inputs, _ = _driven_groups(scene, sym)
+    m_typical = float(np.median(np.asarray(scene.mass, float)[sym.free])) if sym.nf else 1.0
     ell = float(np.median(sym._R))
     worst = {}
     skipped, failed = {}, {}
     used = 0
     worst_cond = 1.0
     for s in states:
-        X, U = np.array(s.X, float), np.array(s.U, float)
-        Aa = np.array(s.anchor_acc, float)
-        if with_motion.size:  # anchors with a scene motion stay where it has them at the simulator's start
-            P, V, A = scene.anchor_motion(0.0)
-            rows = np.searchsorted(sym.driven, with_motion)
-            X[with_motion], U[with_motion], Aa[with_motion] = P[rows], V[rows], A[rows]
         jump = ell * rng.standard_normal((inputs.size, 3))
-        U_after = U.copy()
-        U_after[inputs] += jump
-        G, Gp = sym.G(X).toarray(), sym.Gp(X).toarray()
-        lam = np.linalg.lstsq(sym.A(X).toarray(), G @ sym.reduce(U) + Gp @ sym.reduce(U_after, rows=sym.driven),
-                              rcond=1e-12)[0]
-        J_s = -(Gp.T @ lam).reshape(sym.nd, sym.dim) @ sym.basis.T
-        w = np.linalg.eigvalsh(sym.A(X).toarray())
-        pos = w[w > RTOL_NULL * max(w.max(initial=0.0), 1e-300)]
-        cond = float(pos.max() / pos.min()) if pos.size else 1.0
-        worst_cond = max(worst_cond, cond)
-        scale = max(np.abs(J_s).max(initial=0.0), 1e-300) * cond
         for backend in ("numpy", "native"):
             if backend in skipped:
                 continue
             try:
-                sim = Simulator(scene, method="rattle", dt=1e-3, backend=backend)
-            except Exception as exc:  # noqa: BLE001 - a missing native core is reported, not raised
-                skipped[backend] = f"{type(exc).__name__}: {exc}"
-                continue
-            snapshot = sim.get_state()
-            snapshot["state"].X, snapshot["state"].U = X.copy(), U.copy()
-            sim.set_state(snapshot)
-            try:
+                sim, X, U, Aa = _simulator_at(scene, sym, s, backend)
+                U_after = U.copy()
+                U_after[inputs] += jump
                 sim.advance(sim.state.t + 1e-9, anchors=(X[inputs], U_after[inputs], Aa[inputs]))
             except SolverError as exc:
                 failed[backend] = (failed.get(backend, (0, ""))[0] + 1, _first_clause(exc))
                 continue
+            except Exception as exc:  # noqa: BLE001 - a missing native core is reported, not raised
+                skipped[backend] = f"{type(exc).__name__}: {exc}"
+                continue
+            G, Gp = sym.G(X).toarray(), sym.Gp(X).toarray()
+            lam = np.linalg.lstsq(sym.A(X).toarray(), G @ sym.reduce(U) + Gp @ sym.reduce(U_after, rows=sym.driven),
+                                  rcond=1e-12)[0]
+            J_s = -(Gp.T @ lam).reshape(sym.nd, sym.dim) @ sym.basis.T
+            cond = _condition(sym, X)
+            worst_cond = max(worst_cond, cond)
+            # the impulse this jump would give one typical free mass: the scale where the links take none
+            scale = max(np.abs(J_s).max(initial=0.0), m_typical * float(np.abs(jump).max(initial=0.0))) * cond
             J_n = np.asarray(sim.anchor_report()["impulse"], float)
             worst[backend] = max(worst.get(backend, 0.0), float(np.abs(J_n - J_s).max(initial=0.0)) / scale)
         used += 1
@@ -1079,59 +1093,47 @@ def _check_jump(scene, sym, states, rng):
     detail = (f"{used} state(s), velocity jumps of ~{ell:.2g} m/s on {inputs.size} input-driven anchor(s): "
               + ", ".join(f"{b} {w:.2e}" for b, w in worst.items())
               + f" relative to the largest impulse, divided by cond(A) (up to {worst_cond:.1e})"
-              + "".join(f"; {b}: not compared ({why})" for b, why in skipped.items())
-              + "".join(f"; {b}: {n} advance(s) failed (last: {why})" for b, (n, why) in failed.items()))
+              + _backends_detail(worst, skipped, failed))
     return CheckResult(name, passed, max(worst.values(), default=0.0), tol, detail, skipped=not worst)
 
 
 def _check_rattle_targets(scene, sym, states):
     """One RATTLE step of each core with driven anchors lands on (11) with P_a(t+h) and on (12) with V_a(t+h).
 
-    From each sample (anchors with a scene motion where it has them at the simulator's start, input-driven
-    ones held as the sample's P + V s + A s^2/2: no jump), one step h = 1e-3 through the public API. After
-    it the anchors' rows must be the motion at t + h (the scene motion's evaluate, the held quadratic),
-    and the state must satisfy AD's (11) and (12) with them: what RATTLE's position and velocity stages
-    target."""
+    A ``Simulator`` of each backend at each sample (:func:`_simulator_at`), input-driven anchors held as the
+    sample's P + V s + A s^2/2 (no jump), one step h (the simulator's, at most REACH_STEP). After it the anchors' rows must be the motion at
+    t + h (the scene motion's evaluate, the held quadratic), and the state must satisfy AD's (11) and (12)
+    with them: what RATTLE's position and velocity stages target."""
     from linknet_core.errors import SolverError
-    from linknet_core.simulator.simulator import Simulator
 
     name = "RATTLE: (11) at P_a(t+h), (12) at V_a(t+h)"
-    h = 1e-3
-    inputs = np.asarray(getattr(scene, "input_driven_indices", np.zeros(0, np.int64)), np.int64)
-    with_motion = np.setdiff1d(sym.driven, inputs)
+    inputs, with_motion = _driven_groups(scene, sym)
+    rows_in = np.searchsorted(sym.driven, inputs)
+    rows_motion = np.searchsorted(sym.driven, with_motion)
+    ell = float(np.median(sym._R))
     worst = {}
     skipped, failed = {}, {}
     for s in states:
-        X, U = np.array(s.X, float), np.array(s.U, float)
-        Aa = np.array(s.anchor_acc, float)
-        P_h, V_h = np.array(X[sym.driven]), np.array(U[sym.driven])
-        rows_in = np.searchsorted(sym.driven, inputs)
-        P_h[rows_in] = X[inputs] + h * U[inputs] + 0.5 * h * h * Aa[inputs]
-        V_h[rows_in] = U[inputs] + h * Aa[inputs]
-        if with_motion.size:
-            P0, V0, A0 = scene.anchor_motion(0.0)
-            P1, V1, _ = scene.anchor_motion(h)
-            rows = np.searchsorted(sym.driven, with_motion)
-            X[with_motion], U[with_motion] = P0[rows], V0[rows]
-            P_h[rows], V_h[rows] = P1[rows], V1[rows]
         for backend in ("numpy", "native"):
             if backend in skipped:
                 continue
             try:
-                sim = Simulator(scene, method="rattle", dt=h, backend=backend)
-            except Exception as exc:  # noqa: BLE001 - a missing native core is reported, not raised
-                skipped[backend] = f"{type(exc).__name__}: {exc}"
-                continue
-            snapshot = sim.get_state()
-            snapshot["state"].X, snapshot["state"].U = X.copy(), U.copy()
-            sim.set_state(snapshot)
-            try:
+                sim, X, U, Aa = _simulator_at(scene, sym, s, backend)
+                h = sim.dt
                 sim.advance(sim.state.t + h, anchors=(X[inputs], U[inputs], Aa[inputs]) if inputs.size else None)
             except SolverError as exc:
                 failed[backend] = (failed.get(backend, (0, ""))[0] + 1, _first_clause(exc))
                 continue
+            except Exception as exc:  # noqa: BLE001 - a missing native core is reported, not raised
+                skipped[backend] = f"{type(exc).__name__}: {exc}"
+                continue
+            P_h, V_h = np.array(X[sym.driven]), np.array(U[sym.driven])
+            P_h[rows_in] = X[inputs] + h * U[inputs] + 0.5 * h * h * Aa[inputs]
+            V_h[rows_in] = U[inputs] + h * Aa[inputs]
+            if with_motion.size:
+                P1, V1, _ = scene.anchor_motion(s.tau + h)
+                P_h[rows_motion], V_h[rows_motion] = P1[rows_motion], V1[rows_motion]
             Xn, Un = sim.state.X, sim.state.U
-            ell = float(np.median(sym._R))
             v_scale = max(np.abs(Un).max(initial=0.0), ell / 1.0)
             at = max(float(np.abs(Xn[sym.driven] - P_h).max()) / ell, float(np.abs(Un[sym.driven] - V_h).max()) / v_scale)
             c11 = float(np.abs(sym.constraint(Xn) / sym._R).max(initial=0.0))
@@ -1140,12 +1142,10 @@ def _check_rattle_targets(scene, sym, states):
             worst[backend] = (max(a, at), max(b, c11), max(c, c12))
     tol = 1e-12
     passed = bool(worst) and all(max(w) <= tol for w in worst.values())
-    detail = ("one step h = 1e-3 from each sample: "
+    detail = (f"one step h <= {REACH_STEP:g} s from each sample: "
               + "; ".join(f"{b}: anchors vs P(t+h), V(t+h) {w[0]:.1e}, (11) {w[1]:.1e}, (12) {w[2]:.1e}"
                           for b, w in worst.items())
-              + " (relative to the median link length, the largest speed)"
-              + "".join(f"; {b}: not compared ({why})" for b, why in skipped.items())
-              + "".join(f"; {b}: {n} step(s) failed (last: {why})" for b, (n, why) in failed.items()))
+              + " (relative to the median link length, the largest speed)" + _backends_detail(worst, skipped, failed))
     return CheckResult(name, passed, max((max(w) for w in worst.values()), default=0.0), tol, detail,
                        skipped=not worst)
 
