@@ -45,8 +45,9 @@ forces f) and the driven anchors' p, v, a (empty without driven anchors):
   including its diagonal 1/M_k1 + 1/M_k2 (which equals |E_l|^2 (1/M_k1 + 1/M_k2) only on the manifold).
 
 Coordinates: ``x`` is the row-major flattening of the free masses' reduced positions
-``(X[free] - origin) @ basis`` (``p`` the same for the driven anchors, in scene order): all three coordinates by default (basis = identity), two for a planar
-scene (basis = two orthonormal vectors of its plane). Velocities and forces reduce as ``V[free] @ basis``.
+``(X[free] - origin) @ basis`` (``p`` the same for the driven anchors, in scene order): all three
+coordinates by default (basis = identity), two for a planar scene (basis = two orthonormal vectors of
+its plane). Velocities and forces reduce as ``V[free] @ basis``.
 The external forces F_k (gravity, constant forces, drag, spring-dampers, input forces) are also written
 symbolically (:meth:`SymbolicTensionSystem.forces_function`), so a generated kernel needs no numeric
 force evaluation.
