@@ -5,6 +5,8 @@ then a pure function of (X, U, F_input): it holds no state of the simulation.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from linknet_core.errors import ConsistencyError, SolverError
@@ -22,7 +24,6 @@ class Dynamics:
     def __init__(self, scene: Scene, structure: Structure | None = None, rhs_kernel: str = "numpy"):
         self.scene = scene
         self.structure = structure or analyse(scene)
-        self.solver: TensionSolver = make_solver(scene, self.structure)
         self._factored_at: np.ndarray | None = None
         self._k1, self._k2 = scene.k1, scene.k2
         self._inv_mass = scene.inv_mass
@@ -54,6 +55,12 @@ class Dynamics:
         anchor = np.concatenate([row[scene.k1[on1]], row[scene.k2[on2]]])
         self._reaction_slots = (3 * anchor[:, None] + np.arange(3)).reshape(-1)
 
+    @functools.cached_property
+    def solver(self) -> TensionSolver:
+        """The reference's tension solver, set up at its first use: a Simulator on the native backend may never
+        factor A here (its initial velocities already satisfy (12), no self-stress to check)."""
+        return make_solver(self.scene, self.structure)
+
     # ---- building blocks ----------------------------------------------------------------------
     def forces(self, X, U, F_input=None) -> np.ndarray:
         return external_forces(self.scene, X, U, F_input)
@@ -65,9 +72,9 @@ class Dynamics:
         """A of (25) (symmetric scipy.sparse CSR, original link numbering)."""
         return self.solver.assembly.matrix(self.unit_vectors(X))
 
-    def tension_rhs(self, X, U, F) -> np.ndarray:
-        """B of (26) for total external forces F."""
-        return rhs(self.scene, X, U, F)
+    def tension_rhs(self, X, U, F, anchor_acc=None) -> np.ndarray:
+        """B of (26) for total external forces F (and the driven anchors' accelerations, (K,3))."""
+        return rhs(self.scene, X, U, F, anchor_acc=anchor_acc)
 
     def factor(self, X, E=None) -> None:
         """Factor A(X) unless the last factorisation was at this very configuration (E: unit vectors at X,
@@ -241,8 +248,11 @@ class Dynamics:
         if self.scene.L == 0:
             return np.array(U, float, copy=True)
         E = self.unit_vectors(X)
+        rows = self.constraint_rows(X, U, E)
+        if not rows.any():  # already on (12): the projection is U itself, no factorisation needed
+            return np.array(U, float, copy=True)
         self.factor(X, E)
-        mu = self.solver.solve(self.constraint_rows(X, U, E))
+        mu = self.solver.solve(rows)
         return U - self._correction(E, mu)
 
     # ---- hypothesis (35) ------------------------------------------------------------------------
