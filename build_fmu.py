@@ -280,8 +280,8 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
         description=(f"linknet network '{name}': {scene.K} point masses, {scene.L} rigid links. "
                      "Inputs F[k,i] (N) are held constant over each communication step."
                      + (" Inputs P[k,i] (m), V[k,i] (m/s), A[k,i] (m/s2) move driven anchor k as P + V tau + A tau^2/2 "
-                        "over each communication step; Freact[k,i] is the force on each anchor, Jreact[k,i] the "
-                        "impulse on a driven anchor at the last step's start."
+                        "from the communication point where they are set; Freact[k,i] is the force on each anchor, "
+                        "Jreact[k,i] the impulse on a driven anchor at the last step's start."
                         if len(scene.input_driven_indices) else "")),
         integrator=integrator,
         integrators=integrators,

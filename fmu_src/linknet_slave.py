@@ -120,6 +120,9 @@ class LinknetNetwork(Fmi2Slave):
 
         self._real = np.zeros(lay.n_real)
         self._input_vrs = self._input_idx = self._input_force_idx = None  # the last inputs set (set_real)
+        # P, V, A set since the last step: the anchors move as P + V s + A s^2/2 from the time they were set (the
+        # current time); until they are, the Simulator keeps the last hold (a read after a step sees where it went)
+        self._anchors_set = False
         self._read_vrs = self._read_idx = None  # the last list of variables read (get_real)
         self._real[lay.P_vr] = np.asarray(self._scene0.X0)[lay.anchor_inputs]  # at rest at the scene's position
         self._real[lay.M_vr] = np.asarray(self._scene0.mass)[lay.free_indices]
@@ -175,10 +178,11 @@ class LinknetNetwork(Fmi2Slave):
         self._outputs_stale = True
 
     def _anchors(self):
-        """The motion of the anchors driven by inputs as the Simulator takes it, (P, V, A) each (n, 3) in scene
-        order (held as P + V tau + A tau^2/2 over the step), or None for a scene without them."""
+        """The motion of the anchors driven by inputs as the Simulator takes it: (P, V, A) each (n, 3) in scene
+        order, held as P + V s + A s^2/2 from the current time, if they were set since the last step; else None
+        (the Simulator keeps the last hold)."""
         lay = self._layout
-        if not lay.anchor_inputs.size:
+        if not self._anchors_set:
             return None
         return self._real[lay.P_vr], self._real[lay.V_vr], self._real[lay.A_vr]
 
@@ -265,6 +269,7 @@ class LinknetNetwork(Fmi2Slave):
                     self._real[idx] = vals
                     if isinstance(force_idx, tuple):
                         self._F_flat[force_idx[1]] = vals[force_idx[0]]
+                        self._anchors_set = True
                     else:
                         self._F_flat[force_idx] = vals
                     self._outputs_stale = True
@@ -290,6 +295,7 @@ class LinknetNetwork(Fmi2Slave):
                     continue
                 self._bad.pop(var.name, None)
                 self._real[vr] = value
+                self._anchors_set |= not bool(lay.is_force_input[vr])
                 continue
             # parameter
             if self._initialized:
@@ -484,6 +490,7 @@ class LinknetNetwork(Fmi2Slave):
             self._error(f"doStep from t={t!r} with h={h!r} failed: {e}", Fmi2Status.discard)
             return False
         self._restored_impulse = None
+        self._anchors_set = False
         self._outputs_stale = True
         return True
 
@@ -503,6 +510,7 @@ class LinknetNetwork(Fmi2Slave):
             "bad": dict(self._bad),
             "broken": self._broken,
             "initialized": self._initialized,
+            "anchors_set": self._anchors_set,
             # Jreact: the driven anchors' impulse of the last step, which the Simulator's snapshot does not carry
             "impulse": (self._sim.anchor_report()["impulse"] if self._restored_impulse is None
                         else self._restored_impulse).copy() if self._layout.driven_indices.size else None,
@@ -542,6 +550,7 @@ class LinknetNetwork(Fmi2Slave):
             self._F[lay.input_masses] = self._real[lay.F_vr]
             self._sim.set_state(copy.deepcopy(state["sim"]))
             self._restored_impulse = None if state.get("impulse") is None else state["impulse"].copy()
+            self._anchors_set = bool(state.get("anchors_set", False))
             self._bad = dict(state["bad"])
             self._broken = state["broken"]
             self._initialized = state["initialized"]

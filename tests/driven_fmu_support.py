@@ -89,9 +89,12 @@ def output_names(md) -> list[str]:
     return [v.name for v in md.modelVariables if v.causality == "output"]
 
 
-def library_outputs(scene, names, method="rattle", jump_step=None, n_steps=N_STEPS, h=H, **settings) -> np.ndarray:
+def library_outputs(scene, names, method="rattle", jump_step=None, n_steps=N_STEPS, h=H, read_after=False,
+                    **settings) -> np.ndarray:
     """The run on linknet_core's Simulator: at each communication point the outputs `names` (FMU names) with the
-    inputs of that point, then an advance to the next with them held. Rows: t, then names."""
+    inputs of that point, then an advance to the next with them held. Rows: t, then names. ``read_after``: the
+    outputs are read after each advance instead, before the next inputs (as fmpy's simulate_fmu reads them): the
+    driven anchors where their held motion took them (rows t_1 .. t_N)."""
     import linknet_core as ln
     kwargs = settings or (dict(rtol=1e-8) if ln.METHODS[method].adaptive else dict(dt=1e-3))
     sim = ln.Simulator(scene, method=method, **kwargs)
@@ -103,8 +106,14 @@ def library_outputs(scene, names, method="rattle", jump_step=None, n_steps=N_STE
     rows = []
     for n in range(n_steps + 1):
         anchors = (P[n:n + 1], V[n:n + 1], A[n:n + 1])
-        out = sim.outputs(F, anchors=anchors)
-        row = [n * h]
+        if read_after:
+            if n == n_steps:
+                break
+            sim.advance(n * h + h, F, anchors=anchors)
+            out = sim.outputs(F)  # the last hold
+        else:
+            out = sim.outputs(F, anchors=anchors)
+        row = [(n + 1) * h if read_after else n * h]
         for name in names:
             kind, idx = name.split("[")
             idx = [int(i) - 1 for i in idx.rstrip("]").split(",")]
@@ -117,6 +126,6 @@ def library_outputs(scene, names, method="rattle", jump_step=None, n_steps=N_STE
             else:
                 row.append(out[kind][idx[0], idx[1]])
         rows.append(row)
-        if n < n_steps:
+        if n < n_steps and not read_after:
             sim.advance(n * h + h, F, anchors=anchors)  # as the FMU: t + h
     return np.array(rows)

@@ -119,12 +119,12 @@ class Layout:
         self.F_vr = np.array([[self._add(f"F[{k + 1},{i + 1}]", "input", "continuous", None, "Force",
                                          f"external force on {self._mass_label(k)}, {AXES[i]} component, {held}")
                                for i in range(3)] for k in self.input_masses], dtype=int).reshape(-1, 3)
-        quadratic = ("the anchor moves as P + V tau + A tau^2/2 over each communication step (tau from its start); "
-                     "fmi2SetRealInputDerivatives of P[k,i] sets V[k,i] (order 1) and A[k,i] (order 2)")
+        quadratic = ("the anchor moves as P + V tau + A tau^2/2, tau from the communication point where they were set, "
+                     "until they are set again; fmi2SetRealInputDerivatives of P[k,i] sets V[k,i] (order 1) and "
+                     "A[k,i] (order 2)")
         self.P_vr, self.V_vr, self.A_vr = (
             np.array([[self._add(f"{name}[{k + 1},{i + 1}]", "input", "continuous", None, dtype,
-                                 f"{what} of driven anchor {self._mass_label(k)}, {AXES[i]}, at the start of the "
-                                 f"communication step; {quadratic}")
+                                 f"{what} of driven anchor {self._mass_label(k)}, {AXES[i]}; {quadratic}")
                        for i in range(3)] for k in self.anchor_inputs], dtype=int).reshape(-1, 3)
             for name, dtype, what in (("P", "Position", "position"), ("V", "Velocity", "velocity"),
                                       ("A", "Acceleration", "acceleration")))

@@ -706,7 +706,6 @@ static int evaluate_outputs(fmu_model *m, char *msg)
         memcpy(m->Xo, m->d->X, n3 * sizeof(double));
         memcpy(m->Uo, m->d->U, n3 * sizeof(double));
     }
-    m->d->drive_hold_t = m->d->t;  /* the inputs as set hold from the current communication point */
     const int status = ln_evaluate(&m->model, m->d, m->Xo, m->Uo);
     if (status != LN_OK) {
         for (ln_int l = 0; l < s->L; l++) m->d->T[l] = NAN;
@@ -796,8 +795,11 @@ int fmu_model_set_real(fmu_model *m, const unsigned *vr, size_t n, const double 
             m->d->F_input[v->index] = value[i];
             m->outputs_stale = 1;
         } else if (is_anchor_input(v->kind)) {
+            /* P, V, A set at t: the anchor moves as P + V s + A s^2/2, s = t' - t, from now until they are set
+               again (reads between a step and the next inputs see where that motion took it) */
             m->value[vr[i]] = value[i];
             anchor_input(m, v->kind)[v->index] = value[i];
+            m->d->drive_hold_t = m->d->t;
             m->outputs_stale = 1;
         } else if (value[i] != m->value[vr[i]]) {
             m->value[vr[i]] = value[i];
@@ -964,7 +966,6 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
 {
     const double t_fmu = m->d->t, t_target = t + h;
     if (t_target <= t_fmu) return FMU_OK;  /* h below half an ulp of t: nothing to integrate */
-    m->d->drive_hold_t = t_fmu;  /* the anchor inputs as set: P + V s + A s^2/2, s from the step's start */
     const int status = ln_advance(&m->model, &m->method, m->d, t_target, m->s->max_steps);
     if (status != LN_OK) {
         char why[FMU_MESSAGE - 128];

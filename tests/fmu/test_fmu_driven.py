@@ -77,6 +77,22 @@ def case(name, instance, jump_step=None, derivatives=False):
     f.slave.freeInstance()
     return rows
 
+def case_read_after(name, instance):  # outputs read after each doStep, before the next inputs (fmpy's way)
+    f = Fmu(fmus[name], instance)
+    f.init()
+    scene = scenes[name]
+    motion = drive.anchor_motion(scene.X0[drive.ANCHOR[name] - 1])
+    names = [v.name for v in f.md.modelVariables if v.causality == "output"]
+    rows = []
+    for n in range(drive.N_STEPS):
+        inputs(f, scene, n, motion)
+        f.step(n * drive.H, drive.H)
+        rows.append([(n + 1) * drive.H] + list(f.get(names)))
+    f.slave.terminate()
+    f.slave.freeInstance()
+    return np.array(rows)
+
+save(read_after=case_read_after("driven_chain", "r1"))
 save(pendulum=case("driven_pendulum", "p1"), chain=case("driven_chain", "c1"),
      chain_derivatives=case("driven_chain", "c2", derivatives=True), jump=case("driven_pendulum", "p2", jump_step=10))
 
@@ -123,6 +139,14 @@ def test_driven_anchor_runs_equal_the_library(name, key, runs):
     out, scenes, fmus, _ = runs
     ref = drive.library_outputs(scenes[name], _names(fmus[name]))
     assert np.array_equal(out[key], ref)  # the FMU runs the library itself: bit for bit
+
+
+def test_outputs_read_after_a_step_see_the_held_motion(runs):
+    """Read after doStep, before the next inputs: the anchor where its held quadratic took it, and the tensions of
+    that motion (the library's outputs() with the last hold)."""
+    out, scenes, fmus, _ = runs
+    ref = drive.library_outputs(scenes["driven_chain"], _names(fmus["driven_chain"]), read_after=True)
+    assert np.array_equal(out["read_after"], ref)
 
 
 def test_input_derivatives_give_the_run_of_V_and_A_inputs(runs):

@@ -123,6 +123,28 @@ def test_driven_anchor_runs_equal_the_library(name, method, scenes, fmu_root):
         assert np.ptp(rows[:, shaker], axis=0).min() > 1e-3  # so did the sine-driven one
 
 
+def test_outputs_read_after_a_step_see_the_held_motion(scenes, fmu_root):
+    """A master that reads the outputs after doStep and sets the next inputs after that (fmpy's simulate_fmu) sees
+    the anchor where its held quadratic took it, with the tensions of that motion: the library's outputs() with the
+    last hold. The anchor's X lands on the next P of the (continuous) input motion."""
+    fmu = built(fmu_root, scenes["driven_chain"])
+    scene = ln.load_scene(scenes["driven_chain"])
+    names = drive.output_names(fmu.md)
+    motion = drive.anchor_motion(scene.X0[0])
+    inst = Instance(fmu)
+    inst.initialize()
+    rows = []
+    for n in range(drive.N_STEPS):
+        inst.set_inputs(scene, n, motion)
+        inst.slave.doStep(currentCommunicationPoint=n * drive.H, communicationStepSize=drive.H)
+        rows.append([(n + 1) * drive.H] + list(inst.slave.getReal(inst.vrs(names))))
+    inst.free()
+    rows = np.array(rows)
+    assert_round_off(rows, drive.library_outputs(scene, names, read_after=True), "read after the step")
+    X = rows[:, [names.index(f"X[1,{i}]") + 1 for i in (1, 2, 3)]]
+    np.testing.assert_allclose(X, motion[0][1:], rtol=0, atol=1e-12)
+
+
 def test_changed_mass_with_a_driven_anchor_equals_the_library(scenes, fmu_root):
     """A mass set before initialization rebuilds the model (1/M and the accelerations of B (26)) in C."""
     fmu = built(fmu_root, scenes["driven_pendulum"])
@@ -141,6 +163,44 @@ def test_input_derivatives_give_the_run_of_V_and_A_inputs(scenes, fmu_root):
     assert fmu.md.coSimulation.canInterpolateInputs
     direct = _run(fmu, scene, names)
     assert np.array_equal(_run(fmu, scene, names, derivatives=True), direct)
+
+
+def test_fmpy_simulate_fmu_with_input_derivatives(scenes, fmu_root):
+    """A standard master: fmpy's simulate_fmu with set_input_derivatives=True sets P from a table and its slope as
+    order-1 derivatives (and derivatives of the force and A inputs, which the FMU ignores with a warning). The pivot
+    moves at constant velocity v from rest: the run equals the library's with anchors (P(t_n), v, 0), the anchor's X
+    follows the table and the start is a velocity jump, J = -m (v.e) e."""
+    import fmpy
+    fmu = built(fmu_root, scenes["driven_pendulum"])
+    scene = ln.load_scene(scenes["driven_pendulum"])
+    names = drive.output_names(fmu.md)
+    v, X0, force = np.array([0.5, 0.0, 0.2]), scene.X0[0], np.array([0.3, 0.0, 0.0])
+    # fmpy 0.3.32 sizes its derivative buffer for 9 continuous inputs (simulation.py: (value_type * 9)()): give 9
+    columns = [f"P[1,{i}]" for i in (1, 2, 3)] + [f"F[2,{i}]" for i in (1, 2, 3)] + [f"A[1,{i}]" for i in (1, 2, 3)]
+    signal = np.array([(t, *(X0 + v * t), *force, 0.0, 0.0, 0.0) for t in (-1.0, 1.0)],
+                      dtype=[("time", float)] + [(c, float) for c in columns])
+    log = []
+    result = fmpy.simulate_fmu(str(fmu.path), stop_time=0.2, output_interval=drive.H, input=signal,
+                               set_input_derivatives=True, output=names, logger=lambda *a: log.append(a))
+    rows = np.array([[r[n] for n in names] for r in result])[1:]
+    sim = ln.Simulator(scene, dt=1e-3)
+    F = np.zeros((2, 3))
+    F[1] = force
+    ref = []
+    for n in range(rows.shape[0]):
+        sim.advance(n * drive.H + drive.H, F, anchors=((X0 + v * n * drive.H)[None], v[None], np.zeros((1, 3))))
+        out = sim.outputs(F)
+        ref.append(np.concatenate([out["X"].ravel(), out["U"].ravel(), out["T"], out["Freact"].ravel(),
+                                   out["impulse"].ravel()]))
+    assert names == [f"{q}[{k},{i}]" for q in "XU" for k in (1, 2) for i in (1, 2, 3)] + ["T[1]"] + \
+        [f"{q}[1,{i}]" for q in ("Freact", "Jreact") for i in (1, 2, 3)]
+    ref = np.array(ref)
+    scale = np.maximum(np.abs(ref).max(axis=0), 1e-300)
+    assert (np.abs(rows - ref) / scale).max() < 1e-9
+    np.testing.assert_allclose(rows[:, :3], X0 + v * drive.H * np.arange(1, rows.shape[0] + 1)[:, None], atol=1e-12)
+    e = (scene.X0[1] - X0) / np.linalg.norm(scene.X0[1] - X0)
+    np.testing.assert_allclose(rows[0, -3:], -1.5 * float(v @ e) * e, rtol=1e-9)
+    assert any(status == WARNING and b"is held constant" in message for _, _, status, _, message in log)
 
 
 def test_a_velocity_jump_is_an_inelastic_impulse(scenes, fmu_root):
