@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 import sys
 from pathlib import Path
 
@@ -12,130 +11,10 @@ import numpy as np
 from linknet_core import visual  # light: matplotlib and plotly are imported only when a picture is drawn
 from linknet_core.ensemble import command as ensemble_command  # light: Dask and xarray are imported only when a study runs
 from linknet_core.errors import LinknetError
-
-
-# ---- one validated type per option -------------------------------------------------------------------------------
-# Every option that takes a value is parsed by one of these (or by argparse's `choices`): a bad value is answered at
-# once, naming the option and its rule, before anything is computed (tests/contract checks every option of the
-# parser). Each is marked with the rule it applies.
-
-def _validated(rule: str):
-    def mark(convert):
-        convert.rule = rule
-        convert.__name__ = rule  # argparse names the type in "invalid <name> value" messages
-        return convert
-    return mark
-
-
-def _float_text(text: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-
-
-@_validated("positive number")
-def positive_number(text: str) -> float:
-    from linknet_core.integrators import positive_problem
-
-    x = _float_text(text)
-    if positive_problem(x):
-        raise argparse.ArgumentTypeError(f"{text!r} must be a positive finite number")
-    return x
-
-
-@_validated("relative tolerance")
-def relative_tolerance(text: str) -> float:
-    from linknet_core.integrators import RTOL_MAX, RTOL_MIN, rtol_problem
-
-    x = _float_text(text)
-    if rtol_problem(x):
-        raise argparse.ArgumentTypeError(f"{text!r} must lie in [{RTOL_MIN:g}, {RTOL_MAX:g}) "
-                                         "(a relative tolerance)")
-    return x
-
-
-@_validated("sample count")
-def sample_count(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if n < 2:
-        raise argparse.ArgumentTypeError(f"{text!r} must be at least 2 (the samples at t = 0 and at --t-end)")
-    return n
-
-
-@_validated("readable file")
-def readable_file(text: str) -> str:
-    path = Path(text)
-    if not path.is_file():
-        raise argparse.ArgumentTypeError(f"{text!r} is not a file" + ("" if path.exists() else " (it does not exist)"))
-    if not os.access(path, os.R_OK):
-        raise argparse.ArgumentTypeError(f"{text!r} cannot be read (permissions)")
-    return text
-
-
-def writable_path_problem(text: str) -> str | None:
-    """Why a file could not be written at path `text` (None if it can): a folder there, an ancestor that is a file,
-    or no write permission on the nearest existing folder (missing folders are created when writing)."""
-    path = Path(os.path.abspath(Path(text).expanduser()))
-    if str(text).strip() == "":
-        return "is empty"
-    if path.is_dir():
-        return "is a folder"
-    if path.exists():
-        return None if os.access(path, os.W_OK) else "exists and cannot be overwritten (permissions)"
-    parent = path.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir():
-        return f"cannot be created: {parent} is not a folder"
-    if not os.access(parent, os.W_OK | os.X_OK):
-        return f"cannot be created: no write permission in {parent}"
-    return None
-
-
-def _output(suffixes: tuple, what: str):
-    @_validated(f"writable {what} path")
-    def convert(text: str) -> str:
-        problem = writable_path_problem(text)
-        if problem:
-            raise argparse.ArgumentTypeError(f"{text!r} {problem}")
-        if suffixes and Path(text).suffix.lower() not in suffixes:
-            raise argparse.ArgumentTypeError(f"{text!r}: {what} is written as {' or '.join(suffixes)}")
-        return text
-    return convert
-
-
-npz_path = _output((".npz",), "the result arrays file")
-plot_path = _output((".png", ".pdf", ".svg"), "the plot")
-
-
-@_validated("writable animation path")
-def animation_path(text: str) -> str:
-    problem = writable_path_problem(text)
-    if problem:
-        raise argparse.ArgumentTypeError(f"{text!r} {problem}")
-    try:
-        visual.check_animation_path(text)
-    except LinknetError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text
-
-
-# argparse reads "-1e-3" as an option name (its number pattern has no exponent) and answers "expected one
-# argument"; with this pattern a negative number is a value, which its option's type then refuses by its rule.
-_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
-
-
-def _numbers_may_be_negative(parser: argparse.ArgumentParser) -> None:
-    parser._negative_number_matcher = _NEGATIVE_NUMBER
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            for sub in action.choices.values():
-                _numbers_may_be_negative(sub)
-
+# one validated type per option, for every command (build_fmu.py imports them from here too)
+from linknet_core.options import (  # noqa: F401
+    _numbers_may_be_negative, _output, animation_path, npz_path, one_line_errors, plot_path, positive_number,
+    readable_file, relative_tolerance, sample_count, writable_path_problem)
 
 
 def _add_simulate(sub):
@@ -295,6 +174,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_animate(sub)
     _add_view(sub)
     _numbers_may_be_negative(parser)
+    one_line_errors(parser)
     return parser
 
 

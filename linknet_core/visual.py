@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from linknet_core.errors import LinknetError
+from linknet_core.options import (_output, animation_path, colour_map, count, finite_number, positive_number,
+                                  readable_file, validated)
 
 VIEWS = ("auto", "xz", "xy", "yz", "3d")
 PLANES = {"xz": (0, 2), "xy": (0, 1), "yz": (1, 2)}  # the two coordinates a flat view shows
@@ -324,6 +326,7 @@ class NetworkFigure:
         self.stamp.set_text(stamp)
 
 
+@validated("picture size WxH")
 def parse_size(text: str) -> tuple[int, int]:
     """'800x600' -> (800, 600), for argparse (which prints the message as its one-line usage error)."""
     try:
@@ -567,59 +570,43 @@ def write_html(motion: Motion, path, **options) -> Written:
 
 # ---- command line (wired in linknet_core.cli) ------------------------------------------------------------
 
-def _positive(kind):
-    def parse(text):
-        value = kind(text)  # a ValueError here reads "invalid int value: 'abc'" in argparse's error
-        if not value > 0:
-            raise argparse.ArgumentTypeError(f"must be positive (got {text})")
-        return value
-    parse.__name__ = kind.__name__
-    return parse
-
-
 def _add_picture_arguments(p, max_frames_help: str) -> None:
-    p.add_argument("result", help="a run written by `linknet simulate --out RESULT.npz`")
+    p.add_argument("result", type=readable_file,
+                   help="a run written by `linknet simulate --out RESULT.npz`")
     p.add_argument("--view", choices=VIEWS, default="auto",
                    help="projection: a coordinate plane (xz, xy, yz) or 3d; auto picks the plane the whole run "
                         "stays in, else 3d")
-    p.add_argument("--elev", type=float, default=DEFAULT_ELEV,
+    p.add_argument("--elev", type=finite_number, default=DEFAULT_ELEV,
                    help=f"3d view: elevation of the viewer, degrees (default {DEFAULT_ELEV:g})")
-    p.add_argument("--azim", type=float, default=DEFAULT_AZIM,
+    p.add_argument("--azim", type=finite_number, default=DEFAULT_AZIM,
                    help=f"3d view: azimuth of the viewer, degrees (default {DEFAULT_AZIM:g})")
-    p.add_argument("--max-frames", type=_positive(int), default=None, help=max_frames_help)
-    p.add_argument("--fps", type=_positive(float), default=DEFAULT_FPS,
+    p.add_argument("--max-frames", type=count, default=None, help=max_frames_help)
+    p.add_argument("--fps", type=positive_number, default=DEFAULT_FPS,
                    help=f"frames per second of playback (default {DEFAULT_FPS:g})")
-    p.add_argument("--speed", type=_positive(float), default=1.0,
+    p.add_argument("--speed", type=positive_number, default=1.0,
                    help="playback speed relative to real time (default 1; 0.25 is four times slower); "
                         "sets how many samples are shown")
-    p.add_argument("--tension-range", type=_positive(float), metavar="N",
+    p.add_argument("--tension-range", type=positive_number, metavar="N",
                    help="colour scale from -N to N newtons (default: the 95th percentile of |T| over the run, so "
                         "that short spikes saturate rather than wash the rest out)")
-    p.add_argument("--cmap", default=DEFAULT_CMAP, help=f"diverging matplotlib colour map (default {DEFAULT_CMAP})")
-
-
-def _one_line_errors(p) -> None:
-    """argparse prints a usage block before a bad option's error; the CLI promises one line naming the problem."""
-    def error(message):
-        p.exit(2, f"{p.prog}: error: {message} (see {p.prog} --help)\n")
-    p.error = error
+    p.add_argument("--cmap", type=colour_map, default=DEFAULT_CMAP, help=f"diverging matplotlib colour map (default {DEFAULT_CMAP})")
 
 
 def add_animate_arguments(p) -> None:
-    _one_line_errors(p)
     _add_picture_arguments(p, f"at most this many frames (default {DEFAULT_MAX_FRAMES}); samples are thinned "
                               "evenly in time")
-    p.add_argument("-o", "--out", required=True, help="OUT.gif or OUT.mp4 (needs ffmpeg), or OUT.png for one frame")
+    p.add_argument("-o", "--out", type=animation_path, required=True,
+                   help="OUT.gif or OUT.mp4 (needs ffmpeg), or OUT.png for one frame")
     p.add_argument("--size", type=parse_size, default=DEFAULT_SIZE, metavar="WxH",
                    help=f"picture size in pixels (default {DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]})")
-    p.add_argument("--at", type=float, metavar="TIME", help="OUT.png: time of the frame, s (default: the last sample)")
+    p.add_argument("--at", type=finite_number, metavar="TIME", help="OUT.png: time of the frame, s (default: the last sample)")
 
 
 def add_view_arguments(p) -> None:
-    _one_line_errors(p)
     _add_picture_arguments(p, f"at most this many frames (default {HTML_MAX_FRAMES}, fewer for large scenes so "
                               f"the file stays near {HTML_FRAME_BUDGET / 1e6:.0f} MB)")
-    p.add_argument("-o", "--out", required=True, help="OUT.html (self-contained: opens without network access)")
+    p.add_argument("-o", "--out", type=_output((".html",), "the page"), required=True,
+                   help="OUT.html (self-contained: opens without network access)")
 
 
 def _print_notes(motion: Motion) -> None:

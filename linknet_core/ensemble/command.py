@@ -11,6 +11,8 @@ import sys
 import numpy as np
 
 from linknet_core.errors import LinknetError
+from linknet_core.options import (_output, count, positive_number, random_seed, readable_file, readable_file_with,
+                                  relative_tolerance, sample_count, text_with)
 
 _DISTRIBUTIONS = {
     "uniform": lambda rng, a, b, n: rng.uniform(a, b, n),
@@ -18,46 +20,58 @@ _DISTRIBUTIONS = {
 }
 
 
+_NUMBER = r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
+# the form of each text option is checked when it is parsed, its meaning (names against the scene) before the run
+vary_text = text_with("NAME=VALUES", r"[^=\s]+=\S.*", "M[3]=0.5:2:10")
+sample_text = text_with("NAME=uniform:LOW:HIGH or NAME=normal:MEAN:SD",
+                        rf"[^=\s]+=(uniform|normal):{_NUMBER}:{_NUMBER}", "M[3]=uniform:0.5:2")
+output_list = text_with("a comma-separated list of X, U, T, Freact, or none", r"(?i:none)|\w+(\s*,\s*\w+)*", "X,T")
+mass_text = text_with("a mass (1-based number or name)", r".+", "11")
+scheduler_address = text_with("a Dask scheduler address", r"(\w+://)?\S+:\d+", "tcp://host:8786")
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", nargs="?", help="scene JSON file (with --fmu, the scene the FMU was built from; an FMU "
+    from linknet_core.integrators import METHODS
+
+    p.add_argument("scene", nargs="?", type=readable_file, help="scene JSON file (with --fmu, the scene the FMU was built from; an FMU "
                                             "built on pythonfmu carries its scene, and may stand here itself)")
-    p.add_argument("--fmu", metavar="FMU", help="run every member through this linknet FMU (build_fmu.py, pythonfmu "
+    p.add_argument("--fmu", metavar="FMU", type=readable_file_with((".fmu",), "FMU"), help="run every member through this linknet FMU (build_fmu.py, pythonfmu "
                                                 "or --native) with fmpy")
-    p.add_argument("--vary", action="append", default=[], metavar="NAME=VALUES",
+    p.add_argument("--vary", action="append", type=vary_text, default=[], metavar="NAME=VALUES",
                    help="a grid axis: M[3]=0.5:2:10 (start:stop:count, both ends included), R[1..10]=0.09,0.1 "
                         "(a list; a..b sets a range of indices to the same value), g[3]=-1.62, F[11,3]=0:5:6 "
                         "(constant input force), integrator=rattle,dop853, step=..., tolerance=...; scene "
                         "studies also X0[k,i], U0[k,i], drag[k], stiffness[s], damping[s], rest_length[s]. "
                         "Several --vary make a full factorial grid")
-    p.add_argument("--sample", action="append", default=[], metavar="NAME=DIST:A:B",
+    p.add_argument("--sample", action="append", type=sample_text, default=[], metavar="NAME=DIST:A:B",
                    help="Monte Carlo: NAME drawn from uniform:LOW:HIGH or normal:MEAN:SD, --n-samples times "
                         "(with --vary, every grid point runs every sample)")
-    p.add_argument("--samples", metavar="CSV", help="parameter sets from a CSV file: a header of parameter "
+    p.add_argument("--samples", metavar="CSV", type=readable_file, help="parameter sets from a CSV file: a header of parameter "
                                                     "names, one member per row")
-    p.add_argument("--n-samples", type=int, default=100, help="number of --sample draws (default 100)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of --sample (default 0)")
-    p.add_argument("--t-end", type=float, required=True, help="end time of every member, s")
-    p.add_argument("--method", help="integration method (default rattle, or dop853 with --rtol; an FMU keeps its "
+    p.add_argument("--n-samples", type=count, default=100, help="number of --sample draws (default 100)")
+    p.add_argument("--seed", type=random_seed, default=0, help="random seed of --sample (default 0)")
+    p.add_argument("--t-end", type=positive_number, required=True, help="end time of every member, s")
+    p.add_argument("--method", choices=sorted(METHODS), help="integration method (default rattle, or dop853 with --rtol; an FMU keeps its "
                                     "own unless given)")
     step = p.add_mutually_exclusive_group()
-    step.add_argument("--dt", type=float, help="step of a fixed-step method, s (default 1e-3)")
-    step.add_argument("--rtol", type=float, help="tolerance of an adaptive method")
-    p.add_argument("--atol", type=float, help="absolute tolerance of an adaptive method")
-    p.add_argument("--n-out", type=int, default=201, help="output samples per member (default 201)")
-    p.add_argument("--outputs", default="X,U,T",
+    step.add_argument("--dt", type=positive_number, help="step of a fixed-step method, s (default 1e-3)")
+    step.add_argument("--rtol", type=relative_tolerance, help="tolerance of an adaptive method")
+    p.add_argument("--atol", type=positive_number, help="absolute tolerance of an adaptive method")
+    p.add_argument("--n-out", type=sample_count, default=201, help="output samples per member (default 201)")
+    p.add_argument("--outputs", type=output_list, default="X,U,T",
                    help="what to keep per member and time, of X,U,T,Freact (default X,U,T; 'none' keeps only the "
                         "quantities of interest)")
-    p.add_argument("--tip", help="mass whose final position is reported (1-based number or name; default the "
+    p.add_argument("--tip", type=mass_text, help="mass whose final position is reported (1-based number or name; default the "
                                  "last free mass)")
     p.add_argument("--project-initial", action=argparse.BooleanOptionalAction, default=None,
                    help="project initial positions onto each member's link lengths (default: when R or X0 "
                         "is varied)")
-    p.add_argument("--out", help="netCDF file the members stream into (read it with xarray.open_dataset)")
-    p.add_argument("--scheduler", metavar="ADDR", help="run on an existing Dask cluster (tcp://host:8786) instead "
+    p.add_argument("--out", type=_output((), "the netCDF file"), help="netCDF file the members stream into (read it with xarray.open_dataset)")
+    p.add_argument("--scheduler", metavar="ADDR", type=scheduler_address, help="run on an existing Dask cluster (tcp://host:8786) instead "
                                                        "of a LocalCluster")
-    p.add_argument("--workers", type=int, help="worker processes of the LocalCluster (default one per core)")
-    p.add_argument("--members-per-task", type=int, help="fixed batch size (default: sized from the member time)")
-    p.add_argument("--plot", metavar="PNG", help="draw the quantities of interest against the varied parameters")
+    p.add_argument("--workers", type=count, help="worker processes of the LocalCluster (default one per core)")
+    p.add_argument("--members-per-task", type=count, help="fixed batch size (default: sized from the member time)")
+    p.add_argument("--plot", metavar="PNG", type=_output((".png",), "the plot"), help="draw the quantities of interest against the varied parameters")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 

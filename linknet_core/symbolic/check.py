@@ -1224,10 +1224,12 @@ class single_threaded_blas:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", nargs="+", help="scene JSON file(s), e.g. models/chain_10.json")
-    parser.add_argument("--samples", type=int, default=5,
+    from linknet_core.options import count, random_seed, readable_file
+
+    parser.add_argument("scene", nargs="+", type=readable_file, help="scene JSON file(s), e.g. models/chain_10.json")
+    parser.add_argument("--samples", type=count, default=5,
                         help="random states on the manifold, and as many off it (default 5)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--seed", type=random_seed, default=0, help="random seed (default 0)")
     parser.add_argument("--kernel", action="store_true",
                         help="also generate and compile the scene's casadi kernel and compare it (needs a C compiler)")
 

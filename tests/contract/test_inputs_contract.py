@@ -87,7 +87,7 @@ def _value_actions(parser):
         yield action
 
 
-@pytest.mark.parametrize("which", ["simulate", "analyze", "build_fmu"])
+@pytest.mark.parametrize("which", ["simulate", "analyze", "check", "animate", "view", "ensemble", "build_fmu"])
 def test_every_option_is_parsed_by_one_validated_type(which):
     """The general rule: each option that takes a value has a validated type (one carrying its rule) or choices."""
     if which == "build_fmu":
@@ -135,6 +135,50 @@ def test_cli_refuses_bad_options_before_running(args, words):
     proc = _linknet("simulate", MODELS / "pendulum.json", "--t-end", "0.1", *args)
     assert proc.returncode == 2 and words in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+PENDULUM_FILE = "models/pendulum.json"  # relative to the repository (the test runs there)
+
+
+@pytest.mark.parametrize("argv,words", [
+    (["check", PENDULUM_FILE, "--samples", "0"], "--samples: '0' must be at least 1"),
+    (["check", PENDULUM_FILE, "--seed", "-1"], "--seed: '-1' must lie in [0, 2**64)"),
+    (["check", "no_such_scene.json"], "'no_such_scene.json' is not a file"),
+    (["animate", "RUN", "-o", "a.gif", "--fps", "0"], "--fps: '0' must be a positive finite number"),
+    (["animate", "RUN", "-o", "a.gif", "--elev", "nan"], "--elev: 'nan' must be a finite number"),
+    (["animate", "RUN", "-o", "a.gif", "--cmap", "rainbowish"], "--cmap: unknown colour map 'rainbowish'"),
+    (["animate", "RUN", "-o", "a.gif", "--size", "5x5"], "--size: 16 to 8000 pixels each way"),
+    (["animate", "RUN", "-o", "a.txt"], "-o/--out: a.txt: an animation is written as .gif or .mp4"),
+    (["animate", "no_such_run.npz", "-o", "a.gif"], "result: 'no_such_run.npz' is not a file"),
+    (["view", "RUN", "-o", "/etc/hostname/v.html"], "-o/--out: '/etc/hostname/v.html' cannot be created"),
+    (["view", "RUN", "-o", "v.html", "--max-frames", "0"], "--max-frames: '0' must be at least 1"),
+    (["view", "RUN", "-o", "v.png"], "the page is written as .html"),
+    (["ensemble", PENDULUM_FILE, "--t-end", "-1"], "--t-end: '-1' must be a positive finite number"),
+    (["ensemble", PENDULUM_FILE, "--t-end", "1", "--rtol", "1"], "--rtol: '1' must lie in [1e-15, 0.1)"),
+    (["ensemble", PENDULUM_FILE, "--t-end", "1", "--n-samples", "0"], "--n-samples: '0' must be at least 1"),
+    (["ensemble", PENDULUM_FILE, "--t-end", "1", "--n-out", "1"], "--n-out: '1' must be at least 2"),
+    (["ensemble", PENDULUM_FILE, "--t-end", "1", "--method", "rk99"], "--method: invalid choice: 'rk99'"),
+    (["ensemble", PENDULUM_FILE, "--t-end", "1", "--vary", "M3"], "--vary: 'M3' is not NAME=VALUES"),
+    (["ensemble", PENDULUM_FILE, "--t-end", "1", "--sample", "M[2]=gauss:1:2"],
+     "--sample: 'M[2]=gauss:1:2' is not NAME=uniform:LOW:HIGH or NAME=normal:MEAN:SD"),
+    (["ensemble", PENDULUM_FILE, "--t-end", "1", "--outputs", "X;U"], "--outputs: 'X;U' is not a comma-separated"),
+    (["ensemble", PENDULUM_FILE, "--t-end", "1", "--workers", "0"], "--workers: '0' must be at least 1"),
+    (["ensemble", PENDULUM_FILE, "--t-end", "1", "--scheduler", "nohost"], "--scheduler: 'nohost' is not a Dask"),
+    (["ensemble", PENDULUM_FILE, "--t-end", "1", "--fmu", PENDULUM_FILE], "--fmu: 'models/pendulum.json': FMU is a "),
+    (["ensemble", PENDULUM_FILE, "--t-end", "1", "--plot", "p.pdf"], "--plot: 'p.pdf': the plot is written as .png"),
+])
+def test_check_animate_view_ensemble_refuse_bad_options_in_one_line(argv, words, tmp_path, monkeypatch, capsys):
+    """Each bad value of the commands' options is refused while parsing, before anything runs: one line naming the
+    option and its rule, exit status 2, no traceback."""
+    monkeypatch.chdir(ROOT)
+    run = tmp_path / "run.npz"
+    run.write_bytes(b"")
+    argv = [str(run) if a == "RUN" else a for a in argv]
+    with pytest.raises(SystemExit) as stop:
+        cli.main(argv)
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and words in err, err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
 
 
 def test_ctrl_c_writes_what_was_computed_and_exits_130(tmp_path):

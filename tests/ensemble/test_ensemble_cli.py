@@ -61,4 +61,4 @@ def test_errors_are_one_line(args, words):
 
 def test_missing_scene_is_one_line(tmp_path):
     run = linknet(tmp_path / "missing.json", "--t-end", "1", "--vary", "M[2]=1")
-    assert run.returncode == 2 and "cannot read scene file" in run.stderr and "Traceback" not in run.stderr
+    assert run.returncode == 2 and "missing.json' is not a file" in run.stderr and "Traceback" not in run.stderr

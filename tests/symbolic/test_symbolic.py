@@ -123,8 +123,9 @@ def test_cli_main_prints_one_line_per_check_and_exits_zero(capsys):
 def test_cli_refuses_a_missing_file_and_handles_a_scene_without_links(capsys, tmp_path):
     parser = argparse.ArgumentParser()
     checks.add_arguments(parser)
-    assert checks.main(parser.parse_args([str(tmp_path / "missing.json")])) == 2
-    assert "missing.json" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:  # refused by the scene argument's type, before anything runs
+        parser.parse_args([str(tmp_path / "missing.json")])
+    assert stop.value.code == 2 and "missing.json' is not a file" in capsys.readouterr().err
     free = tmp_path / "free.json"
     free.write_text('{"name": "free", "gravity": [0, 0, -9.81], "masses": ['
                     '{"name": "a", "mass": 1.0, "position": [0, 0, 0]}, {"name": "b", "mass": 2.0, '

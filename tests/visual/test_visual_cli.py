@@ -86,9 +86,9 @@ def exit_code(argv):
 
 
 @pytest.mark.parametrize("args, says", [
-    (["animate", "{missing}", "-o", "{dir}/a.gif"], "nothing.npz: no such file"),
+    (["animate", "{missing}", "-o", "{dir}/a.gif"], "nothing.npz' is not a file (it does not exist)"),
     (["animate", "{text}", "-o", "{dir}/a.gif"], "not a result file written by `linknet simulate --out`"),
-    (["animate", "{dir}", "-o", "{dir}/a.gif"], "Is a directory"),
+    (["animate", "{dir}", "-o", "{dir}/a.gif"], "is not a file"),
     (["view", "{plain}", "-o", "{dir}/a.html"], "it holds one array"),
     (["animate", "{foreign}", "-o", "{dir}/a.gif"], "it has no t, X, T, k1, k2, mass_names"),
     (["animate", "{truncated}", "-o", "{dir}/a.gif"], "not a result file"),
@@ -96,7 +96,7 @@ def exit_code(argv):
     (["animate", "{good}", "-o", "{dir}/a.gif", "--fps", "100"], "at most 50 frames per second"),
     (["view", "{good}", "-o", "{dir}/a.png"], "written as .html"),
     (["animate", "{good}", "-o", "/proc/nowhere/a.gif"], "cannot write /proc/nowhere/a.gif"),
-    (["animate", "{good}", "-o", "{dir}/a.gif", "--max-frames", "0"], "--max-frames: must be positive"),
+    (["animate", "{good}", "-o", "{dir}/a.gif", "--max-frames", "0"], "--max-frames: '0' must be at least 1"),
     (["animate", "{good}", "-o", "{dir}/a.gif", "--view", "side"], "--view: invalid choice: 'side'"),
     (["animate", "{good}", "-o", "{dir}/a.gif", "--size", "big"], "--size: WIDTHxHEIGHT"),
     (["animate", "{good}", "-o", "{dir}/a.gif", "--cmap", "nosuchmap"], "unknown colour map 'nosuchmap'"),
@@ -126,4 +126,5 @@ def test_mp4_without_ffmpeg_is_one_error_line_naming_it(chain_npz, tmp_path):
 def test_the_real_command_reports_errors_in_one_line(tmp_path):
     result = run_cli("view", tmp_path / "absent.npz", "-o", tmp_path / "a.html")
     assert result.returncode == 2 and result.stdout == ""
-    assert result.stderr == f"linknet view: error: {tmp_path / 'absent.npz'}: no such file\n"
+    assert result.stderr == (f"linknet view: error: argument result: '{tmp_path / 'absent.npz'}' is not a file (it "
+                             "does not exist) (see linknet view --help)\n")
