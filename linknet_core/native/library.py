@@ -127,6 +127,11 @@ evaluate_repeated = _declare("ln_evaluate_repeated", ctypes.c_int, Model_p, Data
 force_kind = _declare("ln_force_kind", ln_int, ctypes.c_char_p)
 fixed_step_count = _declare("ln_fixed_step_count", ln_int, ctypes.c_double, ctypes.c_double)
 sizeof = _declare("ln_sizeof", ctypes.c_size_t, ctypes.c_int)
+# the structure analysis's graph routines (src/graph.h); arrays passed by address (np.ndarray.ctypes.data)
+_graph_components = _declare("ln_graph_components", ln_int, ln_int, ln_int, ctypes.c_void_p, ctypes.c_void_p,
+                             ctypes.c_void_p)
+_forest_depth = _declare("ln_forest_depth", ctypes.c_int, ln_int, ln_int, ctypes.c_void_p, ctypes.c_void_p,
+                         ctypes.c_void_p)
 # int (*)(void *user, double t, double *PVA): the driven anchors' motion callback (ln_data.drive_callback)
 DRIVE_CALLBACK = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, c_double_p)
 
@@ -144,3 +149,23 @@ def int_array(values) -> np.ndarray:
 
 def float_array(values) -> np.ndarray:
     return np.ascontiguousarray(values, np.float64)
+
+
+def graph_components(n_nodes: int, a: np.ndarray, b: np.ndarray) -> tuple[int, np.ndarray]:
+    """(count, label (n_nodes,)) of the connected components of the graph with edges a[e]-b[e], numbered in
+    the order of their smallest node (as scipy.sparse.csgraph.connected_components numbers them)."""
+    a, b = int_array(a), int_array(b)
+    label = np.empty(n_nodes, np.int64)
+    count = _graph_components(n_nodes, a.size, a.ctypes.data, b.ctypes.data, label.ctypes.data)
+    if count < 0:
+        raise ValueError("graph components: an edge end out of range (or out of memory)")
+    return int(count), label
+
+
+def forest_depth(n_nodes: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Depth (n_nodes,) of every node of a forest below its tree's root, the tree's smallest leaf."""
+    a, b = int_array(a), int_array(b)
+    depth = np.empty(n_nodes, np.int64)
+    if _forest_depth(n_nodes, a.size, a.ctypes.data, b.ctypes.data, depth.ctypes.data) != 0:
+        raise ValueError("forest depth: the graph has a cycle (or an edge end out of range, or out of memory)")
+    return depth

@@ -12,9 +12,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
+from linknet_core.native.library import graph_components
 from linknet_core.scene.description import Scene
 
 if TYPE_CHECKING:
@@ -38,8 +37,7 @@ class BodyLayout:
 
 def _components(scene: Scene):
     """Connected components of the link graph over all K masses (springs do not join them)."""
-    graph = sp.coo_matrix((np.ones(scene.L), (scene.k1, scene.k2)), shape=(scene.K, scene.K))
-    return connected_components(graph, directed=False)
+    return graph_components(scene.K, scene.k1, scene.k2)
 
 
 def _principal_moments(scene: Scene, X: np.ndarray, body_of: np.ndarray, count: int):
@@ -62,7 +60,6 @@ def _principal_moments(scene: Scene, X: np.ndarray, body_of: np.ndarray, count: 
 def free_rigid_bodies(scene: Scene, dyn: Dynamics) -> tuple[BodyLayout | None, str]:
     """The body layout if the scene is a set of free rigid bodies, else None and the reason."""
     st = dyn.structure
-    n_comp, labels = _components(scene)
     linked = np.zeros(scene.K, bool)
     linked[scene.k1] = True
     linked[scene.k2] = True
@@ -73,6 +70,7 @@ def free_rigid_bodies(scene: Scene, dyn: Dynamics) -> tuple[BodyLayout | None, s
     if anchored.size:
         return None, (f"{scene.mass_label(int(anchored[0]))} is anchored and linked: its component is not a free "
                       "rigid body")
+    n_comp, labels = _components(scene)
     comp_ids = np.unique(labels[linked])
     body_index = -np.ones(n_comp, np.int64)
     body_index[comp_ids] = np.arange(comp_ids.size)

@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components, breadth_first_order
 
 from linknet_core.native.ldl import amd_ordering, zero_pivots
+from linknet_core.native.library import forest_depth, graph_components
 from linknet_core.scene.description import Scene
 
 DENSE_RANK_LIMIT = 2500  # links; above it, rank is estimated from the LDL pivots
@@ -82,24 +82,21 @@ def _link_pairs(scene: Scene) -> LinkPairs:
 
 
 def _cut_graph(scene: Scene):
-    """Masses-and-links graph with every link end at an anchor given its own node."""
-    K, L = scene.K, scene.L
-    free_ids = -np.ones(K, np.int64)
-    free_ids[scene.free_indices] = np.arange(scene.free_indices.size)
+    """The masses-and-links graph with every link end at an anchor given its own node: (node_of_end (L, 2), the
+    nodes of each link's two ends; number of nodes). Free masses are nodes 0 .. K_free - 1 in scene order."""
     n_free = scene.free_indices.size
-    ends = []
+    free_ids = np.full(scene.K, -1, np.int64)
+    free_ids[scene.free_indices] = np.arange(n_free)
     next_id = n_free
-    node_of_end = np.empty((L, 2), np.int64)
+    node_of_end = np.empty((scene.L, 2), np.int64)
     for side, kk in enumerate((scene.k1, scene.k2)):
-        ids = free_ids[kk].copy()
+        ids = free_ids[kk]
         anchored = scene.fixed[kk]
-        ids[anchored] = next_id + np.arange(int(anchored.sum()))
-        next_id += int(anchored.sum())
+        n_anchored = int(np.count_nonzero(anchored))
+        ids[anchored] = next_id + np.arange(n_anchored)
+        next_id += n_anchored
         node_of_end[:, side] = ids
-        ends.append(ids)
-    n_nodes = next_id
-    graph = sp.coo_matrix((np.ones(L), (node_of_end[:, 0], node_of_end[:, 1])), shape=(n_nodes, n_nodes)).tocsr()
-    return graph, node_of_end, n_free
+    return node_of_end, next_id
 
 
 @dataclass
@@ -119,24 +116,11 @@ class Structure:
     notes: list = field(default_factory=list)
 
 
-def _tree_ordering(scene: Scene, graph, node_of_end, n_free) -> np.ndarray:
-    """Leaves-first order of the links in a forest: no fill in the LDL^T of A."""
-    sym = (graph + graph.T).tocsr()
-    n_nodes = sym.shape[0]
-    _, labels = connected_components(sym, directed=False)
-    degree = np.diff(sym.indptr)
-    # root each component at a leaf (every tree has one) so that chains come out in path order
-    # (tridiagonal A); one BFS from a virtual node joined to all the roots covers the whole forest
-    leaves = np.flatnonzero(degree <= 1)
-    _, first = np.unique(labels[leaves], return_index=True)
-    roots = leaves[first]
-    virtual = n_nodes
-    extra = sp.coo_matrix((np.ones(roots.size), (np.full(roots.size, virtual), roots)), shape=(n_nodes + 1, n_nodes + 1))
-    forest = (sp.block_diag([sym, sp.csr_matrix((1, 1))]) + extra + extra.T).tocsr()
-    order, pred = breadth_first_order(forest, virtual, directed=False, return_predecessors=True)
-    depth = np.zeros(n_nodes + 1, np.int64)
-    for node in order[1:]:  # parents come before children in BFS order (setup, once per scene)
-        depth[node] = depth[pred[node]] + 1
+def _tree_ordering(node_of_end: np.ndarray, n_nodes: int) -> np.ndarray:
+    """Leaves-first order of the links in a forest: no fill in the LDL^T of A. Each tree is rooted at a leaf
+    (every tree has one), so that chains come out in path order (tridiagonal A); a link is as deep as its
+    deeper end, and the deepest links come first."""
+    depth = forest_depth(n_nodes, node_of_end[:, 0], node_of_end[:, 1])
     link_depth = np.maximum(depth[node_of_end[:, 0]], depth[node_of_end[:, 1]])
     return np.argsort(-link_depth, kind="stable")
 
@@ -206,9 +190,8 @@ _per_scene: dict = {}
 
 
 def _analyse(scene: Scene) -> Structure:
-    graph, node_of_end, n_free = _cut_graph(scene)
-    n_nodes = graph.shape[0]
-    n_comp, node_component = connected_components(graph, directed=False)
+    node_of_end, n_nodes = _cut_graph(scene)
+    n_comp, node_component = graph_components(n_nodes, node_of_end[:, 0], node_of_end[:, 1])
     is_forest = scene.L == n_nodes - n_comp
     free_degree = np.bincount(np.concatenate([scene.k1, scene.k2]), minlength=scene.K)[scene.free_indices]
     max_free_degree = int(free_degree.max()) if free_degree.size else 0
@@ -216,14 +199,12 @@ def _analyse(scene: Scene) -> Structure:
     ground_ids = np.where(scene.fixed, scene.free_indices.size, -1)
     ground_ids[scene.free_indices] = np.arange(scene.free_indices.size)
     n_ground_nodes = scene.free_indices.size + (1 if scene.fixed.any() else 0)
-    g = sp.coo_matrix((np.ones(scene.L), (ground_ids[scene.k1], ground_ids[scene.k2])),
-                      shape=(n_ground_nodes, n_ground_nodes))
-    n_comp_ground, _ = connected_components(g, directed=False)
+    n_comp_ground, _ = graph_components(n_ground_nodes, ground_ids[scene.k1], ground_ids[scene.k2])
     closed_loops = int(scene.L - n_ground_nodes + n_comp_ground)
 
     if is_forest:
         topology = "chain" if max_free_degree <= 2 else "tree"
-        ordering = _tree_ordering(scene, graph, node_of_end, n_free)
+        ordering = _tree_ordering(node_of_end, n_nodes)
     else:
         topology = "general"
         pairs = link_pairs(scene)
