@@ -3,8 +3,9 @@ linknet_core's Simulator, which the FMUs are compared with.
 
 Scenes:
 * "driven_pendulum": a pendulum whose pivot is driven by inputs;
-* "driven_chain": three coupled groups of links: a 4-link chain hanging from an input-driven anchor, a pendulum on
-  a fixed pivot with a force input on its bob, and a pendulum on an anchor driven by a scene motion (a sine).
+* "driven_chain": three coupled groups of links: a 4-link chain (generic angles) hanging from an input-driven anchor,
+  a pendulum on a fixed pivot with a force input on its bob, and a pendulum on an anchor driven by a scene motion
+  (a sine).
 
 The input motion is continuous in P and V (each step's quadratic P + V tau + A tau^2/2 ends where the next one
 starts), with a piecewise-constant acceleration; `jump_step` adds a jump of the anchor's velocity at the start of
@@ -35,20 +36,22 @@ SCENES = {
     "driven_chain": {
         "name": "driven_chain", "gravity": [0.0, 0.0, -9.81],
         "masses": [{"name": "hook", "position": [0.0, 0.0, 0.0], "driven": True, "motion": {"kind": "input"}},
-                   {"name": "c1", "position": [0.3, 0.0, 0.0], "mass": 0.2},
-                   {"name": "c2", "position": [0.3, 0.0, -0.3], "mass": 0.2},
-                   {"name": "c3", "position": [0.3, 0.3, -0.3], "mass": 0.2},
-                   {"name": "c4", "position": [0.3, 0.3, -0.6], "mass": 0.3},
+                   {"name": "c1", "position": [0.25, 0.05, -0.15], "mass": 0.2},
+                   {"name": "c2", "position": [0.4, 0.2, -0.35], "mass": 0.2},
+                   {"name": "c3", "position": [0.35, 0.45, -0.5], "mass": 0.2},
+                   {"name": "c4", "position": [0.55, 0.5, -0.7], "mass": 0.3},
                    {"name": "pivot", "position": [2.0, 0.0, 0.0], "fixed": True},
-                   {"name": "bob2", "position": [2.0, 0.5, 0.0], "mass": 1.0},
+                   {"name": "bob2", "position": [2.1, 0.4, -0.3], "mass": 1.0},
                    {"name": "shaker", "position": [4.0, 0.0, 0.0], "driven": True,
                     "motion": {"kind": "sine", "amplitude": [0.05, 0.0, 0.02], "frequency": [2.0, 0.0, 3.0]}},
-                   {"name": "bob3", "position": [4.0, 0.0, -0.5], "mass": 0.5}],
-        "links": [{"a": 1, "b": 2, "length": 0.3}, {"a": 2, "b": 3, "length": 0.3},
-                  {"a": 3, "b": 4, "length": 0.3}, {"a": 4, "b": 5, "length": 0.3},
-                  {"a": 6, "b": 7, "length": 0.5}, {"a": 8, "b": 9, "length": 0.5}],
+                   {"name": "bob3", "position": [4.1, 0.2, -0.45], "mass": 0.5}],
+        "links": [{"a": a, "b": b} for a, b in ((1, 2), (2, 3), (3, 4), (4, 5), (6, 7), (8, 9))],
     },
 }
+for _scene in SCENES.values():  # lengths from the initial positions (a generic, non-degenerate geometry)
+    for _link in _scene["links"]:
+        _a, _b = (np.array(_scene["masses"][_link[end] - 1]["position"]) for end in "ab")
+        _link.setdefault("length", float(np.linalg.norm(_b - _a)))
 # 1-based mass numbers
 ANCHOR = {"driven_pendulum": 1, "driven_chain": 1}
 FORCED = {"driven_pendulum": None, "driven_chain": 7}
