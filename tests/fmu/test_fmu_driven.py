@@ -183,16 +183,35 @@ def test_bad_anchor_inputs_are_refused_and_the_fmu_goes_on(runs):
     assert np.array_equal(out["after_bad"], ref)
 
 
-def test_model_structure_agrees_with_the_native_fmu(runs, tmp_path):
-    """Both FMU kinds write the dependencies of the one Layout: the same ModelStructure (tests/fmu_native checks
-    it against the groups of links)."""
+def test_fmpy_validation_is_clean(runs):
+    from fmpy.validation import validate_fmu
+    _, _, fmus, _ = runs
+    for fmu in fmus.values():
+        assert validate_fmu(str(fmu)) == []
+
+
+def test_model_description_agrees_with_the_native_fmu(runs, tmp_path):
+    """Both FMU kinds write the variables and dependencies of the one Layout: the same capabilities (input
+    derivatives included), variables, start values (P at the anchor's scene position) and ModelStructure
+    (tests/fmu_native checks the structure against the FMU's own answers)."""
     import xml.etree.ElementTree as ET
     import zipfile
     import build_fmu
     _, _, fmus, paths = runs
     native = build_fmu.build_scene_fmu(str(paths["driven_chain"]), tmp_path / "n.fmu", quiet=True, native=True)
 
-    def structure(path):
+    def md(path):
         with zipfile.ZipFile(path) as z:
-            return ET.tostring(ET.fromstring(z.read("modelDescription.xml")).find("ModelStructure"))
-    assert structure(native) == structure(fmus["driven_chain"])
+            return ET.fromstring(z.read("modelDescription.xml"))
+    a, b = md(native), md(fmus["driven_chain"])
+    for key in ("canInterpolateInputs", "canHandleVariableCommunicationStepSize", "canGetAndSetFMUstate",
+                "canSerializeFMUstate"):
+        assert a.find("CoSimulation").get(key) == b.find("CoSimulation").get(key), key
+    assert a.find("CoSimulation").get("canInterpolateInputs") == "true"
+    assert ET.tostring(a.find("ModelStructure")) == ET.tostring(b.find("ModelStructure"))
+    assert ET.tostring(a.find("TypeDefinitions")) == ET.tostring(b.find("TypeDefinitions"))
+    for va, vb in zip(a.find("ModelVariables"), b.find("ModelVariables"), strict=True):
+        assert va.attrib == vb.attrib
+        ra, rb = dict(list(va)[0].attrib), dict(list(vb)[0].attrib)
+        start_a, start_b = ra.pop("start", None), rb.pop("start", None)
+        assert ra == rb and (start_a == start_b or float(start_a) == pytest.approx(float(start_b), rel=1e-15))
