@@ -189,7 +189,7 @@ def rewrite_fmu(fmu: Path, model_description: bytes, link_python: bool) -> str |
                         # still a working FMU for Python hosts (fmpy); C hosts would need libpython preloaded
                         print(f"build_fmu: WARNING: binary not linked to libpython: {e}", file=sys.stderr)
                 try:
-                    out.append((info.filename, compile_front(ident, root.get("guid"), derivative_vr_base)))
+                    out.append((info.filename, compile_front(ident, derivative_vr_base)))
                 except FrontBuildError as e:
                     raise SystemExit(f"build_fmu: {e}")
                 out.append((f"binaries/linux64/{inner_library_name(ident)}", data))

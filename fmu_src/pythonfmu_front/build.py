@@ -38,14 +38,14 @@ def compiler() -> str:
     return cc
 
 
-def compile_front(model_identifier: str, guid: str, derivative_vr_base: int | None = None) -> bytes:
-    """The front layer's shared library for this model identifier and guid. With derivative_vr_base, input
-    derivatives reach the slave as fmi2SetReal of the value reference order * derivative_vr_base + vr."""
+def compile_front(model_identifier: str, derivative_vr_base: int | None = None) -> bytes:
+    """The front layer's shared library for this model identifier. With derivative_vr_base, input derivatives reach
+    the slave as fmi2SetReal of the value reference order * derivative_vr_base + vr."""
     cc = compiler()
     with tempfile.TemporaryDirectory(prefix="linknet_front_") as tmp:
         out = Path(tmp) / f"{model_identifier}.so"
         cmd = [*shlex.split(cc), *CFLAGS, f"-I{FMI_HEADERS}",
-               f'-DFRONT_INNER_LIBRARY="{inner_library_name(model_identifier)}"', f'-DFRONT_GUID="{guid}"',
+               f'-DFRONT_INNER_LIBRARY="{inner_library_name(model_identifier)}"',
                *([f"-DFRONT_DERIVATIVE_VR_BASE={int(derivative_vr_base)}u"] if derivative_vr_base else []),
                "-o", str(out), str(SOURCE), *LDFLAGS]
         try:

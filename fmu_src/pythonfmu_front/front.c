@@ -12,8 +12,8 @@
  * - messages: errors, discards and warnings always reach the host's logger, other messages only with logging
  *   on, as in the native FMU (fmu_src/native/fmi2Functions.c). pythonfmu itself runs with logging always on,
  *   so that every status the slave logs is seen here;
- * - fmi2FreeInstance parks the instance and the next fmi2Instantiate with the same resources takes it back
- *   through pythonfmu's fmi2Reset, which builds a new slave object from the class it already has. A real
+ * - fmi2FreeInstance parks the instance and the next fmi2Instantiate with the same resources and GUID takes it
+ *   back through pythonfmu's fmi2Reset, which builds a new slave object from the class it already has. A real
  *   pythonfmu instantiate executes the slave's module again and never frees what that creates (~75 KiB per
  *   instantiate/free cycle); a reset does not (docs/fmu.md, tests/contract). A parked instance is reset when it
  *   is parked, so it holds a fresh slave rather than a finished run.
@@ -22,7 +22,10 @@
  *   as an fmi2SetReal of encoded value references (see the function).
  *
  * This file knows nothing of linknet: it is pythonfmu glue, compiled by build_fmu.py for every pythonfmu FMU
- * (scenes and components) with FRONT_INNER_LIBRARY and FRONT_GUID defined.
+ * (scenes and components) with FRONT_INNER_LIBRARY defined. It is linked -z nodelete (parked instances outlive a
+ * host's dlclose), so an FMU rebuilt and extracted again at the same path in the same process is served by the
+ * front loaded first: its code must not depend on the FMU (no GUID is compiled in; instances are parked by
+ * resource location and GUID).
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -37,9 +40,6 @@
 
 #ifndef FRONT_INNER_LIBRARY
 #error "define FRONT_INNER_LIBRARY: the file name of pythonfmu's binary, in the folder of this one"
-#endif
-#ifndef FRONT_GUID
-#error "define FRONT_GUID: the guid of the FMU's modelDescription.xml"
 #endif
 
 /* ---- pythonfmu's functions --------------------------------------------------------------------------- */
@@ -98,7 +98,8 @@ typedef struct front {
     unsigned magic;
     fmi2Component inner;              /* pythonfmu's instance */
     char *name;
-    char *resources;                  /* the fmuResourceLocation it was made with: a parked one is reused for it */
+    char *resources;                  /* the fmuResourceLocation and GUID it was made with: a parked instance */
+    char *guid;                       /* is reused for the same two only */
     fmi2CallbackLogger logger;        /* the host's */
     fmi2ComponentEnvironment environment;
     int logging_on;
@@ -283,11 +284,12 @@ static char *copy_of(const char *text)
     return copy;
 }
 
-static front *take_parked(const char *resources)
+static front *take_parked(const char *resources, const char *guid)
 {
     pthread_mutex_lock(&registry_lock);
     front **link = &parked;
-    while (*link && strcmp((*link)->resources, resources) != 0) link = &(*link)->next_parked;
+    while (*link && (strcmp((*link)->resources, resources) != 0 || strcmp((*link)->guid, guid) != 0))
+        link = &(*link)->next_parked;
     front *self = *link;
     if (self) *link = self->next_parked;
     pthread_mutex_unlock(&registry_lock);
@@ -298,6 +300,7 @@ static void destroy(front *self)
 {
     if (self->inner) inner.fmi2FreeInstance(self->inner);
     free(self->resources);
+    free(self->guid);
     free(self->name);
     free(self);
 }
@@ -317,9 +320,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         refuse(&probe, fn, "this is a Co-Simulation FMU only (fmuType %d requested)", (int)fmuType);
         return NULL;
     }
-    if (fmuGUID == NULL || strcmp(fmuGUID, FRONT_GUID) != 0) {
-        refuse(&probe, fn, "GUID \"%s\" is not this FMU's (%s): the modelDescription.xml and the binary come from "
-               "different builds", fmuGUID ? fmuGUID : "(null)", FRONT_GUID);
+    if (fmuGUID == NULL) {
+        refuse(&probe, fn, "fmuGUID is NULL");
         return NULL;
     }
     if (fmuResourceLocation == NULL) {
@@ -332,11 +334,13 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         return NULL;
     }
     char *name = copy_of(probe.name);
-    front *self = name ? take_parked(fmuResourceLocation) : NULL;
+    front *self = name ? take_parked(fmuResourceLocation, fmuGUID) : NULL;
     if (self == NULL && name) {
         self = calloc(1, sizeof *self);
         char *resources = self ? copy_of(fmuResourceLocation) : NULL;
-        if (resources == NULL) {
+        char *guid = resources ? copy_of(fmuGUID) : NULL;
+        if (guid == NULL) {
+            free(resources);
             free(self);
             self = NULL;
         } else {
@@ -344,6 +348,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                                                      functions ? functions->freeMemory : NULL, NULL, self};
             memcpy(&self->callbacks, &callbacks, sizeof callbacks);
             self->resources = resources;
+            self->guid = guid;
         }
     }
     if (self == NULL) {

@@ -9,7 +9,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from contract_support import extract
+from contract_support import MODELS, extract
 from fmu_harness import FMU_CLIENT_LIB, run_client
 
 DISCARD, ERROR, FATAL = 2, 3, 4
@@ -171,6 +171,29 @@ save(runs=np.array(runs), statuses=np.array(statuses), named=np.array(json.dumps
         assert len(mine) == 1 and "X[2,1] is an output" in mine[0], named
     assert all(status >= 1 for _, status, _ in named)  # nothing but the refusals with logging off
     np.testing.assert_array_equal(out["runs"][1], out["runs"][0])
+
+
+def test_an_fmu_rebuilt_and_extracted_again_at_the_same_path_runs_in_the_same_process(pendulum_fmu, contract_root,
+                                                                                     tmp_path):
+    """The binary's front layer stays loaded after a host's dlclose (fmpy unloads at each fmi2FreeInstance): an FMU
+    rebuilt with other settings (a new GUID) and extracted over the first one's folder is still served right."""
+    from fmu_harness import build_cached
+    other = build_cached(contract_root, str(MODELS / "pendulum.json"), step=5e-4)
+    out = run_client(f"""
+{FMU_CLIENT_LIB}
+import shutil
+where = {str(tmp_path / "pendulum_same_path")!r}
+steps = []
+for path in ({str(pendulum_fmu)!r}, {str(other)!r}):
+    shutil.rmtree(where, ignore_errors=True)
+    f = Fmu(path, unzipdir=extract(path, unzipdir=where))
+    f.init()
+    f.step(0.0, 0.01)
+    steps.append(f.get(['step'])[0])
+    f.slave.terminate(); f.slave.freeInstance()
+save(steps=np.array(steps))
+""", tmp_path)
+    assert list(out["steps"]) == [1e-3, 5e-4]
 
 
 def test_state_of_another_fmu_is_refused_and_changes_nothing(pendulum_fmu, chain_fmu, tmp_path):
