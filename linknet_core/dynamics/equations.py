@@ -103,10 +103,10 @@ class Dynamics:
         return scatter_add(K, self._k1, f) - scatter_add(K, self._k2, f)
 
     def constraint_rows(self, X, V, E=None) -> np.ndarray:
-        """(C V)_l = E_l . (V_k1 - V_k2) for a field V on the masses."""
+        """(C V)_l = E_l . (V_k1 - V_k2) for a field V on the masses (X, V (..., K, 3): of every sample)."""
         if E is None:
             E = self.unit_vectors(X)
-        return np.einsum("ij,ij->i", E, V[self._k1] - V[self._k2])
+        return np.einsum("...ij,...ij->...i", E, V[..., self._k1, :] - V[..., self._k2, :])
 
     # ---- the physics ----------------------------------------------------------------------------
     def tensions(self, X, U, F_input=None, F=None, E=None, anchor_acc=None) -> np.ndarray:
@@ -147,18 +147,21 @@ class Dynamics:
         d = X[self._k2] - X[self._k1]
         return (np.einsum("ij,ij->i", d, d) - self.scene.length ** 2) / (2 * self.scene.length)
 
-    def constraint_residual(self, X) -> float:
-        """max_l | |X_k2 - X_k1| - R_l | / R_l (relative violation of (11))."""
+    def constraint_residual(self, X):
+        """max_l | |X_k2 - X_k1| - R_l | / R_l (relative violation of (11)). X (n,K,3), samples of a run: n
+        values."""
         if self.scene.L == 0:
-            return 0.0
-        d = X[self._k2] - X[self._k1]
-        return float(np.max(np.abs(np.sqrt(np.einsum("ij,ij->i", d, d)) / self.scene.length - 1.0)))
+            return 0.0 if X.ndim == 2 else np.zeros(X.shape[:-2])
+        d = X[..., self._k2, :] - X[..., self._k1, :]
+        worst = np.max(np.abs(np.sqrt(np.einsum("...ij,...ij->...i", d, d)) / self.scene.length - 1.0), axis=-1)
+        return float(worst) if X.ndim == 2 else worst
 
-    def velocity_residual(self, X, U) -> float:
-        """max_l |E_l . (U_k2 - U_k1)|, the violation of (12) in m/s."""
+    def velocity_residual(self, X, U):
+        """max_l |E_l . (U_k2 - U_k1)|, the violation of (12) in m/s. X, U (n,K,3), samples of a run: n values."""
         if self.scene.L == 0:
-            return 0.0
-        return float(np.max(np.abs(self.constraint_rows(X, U))))
+            return 0.0 if X.ndim == 2 else np.zeros(X.shape[:-2])
+        worst = np.max(np.abs(self.constraint_rows(X, U)), axis=-1)
+        return float(worst) if X.ndim == 2 else worst
 
     def project_positions(self, X, tol=1e-14, max_iter=50, direction_at=None):
         """Point of the manifold (11) reached from X along M^-1 C(X0)^T mu (X0 = ``direction_at``, default X).
@@ -293,5 +296,6 @@ class Dynamics:
                 "or remove the redundant link(s).")
 
     # ---- diagnostics ----------------------------------------------------------------------------
-    def energy(self, X, U) -> float:
+    def energy(self, X, U):
+        """Kinetic plus potential energy; X, U (n,K,3), samples of a run: n values."""
         return kinetic_energy(self.scene, U) + potential_energy(self.scene, X)

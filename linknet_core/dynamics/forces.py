@@ -47,8 +47,8 @@ def _spring(K, X, U, masses, p):
 
 
 def _spring_potential(X, masses, p):
-    d = X[masses[:, 1]] - X[masses[:, 0]]
-    return 0.5 * float(np.sum(p[:, 0] * (np.sqrt(np.einsum("ij,ij->i", d, d)) - p[:, 1]) ** 2))
+    d = X[..., masses[:, 1], :] - X[..., masses[:, 0], :]
+    return 0.5 * np.sum(p[:, 0] * (np.sqrt(np.einsum("...ij,...ij->...i", d, d)) - p[:, 1]) ** 2, axis=-1)
 
 
 @dataclass(frozen=True)
@@ -99,19 +99,27 @@ def has_velocity_dependent_forces(scene: Scene) -> bool:
                for kind in dict.fromkeys(elements.kinds))
 
 
-def potential_energy(scene: Scene, X: np.ndarray) -> float:
+def _sample_sums(a: np.ndarray) -> np.ndarray:
+    """The sum of each sample's (K, 3) block of a (..., K, 3) array: one pairwise summation over its 3K entries,
+    so that a sample's sum is the same alone (np.sum of the block) or among others."""
+    return a.reshape(a.shape[:-2] + (-1,)).sum(axis=-1)
+
+
+def potential_energy(scene: Scene, X: np.ndarray):
     """Potential of the conservative forces: gravity, constant forces and the force elements that have one
-    (springs); inputs excluded."""
+    (springs); inputs excluded. X (K,3): a float; X (n,K,3), samples of a run: n values."""
     free = ~scene.fixed
     mass = np.where(free, scene.mass, 0.0)
-    V = -float(np.sum(mass[:, None] * scene.gravity[None, :] * X)) - float(np.sum(scene.force[free] * X[free]))
+    V = -_sample_sums(mass[:, None] * scene.gravity[None, :] * X) - _sample_sums(scene.force[free] * X[..., free, :])
     elements = scene.force_elements
     for kind in dict.fromkeys(elements.kinds):
         if ELEMENT_KINDS[kind].potential is not None:
-            V += ELEMENT_KINDS[kind].potential(X, *elements.of_kind(kind))
-    return V
+            V = V + ELEMENT_KINDS[kind].potential(X, *elements.of_kind(kind))
+    return float(V) if X.ndim == 2 else V
 
 
-def kinetic_energy(scene: Scene, U: np.ndarray) -> float:
+def kinetic_energy(scene: Scene, U: np.ndarray):
+    """U (K,3): a float; U (n,K,3), samples of a run: n values."""
     free = ~scene.fixed
-    return 0.5 * float(np.sum(scene.mass[free][:, None] * U[free] ** 2))
+    T = 0.5 * _sample_sums(scene.mass[free][:, None] * U[..., free, :] ** 2)
+    return float(T) if U.ndim == 2 else T

@@ -63,8 +63,8 @@ class TensionAssembly:
 
 
 def unit_vectors(scene: Scene, X: np.ndarray) -> np.ndarray:
-    """E_l of (8)."""
-    return (X[scene.k2] - X[scene.k1]) / scene.length[:, None]
+    """E_l of (8) (X (..., K, 3): of every sample)."""
+    return (X[..., scene.k2, :] - X[..., scene.k1, :]) / scene.length[:, None]
 
 
 def rhs(scene: Scene, X: np.ndarray, U: np.ndarray, F: np.ndarray, E: np.ndarray | None = None,

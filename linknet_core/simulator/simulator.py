@@ -499,10 +499,6 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
     X = np.empty((n, K, 3))
     U = np.empty((n, K, 3))
     T = np.empty((n, L))
-    energy = np.empty(n)
-    kinetic = np.empty(n)
-    residual = np.empty(n)
-    vres = np.empty(n)
     # progress on stderr: always with progress=True, never with False; by default (None) on a terminal once the run
     # has taken a second
     auto = progress is None
@@ -519,10 +515,6 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
             # and at the last sample with the input of the step that ended there
             out = sim.outputs(force_at(times[min(i, n - 2)]))
             X[i], U[i], T[i] = out["X"], out["U"], out["T"]
-            energy[i] = sim.dyn.energy(out["X"], out["U"])
-            kinetic[i] = kinetic_energy(scene, out["U"])
-            residual[i] = sim.dyn.constraint_residual(out["X"])
-            vres[i] = sim.dyn.velocity_residual(out["X"], out["U"])
             done = i + 1
             now = time.perf_counter()
             if show and (not auto or now - start > 1.0) and (now - last_print > 0.2 or i == n - 1):
@@ -537,13 +529,20 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
         stats = _run_stats(sim, method, dt, rtol, scene, wall)
         stats["interrupted"] = True
         part = slice(0, done)
-        raise SimulationInterrupted(Result(scene, method, times[part], X[part], U[part], T[part], energy[part],
-                                           residual[part], vres[part], kinetic[part], stats)) from None
+        raise SimulationInterrupted(Result(scene, method, times[part], X[part], U[part], T[part],
+                                           *_sample_diagnostics(sim.dyn, X[part], U[part]), stats)) from None
     wall = time.perf_counter() - start
     if drawn:
         sys.stderr.write("\n")
     stats = _run_stats(sim, method, dt, rtol, scene, wall)
-    return Result(scene, method, times, X, U, T, energy, residual, vres, kinetic, stats)
+    return Result(scene, method, times, X, U, T, *_sample_diagnostics(sim.dyn, X, U), stats)
+
+
+def _sample_diagnostics(dyn: Dynamics, X: np.ndarray, U: np.ndarray):
+    """(energy, residual of (11), residual of (12), kinetic energy) of every sample of a run, X and U (n,K,3): array
+    code over all samples at once, each sample's value the same as computed alone."""
+    return (dyn.energy(X, U), dyn.constraint_residual(X), dyn.velocity_residual(X, U),
+            kinetic_energy(dyn.scene, U))
 
 
 def _run_stats(sim, method, dt, rtol, scene, wall) -> dict:
