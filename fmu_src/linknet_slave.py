@@ -190,7 +190,9 @@ class LinknetNetwork(Fmi2Slave):
         lay = self._layout
         try:
             out = self._sim.outputs(self._F, anchors=self._anchors())
-            X, U, T = out["X"], out["U"], out["T"]
+            # X, U: the state (a driven anchor where its held motion took it, whichever backend: the numpy
+            # reference's outputs() moves a driven anchor's rows to new inputs, which X and U do not depend on)
+            X, U, T = self._sim.state.X, self._sim.state.U, out["T"]
             Freact = np.asarray(out["Freact"])
             if Freact.shape[0] == self._scene.K:          # (K,3) form: keep the anchored rows
                 Freact = Freact[lay.fixed_indices]
