@@ -9,11 +9,21 @@ import functools
 
 import numpy as np
 
-from linknet_core.errors import ConsistencyError, SolverError
+from linknet_core.errors import ConsistencyError, SolverError, projection_failure
 from linknet_core.dynamics.forces import external_forces, kinetic_energy, potential_energy, scatter_add
 from linknet_core.scene.description import Scene
 from linknet_core.structure.topology import SINGULAR_RCOND, Structure, analyse
 from linknet_core.dynamics.tensions import TensionSolver, make_solver, rhs, unit_vectors
+
+
+# Newton on the position manifold (11): a step that does not lower the largest scaled residual is halved at
+# most this many times; a residual within the round-off floor plus FLOOR_SAFETY times what the step leaves by
+# construction is at the floor the conditioning allows (native/src/stages/projections.c uses the same rule).
+LINE_SEARCH_HALVINGS = 8
+FLOOR_SAFETY = 2.0
+# ... but never above this many times the tolerance: far from (11) a redundant system can stall at a least-squares
+# point off the manifold (its residual along a self-stress), which no round-off explains.
+FLOOR_CAP_OVER_TOL = 1e4
 
 
 class Dynamics:
@@ -30,6 +40,9 @@ class Dynamics:
         self._inv_mass3 = scene.inv_mass[:, None]
         self.rhs_evaluations = 0
         self.exact_newton_projections = 0
+        self.floor_stops = 0  # position projections that stopped at their round-off floor above the tolerance
+        self.floor_reached = 0.0  # the largest relative residual at which one stopped there
+        self.last_floor = 0.0  # the relative floor of the last Newton step taken (diagnostics of a failure)
         if rhs_kernel not in ("numpy", "casadi"):
             raise SolverError(f"rhs_kernel must be 'numpy' or 'casadi', got {rhs_kernel!r}")
         self._compiled_rhs = None
@@ -167,32 +180,41 @@ class Dynamics:
         """Point of the manifold (11) reached from X along M^-1 C(X0)^T mu (X0 = ``direction_at``, default X).
 
         With X0 = X this is the mass-metric projection; RATTLE passes the start of its step as X0.
-        Simplified Newton first (the matrix A(X0), already factored, reused every iteration); if it
-        contracts too slowly (large steps, near-singular configurations) exact Newton with the
-        unsymmetric C(X) M^-1 C(X0)^T takes over. Returns (X_projected, iterations).
+        Simplified Newton first (the matrix A(X0), already factored, reused every iteration). If it contracts
+        too slowly (large steps, near-singular or badly conditioned configurations) exact Newton with the
+        unsymmetric C(X) M^-1 C(X0)^T takes over from X; where A is singular (redundant links, singular
+        passages) Gauss-Newton with the minimum-norm A(Xc)^+ at the current point takes over from where
+        simplified Newton stopped instead (the singular exact matrix has no usable inverse). Both halve a
+        step that does not lower the largest scaled residual, and both stop at the floor the conditioning
+        allows (``_at_floor``). Returns (X_projected, iterations); ``floor_stops`` and ``floor_reached``
+        count the projections that stopped at their floor above tol and the largest relative residual there.
         """
         if self.scene.L == 0:
             return np.array(X, float, copy=True), 0
         X0 = X if direction_at is None else direction_at
         E0 = self.unit_vectors(X0)
         self.factor(X0, E0)
-        Xc, used, err, ok = self._newton(X, tol, max_iter, lambda Xc, phi: self._correction(E0, self.solver.solve(phi)),
-                                         give_up_when_slow=True)
+        Xc, used, err, ok = self._simplified_newton(X, tol, max_iter, E0)
         if ok:
             return Xc, used
-        if direction_at is None:
-            fallback = self._gauss_newton_step  # large initial violations: directions updated every iteration
+        if direction_at is not None:
+            self.exact_newton_projections += 1
+        if direction_at is None or self.structure.kind == "redundant" or self._solver_singular():
+            # the mass-metric projection restarts from X; RATTLE's singular case goes on from Xc
+            start = X if direction_at is None and self.structure.kind != "redundant" else Xc
+            Xc, more, ok = self._newton(start, tol, max_iter, self._gauss_newton_step)
         else:
-            fallback = lambda Xc, phi: self._exact_newton_step(Xc, phi, E0)  # noqa: E731 - RATTLE's own directions
-        Xc, more, err, ok = self._newton(X, tol, max_iter, fallback, give_up_when_slow=False)
+            Xc, more, ok = self._newton(X, tol, max_iter, lambda Xc, phi: self._exact_newton_step(Xc, phi, E0))
         if ok:
-            self.exact_newton_projections += direction_at is not None
             return Xc, used + more
-        self._raise_not_converged(X, err, used + more)
+        self._raise_not_converged(X, Xc, tol, used + more)
 
-    def _newton(self, X, tol, max_iter, correction, give_up_when_slow):
-        """Iterate X += correction(X, phi(X)) until every |phi_l| is within tol (relative, see
-        _residual_scale). Returns (X, iterations, error, converged)."""
+    def _solver_singular(self) -> bool:
+        return bool(getattr(self.solver, "_singular", False))
+
+    def _simplified_newton(self, X, tol, max_iter, E0):
+        """X += M^-1 C(X0)^T A(X0)^-1 phi until every |phi_l| is within tol (relative, see _residual_scale);
+        given up when it contracts too slowly. Returns (X, iterations, error, converged)."""
         Xc = np.array(X, float, copy=True)
         scale = self._residual_scale(Xc, tol)
         previous = err = np.inf
@@ -201,11 +223,48 @@ class Dynamics:
             err = float(np.max(np.abs(phi) / scale)) * tol
             if err <= tol:
                 return Xc, it - 1, err, True
-            if not np.isfinite(err) or (give_up_when_slow and it > 3 and err > 0.3 * previous):
+            if not np.isfinite(err) or (it > 3 and err > 0.3 * previous):
                 return Xc, it, err, False
             previous = err
-            Xc += correction(Xc, phi)
+            Xc += self._correction(E0, self.solver.solve(phi))
         return Xc, max_iter, err, False
+
+    def _newton(self, X, tol, max_iter, step):
+        """Newton iterations X += step(X, phi) -> (dX, r), r = phi - (change of phi to first order) being what
+        the step leaves by construction; a step that does not lower the largest scaled residual is halved
+        (at most LINE_SEARCH_HALVINGS times). Stops when every |phi_l| is within tol, or at the floor.
+        Returns (X, iterations, converged)."""
+        Xc = np.array(X, float, copy=True)
+        scale = self._residual_scale(Xc, tol)
+        phi = self.position_residual(Xc)
+        worst = float(np.max(np.abs(phi) / scale))
+        self.last_floor = 0.0
+        FLOOR_CAP = FLOOR_CAP_OVER_TOL  # noqa: N806 - in units of the convergence scale (about tol)
+        for it in range(max_iter):
+            if worst <= 1.0:
+                return Xc, it, True
+            if not np.isfinite(worst):
+                break
+            dX, r = step(Xc, phi)
+            floor = scale + FLOOR_SAFETY * np.abs(r)
+            self.last_floor = float(np.max(floor / self.scene.length))
+            t = 1.0
+            Xc += dX
+            phi = self.position_residual(Xc)
+            trial = float(np.max(np.abs(phi) / scale))
+            for _ in range(LINE_SEARCH_HALVINGS):
+                if trial < worst or trial <= 1.0:
+                    break
+                Xc -= 0.5 * t * dX
+                t *= 0.5
+                phi = self.position_residual(Xc)
+                trial = float(np.max(np.abs(phi) / scale))
+            worst = trial
+            if 1.0 < worst <= FLOOR_CAP and np.all(np.abs(phi) <= floor):
+                self.floor_stops += 1
+                self.floor_reached = max(self.floor_reached, float(np.max(np.abs(phi) / self.scene.length)))
+                return Xc, it + 1, True
+        return Xc, max_iter, False
 
     def _residual_scale(self, X, tol):
         """Per-link |phi| that counts as converged: tol relative to R_l, but never below the round-off
@@ -215,32 +274,35 @@ class Dynamics:
         return R * tol + 8 * np.finfo(float).eps * size
 
     def _gauss_newton_step(self, Xc, phi):
+        """Minimum-norm Gauss-Newton at Xc: dX = M^-1 C(Xc)^T A(Xc)^+ phi; r = phi - A(Xc) mu."""
         E = self.unit_vectors(Xc)
         self.factor(Xc, E)
-        return self._correction(E, self.solver.solve(phi))
+        mu = self.solver.solve(phi)
+        dX = self._correction(E, mu)
+        return dX, phi - self.constraint_rows(Xc, dX, E)
 
     def _exact_newton_step(self, Xc, phi, E0):
-        """Newton with the exact unsymmetric matrix C(Xc) M^-1 C(X0)^T of RATTLE's position stage."""
+        """Newton with the exact unsymmetric matrix J = C(Xc) M^-1 C(X0)^T of RATTLE's position stage;
+        r = phi - J mu."""
         from scipy.sparse.linalg import splu
 
-        J = self.solver.assembly.matrix(self.unit_vectors(Xc), E0)
+        E = self.unit_vectors(Xc)
+        J = self.solver.assembly.matrix(E, E0)
         try:
-            if self.structure.kind == "redundant":
-                raise RuntimeError("singular by construction")
             mu = splu(J.tocsc()).solve(phi)
-        except RuntimeError:  # singular Newton matrix: minimum-norm Gauss-Newton step
+        except RuntimeError:  # singular Newton matrix: the minimum-norm least-squares step
             mu = np.linalg.lstsq(J.toarray(), phi, rcond=1e-12)[0]
-        return self._correction(E0, mu)
+        dX = self._correction(E0, mu)
+        return dX, phi - self.constraint_rows(Xc, dX, E)
 
-    def _raise_not_converged(self, X, err, iterations):
+    def _raise_not_converged(self, X, Xc, tol, iterations):
         R = self.scene.length
-        phi = self.position_residual(X)
-        worst = int(np.argmax(np.abs(phi) / R))
-        raise SolverError(
-            f"position projection onto the link lengths (11) did not converge: after {iterations} iterations "
-            f"the residual is {err:.3g} relative; {self.scene.link_label(worst)} was worst before projection "
-            f"({abs(phi[worst]) / R[worst]:.3g} relative). Reduce the step (or tighten the tolerance); if the "
-            "configuration is singular (a taut string, a loop passing a flat position), no step may be small enough")
+        before = np.abs(self.position_residual(X)) / R
+        after = np.abs(self.position_residual(Xc)) / R
+        worst = int(np.argmax(after))
+        raise SolverError(projection_failure(
+            f"after {iterations} iterations the residual is {after[worst]:.3g} relative at "
+            f"{self.scene.link_label(worst)}", float(after[worst]), float(before.max()), self.last_floor))
 
     def _correction(self, E, mu) -> np.ndarray:
         """M^-1 C^T mu with C taken from unit vectors E."""

@@ -58,6 +58,11 @@ class Integrator:
     def advance(self, state: State, t_target: float, F_input: np.ndarray | None, max_steps: int) -> None:
         raise NotImplementedError
 
+    def projection_floor(self) -> tuple[int, float]:
+        """(position projections that stopped at their round-off floor above the tolerance, the largest relative
+        residual at which one stopped there) over the run."""
+        return int(getattr(self.dyn, "floor_stops", 0)), float(getattr(self.dyn, "floor_reached", 0.0))
+
 
 class FixedStepIntegrator(Integrator):
     """Equal steps no longer than ``dt`` that land exactly on the target time."""

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from linknet_core.dynamics.drive import call_motion
-from linknet_core.errors import SolverError
+from linknet_core.errors import SolverError, projection_failure
 from linknet_core.integrators.base import Integrator, StepStats
 from linknet_core.native import library as lib
 from linknet_core.native.model import NativeData, NativeMethod, NativeModel
@@ -66,6 +66,9 @@ class NativeIntegrator(Integrator):
     def stats(self) -> StepStats:
         d = self._d
         return StepStats(int(d.steps), int(d.rejected), int(d.split_steps), int(d.finest_split))
+
+    def projection_floor(self) -> tuple[int, float]:
+        return int(self._d.floor_stops), float(self._d.floor_reached)
 
     @property
     def rhs_evaluations(self) -> int:
@@ -183,11 +186,9 @@ class NativeIntegrator(Integrator):
         span = f"between t = {t_start} and t = {t_target}"
         if status == lib.PROJECTION_FAILED:
             link = scene.link_label(int(d.fail_link)) if d.fail_link >= 0 else "a link"
-            return (f"position projection onto the link lengths (11) did not converge {span}: after "
-                    f"{d.fail_iterations} iterations the residual is {d.fail_residual:.3g} relative at {link} "
-                    f"(it was {d.fail_before:.3g} relative before projection). Reduce the step (or tighten the "
-                    "tolerance); if the configuration is singular (a taut string, a loop passing a flat "
-                    "position), no step may be small enough")
+            return projection_failure(f"{span}: after {d.fail_iterations} iterations the residual is "
+                                      f"{d.fail_residual:.3g} relative at {link}", float(d.fail_residual),
+                                      float(d.fail_before), float(d.fail_floor))
         if status == lib.IMPLICIT_KICK_FAILED:
             return (f"the implicit velocity half step (drag, dampers) does not converge {span} at dt = {self.dt:g}: "
                     "the damping is too stiff for this step (h c / 2m near or above 1); reduce dt")

@@ -86,6 +86,7 @@ class Data(ctypes.Structure):
         ("fail_residual", ctypes.c_double), ("fail_before", ctypes.c_double),
         ("fail_iterations", ln_int),
         ("fail_t", ctypes.c_double),
+        ("fail_floor", ctypes.c_double), ("floor_reached", ctypes.c_double), ("floor_stops", ln_int),
         ("T", c_double_p), ("acc", c_double_p), ("reaction", c_double_p),
         ("drive_t0", ctypes.c_double), ("drive_hold_t", ctypes.c_double),
         ("drive_P", c_double_p), ("drive_V", c_double_p), ("drive_A", c_double_p),

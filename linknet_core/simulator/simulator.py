@@ -445,6 +445,9 @@ class Result:
                    f"full length (finest: {s['finest_split']} sub-steps)\n" if s.get("split") else "")
                 + (f"  driven anchors: {s['anchor_jumps']} jumps of their input motion (velocities projected onto (12): "
                    "an inelastic impulse each)\n" if s.get("anchor_jumps") else "")
+                + (f"  {s['floor_stops']} position projections stopped at the round-off floor the conditioning "
+                   f"allows, above the tolerance (largest residual there {s['floor_reached']:.3g} relative)\n"
+                   if s.get("floor_stops") else "")
                 + f"  final energy drift = {self.energy_drift:.3e} (relative), max constraint residual = "
                 f"{float(self.residual.max()):.3e} (relative), max velocity residual = "
                 f"{float(self.velocity_residual.max()):.3e} m/s\n"
@@ -547,7 +550,9 @@ def _sample_diagnostics(dyn: Dynamics, X: np.ndarray, U: np.ndarray):
 
 def _run_stats(sim, method, dt, rtol, scene, wall) -> dict:
     driven = {"anchor_jumps": sim.anchor_report()["jumps"]} if scene.driven.any() else {}
+    floor_stops, floor_reached = sim.integrator.projection_floor()
     return dict(sim.integrator.stats.as_dict(), **driven, wall_time=wall, rhs_evaluations=sim.rhs_evaluations,
+                floor_stops=floor_stops, floor_reached=floor_reached,
                 structure=sim.dyn.structure.kind, method=method, dt=dt, rtol=rtol, rhs_kernel=sim.dyn.rhs_kernel,
                 initial=sim.initial_report.lines(scene) + sim.specialisation.notes,
                 specialisation=sim.specialisation.text())

@@ -170,6 +170,9 @@ typedef struct ln_data {
     double fail_before;             /* relative residual before the projection */
     ln_int fail_iterations;
     double fail_t;                  /* time of the last accepted state */
+    double fail_floor;              /* relative round-off floor the failed projection's last step allowed */
+    double floor_reached;           /* largest relative residual at which a projection stopped on its floor */
+    ln_int floor_stops;             /* position projections stopped at their round-off floor above the tolerance */
 
     /* the last evaluation's tensions, accelerations and anchor reactions */
     double *T;                      /* (L) */

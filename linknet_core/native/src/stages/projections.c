@@ -4,7 +4,13 @@
  * the matrix A(E_dir) = C(E_dir) M^-1 C(E_dir)^T is factored already (RATTLE: at the start of its step;
  * Runge-Kutta: at the new point). The residual is phi_l = (|X_k2 - X_k1|^2 - R_l^2) / (2 R_l), a length.
  * Converged when every |phi_l| is within tol R_l, never below the round-off floor of computing
- * |X_k2 - X_k1| from coordinates of size |X|; given up when it contracts too slowly.
+ * |X_k2 - X_k1| from coordinates of size |X|; simplified Newton is given up when it contracts too slowly.
+ * Exact Newton then takes over, with a backtracking line search on the largest scaled residual. Its stopping
+ * rule follows the conditioning: a Newton step cannot remove the part of phi it leaves by construction,
+ * r = phi - J mu (the solve's own rounding, about eps kappa(J) |phi|, and on redundant links the component of
+ * phi along the self-stresses, which no step along M^-1 C^T changes to first order), so the iteration also
+ * stops, at its floor, once every |phi_l| is within its round-off floor plus 2 |r_l|. The floor reached
+ * (relative) and how often a projection stopped there are counted in d->floor_reached, d->floor_stops.
  *
  * Velocities: the closest U satisfying (12) in the mass metric, U -= M^-1 C^T mu with A(X) mu = C U.
  */
@@ -21,6 +27,11 @@ LN_SCALAR_LOOPS_BEGIN
 #define KRYLOV_DIM 30        /* GMRES restart length of the exact-Newton solve */
 #define KRYLOV_RESTARTS 10
 #define KRYLOV_RTOL 1e-12
+#define KRYLOV_PIVOT_CUT 1e-12  /* GMRES's triangular factor: pivots below this times the largest count as zero */
+#define LINE_SEARCH_HALVINGS 8
+#define FLOOR_SAFETY 2.0        /* a residual within the round-off floor plus this times r is at its floor */
+#define FLOOR_CAP 1e4           /* ... but never above this many times the convergence scale (about tol): far from
+                                   (11) a redundant system can stall at a least-squares point off the manifold */
 
 static inline double length_residual(const ln_model *m, const double *Xc, ln_int l)
 {
@@ -161,18 +172,28 @@ static void newton_matrix_product(const ln_model *m, const double *Xc, const dou
     }
 }
 
+static inline ln_int krylov_need(ln_int L)
+{
+    const ln_int n = KRYLOV_DIM;
+    return (n + 1) * L + (n + 1) * n + 4 * (n + 1) + 2 * L;
+}
+
+/* d->krylov holds at least need doubles (grown, never shrunk); 0 when out of memory. */
+static int reserve_krylov(ln_data *d, ln_int need)
+{
+    if (d->krylov_size >= need) return 1;
+    free(d->krylov);
+    d->krylov = malloc((size_t)need * sizeof(double));
+    d->krylov_size = d->krylov ? need : 0;
+    return d->krylov != NULL;
+}
+
 /* mu = J^-1 phi by GMRES, right-preconditioned with the factored A(E_dir) (close to J: few iterations). */
 static int newton_solve(const ln_model *m, ln_data *d, const double *Xc, const double *E_dir, const double *phi,
                         double *mu)
 {
     const ln_int L = m->L, n = KRYLOV_DIM;
-    const ln_int need = (n + 1) * L + (n + 1) * n + 4 * (n + 1) + 2 * L;
-    if (d->krylov_size < need) {
-        free(d->krylov);
-        d->krylov = malloc((size_t)need * sizeof(double));
-        d->krylov_size = d->krylov ? need : 0;
-        if (!d->krylov) return LN_NO_MEMORY;
-    }
+    if (!reserve_krylov(d, krylov_need(L) + L)) return LN_NO_MEMORY;  /* the last L: exact_newton's r */
     double *V = d->krylov, *H = V + (n + 1) * L, *cs = H + (n + 1) * n, *sn = cs + (n + 1), *g = sn + (n + 1);
     double *y = g + (n + 1), *z = y + (n + 1), *w = z + L, *dX = d->acc1;
     double beta0 = 0.0;
@@ -228,11 +249,15 @@ static int newton_solve(const ln_model *m, ln_data *d, const double *Xc, const d
                 break;
             }
         }
-        /* y = H^-1 g (upper triangular), mu += P^-1 V y */
+        /* y = H^-1 g (upper triangular), mu += P^-1 V y. On a singular J (redundant links: phi's component
+           along the self-stresses is out of its range) the Krylov space meets J's null space and a pivot of H
+           falls to round-off: that direction is dropped, the least-squares step of the rest kept. */
+        double pivot_max = 0.0;
+        for (ln_int i = 0; i < j; i++) pivot_max = fmax(pivot_max, fabs(H[i * n + i]));
         for (ln_int i = j - 1; i >= 0; i--) {
             double s = g[i];
             for (ln_int k = i + 1; k < j; k++) s -= H[i * n + k] * y[k];
-            y[i] = H[i * n + i] != 0.0 ? s / H[i * n + i] : 0.0;
+            y[i] = fabs(H[i * n + i]) > KRYLOV_PIVOT_CUT * pivot_max ? s / H[i * n + i] : 0.0;
         }
         for (ln_int l = 0; l < L; l++) w[l] = 0.0;
         for (ln_int i = 0; i < j; i++)
@@ -243,22 +268,111 @@ static int newton_solve(const ln_model *m, ln_data *d, const double *Xc, const d
     return LN_OK;  /* an inexact Newton step still contracts; the outer iteration judges convergence */
 }
 
+/* Every |phi_l| within its round-off floor plus FLOOR_SAFETY |r_l|, r = phi - J mu of the step just taken: the
+   step left no more than it had to. Returns the largest |phi_l| / R_l then, or -1. */
+static double at_floor(const ln_model *m, const double *phi, const double *inv_scale, const double *r)
+{
+    double reached = 0.0;
+    for (ln_int l = 0; l < m->L; l++) {
+        if (fabs(phi[l]) > 1.0 / inv_scale[l] + FLOOR_SAFETY * fabs(r[l])) return -1.0;
+        reached = fmax(reached, fabs(phi[l]) * m->inv_R[l]);
+    }
+    return reached;
+}
+
 /* Exact Newton from the starting point X_start, for steps where the directions turn too much within a step
-   for simplified Newton (a whipping chain's tip): J = C(Xc) M^-1 C(E_dir)^T, the point reached is the same
-   (it lies on (11) along M^-1 C(E_dir)^T from the start). */
+   for simplified Newton (a whipping chain's tip) or where simplified Newton stalls on a badly conditioned or
+   redundant system: J = C(Xc) M^-1 C(E_dir)^T, the point reached is the same (it lies on (11) along
+   M^-1 C(E_dir)^T from the start). A step that does not lower the largest scaled residual is halved. */
 static int exact_newton(const ln_model *m, ln_data *d, double *Xc, const double *X_start, const double *E_dir,
                         double tol, ln_int max_iter)
 {
     double *phi = d->phi, *mu = d->mu, *inv_scale = d->scale;
     for (ln_int i = 0; i < m->K * DIM; i++) Xc[i] = X_start[i];
     residual_floor(m, Xc, tol, inv_scale);
+    double worst = residuals(m, Xc, inv_scale, phi);
+    d->fail_floor = 0.0;
     for (ln_int it = 0; it < max_iter; it++) {
-        const double worst = residuals(m, Xc, inv_scale, phi);
         if (worst <= 1.0) return LN_OK;
         if (!(worst < 1e300)) break;
         const int status = newton_solve(m, d, Xc, E_dir, phi, mu);
         if (status != LN_OK) return status;
-        FN(ln_add_correction)(m, E_dir, mu, 1.0, Xc);
+        double *r = d->krylov + krylov_need(m->L);  /* r = phi - J mu: what this step leaves by construction */
+        newton_matrix_product(m, Xc, E_dir, mu, d->acc1, r);
+        double floor = 0.0;
+        for (ln_int l = 0; l < m->L; l++) {
+            r[l] = phi[l] - r[l];
+            floor = fmax(floor, (1.0 / inv_scale[l] + FLOOR_SAFETY * fabs(r[l])) * m->inv_R[l]);
+        }
+        d->fail_floor = floor;
+        double step = 1.0;
+        FN(ln_add_correction)(m, E_dir, mu, step, Xc);
+        double trial = residuals(m, Xc, inv_scale, phi);
+        for (int halving = 0; halving < LINE_SEARCH_HALVINGS && !(trial < worst) && trial > 1.0; halving++) {
+            FN(ln_add_correction)(m, E_dir, mu, -0.5 * step, Xc);
+            step *= 0.5;
+            trial = residuals(m, Xc, inv_scale, phi);
+        }
+        worst = trial;
+        if (worst > 1.0 && worst <= FLOOR_CAP) {
+            const double reached = at_floor(m, phi, inv_scale, r);
+            if (reached >= 0.0) {
+                d->floor_stops++;
+                d->floor_reached = fmax(d->floor_reached, reached);
+                return LN_OK;
+            }
+        }
+    }
+    return LN_PROJECTION_FAILED;
+}
+
+/* Gauss-Newton from where simplified Newton stopped, for a singular A (redundant links, singular passages):
+   every iteration moves along M^-1 C(Xc)^T mu with the minimum-norm mu = A(Xc)^+ phi, the closest point in the
+   mass metric. The exact Newton matrix C(Xc) M^-1 C(E_dir)^T is singular there too, and in a way Krylov solves
+   handle badly; simplified Newton has already brought the residual close, so the direction changes only the
+   last small corrections. A step that does not lower the largest scaled residual is halved; the iteration
+   stops at its floor as exact_newton does, with r = phi - A(Xc) mu (phi's component along the self-stresses at
+   Xc, of second order in the distance to (11), and the minimum-norm solve's own rounding). */
+static int gauss_newton(const ln_model *m, ln_data *d, double *Xc, double tol, ln_int max_iter)
+{
+    const ln_int L = m->L;
+    double *phi = d->phi, *mu = d->mu, *inv_scale = d->scale;
+    if (!reserve_krylov(d, L * (DIM + 1))) return LN_NO_MEMORY;
+    double *E = d->krylov, *r = d->krylov + L * DIM;
+    residual_floor(m, Xc, tol, inv_scale);
+    double worst = residuals(m, Xc, inv_scale, phi);
+    d->fail_floor = 0.0;
+    for (ln_int it = 0; it < max_iter; it++) {
+        if (worst <= 1.0) return LN_OK;
+        if (!(worst < 1e300)) break;
+        FN(ln_unit_vectors)(m, Xc, E);
+        int status = FN(ln_factor_tension_matrix)(m, d, E);
+        if (status != LN_OK) return status;
+        FN(ln_solve_tension_system)(m, d, phi, mu);
+        newton_matrix_product(m, Xc, E, mu, d->acc1, r);
+        double floor = 0.0;
+        for (ln_int l = 0; l < L; l++) {
+            r[l] = phi[l] - r[l];
+            floor = fmax(floor, (1.0 / inv_scale[l] + FLOOR_SAFETY * fabs(r[l])) * m->inv_R[l]);
+        }
+        d->fail_floor = floor;
+        double step = 1.0;
+        FN(ln_add_correction)(m, E, mu, step, Xc);
+        double trial = residuals(m, Xc, inv_scale, phi);
+        for (int halving = 0; halving < LINE_SEARCH_HALVINGS && !(trial < worst) && trial > 1.0; halving++) {
+            FN(ln_add_correction)(m, E, mu, -0.5 * step, Xc);
+            step *= 0.5;
+            trial = residuals(m, Xc, inv_scale, phi);
+        }
+        worst = trial;
+        if (worst > 1.0 && worst <= FLOOR_CAP) {
+            const double reached = at_floor(m, phi, inv_scale, r);
+            if (reached >= 0.0) {
+                d->floor_stops++;
+                d->floor_reached = fmax(d->floor_reached, reached);
+                return LN_OK;
+            }
+        }
     }
     return LN_PROJECTION_FAILED;
 }
@@ -272,7 +386,9 @@ int FN(ln_project_positions)(const ln_model *m, ln_data *d, double *Xc, const do
     double before = -1.0;
     if (simplified_newton(m, d, Xc, E_dir, tol, max_iter, &before) == LN_OK) return LN_OK;
     d->exact_newton_projections++;
-    const int status = exact_newton(m, d, Xc, X_start, E_dir, tol, max_iter);
+    const int status = (m->solver == LN_SOLVER_MIN_NORM || d->singular)
+                           ? gauss_newton(m, d, Xc, tol, max_iter)
+                           : exact_newton(m, d, Xc, X_start, E_dir, tol, max_iter);
     if (status == LN_PROJECTION_FAILED) record_failure(m, d, Xc, max_iter, before);
     return status;
 }
