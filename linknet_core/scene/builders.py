@@ -204,6 +204,61 @@ def redundant_truss(bays=2, bay_length=1.0, mass=1.0, gravity=G_EARTH, name="red
                             "gravity": list(gravity), "masses": entries, "links": links})
 
 
+def triangulated_net(n=6, m=6, spacing=0.1, total_mass=1.0, sag=0.3, gravity=G_EARTH, name="triangulated_net") -> Scene:
+    """An n x m cloth with both diagonals in every cell, hung from the two corners of its first row, released
+    at rest from a sagged shape: z = -sag (m-1) spacing 4u(1-u)(0.3 + v) (u along the first row, v across,
+    both from 0 to 1). Lengths are those of that shape, so every cell is a non-planar quadrilateral whose six
+    links make a rigid tetrahedron: the cloth has states of self-stress (redundant links) and a few mechanisms,
+    and swings under gravity. (Released flat and horizontal, a cloth of rigid cells meets gravity
+    perpendicular to every link: a singular configuration no integrator can leave.)"""
+    anchors = {(0, 0), (0, m - 1)}
+    entries = []
+    for i in range(n):
+        for j in range(m):
+            u, v = j / (m - 1), i / (n - 1)
+            z = -sag * spacing * (m - 1) * 4.0 * u * (1.0 - u) * (0.3 + v)
+            entries.append(_mass(f"n{i}_{j}", (j * spacing, i * spacing, z), total_mass / (n * m - len(anchors)),
+                                 fixed=(i, j) in anchors))
+    idx = lambda i, j: i * m + j + 1  # noqa: E731
+    links = []
+    for i in range(n):
+        for j in range(m):
+            if j + 1 < m:
+                links.append({"a": idx(i, j), "b": idx(i, j + 1)})
+            if i + 1 < n:
+                links.append({"a": idx(i, j), "b": idx(i + 1, j)})
+            if i + 1 < n and j + 1 < m:
+                links.append({"a": idx(i, j), "b": idx(i + 1, j + 1)})
+                links.append({"a": idx(i, j + 1), "b": idx(i + 1, j)})
+    return Scene.from_dict({"name": name, "description": f"{n} x {m} cloth with both diagonals per cell, sagged, "
+                            "hung from two corners (states of self-stress and mechanisms)",
+                            "gravity": list(gravity), "masses": entries, "links": links})
+
+
+def braced_tower(width=1.0, storey=1.0, mass=1.0, tilt=(0.3, 0.0), name="braced_tower") -> Scene:
+    """A two-storey tower on four anchors at the corners of a square: four posts per storey, a square at each
+    floor, both diagonals in the top square (one state of self-stress) and no bracing on the sides, so both
+    storeys sway (mechanisms). Gravity 9.81 m/s^2 tilted by ``tilt`` = (g_x, g_y) / g sets it swaying from rest."""
+    gx, gy = tilt
+    g = 9.81
+    gravity = [g * gx, g * gy, -g * math.sqrt(1.0 - gx * gx - gy * gy)]
+    corners = [(0.0, 0.0), (width, 0.0), (width, width), (0.0, width)]
+    entries = [_mass(f"a{c}", (x, y, 0.0), fixed=True) for c, (x, y) in enumerate(corners)]
+    for level in (1, 2):
+        entries += [_mass(f"s{level}_{c}", (x, y, level * storey), mass) for c, (x, y) in enumerate(corners)]
+    links = []
+    for level in (1, 2):
+        below = [f"a{c}" if level == 1 else f"s1_{c}" for c in range(4)]
+        floor = [f"s{level}_{c}" for c in range(4)]
+        for c in range(4):
+            links.append({"a": below[c], "b": floor[c]})
+            links.append({"a": floor[c], "b": floor[(c + 1) % 4]})
+    links += [{"a": "s2_0", "b": "s2_2"}, {"a": "s2_1", "b": "s2_3"}]
+    return Scene.from_dict({"name": name, "description": "two-storey tower on four anchors, both diagonals in the "
+                            "top square (one self-stress), unbraced sides (mechanisms), gravity tilted",
+                            "gravity": gravity, "masses": entries, "links": links})
+
+
 def taut_string(speed=1.0, mass=1.0, name="taut_string") -> Scene:
     """A mass between two anchors on two collinear links (a taut string), moving sideways at ``speed``.
 
@@ -248,4 +303,6 @@ def shipped_scenes() -> dict[str, Scene]:
         "redundant_truss": redundant_truss(),
         "net_10x10": net(10, 10),
         "crane": crane(),
+        "triangulated_net": triangulated_net(),
+        "braced_tower": braced_tower(),
     }
