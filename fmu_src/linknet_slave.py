@@ -171,7 +171,6 @@ class LinknetNetwork(Fmi2Slave):
             kwargs = dict(dt=float(self._real[self._layout.step_vr]))
         self._sim = ln.Simulator(scene, method=method, t0=self._t0, **kwargs)
         self._scene = scene
-        self._restored_impulse = None  # Jreact of a restored FMU state, until the next step (see _set_fmu_state)
         self._F = np.zeros((scene.K, 3))
         self._F_flat = self._F.reshape(-1)  # a view: set_real writes the inputs through it
         self._F[self._layout.input_masses] = self._real[self._layout.F_vr]
@@ -201,8 +200,7 @@ class LinknetNetwork(Fmi2Slave):
             self._real[lay.T_vr] = T
             self._real[lay.Freact_vr] = Freact
             if lay.driven_indices.size:
-                impulse = out["impulse"] if self._restored_impulse is None else self._restored_impulse
-                self._real[lay.Jreact_vr] = impulse
+                self._real[lay.Jreact_vr] = out["impulse"]
         except Exception as e:  # never let an exception reach pythonfmu (fmi2Fatal)
             self._real[lay.T_vr] = np.nan
             self._real[lay.Freact_vr] = np.nan
@@ -491,7 +489,6 @@ class LinknetNetwork(Fmi2Slave):
         except ln.LinknetError as e:
             self._error(f"doStep from t={t!r} with h={h!r} failed: {e}", Fmi2Status.discard)
             return False
-        self._restored_impulse = None
         self._anchors_set = False
         self._outputs_stale = True
         return True
@@ -513,9 +510,6 @@ class LinknetNetwork(Fmi2Slave):
             "broken": self._broken,
             "initialized": self._initialized,
             "anchors_set": self._anchors_set,
-            # Jreact: the driven anchors' impulse of the last step, which the Simulator's snapshot does not carry
-            "impulse": (self._sim.anchor_report()["impulse"] if self._restored_impulse is None
-                        else self._restored_impulse).copy() if self._layout.driven_indices.size else None,
         }
 
     def _state_problem(self, state):
@@ -551,7 +545,6 @@ class LinknetNetwork(Fmi2Slave):
                 self._make_simulator(state["scene"])
             self._F[lay.input_masses] = self._real[lay.F_vr]
             self._sim.set_state(copy.deepcopy(state["sim"]))
-            self._restored_impulse = None if state.get("impulse") is None else state["impulse"].copy()
             self._anchors_set = bool(state.get("anchors_set", False))
             self._bad = dict(state["bad"])
             self._broken = state["broken"]

@@ -57,11 +57,14 @@ class AnchorDrive:
         self.hold = tuple(np.array(a, float) for a in anchors)
 
     def internals(self):
-        return (self.hold_t, tuple(a.copy() for a in self.hold), self.callable, self.jumps)
+        impulse, jump_position, jump_velocity = self.last_jump
+        return (self.hold_t, tuple(a.copy() for a in self.hold), self.callable, self.jumps,
+                (impulse.copy(), jump_position, jump_velocity))
 
     def set_internals(self, saved) -> None:
-        self.hold_t, hold, self.callable, self.jumps = saved
+        self.hold_t, hold, self.callable, self.jumps, (impulse, jump_position, jump_velocity) = saved
         self.hold = tuple(a.copy() for a in hold)
+        self.last_jump = [impulse.copy(), jump_position, jump_velocity]
 
     def input_at(self, t: float):
         """(P, V, A) of the input-driven anchors at t, each (n_input, 3)."""

@@ -7,6 +7,7 @@ is all or nothing), and hands out copies of the new state, so that no caller's a
 """
 from __future__ import annotations
 
+import copy
 import ctypes
 from dataclasses import dataclass
 
@@ -31,6 +32,15 @@ class _Internals:
     finest_split: int
     jumps: int = 0
     drive: tuple | None = None  # driven anchors: (hold time, P, V, A, callable) of the input-driven ones
+    last_jump: tuple | None = None  # driven anchors: (impulse, position jump, velocity jump) of the last advance
+
+    def __deepcopy__(self, memo):
+        """Numbers copy as themselves: only the driven anchors' hold and last jump have anything to copy (the
+        generic deepcopy of the dataclass cost more than a one-step advance)."""
+        drive = None if self.drive is None else copy.deepcopy(self.drive, memo)
+        last_jump = None if self.last_jump is None else copy.deepcopy(self.last_jump, memo)
+        return _Internals(self.t, self.h_next, self.planar, self.steps, self.rejected, self.n_rhs, self.split_steps,
+                          self.finest_split, self.jumps, drive, last_jump)
 
 
 class NativeIntegrator(Integrator):
@@ -76,12 +86,14 @@ class NativeIntegrator(Integrator):
 
     def internals(self) -> dict:
         d = self._d
-        drive = None
+        drive = last_jump = None
         if self._input_slots.size:
             data = self.data
             drive = (d.drive_hold_t, data.drive_P.copy(), data.drive_V.copy(), data.drive_A.copy(), self._motion)
+        if self.model.scene.motions:
+            last_jump = (self.data.impulse.copy(), d.jump_position, d.jump_velocity)
         return {"native": _Internals(d.t, d.h_next, d.planar, d.steps, d.rejected, d.n_rhs, d.split_steps,
-                                     d.finest_split, d.jumps, drive)}
+                                     d.finest_split, d.jumps, drive, last_jump)}
 
     def set_internals(self, data: dict) -> None:
         saved = data["native"]
@@ -93,6 +105,8 @@ class NativeIntegrator(Integrator):
             d.drive_hold_t, P, V, A, motion = saved.drive
             self.data.drive_P[...], self.data.drive_V[...], self.data.drive_A[...] = P, V, A
             self._follow(motion)
+        if saved.last_jump is not None:
+            self.data.impulse[...], d.jump_position, d.jump_velocity = saved.last_jump
         self._out = (None, None)  # the state may have been set from outside too: copy it in next time
 
     # ---- driven anchors -----------------------------------------------------------------------------

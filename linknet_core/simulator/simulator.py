@@ -248,10 +248,14 @@ class Simulator:
                               f"anchors, each of shape ({rows.size}, 3), or a callable f(t) -> (P, V, A)")
         out = []
         for name, unit, value in zip("PVA", ("m", "m/s", "m/s2"), anchors):
-            a = np.asarray(value, float)
+            a = value if type(value) is np.ndarray and value.dtype == np.float64 else np.asarray(value, float)
             if a.shape != (rows.size, 3):
                 raise SolverError(f"anchors {name} must have shape ({rows.size}, 3) (one row per input-driven anchor: "
                                   f"{', '.join(self.scene.mass_label(int(k)) for k in rows)}), got {a.shape}")
+            v = a.ravel()
+            if float(v.dot(v)) <= MAX_FORCE * MAX_FORCE:  # the common case: every entry finite and not huge
+                out.append(a)
+                continue
             bad = ~np.isfinite(a) | (np.abs(np.nan_to_num(a)) > MAX_FORCE)
             if bad.any():
                 i, j = np.argwhere(bad)[0]
@@ -329,18 +333,18 @@ class Simulator:
                 if saved is not None:
                     self.integrator.set_internals(saved)
         else:
-            anchor_acc = None
+            X_at, U_at, anchor_acc = X, U, None
             drive = self.integrator.drive
-            if drive is not None:
-                saved = drive.internals()
+            if drive is not None:  # evaluated with the driven anchors where their motion is now (the state's rows
+                saved = drive.internals()  # are reported, as the native backend does)
                 try:
                     if hold is not None:
                         drive.set_input(t, hold)
-                    X, U, anchor_acc = drive.apply(t, X, U)
+                    X_at, U_at, anchor_acc = drive.apply(t, X, U)
                 finally:
                     drive.set_internals(saved)
-            T = self.dyn.tensions(X, U, F, anchor_acc=anchor_acc)
-            Freact = self.dyn.anchor_reactions(X, T)
+            T = self.dyn.tensions(X_at, U_at, F, anchor_acc=anchor_acc)
+            Freact = self.dyn.anchor_reactions(X_at, T)
         out = {"t": t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": Freact}
         if self.scene.driven.any():
             out["impulse"] = self.anchor_report()["impulse"]

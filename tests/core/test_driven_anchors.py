@@ -282,3 +282,22 @@ def test_measured_convergence_order_with_a_driven_anchor_equals_nominal(method, 
     # above nominal is the pre-asymptotic range (the next term of the error still counts: DOP853 measures 8.9 on the
     # sine until round-off); below it is what this test is for
     assert cls.order - 0.35 <= observed <= cls.order + 1.0, f"errors {errors}, slopes {slopes}"
+
+
+@pytest.mark.parametrize("backend", ["native", "numpy"])
+def test_a_snapshot_carries_the_last_jumps_impulse(backend):
+    """get_state/set_state bring back what anchor_report says about the last jump (the FMUs' Jreact after a
+    restored state), not the impulse of whatever ran after the snapshot."""
+    scene = builders.chain(10).with_motions({1: {"kind": "input"}})
+    sim = ln.Simulator(scene, method="rattle", dt=1e-3, backend=backend)
+    Z = np.zeros((1, 3))
+    sim.advance(0.01, anchors=(Z, np.array([[1.0, 0.0, 0.0]]), Z))  # the anchor starts moving: an impulse
+    report = sim.anchor_report()
+    assert report["jumps"] == 1 and report["impulse"][0, 0] < 0
+    snapshot = sim.get_state()
+    sim.advance(0.02, anchors=(np.array([[0.01, 0.0, 0.0]]), np.array([[0.0, 0.0, 1.0]]), Z))
+    assert not np.array_equal(sim.anchor_report()["impulse"], report["impulse"])
+    sim.set_state(snapshot)
+    restored = sim.anchor_report()
+    assert np.array_equal(restored["impulse"], report["impulse"]) and restored["jumps"] == 1
+    assert np.array_equal(sim.outputs()["impulse"], report["impulse"])
