@@ -54,19 +54,22 @@ class Dynamics:
 
             self._compiled_rhs = compiled_rhs(scene, fallback=self._accelerations_numpy)  # None: no compiler
         self.rhs_kernel = "casadi" if self._compiled_rhs is not None else "numpy"
-        # anchor reactions (outputs, every communication step): only the links that touch an anchor matter.
-        # One entry per (link, anchored end): +T_l E_l on k1(l), -T_l E_l on k2(l), summed per anchor.
+
+    @functools.cached_property
+    def _reaction_map(self):
+        """What :meth:`anchor_reactions` gathers and sums (set up at its first use): only the links that touch an
+        anchor matter, one entry per (link, anchored end), +T_l E_l on k1(l), -T_l E_l on k2(l), summed per
+        anchor. (links, k1, k2, +-1/R_l, the slots of the 3 components of each entry's anchor, anchors)."""
+        scene = self.scene
         fixed = np.asarray(scene.fixed, bool)
         row = np.full(scene.K, -1, np.int64)
         row[fixed] = np.arange(int(fixed.sum()))
         on1, on2 = np.flatnonzero(fixed[scene.k1]), np.flatnonzero(fixed[scene.k2])
         links = np.concatenate([on1, on2])
-        self._n_anchors = int(fixed.sum())
-        self._reaction_links = links
-        self._reaction_k1, self._reaction_k2 = scene.k1[links], scene.k2[links]
-        self._reaction_weight = np.concatenate([np.ones(on1.size), -np.ones(on2.size)]) / scene.length[links]
+        weight = np.concatenate([np.ones(on1.size), -np.ones(on2.size)]) / scene.length[links]
         anchor = np.concatenate([row[scene.k1[on1]], row[scene.k2[on2]]])
-        self._reaction_slots = (3 * anchor[:, None] + np.arange(3)).reshape(-1)
+        slots = (3 * anchor[:, None] + np.arange(3)).reshape(-1)
+        return links, scene.k1[links], scene.k2[links], weight, slots, int(fixed.sum())
 
     @functools.cached_property
     def solver(self) -> TensionSolver:
@@ -104,10 +107,10 @@ class Dynamics:
     def anchor_reactions(self, X, T) -> np.ndarray:
         """The rows of :meth:`link_forces` on the anchored masses, in scene order (the force the network exerts
         on each anchor), from the links that touch an anchor only: one bincount."""
-        w = T[self._reaction_links] * self._reaction_weight  # +-T_l / R_l
-        f = w[:, None] * (X[self._reaction_k2] - X[self._reaction_k1])  # +-T_l E_l of (8)
-        n = self._n_anchors
-        return np.bincount(self._reaction_slots, weights=f.reshape(-1), minlength=3 * n).reshape(n, 3)
+        links, k1, k2, weight, slots, n = self._reaction_map
+        w = T[links] * weight  # +-T_l / R_l
+        f = w[:, None] * (X[k2] - X[k1])  # +-T_l E_l of (8)
+        return np.bincount(slots, weights=f.reshape(-1), minlength=3 * n).reshape(n, 3)
 
     def _scatter(self, E, weights) -> np.ndarray:
         """C^T w for C built from unit vectors E: +w_l E_l on k1(l), -w_l E_l on k2(l)."""

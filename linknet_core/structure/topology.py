@@ -63,21 +63,16 @@ def _link_pairs(scene: Scene) -> LinkPairs:
     links, masses, sigma = links[order], masses[order], sigma[order]
     starts = np.flatnonzero(np.r_[True, masses[1:] != masses[:-1]])
     degree = np.diff(np.r_[starts, masses.size])
-    out_first, out_second, out_mass, out_sign = [], [], [], []
-    for d in np.unique(degree):  # vectorised per degree value: no loop per mass
-        group_starts = starts[degree == d]
-        idx = group_starts[:, None] + np.arange(d)[None, :]
-        i, j = np.triu_indices(d)  # includes i == j: the diagonal contributions (18)
-        a, b = links[idx[:, i]], links[idx[:, j]]
-        out_first.append(np.minimum(a, b).ravel())
-        out_second.append(np.maximum(a, b).ravel())
-        out_mass.append(np.repeat(masses[group_starts], i.size))
-        out_sign.append((sigma[idx[:, i]] * sigma[idx[:, j]]).ravel())
-    if not out_first:
-        empty = np.zeros(0, np.int64)
-        return LinkPairs(empty, empty, empty, np.zeros(0))
-    return LinkPairs(np.concatenate(out_first), np.concatenate(out_second), np.concatenate(out_mass),
-                     np.concatenate(out_sign))
+    # the ends around each free mass pair up with themselves and the ends after them (i <= j, row by row of the
+    # upper triangle), masses taken by degree and then in order: one set of array operations, no loop per mass
+    by_degree = np.argsort(degree, kind="stable")
+    group_start, group_size = starts[by_degree], degree[by_degree]
+    end = np.repeat(group_start - np.cumsum(group_size) + group_size, group_size) + np.arange(group_size.sum())
+    partners = np.repeat(group_start + group_size, group_size) - end  # ends j >= i in the same group
+    i = np.repeat(end, partners)
+    j = i + np.arange(partners.sum()) - np.repeat(np.cumsum(partners) - partners, partners)
+    a, b = links[i], links[j]
+    return LinkPairs(np.minimum(a, b), np.maximum(a, b), masses[i], sigma[i] * sigma[j])
 
 
 def _cut_graph(scene: Scene):
