@@ -247,6 +247,152 @@ def breakdown(repeats: int = 9, n: int = 200, log=print) -> dict:
     return out
 
 
+# ------------------------------------------------------------------------------------------------ phases
+# (label, module, attribute): the set-up and run phases timed by --phases; entries a tree does not have are
+# skipped, so that the same table compares trees whose internals differ. Times are exclusive: a phase's own
+# time, without the phases it calls.
+PHASES = (
+    ("scene file (load_scene)", "linknet_core.scene.description", "load_scene"),
+    ("structure analysis", "linknet_core.structure.topology", "_analyse"),
+    ("link pairs", "linknet_core.structure.topology", "_link_pairs"),
+    ("leaves-first ordering", "linknet_core.structure.topology", "_tree_ordering"),
+    ("Dynamics (reference) set-up", "linknet_core.dynamics.equations", "Dynamics.__init__"),
+    ("reference tension solver set-up", "linknet_core.dynamics.equations", "make_solver"),
+    ("method settings", "linknet_core.simulator.simulator", "method_settings"),
+    ("initial state ((11), (12), (35))", "linknet_core.simulator.simulator", "prepare_initial_state"),
+    ("specialisation", "linknet_core.simulator.simulator", "choose_specialisation"),
+    ("native model", "linknet_core.simulator.simulator", "NativeModel"),
+    ("native method and data", "linknet_core.simulator.simulator", "NativeIntegrator"),
+    ("Simulator.__init__ (the rest)", "linknet_core.simulator.simulator", "Simulator.__init__"),
+    ("advance calls", "linknet_core.simulator.simulator", "Simulator.advance"),
+    ("outputs calls", "linknet_core.simulator.simulator", "Simulator.outputs"),
+    ("per-sample diagnostics", "linknet_core.dynamics.equations", "Dynamics.energy"),
+    ("per-sample diagnostics", "linknet_core.dynamics.equations", "Dynamics.constraint_residual"),
+    ("per-sample diagnostics", "linknet_core.dynamics.equations", "Dynamics.velocity_residual"),
+    ("per-sample diagnostics", "linknet_core.simulator.simulator", "kinetic_energy"),
+    ("per-sample diagnostics", "linknet_core.simulator.simulator", "_sample_diagnostics"),
+    ("simulate (the rest)", "linknet_core.simulator.simulator", "simulate"),
+)
+
+
+def phases(repeats: int = 200, log=print) -> dict:
+    """Where a fresh ``Simulator(scene)`` and a fresh ``ln.simulate(load_scene(...))`` spend their time, phase by
+    phase (PHASES, exclusive times): median over ``repeats`` runs of CPU time (process_time), the garbage
+    collector off inside a run. Every run starts from a scene object of its own (the structure analysis is kept
+    per scene object, so a fresh scene pays it, as a user's first run does). The wrappers cost ~0.3 us per call:
+    the un-instrumented totals come with them."""
+    import importlib
+    import statistics
+
+    import linknet_core as ln
+
+    clock = time.process_time
+    tree = Path(ln.__file__).resolve().parent.parent
+    acc: dict = {}
+    stack: list = []
+
+    def wrap(label, fn):
+        def timed(*args, **kwargs):
+            stack.append(0.0)
+            start = clock()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                elapsed = clock() - start
+                inner = stack.pop()
+                acc[label] = acc.get(label, 0.0) + elapsed - inner
+                if stack:
+                    stack[-1] += elapsed
+        return timed
+
+    def install():
+        undo = []
+        for label, module, attr in PHASES:
+            owner = importlib.import_module(module)
+            *path, name = attr.split(".")
+            for part in path:
+                owner = getattr(owner, part, None)
+            if owner is None or not hasattr(owner, name):
+                continue
+            original = getattr(owner, name)
+            setattr(owner, name, wrap(label, original))
+            undo.append((owner, name, original))
+        return undo
+
+    configs = {"pendulum dop853 rtol 1e-4": ("pendulum", "dop853", {"rtol": 1e-4}),
+               "pendulum rattle dt 1e-3": ("pendulum", "rattle", {"dt": 1e-3}),
+               "chain_10 rattle dt 1e-3": ("chain_10", "rattle", {"dt": 1e-3})}
+    out = {"linknet_core": str(Path(ln.__file__).resolve().parent), "configs": {}}
+    for key, (name, method, settings) in configs.items():
+        path = tree / "models" / f"{name}.json"
+        rows = {}
+        for what, run in (("Simulator(scene)", lambda sc: ln.Simulator(sc, method=method, **settings)),
+                          ("simulate, 2 samples", lambda sc: ln.simulate(sc, RUN_T, method=method, n_out=2,
+                                                                          **settings)),
+                          ("simulate, 201 samples", lambda sc: ln.simulate(sc, RUN_T, method=method, **settings))):
+            for _ in range(5):
+                run(ln.load_scene(path))
+            plain = []
+            for _ in range(repeats):
+                scene = ln.load_scene(path)
+                gc.collect()
+                gc.disable()
+                start = clock()
+                run(scene)
+                plain.append(clock() - start)
+                gc.enable()
+            undo = install()
+            per_run = []
+            try:
+                for _ in range(repeats):
+                    scene = ln.load_scene(path)
+                    acc.clear()
+                    gc.collect()
+                    gc.disable()
+                    start = clock()
+                    run(scene)
+                    total = clock() - start
+                    gc.enable()
+                    per_run.append(dict(acc, total=total))
+            finally:
+                for owner, name, original in reversed(undo):
+                    setattr(owner, name, original)
+            labels = dict.fromkeys(k for r in per_run for k in r if k != "total")
+            row = {label: statistics.median(r.get(label, 0.0) for r in per_run) for label in labels}
+            row["total (instrumented)"] = statistics.median(r["total"] for r in per_run)
+            row["total"] = statistics.median(plain)
+            rows[what] = row
+            log(f"{key}, {what}: " + "; ".join(f"{k} {1e6 * v:.1f}" for k, v in row.items()) + " (us)")
+        scene_t = []
+        for _ in range(repeats):
+            gc.disable()
+            start = clock()
+            ln.load_scene(path)
+            scene_t.append(clock() - start)
+            gc.enable()
+        rows["load_scene"] = {"total": statistics.median(scene_t)}
+        out["configs"][key] = rows
+    return out
+
+
+def _phases_markdown(trees: dict, results: dict) -> str:
+    names = list(trees)
+    lines = []
+    for key in results[names[0]]["configs"]:
+        for what in results[names[0]]["configs"][key]:
+            if what == "load_scene":
+                continue
+            labels = dict.fromkeys(l for t in names for l in results[t]["configs"][key][what])
+            lines += [f"### {key}: {what}", "", "| phase | " + " | ".join(f"{t} us" for t in names) + " |",
+                      "|---|" + "---:|" * len(names)]
+            for label in labels:
+                cells = [results[t]["configs"][key][what].get(label) for t in names]
+                text = " | ".join("-" if v is None else f"{1e6 * v:.1f}" for v in cells)
+                lines.append(f"| {'**' + label + '**' if label == 'total' else label} | {text} |")
+            lines.append("")
+    return "\n".join(lines)
+
+
 # ------------------------------------------------------------------------------------------------ driver
 def _load():
     try:
@@ -360,17 +506,33 @@ def main(argv=None):
     ap.add_argument("--json", type=Path, help="write this tree's figures here")
     ap.add_argument("--trees", nargs="+", metavar="NAME=PATH", help="run each tree in its own process, interleaved")
     ap.add_argument("--rounds", type=int, default=3, help="with --trees: rounds over all trees")
+    ap.add_argument("--phases", action="store_true",
+                    help="where a fresh Simulator and a fresh simulate spend their set-up, phase by phase; with "
+                         "--trees: one table of every tree's phases")
     ap.add_argument("--breakdown", action="store_true",
                     help="native tree only: where a one-step advance spends its time (Python, ctypes, C)")
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent.parent / "docs" / "benchmarks"
                     / "native_vs_numba",
                     help="with --trees: output folder")
     args = ap.parse_args(argv)
+    if args.trees and args.phases:
+        trees = {k: Path(v).resolve() for k, v in (item.split("=", 1) for item in args.trees)}
+        results = {}
+        for tree, path in trees.items():
+            with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
+                target = f.name
+            env = dict(os.environ, PYTHONPATH=str(path), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+            subprocess.run([sys.executable, str(Path(__file__).resolve()), "--phases", "--json", target], cwd=path,
+                           env=env, check=True)
+            results[tree] = json.loads(Path(target).read_text())
+            os.unlink(target)
+        print(_phases_markdown(trees, results))
+        return
     if args.trees:
         trees = dict(item.split("=", 1) for item in args.trees)
         drive({k: Path(v).resolve() for k, v in trees.items()}, args.rounds, args.repeats, args.out.resolve())
         return
-    res = breakdown(args.repeats) if args.breakdown else measure(args.repeats)
+    res = breakdown(args.repeats) if args.breakdown else phases() if args.phases else measure(args.repeats)
     if args.json:
         args.json.write_text(json.dumps(res, indent=1))
 
