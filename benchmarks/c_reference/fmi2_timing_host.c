@@ -224,18 +224,24 @@ int main(int argc, char **argv) {
     host.set_real = (SetReal_t)sym(lib, "fmi2SetReal");
     host.do_step = (DoStep_t)sym(lib, "fmi2DoStep");
     host.set_state = (SetFMUstate_t)sym(lib, "fmi2SetFMUstate");
-    py.ensure = (GILStateEnsure_t)dlsym(lib, "PyGILState_Ensure");
-    py.release = (GILStateRelease_t)dlsym(lib, "PyGILState_Release");
-    py.save = (SaveThread_t)dlsym(lib, "PyEval_SaveThread");
-    py.restore = (RestoreThread_t)dlsym(lib, "PyEval_RestoreThread");
-    if (!(py.ensure && py.release && py.save && py.restore)) {
-        fprintf(stderr, "note: no libpython behind the FMU binary; the _tstate_kept variants are not measured\n");
-        py.ensure = NULL;
-    }
 
     fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
     host.c = instantiate("c_timing_host", fmi2CoSimulation, guid, uri, &cb, 0, 1);
     if (!host.c) { fprintf(stderr, "fmi2Instantiate failed\n"); return 4; }
+    /* libpython comes with pythonfmu's binary, which the FMU's front layer (<id>.so) loads at fmi2Instantiate as
+       <id>_pythonfmu.so beside it: its symbols are reached through that binary, else through the FMU's own */
+    char inner_path[4200];
+    snprintf(inner_path, sizeof inner_path, "%s/binaries/linux64/%s_pythonfmu.so", dir, id);
+    void *python_lib = dlopen(inner_path, RTLD_NOW | RTLD_NOLOAD);
+    if (!python_lib) python_lib = lib;
+    py.ensure = (GILStateEnsure_t)dlsym(python_lib, "PyGILState_Ensure");
+    py.release = (GILStateRelease_t)dlsym(python_lib, "PyGILState_Release");
+    py.save = (SaveThread_t)dlsym(python_lib, "PyEval_SaveThread");
+    py.restore = (RestoreThread_t)dlsym(python_lib, "PyEval_RestoreThread");
+    if (!(py.ensure && py.release && py.save && py.restore)) {
+        fprintf(stderr, "note: no libpython behind the FMU binary; the _tstate_kept variants are not measured\n");
+        py.ensure = NULL;
+    }
 #undef CHECK
 #define CHECK(call) do { fmi2Status s_ = (call); if (s_ > fmi2Warning) { \
     fprintf(stderr, "%s failed with status %d\n", #call, (int)s_); return 4; } } while (0)
