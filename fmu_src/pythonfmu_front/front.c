@@ -64,11 +64,13 @@ static struct {
 
 static pthread_once_t inner_once = PTHREAD_ONCE_INIT;
 
+static const char inner_anchor = 0;  /* an object of this library: dladdr names the library's file */
+
 static void load_inner(void)
 {
     Dl_info self_info;
     char path[PATH_MAX];
-    if (!dladdr((void *)&load_inner, &self_info) || self_info.dli_fname == NULL) {
+    if (!dladdr(&inner_anchor, &self_info) || self_info.dli_fname == NULL) {
         snprintf(inner.problem, sizeof inner.problem, "cannot find the folder of the FMU's binary (dladdr failed)");
         return;
     }
