@@ -130,6 +130,12 @@ typedef struct ln_model {
     const double *piece;            /* (rows, 14): start, base, then c0..c3 of each axis in powers of tau - base */
     const double *sine;             /* (n_driven, 12): origin, amplitude, angular frequency, phase (3 each) */
     const double *accel_weight;     /* (K) 1/M_k; 1 on driven anchors (the same array as inv_m without them) */
+
+    /* the position projection's stopping rule (stages/projections.c): a residual within the round-off floor plus
+       floor_safety times what the Newton step leaves by construction is at the floor the conditioning allows, but
+       never above floor_cap times the convergence scale (linknet_core.dynamics.equations: FLOOR_SAFETY,
+       FLOOR_CAP_OVER_TOL) */
+    double floor_safety, floor_cap;
 } ln_model;
 
 typedef struct ln_method {

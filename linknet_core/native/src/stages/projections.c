@@ -29,9 +29,6 @@ LN_SCALAR_LOOPS_BEGIN
 #define KRYLOV_RTOL 1e-12
 #define KRYLOV_PIVOT_CUT 1e-12  /* GMRES's triangular factor: pivots below this times the largest count as zero */
 #define LINE_SEARCH_HALVINGS 8
-#define FLOOR_SAFETY 2.0        /* a residual within the round-off floor plus this times r is at its floor */
-#define FLOOR_CAP 1e4           /* ... but never above this many times the convergence scale (about tol): far from
-                                   (11) a redundant system can stall at a least-squares point off the manifold */
 
 static inline double length_residual(const ln_model *m, const double *Xc, ln_int l)
 {
@@ -268,13 +265,13 @@ static int newton_solve(const ln_model *m, ln_data *d, const double *Xc, const d
     return LN_OK;  /* an inexact Newton step still contracts; the outer iteration judges convergence */
 }
 
-/* Every |phi_l| within its round-off floor plus FLOOR_SAFETY |r_l|, r = phi - J mu of the step just taken: the
+/* Every |phi_l| within its round-off floor plus m->floor_safety |r_l|, r = phi - J mu of the step just taken: the
    step left no more than it had to. Returns the largest |phi_l| / R_l then, or -1. */
 static double at_floor(const ln_model *m, const double *phi, const double *inv_scale, const double *r)
 {
     double reached = 0.0;
     for (ln_int l = 0; l < m->L; l++) {
-        if (fabs(phi[l]) > 1.0 / inv_scale[l] + FLOOR_SAFETY * fabs(r[l])) return -1.0;
+        if (fabs(phi[l]) > 1.0 / inv_scale[l] + m->floor_safety * fabs(r[l])) return -1.0;
         reached = fmax(reached, fabs(phi[l]) * m->inv_R[l]);
     }
     return reached;
@@ -302,7 +299,7 @@ static int exact_newton(const ln_model *m, ln_data *d, double *Xc, const double 
         double floor = 0.0;
         for (ln_int l = 0; l < m->L; l++) {
             r[l] = phi[l] - r[l];
-            floor = fmax(floor, (1.0 / inv_scale[l] + FLOOR_SAFETY * fabs(r[l])) * m->inv_R[l]);
+            floor = fmax(floor, (1.0 / inv_scale[l] + m->floor_safety * fabs(r[l])) * m->inv_R[l]);
         }
         d->fail_floor = floor;
         double step = 1.0;
@@ -314,7 +311,7 @@ static int exact_newton(const ln_model *m, ln_data *d, double *Xc, const double 
             trial = residuals(m, Xc, inv_scale, phi);
         }
         worst = trial;
-        if (worst > 1.0 && worst <= FLOOR_CAP) {
+        if (worst > 1.0 && worst <= m->floor_cap) {
             const double reached = at_floor(m, phi, inv_scale, r);
             if (reached >= 0.0) {
                 d->floor_stops++;
@@ -353,7 +350,7 @@ static int gauss_newton(const ln_model *m, ln_data *d, double *Xc, double tol, l
         double floor = 0.0;
         for (ln_int l = 0; l < L; l++) {
             r[l] = phi[l] - r[l];
-            floor = fmax(floor, (1.0 / inv_scale[l] + FLOOR_SAFETY * fabs(r[l])) * m->inv_R[l]);
+            floor = fmax(floor, (1.0 / inv_scale[l] + m->floor_safety * fabs(r[l])) * m->inv_R[l]);
         }
         d->fail_floor = floor;
         double step = 1.0;
@@ -365,7 +362,7 @@ static int gauss_newton(const ln_model *m, ln_data *d, double *Xc, double tol, l
             trial = residuals(m, Xc, inv_scale, phi);
         }
         worst = trial;
-        if (worst > 1.0 && worst <= FLOOR_CAP) {
+        if (worst > 1.0 && worst <= m->floor_cap) {
             const double reached = at_floor(m, phi, inv_scale, r);
             if (reached >= 0.0) {
                 d->floor_stops++;
