@@ -161,10 +161,8 @@ def _system_library(soname: str) -> str | None:
 def rewrite_fmu(fmu: Path, model_description: bytes, link_python: bool) -> str | None:
     """Replace modelDescription.xml, (optionally) relink pythonfmu's Linux binary and put the front layer
     (fmu_src/pythonfmu_front) in front of it, in place."""
-    from linknet_fmu import layout
+    from linknet_fmu.layout import DERIVATIVE_VR_BASE  # how input derivatives reach the slaves (see front.c)
     from pythonfmu_front.build import FrontBuildError, compile_front, inner_library_name
-    # a slave that takes input derivatives declares how they reach it through fmi2SetReal (see front.c)
-    derivative_vr_base = getattr(layout, "DERIVATIVE_VR_BASE", None)
     root = ET.fromstring(model_description)
     ident = root.find("CoSimulation").get("modelIdentifier")
     linked = None
@@ -189,7 +187,7 @@ def rewrite_fmu(fmu: Path, model_description: bytes, link_python: bool) -> str |
                         # still a working FMU for Python hosts (fmpy); C hosts would need libpython preloaded
                         print(f"build_fmu: WARNING: binary not linked to libpython: {e}", file=sys.stderr)
                 try:
-                    out.append((info.filename, compile_front(ident, derivative_vr_base)))
+                    out.append((info.filename, compile_front(ident, DERIVATIVE_VR_BASE)))
                 except FrontBuildError as e:
                     raise SystemExit(f"build_fmu: {e}")
                 out.append((f"binaries/linux64/{inner_library_name(ident)}", data))
