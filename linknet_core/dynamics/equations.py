@@ -220,7 +220,7 @@ class Dynamics:
 
     def _simplified_newton(self, X, tol, max_iter, E0):
         """X += M^-1 C(X0)^T A(X0)^-1 phi until every |phi_l| is within tol (relative, see _residual_scale);
-        given up when it contracts too slowly. Returns (X, iterations, error, converged)."""
+        given up when it contracts too slowly, at its best iterate. Returns (X, iterations, error, converged)."""
         Xc = np.array(X, float, copy=True)
         scale = self._residual_scale(Xc, tol)
         previous = err = np.inf
@@ -230,9 +230,14 @@ class Dynamics:
             if err <= tol:
                 return Xc, it - 1, err, True
             if not np.isfinite(err) or (it > 3 and err > 0.3 * previous):
+                if it > 1 and not err <= previous:  # a step that made things worse is undone (Gauss-Newton
+                    # goes on from Xc, and far from (11) a redundant system's least squares can settle off it)
+                    Xc -= dX
+                    err = previous
                 return Xc, it, err, False
             previous = err
-            Xc += self._correction(E0, self.solver.solve(phi))
+            dX = self._correction(E0, self.solver.solve(phi))
+            Xc += dX
         return Xc, max_iter, err, False
 
     def _newton(self, X, tol, max_iter, step):

@@ -132,7 +132,8 @@ static int project_positions_chain(const ln_model *m, ln_data *d, double *Xc, co
 }
 
 /* Simplified Newton with A(E_dir) factored (the chain's own sweeps, or the general solve). Returns LN_OK,
-   or LN_PROJECTION_FAILED when it contracts too slowly (it is then handed to exact Newton). */
+   or LN_PROJECTION_FAILED when it contracts too slowly (it is then handed to exact Newton), with Xc at its best
+   iterate. */
 static int simplified_newton(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
                              ln_int max_iter, double *first)
 {
@@ -145,7 +146,12 @@ static int simplified_newton(const ln_model *m, ln_data *d, double *Xc, const do
         const double worst = residuals(m, Xc, inv_scale, phi);
         if (*first < 0) *first = worst * tol;
         if (worst <= 1.0) return LN_OK;
-        if (!(worst < 1e300) || (it > 2 && worst > 0.3 * previous)) break;
+        if (!(worst < 1e300) || (it > 2 && worst > 0.3 * previous)) {
+            /* a step that made things worse is undone: Gauss-Newton goes on from here, and from a point far
+               off (11) a redundant system's least squares can settle off the manifold for good */
+            if (it > 0 && !(worst <= previous)) FN(ln_add_correction)(m, E_dir, mu, -1.0, Xc);
+            break;
+        }
         previous = worst;
         FN(ln_solve_tension_system)(m, d, phi, mu);
         FN(ln_add_correction)(m, E_dir, mu, 1.0, Xc);
