@@ -14,6 +14,19 @@
    projections, the RATTLE loop): on small scenes the checks GCC's loop vectorizer puts before each of those
    loops (aliasing, trip count) cost more than the vectorized loops save, and from about a hundred links on
    the time is in the tension solves. Clang does not vectorize them that way. */
+/* The hot path of a small scene's step is a handful of stage calls around loops of a few iterations: the calls
+   themselves would cost as much as the work, so the hot parts are inlined into the step loop (LN_ALWAYS_INLINE)
+   and the rarely taken recoveries kept out of line (LN_COLD), which keeps the inlined code small. */
+#if defined(__GNUC__) || defined(__clang__)
+#define LN_ALWAYS_INLINE static inline __attribute__((always_inline))
+#define LN_COLD static __attribute__((noinline, cold))
+#define LN_NOINLINE static __attribute__((noinline))
+#else
+#define LN_ALWAYS_INLINE static inline
+#define LN_COLD static
+#define LN_NOINLINE static
+#endif
+
 #if defined(__GNUC__) && !defined(__clang__)
 #define LN_SCALAR_LOOPS_BEGIN _Pragma("GCC push_options") _Pragma("GCC optimize(\"no-tree-loop-vectorize\")")
 #define LN_SCALAR_LOOPS_END _Pragma("GCC pop_options")

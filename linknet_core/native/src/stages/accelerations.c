@@ -46,7 +46,7 @@ static inline void scatter_link_force(const ln_model *m, const double *E, ln_int
 
 /* The chain's tensions in two sweeps (refactor 0: the factorisation at X is there already). Returns 0, or 1
    when a pivot vanished (the caller takes the general route with its minimum-norm solve). */
-static int chain_tensions(const ln_model *m, ln_data *d, const double *X, const double *U, const double *F,
+LN_ALWAYS_INLINE int chain_tensions(const ln_model *m, ln_data *d, const double *X, const double *U, const double *F,
                           double *E, double *T, double *acc, int refactor)
 {
     const ln_int L = m->L;
@@ -74,8 +74,28 @@ static int chain_tensions(const ln_model *m, ln_data *d, const double *X, const 
     return 0;
 }
 
-int FN(ln_accelerations)(const ln_model *m, ln_data *d, const double *X, const double *U, const double *F_base,
-                         double *acc, double *T, int refactor)
+/* The tensions on the general route (trees, general graphs, minimum-norm solves, a chain at a vanishing pivot),
+   their forces added into acc. */
+LN_NOINLINE int general_tensions(const ln_model *m, ln_data *d, const double *X, const double *U, const double *F,
+                                 double *E, double *T, double *acc, int refactor)
+{
+    FN(ln_unit_vectors)(m, X, E);
+    if (refactor) {
+        /* a chain whose sweep just met a vanishing pivot goes straight to the minimum-norm path */
+        const int status = m->solver == LN_SOLVER_CHAIN ? FN(ln_factor_singular)(m, d, E)
+                                                        : FN(ln_factor_tension_matrix)(m, d, E);
+        if (status != LN_OK) return status;
+    }
+    double *B = d->B;
+    for (ln_int l = 0; l < m->L; l++) link_terms(m, X, U, F, l, E, &B[l]);
+    FN(ln_solve_tension_system)(m, d, B, T);
+    for (ln_int l = 0; l < m->L; l++) scatter_link_force(m, E, l, T[l], acc);
+    return LN_OK;
+}
+
+/* The right-hand side as the step loops call it (inlined there; ln_accelerations for everyone else). */
+LN_ALWAYS_INLINE int accelerations(const ln_model *m, ln_data *d, const double *X, const double *U,
+                                   const double *F_base, double *acc, double *T, int refactor)
 {
     const ln_int K = m->K, L = m->L;
     double *E = d->E1;
@@ -96,17 +116,8 @@ int FN(ln_accelerations)(const ln_model *m, ln_data *d, const double *X, const d
         }
     }
     if (general) {
-        FN(ln_unit_vectors)(m, X, E);
-        if (refactor) {
-            /* a chain whose sweep just met a vanishing pivot goes straight to the minimum-norm path */
-            const int status = m->solver == LN_SOLVER_CHAIN ? FN(ln_factor_singular)(m, d, E)
-                                                            : FN(ln_factor_tension_matrix)(m, d, E);
-            if (status != LN_OK) return status;
-        }
-        double *B = d->B;
-        for (ln_int l = 0; l < L; l++) link_terms(m, X, U, F, l, E, &B[l]);
-        FN(ln_solve_tension_system)(m, d, B, T);
-        for (ln_int l = 0; l < L; l++) scatter_link_force(m, E, l, T[l], acc);
+        const int status = general_tensions(m, d, X, U, F, E, T, acc, refactor);
+        if (status != LN_OK) return status;
     }
     double total = 0.0;
     for (ln_int k = 0; k < K; k++) {
@@ -119,4 +130,10 @@ int FN(ln_accelerations)(const ln_model *m, ln_data *d, const double *X, const d
     for (ln_int a = 0; a < m->n_driven; a++)
         for (int e = 0; e < DIM; e++) acc[m->driven_idx[a] * DIM + e] = F[m->driven_idx[a] * DIM + e];
     return isfinite(total) ? LN_OK : LN_NON_FINITE;
+}
+
+int FN(ln_accelerations)(const ln_model *m, ln_data *d, const double *X, const double *U, const double *F_base,
+                         double *acc, double *T, int refactor)
+{
+    return accelerations(m, d, X, U, F_base, acc, T, refactor);
 }

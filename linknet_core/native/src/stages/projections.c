@@ -41,14 +41,21 @@ static inline double length_residual(const ln_model *m, const double *Xc, ln_int
     return (sq - m->R[l] * m->R[l]) * (0.5 * m->inv_R[l]);
 }
 
-static void residual_floor(const ln_model *m, const double *Xc, double tol, double *inv_scale)
+/* The larger of a size (never NaN) and |x|: fmax(size, |x|) without a call into libm (a NaN x leaves size). */
+static inline double grow_size(double size, double x)
+{
+    const double v = fabs(x);
+    return v > size ? v : size;
+}
+
+LN_ALWAYS_INLINE void residual_floor(const ln_model *m, const double *Xc, double tol, double *inv_scale)
 {
     for (ln_int l = 0; l < m->L; l++) {
         const ln_int a = m->k1[l], b = m->k2[l];
         double size_a = 0.0, size_b = 0.0;
         for (int e = 0; e < DIM; e++) {
-            size_a = fmax(size_a, fabs(Xc[a * DIM + e]));
-            size_b = fmax(size_b, fabs(Xc[b * DIM + e]));
+            size_a = grow_size(size_a, Xc[a * DIM + e]);
+            size_b = grow_size(size_b, Xc[b * DIM + e]);
         }
         inv_scale[l] = 1.0 / (m->R[l] * tol + 8.0 * EPS * (size_a + size_b));
     }
@@ -103,7 +110,7 @@ static inline void chain_back_substitution(const ln_model *m, const ln_data *d, 
 
 /* The chain's Newton iteration: the residuals of (11), the convergence test and the forward substitution in
    one sweep; the back substitution, each multiplier applied as soon as it is known, in the other. */
-static int project_positions_chain(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
+LN_ALWAYS_INLINE int project_positions_chain(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
                                    ln_int max_iter, double *first)
 {
     const ln_int L = m->L;
@@ -134,7 +141,7 @@ static int project_positions_chain(const ln_model *m, ln_data *d, double *Xc, co
 /* Simplified Newton with A(E_dir) factored (the chain's own sweeps, or the general solve). Returns LN_OK,
    or LN_PROJECTION_FAILED when it contracts too slowly (it is then handed to exact Newton), with Xc at its best
    iterate. */
-static int simplified_newton(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
+LN_ALWAYS_INLINE int simplified_newton(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
                              ln_int max_iter, double *first)
 {
     if (m->solver == LN_SOLVER_CHAIN && !d->singular)
@@ -380,14 +387,10 @@ static int gauss_newton(const ln_model *m, ln_data *d, double *Xc, double tol, l
     return LN_PROJECTION_FAILED;
 }
 
-int FN(ln_project_positions)(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
-                             ln_int max_iter)
+/* Where simplified Newton gave up: exact Newton from X_start, or Gauss-Newton where A is singular. */
+LN_COLD int project_positions_newton(const ln_model *m, ln_data *d, double *Xc, const double *X_start,
+                                     const double *E_dir, double tol, ln_int max_iter, double before)
 {
-    if (m->L == 0) return LN_OK;
-    double *X_start = d->Xs == Xc ? d->Us : d->Xs;  /* a copy of the starting point, for exact Newton */
-    for (ln_int i = 0; i < m->K * DIM; i++) X_start[i] = Xc[i];
-    double before = -1.0;
-    if (simplified_newton(m, d, Xc, E_dir, tol, max_iter, &before) == LN_OK) return LN_OK;
     d->exact_newton_projections++;
     const int status = (m->solver == LN_SOLVER_MIN_NORM || d->singular)
                            ? gauss_newton(m, d, Xc, tol, max_iter)
@@ -396,10 +399,28 @@ int FN(ln_project_positions)(const ln_model *m, ln_data *d, double *Xc, const do
     return status;
 }
 
+/* The position stage as the step loops call it (inlined there; ln_project_positions for everyone else). */
+LN_ALWAYS_INLINE int project_positions(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
+                                       ln_int max_iter)
+{
+    if (m->L == 0) return LN_OK;
+    double *X_start = d->Xs == Xc ? d->Us : d->Xs;  /* a copy of the starting point, for exact Newton */
+    for (ln_int i = 0; i < m->K * DIM; i++) X_start[i] = Xc[i];
+    double before = -1.0;
+    if (simplified_newton(m, d, Xc, E_dir, tol, max_iter, &before) == LN_OK) return LN_OK;
+    return project_positions_newton(m, d, Xc, X_start, E_dir, tol, max_iter, before);
+}
+
+int FN(ln_project_positions)(const ln_model *m, ln_data *d, double *Xc, const double *E_dir, double tol,
+                             ln_int max_iter)
+{
+    return project_positions(m, d, Xc, E_dir, tol, max_iter);
+}
+
 /* The chain's velocity projection in two sweeps: unit vectors, A's entries and pivots, C U and the forward
    substitution in one; the back substitution with the correction of U in the other. Returns 1 at a
    vanishing pivot (the caller takes the general route). */
-static int project_velocities_chain(const ln_model *m, ln_data *d, const double *X, double *U, double *E)
+LN_ALWAYS_INLINE int project_velocities_chain(const ln_model *m, ln_data *d, const double *X, double *U, double *E)
 {
     const ln_int L = m->L;
     const ln_int *order = m->chain_order;
@@ -425,11 +446,11 @@ static int project_velocities_chain(const ln_model *m, ln_data *d, const double 
     return 0;
 }
 
-int FN(ln_project_velocities)(const ln_model *m, ln_data *d, const double *X, double *U, double *E)
+/* The velocity projection on the general route: trees, general graphs, minimum-norm solves, and a chain whose
+   sweep met a vanishing pivot. */
+LN_NOINLINE int project_velocities_general(const ln_model *m, ln_data *d, const double *X, double *U, double *E)
 {
     const ln_int L = m->L;
-    if (L == 0) return LN_OK;
-    if (m->solver == LN_SOLVER_CHAIN && !project_velocities_chain(m, d, X, U, E)) return LN_OK;
     FN(ln_unit_vectors)(m, X, E);
     /* a chain whose sweep just met a vanishing pivot goes straight to the minimum-norm path */
     const int status = m->solver == LN_SOLVER_CHAIN ? FN(ln_factor_singular)(m, d, E)
@@ -445,6 +466,19 @@ int FN(ln_project_velocities)(const ln_model *m, ln_data *d, const double *X, do
     FN(ln_solve_tension_system)(m, d, rhs, mu);
     FN(ln_add_correction)(m, E, mu, -1.0, U);
     return LN_OK;
+}
+
+/* The velocity stage as the step loops call it (inlined there; ln_project_velocities for everyone else). */
+LN_ALWAYS_INLINE int project_velocities(const ln_model *m, ln_data *d, const double *X, double *U, double *E)
+{
+    if (m->L == 0) return LN_OK;
+    if (m->solver == LN_SOLVER_CHAIN && !project_velocities_chain(m, d, X, U, E)) return LN_OK;
+    return project_velocities_general(m, d, X, U, E);
+}
+
+int FN(ln_project_velocities)(const ln_model *m, ln_data *d, const double *X, double *U, double *E)
+{
+    return project_velocities(m, d, X, U, E);
 }
 
 LN_SCALAR_LOOPS_END

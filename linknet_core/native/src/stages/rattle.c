@@ -33,7 +33,7 @@ static inline const double *rattle_forces(const ln_model *m, ln_data *d, const d
 /* One step of size h from t to t_end: the composition's RATTLE stages in turn, with A(X) factored at *E0 on
    entry and, on success, at the new X on exit (the pointers swap with every stage). Driven anchors: each stage's
    position stage targets their P at the stage's end and its velocity stage their V there (drive.c). */
-static int composition_step(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
+LN_ALWAYS_INLINE int composition_step(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
                             const double *F_base, double h, double t, double t_end, double **E0_inout,
                             double **E1_inout)
 {
@@ -55,7 +55,7 @@ static int composition_step(const ln_model *m, const ln_method *meth, ln_data *d
             }
         if (m->n_driven && (status = ln_drive_rows(m, d, stage_end, Xc, NULL, NULL, DIM)) != LN_OK) return status;
         /* position stage: Xc + M^-1 C(X)^T mu on (11), simplified Newton with A(X) factored */
-        status = FN(ln_project_positions)(m, d, Xc, E0, meth->position_tol, meth->max_projection_iter);
+        status = project_positions(m, d, Xc, E0, meth->position_tol, meth->max_projection_iter);
         if (status != LN_OK) return status;
         for (ln_int i = 0; i < K * DIM; i++) Uh[i] = (Xc[i] - X[i]) / hs;
         /* second half kick, then the velocity projection onto (12) at the new positions */
@@ -67,7 +67,7 @@ static int composition_step(const ln_model *m, const ln_method *meth, ln_data *d
                 X[i] = Xc[i];
             }
         if (m->n_driven && (status = ln_drive_rows(m, d, stage_end, NULL, U, NULL, DIM)) != LN_OK) return status;
-        if ((status = FN(ln_project_velocities)(m, d, X, U, E1)) != LN_OK) return status;
+        if ((status = project_velocities(m, d, X, U, E1)) != LN_OK) return status;
         if (m->velocity_dependent) {
             /* U_new = P(U_half + hs/2 M^-1 F(X_new, U_new)): contraction factor ~ hs c / (2 m) */
             int converged = 0;
@@ -107,7 +107,7 @@ static int composition_step(const ln_model *m, const ln_method *meth, ln_data *d
    moves little enough within a sub-step, and the result keeps the method's order as dt shrinks. */
 #define MAX_SPLIT_LEVEL 6
 
-static int split_step(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
+LN_COLD int split_step(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
                       const double *F_base, double h, double t, double t_end, double **E0, double **E1, int status)
 {
     const ln_int size = m->K * DIM;

@@ -14,18 +14,42 @@
 #include "../linknet.h"
 #include "../stages.h"
 
-/* out = Y0 + h sum_{j<n} coef[row, j] KY[j] (zero coefficients skipped); KY rows are (K,DIM) blocks. */
-static void combine(ln_int size, const double *Y0, double h, const double *coef, ln_int row, ln_int n,
-                    ln_int s, const double *KY, double *out)
+/* Below this many coordinates a stage's point is summed coordinate by coordinate, above it block by block. */
+#define COMBINE_BY_COORDINATE 32
+
+/* A stage's point: Xo = X0 + h sum_{j<n} coef[j] KX[j], Uo likewise from KU (zero coefficients skipped; KX, KU
+   rows are (K,DIM) blocks), each coordinate's sum in j order from 0.0 either way. On a small scene the work is a
+   few terms per coordinate, and the set-up of a (vectorized) loop over each block costs more than its sums; on
+   a large one the loops over whole blocks are the fast order. */
+static inline void combine(ln_int size, const double *X0, const double *U0, double h, const double *coef, ln_int n,
+                           const double *KX, const double *KU, double *Xo, double *Uo)
 {
-    for (ln_int i = 0; i < size; i++) out[i] = 0.0;
-    for (ln_int j = 0; j < n; j++) {
-        const double c = coef[row * s + j];
-        if (c == 0.0) continue;
-        const double *Kj = KY + j * size;
-        for (ln_int i = 0; i < size; i++) out[i] += c * Kj[i];
+    if (size <= COMBINE_BY_COORDINATE) {
+        for (ln_int i = 0; i < size; i++) {
+            double sx = 0.0, su = 0.0;
+            for (ln_int j = 0; j < n; j++) {
+                const double c = coef[j];
+                if (c == 0.0) continue;
+                sx += c * KX[j * size + i];
+                su += c * KU[j * size + i];
+            }
+            Xo[i] = X0[i] + h * sx;
+            Uo[i] = U0[i] + h * su;
+        }
+        return;
     }
-    for (ln_int i = 0; i < size; i++) out[i] = Y0[i] + h * out[i];
+    for (int part = 0; part < 2; part++) {
+        const double *Y0 = part == 0 ? X0 : U0, *KY = part == 0 ? KX : KU;
+        double *out = part == 0 ? Xo : Uo;
+        for (ln_int i = 0; i < size; i++) out[i] = 0.0;
+        for (ln_int j = 0; j < n; j++) {
+            const double c = coef[j];
+            if (c == 0.0) continue;
+            const double *Kj = KY + j * size;
+            for (ln_int i = 0; i < size; i++) out[i] += c * Kj[i];
+        }
+        for (ln_int i = 0; i < size; i++) out[i] = Y0[i] + h * out[i];
+    }
 }
 
 /* Stage i's derivatives: dX/dt = U (10) and dU/dt = acc (9) into row i of KX, KU. */
@@ -129,7 +153,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
     /* driven anchors are known functions of time: each stage's rows of X, U and of the base force (their
        accelerations) are set to the motion at the stage's time, t + c_i h */
     if (m->n_driven && (status = ln_drive_rows(m, d, t, X, U, d->F_base, DIM)) != LN_OK) return status;
-    if ((status = FN(ln_accelerations)(m, d, X, U, F_base, acc, d->T, 1)) != LN_OK) return status;
+    if ((status = accelerations(m, d, X, U, F_base, acc, d->T, 1)) != LN_OK) return status;
     store_stage(size, 0, U, acc, KX, KU);
     if (d->h_next <= 0.0) {
         double h0;
@@ -145,13 +169,12 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
            A(Xn), which the position projection below reuses */
         for (ln_int i = 1; i <= s; i++) {
             double *Yx = i < s ? Xs : Xn, *Yu = i < s ? Us : Un;
-            combine(size, X, h, meth->AB, i, i, s, KX, Yx);
-            combine(size, U, h, meth->AB, i, i, s, KU, Yu);
+            combine(size, X, U, h, meth->AB + i * s, i, KX, KU, Yx, Yu);
             if (m->n_driven
                 && (status = ln_drive_rows(m, d, i < s ? t + meth->C[i] * h : t_new, Yx, Yu, d->F_base, DIM)) != LN_OK)
                 return status;
             d->n_rhs++;
-            if ((status = FN(ln_accelerations)(m, d, Yx, Yu, F_base, acc, d->T, 1)) != LN_OK) return status;
+            if ((status = accelerations(m, d, Yx, Yu, F_base, acc, d->T, 1)) != LN_OK) return status;
             store_stage(size, i, Yu, acc, KX, KU);
         }
         const double err = FN(ln_rk_error_norm)(m, meth, X, U, Xn, Un, KX, KU, h);
@@ -162,7 +185,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
         }
         /* positions onto (11) along the directions at Xn (unit vectors E1 of the last evaluation, A(Xn)
            factored), then the velocities onto (12) at the projected positions */
-        status = FN(ln_project_positions)(m, d, Xn, d->E1, meth->position_tol, meth->max_projection_iter);
+        status = project_positions(m, d, Xn, d->E1, meth->position_tol, meth->max_projection_iter);
         if (status == LN_PROJECTION_FAILED) {
             /* the new point is too far off (11) for the projection: a step too long for the motion, rejected
                like one whose error estimate is too large (a shorter step lands closer to the manifold) */
@@ -171,7 +194,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
             continue;
         }
         if (status != LN_OK) return status;
-        if ((status = FN(ln_project_velocities)(m, d, Xn, Un, d->E1)) != LN_OK) return status;
+        if ((status = project_velocities(m, d, Xn, Un, d->E1)) != LN_OK) return status;
         t = t_new;
         d->h_next = ln_next_step_size(meth, h, d->h_next, err);
         for (ln_int j = 0; j < size; j++) {
@@ -184,7 +207,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
         if (t < t_target) {
             /* the first stage of the next step; A(X) is factored already (velocity projection) */
             d->n_rhs++;
-            if ((status = FN(ln_accelerations)(m, d, X, U, F_base, acc, d->T, 0)) != LN_OK) return status;
+            if ((status = accelerations(m, d, X, U, F_base, acc, d->T, 0)) != LN_OK) return status;
             store_stage(size, 0, U, acc, KX, KU);
         }
     }
