@@ -17,6 +17,7 @@
  *   pythonfmu instantiate executes the slave's module again and never frees what that creates (~75 KiB per
  *   instantiate/free cycle); a reset does not (docs/fmu.md, tests/contract). A parked instance is reset when it
  *   is parked, so it holds a fresh slave rather than a finished run.
+ * - at exit(), pythonfmu's interpreter is released once, not twice (see load_inner).
  *
  * - fmi2SetRealInputDerivatives reaches a slave that takes input derivatives (FRONT_DERIVATIVE_VR_BASE defined)
  *   as an fmi2SetReal of encoded value references (see the function).
@@ -89,6 +90,22 @@ static void load_inner(void)
     }
     INNER_FUNCTIONS(RESOLVE)
 #undef RESOLVE
+    /* pythonfmu 0.7.0 keeps its interpreter in a static std::shared_ptr<PyState> (PySlaveInstance.cpp) and releases
+       it twice when the process calls exit(): exit() first runs the shared_ptr's destructor, registered with
+       __cxa_atexit when the library was loaded (PyState's teardown, then its control block is freed); then _dl_fini
+       runs the library's __attribute__((destructor)) onLibraryUnload, whose finalizePythonInterpreter assigns
+       nullptr to the destroyed shared_ptr and so decrements the count inside the freed block (glibc aborts with
+       "free(): corrupted unsorted chunks" when that block sits in an unsorted bin; elsewhere the heap is damaged
+       silently). An exit handler registered now, after the library was loaded, runs before that destructor: it is
+       finalizePythonInterpreter itself, which releases the interpreter once and leaves the shared_ptr empty for
+       the two later releases. (A dlclose runs onLibraryUnload first: the safe order.) */
+    void (*finalize_inner)(void);
+    *(void **)&finalize_inner = dlsym(library, "finalizePythonInterpreter");
+    if (finalize_inner == NULL || atexit(finalize_inner) != 0) {
+        snprintf(inner.problem, sizeof inner.problem, "%s: pythonfmu's finalizePythonInterpreter is missing or cannot "
+                 "be called at exit (the front layer is written for pythonfmu 0.7.0)", path);
+        return;
+    }
     inner.library = library;
 }
 

@@ -4,9 +4,13 @@
  * in time, with that code.
  *
  *   exit_host FMU_DIR MODEL_ID GUID MODE EXIT_CODE      MODE: free (instantiate/free only) | step | cycles:N
+ *                                                        | atexit
  *
  * cycles:N instantiates, initializes, steps and frees N times and prints the resident memory (KiB) after the
  * first tenth and after all: "rss_tenth A rss_end B".
+ * atexit is a host that tears down in its own exit handler (as a C++ host does in the destructor of a static
+ * object): registered before the FMU is loaded, it runs after the FMU's own exit handlers, steps the instance main
+ * left live and frees it, printing "late step S" and "late freed".
  */
 #include <dlfcn.h>
 #include <stdio.h>
@@ -27,6 +31,17 @@ static void logger(void *env, const char *instance, int status, const char *cate
     fprintf(stderr, "LOG %s %d %s\n", instance, status, message);
 }
 
+static fmi2Component late_instance;
+static int (*late_step)(fmi2Component, double, double, int);
+static void (*late_free)(fmi2Component);
+
+static void host_teardown(void) {
+    printf("late step %d\n", late_step(late_instance, 0.01, 0.01, 1));
+    late_free(late_instance);
+    printf("late freed\n");
+    fflush(stdout);
+}
+
 static long resident_kib(void) {
     FILE *f = fopen("/proc/self/status", "r");
     char line[256];
@@ -40,6 +55,8 @@ static long resident_kib(void) {
 int main(int argc, char **argv) {
     if (argc < 6) { fprintf(stderr, "usage: %s FMU_DIR MODEL_ID GUID MODE EXIT_CODE\n", argv[0]); return 2; }
     char path[4096], uri[4096];
+    const int late = strcmp(argv[4], "atexit") == 0;
+    if (late) atexit(host_teardown);
     snprintf(path, sizeof path, "%s/binaries/linux64/%s.so", argv[1], argv[2]);
     snprintf(uri, sizeof uri, "file://%s/resources", argv[1]);
     void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
@@ -67,7 +84,13 @@ int main(int argc, char **argv) {
             printf("step %d\n", do_step(c, 0.0, 0.01, 1));
             if (cycles == 1) printf("refused step %d\n", do_step(c, 5.0, 0.01, 1)); /* t is not the FMU's time */
         }
-        free_instance(c);
+        if (late) {
+            late_instance = c;
+            late_step = do_step;
+            late_free = free_instance;
+        } else {
+            free_instance(c);
+        }
         if (i == cycles / 10) tenth = resident_kib();
     }
     if (cycles > 1) printf("rss_tenth %ld rss_end %ld\n", tenth, resident_kib());
