@@ -214,7 +214,13 @@ class NativeIntegrator(Integrator):
                        f"{d.fail_iterations} iterations): a singular configuration such as a taut string?")
             return f"step size underflow {span}: the tolerance rtol = {self.rtol} cannot be met ({why})"
         if status == lib.TOO_MANY_STEPS:
-            return f"more than {max_steps} steps {span}; raise max_steps or the tolerance"
+            why = "raise max_steps or the tolerance"
+            if d.floor_stops:  # the steps were cut where the links' Newton matrix is (nearly) singular
+                why = (f"the position projection onto the link lengths (11) has stopped at its conditioning floor "
+                       f"{int(d.floor_stops)} times in this run (largest residual {d.floor_reached:.3g} relative): a "
+                       "singular or badly conditioned configuration (a taut string, a flat braced cell pushed out of "
+                       "its plane), where more steps or a looser tolerance may not help")
+            return f"more than {max_steps} steps {span}; {why}"
         if status == lib.NON_FINITE:
             return (f"the state became non-finite {span} (the forces or the state contain NaN or infinity, or "
                     "the motion blew up); reduce the step or tolerance")
