@@ -14,14 +14,14 @@ Anchored masses enter with 1/M = 0.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
-import scipy.sparse as sp
 
-from scipy.sparse.linalg import splu
 from linknet_core.scene.description import Scene
 from linknet_core.native.ldl import PIVOT_TOL
 from linknet_core.structure.topology import SINGULAR_RCOND, Structure, link_pairs
 
+# scipy (sparse matrices, dense and sparse factorisations) is imported inside the functions of this reference path
+# that use it: a Simulator on the native core never calls them, and importing scipy.sparse and scipy.linalg costs
+# ~0.2 s of every command's start-up.
 DENSE_MIN_NORM_LIMIT = 2500  # links; above it the redundant path uses MINRES (min-norm from x0 = 0)
 DENSE_FACTOR_LIMIT = 200  # links; up to here the reference factors A densely
 
@@ -47,6 +47,8 @@ class TensionAssembly:
         With ``E_right`` it is the unsymmetric C(E) M^-1 C(E_right)^T (the exact Newton matrix of RATTLE's
         position stage, whose constraint directions are those at the start of the step).
         """
+        import scipy.sparse as sp
+
         L = self.scene.L
         off = self.pair_first != self.pair_second
         f, g = self.pair_first, self.pair_second
@@ -117,6 +119,9 @@ class SparseSolver(TensionSolver):
         self._lu = None
 
     def factor(self, E: np.ndarray) -> None:
+        import scipy.linalg
+        from scipy.sparse.linalg import splu
+
         order = self.assembly.ordering
         A = self.assembly.matrix(E)
         try:
@@ -143,6 +148,8 @@ class SparseSolver(TensionSolver):
     def solve(self, b: np.ndarray) -> np.ndarray:
         if self._singular:
             return self._fallback.solve(b)
+        import scipy.linalg
+
         order = self.assembly.ordering
         out = np.empty(b.shape[0])
         b_ordered = np.ascontiguousarray(b[order], dtype=float)
@@ -171,6 +178,8 @@ class MinNormSolver(TensionSolver):
         self.rank = None
 
     def factor(self, E: np.ndarray) -> None:
+        import scipy.linalg
+
         A = self.assembly.matrix(E)
         if self._dense:
             w, V = scipy.linalg.eigh(A.toarray())

@@ -5,7 +5,8 @@ The index-1 ODE is dX/dt = U (10), dU/dt = accelerations with the tensions of (2
 (11) and the velocities onto (12) (mass-metric orthogonal projections). The projection does not lower
 the order of the method. The step size is controlled by the embedded error estimate to meet
 ``rtol``/``atol`` (SI units; atol defaults to rtol). A method is defined by its tableau only; the
-tableaux are those of scipy's RK45 (Dormand-Prince 5(4)) and DOP853 (Hairer's 8(5,3)).
+tableaux (linknet_core.integrators.tableaux) are those of scipy's RK45 (Dormand-Prince 5(4)) and DOP853 (Hairer's
+8(5,3)).
 
 This is the readable reference: the native core (linknet_core/native/src/stages/runge_kutta.c) runs the
 same algorithm on the same tableau, and the tests hold the two together to round-off.
@@ -15,10 +16,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.integrate._ivp import dop853_coefficients as _dop853
-from scipy.integrate._ivp.rk import RK45 as _RK45
-
 from linknet_core.errors import SolverError
+from linknet_core.integrators import tableaux
 from linknet_core.integrators.base import Integrator
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
@@ -190,9 +189,9 @@ class DOPRI5(ProjectedRungeKutta):
     name = "dopri5"
     order = 5
     error_estimator_order = 4
-    n_stages = _RK45.n_stages
-    A, B, C = _RK45.A, _RK45.B, _RK45.C
-    error_weights = (_RK45.E,)
+    n_stages = 6
+    A, B, C = tableaux.DOPRI5_A, tableaux.DOPRI5_B, tableaux.DOPRI5_C
+    error_weights = (tableaux.DOPRI5_E,)
     guarantees = ("order 5, adaptive (Dormand-Prince 5(4)); after every step positions are projected onto (11) "
                   "and velocities onto (12); not symplectic: energy error follows the tolerance and may drift")
 
@@ -201,11 +200,9 @@ class DOP853(ProjectedRungeKutta):
     name = "dop853"
     order = 8
     error_estimator_order = 7
-    n_stages = _dop853.N_STAGES
-    A = _dop853.A[:_dop853.N_STAGES, :_dop853.N_STAGES]
-    B = _dop853.B
-    C = _dop853.C[:_dop853.N_STAGES]
-    error_weights = (_dop853.E5, _dop853.E3)
+    n_stages = 12
+    A, B, C = tableaux.DOP853_A, tableaux.DOP853_B, tableaux.DOP853_C
+    error_weights = (tableaux.DOP853_E5, tableaux.DOP853_E3)
     error_norm_kind = "hairer"
     guarantees = ("order 8, adaptive (Hairer's DOP853 with its 5th/3rd-order error estimate); projected onto (11) "
                   "and (12) after every step; not symplectic: energy error follows the tolerance")

@@ -16,7 +16,6 @@ import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
 
 from linknet_core.native.ldl import amd_ordering, zero_pivots
 from linknet_core.native.library import forest_depth, graph_components
@@ -122,6 +121,8 @@ def _tree_ordering(node_of_end: np.ndarray, n_nodes: int) -> np.ndarray:
 
 def constraint_jacobian(scene: Scene, X: np.ndarray, free_only: bool = True) -> sp.csr_matrix:
     """C (L x 3K, or L x 3K_free) with row l = +E_l at k1(l) and -E_l at k2(l) (see (9), (12))."""
+    import scipy.sparse as sp  # here only: the analysis of most scenes needs no sparse matrix (start-up time)
+
     E = (X[scene.k2] - X[scene.k1]) / scene.length[:, None]
     L = scene.L
     rows = np.repeat(np.arange(L), 6)
