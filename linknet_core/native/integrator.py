@@ -17,7 +17,7 @@ from linknet_core.dynamics.drive import call_motion
 from linknet_core.errors import SolverError, projection_failure
 from linknet_core.integrators.base import Integrator, StepStats
 from linknet_core.native import library as lib
-from linknet_core.native.model import NativeData, NativeMethod, NativeModel
+from linknet_core.native.model import NativeData, NativeModel, native_method
 
 
 @dataclass
@@ -56,20 +56,20 @@ class NativeIntegrator(Integrator):
         self.dt, self.rtol = dt, rtol
         self.atol = atol if atol is not None else rtol
         position_tol = getattr(method_cls, "position_tol", 1e-14)
-        self.method = NativeMethod(method_cls, dt=dt, rtol=rtol, atol=self.atol, position_tol=position_tol,
-                                   static=static)
+        self.method = native_method(method_cls, dt=dt, rtol=rtol, atol=self.atol, position_tol=position_tol,
+                                    static=static)
         self.data = NativeData(model, self.method.n_stages)
         self._model_p, self._method_p, self._data_p = model.pointer, self.method.pointer, self.data._ptr
         self._d = self.data.struct
         self._out = (None, None)  # the arrays last handed out as the state (the data holds the same values)
         # driven anchors: scene time 0 is t0; input-driven anchors are rows input_slots of the drive arrays
         self._d.drive_t0 = self._d.drive_hold_t = t0
-        scene = model.scene
+        self.scene = scene = model.scene  # the model holds it weakly
         self._input_slots = np.flatnonzero([motion.kind == "input" for motion in scene.motions])
         self._input_labels = [scene.mass_label(int(k)) for k in scene.input_driven_indices]
         self._motion = None  # the user's callable of t, when the input-driven anchors follow one
         self._motion_error = None  # what it raised inside the last advance
-        self._callback = lib.DRIVE_CALLBACK(self._call_motion)
+        self._callback = None  # the C callback that calls it, made when first needed
 
     # ---- stats and internals: they live in the native data ------------------------------------
     @property
@@ -90,7 +90,7 @@ class NativeIntegrator(Integrator):
         if self._input_slots.size:
             data = self.data
             drive = (d.drive_hold_t, data.drive_P.copy(), data.drive_V.copy(), data.drive_A.copy(), self._motion)
-        if self.model.scene.motions:
+        if self.scene.motions:
             last_jump = (self.data.impulse.copy(), d.jump_position, d.jump_velocity)
         return {"native": _Internals(d.t, d.h_next, d.planar, d.steps, d.rejected, d.n_rhs, d.split_steps,
                                      d.finest_split, d.jumps, drive, last_jump)}
@@ -124,6 +124,8 @@ class NativeIntegrator(Integrator):
 
     def _follow(self, motion) -> None:
         self._motion = motion
+        if motion is not None and self._callback is None:
+            self._callback = lib.DRIVE_CALLBACK(self._call_motion)
         self._d.drive_callback = ctypes.cast(self._callback, ctypes.c_void_p) if motion is not None else None
 
     def _call_motion(self, user, t, out) -> int:
@@ -168,6 +170,31 @@ class NativeIntegrator(Integrator):
         state.X, state.U, state.t = X, U, t_target
         self._out = (X, U)
 
+    def sample(self, state, times, F_input, max_steps: int, X, U, T, advance_first: bool) -> None:
+        """Samples at ``times`` (advance to each, then the outputs there) with F_input held, in one call into C
+        (ln_sample), into X, U (n,K,3) and T (n,L), C-contiguous float64. Sample 0 is taken at the current state
+        unless ``advance_first``. On a failure the samples before it are written, ``state`` is where the run
+        stopped, and the SolverError says why, as ``advance`` and ``outputs`` would."""
+        self._load(state, F_input)
+        t_before = state.t
+        times = np.ascontiguousarray(times, np.float64)
+        written = lib.ln_int(0)
+        status = lib.sample(self._model_p, self._method_p, self._data_p, lib.pointer(times), times.size,
+                            int(advance_first), max_steps, lib.pointer(X), lib.pointer(U), lib.pointer(T),
+                            ctypes.byref(written))
+        if written.value or status != lib.OK:
+            X_now, U_now = self.data.X.copy(), self.data.U.copy()
+            state.X, state.U, state.t = X_now, U_now, float(self._d.t)
+            self._out = (X_now, U_now)
+        if status == lib.OK:
+            return
+        self._raise_motion_error()
+        i = written.value
+        if self._d.t == times[i]:  # the advance to sample i succeeded, its outputs did not
+            raise SolverError(f"the tensions (25)-(26) cannot be evaluated at this state: {lib.STATUS[status]}")
+        raise SolverError(self.explain(status, float(times[i - 1]) if i > 0 else t_before, float(times[i]),
+                                       max_steps))
+
     def tensions(self, X, U, F_input=None) -> np.ndarray:
         """T of (25)-(26) at (X, U) with F_input held (minimum-norm where A is singular)."""
         return self.outputs(X, U, F_input)[0]
@@ -196,7 +223,7 @@ class NativeIntegrator(Integrator):
 
     def explain(self, status: int, t_start: float, t_target: float, max_steps: int) -> str:
         """The failure of an advance in words, naming the link, the residuals and what may help."""
-        scene, d = self.model.scene, self._d
+        scene, d = self.scene, self._d
         span = f"between t = {t_start} and t = {t_target}"
         if status == lib.PROJECTION_FAILED:
             link = scene.link_label(int(d.fail_link)) if d.fail_link >= 0 else "a link"

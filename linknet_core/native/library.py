@@ -124,6 +124,8 @@ data_new = _declare("ln_data_new", Data_p, Model_p, ln_int)
 data_free = _declare("ln_data_free", None, Data_p)
 advance = _declare("ln_advance", ctypes.c_int, Model_p, Method_p, Data_p, ctypes.c_double, ln_int)
 evaluate = _declare("ln_evaluate", ctypes.c_int, Model_p, Data_p, c_double_p, c_double_p)
+sample = _declare("ln_sample", ctypes.c_int, Model_p, Method_p, Data_p, c_double_p, ln_int, ctypes.c_int, ln_int,
+                  c_double_p, c_double_p, c_double_p, ctypes.POINTER(ln_int))
 evaluate_repeated = _declare("ln_evaluate_repeated", ctypes.c_int, Model_p, Data_p, ctypes.c_int, c_double_p,
                              c_double_p, ln_int)
 force_kind = _declare("ln_force_kind", ln_int, ctypes.c_char_p)

@@ -9,11 +9,13 @@ step fractions of a RATTLE composition, or the tableau and controller of an embe
 from __future__ import annotations
 
 import ctypes
+import functools
+import weakref
 
 import numpy as np
 from linknet_core.dynamics.forces import has_velocity_dependent_forces
 from linknet_core.integrators.runge_kutta import MAX_FACTOR, MIN_FACTOR, SAFETY
-from linknet_core.structure.topology import PLANE_TOL, SINGULAR_RCOND, link_pairs
+from linknet_core.structure.topology import PLANE_TOL, SINGULAR_RCOND, analyse, kept_per_scene, link_pairs
 from linknet_core.dynamics.equations import FLOOR_CAP_OVER_TOL, FLOOR_SAFETY
 from linknet_core.dynamics.tensions import DENSE_MIN_NORM_LIMIT
 from linknet_core.native.ldl import PIVOT_TOL, package_library
@@ -76,8 +78,8 @@ class NativeModel:
     ln_rigid_model of a free-rigid-body specialisation (with the arrays it points into), or None."""
 
     def __init__(self, scene, structure, planar: bool | None = None, rigid=None):
-        self.scene = scene
-        K, L = scene.K, scene.L
+        self._scene = weakref.ref(scene)  # a model may be kept per scene (native_model): it must not keep it alive
+        self.K, self.L = K, L = scene.K, scene.L
         fixed = np.asarray(scene.fixed, bool)
         keep = self._keep = []
 
@@ -142,6 +144,7 @@ class NativeModel:
                 m.solver = lib.SOLVER_LDL
                 ordering = int_array(structure.ordering)
                 first, second = int_array(pairs.first), int_array(pairs.second)
+                self._ldl_free = package_library().ln_ldl_symbolic_free  # bound now: __del__ may run at exit
                 self._ldl = package_library().ln_ldl_analyse(L, first.size, pointer(first, lib.ln_int),
                                                              pointer(second, lib.ln_int), pointer(ordering, lib.ln_int))
                 if not self._ldl:
@@ -186,9 +189,14 @@ class NativeModel:
         weight[scene.driven_indices] = 1.0
         m.accel_weight = f8(weight)
 
+    @property
+    def scene(self):
+        """The scene (held weakly; whoever uses the model holds the scene)."""
+        return self._scene()
+
     def __del__(self):
         if getattr(self, "_ldl", None):
-            package_library().ln_ldl_symbolic_free(self._ldl)
+            self._ldl_free(self._ldl)
             self._ldl = None
 
     def describe(self) -> str:
@@ -212,6 +220,22 @@ class NativeModel:
         if not kinds:
             terms.append("no force elements: no force evaluation per step")
         return f"{solver}; {dims}; forces: {', '.join(terms)}"
+
+
+def native_model(scene, structure) -> NativeModel:
+    """The NativeModel of ``scene`` run on ``structure``: built once per scene object when the structure is the
+    scene's own analysis (ln_model is immutable, so every Simulator of the scene, an ensemble's members or a reset
+    FMU, shares it), built anew otherwise."""
+    if structure is not analyse(scene):
+        return NativeModel(scene, structure)
+    return kept_per_scene(scene, "native model", lambda s: NativeModel(s, structure))
+
+
+@functools.lru_cache(maxsize=64)
+def native_method(cls, *, dt=None, rtol=None, atol=None, position_tol=1e-14, static=False) -> "NativeMethod":
+    """The NativeMethod of an integrator class and its settings, built once per distinct set (ln_method is
+    immutable and only read by C)."""
+    return NativeMethod(cls, dt=dt, rtol=rtol, atol=atol, position_tol=position_tol, static=static)
 
 
 class NativeMethod:
@@ -278,7 +302,7 @@ class NativeData:
         if not self._ptr:
             raise MemoryError("the native core could not allocate its data (out of memory)")
         d = self.struct = self._ptr.contents
-        K, L = model.scene.K, model.scene.L
+        K, L = model.K, model.L
         self.X = np.ctypeslib.as_array(d.X, (K, 3)) if K else np.zeros((0, 3))
         self.U = np.ctypeslib.as_array(d.U, (K, 3)) if K else np.zeros((0, 3))
         self.F_input = np.ctypeslib.as_array(d.F_input, (K, 3)) if K else np.zeros((0, 3))

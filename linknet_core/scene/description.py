@@ -162,21 +162,19 @@ class Scene:
     def L(self) -> int:
         return int(self.k1.shape[0])
 
-    @property
+    @cached_property
     def inv_mass(self) -> np.ndarray:
         """1/M_k, zero for anchored masses (they take no acceleration)."""
-        inv = np.where(self.fixed, 0.0, 1.0 / np.where(self.fixed, 1.0, self.mass))
-        inv.setflags(write=False)
-        return inv
+        return _frozen(np.where(self.fixed, 0.0, 1.0 / np.where(self.fixed, 1.0, self.mass)))
 
-    @property
+    @cached_property
     def free_indices(self) -> np.ndarray:
-        return np.flatnonzero(~self.fixed)
+        return _frozen_int(np.flatnonzero(~self.fixed))
 
-    @property
+    @cached_property
     def fixed_indices(self) -> np.ndarray:
         """Every anchored mass, standing still or driven."""
-        return np.flatnonzero(self.fixed)
+        return _frozen_int(np.flatnonzero(self.fixed))
 
     @cached_property
     def driven_indices(self) -> np.ndarray:

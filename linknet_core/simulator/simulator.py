@@ -16,9 +16,10 @@ from linknet_core.errors import SceneError, SolverError
 from linknet_core.dynamics.forces import kinetic_energy
 from linknet_core.integrators import make_integrator, method_settings, real_number
 from linknet_core.native.integrator import NativeIntegrator
-from linknet_core.native.model import NativeModel
+from linknet_core.native.model import native_model
 from linknet_core.native.rigid import NativeRigidIntegrator
 from linknet_core.simulator.specialisation import RIGID, STATIC, choose_specialisation
+from linknet_core.structure.topology import kept_per_scene
 from linknet_core.scene.description import Scene
 from linknet_core.state import State
 
@@ -111,6 +112,16 @@ def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: boo
     return X, U_projected, InitialReport(worst, projected, dv, worst_mass)
 
 
+def _kept_initial_state(scene: Scene, dyn: Dynamics, project_positions: bool | None, length_tol: float):
+    """prepare_initial_state with the scene's own Dynamics, kept per scene object and settings (a scene is
+    immutable: a second Simulator of it, an ensemble's member or a reset FMU skips the projections and checks);
+    every caller gets its own copies of X and U. A refused state is refused again each time."""
+    X, U, report = kept_per_scene(scene, ("initial state", project_positions, length_tol, dyn.rhs_kernel),
+                                  lambda s: prepare_initial_state(s, dyn, project_positions=project_positions,
+                                                                  length_tol=length_tol))
+    return X.copy(), U.copy(), report
+
+
 def _as_time(value, what: str) -> float:
     """A time given as any real number (Python or numpy scalar, 0-d array), as a float; refused otherwise."""
     x = real_number(value)
@@ -157,8 +168,11 @@ class Simulator:
         self.dyn = dynamics or Dynamics(scene, rhs_kernel=rhs_kernel)
         self.method = method
         method_cls, dt, rtol, atol = method_settings(method, dt, rtol, atol)
-        X0, U0, self.initial_report = prepare_initial_state(scene, self.dyn, project_positions=project_initial,
-                                                            length_tol=length_tol)
+        if dynamics is None:
+            X0, U0, self.initial_report = _kept_initial_state(scene, self.dyn, project_initial, length_tol)
+        else:
+            X0, U0, self.initial_report = prepare_initial_state(scene, self.dyn, project_positions=project_initial,
+                                                                length_tol=length_tol)
         # one backend, chosen here before anything is built: the native core, or the numpy reference (asked
         # for, or implied by a casadi right-hand side, which is a variant of the numpy Dynamics)
         self.backend = "numpy" if backend == "numpy" or self.dyn.rhs_kernel != "numpy" else "native"
@@ -176,7 +190,7 @@ class Simulator:
                 X0, U0 = self.integrator.initial_state
                 self.specialisation.notes.extend(self.integrator.notes)
             else:
-                self.integrator = NativeIntegrator(NativeModel(scene, self.dyn.structure), method_cls, dt=dt,
+                self.integrator = NativeIntegrator(native_model(scene, self.dyn.structure), method_cls, dt=dt,
                                                    rtol=rtol, atol=atol, static=self.specialisation.kind == STATIC,
                                                    t0=t0)
                 if self.specialisation.kind == STATIC:
@@ -350,6 +364,25 @@ class Simulator:
             out["impulse"] = self.anchor_report()["impulse"]
         return out
 
+    def sample(self, times, F_input, X: np.ndarray, U: np.ndarray, T: np.ndarray, advance_first: bool = True) -> None:
+        """What ``advance(t_i, F_input)`` then ``outputs(F_input)`` do at each of ``times``, in one call into the
+        native core (the point-mass path, no driven anchors: see ``samples_in_one_call``): X[i], U[i], T[i] of each
+        sample into X, U (n,K,3) and T (n,L) (C-contiguous float64). Sample 0 is taken at the current state unless
+        ``advance_first``. On a failure the samples before it are written and the SolverError is raised."""
+        F = self.check_input(F_input)
+        try:
+            self.integrator.sample(self.state, times, F, self.max_steps_per_call, X, U, T, advance_first)
+        except SolverError as exc:
+            if F is None:
+                raise
+            raise SolverError(f"{exc}{self._input_note(F)}") from None
+
+    @property
+    def samples_in_one_call(self) -> bool:
+        """Whether ``sample`` is available: the native point-mass path (free rigid bodies and the numpy reference
+        step from Python) of a scene without driven anchors."""
+        return type(self.integrator) is NativeIntegrator and not self.scene.driven.any()
+
     def anchor_report(self) -> dict:
         """The driven anchors' jump at the start of the last advance: "impulse" (n_driven, 3), what the links gave
         each (N s); "jump_position" (m) and "jump_velocity" (m/s), the largest coordinate changes; "jumps", how
@@ -515,7 +548,23 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
     last_print = start
     done = 0
     try:
-        for i, t in enumerate(times):
+        if sim.samples_in_one_call and not callable(forces):
+            # a held input and nothing else called from Python per sample: the samples in calls into C of about a
+            # tenth of a second each (the first takes sample 0 alone), so that Ctrl-C and the progress bar are
+            # answered as promptly as sample by sample
+            chunk = 1
+            while done < n:
+                stop = min(n, done + chunk)
+                sim.sample(times[done:stop], force_at(0.0), X[done:stop], U[done:stop], T[done:stop],
+                           advance_first=done > 0)
+                done = stop
+                now = time.perf_counter()
+                if show and (not auto or now - start > 1.0):
+                    _progress_bar(done, n, now - start)
+                    drawn, last_print = True, now
+                chunk = max(1, int(0.1 * done / max(now - start, 1e-9)))
+        for i in range(done, n):
+            t = times[i]
             if i > 0:
                 sim.advance(t, force_at(times[i - 1]), anchor_hold if i == 1 else None)
             # tensions feel the input directly: report them with the input of the step starting at t_i,

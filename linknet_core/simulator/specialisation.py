@@ -34,6 +34,7 @@ from linknet_core.dynamics.equations import Dynamics
 from linknet_core.integrators import METHODS
 from linknet_core.scene.description import Scene
 from linknet_core.structure.bodies import TOP_NAMES, BodyLayout, _principal_moments, _top_kinds, free_rigid_bodies
+from linknet_core.structure.topology import analyse, kept_per_scene
 
 STATIC, RIGID, NONE = "static", "rigid", "none"
 
@@ -75,7 +76,10 @@ def choose_specialisation(scene: Scene, dyn: Dynamics, method: str | None = None
         return Specialisation(STATIC, f"the {n_free} free masses cannot move (rank G = 3 K_free = {3 * n_free}): "
                                       "X = X0, U = 0, advance moves t only; tensions the minimum-norm solution of "
                                       "C^T T + F = 0, i.e. of (25)-(26) at U = 0")
-    bodies, why = free_rigid_bodies(scene, dyn)
+    if st is analyse(scene):  # the scene's own structure: its body layout is kept with the scene
+        bodies, why = kept_per_scene(scene, "free rigid bodies", lambda s: free_rigid_bodies(s, dyn))
+    else:
+        bodies, why = free_rigid_bodies(scene, dyn)
     if bodies is None:
         if not scene.L:
             return Specialisation(NONE, "no links")

@@ -45,7 +45,7 @@ class LinkPairs:
 
 def link_pairs(scene: Scene) -> LinkPairs:
     """All (l, l', k) with links l, l' incident to the same free mass k (setup, not per step; kept per scene)."""
-    return _kept(scene, "pairs", _link_pairs)
+    return kept_per_scene(scene, "pairs", _link_pairs)
 
 
 def _link_pairs(scene: Scene) -> LinkPairs:
@@ -168,11 +168,13 @@ def analyse(scene: Scene) -> Structure:
     """Classify the scene once, from its topology and its initial configuration. A scene is immutable, so
     its analysis is kept while the scene lives: every Simulator, Dynamics and native model of the same scene
     (an ensemble's members, a reset FMU) shares it."""
-    return _kept(scene, "structure", _analyse)
+    return kept_per_scene(scene, "structure", _analyse)
 
 
-def _kept(scene: Scene, what: str, compute):
-    """compute(scene), computed once per scene object and what, dropped with the scene."""
+def kept_per_scene(scene: Scene, what: str, compute):
+    """compute(scene), computed once per scene object and what, dropped with the scene. What is derived from an
+    immutable scene is kept here rather than on the scene (which pickles and copies as its fields); the value must
+    not refer to the scene, or the scene would never be dropped."""
     key = (id(scene), what)
     kept = _per_scene.get(key)
     if kept is not None and kept[0]() is scene:

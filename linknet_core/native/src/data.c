@@ -265,6 +265,23 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
     return LN_OK;
 }
 
+int ln_sample(const ln_model *m, const ln_method *meth, ln_data *d, const double *times, ln_int n, int advance_first,
+              ln_int max_steps, double *X_out, double *U_out, double *T_out, ln_int *written)
+{
+    const size_t state_bytes = (size_t)(3 * m->K) * sizeof(double), T_bytes = (size_t)m->L * sizeof(double);
+    *written = 0;
+    for (ln_int i = 0; i < n; i++) {
+        int status;
+        if ((i > 0 || advance_first) && (status = ln_advance(m, meth, d, times[i], max_steps)) != LN_OK) return status;
+        if ((status = ln_evaluate(m, d, d->X, d->U)) != LN_OK) return status;
+        memcpy(X_out + 3 * m->K * i, d->X, state_bytes);
+        memcpy(U_out + 3 * m->K * i, d->U, state_bytes);
+        if (T_bytes) memcpy(T_out + m->L * i, d->T, T_bytes);
+        *written = i + 1;
+    }
+    return LN_OK;
+}
+
 size_t ln_sizeof(int which)
 {
     switch (which) {

@@ -231,6 +231,16 @@ LN_API void ln_data_free(ln_data *d);
    but LN_OK the state and internals are those before the call, and the diagnostics say why. */
 LN_API int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps);
 
+/* Samples of a run at the output times times[0..n) with d->F_input held throughout: advance to each (ln_advance,
+   all or nothing; sample 0 is taken at the current state unless advance_first) and evaluate the outputs there
+   (ln_evaluate), writing X, U (K,3) and T (L) of sample i into X_out, U_out (n,K,3) and T_out (n,L). What
+   simulate's output loop does per sample, in one call. Stops at the first status but LN_OK: *written samples were
+   written; the state is then that of the last sample, or, when the evaluation failed, the one it failed at
+   (d->t tells which). */
+LN_API int ln_sample(const ln_model *m, const ln_method *meth, ln_data *d, const double *times, ln_int n,
+                     int advance_first, ln_int max_steps, double *X_out, double *U_out, double *T_out,
+                     ln_int *written);
+
 /* The tensions T of (25)-(26) and accelerations (9) at X, U (K,3) with d->F_input held (the reported outputs:
    direct feedthrough of F), and the force the links exert on each anchor, sum_l T_l E_l (delta(k,k1(l)) -
    delta(k,k2(l))) of (9) at the anchored k. Minimum-norm where A is singular. Results in d->T, d->acc,
