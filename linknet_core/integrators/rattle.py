@@ -34,7 +34,8 @@ class Rattle(FixedStepIntegrator):
         if drive is not None:  # driven anchors: the position stage targets |X_k - P_a(t + h)| = R_l (11)
             X_free = drive.place(t_end, X_free)
         # position stage: X_new = X_free + M^-1 C(X)^T mu on the manifold (11); mu = (h^2/2) * multipliers
-        X_new, _ = dyn.project_positions(X_free, tol=self.position_tol, direction_at=X)
+        X_new, _ = dyn.project_positions(X_free, tol=self.position_tol, direction_at=X,
+                                         step=(self.dt, max(abs(g) for g in self.gammas), U, F_input))
         U_half = (X_new - X) / h
         # velocity stage: half kick with the new forces, then projection onto (12) at X_new (relative to the
         # driven anchors' V_a(t + h))

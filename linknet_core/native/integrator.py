@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from linknet_core.dynamics.drive import call_motion
+from linknet_core.dynamics.equations import fastest_oscillation
 from linknet_core.errors import SolverError, projection_failure
 from linknet_core.integrators.base import Integrator, StepStats
 from linknet_core.native import library as lib
@@ -54,6 +55,7 @@ class NativeIntegrator(Integrator):
         self.name, self.order, self.symplectic = method_cls.name, method_cls.order, method_cls.symplectic
         self.adaptive, self.guarantees = method_cls.adaptive, method_cls.guarantees
         self.dt, self.rtol = dt, rtol
+        self._stage_fraction = max(abs(g) for g in getattr(method_cls, "gammas", (1.0,)))  # largest stage / dt
         self.atol = atol if atol is not None else rtol
         position_tol = getattr(method_cls, "position_tol", 1e-14)
         self.method = native_method(method_cls, dt=dt, rtol=rtol, atol=self.atol, position_tol=position_tol,
@@ -227,9 +229,13 @@ class NativeIntegrator(Integrator):
         span = f"between t = {t_start} and t = {t_target}"
         if status == lib.PROJECTION_FAILED:
             link = scene.link_label(int(d.fail_link)) if d.fail_link >= 0 else "a link"
+            stability = {}
+            if not self.adaptive:  # the core left the tensions at the start of the step that failed in T
+                stability = dict(dt=self.dt, stage_fraction=self._stage_fraction,
+                                 omega=fastest_oscillation(scene, self.data.T))
             return projection_failure(f"{span}: after {d.fail_iterations} iterations the residual is "
                                       f"{d.fail_residual:.3g} relative at {link}", float(d.fail_residual),
-                                      float(d.fail_before), float(d.fail_floor))
+                                      float(d.fail_before), float(d.fail_floor), **stability)
         if status == lib.IMPLICIT_KICK_FAILED:
             return (f"the implicit velocity half step (drag, dampers) does not converge {span} at dt = {self.dt:g}: "
                     "the damping is too stiff for this step (h c / 2m near or above 1); reduce dt")

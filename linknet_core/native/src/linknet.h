@@ -181,7 +181,8 @@ typedef struct ln_data {
     ln_int floor_stops;             /* position projections stopped at their round-off floor above the tolerance */
 
     /* the last evaluation's tensions, accelerations and anchor reactions */
-    double *T;                      /* (L) */
+    double *T;                      /* (L); after an advance of a composition that failed with LN_PROJECTION_FAILED:
+                                       the tensions at the start of the step that failed */
     double *acc;                    /* (K,3) */
     double *reaction;               /* (n_fixed,3) the force the network exerts on each anchor (ln_evaluate) */
 

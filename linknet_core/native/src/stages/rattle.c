@@ -134,6 +134,15 @@ LN_COLD int split_step(const ln_model *m, const ln_method *meth, ln_data *d, dou
     return status;
 }
 
+/* A step that failed for good: the tensions at its start into d->T, from which the failure's message estimates the
+   fastest oscillation of the masses between their links (linknet_core.dynamics.equations.fastest_oscillation)
+   and so whether the step is beyond the stability limit of explicit steps. 0 where they cannot be evaluated. */
+LN_COLD void record_failed_step_tensions(const ln_model *m, ln_data *d, const double *F_base)
+{
+    if (FN(ln_accelerations)(m, d, d->X_step, d->U_step, F_base, d->acc, d->T, 1) != LN_OK)
+        for (ln_int l = 0; l < m->L; l++) d->T[l] = 0.0;
+}
+
 int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
                         const double *F_base, ln_int n_steps, double t_start, double t_end, ln_int *completed)
 {
@@ -155,6 +164,7 @@ int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, do
         status = composition_step(m, meth, d, X, U, F_base, h, t, end, &E0, &E1);
         if (status == LN_PROJECTION_FAILED || status == LN_IMPLICIT_KICK_FAILED)
             status = split_step(m, meth, d, X, U, F_base, h, t, end, &E0, &E1, status);
+        if (status == LN_PROJECTION_FAILED) record_failed_step_tensions(m, d, F_base);
         if (status != LN_OK) return status;
         double total = 0.0;
         for (ln_int i = 0; i < size; i++) total += X[i] + U[i];
