@@ -388,7 +388,7 @@ static int gauss_newton(const ln_model *m, ln_data *d, double *Xc, double tol, l
 }
 
 /* Where simplified Newton gave up: exact Newton from X_start, or Gauss-Newton where A is singular. */
-LN_COLD int project_positions_newton(const ln_model *m, ln_data *d, double *Xc, const double *X_start,
+LN_NOINLINE int project_positions_newton(const ln_model *m, ln_data *d, double *Xc, const double *X_start,
                                      const double *E_dir, double tol, ln_int max_iter, double before)
 {
     d->exact_newton_projections++;

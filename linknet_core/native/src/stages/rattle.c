@@ -107,7 +107,7 @@ LN_ALWAYS_INLINE int composition_step(const ln_model *m, const ln_method *meth, 
    moves little enough within a sub-step, and the result keeps the method's order as dt shrinks. */
 #define MAX_SPLIT_LEVEL 6
 
-LN_COLD int split_step(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
+LN_NOINLINE int split_step(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
                       const double *F_base, double h, double t, double t_end, double **E0, double **E1, int status)
 {
     const ln_int size = m->K * DIM;
