@@ -22,9 +22,11 @@
 #if defined(__GNUC__) || defined(__clang__)
 #define LN_ALWAYS_INLINE static inline __attribute__((always_inline))
 #define LN_NOINLINE static __attribute__((noinline))
+#define LN_COLD static __attribute__((noinline, cold))  /* once per failure, never in a loop (optimised for size) */
 #else
 #define LN_ALWAYS_INLINE static inline
 #define LN_NOINLINE static
+#define LN_COLD static
 #endif
 
 #if defined(__GNUC__) && !defined(__clang__)
