@@ -12,7 +12,7 @@ import numpy as np
 from linknet_core.errors import ConsistencyError, SolverError, projection_failure
 from linknet_core.dynamics.forces import external_forces, kinetic_energy, potential_energy, scatter_add
 from linknet_core.scene.description import Scene
-from linknet_core.structure.topology import SINGULAR_RCOND, Structure, analyse
+from linknet_core.structure.topology import RETRY_SINGULAR_RCOND, SINGULAR_RCOND, Structure, analyse
 from linknet_core.dynamics.tensions import TensionSolver, make_solver, rhs, unit_vectors
 
 
@@ -207,7 +207,8 @@ class Dynamics:
         passages) Gauss-Newton with the minimum-norm A(Xc)^+ at the current point takes over from where
         simplified Newton stopped instead (the singular exact matrix has no usable inverse). Both halve a
         step that does not lower the largest scaled residual, and both stop at the floor the conditioning
-        allows (``_at_floor``). Returns (X_projected, iterations); ``floor_stops`` and ``floor_reached``
+        allows (``_at_floor``); a Gauss-Newton that would fail gets one retry with a finer minimum-norm cut
+        (``_gauss_newton_retry``). Returns (X_projected, iterations); ``floor_stops`` and ``floor_reached``
         count the projections that stopped at their floor above tol and the largest relative residual there.
         ``step``: (dt, largest stage step over dt, U, F_input) of the fixed-step method whose position stage this
         is, U being the velocities at ``direction_at``: a failure then says whether dt is beyond the stability
@@ -227,6 +228,9 @@ class Dynamics:
             # the mass-metric projection restarts from X; RATTLE's singular case goes on from Xc
             start = X if direction_at is None and self.structure.kind != "redundant" else Xc
             Xc, more, ok = self._newton(start, tol, max_iter, self._gauss_newton_step)
+            if not ok:
+                Xc, again, ok = self._gauss_newton_retry(Xc, tol, max_iter)
+                more += again
         else:
             Xc, more, ok = self._newton(X, tol, max_iter, lambda Xc, phi: self._exact_newton_step(Xc, phi, E0))
         if ok:
@@ -309,6 +313,19 @@ class Dynamics:
         mu = self.solver.solve(phi)
         dX = self._correction(E, mu)
         return dX, phi - self.constraint_rows(Xc, dX, E)
+
+    def _gauss_newton_retry(self, Xc, tol, max_iter):
+        """Gauss-Newton again from where it failed, its minimum-norm solves cutting eigenvalues of A only below
+        RETRY_SINGULAR_RCOND: a near-self-stress (a flat braced cell pushed out of its plane, eigenvalue a few 1e-12
+        of the largest) is then a direction to move along, not a self-stress (31) to leave out. Taken only where the
+        projection would otherwise fail, so every projection that converges with SINGULAR_RCOND is unchanged; the
+        factorisations made with the finer cut are dropped after. Returns (X, iterations, converged)."""
+        solver = self.solver
+        solver.rcond, self._factored_at = RETRY_SINGULAR_RCOND, None
+        try:
+            return self._newton(Xc, tol, max_iter, self._gauss_newton_step)
+        finally:
+            solver.rcond, self._factored_at = SINGULAR_RCOND, None
 
     def _exact_newton_step(self, Xc, phi, E0):
         """Newton with the exact unsymmetric matrix J = C(Xc) M^-1 C(X0)^T of RATTLE's position stage;

@@ -114,6 +114,7 @@ class SparseSolver(TensionSolver):
     def __init__(self, scene: Scene, structure: Structure):
         super().__init__(scene, structure)
         self.singular_events = 0
+        self.rcond = SINGULAR_RCOND  # the minimum-norm fallback's cut
         self._fallback: MinNormSolver | None = None
         self._singular = False
         self._lu = None
@@ -143,6 +144,7 @@ class SparseSolver(TensionSolver):
             self.singular_events += 1
             if self._fallback is None:
                 self._fallback = MinNormSolver(self.scene, self.structure, self.assembly)
+            self._fallback.rcond = self.rcond
             self._fallback.factor(E)
 
     def solve(self, b: np.ndarray) -> np.ndarray:

@@ -56,6 +56,7 @@ class Model(ctypes.Structure):
         ("n_driven", ln_int), ("driven_idx", ln_int_p), ("motion_kind", ln_int_p), ("motion_pieces", ln_int_p),
         ("piece", c_double_p), ("sine", c_double_p), ("accel_weight", c_double_p),
         ("floor_safety", ctypes.c_double), ("floor_cap", ctypes.c_double),
+        ("retry_rank_tol", ctypes.c_double),
     ]
 
 

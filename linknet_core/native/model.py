@@ -15,7 +15,8 @@ import weakref
 import numpy as np
 from linknet_core.dynamics.forces import has_velocity_dependent_forces
 from linknet_core.integrators.runge_kutta import MAX_FACTOR, MIN_FACTOR, SAFETY
-from linknet_core.structure.topology import PLANE_TOL, SINGULAR_RCOND, analyse, kept_per_scene, link_pairs
+from linknet_core.structure.topology import (PLANE_TOL, RETRY_SINGULAR_RCOND, SINGULAR_RCOND, analyse, kept_per_scene,
+                                            link_pairs)
 from linknet_core.dynamics.equations import FLOOR_CAP_OVER_TOL, FLOOR_SAFETY
 from linknet_core.dynamics.tensions import DENSE_MIN_NORM_LIMIT
 from linknet_core.native.ldl import PIVOT_TOL, package_library
@@ -121,6 +122,7 @@ class NativeModel:
         m.n_pairs, m.pair_first, m.pair_second = pairs.first.size, i8(pairs.first), i8(pairs.second)
         m.pair_weight = f8(weight)
         m.pivot_tol, m.rank_tol, m.dense_min_norm_limit = PIVOT_TOL, SINGULAR_RCOND, DENSE_MIN_NORM_LIMIT
+        m.retry_rank_tol = RETRY_SINGULAR_RCOND  # a failing Gauss-Newton's retry, as the reference's
         m.floor_safety, m.floor_cap = FLOOR_SAFETY, FLOOR_CAP_OVER_TOL  # the reference's projection stopping rule
         self._ldl = None
         if L == 0:

@@ -26,6 +26,11 @@ DENSE_RANK_LIMIT = 2500  # links; above it, rank is estimated from the LDL pivot
 # eigenvalue of A = C M^-1 C^T below SINGULAR_RCOND times the largest is zero. In terms of singular values
 # of C that is sqrt(SINGULAR_RCOND) = 1e-5 relative.
 SINGULAR_RCOND = 1e-10
+# The cut of a position projection's Gauss-Newton retry, taken only where the iteration with SINGULAR_RCOND would
+# fail: a flat braced cell pushed out of its plane has a near-self-stress whose eigenvalue (~(delta/R)^2, a few
+# 1e-12 of the largest) falls below SINGULAR_RCOND, so Gauss-Newton never moves along it and stalls at a residual
+# of ~delta^2/R; exact self-stresses sit at round-off (~1e-16 of the largest), well below this cut.
+RETRY_SINGULAR_RCOND = 1e-13
 PLANE_TOL = 1e-12  # an out-of-plane component at most this relative to its size is round-off (dropped in 2-D)
 
 

@@ -136,6 +136,9 @@ typedef struct ln_model {
        never above floor_cap times the convergence scale (linknet_core.dynamics.equations: FLOOR_SAFETY,
        FLOOR_CAP_OVER_TOL) */
     double floor_safety, floor_cap;
+    /* a position projection's Gauss-Newton that would fail is retried once with its minimum-norm solves cutting at
+       retry_rank_tol instead of rank_tol (linknet_core.structure.RETRY_SINGULAR_RCOND); 0: no retry */
+    double retry_rank_tol;
 } ln_model;
 
 typedef struct ln_method {

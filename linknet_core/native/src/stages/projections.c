@@ -387,14 +387,32 @@ static int gauss_newton(const ln_model *m, ln_data *d, double *Xc, double tol, l
     return LN_PROJECTION_FAILED;
 }
 
-/* Where simplified Newton gave up: exact Newton from X_start, or Gauss-Newton where A is singular. */
+/* A Gauss-Newton that failed, once more from where it stopped, on the model with the finer minimum-norm cut
+   retry_rank_tol: a near-self-stress (a flat braced cell pushed out of its plane: eigenvalue ~(delta/R)^2, a few
+   1e-12 of the largest, below rank_tol) is then a direction to move along, not a self-stress (31) to leave out.
+   The factorisation it leaves in d is, as the first Gauss-Newton's, of a point inside the iteration, which no caller
+   solves with again. */
+static int gauss_newton_retry(const ln_model *m, ln_data *d, double *Xc, double tol, ln_int max_iter)
+{
+    if (!(m->retry_rank_tol > 0.0)) return LN_PROJECTION_FAILED;
+    ln_model finer = *m;
+    finer.rank_tol = m->retry_rank_tol;
+    return gauss_newton(&finer, d, Xc, tol, max_iter);
+}
+
+/* Where simplified Newton gave up: exact Newton from X_start, or Gauss-Newton where A is singular (retried with
+   the finer cut only where it would fail, so every projection that converges without it is unchanged). */
 LN_NOINLINE int project_positions_newton(const ln_model *m, ln_data *d, double *Xc, const double *X_start,
                                      const double *E_dir, double tol, ln_int max_iter, double before)
 {
     d->exact_newton_projections++;
-    const int status = (m->solver == LN_SOLVER_MIN_NORM || d->singular)
-                           ? gauss_newton(m, d, Xc, tol, max_iter)
-                           : exact_newton(m, d, Xc, X_start, E_dir, tol, max_iter);
+    int status;
+    if (m->solver == LN_SOLVER_MIN_NORM || d->singular) {
+        status = gauss_newton(m, d, Xc, tol, max_iter);
+        if (status == LN_PROJECTION_FAILED) status = gauss_newton_retry(m, d, Xc, tol, max_iter);
+    } else {
+        status = exact_newton(m, d, Xc, X_start, E_dir, tol, max_iter);
+    }
     if (status == LN_PROJECTION_FAILED) record_failure(m, d, Xc, max_iter, before);
     return status;
 }
