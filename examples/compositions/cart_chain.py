@@ -47,7 +47,6 @@ Other masters:
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 import zipfile
@@ -63,7 +62,7 @@ sys.path.insert(0, str(HERE))
 import build_fmu  # noqa: E402
 import linknet_core as ln  # noqa: E402
 from cart_chain_reference import CartChain, simulate as simulate_reference  # noqa: E402
-from cosim import Slave, finish, observed_orders  # noqa: E402
+from cosim import Slave, finish, observed_orders, write_container  # noqa: E402
 
 SCENE = HERE / "cart_chain.json"
 HOOK = 1                      # 1-based mass number of the driven hook
@@ -334,7 +333,6 @@ def build_container(fmus: dict, m_c: float, h: float, out: Path) -> Path:
     import uuid
     from fmpy import read_model_description
     from fmpy.container_fmu import Configuration
-    from fmpy.container_fmu.cli import create_container_fmu
     from fmpy.container_fmu.config import Component, Connection
     from fmpy.model_description import CoSimulation, DefaultExperiment, ModelDescription, ModelVariable, Unknown
 
@@ -369,23 +367,7 @@ def build_container(fmus: dict, m_c: float, h: float, out: Path) -> Path:
     mapping[mass] = [(comp["cart"], var["cart"]["mass"])]
     config = Configuration(parallelDoStep=False, modelDescription=container, components=list(comp.values()),
                            connections=conns, variableMappings=mapping)
-    unzipdir = out / "cart_chain_container"
-    unzipdir.mkdir(parents=True, exist_ok=True)
-    fmu = out / "cart_chain_container.fmu"
-    if fmu.exists():
-        fmu.unlink()
-    create_container_fmu(config, unzipdir, fmu)
-    with zipfile.ZipFile(fmu) as z:  # workaround: connection type "Real" -> "Float64"
-        items = [(i.filename, z.read(i)) for i in z.infolist()]
-    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
-        for name, data in items:
-            if name == "resources/container.json":
-                cfg = json.loads(data)
-                for c in cfg["connections"]:
-                    c["variableType"] = {"Real": "Float64"}.get(c["variableType"], c["variableType"])
-                data = json.dumps(cfg, indent=1).encode()
-            z.writestr(name, data)
-    return fmu
+    return write_container(config, out, "cart_chain_container")
 
 
 def run_container(fmus: dict, m_c: float, h: float, t_end: float, out: Path, sample=SAMPLE) -> dict:

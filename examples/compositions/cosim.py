@@ -67,6 +67,35 @@ class Slave:
         self.close()
 
 
+def write_container(config, out, name: str):
+    """fmpy's container FMU for ``config`` as out/name.fmu (unpacked in out/name). fmpy 0.3.x writes the
+    connections' types with FMI 2 names ("Real", "Integer") into resources/container.json, where its own container
+    binary expects FMI 3 names ("Float64", "Int32"): they are renamed in the written FMU."""
+    import json
+    import zipfile
+
+    from fmpy.container_fmu.cli import create_container_fmu
+
+    unzipdir = out / name
+    unzipdir.mkdir(parents=True, exist_ok=True)
+    fmu = out / f"{name}.fmu"
+    if fmu.exists():
+        fmu.unlink()
+    create_container_fmu(config, unzipdir, fmu)
+    with zipfile.ZipFile(fmu) as z:
+        items = [(i.filename, z.read(i)) for i in z.infolist()]
+    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
+        for item, data in items:
+            if item == "resources/container.json":
+                cfg = json.loads(data)
+                for c in cfg["connections"]:
+                    c["variableType"] = {"Real": "Float64", "Integer": "Int32"}.get(c["variableType"],
+                                                                                    c["variableType"])
+                data = json.dumps(cfg, indent=1).encode()
+            z.writestr(item, data)
+    return fmu
+
+
 def finish(code: int = 0):
     """Flush and leave without running pythonfmu's exit-time finalization (see module doc)."""
     sys.stdout.flush()

@@ -37,7 +37,7 @@ sys.path.insert(0, str(HERE))
 
 import build_fmu  # noqa: E402
 import linknet_core as ln  # noqa: E402
-from cosim import Slave, finish  # noqa: E402
+from cosim import Slave, finish, write_container  # noqa: E402
 
 KP, ZETA, LIFT = 50.0, 0.5, 0.1
 
@@ -94,12 +94,9 @@ def run(chain_fmu, pd_fmu, h: float, t_end: float) -> dict:
 
 def build_container(chain_fmu, pd_fmu, h: float, out: Path) -> Path:
     """fmpy container FMU of the loop; output z_top (the top mass's z), gains as parameters."""
-    import json
     import uuid
-    import zipfile
     from fmpy import read_model_description
     from fmpy.container_fmu import Configuration
-    from fmpy.container_fmu.cli import create_container_fmu
     from fmpy.container_fmu.config import Component, Connection
     from fmpy.model_description import CoSimulation, DefaultExperiment, ModelDescription, ModelVariable, Unknown
 
@@ -140,23 +137,7 @@ def build_container(chain_fmu, pd_fmu, h: float, out: Path) -> Path:
     mapping = {z_top: [(chain, vc["X[1,3]"])], **{v: [(ctrl, vp[name])] for name, v in params.items()}}
     config = Configuration(parallelDoStep=False, modelDescription=md, components=[chain, ctrl],
                            connections=conns, variableMappings=mapping)
-    unzipdir = out / "pd_loop_container"
-    unzipdir.mkdir(parents=True, exist_ok=True)
-    fmu = out / "pd_loop_container.fmu"
-    if fmu.exists():
-        fmu.unlink()
-    create_container_fmu(config, unzipdir, fmu)
-    with zipfile.ZipFile(fmu) as z:  # workaround: connection type "Real" -> "Float64"
-        items = [(i.filename, z.read(i)) for i in z.infolist()]
-    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
-        for name, data in items:
-            if name == "resources/container.json":
-                cfg = json.loads(data)
-                for c in cfg["connections"]:
-                    c["variableType"] = {"Real": "Float64", "Integer": "Int32"}.get(c["variableType"], c["variableType"])
-                data = json.dumps(cfg, indent=1).encode()
-            z.writestr(name, data)
-    return fmu
+    return write_container(config, out, "pd_loop_container")
 
 
 def run_container(chain_fmu, pd_fmu, h: float, t_end: float, out: Path) -> dict:
