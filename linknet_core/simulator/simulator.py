@@ -6,6 +6,7 @@ import functools
 import math
 import sys
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -130,6 +131,20 @@ def _as_time(value, what: str) -> float:
     return x
 
 
+# _within's sum of squares overflows to inf for entries beyond ~1e154: that is its answer (the caller's slow path
+# then names the entry), not something to warn about
+warnings.filterwarnings("ignore", message="overflow encountered in dot", category=RuntimeWarning,
+                        module=r"linknet_core\.simulator\.simulator")
+
+
+def _within(a: np.ndarray, bound: float) -> bool:
+    """Whether every entry is finite and below ``bound``, in one dot product: the common case of every input
+    check (each advance, so each FMU doStep). False may also mean an entry close below the bound: the caller's
+    slow path looks entry by entry."""
+    v = a.ravel()
+    return float(v.dot(v)) <= bound * bound
+
+
 def _all_finite(*arrays: np.ndarray) -> bool:
     """Whether every entry is finite and below ~1e154, in one dot product per array: a sum of squares is
     non-finite iff an entry is non-finite or beyond ~1e154, which is no physical state or force either. For the
@@ -223,8 +238,7 @@ class Simulator:
         F = F_input if type(F_input) is np.ndarray and F_input.dtype == np.float64 else np.asarray(F_input, float)
         if F.shape != (self.scene.K, 3):
             raise SolverError(f"input forces must have shape ({self.scene.K}, 3), got {F.shape}")
-        v = F.ravel()
-        if float(v.dot(v)) <= MAX_FORCE * MAX_FORCE:  # the common case: every entry finite and below MAX_FORCE
+        if _within(F, MAX_FORCE):
             return F
         bad = ~np.isfinite(F) | (np.abs(np.nan_to_num(F)) > MAX_FORCE)
         bad[self.scene.fixed] = False
@@ -266,8 +280,7 @@ class Simulator:
             if a.shape != (rows.size, 3):
                 raise SolverError(f"anchors {name} must have shape ({rows.size}, 3) (one row per input-driven anchor: "
                                   f"{', '.join(self.scene.mass_label(int(k)) for k in rows)}), got {a.shape}")
-            v = a.ravel()
-            if float(v.dot(v)) <= MAX_FORCE * MAX_FORCE:  # the common case: every entry finite and not huge
+            if _within(a, MAX_FORCE):
                 out.append(a)
                 continue
             bad = ~np.isfinite(a) | (np.abs(np.nan_to_num(a)) > MAX_FORCE)
