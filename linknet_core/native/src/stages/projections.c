@@ -290,6 +290,41 @@ static double at_floor(const ln_model *m, const double *phi, const double *inv_s
     return reached;
 }
 
+/* One step of exact Newton or Gauss-Newton, given the multipliers mu along M^-1 C(E)^T and r = J mu on entry: r
+   becomes phi - J mu (what the step leaves by construction) and the floor it allows is recorded; Xc moves by the
+   step, halved while it does not lower the largest scaled residual *worst (d->phi and *worst then describe the new
+   point). Returns 1 when the projection stops there at its floor (counted), 0 to go on. */
+static int newton_step(const ln_model *m, ln_data *d, double *Xc, const double *E, const double *mu, double *r,
+                       double *worst)
+{
+    double *phi = d->phi;
+    const double *inv_scale = d->scale;
+    double floor = 0.0;
+    for (ln_int l = 0; l < m->L; l++) {
+        r[l] = phi[l] - r[l];
+        floor = fmax(floor, (1.0 / inv_scale[l] + m->floor_safety * fabs(r[l])) * m->inv_R[l]);
+    }
+    d->fail_floor = floor;
+    double step = 1.0;
+    FN(ln_add_correction)(m, E, mu, step, Xc);
+    double trial = residuals(m, Xc, inv_scale, phi);
+    for (int halving = 0; halving < LINE_SEARCH_HALVINGS && !(trial < *worst) && trial > 1.0; halving++) {
+        FN(ln_add_correction)(m, E, mu, -0.5 * step, Xc);
+        step *= 0.5;
+        trial = residuals(m, Xc, inv_scale, phi);
+    }
+    *worst = trial;
+    if (trial > 1.0 && trial <= m->floor_cap) {
+        const double reached = at_floor(m, phi, inv_scale, r);
+        if (reached >= 0.0) {
+            d->floor_stops++;
+            d->floor_reached = fmax(d->floor_reached, reached);
+            return 1;
+        }
+    }
+    return 0;
+}
+
 /* Exact Newton from the starting point X_start, for steps where the directions turn too much within a step
    for simplified Newton (a whipping chain's tip) or where simplified Newton stalls on a badly conditioned or
    redundant system: J = C(Xc) M^-1 C(E_dir)^T, the point reached is the same (it lies on (11) along
@@ -309,29 +344,7 @@ static int exact_newton(const ln_model *m, ln_data *d, double *Xc, const double 
         if (status != LN_OK) return status;
         double *r = d->krylov + krylov_need(m->L);  /* r = phi - J mu: what this step leaves by construction */
         newton_matrix_product(m, Xc, E_dir, mu, d->acc1, r);
-        double floor = 0.0;
-        for (ln_int l = 0; l < m->L; l++) {
-            r[l] = phi[l] - r[l];
-            floor = fmax(floor, (1.0 / inv_scale[l] + m->floor_safety * fabs(r[l])) * m->inv_R[l]);
-        }
-        d->fail_floor = floor;
-        double step = 1.0;
-        FN(ln_add_correction)(m, E_dir, mu, step, Xc);
-        double trial = residuals(m, Xc, inv_scale, phi);
-        for (int halving = 0; halving < LINE_SEARCH_HALVINGS && !(trial < worst) && trial > 1.0; halving++) {
-            FN(ln_add_correction)(m, E_dir, mu, -0.5 * step, Xc);
-            step *= 0.5;
-            trial = residuals(m, Xc, inv_scale, phi);
-        }
-        worst = trial;
-        if (worst > 1.0 && worst <= m->floor_cap) {
-            const double reached = at_floor(m, phi, inv_scale, r);
-            if (reached >= 0.0) {
-                d->floor_stops++;
-                d->floor_reached = fmax(d->floor_reached, reached);
-                return LN_OK;
-            }
-        }
+        if (newton_step(m, d, Xc, E_dir, mu, r, &worst)) return LN_OK;
     }
     return LN_PROJECTION_FAILED;
 }
@@ -360,29 +373,7 @@ static int gauss_newton(const ln_model *m, ln_data *d, double *Xc, double tol, l
         if (status != LN_OK) return status;
         FN(ln_solve_tension_system)(m, d, phi, mu);
         newton_matrix_product(m, Xc, E, mu, d->acc1, r);
-        double floor = 0.0;
-        for (ln_int l = 0; l < L; l++) {
-            r[l] = phi[l] - r[l];
-            floor = fmax(floor, (1.0 / inv_scale[l] + m->floor_safety * fabs(r[l])) * m->inv_R[l]);
-        }
-        d->fail_floor = floor;
-        double step = 1.0;
-        FN(ln_add_correction)(m, E, mu, step, Xc);
-        double trial = residuals(m, Xc, inv_scale, phi);
-        for (int halving = 0; halving < LINE_SEARCH_HALVINGS && !(trial < worst) && trial > 1.0; halving++) {
-            FN(ln_add_correction)(m, E, mu, -0.5 * step, Xc);
-            step *= 0.5;
-            trial = residuals(m, Xc, inv_scale, phi);
-        }
-        worst = trial;
-        if (worst > 1.0 && worst <= m->floor_cap) {
-            const double reached = at_floor(m, phi, inv_scale, r);
-            if (reached >= 0.0) {
-                d->floor_stops++;
-                d->floor_reached = fmax(d->floor_reached, reached);
-                return LN_OK;
-            }
-        }
+        if (newton_step(m, d, Xc, E, mu, r, &worst)) return LN_OK;
     }
     return LN_PROJECTION_FAILED;
 }
