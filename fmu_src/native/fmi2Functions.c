@@ -135,22 +135,13 @@ const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 
 const char *fmi2GetVersion(void) { return fmi2Version; }
 
-static const char *const log_categories[] = {"logStatusWarning", "logStatusDiscard", "logStatusError",
-                                             "logStatusFatal", "logAll"};
-
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
                                const fmi2String categories[])
 {
     ENTER("fmi2SetDebugLogging");
     if (nCategories > 0 && categories == NULL) return refuse(self, fn, "categories is NULL");
-    for (size_t i = 0; i < nCategories; i++) {
-        int known = 0;
-        for (size_t k = 0; k < sizeof log_categories / sizeof log_categories[0]; k++)
-            known |= categories[i] != NULL && strcmp(categories[i], log_categories[k]) == 0;
-        if (!known)
-            return refuse(self, fn, "unknown log category \"%s\" (known: logStatusWarning, logStatusDiscard, "
-                          "logStatusError, logStatusFatal, logAll)", categories[i] ? categories[i] : "(null)");
-    }
+    const char *unknown = linknet_unknown_log_category(nCategories, categories);
+    if (unknown) return refuse(self, fn, "unknown log category \"%s\" (known: " LINKNET_LOG_CATEGORIES ")", unknown);
     self->logging_on = loggingOn != fmi2False;
     return fmi2OK;
 }

@@ -11,6 +11,7 @@
 #define LINKNET_FMI2_API_H
 
 #include <stddef.h>
+#include <string.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -153,6 +154,25 @@ FMI2_Export fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s
 FMI2_Export fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value);
 FMI2_Export fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value);
 FMI2_Export fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value);
+
+/* The log categories both linknet FMU kinds declare (fmu_src/native/build.py: LOG_CATEGORIES) and accept in
+   fmi2SetDebugLogging, and the check of a host's list against them: written here once for the native FMU's glue and
+   the pythonfmu FMU's front layer. */
+#define LINKNET_LOG_CATEGORIES "logStatusWarning, logStatusDiscard, logStatusError, logStatusFatal, logAll"
+
+/* The first of categories[0..n) that is none of them ("(null)" for a NULL name), or NULL when every one is known. */
+static inline const char *linknet_unknown_log_category(size_t n, const fmi2String categories[])
+{
+    static const char *const known[] = {"logStatusWarning", "logStatusDiscard", "logStatusError", "logStatusFatal",
+                                        "logAll"};
+    for (size_t i = 0; i < n; i++) {
+        if (categories[i] == NULL) return "(null)";
+        size_t k = 0;
+        while (k < sizeof known / sizeof known[0] && strcmp(categories[i], known[k]) != 0) k++;
+        if (k == sizeof known / sizeof known[0]) return categories[i];
+    }
+    return NULL;
+}
 
 #ifdef __cplusplus
 }
