@@ -43,10 +43,6 @@ class AnchorDrive:
         self.last_jump = [np.zeros((self.n, 3)), 0.0, 0.0]  # impulse (n_driven, 3), position and velocity jump
         self.jumps = 0
 
-    @property
-    def active(self) -> bool:
-        return self.n > 0
-
     def set_input(self, t: float, anchors) -> None:
         """Hold ``anchors`` from time t on: (P, V, A), each (n_input, 3), or a callable f(t) -> (P, V, A)."""
         if callable(anchors):
