@@ -1,4 +1,4 @@
-"""Scene x method table of issue "robust stepping": every shipped scene (models/*.json, plus the two redundant
+"""Scene x method table of robust stepping: every shipped scene (models/*.json, plus the two redundant
 scenes with mechanisms and a chain with masses 1e3 .. 1e-3) with every method at its default settings (dt = 1e-3,
 rtol = 1e-8) on the native core to t = 2 s (the DefaultExperiment stopTime build_fmu.py writes), and for the
 redundant scenes the largest position error at t = 0.3 s against the independent reference of
