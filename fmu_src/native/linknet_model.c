@@ -917,59 +917,15 @@ int fmu_model_initialize(fmu_model *m, char *msg)
     return apply_parameters(m, msg);
 }
 
-/* A failed advance in words (linknet_core.native.integrator.NativeIntegrator.explain). */
-static void explain(const fmu_model *m, int status, double t, double t_target, char *out, size_t n)
-{
-    const ln_data *d = m->d;
-    char span[128];
-    snprintf(span, sizeof span, "between t = %.17g and t = %.17g", t, t_target);
-    switch (status) {
-    case LN_PROJECTION_FAILED: {
-        char label[512] = "a link";
-        if (d->fail_link >= 0) link_label(m->s, d->fail_link, label, sizeof label);
-        snprintf(out, n, "position projection onto the link lengths (11) did not converge %s: after %lld iterations "
-                 "the residual is %.3g relative at %s (it was %.3g relative before projection). Reduce the step (or "
-                 "tighten the tolerance); if the configuration is singular (a taut string, a loop passing a flat "
-                 "position), no step may be small enough", span, (long long)d->fail_iterations, d->fail_residual,
-                 label, d->fail_before);
-        break;
-    }
-    case LN_IMPLICIT_KICK_FAILED:
-        snprintf(out, n, "the implicit velocity half step (drag, dampers) does not converge %s at dt = %g: the damping "
-                 "is too stiff for this step (h c / 2m near or above 1); reduce dt", span, m->method.dt);
-        break;
-    case LN_STEP_UNDERFLOW:
-        snprintf(out, n, "step size underflow %s: the tolerance rtol = %g cannot be met (singular configuration or "
-                 "discontinuous input?)", span, m->method.rtol);
-        break;
-    case LN_TOO_MANY_STEPS:
-        snprintf(out, n, "more than %lld steps %s; raise the tolerance or the step", (long long)m->s->max_steps, span);
-        break;
-    case LN_NON_FINITE:
-        snprintf(out, n, "the state became non-finite %s (the forces or the state contain NaN or infinity, or the "
-                 "motion blew up); reduce the step or tolerance", span);
-        break;
-    case LN_BAD_ARGUMENT:
-        snprintf(out, n, "cannot advance from t = %.17g to t = %.17g: the target must be later and finite", t,
-                 t_target);
-        break;
-    case LN_NO_MEMORY:
-        snprintf(out, n, "out of memory %s", span);
-        break;
-    default:
-        snprintf(out, n, "the native core stopped %s (status %d)", span, status);
-        break;
-    }
-}
-
 int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
 {
     const double t_fmu = m->d->t, t_target = t + h;
     if (t_target <= t_fmu) return FMU_OK;  /* h below half an ulp of t: nothing to integrate */
     const int status = ln_advance(&m->model, &m->method, m->d, t_target, m->s->max_steps);
     if (status != LN_OK) {
-        char why[FMU_MESSAGE - 128];
-        explain(m, status, t_fmu, t_target, why, sizeof why);
+        char why[FMU_MESSAGE - 128], label[512] = "";
+        if (m->d->fail_link >= 0) link_label(m->s, m->d->fail_link, label, sizeof label);
+        ln_explain(&m->model, &m->method, m->d, status, t_fmu, t_target, m->s->max_steps, label, why, sizeof why);
         return fail(msg, FMU_DISCARD, "step from t=%.17g with h=%.17g failed, the FMU stays at t=%.17g: %s", t, h,
                     t_fmu, why);
     }

@@ -9,16 +9,24 @@ from __future__ import annotations
 
 import copy
 import ctypes
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from linknet_core.dynamics.drive import call_motion
-from linknet_core.dynamics.equations import fastest_oscillation
-from linknet_core.errors import SolverError, projection_failure
+from linknet_core.errors import SolverError
 from linknet_core.integrators.base import Integrator, StepStats
 from linknet_core.native import library as lib
 from linknet_core.native.model import NativeData, NativeModel, native_method
+
+_explain = lib.lib.ln_explain  # void ln_explain(model, method, data, status, t, t_target, max_steps, label, out, n)
+_explain.restype = None
+_explain.argtypes = [lib.Model_p, lib.Method_p, lib.Data_p, ctypes.c_int, ctypes.c_double, ctypes.c_double, lib.ln_int,
+                     ctypes.c_char_p, ctypes.c_char_p, ctypes.c_size_t]
+
+
+_NONE = np.zeros(0, np.int64)  # no input-driven anchors (never written into)
 
 
 @dataclass
@@ -55,7 +63,6 @@ class NativeIntegrator(Integrator):
         self.name, self.order, self.symplectic = method_cls.name, method_cls.order, method_cls.symplectic
         self.adaptive, self.guarantees = method_cls.adaptive, method_cls.guarantees
         self.dt, self.rtol = dt, rtol
-        self._stage_fraction = max(abs(g) for g in getattr(method_cls, "gammas", (1.0,)))  # largest stage / dt
         self.atol = atol if atol is not None else rtol
         position_tol = getattr(method_cls, "position_tol", 1e-14)
         self.method = native_method(method_cls, dt=dt, rtol=rtol, atol=self.atol, position_tol=position_tol,
@@ -67,8 +74,9 @@ class NativeIntegrator(Integrator):
         # driven anchors: scene time 0 is t0; input-driven anchors are rows input_slots of the drive arrays
         self._d.drive_t0 = self._d.drive_hold_t = t0
         self.scene = scene = model.scene  # the model holds it weakly
-        self._input_slots = np.flatnonzero([motion.kind == "input" for motion in scene.motions])
-        self._input_labels = [scene.mass_label(int(k)) for k in scene.input_driven_indices]
+        self._input_slots = (np.flatnonzero([motion.kind == "input" for motion in scene.motions]) if scene.motions
+                             else _NONE)
+        self._input_labels = [scene.mass_label(int(k)) for k in scene.input_driven_indices] if scene.motions else []
         self._motion = None  # the user's callable of t, when the input-driven anchors follow one
         self._motion_error = None  # what it raised inside the last advance
         self._callback = None  # the C callback that calls it, made when first needed
@@ -172,18 +180,20 @@ class NativeIntegrator(Integrator):
         state.X, state.U, state.t = X, U, t_target
         self._out = (X, U)
 
-    def sample(self, state, times, F_input, max_steps: int, X, U, T, advance_first: bool) -> None:
+    def sample(self, state, times, F_input, max_steps: int, X, U, T, diagnostics, advance_first: bool) -> None:
         """Samples at ``times`` (advance to each, then the outputs there) with F_input held, in one call into C
-        (ln_sample), into X, U (n,K,3) and T (n,L), C-contiguous float64. Sample 0 is taken at the current state
-        unless ``advance_first``. On a failure the samples before it are written, ``state`` is where the run
-        stopped, and the SolverError says why, as ``advance`` and ``outputs`` would."""
+        (ln_sample), into X, U (n,K,3) and T (n,L), and unless ``diagnostics`` is None each sample's energy,
+        residuals of (11) and (12) and kinetic energy into its row of ``diagnostics`` (n,4) (needs
+        ``diagnostics_in_c``); every array C-contiguous float64, ``times`` too. Sample 0 is taken at the current
+        state unless ``advance_first``. On a failure the samples before it are written, ``state`` is where the
+        run stopped, and the SolverError says why, as ``advance`` and ``outputs`` would."""
         self._load(state, F_input)
         t_before = state.t
-        times = np.ascontiguousarray(times, np.float64)
         written = lib.ln_int(0)
-        status = lib.sample(self._model_p, self._method_p, self._data_p, lib.pointer(times), times.size,
-                            int(advance_first), max_steps, lib.pointer(X), lib.pointer(U), lib.pointer(T),
-                            ctypes.byref(written))
+        ref = lib.first_double
+        status = lib.sample(self._model_p, self._method_p, self._data_p, ref(times), times.size, int(advance_first),
+                            max_steps, ref(X), ref(U), ref(T), None if diagnostics is None else self._energy_terms,
+                            None if diagnostics is None else ref(diagnostics), written)
         if written.value or status != lib.OK:
             X_now, U_now = self.data.X.copy(), self.data.U.copy()
             state.X, state.U, state.t = X_now, U_now, float(self._d.t)
@@ -196,6 +206,15 @@ class NativeIntegrator(Integrator):
             raise SolverError(f"the tensions (25)-(26) cannot be evaluated at this state: {lib.STATUS[status]}")
         raise SolverError(self.explain(status, float(times[i - 1]) if i > 0 else t_before, float(times[i]),
                                        max_steps))
+
+    @property
+    def diagnostics_in_c(self) -> bool:
+        """Whether ``sample`` can fill the samples' diagnostics (a scene whose potentials the core knows)."""
+        return self._energy_terms is not None
+
+    @functools.cached_property
+    def _energy_terms(self):
+        return self.model.energy_terms
 
     def tensions(self, X, U, F_input=None) -> np.ndarray:
         """T of (25)-(26) at (X, U) with F_input held (minimum-norm where A is singular)."""
@@ -224,39 +243,11 @@ class NativeIntegrator(Integrator):
             raise SolverError(f"the anchors' motion callable failed: {type(error).__name__}: {error}") from error
 
     def explain(self, status: int, t_start: float, t_target: float, max_steps: int) -> str:
-        """The failure of an advance in words, naming the link, the residuals and what may help."""
-        scene, d = self.scene, self._d
-        span = f"between t = {t_start} and t = {t_target}"
-        if status == lib.PROJECTION_FAILED:
-            link = scene.link_label(int(d.fail_link)) if d.fail_link >= 0 else "a link"
-            stability = {}
-            if not self.adaptive:  # the core left the tensions at the start of the step that failed in T
-                stability = dict(dt=self.dt, stage_fraction=self._stage_fraction,
-                                 omega=fastest_oscillation(scene, self.data.T))
-            return projection_failure(f"{span}: after {d.fail_iterations} iterations the residual is "
-                                      f"{d.fail_residual:.3g} relative at {link}", float(d.fail_residual),
-                                      float(d.fail_before), float(d.fail_floor), **stability)
-        if status == lib.IMPLICIT_KICK_FAILED:
-            return (f"the implicit velocity half step (drag, dampers) does not converge {span} at dt = {self.dt:g}: "
-                    "the damping is too stiff for this step (h c / 2m near or above 1); reduce dt")
-        if status == lib.STEP_UNDERFLOW:
-            why = "singular configuration or discontinuous input?"
-            if d.fail_link >= 0:  # the steps were cut because their positions could not be projected onto (11)
-                why = (f"the position projection onto the link lengths (11) kept failing, last at "
-                       f"{scene.link_label(int(d.fail_link))} (residual {d.fail_residual:.3g} relative after "
-                       f"{d.fail_iterations} iterations): a singular configuration such as a taut string?")
-            return f"step size underflow {span}: the tolerance rtol = {self.rtol} cannot be met ({why})"
-        if status == lib.TOO_MANY_STEPS:
-            why = "raise max_steps or the tolerance"
-            if d.floor_stops:  # the steps were cut where the links' Newton matrix is (nearly) singular
-                why = (f"the position projection onto the link lengths (11) has stopped at its conditioning floor "
-                       f"{int(d.floor_stops)} times in this run (largest residual {d.floor_reached:.3g} relative): a "
-                       "singular or badly conditioned configuration (a taut string, a flat braced cell pushed out of "
-                       "its plane), where more steps or a looser tolerance may not help")
-            return f"more than {max_steps} steps {span}; {why}"
-        if status == lib.NON_FINITE:
-            return (f"the state became non-finite {span} (the forces or the state contain NaN or infinity, or "
-                    "the motion blew up); reduce the step or tolerance")
-        if status == lib.BAD_ARGUMENT:
-            return f"cannot advance from t = {t_start} to t = {t_target}: the target must be later and finite"
-        return f"the native core stopped {span}: {lib.STATUS.get(status, status)}"
+        """The failure of an advance in words, naming the link, the residuals and what may help: the core's text
+        (ln_explain, src/explain.c; the native FMU says the same)."""
+        d = self._d
+        link = self.scene.link_label(int(d.fail_link)).encode() if d.fail_link >= 0 else None
+        out = ctypes.create_string_buffer(4096)
+        _explain(self._model_p, self._method_p, self._data_p, status, t_start, t_target, max_steps, link, out,
+                 len(out))
+        return out.value.decode(errors="replace")
