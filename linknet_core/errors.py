@@ -38,7 +38,8 @@ def projection_failure(where: str, reached: float, before: float, floor: float, 
     core's text (ln_projection_failure, src/explain.c), so that the numpy reference, the native core and the native
     FMU say the same words. ``where``: what the iteration reached and at which link; ``reached``: the relative
     residual the iteration ended at; ``before``: the largest relative violation before projection; ``floor``: the
-    relative floor its last Newton step allowed (the round-off floor plus what that step left by construction; 0: no Newton step taken).
+    relative floor its last Newton step allowed (the round-off floor plus what that step left by construction; 0:
+    no Newton step taken).
     A fixed-step method also gives its ``dt``, its largest stage step over dt (``stage_fraction``, max |gamma_i|
     of a composition) and ``omega``, the fastest oscillation of its masses at the start of the step that failed
     (:func:`linknet_core.dynamics.equations.fastest_oscillation`).
