@@ -5,8 +5,9 @@
  * those linknet_core's Simulator builds, so the FMU repeats the library's arithmetic bit for bit. A changed
  * mass, length or gravity (before the end of initialization) rebuilds what depends on it here, with the
  * library's formulas: 1/M, the base forces M g + F, the weights of A (25), a chain's tridiagonal weights, the
- * initial state (lengths checked, positions projected if the scene opts in, velocities projected onto (12);
- * zero for a static scene) and, for free rigid bodies, their geometry and initial body states.
+ * initial state (lengths checked, positions projected if the scene opts in, velocities projected onto (12):
+ * ln_project_state; zero for a static scene) and, for free rigid bodies, their layout and initial body states
+ * (ln_rigid_layout).
  *
  * Everything an instance changes lives in its fmu_model: instances are independent.
  */
@@ -22,17 +23,11 @@
 #include "lnfmu_scene.h"
 #include "rigid.h"
 
-/* the 3-D stage functions used to make a changed scene's initial state consistent (stages.h) */
-#define FN(name) name##_3d
-#include "stages.h"
-#undef FN
-
 extern const fmu_model_info lnfmu_info;
 
 const fmu_model_info *fmu_model_info_get(void) { return &lnfmu_info; }
 
-/* as linknet_core's rigid-body geometry (linknet_core/rigid.py) */
-#define TOP_TOL 1e-12       /* principal moments equal to this (relative): a spherical or symmetric top */
+/* as linknet_core.structure.bodies.freeze_initial_state and Simulator's initial projection */
 #define RESHAPE_TOL 1e-13   /* initial link lengths off by more than this are projected before freezing a body */
 #define PROJECTION_TOL 1e-14
 #define PROJECTION_ITERATIONS 200
@@ -60,7 +55,7 @@ struct fmu_model {
     ln_int *top;
     double *mass_full, *gravity;        /* (K), (3) the parameters being applied */
     double *X_init, *U_init, *Y_init;   /* the current model's initial state */
-    double *Xo, *Uo, *E, *Ys;           /* scratch: the state handed to ln_evaluate, unit vectors, body states */
+    double *Xo, *Uo, *Ys;               /* scratch: the state handed to ln_evaluate, body states */
     ln_int *position;                   /* scratch: a chain's links' positions in path order */
 };
 
@@ -188,187 +183,6 @@ static double parameter_value(const lnfmu_scene *s, const double *values, int ki
     return 0.0;
 }
 
-/* ---- free rigid bodies of a changed scene: the geometry of linknet_core/rigid.py ----------------- */
-
-/* Eigen-decomposition of a symmetric 3x3 matrix (row-major) by cyclic Jacobi rotations: eigenvalues w
-   ascending, eigenvectors the columns of V. */
-static void eigh3(const double *A_in, double *w, double *V)
-{
-    double A[9];
-    memcpy(A, A_in, sizeof A);
-    for (int i = 0; i < 9; i++) V[i] = (i % 4 == 0) ? 1.0 : 0.0;
-    for (int sweep = 0; sweep < 64; sweep++) {
-        const double off = A[1] * A[1] + A[2] * A[2] + A[5] * A[5];
-        const double diag = A[0] * A[0] + A[4] * A[4] + A[8] * A[8];
-        if (off <= 1e-40 * diag || off == 0.0) break;
-        for (int p = 0; p < 2; p++)
-            for (int q = p + 1; q < 3; q++) {
-                const double apq = A[3 * p + q];
-                if (apq == 0.0) continue;
-                const double theta = (A[3 * q + q] - A[3 * p + p]) / (2.0 * apq);
-                const double t = (theta >= 0.0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
-                const double c = 1.0 / sqrt(t * t + 1.0), sn = t * c;
-                for (int k = 0; k < 3; k++) {
-                    const double akp = A[3 * k + p], akq = A[3 * k + q];
-                    A[3 * k + p] = c * akp - sn * akq;
-                    A[3 * k + q] = sn * akp + c * akq;
-                }
-                for (int k = 0; k < 3; k++) {
-                    const double apk = A[3 * p + k], aqk = A[3 * q + k];
-                    A[3 * p + k] = c * apk - sn * aqk;
-                    A[3 * q + k] = sn * apk + c * aqk;
-                }
-                for (int k = 0; k < 3; k++) {
-                    const double vkp = V[3 * k + p], vkq = V[3 * k + q];
-                    V[3 * k + p] = c * vkp - sn * vkq;
-                    V[3 * k + q] = sn * vkp + c * vkq;
-                }
-            }
-    }
-    for (int i = 0; i < 3; i++) w[i] = A[4 * i];
-    for (int i = 0; i < 2; i++)  /* ascending, columns with them */
-        for (int j = 0; j < 2 - i; j++)
-            if (w[j] > w[j + 1]) {
-                const double tw = w[j];
-                w[j] = w[j + 1];
-                w[j + 1] = tw;
-                for (int k = 0; k < 3; k++) {
-                    const double tv = V[3 * k + j];
-                    V[3 * k + j] = V[3 * k + j + 1];
-                    V[3 * k + j + 1] = tv;
-                }
-            }
-}
-
-/* Unit quaternion (w, x, y, z) of a rotation matrix (row-major): Shepperd's branch by the largest term. */
-static void quaternion_of(const double *R, double *q)
-{
-    const double t = R[0] + R[4] + R[8], d0 = R[0], d1 = R[4], d2 = R[8];
-    const double terms[4] = {t, d0, d1, d2};
-    int branch = 0;
-    for (int i = 1; i < 4; i++)
-        if (terms[i] > terms[branch]) branch = i;
-    const double arg[4] = {t, d0 - d1 - d2, d1 - d0 - d2, d2 - d0 - d1};
-    const double s = 2.0 * sqrt(fmax(1.0 + arg[branch], 0.0));
-    const double a = R[7] - R[5], b = R[2] - R[6], c = R[3] - R[1];
-    const double e = R[1] + R[3], f = R[2] + R[6], g = R[5] + R[7];
-    switch (branch) {
-    case 0: q[0] = s / 4; q[1] = a / s; q[2] = b / s; q[3] = c / s; break;
-    case 1: q[0] = a / s; q[1] = s / 4; q[2] = e / s; q[3] = f / s; break;
-    case 2: q[0] = b / s; q[1] = e / s; q[2] = s / 4; q[3] = g / s; break;
-    default: q[0] = c / s; q[1] = f / s; q[2] = g / s; q[3] = s / 4; break;
-    }
-    const double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-    for (int i = 0; i < 4; i++) q[i] /= n;
-}
-
-/* Rotation matrix of a unit quaternion, with the step loops' arithmetic. */
-static void rotation_of(const double *q, double *R)
-{
-    const double w = q[0], x = q[1], y = q[2], z = q[3];
-    R[0] = 1.0 - 2.0 * (y * y + z * z);
-    R[1] = 2.0 * (x * y - w * z);
-    R[2] = 2.0 * (x * z + w * y);
-    R[3] = 2.0 * (x * y + w * z);
-    R[4] = 1.0 - 2.0 * (x * x + z * z);
-    R[5] = 2.0 * (y * z - w * x);
-    R[6] = 2.0 * (x * z - w * y);
-    R[7] = 2.0 * (y * z + w * x);
-    R[8] = 1.0 - 2.0 * (x * x + y * y);
-}
-
-/* Body frames from the principal axes at X (a symmetric top's distinct axis third, a spherical top the space
-   axes, right-handed), the masses' body-frame positions and the initial body states (c, v, q, Pi). */
-static int rigid_geometry(fmu_model *m, const double *mass, const double *X, const double *U, char *msg)
-{
-    const lnfmu_scene *s = m->s;
-    const struct ln_rigid_model *base = s->rigid;
-    const ln_int B = base->n_bodies, K = s->K;
-    for (ln_int b = 0; b < B; b++) {
-        double M = 0.0, c[3] = {0, 0, 0}, v[3] = {0, 0, 0}, I[9] = {0};
-        for (ln_int k = 0; k < K; k++)
-            if (base->body_of[k] == b) {
-                M += mass[k];
-                for (int e = 0; e < 3; e++) {
-                    c[e] += mass[k] * X[3 * k + e];
-                    v[e] += mass[k] * U[3 * k + e];
-                }
-            }
-        if (!(M > 0.0)) return fail(msg, FMU_ERROR, "rigid body %lld has no mass", (long long)(b + 1));
-        for (int e = 0; e < 3; e++) {
-            c[e] /= M;
-            v[e] /= M;
-        }
-        for (ln_int k = 0; k < K; k++)
-            if (base->body_of[k] == b) {
-                const double rho[3] = {X[3 * k] - c[0], X[3 * k + 1] - c[1], X[3 * k + 2] - c[2]};
-                const double sq = rho[0] * rho[0] + rho[1] * rho[1] + rho[2] * rho[2];
-                for (int i = 0; i < 3; i++)
-                    for (int j = 0; j < 3; j++)
-                        I[3 * i + j] += -mass[k] * rho[i] * rho[j] + (i == j ? mass[k] * sq : 0.0);
-            }
-        double w[3], axes[9];
-        eigh3(I, w, axes);
-        const double scale = TOP_TOL * w[2];
-        const int spherical = w[2] - w[0] <= scale;
-        const int first_pair_equal = w[1] - w[0] <= scale;
-        const int symmetric = first_pair_equal || w[2] - w[1] <= scale;
-        const int kind = spherical ? LN_SPHERICAL_TOP : symmetric ? LN_SYMMETRIC_TOP : LN_ASYMMETRIC_TOP;
-        const int order[3] = {kind == LN_SYMMETRIC_TOP && !first_pair_equal ? 1 : 0,
-                              kind == LN_SYMMETRIC_TOP && !first_pair_equal ? 2 : 1,
-                              kind == LN_SYMMETRIC_TOP && !first_pair_equal ? 0 : 2};
-        double frame[9], inertia[3];
-        for (int j = 0; j < 3; j++) {
-            inertia[j] = w[order[j]];
-            for (int i = 0; i < 3; i++) frame[3 * i + j] = axes[3 * i + order[j]];
-        }
-        if (kind == LN_SYMMETRIC_TOP) inertia[0] = inertia[1] = 0.5 * (inertia[0] + inertia[1]);
-        if (kind == LN_SPHERICAL_TOP) {
-            for (int i = 0; i < 9; i++) frame[i] = (i % 4 == 0) ? 1.0 : 0.0;
-            inertia[0] = inertia[1] = inertia[2] = (w[0] + w[1] + w[2]) / 3.0;
-        }
-        const double det = frame[0] * (frame[4] * frame[8] - frame[5] * frame[7])
-                           - frame[1] * (frame[3] * frame[8] - frame[5] * frame[6])
-                           + frame[2] * (frame[3] * frame[7] - frame[4] * frame[6]);
-        if (det < 0.0)
-            for (int i = 0; i < 3; i++) frame[3 * i] = -frame[3 * i];
-        double q[4], R0[9];
-        quaternion_of(frame, q);
-        rotation_of(q, R0);
-        double Lm[3] = {0, 0, 0};
-        for (ln_int k = 0; k < K; k++)
-            if (base->body_of[k] == b) {
-                const double rho[3] = {X[3 * k] - c[0], X[3 * k + 1] - c[1], X[3 * k + 2] - c[2]};
-                const double du[3] = {U[3 * k] - v[0], U[3 * k + 1] - v[1], U[3 * k + 2] - v[2]};
-                for (int i = 0; i < 3; i++)  /* r = R0^T rho: in the frame of exactly the matrix the steps use */
-                    m->r[3 * k + i] = R0[i] * rho[0] + R0[3 + i] * rho[1] + R0[6 + i] * rho[2];
-                Lm[0] += mass[k] * (rho[1] * du[2] - rho[2] * du[1]);
-                Lm[1] += mass[k] * (rho[2] * du[0] - rho[0] * du[2]);
-                Lm[2] += mass[k] * (rho[0] * du[1] - rho[1] * du[0]);
-            }
-        double *Y = m->Y_init + LN_RIGID_STATE * b;
-        for (int e = 0; e < 3; e++) {
-            Y[e] = c[e];
-            Y[3 + e] = v[e];
-            Y[10 + e] = R0[e] * Lm[0] + R0[3 + e] * Lm[1] + R0[6 + e] * Lm[2];  /* Pi = R^T L, body frame */
-        }
-        for (int i = 0; i < 4; i++) Y[6 + i] = q[i];
-        m->body_mass[b] = M;
-        m->top[b] = kind;
-        for (int e = 0; e < 3; e++) m->inertia[3 * b + e] = inertia[e];
-    }
-    for (ln_int k = 0; k < K; k++)
-        if (base->body_of[k] < 0)
-            for (int e = 0; e < 3; e++) m->r[3 * k + e] = 0.0;
-    m->rigid.n_bodies = B;
-    m->rigid.body_of = base->body_of;
-    m->rigid.r = m->r;
-    m->rigid.inertia = m->inertia;
-    m->rigid.body_mass = m->body_mass;
-    m->rigid.kind = m->top;
-    return FMU_OK;
-}
-
 /* ---- building the model -------------------------------------------------------------------------- */
 
 static double worst_violation(const ln_model *model, const double *X, ln_int *worst_link)
@@ -388,29 +202,20 @@ static double worst_violation(const ln_model *model, const double *X, ln_int *wo
     return worst;
 }
 
-/* X onto the link lengths (11) along M^-1 C(X)^T mu, then U onto (12) at the new X. */
+/* X onto the link lengths (11) along M^-1 C(X)^T mu, then U onto (12) at the new X (ln_project_state). */
 static int project_state(fmu_model *m, double *X, double *U, int positions, char *msg)
 {
-    const ln_model *model = &m->model;
-    if (model->L == 0) return FMU_OK;
-    int status = LN_OK;
-    if (positions) {
-        ln_unit_vectors_3d(model, X, m->E);
-        status = ln_factor_tension_matrix_3d(model, m->d, m->E);
-        if (status == LN_OK)
-            status = ln_project_positions_3d(model, m->d, X, m->E, PROJECTION_TOL, PROJECTION_ITERATIONS);
-        if (status != LN_OK) {
-            char label[512] = "a link";
-            if (m->d->fail_link >= 0) link_label(m->s, m->d->fail_link, label, sizeof label);
-            return fail(msg, FMU_ERROR, "the initial positions cannot be projected onto the link lengths (worst: %s, "
-                        "residual %.3g relative): the lengths R do not fit the scene's geometry", label,
-                        m->d->fail_residual);
-        }
+    const int status = ln_project_state(&m->model, m->d, X, U, positions, PROJECTION_TOL, PROJECTION_ITERATIONS, NULL);
+    if (status == LN_OK) return FMU_OK;
+    if (positions && status == LN_PROJECTION_FAILED) {
+        char label[512] = "a link";
+        if (m->d->fail_link >= 0) link_label(m->s, m->d->fail_link, label, sizeof label);
+        return fail(msg, FMU_ERROR, "the initial positions cannot be projected onto the link lengths (worst: %s, "
+                    "residual %.3g relative): the lengths R do not fit the scene's geometry", label,
+                    m->d->fail_residual);
     }
-    status = ln_project_velocities_3d(model, m->d, X, U, m->E);
-    if (status != LN_OK)
-        return fail(msg, FMU_ERROR, "the initial velocities cannot be projected onto (12) (status %d)", status);
-    return FMU_OK;
+    return fail(msg, FMU_ERROR, "the initial state cannot be projected onto (11) and (12) (native status %d: %s)",
+                status, ln_status_name(status));
 }
 
 /* The model, method and initial state for the parameters in values and integrator. At the scene's defaults
@@ -497,8 +302,10 @@ static int build(fmu_model *m, const double *values, ln_int integrator, char *ms
             result = project_state(m, X, U, 1, msg);
             if (result != FMU_OK) return result;
         }
-        result = rigid_geometry(m, mass, X, U, msg);
-        if (result != FMU_OK) return result;
+        m->rigid.n_bodies = m->n_bodies;
+        m->rigid.body_of = s->rigid->body_of;
+        if (ln_rigid_layout(K, mass, X, U, &m->rigid, m->r, m->inertia, m->body_mass, m->top, m->Y_init) != LN_OK)
+            return fail(msg, FMU_ERROR, "a rigid body has no mass");
         m->model.rigid = &m->rigid;
     }
     return FMU_OK;
@@ -583,7 +390,7 @@ void fmu_model_free(fmu_model *m)
     ln_ldl_symbolic_free(m->ldl);
     double *arrays[] = {m->value, m->applied, m->inv_m, m->accel_weight, m->R, m->inv_R, m->F_scene, m->pair_weight,
                         m->chain_diag, m->chain_off, m->r, m->inertia, m->body_mass, m->mass_full, m->gravity,
-                        m->X_init, m->U_init, m->Y_init, m->Xo, m->Uo, m->E, m->Ys};
+                        m->X_init, m->U_init, m->Y_init, m->Xo, m->Uo, m->Ys};
     for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
     free(m->top);
     free(m->position);
@@ -625,12 +432,11 @@ fmu_model *fmu_model_new(char *msg)
     m->Y_init = doubles(LN_RIGID_STATE * B);
     m->Xo = doubles(3 * K);
     m->Uo = doubles(3 * K);
-    m->E = doubles(3 * L);
     m->Ys = doubles(LN_RIGID_STATE * B);
     m->position = calloc((size_t)(L > 0 ? L : 1), sizeof(ln_int));
     if (!(m->value && m->applied && m->inv_m && m->accel_weight && m->R && m->inv_R && m->F_scene && m->pair_weight
           && m->chain_diag && m->chain_off && m->r && m->inertia && m->body_mass && m->top && m->mass_full && m->gravity
-          && m->X_init && m->U_init && m->Y_init && m->Xo && m->Uo && m->E && m->Ys && m->position)) {
+          && m->X_init && m->U_init && m->Y_init && m->Xo && m->Uo && m->Ys && m->position)) {
         fmu_model_free(m);
         fail(msg, FMU_ERROR, "out of memory");
         return NULL;

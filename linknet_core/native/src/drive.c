@@ -18,10 +18,6 @@
 #include "drive.h"
 #include "linknet.h"
 
-#define FN(name) name##_3d
-#include "stages.h"
-#undef FN
-
 enum ln_motion_kind { LN_MOTION_INPUT = 0, LN_MOTION_PIECEWISE = 1, LN_MOTION_SINE = 2 };
 
 #define PIECE_COLUMNS 14
@@ -138,25 +134,12 @@ int ln_drive_jump(const ln_model *m, const ln_method *meth, ln_data *d)
     }
     d->jumps++;
     if (m->L == 0) return LN_OK;
-    double *E = d->E0, *mu = d->mu, *rhs = d->phi;
-    if (jump_x > 0.0) {  /* the free masses follow the anchors' new positions onto (11), in the mass metric */
-        ln_unit_vectors_3d(m, X, E);
-        if ((status = ln_factor_tension_matrix_3d(m, d, E)) != LN_OK) return status;
-        if ((status = ln_project_positions_3d(m, d, X, E, meth->position_tol, meth->max_projection_iter)) != LN_OK)
-            return status;
-    }
-    /* U -= M^-1 C^T mu with A mu = C U: the closest velocities satisfying (12) relative to the anchors' new
-       velocities; the links give each driven anchor the impulse -(C^T mu)_a */
-    ln_unit_vectors_3d(m, X, E);
-    if ((status = ln_factor_tension_matrix_3d(m, d, E)) != LN_OK) return status;
-    for (ln_int l = 0; l < m->L; l++) {
-        const ln_int a = m->k1[l], b = m->k2[l];
-        double sum = 0.0;
-        for (int e = 0; e < 3; e++) sum += E[3 * l + e] * (U[3 * a + e] - U[3 * b + e]);
-        rhs[l] = sum;
-    }
-    ln_solve_tension_system_3d(m, d, rhs, mu);
-    ln_add_correction_3d(m, E, mu, -1.0, U);
+    /* the free masses follow the anchors' new positions onto (11) in the mass metric (when the anchors moved), and
+       U onto (12) relative to the anchors' new velocities: the closest velocities, U -= M^-1 C^T mu */
+    if ((status = ln_project_state(m, d, X, U, jump_x > 0.0, meth->position_tol, meth->max_projection_iter, d->mu))
+        != LN_OK)
+        return status;
+    const double *E = d->E0, *mu = d->mu;
     /* the anchors' rows of C^T mu: +mu_l E_l on k1(l), -mu_l E_l on k2(l) */
     for (ln_int l = 0; l < m->L; l++)
         for (ln_int a = 0; a < n; a++) {

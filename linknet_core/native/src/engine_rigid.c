@@ -646,4 +646,166 @@ int ln_rigid_rk_fixed_steps(const ln_model *m, const ln_method *meth, ln_data *d
     return LN_OK;
 }
 
+/* ---- the layout of the bodies (the numpy reference: linknet_core.structure.bodies) ------------------ */
+
+#define TOP_TOL 1e-12  /* principal moments equal to this (relative): a spherical or symmetric top (bodies.TOP_TOL) */
+
+/* Eigen-decomposition of a symmetric 3x3 matrix (row-major) by cyclic Jacobi rotations: eigenvalues w
+   ascending, eigenvectors the columns of V. */
+static void eigh3(const double *A_in, double *w, double *V)
+{
+    double A[9];
+    memcpy(A, A_in, sizeof A);
+    for (int i = 0; i < 9; i++) V[i] = (i % 4 == 0) ? 1.0 : 0.0;
+    for (int sweep = 0; sweep < 64; sweep++) {
+        const double off = A[1] * A[1] + A[2] * A[2] + A[5] * A[5];
+        const double diag = A[0] * A[0] + A[4] * A[4] + A[8] * A[8];
+        if (off <= 1e-40 * diag || off == 0.0) break;
+        for (int p = 0; p < 2; p++)
+            for (int q = p + 1; q < 3; q++) {
+                const double apq = A[3 * p + q];
+                if (apq == 0.0) continue;
+                const double theta = (A[3 * q + q] - A[3 * p + p]) / (2.0 * apq);
+                const double t = (theta >= 0.0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
+                const double c = 1.0 / sqrt(t * t + 1.0), sn = t * c;
+                for (int k = 0; k < 3; k++) {
+                    const double akp = A[3 * k + p], akq = A[3 * k + q];
+                    A[3 * k + p] = c * akp - sn * akq;
+                    A[3 * k + q] = sn * akp + c * akq;
+                }
+                for (int k = 0; k < 3; k++) {
+                    const double apk = A[3 * p + k], aqk = A[3 * q + k];
+                    A[3 * p + k] = c * apk - sn * aqk;
+                    A[3 * q + k] = sn * apk + c * aqk;
+                }
+                for (int k = 0; k < 3; k++) {
+                    const double vkp = V[3 * k + p], vkq = V[3 * k + q];
+                    V[3 * k + p] = c * vkp - sn * vkq;
+                    V[3 * k + q] = sn * vkp + c * vkq;
+                }
+            }
+    }
+    for (int i = 0; i < 3; i++) w[i] = A[4 * i];
+    for (int i = 0; i < 2; i++)  /* ascending, columns with them */
+        for (int j = 0; j < 2 - i; j++)
+            if (w[j] > w[j + 1]) {
+                const double tw = w[j];
+                w[j] = w[j + 1];
+                w[j + 1] = tw;
+                for (int k = 0; k < 3; k++) {
+                    const double tv = V[3 * k + j];
+                    V[3 * k + j] = V[3 * k + j + 1];
+                    V[3 * k + j + 1] = tv;
+                }
+            }
+}
+
+/* Unit quaternion (w, x, y, z) of a rotation matrix (row-major): Shepperd's branch by the largest term. */
+static void quaternion_of(const double *R, double *q)
+{
+    const double t = R[0] + R[4] + R[8], d0 = R[0], d1 = R[4], d2 = R[8];
+    const double terms[4] = {t, d0, d1, d2};
+    int branch = 0;
+    for (int i = 1; i < 4; i++)
+        if (terms[i] > terms[branch]) branch = i;
+    const double arg[4] = {t, d0 - d1 - d2, d1 - d0 - d2, d2 - d0 - d1};
+    const double s = 2.0 * sqrt(fmax(1.0 + arg[branch], 0.0));
+    const double a = R[7] - R[5], b = R[2] - R[6], c = R[3] - R[1];
+    const double e = R[1] + R[3], f = R[2] + R[6], g = R[5] + R[7];
+    switch (branch) {
+    case 0: q[0] = s / 4; q[1] = a / s; q[2] = b / s; q[3] = c / s; break;
+    case 1: q[0] = a / s; q[1] = s / 4; q[2] = e / s; q[3] = f / s; break;
+    case 2: q[0] = b / s; q[1] = e / s; q[2] = s / 4; q[3] = g / s; break;
+    default: q[0] = c / s; q[1] = f / s; q[2] = g / s; q[3] = s / 4; break;
+    }
+    const double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    for (int i = 0; i < 4; i++) q[i] /= n;
+}
+
+int ln_rigid_layout(ln_int K, const double *mass, const double *X, const double *U, struct ln_rigid_model *rigid,
+                    double *r, double *inertia_out, double *body_mass, ln_int *top, double *Y0)
+{
+    const ln_int B = rigid->n_bodies, *body_of = rigid->body_of;
+    for (ln_int b = 0; b < B; b++) {
+        double M = 0.0, c[3] = {0, 0, 0}, v[3] = {0, 0, 0}, I[9] = {0};
+        for (ln_int k = 0; k < K; k++)
+            if (body_of[k] == b) {
+                M += mass[k];
+                for (int e = 0; e < 3; e++) {
+                    c[e] += mass[k] * X[3 * k + e];
+                    v[e] += mass[k] * U[3 * k + e];
+                }
+            }
+        if (!(M > 0.0)) return LN_BAD_ARGUMENT;
+        for (int e = 0; e < 3; e++) {
+            c[e] /= M;
+            v[e] /= M;
+        }
+        for (ln_int k = 0; k < K; k++)
+            if (body_of[k] == b) {
+                const double rho[3] = {X[3 * k] - c[0], X[3 * k + 1] - c[1], X[3 * k + 2] - c[2]};
+                const double sq = rho[0] * rho[0] + rho[1] * rho[1] + rho[2] * rho[2];
+                for (int i = 0; i < 3; i++)
+                    for (int j = 0; j < 3; j++)
+                        I[3 * i + j] += -mass[k] * rho[i] * rho[j] + (i == j ? mass[k] * sq : 0.0);
+            }
+        double w[3], axes[9];
+        eigh3(I, w, axes);
+        const double scale = TOP_TOL * w[2];
+        const int spherical = w[2] - w[0] <= scale;
+        const int first_pair_equal = w[1] - w[0] <= scale;
+        const int symmetric = first_pair_equal || w[2] - w[1] <= scale;
+        const int kind = spherical ? LN_SPHERICAL_TOP : symmetric ? LN_SYMMETRIC_TOP : LN_ASYMMETRIC_TOP;
+        const int order[3] = {kind == LN_SYMMETRIC_TOP && !first_pair_equal ? 1 : 0,
+                              kind == LN_SYMMETRIC_TOP && !first_pair_equal ? 2 : 1,
+                              kind == LN_SYMMETRIC_TOP && !first_pair_equal ? 0 : 2};
+        double frame[9], inertia[3];
+        for (int j = 0; j < 3; j++) {
+            inertia[j] = w[order[j]];
+            for (int i = 0; i < 3; i++) frame[3 * i + j] = axes[3 * i + order[j]];
+        }
+        if (kind == LN_SYMMETRIC_TOP) inertia[0] = inertia[1] = 0.5 * (inertia[0] + inertia[1]);
+        if (kind == LN_SPHERICAL_TOP) {
+            for (int i = 0; i < 9; i++) frame[i] = (i % 4 == 0) ? 1.0 : 0.0;
+            inertia[0] = inertia[1] = inertia[2] = (w[0] + w[1] + w[2]) / 3.0;
+        }
+        const double det = frame[0] * (frame[4] * frame[8] - frame[5] * frame[7])
+                           - frame[1] * (frame[3] * frame[8] - frame[5] * frame[6])
+                           + frame[2] * (frame[3] * frame[7] - frame[4] * frame[6]);
+        if (det < 0.0)
+            for (int i = 0; i < 3; i++) frame[3 * i] = -frame[3 * i];
+        double *Y = Y0 + LN_RIGID_STATE * b, R0[9];
+        quaternion_of(frame, Y + COL_Q);
+        rotation_matrices(1, Y, R0);  /* exactly the matrix the steps use */
+        double Lm[3] = {0, 0, 0};
+        for (ln_int k = 0; k < K; k++)
+            if (body_of[k] == b) {
+                const double rho[3] = {X[3 * k] - c[0], X[3 * k + 1] - c[1], X[3 * k + 2] - c[2]};
+                const double du[3] = {U[3 * k] - v[0], U[3 * k + 1] - v[1], U[3 * k + 2] - v[2]};
+                for (int i = 0; i < 3; i++)  /* r = R0^T rho: in the frame of exactly the matrix the steps use */
+                    r[3 * k + i] = R0[i] * rho[0] + R0[3 + i] * rho[1] + R0[6 + i] * rho[2];
+                Lm[0] += mass[k] * (rho[1] * du[2] - rho[2] * du[1]);
+                Lm[1] += mass[k] * (rho[2] * du[0] - rho[0] * du[2]);
+                Lm[2] += mass[k] * (rho[0] * du[1] - rho[1] * du[0]);
+            }
+        for (int e = 0; e < 3; e++) {
+            Y[e] = c[e];
+            Y[3 + e] = v[e];
+            Y[10 + e] = R0[e] * Lm[0] + R0[3 + e] * Lm[1] + R0[6 + e] * Lm[2];  /* Pi = R^T L, body frame */
+        }
+        body_mass[b] = M;
+        top[b] = kind;
+        for (int e = 0; e < 3; e++) inertia_out[3 * b + e] = inertia[e];
+    }
+    for (ln_int k = 0; k < K; k++)
+        if (body_of[k] < 0)
+            for (int e = 0; e < 3; e++) r[3 * k + e] = 0.0;
+    rigid->r = r;
+    rigid->inertia = inertia_out;
+    rigid->body_mass = body_mass;
+    rigid->kind = top;
+    return LN_OK;
+}
+
+
 size_t ln_rigid_model_size(void) { return sizeof(struct ln_rigid_model); }

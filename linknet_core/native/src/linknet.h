@@ -273,6 +273,14 @@ LN_API int ln_base_forces(const ln_model *m, const ln_data *d, double *F_base);
    failed or gave non-finite values. */
 LN_API int ln_drive_at(const ln_model *m, ln_data *d, double t, double *P, double *V, double *A);
 
+/* stages/projections.c: a state (K,3) onto the manifolds. With positions, X onto (11) along M^-1 C(X)^T mu from X
+   itself (the closest point in the mass metric; relative tolerance tol, at most max_iter iterations); then U onto
+   (12) at the new X, U -= M^-1 C^T mu with A(X) mu = C U. mu: NULL, or (L) where the velocity projection's
+   multipliers are kept (the links give an anchored mass k the impulse -(C^T mu)_k). LN_OK, or the status of the
+   projection or factorisation that failed (d->fail_* then say where). Scratch: d->E0, d->phi and the projections'. */
+LN_API int ln_project_state(const ln_model *m, ln_data *d, double *X, double *U, int positions, double tol,
+                            ln_int max_iter, double *mu);
+
 /* Equal steps no longer than dt that land on the target: how many (a whole number up to round-off is that
    number, not one more). */
 LN_API ln_int ln_fixed_step_count(double span, double dt);

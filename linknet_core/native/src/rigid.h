@@ -79,6 +79,16 @@ LN_API int ln_rigid_set_state(const ln_model *m, ln_data *d, const double *Y);
    left as it is. LN_OK, LN_NON_FINITE or LN_BAD_ARGUMENT (not a Runge-Kutta method, n < 1 or h <= 0). */
 LN_API int ln_rigid_rk_fixed_steps(const ln_model *m, const ln_method *meth, ln_data *d, double h, ln_int n);
 
+/* The layout of the bodies frozen at the mass state X, U (K,3) with masses mass (K) (anchors' entries unused): per
+   body its mass, principal moments and top kind, its frame from the principal axes (right-handed; a symmetric
+   top's distinct axis third, a spherical top the space axes), the masses' body-frame positions r about the centre
+   of mass (in the frame of exactly the rotation matrix the steps use; zero off the bodies) and the initial body
+   states Y0 (B,13). rigid gives n_bodies and body_of; its r, inertia, body_mass and kind are set to point to the
+   arrays given here ((K,3), (B,3), (B), (B)), which are filled. LN_OK, or LN_BAD_ARGUMENT when a body has no mass.
+   linknet_core.structure.bodies is the numpy reference (body_geometry, fit_bodies). */
+LN_API int ln_rigid_layout(ln_int K, const double *mass, const double *X, const double *U, struct ln_rigid_model *rigid,
+                           double *r, double *inertia, double *body_mass, ln_int *kind, double *Y0);
+
 /* sizeof(struct ln_rigid_model): the ctypes mirror's size is checked against it */
 LN_API size_t ln_rigid_model_size(void);
 

@@ -490,4 +490,34 @@ int FN(ln_project_velocities)(const ln_model *m, ln_data *d, const double *X, do
     return project_velocities(m, d, X, U, E);
 }
 
+#if DIM == 3
+int ln_project_state(const ln_model *m, ln_data *d, double *X, double *U, int positions, double tol, ln_int max_iter,
+                     double *mu)
+{
+    if (m->L == 0) return LN_OK;
+    double *E = d->E0;
+    int status;
+    if (positions) {  /* along M^-1 C(X)^T mu from X itself: the closest point of (11) in the mass metric */
+        FN(ln_unit_vectors)(m, X, E);
+        if ((status = FN(ln_factor_tension_matrix)(m, d, E)) != LN_OK) return status;
+        if ((status = project_positions(m, d, X, E, tol, max_iter)) != LN_OK) return status;
+    }
+    if (!mu) return project_velocities(m, d, X, U, E);
+    /* the multipliers kept: A(X) mu = C U solved on the general factorisation (a chain's sweeps apply each
+       multiplier as soon as it is known and keep none) */
+    FN(ln_unit_vectors)(m, X, E);
+    if ((status = FN(ln_factor_tension_matrix)(m, d, E)) != LN_OK) return status;
+    double *rhs = d->phi;
+    for (ln_int l = 0; l < m->L; l++) {
+        const ln_int a = m->k1[l], b = m->k2[l];
+        double sum = 0.0;
+        for (int e = 0; e < 3; e++) sum += E[3 * l + e] * (U[3 * a + e] - U[3 * b + e]);
+        rhs[l] = sum;
+    }
+    FN(ln_solve_tension_system)(m, d, rhs, mu);
+    FN(ln_add_correction)(m, E, mu, -1.0, U);
+    return LN_OK;
+}
+#endif
+
 LN_SCALAR_LOOPS_END
