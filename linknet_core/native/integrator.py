@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import ctypes
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +24,9 @@ _explain = lib.lib.ln_explain  # void ln_explain(model, method, data, status, t,
 _explain.restype = None
 _explain.argtypes = [lib.Model_p, lib.Method_p, lib.Data_p, ctypes.c_int, ctypes.c_double, ctypes.c_double, lib.ln_int,
                      ctypes.c_char_p, ctypes.c_char_p, ctypes.c_size_t]
+
+
+_NONE = np.zeros(0, np.int64)  # no input-driven anchors (never written into)
 
 
 @dataclass
@@ -70,8 +74,9 @@ class NativeIntegrator(Integrator):
         # driven anchors: scene time 0 is t0; input-driven anchors are rows input_slots of the drive arrays
         self._d.drive_t0 = self._d.drive_hold_t = t0
         self.scene = scene = model.scene  # the model holds it weakly
-        self._input_slots = np.flatnonzero([motion.kind == "input" for motion in scene.motions])
-        self._input_labels = [scene.mass_label(int(k)) for k in scene.input_driven_indices]
+        self._input_slots = (np.flatnonzero([motion.kind == "input" for motion in scene.motions]) if scene.motions
+                             else _NONE)
+        self._input_labels = [scene.mass_label(int(k)) for k in scene.input_driven_indices] if scene.motions else []
         self._motion = None  # the user's callable of t, when the input-driven anchors follow one
         self._motion_error = None  # what it raised inside the last advance
         self._callback = None  # the C callback that calls it, made when first needed
@@ -175,18 +180,20 @@ class NativeIntegrator(Integrator):
         state.X, state.U, state.t = X, U, t_target
         self._out = (X, U)
 
-    def sample(self, state, times, F_input, max_steps: int, X, U, T, advance_first: bool) -> None:
+    def sample(self, state, times, F_input, max_steps: int, X, U, T, diagnostics, advance_first: bool) -> None:
         """Samples at ``times`` (advance to each, then the outputs there) with F_input held, in one call into C
-        (ln_sample), into X, U (n,K,3) and T (n,L), C-contiguous float64. Sample 0 is taken at the current state
-        unless ``advance_first``. On a failure the samples before it are written, ``state`` is where the run
-        stopped, and the SolverError says why, as ``advance`` and ``outputs`` would."""
+        (ln_sample), into X, U (n,K,3) and T (n,L), and unless ``diagnostics`` is None each sample's energy,
+        residuals of (11) and (12) and kinetic energy into its row of ``diagnostics`` (n,4) (needs
+        ``diagnostics_in_c``); every array C-contiguous float64, ``times`` too. Sample 0 is taken at the current
+        state unless ``advance_first``. On a failure the samples before it are written, ``state`` is where the
+        run stopped, and the SolverError says why, as ``advance`` and ``outputs`` would."""
         self._load(state, F_input)
         t_before = state.t
-        times = np.ascontiguousarray(times, np.float64)
         written = lib.ln_int(0)
-        status = lib.sample(self._model_p, self._method_p, self._data_p, lib.pointer(times), times.size,
-                            int(advance_first), max_steps, lib.pointer(X), lib.pointer(U), lib.pointer(T),
-                            ctypes.byref(written))
+        ref = lib.first_double
+        status = lib.sample(self._model_p, self._method_p, self._data_p, ref(times), times.size, int(advance_first),
+                            max_steps, ref(X), ref(U), ref(T), None if diagnostics is None else self._energy_terms,
+                            None if diagnostics is None else ref(diagnostics), written)
         if written.value or status != lib.OK:
             X_now, U_now = self.data.X.copy(), self.data.U.copy()
             state.X, state.U, state.t = X_now, U_now, float(self._d.t)
@@ -199,6 +206,15 @@ class NativeIntegrator(Integrator):
             raise SolverError(f"the tensions (25)-(26) cannot be evaluated at this state: {lib.STATUS[status]}")
         raise SolverError(self.explain(status, float(times[i - 1]) if i > 0 else t_before, float(times[i]),
                                        max_steps))
+
+    @property
+    def diagnostics_in_c(self) -> bool:
+        """Whether ``sample`` can fill the samples' diagnostics (a scene whose potentials the core knows)."""
+        return self._energy_terms is not None
+
+    @functools.cached_property
+    def _energy_terms(self):
+        return self.model.energy_terms
 
     def tensions(self, X, U, F_input=None) -> np.ndarray:
         """T of (25)-(26) at (X, U) with F_input held (minimum-norm where A is singular)."""

@@ -13,7 +13,7 @@ import functools
 import weakref
 
 import numpy as np
-from linknet_core.dynamics.forces import has_velocity_dependent_forces
+from linknet_core.dynamics.forces import ELEMENT_KINDS, has_velocity_dependent_forces
 from linknet_core.integrators.runge_kutta import MAX_FACTOR, MIN_FACTOR, SAFETY
 from linknet_core.structure.topology import (PLANE_TOL, RETRY_SINGULAR_RCOND, SINGULAR_RCOND, analyse, kept_per_scene,
                                             link_pairs)
@@ -196,6 +196,28 @@ class NativeModel:
         """The scene (held weakly; whoever uses the model holds the scene)."""
         return self._scene()
 
+    @functools.cached_property
+    def energy_terms(self):
+        """ln_energy_terms of the scene: what a sample's diagnostics (ln_sample_diagnostics) need beyond the
+        model, as the numpy reference forms them (linknet_core.dynamics.forces.potential_energy, kinetic_energy).
+        None when a force element with a potential other than a spring's is present: the reference computes that
+        scene's energy."""
+        scene = self.scene
+        elements = scene.force_elements
+        if any(ELEMENT_KINDS[kind].potential is not None and kind != "spring" for kind in elements.kinds):
+            return None
+        free = ~np.asarray(scene.fixed, bool)
+        springs, parameters = elements.of_kind("spring")
+        arrays = (float_array(scene.mass),
+                  float_array(np.where(free, scene.mass, 0.0)[:, None] * scene.gravity[None, :]),
+                  float_array(scene.force), int_array(springs[:, :2]), float_array(parameters[:, :2]))
+        terms = lib.EnergyTerms()
+        terms.mass, terms.weight, terms.force = (pointer(a) for a in arrays[:3])
+        terms.n_springs = springs.shape[0]
+        terms.spring_mass, terms.spring_param = pointer(arrays[3], lib.ln_int), pointer(arrays[4])
+        terms.keep = arrays  # the arrays the struct points into live as long as it
+        return terms
+
     def __del__(self):
         if getattr(self, "_ldl", None):
             self._ldl_free(self._ldl)
@@ -303,19 +325,26 @@ class NativeData:
         self._ptr = lib.data_new(model.pointer, n_stages)
         if not self._ptr:
             raise MemoryError("the native core could not allocate its data (out of memory)")
-        d = self.struct = self._ptr.contents
-        K, L = model.K, model.L
-        self.X = np.ctypeslib.as_array(d.X, (K, 3)) if K else np.zeros((0, 3))
-        self.U = np.ctypeslib.as_array(d.U, (K, 3)) if K else np.zeros((0, 3))
-        self.F_input = np.ctypeslib.as_array(d.F_input, (K, 3)) if K else np.zeros((0, 3))
-        self.T = np.ctypeslib.as_array(d.T, (L,)) if L else np.zeros(0)
-        self.acc = np.ctypeslib.as_array(d.acc, (K, 3)) if K else np.zeros((0, 3))
-        n_fixed = int(model.struct.n_fixed)
-        self.reaction = np.ctypeslib.as_array(d.reaction, (n_fixed, 3)) if n_fixed else np.zeros((0, 3))
-        n_driven = int(model.struct.n_driven)
-        views = [np.ctypeslib.as_array(p, (n_driven, 3)) if n_driven else np.zeros((0, 3))
-                 for p in (d.drive_P, d.drive_V, d.drive_A, d.impulse)]
-        self.drive_P, self.drive_V, self.drive_A, self.impulse = views
+        self.struct = self._ptr.contents
+
+    # the views of C's arrays, each made when first used (a Simulator uses a few of them; making one costs ~1 us)
+    def _view(self, field: str, rows: int, columns: int = 0) -> np.ndarray:
+        shape = (rows, columns) if columns else (rows,)
+        if not rows:
+            return np.zeros(shape)
+        address = ctypes.c_void_p.from_address(ctypes.addressof(self.struct) + getattr(lib.Data, field).offset).value
+        return np.frombuffer((ctypes.c_double * (rows * max(columns, 1))).from_address(address)).reshape(shape)
+
+    X = functools.cached_property(lambda self: self._view("X", self.model.K, 3))
+    U = functools.cached_property(lambda self: self._view("U", self.model.K, 3))
+    F_input = functools.cached_property(lambda self: self._view("F_input", self.model.K, 3))
+    T = functools.cached_property(lambda self: self._view("T", self.model.L))
+    acc = functools.cached_property(lambda self: self._view("acc", self.model.K, 3))
+    reaction = functools.cached_property(lambda self: self._view("reaction", int(self.model.struct.n_fixed), 3))
+    drive_P = functools.cached_property(lambda self: self._view("drive_P", int(self.model.struct.n_driven), 3))
+    drive_V = functools.cached_property(lambda self: self._view("drive_V", int(self.model.struct.n_driven), 3))
+    drive_A = functools.cached_property(lambda self: self._view("drive_A", int(self.model.struct.n_driven), 3))
+    impulse = functools.cached_property(lambda self: self._view("impulse", int(self.model.struct.n_driven), 3))
 
     def __del__(self):
         if getattr(self, "_ptr", None):

@@ -4,6 +4,7 @@ from __future__ import annotations
 import copy
 import functools
 import math
+import os
 import sys
 import time
 import warnings
@@ -19,9 +20,9 @@ from linknet_core.integrators import make_integrator, method_settings, real_numb
 from linknet_core.native.integrator import NativeIntegrator
 from linknet_core.native.model import native_model
 from linknet_core.native.rigid import NativeRigidIntegrator
-from linknet_core.simulator.specialisation import RIGID, STATIC, choose_specialisation
+from linknet_core.simulator.specialisation import RIGID, STATIC, Specialisation, choose_specialisation
 from linknet_core.structure.topology import kept_per_scene
-from linknet_core.scene.description import Scene
+from linknet_core.scene.description import Scene, load_scene
 from linknet_core.state import State
 
 DEFAULT_LENGTH_TOL = 1e-6  # relative violation of (11) accepted in a scene's initial positions
@@ -123,6 +124,54 @@ def _kept_initial_state(scene: Scene, dyn: Dynamics, project_positions: bool | N
     return X.copy(), U.copy(), report
 
 
+def as_scene(scene) -> Scene:
+    """A Scene as given, or the scene file at a path (str or os.PathLike), read by load_scene (whose errors name
+    the file and the rule); anything else is refused naming the argument."""
+    if isinstance(scene, Scene):
+        return scene
+    if isinstance(scene, (str, os.PathLike)):
+        return load_scene(scene)
+    text = repr(scene)
+    raise SolverError(f"scene must be a Scene or the path of a scene file (str or os.PathLike), got "
+                      f"{type(scene).__name__} {text if len(text) <= 80 else text[:77] + '...'}")
+
+
+def _settings_key(method, dt, rtol, atol, project_initial, length_tol, backend, rhs_kernel, specialise):
+    """What a Simulator's set-up depends on beyond its scene, as a key of what is kept per scene object (each value
+    with its type, so that True and 1 or 1e-3 and numpy's 1e-3 are told apart), or None when a value cannot be a key
+    (the set-up is then made afresh)."""
+    key = ("simulator set-up", method, backend, rhs_kernel,
+           *((type(v), v) for v in (dt, rtol, atol, project_initial, length_tol, specialise)))
+    try:
+        hash(key)
+    except TypeError:
+        return None
+    return key
+
+
+def _setup(scene: Scene, dyn: Dynamics, method, dt, rtol, atol, project_initial, length_tol, backend, specialise,
+           own_dynamics: bool):
+    """What a Simulator's settings decide for its scene before anything is built: the method's class and validated
+    settings, the initial state (read-only arrays) and its report, the backend and the specialisation. Nothing in it
+    refers to the scene (it is kept per scene object)."""
+    method_cls, dt, rtol, atol = method_settings(method, dt, rtol, atol)
+    if own_dynamics:
+        X0, U0, report = _kept_initial_state(scene, dyn, project_initial, length_tol)
+    else:
+        X0, U0, report = prepare_initial_state(scene, dyn, project_positions=project_initial, length_tol=length_tol)
+    # one backend, chosen here before anything is built: the native core, or the numpy reference (asked for, or
+    # implied by a casadi right-hand side, which is a variant of the numpy Dynamics)
+    chosen = "numpy" if backend == "numpy" or dyn.rhs_kernel != "numpy" else "native"
+    if chosen == "numpy":
+        specialisation = choose_specialisation(scene, dyn, method, enabled=False)
+    else:
+        specialisation = choose_specialisation(scene, dyn, method, enabled=specialise, tolerances=(rtol, atol))
+        if specialisation.kind == STATIC:
+            U0 = np.zeros_like(U0)  # the only velocity (12) allows where nothing can move
+    X0.flags.writeable = U0.flags.writeable = False
+    return method_cls, dt, rtol, atol, X0, U0, report, chosen, specialisation
+
+
 def _as_time(value, what: str) -> float:
     """A time given as any real number (Python or numpy scalar, 0-d array), as a float; refused otherwise."""
     x = real_number(value)
@@ -158,7 +207,7 @@ def _all_finite(*arrays: np.ndarray) -> bool:
 
 
 class Simulator:
-    """One scene, one integrator, one state: the stepping interface.
+    """One scene (a Scene, or the path of a scene file), one integrator, one state: the stepping interface.
 
     ``advance(t_next, F_input)`` integrates from the current time to ``t_next`` with the input forces
     held constant (zero-order hold), which is exactly what an FMI co-simulation step does.
@@ -169,12 +218,13 @@ class Simulator:
     keeps the point-mass path.
     """
 
-    def __init__(self, scene: Scene, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
+    def __init__(self, scene: Scene | str | os.PathLike, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
                  atol: float | None = None, *, project_initial: bool | None = None,
                  length_tol: float = DEFAULT_LENGTH_TOL, max_steps_per_call: int = 100_000_000,
                  dynamics: Dynamics | None = None, backend: str = "auto", rhs_kernel: str = "numpy",
                  specialise: bool = True, t0: float = 0.0):
-        t0 = _as_time(t0, "the start time t0")
+        scene = as_scene(scene)
+        t0 = t0 if type(t0) is float else _as_time(t0, "the start time t0")
         if not math.isfinite(t0):
             raise SolverError(f"the start time t0 must be finite, got {t0!r}")
         if backend not in BACKENDS:
@@ -182,37 +232,37 @@ class Simulator:
         self.scene = scene
         self.dyn = dynamics or Dynamics(scene, rhs_kernel=rhs_kernel)
         self.method = method
-        method_cls, dt, rtol, atol = method_settings(method, dt, rtol, atol)
-        if dynamics is None:
-            X0, U0, self.initial_report = _kept_initial_state(scene, self.dyn, project_initial, length_tol)
-        else:
-            X0, U0, self.initial_report = prepare_initial_state(scene, self.dyn, project_positions=project_initial,
-                                                                length_tol=length_tol)
-        # one backend, chosen here before anything is built: the native core, or the numpy reference (asked
-        # for, or implied by a casadi right-hand side, which is a variant of the numpy Dynamics)
-        self.backend = "numpy" if backend == "numpy" or self.dyn.rhs_kernel != "numpy" else "native"
+        settings = None if dynamics is not None else _settings_key(method, dt, rtol, atol, project_initial, length_tol,
+                                                                   backend, rhs_kernel, specialise)
+        if settings is None:
+            setup = _setup(scene, self.dyn, method, dt, rtol, atol, project_initial, length_tol, backend, specialise,
+                           dynamics is None)
+        else:  # what these settings decide for this scene, decided once per scene object
+            setup = kept_per_scene(scene, settings, lambda s: _setup(s, self.dyn, method, dt, rtol, atol,
+                                                                    project_initial, length_tol, backend, specialise,
+                                                                    True))
+        method_cls, dt, rtol, atol, X0, U0, self.initial_report, self.backend, specialisation = setup
+        self.specialisation = Specialisation(specialisation.kind, specialisation.reason, specialisation.bodies,
+                                             list(specialisation.notes), specialisation.tolerances)  # its own notes
         if self.backend == "numpy":
-            self.specialisation = choose_specialisation(scene, self.dyn, method, enabled=False)
             self.integrator = make_integrator(method, self.dyn, dt=dt, rtol=rtol, atol=atol)
-            if scene.driven.any():
+            if scene.motions:
                 self.integrator.drive = AnchorDrive(scene, t0)
+        elif self.specialisation.kind == RIGID:
+            self.integrator = NativeRigidIntegrator(self.dyn, self.specialisation.bodies, method_cls, X0, U0,
+                                                    dt=dt, rtol=rtol, atol=atol)
+            X0, U0 = self.integrator.initial_state
+            self.specialisation.notes.extend(self.integrator.notes)
         else:
-            self.specialisation = choose_specialisation(scene, self.dyn, method, enabled=specialise,
-                                                        tolerances=(rtol, atol))
-            if self.specialisation.kind == RIGID:
-                self.integrator = NativeRigidIntegrator(self.dyn, self.specialisation.bodies, method_cls, X0, U0,
-                                                        dt=dt, rtol=rtol, atol=atol)
-                X0, U0 = self.integrator.initial_state
-                self.specialisation.notes.extend(self.integrator.notes)
-            else:
-                self.integrator = NativeIntegrator(native_model(scene, self.dyn.structure), method_cls, dt=dt,
-                                                   rtol=rtol, atol=atol, static=self.specialisation.kind == STATIC,
-                                                   t0=t0)
-                if self.specialisation.kind == STATIC:
-                    U0 = np.zeros_like(U0)  # the only velocity (12) allows where nothing can move
+            self.integrator = NativeIntegrator(native_model(scene, self.dyn.structure), method_cls, dt=dt,
+                                               rtol=rtol, atol=atol, static=self.specialisation.kind == STATIC, t0=t0)
         # the scene is autonomous (no force depends on t), so starting at t0 is the scene's motion shifted in time
+        # (the initial arrays are never written into: every advance replaces the state's arrays, and the state
+        # handed out is a copy)
         self._initial = State(t0, X0, U0)
-        self._initial_internals = copy.deepcopy(self.integrator.internals())
+        internals = self.integrator.internals()
+        # the native point-mass integrator hands out internals of their own (copies of its data); others may share
+        self._initial_internals = internals if type(self.integrator) is NativeIntegrator else copy.deepcopy(internals)
         self.max_steps_per_call = max_steps_per_call
         self.state = self._initial.copy()
 
@@ -377,24 +427,33 @@ class Simulator:
             out["impulse"] = self.anchor_report()["impulse"]
         return out
 
-    def sample(self, times, F_input, X: np.ndarray, U: np.ndarray, T: np.ndarray, advance_first: bool = True) -> None:
+    def sample(self, times, F_input, X: np.ndarray, U: np.ndarray, T: np.ndarray, advance_first: bool = True,
+               diagnostics: np.ndarray | None = None) -> None:
         """What ``advance(t_i, F_input)`` then ``outputs(F_input)`` do at each of ``times``, in one call into the
         native core (the point-mass path, no driven anchors: see ``samples_in_one_call``): X[i], U[i], T[i] of each
-        sample into X, U (n,K,3) and T (n,L) (C-contiguous float64). Sample 0 is taken at the current state unless
-        ``advance_first``. On a failure the samples before it are written and the SolverError is raised."""
+        sample into X, U (n,K,3) and T (n,L), and, unless ``diagnostics`` is None, its energy, residuals of (11) and
+        (12) and kinetic energy into diagnostics[i] (n,4) (where ``diagnostics_in_one_call``): the values
+        Dynamics.energy, constraint_residual, velocity_residual and dynamics.forces.kinetic_energy give. Every array
+        C-contiguous float64, ``times`` too. Sample 0 is taken at the current state unless ``advance_first``. On a
+        failure the samples before it are written and the SolverError is raised."""
         F = self.check_input(F_input)
         try:
-            self.integrator.sample(self.state, times, F, self.max_steps_per_call, X, U, T, advance_first)
+            self.integrator.sample(self.state, times, F, self.max_steps_per_call, X, U, T, diagnostics, advance_first)
         except SolverError as exc:
             if F is None:
                 raise
             raise SolverError(f"{exc}{self._input_note(F)}") from None
 
     @property
+    def diagnostics_in_one_call(self) -> bool:
+        """Whether ``sample`` can fill the samples' diagnostics too."""
+        return self.samples_in_one_call and self.integrator.diagnostics_in_c
+
+    @property
     def samples_in_one_call(self) -> bool:
         """Whether ``sample`` is available: the native point-mass path (free rigid bodies and the numpy reference
         step from Python) of a scene without driven anchors."""
-        return type(self.integrator) is NativeIntegrator and not self.scene.driven.any()
+        return type(self.integrator) is NativeIntegrator and not self.scene.motions  # one motion per driven anchor
 
     def anchor_report(self) -> dict:
         """The driven anchors' jump at the start of the last advance: "impulse" (n_driven, 3), what the links gave
@@ -505,12 +564,12 @@ class Result:
                 f"min tension = {float(np.min(self.T)) if self.T.size else 0.0:.6g} N")
 
 
-def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
+def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
              atol: float | None = None, n_out: int | None = None, output_dt: float | None = None,
              forces=None, progress: bool | None = None, project_initial: bool | None = None,
              backend: str = "auto", rhs_kernel: str = "numpy", specialise: bool = True, motions: dict | None = None,
              anchors=None) -> Result:
-    """Simulate ``scene`` from t = 0 to ``t_end``.
+    """Simulate ``scene`` (a Scene, or the path of a scene file) from t = 0 to ``t_end``.
 
     ``forces``: None, a (K,3) array held constant, or a callable ``f(t) -> (K,3)`` evaluated at each
     output time and held until the next (piecewise constant, as an FMI master does). Outputs are taken
@@ -521,14 +580,16 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
     input-driven ones: a callable ``f(t) -> (P, V, A)`` followed wherever the integrator needs it, or (P, V, A)
     held as P + V t + A t^2/2 from t = 0.
     """
-    t_end_value = real_number(t_end)
+    scene = as_scene(scene)
+    t_end_value = t_end if type(t_end) is float else real_number(t_end)
     if t_end_value is None or not (math.isfinite(t_end_value) and t_end_value > 0):
         raise SolverError(f"t_end must be a positive finite time, got {t_end!r}")
     t_end = t_end_value
-    if n_out is not None and (isinstance(n_out, bool) or not isinstance(n_out, (int, np.integer)) or n_out < 2):
+    if n_out is not None and not (type(n_out) is int and n_out >= 2) and (
+            isinstance(n_out, bool) or not isinstance(n_out, (int, np.integer)) or n_out < 2):
         raise SolverError(f"n_out must be a whole number >= 2 (the samples at 0 and t_end at least), got {n_out!r}")
     if output_dt is not None:
-        output_dt_value = real_number(output_dt)
+        output_dt_value = output_dt if type(output_dt) is float else real_number(output_dt)
         if output_dt_value is None or not (math.isfinite(output_dt_value) and output_dt_value > 0):
             raise SolverError(f"output_dt must be a positive finite time, got {output_dt!r}")
         output_dt = output_dt_value
@@ -538,10 +599,9 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
                     backend=backend, rhs_kernel=rhs_kernel, specialise=specialise)
     anchor_hold = sim.check_anchors(anchors)
     if output_dt is not None:
-        n = max(1, int(round(t_end / output_dt)))
-        times = np.linspace(0.0, t_end, n + 1)
+        times = _output_times(t_end, max(1, int(round(t_end / output_dt))) + 1)
     else:
-        times = np.linspace(0.0, t_end, 201 if n_out is None else int(n_out))
+        times = _output_times(t_end, 201 if n_out is None else int(n_out))
     if callable(forces):
         force_at = forces
     else:
@@ -552,30 +612,40 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
     X = np.empty((n, K, 3))
     U = np.empty((n, K, 3))
     T = np.empty((n, L))
+    in_one_call = not callable(forces) and sim.samples_in_one_call
+    # the samples' diagnostics from the native core as it samples, where it can: one row (energy, residual of (11),
+    # of (12), kinetic energy) per sample
+    diagnostics = np.empty((n, 4)) if in_one_call and sim.integrator.diagnostics_in_c else None
     # progress on stderr: always with progress=True, never with False; by default (None) on a terminal once the run
     # has taken a second
     auto = progress is None
-    show = sys.stderr.isatty() if auto else bool(progress)
+    show = None if auto else bool(progress)
     drawn = False
     start = time.perf_counter()
     last_print = start
     done = 0
     try:
-        if sim.samples_in_one_call and not callable(forces):
+        if in_one_call:
             # a held input and nothing else called from Python per sample: the samples in calls into C of about a
-            # tenth of a second each (the first takes sample 0 alone), so that Ctrl-C and the progress bar are
-            # answered as promptly as sample by sample
-            chunk = 1
+            # tenth of a second each (the first takes samples 0 and 1, one output interval, as the loop below
+            # does between two looks at Ctrl-C), so that Ctrl-C and the progress bar are answered as promptly as
+            # sample by sample
+            F = force_at(0.0)
+            chunk = 2
             while done < n:
                 stop = min(n, done + chunk)
-                sim.sample(times[done:stop], force_at(0.0), X[done:stop], U[done:stop], T[done:stop],
-                           advance_first=done > 0)
+                sim.sample(times[done:stop], F, X[done:stop], U[done:stop], T[done:stop], advance_first=done > 0,
+                           diagnostics=None if diagnostics is None else diagnostics[done:stop])
                 done = stop
                 now = time.perf_counter()
+                if now - start > 1.0 and show is None:
+                    show = sys.stderr.isatty()
                 if show and (not auto or now - start > 1.0):
                     _progress_bar(done, n, now - start)
                     drawn, last_print = True, now
                 chunk = max(1, int(0.1 * done / max(now - start, 1e-9)))
+        if done < n and show is None:
+            show = sys.stderr.isatty()
         for i in range(done, n):
             t = times[i]
             if i > 0:
@@ -599,12 +669,34 @@ def simulate(scene: Scene, t_end: float, method: str = "rattle", dt: float | Non
         stats["interrupted"] = True
         part = slice(0, done)
         raise SimulationInterrupted(Result(scene, method, times[part], X[part], U[part], T[part],
-                                           *_sample_diagnostics(sim.dyn, X[part], U[part]), stats)) from None
+                                           *_diagnostics(sim, X[part], U[part],
+                                                         None if diagnostics is None else diagnostics[part]),
+                                           stats)) from None
     wall = time.perf_counter() - start
     if drawn:
         sys.stderr.write("\n")
     stats = _run_stats(sim, method, dt, rtol, scene, wall)
-    return Result(scene, method, times, X, U, T, *_sample_diagnostics(sim.dyn, X, U), stats)
+    return Result(scene, method, times, X, U, T, *_diagnostics(sim, X, U, diagnostics), stats)
+
+
+def _output_times(t_end: float, n: int) -> np.ndarray:
+    """np.linspace(0.0, t_end, n), n >= 2, computed as linspace does (i * (t_end / (n - 1)), the last t_end) in a
+    fraction of its time (a fixed cost of every run); linspace itself where that step underflows to 0."""
+    step = t_end / (n - 1)
+    if step == 0.0:
+        return np.linspace(0.0, t_end, n)
+    times = np.arange(n, dtype=np.float64)
+    times *= step
+    times[-1] = t_end
+    return times
+
+
+def _diagnostics(sim, X: np.ndarray, U: np.ndarray, from_core: np.ndarray | None):
+    """(energy, residual of (11), residual of (12), kinetic energy) of every sample of a run: the native core's
+    rows, where it filled them as it sampled, or the numpy reference's."""
+    if from_core is None:
+        return _sample_diagnostics(sim.dyn, X, U)
+    return tuple(from_core.T.copy())
 
 
 def _sample_diagnostics(dyn: Dynamics, X: np.ndarray, U: np.ndarray):

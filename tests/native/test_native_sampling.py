@@ -71,3 +71,86 @@ def test_what_is_kept_per_scene_is_shared_and_dropped_with_the_scene(shipped_sce
     del a, b, scene
     gc.collect()
     assert gone() is None
+
+
+def sprung_chain(shipped_scene) -> ln.Scene:
+    """chain_10 with what a sample's energy sums over: springs (between masses and to the anchor), a constant
+    force, viscous and quadratic drag (no potential), a tilted gravity, and a push to move."""
+    data = shipped_scene("chain_10").to_dict()
+    data["gravity"] = [0.5, -0.3, -9.81]
+    masses = data["masses"]
+    masses[3]["force"] = [0.2, 0.1, -0.4]
+    masses[5]["drag"] = 0.05
+    masses[7]["quadratic_drag"] = 0.02
+    masses[-1]["velocity"] = [0.0, 0.3, 0.2]
+    data["springs"] = [{"a": 1, "b": 5, "stiffness": 40.0, "rest_length": 0.35, "damping": 0.1},
+                       {"a": 3, "b": 11, "stiffness": 7.5, "rest_length": 0.9}]
+    return ln.Scene.from_dict(data)
+
+
+@pytest.mark.parametrize("method,settings", [("rattle", {"dt": 1e-3}), ("dop853", {"rtol": 1e-8})])
+def test_diagnostics_filled_while_sampling_are_the_reference_diagnostics(shipped_scene, method, settings):
+    """Energy (kinetic, gravity, constant forces, springs), the residuals of (11) and (12) and the kinetic energy
+    the native core fills as it samples, against the numpy reference's functions on the same samples and against
+    the run whose samples are taken from Python (a callable input), which uses those functions."""
+    from linknet_core.dynamics.forces import kinetic_energy
+    from linknet_core.native.integrator import NativeIntegrator
+
+    scene = sprung_chain(shipped_scene)
+    assert scene.force_elements.count == 4
+    res = ln.simulate(scene, 0.3, method=method, n_out=31, progress=False, **settings)
+    sim = ln.Simulator(scene, method=method, **settings)
+    assert type(sim.integrator) is NativeIntegrator and sim.diagnostics_in_one_call
+    dyn = sim.dyn
+    reference = (dyn.energy(res.X, res.U), dyn.constraint_residual(res.X), dyn.velocity_residual(res.X, res.U),
+                 kinetic_energy(scene, res.U))
+    energy_scale = float(np.max(np.abs(reference[0]))) + float(np.max(reference[3]))
+    # the core sums in numpy's order (bit for bit with the numpy of this writing); a sum in another order may
+    # differ in the last bits of the largest term
+    eps = np.finfo(float).eps
+    for got, want, scale in zip((res.energy, res.residual, res.velocity_residual, res.kinetic), reference,
+                                (energy_scale, 1.0, float(np.abs(res.U).max()), energy_scale)):
+        assert got.shape == want.shape == (31,)
+        np.testing.assert_allclose(got, want, rtol=0, atol=16 * eps * scale)
+    assert res.kinetic[-1] > 0.01 * energy_scale and res.residual.max() > 0  # the run moved and the checks see it
+    looped = ln.simulate(scene, 0.3, method=method, n_out=31, progress=False, forces=lambda t: None, **settings)
+    assert np.array_equal(looped.X, res.X)
+    for field in ("energy", "residual", "velocity_residual", "kinetic"):
+        np.testing.assert_allclose(getattr(res, field), getattr(looped, field), rtol=0,
+                                   atol=16 * eps * max(energy_scale, 1.0))
+
+
+def test_the_energy_terms_struct_has_the_c_layout():
+    import ctypes
+
+    from linknet_core.native import library
+
+    assert ctypes.sizeof(library.EnergyTerms) == library.sizeof(3)
+
+
+@pytest.mark.parametrize("t_end,n", [(2.0, 2), (2.0, 201), (0.3, 31), (1e-300, 7), (7.77, 1000), (1e6, 3)])
+def test_output_times_are_linspace(t_end, n):
+    from linknet_core.simulator.simulator import _output_times
+
+    assert np.array_equal(_output_times(t_end, n), np.linspace(0.0, t_end, n))
+
+
+def test_a_scene_may_be_given_as_the_path_of_its_file(tmp_path):
+    from pathlib import Path
+
+    models = Path(ln.__file__).resolve().parent.parent / "models"
+    scene = ln.load_scene(models / "pendulum.json")
+    by_object = ln.simulate(scene, 0.5, method="dop853", rtol=1e-8, n_out=5, progress=False)
+    for path in (str(models / "pendulum.json"), models / "pendulum.json"):
+        by_path = ln.simulate(path, 0.5, method="dop853", rtol=1e-8, n_out=5, progress=False)
+        assert np.array_equal(by_path.X, by_object.X) and np.array_equal(by_path.energy, by_object.energy)
+        sim = ln.Simulator(path, method="rattle", dt=1e-3)
+        sim.advance(0.01)
+        assert sim.scene.K == scene.K and sim.state.t == 0.01
+    missing = tmp_path / "nowhere.json"
+    for call in (lambda s: ln.simulate(s, 1.0), lambda s: ln.Simulator(s)):
+        with pytest.raises(ln.SceneError, match="cannot read scene file .*nowhere.json"):
+            call(missing)
+        for bad, name in ((42, "int"), (None, "NoneType"), ({"masses": []}, "dict"), (b"models/pendulum.json", "bytes")):
+            with pytest.raises(ln.SolverError, match=f"scene must be a Scene or the path of a scene file .*got {name}"):
+                call(bad)

@@ -266,7 +266,8 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
 }
 
 int ln_sample(const ln_model *m, const ln_method *meth, ln_data *d, const double *times, ln_int n, int advance_first,
-              ln_int max_steps, double *X_out, double *U_out, double *T_out, ln_int *written)
+              ln_int max_steps, double *X_out, double *U_out, double *T_out, const ln_energy_terms *energy,
+              double *diagnostics_out, ln_int *written)
 {
     const size_t state_bytes = (size_t)(3 * m->K) * sizeof(double), T_bytes = (size_t)m->L * sizeof(double);
     *written = 0;
@@ -277,6 +278,7 @@ int ln_sample(const ln_model *m, const ln_method *meth, ln_data *d, const double
         memcpy(X_out + 3 * m->K * i, d->X, state_bytes);
         memcpy(U_out + 3 * m->K * i, d->U, state_bytes);
         if (T_bytes) memcpy(T_out + m->L * i, d->T, T_bytes);
+        if (diagnostics_out) ln_sample_diagnostics(m, energy, d->X, d->U, diagnostics_out + 4 * i);
         *written = i + 1;
     }
     return LN_OK;
@@ -288,6 +290,7 @@ size_t ln_sizeof(int which)
     case 0: return sizeof(ln_model);
     case 1: return sizeof(ln_method);
     case 2: return offsetof(ln_data, X_start);  /* the part of ln_data the Python binding reads */
+    case 3: return sizeof(ln_energy_terms);
     default: return 0;
     }
 }

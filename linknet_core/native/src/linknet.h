@@ -235,15 +235,33 @@ LN_API void ln_data_free(ln_data *d);
    but LN_OK the state and internals are those before the call, and the diagnostics say why. */
 LN_API int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps);
 
+/* What a sample's energy needs beyond the model (diagnostics.c), as the numpy reference writes its terms: the
+   masses, the weights M_k g, the constant forces and the springs (the force elements with a potential). */
+typedef struct ln_energy_terms {
+    const double *mass;             /* (K) M_k (anchors' entries unused) */
+    const double *weight;           /* (K,3) M_k g, zero rows on anchors */
+    const double *force;            /* (K,3) the scene's constant forces (anchors' rows unused) */
+    ln_int n_springs;
+    const ln_int *spring_mass;      /* (n_springs,2) the masses a, b of each */
+    const double *spring_param;     /* (n_springs,2) k, d0 of each */
+} ln_energy_terms;
+
 /* Samples of a run at the output times times[0..n) with d->F_input held throughout: advance to each (ln_advance,
    all or nothing; sample 0 is taken at the current state unless advance_first) and evaluate the outputs there
-   (ln_evaluate), writing X, U (K,3) and T (L) of sample i into X_out, U_out (n,K,3) and T_out (n,L). What
-   simulate's output loop does per sample, in one call. Stops at the first status but LN_OK: *written samples were
-   written; the state is then that of the last sample, or, when the evaluation failed, the one it failed at
+   (ln_evaluate), writing X, U (K,3) and T (L) of sample i into X_out, U_out (n,K,3) and T_out (n,L), and, unless
+   diagnostics_out is NULL, the sample's diagnostics (ln_sample_diagnostics) into row i of diagnostics_out (n,4).
+   What simulate's output loop does per sample, in one call. Stops at the first status but LN_OK: *written samples
+   were written; the state is then that of the last sample, or, when the evaluation failed, the one it failed at
    (d->t tells which). */
 LN_API int ln_sample(const ln_model *m, const ln_method *meth, ln_data *d, const double *times, ln_int n,
                      int advance_first, ln_int max_steps, double *X_out, double *U_out, double *T_out,
-                     ln_int *written);
+                     const ln_energy_terms *energy, double *diagnostics_out, ln_int *written);
+
+/* diagnostics.c: a sample's energy (kinetic plus the potential of gravity, constant forces and springs), the
+   largest relative violation of (11), the largest violation of (12) (m/s) and the kinetic energy, in out[0..4),
+   at X, U (K,3): the numpy reference's values (linknet_core.dynamics), bit for bit. */
+LN_API void ln_sample_diagnostics(const ln_model *m, const ln_energy_terms *e, const double *X, const double *U,
+                                  double out[4]);
 
 /* The tensions T of (25)-(26) and accelerations (9) at X, U (K,3) with d->F_input held (the reported outputs:
    direct feedthrough of F), and the force the links exert on each anchor, sum_l T_l E_l (delta(k,k1(l)) -
@@ -285,8 +303,8 @@ LN_API int ln_project_state(const ln_model *m, ln_data *d, double *X, double *U,
    number, not one more). */
 LN_API ln_int ln_fixed_step_count(double span, double dt);
 
-/* sizeof(ln_model), sizeof(ln_method) and the part of ln_data the Python binding mirrors (which = 0, 1, 2):
-   the binding checks its struct layouts against these. */
+/* sizeof(ln_model), sizeof(ln_method), the part of ln_data the Python binding mirrors and sizeof(ln_energy_terms)
+   (which = 0, 1, 2, 3): the binding checks its struct layouts against these. */
 LN_API size_t ln_sizeof(int which);
 
 /* The code of a force element kind named as in linknet_core.dynamics.forces (stages/forces.c), or -1. */
