@@ -174,21 +174,39 @@ def test_wall_reaction_balances_the_weight_of_the_cantilever():
     np.testing.assert_allclose(out["Freact"].sum(axis=0), total_weight, atol=1e-9)
 
 
+# Scenes with flat braced cells (both diagonals in a flat quadrilateral: the braced tower's top square, the cloth's
+# cells), rigid only at second order: a twist out of their plane changes the link lengths at second order in the
+# twist, so a projection must remove it by Gauss-Newton along a direction whose eigenvalue of A falls like the
+# twist squared; it converges linearly and stalls when that eigenvalue reaches the rank cut (shaken by 1 % of a
+# link, braced_tower stops at 8e-8 and 3e-7 relative in two states of three). Shaken by 0.1 % of a link, the
+# projection converges. The cloth's flat braced cells can also flex out of their plane at first order (the tower's
+# verticals hold its top square): random velocities along such flexes violate (35) and no acceleration satisfies
+# (13) (off by up to 7e-3 relative; on the tower, by 2e-12), so the cloth's velocities come from its own motion.
+FLAT_BRACED_CELLS = ("braced_tower", "triangulated_net")
+FLEXIBLE_FLAT_BRACED_CELLS = ("triangulated_net",)
+
+
+def _state_of_the_motion(scene, t):
+    sim = ln.Simulator(scene, method="dop853", rtol=1e-10)
+    sim.advance(t)
+    return sim.state.X.copy(), sim.state.U.copy()
+
+
 def test_solvers_agree_with_dense_reference_at_random_states():
     from linknet_core.dynamics.tensions import reference_tensions
 
     rng = np.random.default_rng(11)
     for name, scene in builders.shipped_scenes().items():
-        if name in ("triangulated_net", "braced_tower"):
-            # known limit: from a randomly shaken state of a redundant scene with mechanisms (the shaking destroys
-            # its self-stresses) the minimum-norm Gauss-Newton can stall off (11) where the rank cut meets the
-            # smallest singular values; these scenes in motion are covered by tests/core/test_redundant_motion.py
-            continue
         dyn = ln.Dynamics(scene)
         for _ in range(3):
-            X = scene.X0 + 0.2 * scene.length.min() * rng.normal(size=scene.X0.shape) * (~scene.fixed)[:, None]
+            shake = (1e-3 if name in FLAT_BRACED_CELLS else 0.2) * scene.length.min()
+            X = scene.X0 + shake * rng.normal(size=scene.X0.shape) * (~scene.fixed)[:, None]
             X, _ = dyn.project_positions(X)
-            U = dyn.project_velocities(X, rng.normal(size=X.shape) * (~scene.fixed)[:, None])
+            assert dyn.constraint_residual(X) < 1e-10, name
+            if name in FLEXIBLE_FLAT_BRACED_CELLS:   # a state of the motion instead: velocities that satisfy (35)
+                X, U = _state_of_the_motion(scene, rng.uniform(0.05, 0.5))
+            else:
+                U = dyn.project_velocities(X, rng.normal(size=X.shape) * (~scene.fixed)[:, None])
             F_in = rng.normal(size=X.shape)
             T = dyn.tensions(X, U, F_in)
             T_ref = reference_tensions(scene, X, U, dyn.forces(X, U, F_in))
