@@ -27,10 +27,14 @@ RTOL_REF = 2.5e-14
 AGREE = 1e-12
 
 
-def _solve(spec: SceneSpec, t_end: float, rtol: float):
+def solve_index1(spec: SceneSpec, t_end: float, rtol: float, atol: float | None = None):
+    """The scene's state at t_end by scipy's DOP853 on the index-1 form (benchmarks.index1: tensions of
+    (25)-(26), minimum-norm (31) where A is singular): (X, U, seconds, steps). atol defaults to 1e-3 rtol
+    (positions are O(1 m)). The one independent reference of the benchmarks and the tests."""
     sys = Index1System(spec)
     t0 = time.perf_counter()
-    sol = solve_ivp(sys.rhs, (0.0, t_end), sys.y0(), method="DOP853", rtol=rtol, atol=rtol * 1e-3)
+    sol = solve_ivp(sys.rhs, (0.0, t_end), sys.y0(), method="DOP853", rtol=rtol,
+                    atol=rtol * 1e-3 if atol is None else atol)
     if sol.status != 0:
         raise RuntimeError(f"reference for {spec.name} failed: {sol.message}")
     X, U = sys.split(sol.y[:, -1])
@@ -43,8 +47,8 @@ def reference(spec: SceneSpec, t_end: float, cache: bool = True, log=print) -> d
         d = np.load(path)
         return {k: (d[k] if d[k].ndim else d[k].item()) for k in d.files} | {"path": str(path), "cached": True}
     log(f"  reference {spec.name} t_end={t_end}: DOP853 rtol={RTOL_CHECK:g} and {RTOL_REF:g} ...")
-    Xc, Uc, sc, _ = _solve(spec, t_end, RTOL_CHECK)
-    X, U, s, steps = _solve(spec, t_end, RTOL_REF)
+    Xc, Uc, sc, _ = solve_index1(spec, t_end, RTOL_CHECK)
+    X, U, s, steps = solve_index1(spec, t_end, RTOL_REF)
     diff = float(np.max(np.linalg.norm(X - Xc, axis=1)))
     out = {"X": X, "U": U, "agreement": diff, "verified": diff <= AGREE, "rtol_ref": RTOL_REF,
            "rtol_check": RTOL_CHECK, "seconds": s + sc, "steps": steps,

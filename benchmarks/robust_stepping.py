@@ -2,7 +2,7 @@
 scenes with mechanisms and a chain with masses 1e3 .. 1e-3) with every method at its default settings (dt = 1e-3,
 rtol = 1e-8) on the native core to t = 2 s (the DefaultExperiment stopTime build_fmu.py writes), and for the
 redundant scenes the largest position error at t = 0.3 s against the independent reference of
-tests/core/redundant_reference.py.
+benchmarks.reference.solve_index1.
 
     python3 benchmarks/robust_stepping.py            # this checkout
     PYTHONPATH=<other checkout> python3 benchmarks/robust_stepping.py --models <this checkout>/models
@@ -25,8 +25,9 @@ def main() -> None:
     p.add_argument("--t-end", type=float, default=2.0)
     a = p.parse_args()
     import linknet_core as ln
-    sys.path.insert(0, str(HERE / "tests" / "core"))
-    from redundant_reference import reference_run
+    sys.path.insert(0, str(HERE))
+    from benchmarks.reference import solve_index1
+    from benchmarks.scene_spec import SceneSpec
 
     from linknet_core.scene.description import load_scene
 
@@ -44,7 +45,9 @@ def main() -> None:
     print(f"{'scene':22s} " + " ".join(f"{m:>10s}" for m in METHODS))
     for name, scene in scenes.items():
         cells = []
-        ref = reference_run(scene, 0.3) if name in ("triangulated_net", "braced_tower") else None
+        ref = None
+        if name in ("triangulated_net", "braced_tower"):
+            ref = solve_index1(SceneSpec.from_core(scene), 0.3, rtol=1e-12, atol=1e-12)[0]
         for method in METHODS:
             settings = dict(rtol=1e-8) if method.startswith("dop") else dict(dt=1e-3)
             try:

@@ -1,14 +1,16 @@
 """The shipped redundant scenes with mechanisms in motion (models/triangulated_net.json, models/braced_tower.json:
 states of self-stress and mechanisms at once), with every method, against an independent reference written from
-the seed's equations (redundant_reference.py: scipy's DOP853 on the index-1 form, least-squares tensions), with
-the measured orders of the fixed-step methods at their nominal values."""
+the seed's equations (benchmarks.reference.solve_index1, the work-precision benchmark's reference: scipy's DOP853 on
+the index-1 form, minimum-norm tensions), with the measured orders of the fixed-step methods at their nominal
+values."""
 import numpy as np
 import pytest
 
 import linknet_core as ln
 from linknet_core.integrators import METHODS
 from linknet_core.scene import builders
-from redundant_reference import reference_run
+from benchmarks.reference import solve_index1
+from benchmarks.scene_spec import SceneSpec
 
 T_END = 0.3
 FIXED = ("rattle", "yoshida4", "suzuki4", "yoshida6", "yoshida8")
@@ -18,7 +20,7 @@ FIXED = ("rattle", "yoshida4", "suzuki4", "yoshida6", "yoshida8")
 def scenes():
     out = {}
     for scene in (builders.braced_tower(), builders.triangulated_net()):
-        out[scene.name] = (scene, reference_run(scene, T_END))
+        out[scene.name] = (scene, solve_index1(SceneSpec.from_core(scene), T_END, rtol=1e-12, atol=1e-12)[0])
     return out
 
 
