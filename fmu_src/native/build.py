@@ -212,7 +212,6 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
     """The generated C file (without its identity lines) and facts about the scene for the caller."""
     import linknet_core as ln
     from linknet_core.native.ldl import package_library
-    import linknet_core.native.model as native_model
     from linknet_core.scene.motion import PIECE_COLUMNS, SINE_COLUMNS
 
     sims = _simulators(scene, cfg)
@@ -231,7 +230,8 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
     model_lengths = {"k1": L, "k2": L, "R": L, "inv_R": L, "inv_m": K, "free_idx": n_free, "fixed_idx": n_fixed,
                      "is_fixed": K, "F_scene": 3 * K, "element_kind": n_el, "element_mass": 2 * n_el,
                      "element_param": P * n_el, "pair_first": n_pairs, "pair_second": n_pairs,
-                     "pair_weight": n_pairs, "chain_order": L, "chain_diag_weight": L, "chain_off_weight": L,
+                     "pair_weight": n_pairs, "pair_mass": n_pairs, "pair_sign": n_pairs, "chain_order": L,
+                     "chain_diag_weight": L, "chain_off_weight": L,
                      "driven_idx": n_driven, "motion_kind": n_driven, "motion_pieces": n_driven + 1,
                      "piece": PIECE_COLUMNS * int(pieces[-1]) if n_driven else 0, "sine": SINE_COLUMNS * n_driven,
                      "accel_weight": K}
@@ -244,18 +244,6 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
         order = np.zeros(L, np.int64)
         package_library().ln_ldl_get_ordering(model.ldl, order.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)))
         ordering = w.ints(order, "ldl_ordering")
-
-    # which mass and sign each pair weight of A (25) comes from: a changed mass rebuilds the weights
-    pairs = native_model.link_pairs(scene)
-    first = _pointer_values(model.pair_first, n_pairs, ctypes.c_int64)
-    second = _pointer_values(model.pair_second, n_pairs, ctypes.c_int64)
-    weight = _pointer_values(model.pair_weight, n_pairs, ctypes.c_double)
-    if n_pairs and not (np.array_equal(pairs.first, first) and np.array_equal(pairs.second, second)
-                        and np.array_equal(pairs.sign * scene.inv_mass[pairs.mass], weight)):
-        raise NativeBuildError("the native model's pair table no longer matches linknet_core's link_pairs: "
-                               "fmu_src/native/build.py needs the new rule for the pair weights")
-    pair_mass = w.ints(pairs.mass, "pair_mass") if n_pairs else "NULL"
-    pair_sign = w.doubles(pairs.sign, "pair_sign") if n_pairs else "NULL"
 
     rigid_ref, Y0_ref, n_bodies = "NULL", "NULL", 0
     if spec == 2:
@@ -361,8 +349,6 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
     .max_force = {c_double(max_force)},
     .model = &model,
     .ldl_ordering = {ordering},
-    .pair_mass = {pair_mass},
-    .pair_sign = {pair_sign},
     .specialisation = {spec},
     .rigid = {rigid_ref},
     .Y0 = {Y0_ref},

@@ -3,9 +3,9 @@
  *
  * At the scene's default parameters the ln_model, ln_method and initial state are the baked ones, which are
  * those linknet_core's Simulator builds, so the FMU repeats the library's arithmetic bit for bit. A changed
- * mass, length or gravity (before the end of initialization) rebuilds what depends on it here, with the
- * library's formulas: 1/M, the base forces M g + F, the weights of A (25), a chain's tridiagonal weights, the
- * initial state (lengths checked, positions projected if the scene opts in, velocities projected onto (12):
+ * mass, length or gravity (before the end of initialization) rebuilds what depends on it with the library's own
+ * functions: 1/M, the base forces M g + F, the weights of A (25) and B (26) (ln_model_weights), the initial
+ * state (lengths checked, positions projected if the scene opts in, velocities projected onto (12):
  * ln_project_state; zero for a static scene) and, for free rigid bodies, their layout and initial body states
  * (ln_rigid_layout).
  *
@@ -50,13 +50,12 @@ struct fmu_model {
     ln_int n_bodies;
 
     /* a model built from changed parameters points into these */
-    double *inv_m, *R, *inv_R, *F_scene, *pair_weight, *chain_diag, *chain_off, *accel_weight;
+    double *R, *weights;                /* (L), (ln_model_weights_size) */
     double *r, *inertia, *body_mass;
     ln_int *top;
     double *mass_full, *gravity;        /* (K), (3) the parameters being applied */
     double *X_init, *U_init, *Y_init;   /* the current model's initial state */
     double *Xo, *Uo, *Ys;               /* scratch: the state handed to ln_evaluate, body states */
-    ln_int *position;                   /* scratch: a chain's links' positions in path order */
 };
 
 #if defined __GNUC__
@@ -244,40 +243,13 @@ static int build(fmu_model *m, const double *values, ln_int integrator, char *ms
         return FMU_OK;
     }
 
-    /* changed parameters: what depends on them, by linknet_core's formulas (native/model.py) */
+    /* changed parameters: what depends on them, by the library's own function (as linknet_core builds its model) */
     double *mass = m->mass_full, *R = m->R, *g = m->gravity;
     if (L) memcpy(R, s->length, (size_t)L * sizeof(double));
     memcpy(g, s->gravity, 3 * sizeof(double));
     parameter_arrays(m, values, mass, R, g);
-    const ln_model *base = s->model;
-    for (ln_int k = 0; k < K; k++) {
-        const int fixed = base->is_fixed[k];
-        m->inv_m[k] = fixed ? 0.0 : 1.0 / mass[k];
-        for (int e = 0; e < 3; e++) m->F_scene[3 * k + e] = fixed ? 0.0 : mass[k] * g[e] + s->force[3 * k + e];
-    }
-    for (ln_int l = 0; l < L; l++) m->inv_R[l] = 1.0 / R[l];
-    for (ln_int p = 0; p < base->n_pairs; p++) m->pair_weight[p] = s->pair_sign[p] * m->inv_m[s->pair_mass[p]];
-    m->model.inv_m = m->inv_m;
-    /* a_k of B (26) is accel_weight[k] times the base force: 1/M_k, and 1 on a driven anchor (its acceleration) */
-    for (ln_int k = 0; k < K; k++) m->accel_weight[k] = m->inv_m[k];
-    for (ln_int j = 0; j < base->n_driven; j++) m->accel_weight[base->driven_idx[j]] = 1.0;
-    m->model.accel_weight = m->accel_weight;
-    m->model.R = R;
-    m->model.inv_R = m->inv_R;
-    m->model.F_scene = m->F_scene;
-    m->model.pair_weight = m->pair_weight;
-    if (base->solver == LN_SOLVER_CHAIN) {
-        ln_int *position = m->position;
-        for (ln_int i = 0; i < L; i++) position[base->chain_order[i]] = i;
-        for (ln_int i = 0; i < L; i++) m->chain_diag[i] = m->chain_off[i] = 0.0;
-        for (ln_int p = 0; p < base->n_pairs; p++) {
-            const ln_int a = position[base->pair_first[p]], b = position[base->pair_second[p]];
-            if (base->pair_first[p] == base->pair_second[p]) m->chain_diag[a] += m->pair_weight[p];
-            else m->chain_off[a > b ? a : b] += m->pair_weight[p];
-        }
-        m->model.chain_diag_weight = m->chain_diag;
-        m->model.chain_off_weight = m->chain_off;
-    }
+    if (ln_model_weights(&m->model, mass, R, g, s->force, m->weights) != LN_OK)
+        return fail(msg, FMU_ERROR, "out of memory");
 
     /* the initial state, as Simulator prepares it: lengths checked (or projected), velocities onto (12) */
     double *X = m->X_init, *U = m->U_init;
@@ -388,12 +360,10 @@ void fmu_model_free(fmu_model *m)
     if (!m) return;
     ln_data_free(m->d);
     ln_ldl_symbolic_free(m->ldl);
-    double *arrays[] = {m->value, m->applied, m->inv_m, m->accel_weight, m->R, m->inv_R, m->F_scene, m->pair_weight,
-                        m->chain_diag, m->chain_off, m->r, m->inertia, m->body_mass, m->mass_full, m->gravity,
-                        m->X_init, m->U_init, m->Y_init, m->Xo, m->Uo, m->Ys};
+    double *arrays[] = {m->value, m->applied, m->R, m->weights, m->r, m->inertia, m->body_mass, m->mass_full,
+                        m->gravity, m->X_init, m->U_init, m->Y_init, m->Xo, m->Uo, m->Ys};
     for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
     free(m->top);
-    free(m->position);
     free(m);
 }
 
@@ -413,14 +383,8 @@ fmu_model *fmu_model_new(char *msg)
     const ln_int B = m->n_bodies;
     m->value = doubles(s->n_real);
     m->applied = doubles(s->n_real);
-    m->inv_m = doubles(K);
-    m->accel_weight = doubles(K);
     m->R = doubles(L);
-    m->inv_R = doubles(L);
-    m->F_scene = doubles(3 * K);
-    m->pair_weight = doubles(P);
-    m->chain_diag = doubles(L);
-    m->chain_off = doubles(L);
+    m->weights = doubles(ln_model_weights_size(s->model));
     m->r = doubles(3 * K);
     m->inertia = doubles(3 * B);
     m->body_mass = doubles(B);
@@ -433,10 +397,8 @@ fmu_model *fmu_model_new(char *msg)
     m->Xo = doubles(3 * K);
     m->Uo = doubles(3 * K);
     m->Ys = doubles(LN_RIGID_STATE * B);
-    m->position = calloc((size_t)(L > 0 ? L : 1), sizeof(ln_int));
-    if (!(m->value && m->applied && m->inv_m && m->accel_weight && m->R && m->inv_R && m->F_scene && m->pair_weight
-          && m->chain_diag && m->chain_off && m->r && m->inertia && m->body_mass && m->top && m->mass_full && m->gravity
-          && m->X_init && m->U_init && m->Y_init && m->Xo && m->Uo && m->Ys && m->position)) {
+    if (!(m->value && m->applied && m->R && m->weights && m->r && m->inertia && m->body_mass && m->top
+          && m->mass_full && m->gravity && m->X_init && m->U_init && m->Y_init && m->Xo && m->Uo && m->Ys)) {
         fmu_model_free(m);
         fail(msg, FMU_ERROR, "out of memory");
         return NULL;

@@ -5,8 +5,7 @@
  * The ln_model and the ln_methods are those linknet_core builds for the scene at the FMU's default
  * parameters (read field by field from the library's own structs), so that at the defaults the FMU runs
  * exactly the library's arithmetic. What a changed parameter needs besides (the scene's masses, lengths,
- * gravity and constant forces, which mass and sign each pair weight of A (25) comes from, the scene's own
- * initial state) is here too.
+ * gravity and constant forces, the scene's own initial state) is here too.
  */
 #ifndef LINKNET_FMU_SCENE_H
 #define LINKNET_FMU_SCENE_H
@@ -74,8 +73,6 @@ typedef struct lnfmu_scene {
     /* the native model at the defaults; its ldl and rigid pointers are NULL (built at instantiation) */
     const ln_model *model;
     const ln_int *ldl_ordering;     /* (L) LN_SOLVER_LDL: the elimination order (position -> link) */
-    const ln_int *pair_mass;        /* (n_pairs) the free mass a pair of links shares: weight = sign / M */
-    const double *pair_sign;        /* (n_pairs) S(l,l') of (21), +1 on the diagonal */
     int specialisation;             /* enum lnfmu_specialisation */
     const struct ln_rigid_model *rigid;     /* LNFMU_RIGID: the bodies at the defaults */
     const double *Y0;               /* (B,13) their initial states */

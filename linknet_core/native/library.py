@@ -45,6 +45,7 @@ class Model(ctypes.Structure):
         ("velocity_dependent", ctypes.c_int),
         ("solver", ctypes.c_int),
         ("n_pairs", ln_int), ("pair_first", ln_int_p), ("pair_second", ln_int_p), ("pair_weight", c_double_p),
+        ("pair_mass", ln_int_p), ("pair_sign", c_double_p),
         ("chain_order", ln_int_p), ("chain_diag_weight", c_double_p), ("chain_off_weight", c_double_p),
         ("ldl", ctypes.c_void_p),
         ("pivot_tol", ctypes.c_double), ("rank_tol", ctypes.c_double),
@@ -138,6 +139,9 @@ sample_diagnostics = _declare("ln_sample_diagnostics", None, Model_p, ctypes.POI
                               c_double_p, c_double_p)
 evaluate_repeated = _declare("ln_evaluate_repeated", ctypes.c_int, Model_p, Data_p, ctypes.c_int, c_double_p,
                              c_double_p, ln_int)
+model_weights_size = _declare("ln_model_weights_size", ln_int, Model_p)
+model_weights = _declare("ln_model_weights", ctypes.c_int, Model_p, c_double_p, c_double_p, c_double_p, c_double_p,
+                         c_double_p)
 force_kind = _declare("ln_force_kind", ln_int, ctypes.c_char_p)
 fixed_step_count = _declare("ln_fixed_step_count", ln_int, ctypes.c_double, ctypes.c_double)
 sizeof = _declare("ln_sizeof", ctypes.c_size_t, ctypes.c_int)

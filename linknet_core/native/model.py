@@ -53,10 +53,10 @@ def scene_plane(scene, normal):
     return P, o, n, length
 
 
-def chain_elimination(L, first, second, weight, ordering, component):
-    """Path order of a chain's links and the weights of its tridiagonal A, or None where A is not tridiagonal
-    in that order. The links of each path (``component``: a component of the graph cut at the anchors) come in
-    the structure's leaves-first order, which for a path is path order; the test below checks it."""
+def chain_order(L, first, second, ordering, component):
+    """Path order of a chain's links, or None where A is not tridiagonal in that order. The links of each path
+    (``component``: a component of the graph cut at the anchors) come in the structure's leaves-first order, which
+    for a path is path order; the test below checks it."""
     off = first != second
     position_of = np.empty(L, np.int64)
     position_of[ordering] = np.arange(L)
@@ -66,10 +66,7 @@ def chain_elimination(L, first, second, weight, ordering, component):
     p1, p2 = position[first[off]], position[second[off]]
     if np.any(np.abs(p1 - p2) != 1):
         return None
-    diag_weight = np.bincount(position[first[~off]], weights=weight[~off], minlength=L)
-    off_weight = np.zeros(L)
-    np.add.at(off_weight, np.maximum(p1, p2), weight[off])
-    return order, diag_weight, off_weight
+    return order
 
 
 class NativeModel:
@@ -97,18 +94,12 @@ class NativeModel:
         m = self.struct = lib.Model()
         m.K, m.L = K, L
         m.k1, m.k2 = i8(scene.k1), i8(scene.k2)
-        m.R, m.inv_R = f8(scene.length), f8(1.0 / scene.length if L else np.zeros(0))
-        m.inv_m = f8(scene.inv_mass)
         self._fill_driven(m, scene, f8, i8)
         m.n_free, m.free_idx = scene.free_indices.size, i8(scene.free_indices)
         m.n_fixed, m.fixed_idx = int(fixed.sum()), i8(np.flatnonzero(fixed))
         is_fixed = np.ascontiguousarray(fixed, np.uint8)
         keep.append(is_fixed)
         m.is_fixed = pointer(is_fixed, ctypes.c_uint8)
-        free_mass = np.where(fixed, 0.0, scene.mass)  # an anchor's mass is infinite (1/M = 0)
-        F_scene = free_mass[:, None] * np.asarray(scene.gravity)[None, :] + scene.force
-        F_scene[fixed] = 0.0  # no force acts on an anchor
-        m.F_scene = f8(F_scene)
         elements = scene.force_elements
         kinds = [lib.force_kind(kind.encode()) for kind in elements.kinds]
         if -1 in kinds:
@@ -118,9 +109,8 @@ class NativeModel:
         m.velocity_dependent = int(has_velocity_dependent_forces(scene))
 
         pairs = link_pairs(scene)
-        weight = pairs.sign * scene.inv_mass[pairs.mass]
         m.n_pairs, m.pair_first, m.pair_second = pairs.first.size, i8(pairs.first), i8(pairs.second)
-        m.pair_weight = f8(weight)
+        m.pair_mass, m.pair_sign = i8(pairs.mass), f8(pairs.sign)
         m.pivot_tol, m.rank_tol, m.dense_min_norm_limit = PIVOT_TOL, SINGULAR_RCOND, DENSE_MIN_NORM_LIMIT
         m.retry_rank_tol = RETRY_SINGULAR_RCOND  # a failing Gauss-Newton's retry, as the reference's
         m.floor_safety, m.floor_cap = FLOOR_SAFETY, FLOOR_CAP_OVER_TOL  # the reference's projection stopping rule
@@ -132,15 +122,13 @@ class NativeModel:
             self.solver = "min-norm"
             m.solver = lib.SOLVER_MIN_NORM
         else:
-            chain = None
+            order = None
             if structure.kind == "chain":
-                chain = chain_elimination(L, pairs.first, pairs.second, weight, structure.ordering,
-                                          structure.link_component)
-            if chain is not None:
-                order, diag_weight, off_weight = chain
+                order = chain_order(L, pairs.first, pairs.second, structure.ordering, structure.link_component)
+            if order is not None:
                 self.solver = "chain"
                 m.solver = lib.SOLVER_CHAIN
-                m.chain_order, m.chain_diag_weight, m.chain_off_weight = i8(order), f8(diag_weight), f8(off_weight)
+                m.chain_order = i8(order)
             else:
                 self.solver = "ldl"
                 m.solver = lib.SOLVER_LDL
@@ -152,6 +140,12 @@ class NativeModel:
                 if not self._ldl:
                     raise MemoryError("the sparse LDL^T analysis of the tension matrix failed (out of memory)")
                 m.ldl = self._ldl
+        # 1/M, the base forces, 1/R, the weights of A (25) and of a_k in B (26): the core's one formula for them
+        weights = np.empty(lib.model_weights_size(ctypes.pointer(m)))
+        parameters = [float_array(a) for a in (scene.mass, scene.length, scene.gravity, scene.force)]
+        keep += [weights, parameters[1]]  # the model points into both
+        if lib.model_weights(ctypes.pointer(m), *(pointer(a) for a in parameters), pointer(weights)) != lib.OK:
+            raise MemoryError("the native core could not compute the model's weights (out of memory)")
         if self._ldl:
             self.nnz_L = int(package_library().ln_ldl_nnz_L(self._ldl))
         else:  # a chain's L has one entry per link after the first; no links, no L
@@ -173,12 +167,10 @@ class NativeModel:
 
     @staticmethod
     def _fill_driven(m, scene, f8, i8) -> None:
-        """The driven anchors: their masses, motions as the tables of drive.c (linknet_core.scene.motion) and the
-        weights of a_k in B (26): 1/M_k, and 1 on driven anchors, whose base-force rows hold their accelerations."""
+        """The driven anchors: their masses and motions as the tables of drive.c (linknet_core.scene.motion)."""
         motions = scene.motions
         m.n_driven = len(motions)
         if not motions:
-            m.accel_weight = m.inv_m
             return
         from linknet_core.scene.motion import PIECE_COLUMNS, SINE_COLUMNS
 
@@ -187,9 +179,6 @@ class NativeModel:
         m.motion_pieces = i8(np.concatenate([[0], np.cumsum([motion.pieces.shape[0] for motion in motions])]))
         m.piece = f8(np.concatenate([motion.pieces for motion in motions]).reshape(-1, PIECE_COLUMNS))
         m.sine = f8(np.array([motion.sine for motion in motions]).reshape(-1, SINE_COLUMNS))
-        weight = np.array(scene.inv_mass, np.float64)
-        weight[scene.driven_indices] = 1.0
-        m.accel_weight = f8(weight)
 
     @property
     def scene(self):

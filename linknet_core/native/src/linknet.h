@@ -105,6 +105,8 @@ typedef struct ln_model {
     ln_int n_pairs;                 /* pairs of links coupled in A (diagonal pairs included) */
     const ln_int *pair_first, *pair_second;
     const double *pair_weight;      /* S(l,l')/M(l,l') of (21)-(22), 1/M of one end on the diagonal (18) */
+    const ln_int *pair_mass;        /* the free mass the two links of each pair share (the M of pair_weight) */
+    const double *pair_sign;        /* S(l,l') of (21) of each pair; +1 on the diagonal */
     const ln_int *chain_order;      /* (L) chains: links in path order */
     const double *chain_diag_weight, *chain_off_weight;    /* (L) chains, in path order */
     const struct ln_ldl_symbolic *ldl;  /* LN_SOLVER_LDL (NULL for the others) */
@@ -298,6 +300,16 @@ LN_API int ln_drive_at(const ln_model *m, ln_data *d, double t, double *P, doubl
    projection or factorisation that failed (d->fail_* then say where). Scratch: d->E0, d->phi and the projections'. */
 LN_API int ln_project_state(const ln_model *m, ln_data *d, double *X, double *U, int positions, double tol,
                             ln_int max_iter, double *mu);
+
+/* model_weights.c: what of the model follows from the masses M (K; anchors' entries unused), lengths R (L), gravity
+   (3) and the scene's constant forces (K,3), written into weights (ln_model_weights_size(m) doubles, kept by the
+   caller as long as m) and pointed at by m: R itself, inv_m, accel_weight, F_scene, inv_R, pair_weight and, for
+   LN_SOLVER_CHAIN, chain_diag_weight and chain_off_weight. Reads the structure already in m: K, L, is_fixed, the
+   pairs (pair_first, pair_second, pair_mass, pair_sign), the solver and chain_order, the driven anchors. LN_OK, or
+   LN_NO_MEMORY. */
+LN_API ln_int ln_model_weights_size(const ln_model *m);
+LN_API int ln_model_weights(ln_model *m, const double *mass, const double *R, const double *gravity,
+                            const double *force, double *weights);
 
 /* Equal steps no longer than dt that land on the target: how many (a whole number up to round-off is that
    number, not one more). */
