@@ -164,9 +164,17 @@ class MinNormSolver(TensionSolver):
     """Redundant links (A singular): the minimum-norm tensions T = A^+ B.
 
     Any solution gives the same forces on the masses (31); the minimum-norm one is the solution with no
-    component along the self-stresses. Dense eigen-decomposition (rank revealing) up to
-    DENSE_MIN_NORM_LIMIT links; MINRES from T = 0 above (its iterates stay in range(A), so it converges
-    to the minimum-norm solution of a consistent system).
+    component along the self-stresses. Up to DENSE_MIN_NORM_LIMIT links, the native core's algorithm
+    (native/src/stages/minnorm.c), so that both paths draw the line between a self-stress and a stiff direction
+    in the same place: Cholesky with complete pivoting, P A P^T = R^T R (LAPACK dpstrf), stopped at rank r when
+    every remaining diagonal entry of the Schur complement is at most ``rcond`` times the largest diagonal entry
+    of A; the null space of P A P^T is spanned by the columns of Z = [-W; I], W = R11^-1 R12, and
+
+        T = P^T Pz([R11^-1 R11^-T c_1; 0]),  c = Pz(P B),  Pz(y) = y - Z (Z^T Z)^-1 Z^T y
+
+    (projecting B first drops its component along the self-stresses, so a B inconsistent at round-off gets the
+    minimum-norm least-squares answer). Above that size MINRES from T = 0 (its iterates stay in range(A), so it
+    converges to the minimum-norm solution of a consistent system).
     """
 
     name = "min-norm"
@@ -180,30 +188,66 @@ class MinNormSolver(TensionSolver):
         self.rank = None
 
     def factor(self, E: np.ndarray) -> None:
+        A = self.assembly.matrix(E)
+        if not self._dense:
+            self._A = A
+            return
+        import scipy.linalg
+        from scipy.linalg.lapack import dpstrf
+
+        A = A.toarray()
+        L = A.shape[0]
+        largest = float(A.diagonal().max()) if L else 0.0
+        if not np.isfinite(A).all():  # not usable: the solves give NaN, for the caller's finiteness test
+            self.rank, self._perm = -1, None
+            return
+        if not largest > 0.0:  # A = 0: T = 0 is the minimum-norm answer to any B
+            self.rank, self._perm = 0, np.arange(L)
+            return
+        R, pivots, rank, info = dpstrf(A, tol=self.rcond * largest, lower=0)
+        r = int(rank) if info > 0 else L
+        self.rank, self._perm = r, pivots[:L] - 1
+        self._R11 = np.triu(R[:r, :r])
+        if r < L:
+            W = scipy.linalg.solve_triangular(self._R11, R[:r, r:])
+            self._W = W
+            self._ZtZ = scipy.linalg.cho_factor(np.eye(L - r) + W.T @ W)
+
+    def _without_null(self, y: np.ndarray) -> np.ndarray:
+        """Pz(y): y (pivoted numbering) less its component along the null space Z = [-W; I]."""
         import scipy.linalg
 
-        A = self.assembly.matrix(E)
-        if self._dense:
-            w, V = scipy.linalg.eigh(A.toarray())
-            keep = w > self.rcond * max(w.max(), 1e-300)
-            self.rank = int(keep.sum())
-            self._V, self._winv, self._null = V[:, keep], 1.0 / w[keep], V[:, ~keep]
-        else:
-            self._A = A
+        r = self.rank
+        t = scipy.linalg.cho_solve(self._ZtZ, y[r:] - self._W.T @ y[:r])
+        out = y.copy()
+        out[:r] += self._W @ t
+        out[r:] -= t
+        return out
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        if self._dense:
-            return self._V @ (self._winv * (self._V.T @ b))
-        from scipy.sparse.linalg import minres
-
-        x, _ = minres(self._A, b, rtol=1e-14, maxiter=20 * self.scene.L)
-        return x
-
-    def nullspace(self) -> np.ndarray:
-        """Orthonormal basis of null(A) at the last factorisation: the self-stresses of (27), (31)."""
         if not self._dense:
-            raise NotImplementedError("null space basis is computed on the dense path only")
-        return self._null
+            from scipy.sparse.linalg import minres
+
+            x, _ = minres(self._A, b, rtol=1e-14, maxiter=20 * self.scene.L)
+            return x
+        import scipy.linalg
+
+        L, r = b.shape[0], self.rank
+        if r is None or r < 0:
+            return np.full(L, np.nan)
+        x = np.zeros(L)
+        if r == 0:
+            return x
+        c = np.asarray(b, float)[self._perm]
+        if r < L:
+            c = self._without_null(c)  # B's self-stress component carries no equation
+        basic = np.zeros(L)  # R11^T R11 x_1 = c_1, x_2 = 0
+        basic[:r] = scipy.linalg.solve_triangular(
+            self._R11, scipy.linalg.solve_triangular(self._R11, c[:r], trans="T"))
+        if r < L:
+            basic = self._without_null(basic)  # minimum norm: drop the self-stresses (27)
+        x[self._perm] = basic
+        return x
 
 
 def make_solver(scene: Scene, structure: Structure) -> TensionSolver:
