@@ -20,6 +20,17 @@ class SolverError(LinknetError):
     """The integration cannot continue from the current state (step too small, non-finite values, ...)."""
 
 
+class StepFailure(SolverError):
+    """A step's position stage (or a fixed step's implicit half kick) did not converge: the native core's
+    LN_PROJECTION_FAILED / LN_IMPLICIT_KICK_FAILED. A fixed-step method splits such a step before giving up; the
+    integrator that gives up composes the final message from ``parts`` (the arguments of
+    :func:`projection_failure`, its ``where`` without the time span; None for the implicit kick)."""
+
+    def __init__(self, message: str, parts: dict | None = None):
+        super().__init__(message)
+        self.parts = parts
+
+
 # The failure texts are the native core's (src/explain.c), for every path; so are the thresholds they use.
 # NEAR_FLOOR: a residual that stalled within this factor of the floor its last Newton step allowed stalled at that
 # floor. STABILITY_LIMIT: h omega above which an explicit step amplifies an oscillation of angular frequency omega

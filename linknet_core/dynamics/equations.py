@@ -9,7 +9,7 @@ import functools
 
 import numpy as np
 
-from linknet_core.errors import ConsistencyError, SolverError, projection_failure
+from linknet_core.errors import ConsistencyError, SolverError, StepFailure, projection_failure
 from linknet_core.dynamics.forces import external_forces, kinetic_energy, potential_energy, scatter_add
 from linknet_core.scene.description import Scene
 from linknet_core.structure.topology import RETRY_SINGULAR_RCOND, SINGULAR_RCOND, Structure, analyse
@@ -28,6 +28,13 @@ FLOOR_SAFETY = 2.0
 # as the floor reached (benchmarks/stress.py checks the taut string's sag against it). The native core takes both
 # numbers from here (ln_model.floor_safety, floor_cap).
 FLOOR_CAP_OVER_TOL = 1e4
+# A failed projection's diagnosis (Dynamics.near_self_stress_load, failure path only): an eigenvalue of A (25) below
+# NEAR_SELF_STRESS_CUT of the largest is a near-self-stress, and one that carries more than NEAR_SELF_STRESS_LOAD of
+# |B| (26) is a load the rigid links can hold only with unbounded tensions; a dense eigen-decomposition, skipped above
+# DENSE_DIAGNOSIS_LIMIT links.
+NEAR_SELF_STRESS_CUT = 1e-6
+NEAR_SELF_STRESS_LOAD = 1e-3
+DENSE_DIAGNOSIS_LIMIT = 2500
 
 
 def fastest_oscillation(scene: Scene, T: np.ndarray) -> float:
@@ -354,10 +361,10 @@ class Dynamics:
             except SolverError:  # no tensions there: the message says what the iteration shows
                 omega = 0.0
             stability = dict(dt=dt, stage_fraction=stage_fraction, omega=omega)
-        raise SolverError(projection_failure(
-            f"after {iterations} iterations the residual is {after[worst]:.3g} relative at "
-            f"{self.scene.link_label(worst)}", float(after[worst]), float(before.max()), self.last_floor,
-            **stability))
+        parts = dict(where=f"after {iterations} iterations the residual is {after[worst]:.3g} relative at "
+                           f"{self.scene.link_label(worst)}", reached=float(after[worst]),
+                     before=float(before.max()), floor=self.last_floor, **stability)
+        raise StepFailure(projection_failure(**parts), parts)
 
     def _correction(self, E, mu) -> np.ndarray:
         """M^-1 C^T mu with C taken from unit vectors E."""
@@ -375,7 +382,24 @@ class Dynamics:
         mu = self.solver.solve(rows)
         return U - self._correction(E, mu)
 
-    # ---- hypothesis (35) ------------------------------------------------------------------------
+    # ---- hypothesis (35) and loads across near-self-stresses --------------------------------------
+    def _self_stress_share(self, X, b, cut):
+        """The (near-)self-stresses of A(X) and b's share on them, by a dense eigen-decomposition: the
+        eigenvalues at most ``cut`` times the largest, relative to it (w), their orthonormal eigenvectors (N,
+        columns) and N^T b. At cut = SINGULAR_RCOND these are the self-stresses (27), (31) that the minimum-norm
+        solves leave out; above it, stiff directions a configuration is close to losing."""
+        w, V = np.linalg.eigh(self.tension_matrix(X).toarray())
+        largest = max(float(w.max()), 1e-300)
+        keep = w <= cut * largest
+        N = V[:, keep]
+        return w[keep] / largest, N, N.T @ b
+
+    def _stress_links(self, stress) -> str:
+        """The links a self-stress (one column of N) runs through, named (at most 12)."""
+        links = np.flatnonzero(np.abs(stress) > 1e-6 * np.abs(stress).max())
+        named = ", ".join(self.scene.link_label(int(l)) for l in links[:12])
+        return named + ("" if links.size <= 12 else f" and {links.size - 12} more")
+
     def check_consistent_velocities(self, X, U, rtol=1e-8, anchor_acc=None) -> None:
         """Refuse (X, U) that admit no accelerations consistent with the constraints (35).
 
@@ -387,30 +411,60 @@ class Dynamics:
             return
         if not self.structure.rank_exact:
             return  # large redundant scenes: the MINRES residual reports inconsistency during the run
-        # the same cut as the minimum-norm solver (SINGULAR_RCOND on the eigenvalues of A), so that a state
-        # accepted here is one whose tensions that solver gets right
-        w, V = np.linalg.eigh(self.tension_matrix(X).toarray())
-        N = V[:, w <= SINGULAR_RCOND * max(w.max(), 1e-300)]
-        if N.shape[1] == 0:
-            return
         dU = U[self._k2] - U[self._k1]
         b = np.einsum("ij,ij->i", dU, dU) / self.scene.length
         if anchor_acc is not None:  # driven anchors' prescribed accelerations are part of (35)'s right-hand side
             b = b + np.einsum("ij,ij->i", self.unit_vectors(X), anchor_acc[self._k2] - anchor_acc[self._k1])
+        # the same cut as the minimum-norm solver (SINGULAR_RCOND), so that a state accepted here is one whose
+        # tensions that solver gets right
+        _, N, proj = self._self_stress_share(X, b, SINGULAR_RCOND)
         scale = np.linalg.norm(b)
-        proj = N.T @ b
-        if scale > 0 and np.max(np.abs(proj)) > rtol * scale:
+        if N.shape[1] and scale > 0 and np.max(np.abs(proj)) > rtol * scale:
             i = int(np.argmax(np.abs(proj)))
-            stress = N[:, i]
-            links = np.flatnonzero(np.abs(stress) > 1e-6 * np.abs(stress).max())
-            named = ", ".join(self.scene.link_label(int(l)) for l in links[:12])
-            more = "" if links.size <= 12 else f" and {links.size - 12} more"
             raise ConsistencyError(
                 "the initial velocities admit no accelerations consistent with the links (hypothesis (35) of "
-                f"the seed): the state of self-stress over {named}{more} is not orthogonal to |dU|^2/R "
-                f"(|projection| = {abs(proj[i]):.3g} vs |b| = {scale:.3g}). Velocities that satisfy (12) can "
+                f"the seed): the state of self-stress over {self._stress_links(N[:, i])} is not orthogonal to "
+                f"|dU|^2/R (|projection| = {abs(proj[i]):.3g} vs |b| = {scale:.3g}). Velocities that satisfy (12) can "
                 "still do this, e.g. a taut string whose middle mass moves sideways; change the velocities "
                 "or remove the redundant link(s).")
+
+    def near_self_stress_load(self, X, U, F_input=None, anchor_acc=None) -> str:
+        """Why a failed projection cannot be helped by a smaller step, when that is the reason: at (X, U) a
+        near-self-stress n of A (eigenvalue below NEAR_SELF_STRESS_CUT of the largest) carries a share of B (26)
+        above NEAR_SELF_STRESS_LOAD, so that (32) fails or nearly fails, the tensions (25) would need ~|n^T B| /
+        lambda along it, and the rigid-link model has no bounded-tension solution there (a flat braced cell loaded
+        across its plane, a taut string loaded sideways: held at second order only). '' otherwise, and on scenes
+        without self-stresses or mechanisms or above DENSE_DIAGNOSIS_LIMIT links (a dense eigen-decomposition:
+        failure path only)."""
+        scene = self.scene
+        structure = self.structure
+        if scene.L == 0 or scene.L > DENSE_DIAGNOSIS_LIMIT:
+            return ""
+        if structure.self_stresses == 0 and structure.rank_G >= 3 * int(np.count_nonzero(~scene.fixed)):
+            return ""  # no self-stress and no mechanism: A stays far from singular
+        try:
+            F = self.forces(X, U, F_input)
+            B = rhs(scene, X, U, F, anchor_acc=anchor_acc)
+            w, N, proj = self._self_stress_share(X, B, NEAR_SELF_STRESS_CUT)
+        except (SolverError, np.linalg.LinAlgError, ValueError):
+            return ""
+        size = float(np.linalg.norm(B))
+        if N.shape[1] == 0 or not size > 0 or not np.all(np.isfinite(proj)):
+            return ""
+        i = int(np.argmax(np.abs(proj)))
+        share = abs(float(proj[i])) / size
+        if share <= NEAR_SELF_STRESS_LOAD:
+            return ""
+        ratio = max(float(w[i]), 0.0)
+        largest = float(np.linalg.eigvalsh(self.tension_matrix(X).toarray()).max())
+        eigenvalue = max(ratio * largest, np.finfo(float).tiny)
+        tension = abs(float(proj[i])) / eigenvalue
+        return (f"The links {self._stress_links(N[:, i])} are at a near-self-stress (eigenvalue {ratio:.2g} of the "
+                f"largest of A (25)) that carries {share:.2g} of the load B (26) (|n^T B| / |B|; it would need "
+                f"tensions of ~{tension:.3g} N along it): a flat braced cell, or a taut string, loaded across is held "
+                "at second order only, and the rigid-link model's tensions there grow without bound as it flattens, "
+                "so a smaller step cannot help. Brace the structure so that no cell is flat, or model the compliance "
+                "with a spring instead of a rigid link.")
 
     # ---- diagnostics ----------------------------------------------------------------------------
     def energy(self, X, U):

@@ -7,15 +7,20 @@ Adding a method means adding a subclass; nothing else changes.
 """
 from __future__ import annotations
 
+import ctypes
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from linknet_core.dynamics.equations import Dynamics
-from linknet_core.errors import SolverError
-from linknet_core.native.library import fixed_step_count
+from linknet_core.errors import SolverError, StepFailure, projection_failure
+from linknet_core.native.library import fixed_step_count, lib as _core
 from linknet_core.state import State
+
+# A fixed step whose position stage (or implicit half kick) fails is taken again from its start as 2, 4, ...,
+# 2^MAX_SPLIT_LEVEL equal sub-steps, each the whole method: the native core's bound (stages/rattle.c), read from it.
+MAX_SPLIT_LEVEL = ctypes.c_int.in_dll(_core, "ln_max_split_level").value
 
 
 @dataclass
@@ -81,8 +86,34 @@ class FixedStepIntegrator(Integrator):
     def _advance_steps(self, X, U, n, h, F_input, t=0.0, t_target=None):
         for i in range(n):  # the last step ends on the target itself: the driven anchors' final position
             end = t_target if i == n - 1 and t_target is not None else t + (i + 1) * h
-            X, U = self.step(X, U, h, F_input, t + i * h, end)
+            try:
+                X_new, U_new = self.step(X, U, h, F_input, t + i * h, end)
+            except StepFailure as failure:
+                X_new, U_new = self._split_step(X, U, h, F_input, t + i * h, end, failure)
+            X, U = X_new, U_new
         return X, U
+
+    def _split_step(self, X, U, h, F_input, t, t_end, failure):
+        """The step from (X, U) at t taken again as 2, 4, ... 2^MAX_SPLIT_LEVEL equal sub-steps, each the whole
+        method (so each keeps its symmetry), until one split goes through (counted in the stats), as the native
+        core does (split_step, stages/rattle.c). Past the bound the last failure is raised, with ``start``: the
+        state the failed step started from."""
+        for level in range(1, MAX_SPLIT_LEVEL + 1):
+            parts = 1 << level
+            hp = h / parts
+            Xp, Up = X, U
+            try:
+                for part in range(parts):
+                    Xp, Up = self.step(Xp, Up, hp, F_input, t + part * hp,
+                                       t_end if part == parts - 1 else t + (part + 1) * hp)
+            except StepFailure as finer:
+                failure = finer
+                continue
+            self.stats.split += 1
+            self.stats.finest_split = max(self.stats.finest_split, parts)
+            return Xp, Up
+        failure.start = (X, U, t)
+        raise failure
 
     def advance(self, state, t_target, F_input, max_steps):
         span = t_target - state.t
@@ -92,6 +123,35 @@ class FixedStepIntegrator(Integrator):
                               f"limit of {max_steps}; raise max_steps or the step")
         h = span / n
         # finiteness of the result is checked once, by Simulator.advance, for every path
-        X, U = self._advance_steps(state.X, state.U, n, h, F_input, state.t, t_target)
+        try:
+            X, U = self._advance_steps(state.X, state.U, n, h, F_input, state.t, t_target)
+        except StepFailure as failure:
+            raise SolverError(self.explain_failure(failure, state.t, t_target, F_input)) from None
         state.X, state.U, state.t = X, U, t_target
         self.stats.steps += n
+
+    def explain_failure(self, failure: StepFailure, t_start: float, t_target: float, F_input) -> str:
+        """A step that failed for good, in words as the native core says it: the time span of the advance, the
+        projection's figures (errors.projection_failure), and, where a near-self-stress carries the load at the
+        start of the failed step, why no step can help (Dynamics.near_self_stress_load)."""
+        return explain_step_failure(self.dyn, failure, t_start, t_target, F_input, self.drive)
+
+
+def explain_step_failure(dyn, failure: StepFailure, t_start: float, t_target: float, F_input, drive=None) -> str:
+    """The message of a step failure of the numpy reference, fixed-step or adaptive (see
+    FixedStepIntegrator.explain_failure)."""
+    if failure.parts is None:  # the implicit half kick: its own words
+        return f"between t = {t_start} and t = {t_target}: {failure}"
+    parts = dict(failure.parts)
+    parts["where"] = f"between t = {t_start} and t = {t_target}: {parts['where']}"
+    message = projection_failure(**parts)
+    start = getattr(failure, "start", None)
+    if start is not None:
+        X, U, t = start
+        anchor_acc = None
+        if drive is not None:  # the driven anchors' accelerations enter B (26)
+            X, U, anchor_acc = drive.apply(t, X, U)
+        diagnosis = dyn.near_self_stress_load(X, U, F_input, anchor_acc)
+        if diagnosis:
+            message = f"{message} {diagnosis}"
+    return message

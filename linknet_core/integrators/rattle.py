@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from linknet_core.errors import SolverError
+from linknet_core.errors import StepFailure
 from linknet_core.dynamics.forces import has_velocity_dependent_forces
 from linknet_core.integrators.base import FixedStepIntegrator
 
@@ -63,5 +63,5 @@ class Rattle(FixedStepIntegrator):
             U_new = U_next
             if change <= 4e-16 * float(np.abs(U_new).max()) or change == 0.0:
                 return U_new
-        raise SolverError(f"the implicit velocity half step (drag, dampers) does not converge at dt = {h:g}: the "
+        raise StepFailure(f"the implicit velocity half step (drag, dampers) does not converge at dt = {h:g}: the "
                           "damping is too stiff for this step (h c / 2m near or above 1); reduce dt")

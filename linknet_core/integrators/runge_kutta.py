@@ -16,9 +16,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from linknet_core.errors import SolverError
+from linknet_core.errors import SolverError, StepFailure
 from linknet_core.integrators import tableaux
-from linknet_core.integrators.base import Integrator
+from linknet_core.integrators.base import Integrator, explain_step_failure
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 
@@ -165,7 +165,12 @@ class ProjectedRungeKutta(Integrator):
                 self.h = h * MIN_FACTOR
                 continue
             if err <= 1.0:
-                X_new, _ = dyn.project_positions(X_new, tol=1e-14)  # onto (11)
+                try:
+                    X_new, _ = dyn.project_positions(X_new, tol=1e-14)  # onto (11)
+                except StepFailure as failure:
+                    failure.start = (X, U, t)
+                    raise SolverError(explain_step_failure(dyn, failure, t_start, t_target, F_input,
+                                                           self.drive)) from None
                 U_new = dyn.project_velocities(X_new, U_new)  # onto (12)
                 t = t_new
                 X, U = X_new, U_new
@@ -175,8 +180,14 @@ class ProjectedRungeKutta(Integrator):
                 steps += 1
                 self.stats.steps += 1
                 if steps > max_steps:
-                    raise SolverError(f"more than {max_steps} steps between t = {t_start} and t = {t_target}; "
-                                      "raise max_steps or the tolerance")
+                    why = "raise max_steps or the tolerance"
+                    if dyn.floor_stops:  # the native core's note (NativeIntegrator.explain)
+                        why = (f"the position projection onto the link lengths (11) has stopped at its conditioning "
+                               f"floor {dyn.floor_stops} times in this run (largest residual {dyn.floor_reached:.3g} "
+                               "relative): a singular or badly conditioned configuration (a taut string, a flat "
+                               "braced cell pushed out of its plane), where more steps or a looser tolerance may not "
+                               "help")
+                    raise SolverError(f"more than {max_steps} steps between t = {t_start} and t = {t_target}; {why}")
                 if t < t_target:  # the first stage of the next step (none after the last one)
                     k0 = self._f(X, U, F_input, t)
             else:

@@ -250,4 +250,22 @@ class NativeIntegrator(Integrator):
         out = ctypes.create_string_buffer(4096)
         _explain(self._model_p, self._method_p, self._data_p, status, t_start, t_target, max_steps, link, out,
                  len(out))
-        return out.value.decode(errors="replace")
+        message = out.value.decode(errors="replace")
+        if status in (lib.PROJECTION_FAILED, lib.STEP_UNDERFLOW) and d.fail_link >= 0:
+            message = self._near_self_stress(message)
+        return message
+
+    def _near_self_stress(self, message: str) -> str:
+        """The message, and why no step can help where a near-self-stress carries the load
+        (Dynamics.near_self_stress_load), judged at the state the failed advance started from (the core puts it
+        back: all or nothing); the reference's dynamics is made for it, on the failure path only."""
+        from linknet_core.dynamics.equations import Dynamics
+        from linknet_core.structure.topology import analyse
+
+        scene = self.scene
+        try:
+            diagnosis = Dynamics(scene, analyse(scene)).near_self_stress_load(self.data.X.copy(), self.data.U.copy(),
+                                                                               self.data.F_input.copy())
+        except SolverError:
+            diagnosis = ""
+        return f"{message} {diagnosis}" if diagnosis else message

@@ -34,16 +34,17 @@ def spinning_double_pendulum():
         "links": [{"a": "p", "b": "a"}, {"a": "a", "b": "b"}]})
 
 
+@pytest.mark.parametrize("backend", ["native", "numpy"])
 @pytest.mark.parametrize("method,dts", [("rattle", [0.04, 0.02, 0.01, 0.005, 0.0025, 0.00125, 0.000625]),
                                         ("yoshida4", [0.02, 0.01, 0.005, 0.0025, 0.00125])])
-def test_split_runs_converge_at_the_method_order(method, dts):
+def test_split_runs_converge_at_the_method_order(method, dts, backend):
     scene = spinning_double_pendulum()
     t_end = 0.5
     reference = ln.Simulator(scene, method="dop853", rtol=1e-13, atol=1e-14)
     reference.advance(t_end)
     errors, splits = [], []
     for dt in dts:
-        sim = ln.Simulator(scene, method=method, dt=dt)
+        sim = ln.Simulator(scene, method=method, dt=dt, backend=backend)
         sim.advance(t_end)
         errors.append(np.abs(sim.state.X - reference.state.X).max())
         splits.append(sim.integrator.stats.split)
@@ -51,3 +52,17 @@ def test_split_runs_converge_at_the_method_order(method, dts):
     order = np.log(errors[-2] / errors[-1]) / np.log(2.0)
     assert abs(order - ln.METHODS[method].order) < 0.3, (errors, splits)
     assert errors[-1] < 1e-2 * errors[0]
+
+
+@pytest.mark.parametrize("method,dt", [("rattle", 0.04), ("yoshida4", 0.02)])
+def test_the_numpy_reference_splits_as_the_native_core_does(method, dt):
+    """Every step of these runs fails at full length; both paths split each into the same sub-steps (the bound is
+    the core's ln_max_split_level), count them alike and agree to round-off."""
+    scene = spinning_double_pendulum()
+    final, stats = {}, {}
+    for backend in ("numpy", "native"):
+        sim = ln.Simulator(scene, method=method, dt=dt, backend=backend)
+        sim.advance(0.5)
+        final[backend], stats[backend] = sim.state.X, sim.integrator.stats
+    assert stats["numpy"] == stats["native"] and stats["numpy"].split > 0 and stats["numpy"].finest_split >= 2
+    assert np.abs(final["numpy"] - final["native"]).max() < 1e-11

@@ -103,15 +103,22 @@ LN_ALWAYS_INLINE int composition_step(const ln_model *m, const ln_method *meth, 
 
 /* A step whose position stage (or implicit half kick) fails is taken again from its start as 2, 4, ...
    equal sub-steps, each the whole composition (so each keeps the method's symmetry), at most
-   2^MAX_SPLIT_LEVEL of them: a whipping tip that moves too far within one step for Newton to converge
-   moves little enough within a sub-step, and the result keeps the method's order as dt shrinks. */
-#define MAX_SPLIT_LEVEL 6
+   2^ln_max_split_level of them: a whipping tip that moves too far within one step for Newton to converge
+   moves little enough within a sub-step, and the result keeps the method's order as dt shrinks. The numpy
+   reference reads the bound from here (linknet_core.integrators.base.MAX_SPLIT_LEVEL) and splits the same way. */
+#ifndef LINKNET_MAX_SPLIT_LEVEL
+#define LINKNET_MAX_SPLIT_LEVEL
+LN_API extern const int ln_max_split_level;
+#if DIM == 3
+LN_API const int ln_max_split_level = 6;
+#endif
+#endif
 
 LN_NOINLINE int split_step(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
                       const double *F_base, double h, double t, double t_end, double **E0, double **E1, int status)
 {
     const ln_int size = m->K * DIM;
-    for (int level = 1; level <= MAX_SPLIT_LEVEL; level++) {
+    for (int level = 1; level <= ln_max_split_level; level++) {
         const ln_int parts = (ln_int)1 << level;
         for (ln_int i = 0; i < size; i++) {
             X[i] = d->X_step[i];
