@@ -105,6 +105,13 @@ class NativeIntegrator(Integrator):
         return {"native": _Internals(d.t, d.h_next, d.planar, d.steps, d.rejected, d.n_rhs, d.split_steps,
                                      d.finest_split, d.jumps, drive, last_jump)}
 
+    def reset(self, internals: dict) -> None:
+        """Back to a new integrator's data (NativeData.reset: every counter, the projection floor's included, and
+        the scratch), then to ``internals`` (those it had when new)."""
+        self.data.reset()
+        self._motion_error = None
+        self.set_internals(internals)
+
     def set_internals(self, data: dict) -> None:
         saved = data["native"]
         d = self._d

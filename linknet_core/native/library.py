@@ -131,6 +131,7 @@ def _declare(name, restype, *argtypes):
 Model_p, Method_p, Data_p = ctypes.POINTER(Model), ctypes.POINTER(Method), ctypes.POINTER(Data)
 data_new = _declare("ln_data_new", Data_p, Model_p, ln_int)
 data_free = _declare("ln_data_free", None, Data_p)
+data_reset = _declare("ln_data_reset", None, Model_p, Data_p)
 advance = _declare("ln_advance", ctypes.c_int, Model_p, Method_p, Data_p, ctypes.c_double, ln_int)
 evaluate = _declare("ln_evaluate", ctypes.c_int, Model_p, Data_p, c_double_p, c_double_p)
 sample = _declare("ln_sample", ctypes.c_int, Model_p, Method_p, Data_p, c_double_p, ln_int, ctypes.c_int, ln_int,

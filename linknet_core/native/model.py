@@ -331,6 +331,11 @@ class NativeData:
         address = ctypes.c_void_p.from_address(ctypes.addressof(self.struct) + _DATA_OFFSET[field]).value
         return np.frombuffer((ctypes.c_double * (rows * max(columns, 1))).from_address(address)).reshape(shape)
 
+    def reset(self) -> None:
+        """Back to what a new data of the model holds (ln_data_reset: state, internals, counters, the driven
+        anchors' hold, scratch), keeping its allocations, its views and its scene time origin."""
+        lib.data_reset(self.model.pointer, self._ptr)
+
     acc = functools.cached_property(lambda self: self._view("acc", self.model.K, 3))
     reaction = functools.cached_property(lambda self: self._view("reaction", int(self.model.struct.n_fixed), 3))
     drive_P = functools.cached_property(lambda self: self._view("drive_P", int(self.model.struct.n_driven), 3))

@@ -265,6 +265,9 @@ class Simulator:
         self._initial_internals = internals if type(self.integrator) is NativeIntegrator else copy.deepcopy(internals)
         self.max_steps_per_call = max_steps_per_call
         self.state = self._initial.copy()
+        # what the Dynamics counts (the numpy reference's right-hand sides and projection floor), as reset finds it
+        self._initial_counts = (self.dyn.rhs_evaluations, getattr(self.dyn, "floor_stops", 0),
+                                getattr(self.dyn, "floor_reached", 0.0))
 
     @functools.cached_property
     def identity(self) -> dict:
@@ -497,8 +500,14 @@ class Simulator:
         self.dyn.rhs_evaluations = snapshot.get("rhs_evaluations", self.dyn.rhs_evaluations)
 
     def reset(self) -> None:
+        """Back to the initial state, as a new Simulator of the same settings: state, integrator internals, the
+        driven anchors' hold and every counter (steps, right-hand sides, the projection floor's)."""
         self.state = self._initial.copy()
-        self.integrator.set_internals(copy.deepcopy(self._initial_internals))
+        if type(self.integrator) is NativeIntegrator:
+            self.integrator.reset(self._initial_internals)
+        else:
+            self.integrator.set_internals(copy.deepcopy(self._initial_internals))
+        self.dyn.rhs_evaluations, self.dyn.floor_stops, self.dyn.floor_reached = self._initial_counts
 
     def summary(self) -> str:
         """Scene, method and the specialisation chosen for it (and why)."""
@@ -595,8 +604,69 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str = "ratt
         output_dt = output_dt_value
     if motions:
         scene = scene.with_motions(motions)
-    sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial,
-                    backend=backend, rhs_kernel=rhs_kernel, specialise=specialise)
+    # a Simulator of an earlier run of this scene object and these settings, reset, or a new one; handed back to
+    # the scene's pool when the run ends, however it ends
+    pool_key = None if motions else _settings_key(method, dt, rtol, atol, project_initial, DEFAULT_LENGTH_TOL,
+                                                  backend, rhs_kernel, specialise)
+    sim = _take_pooled(scene, pool_key)
+    if sim is None:
+        sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial,
+                        backend=backend, rhs_kernel=rhs_kernel, specialise=specialise)
+    try:
+        return _run(sim, scene, t_end, method, dt, rtol, n_out, output_dt, forces, progress, anchors)
+    finally:
+        if pool_key is not None and type(sim.integrator) is NativeIntegrator:
+            _hand_back(scene, pool_key, sim)
+
+
+class _SimulatorPool(dict):
+    """Simulators that simulate has finished with, per settings key, kept on their scene object (so they live as
+    long as it: the cycle scene -> pool -> Simulator -> scene is the garbage collector's to free). A copy or a
+    pickle of the scene gets an empty pool: Simulators hold the native core's memory."""
+
+    def __reduce__(self):
+        return _SimulatorPool, ()
+
+    def __copy__(self):
+        return _SimulatorPool()
+
+    def __deepcopy__(self, memo):
+        return _SimulatorPool()
+
+
+_POOL_ATTRIBUTE = "_simulate_pool"
+_POOL_SIZE = 2  # Simulators kept per scene and settings (more only while as many runs of them are under way)
+
+
+def _take_pooled(scene: Scene, key) -> Simulator | None:
+    """A pooled Simulator of ``scene`` and ``key``, reset to its initial state and taken out of the pool (a run in
+    another thread, or one nested in a forces callable, builds its own), or None."""
+    if key is None:
+        return None
+    pool = scene.__dict__.get(_POOL_ATTRIBUTE)
+    kept = pool.get(key) if pool is not None else None
+    try:
+        sim = kept.pop() if kept else None
+    except IndexError:  # another thread took the last one
+        return None
+    if sim is not None:
+        sim.reset()
+    return sim
+
+
+def _hand_back(scene: Scene, key, sim: Simulator) -> None:
+    pool = scene.__dict__.get(_POOL_ATTRIBUTE)
+    if pool is None:
+        pool = _SimulatorPool()
+        object.__setattr__(scene, _POOL_ATTRIBUTE, pool)  # a frozen dataclass: its fields are not touched
+    kept = pool.setdefault(key, [])
+    if len(kept) < _POOL_SIZE:
+        kept.append(sim)
+
+
+def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, output_dt, forces, progress,
+         anchors) -> Result:
+    """simulate's run on ``sim`` (at its initial state), its arguments but the scene's checked."""
     anchor_hold = sim.check_anchors(anchors)
     if output_dt is not None:
         times = _output_times(t_end, max(1, int(round(t_end / output_dt))) + 1)

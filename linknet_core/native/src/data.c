@@ -33,6 +33,17 @@ void ln_data_free(ln_data *d)
     free(d);
 }
 
+/* What a new data holds beyond zeros (ln_data_new and ln_data_reset). */
+static void initial_values(const ln_model *m, ln_data *d)
+{
+    d->planar = m->planar;
+    d->fail_link = -1;
+    /* input-driven anchors rest at their scene position until an input arrives: the first row of their
+       piece table (drive.c) holds it */
+    for (ln_int a = 0; a < m->n_driven; a++)
+        for (int e = 0; e < 3; e++) d->drive_P[3 * a + e] = m->piece[14 * m->motion_pieces[a] + 2 + 4 * e];
+}
+
 ln_data *ln_data_new(const ln_model *m, ln_int n_stages)
 {
     ln_data *d = calloc(1, sizeof *d);
@@ -55,24 +66,49 @@ ln_data *ln_data_new(const ln_model *m, ln_int n_stages)
     const ln_int n_driven = m->n_driven;
     d->drive_P = doubles(3 * n_driven); d->drive_V = doubles(3 * n_driven); d->drive_A = doubles(3 * n_driven);
     d->impulse = doubles(3 * n_driven); d->drive_scratch = doubles(18 * n_driven);
-    d->planar = m->planar;
-    d->fail_link = -1;
     int ok = d->X && d->U && d->F_input && d->T && d->acc && d->reaction && d->X_start && d->U_start && d->X_step && d->U_step && d->Xp && d->Up && d->Fp
              && d->F_base && d->F && d->Uh && d->Xc && d->U_iterate && d->acc1 && d->Xs && d->Us && d->Xn && d->Un
              && d->E0 && d->E1 && d->B && d->mu && d->phi && d->scale && d->work && d->KX && d->KU
              && d->pair_values && d->chain_sub && d->chain_Dinv
              && d->drive_P && d->drive_V && d->drive_A && d->impulse && d->drive_scratch;
-    /* input-driven anchors rest at their scene position until an input arrives: the first row of their
-       piece table (drive.c) holds it */
-    for (ln_int a = 0; ok && a < n_driven; a++)
-        for (int e = 0; e < 3; e++) d->drive_P[3 * a + e] = m->piece[14 * m->motion_pieces[a] + 2 + 4 * e];
     if (ok && m->solver == LN_SOLVER_LDL) ok = (d->ldl = ln_ldl_numeric_new(m->ldl)) != NULL;
     if (ok && m->rigid) ok = (d->rigid = ln_rigid_data_new(m, n_stages)) != NULL;
     if (!ok) {
         ln_data_free(d);
         return NULL;
     }
+    initial_values(m, d);
     return d;
+}
+
+void ln_data_reset(const ln_model *m, ln_data *d)
+{
+    const ln_int K3 = 3 * m->K, L = m->L, L3 = 3 * m->L, K2 = 2 * m->K, n_driven = m->n_driven;
+    const ln_int stage_values = (d->n_stages_allocated + 1) * K3;
+    struct { double *array; ln_int n; } arrays[] = {
+        {d->X, K3}, {d->U, K3}, {d->F_input, K3}, {d->T, L}, {d->acc, K3}, {d->reaction, 3 * m->n_fixed},
+        {d->X_start, K3}, {d->U_start, K3}, {d->X_step, K3}, {d->U_step, K3}, {d->Xp, K2}, {d->Up, K2},
+        {d->Fp, K2}, {d->F_base, K3}, {d->F, K3}, {d->Uh, K3}, {d->Xc, K3}, {d->U_iterate, K3}, {d->acc1, K3},
+        {d->Xs, K3}, {d->Us, K3}, {d->Xn, K3}, {d->Un, K3}, {d->E0, L3}, {d->E1, L3}, {d->B, L}, {d->mu, L},
+        {d->phi, L}, {d->scale, L}, {d->work, L}, {d->KX, stage_values}, {d->KU, stage_values},
+        {d->pair_values, m->n_pairs}, {d->chain_sub, L}, {d->chain_Dinv, L}, {d->drive_P, 3 * n_driven},
+        {d->drive_V, 3 * n_driven}, {d->drive_A, 3 * n_driven}, {d->impulse, 3 * n_driven},
+        {d->drive_scratch, 18 * n_driven}};
+    for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++)
+        if (arrays[i].n > 0) memset(arrays[i].array, 0, (size_t)arrays[i].n * sizeof(double));
+    d->t = d->h_next = 0.0;
+    d->steps = d->rejected = d->n_rhs = d->split_steps = d->finest_split = d->last_steps = 0;
+    d->status = LN_OK;
+    d->fail_residual = d->fail_before = d->fail_t = d->fail_floor = d->floor_reached = 0.0;
+    d->fail_iterations = d->floor_stops = 0;
+    d->drive_hold_t = d->drive_t0;  /* the scene's time origin is the data's setting, kept */
+    d->drive_callback = NULL;
+    d->drive_user = NULL;
+    d->jump_position = d->jump_velocity = 0.0;
+    d->jumps = 0;
+    d->singular = 0;
+    d->singular_events = d->exact_newton_projections = 0;
+    initial_values(m, d);
 }
 
 ln_int ln_fixed_step_count(double span, double dt)

@@ -232,6 +232,10 @@ typedef struct ln_data {
 /* ---- data.c: allocation and the whole-interval advance ------------------------------------------ */
 LN_API ln_data *ln_data_new(const ln_model *m, ln_int n_stages);  /* NULL: out of memory */
 LN_API void ln_data_free(ln_data *d);
+/* Put d back to what ln_data_new(m, ...) made (the state, internals, counters, diagnostics, the driven anchors'
+   hold and every scratch array), keeping its allocations and its scene time origin drive_t0: a run on a reset
+   data is the run on a new one. Not for free rigid bodies (their ln_rigid_data is not reset). */
+LN_API void ln_data_reset(const ln_model *m, ln_data *d);
 
 /* Advance d from d->t to t_target with d->F_input held (zero-order hold), all or nothing: on any status
    but LN_OK the state and internals are those before the call, and the diagnostics say why. */
