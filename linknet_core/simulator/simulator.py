@@ -140,8 +140,8 @@ def _settings_key(method, dt, rtol, atol, project_initial, length_tol, backend, 
     """What a Simulator's set-up depends on beyond its scene, as a key of what is kept per scene object (each value
     with its type, so that True and 1 or 1e-3 and numpy's 1e-3 are told apart), or None when a value cannot be a key
     (the set-up is then made afresh)."""
-    key = ("simulator set-up", method, backend, rhs_kernel,
-           *((type(v), v) for v in (dt, rtol, atol, project_initial, length_tol, specialise)))
+    key = ("simulator set-up", method, backend, rhs_kernel, type(dt), dt, type(rtol), rtol, type(atol), atol,
+           type(project_initial), project_initial, type(length_tol), length_tol, type(specialise), specialise)
     try:
         hash(key)
     except TypeError:
@@ -276,6 +276,13 @@ class Simulator:
         rest of a small simulator)."""
         return {"format": SNAPSHOT_FORMAT, "scene": self.scene.fingerprint, "method": self.method,
                 "path": f"{self.backend} {self.specialisation.kind}"}
+
+    @functools.cached_property
+    def run_description(self) -> tuple:
+        """(tension solver's structure, right-hand side kernel, notes on the initial state and the specialisation,
+        the specialisation in words): what the stats of every run say of this simulator (fixed at construction)."""
+        return (self.dyn.structure.kind, self.dyn.rhs_kernel,
+                tuple(self.initial_report.lines(self.scene) + self.specialisation.notes), self.specialisation.text())
 
     @property
     def rhs_evaluations(self) -> int:
@@ -704,8 +711,11 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
             chunk = 2
             while done < n:
                 stop = min(n, done + chunk)
-                sim.sample(times[done:stop], F, X[done:stop], U[done:stop], T[done:stop], advance_first=done > 0,
-                           diagnostics=None if diagnostics is None else diagnostics[done:stop])
+                if stop - done == n:  # the whole run in one call (two samples)
+                    sim.sample(times, F, X, U, T, advance_first=False, diagnostics=diagnostics)
+                else:
+                    sim.sample(times[done:stop], F, X[done:stop], U[done:stop], T[done:stop], advance_first=done > 0,
+                               diagnostics=None if diagnostics is None else diagnostics[done:stop])
                 done = stop
                 now = time.perf_counter()
                 if now - start > 1.0 and show is None:
@@ -752,6 +762,8 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
 def _output_times(t_end: float, n: int) -> np.ndarray:
     """np.linspace(0.0, t_end, n), n >= 2, computed as linspace does (i * (t_end / (n - 1)), the last t_end) in a
     fraction of its time (a fixed cost of every run); linspace itself where that step underflows to 0."""
+    if n == 2:  # linspace's too: 0, then the last exactly t_end
+        return np.array((0.0, t_end))
     step = t_end / (n - 1)
     if step == 0.0:
         return np.linspace(0.0, t_end, n)
@@ -779,11 +791,10 @@ def _sample_diagnostics(dyn: Dynamics, X: np.ndarray, U: np.ndarray):
 def _run_stats(sim, method, dt, rtol, scene, wall) -> dict:
     driven = {"anchor_jumps": sim.anchor_report()["jumps"]} if scene.driven.any() else {}
     floor_stops, floor_reached = sim.integrator.projection_floor()
+    structure, rhs_kernel, initial, specialisation = sim.run_description
     return dict(sim.integrator.stats.as_dict(), **driven, wall_time=wall, rhs_evaluations=sim.rhs_evaluations,
-                floor_stops=floor_stops, floor_reached=floor_reached,
-                structure=sim.dyn.structure.kind, method=method, dt=dt, rtol=rtol, rhs_kernel=sim.dyn.rhs_kernel,
-                initial=sim.initial_report.lines(scene) + sim.specialisation.notes,
-                specialisation=sim.specialisation.text())
+                floor_stops=floor_stops, floor_reached=floor_reached, structure=structure, method=method, dt=dt,
+                rtol=rtol, rhs_kernel=rhs_kernel, initial=list(initial), specialisation=specialisation)
 
 
 def _progress_bar(done: int, total: int, elapsed: float) -> None:
