@@ -6,13 +6,16 @@ What differs: generalized-alpha is second order and, with spectral radius < 1, n
 Exudyn's default spectral radius 0.9: with 1.0 (no numerical damping) the index-3 Newton iteration fails on
 the whipping chain_10 at every step size tried (1e-2 .. 1e-4 s) and every Newton tolerance (1e-14 .. 1e-6),
 a known weakness of undamped index-3 generalized-alpha. Newton runs to 1e-12 (1e-14 is unreachable on the
-spinning tetrahedron) so the step size is the only accuracy knob. Redundant links make the
-constraint Jacobian rank-deficient; Exudyn then needs ignoreSingularJacobian (dense solver) and may fail.
+spinning tetrahedron) so the step size is the only accuracy knob. Redundant links (a state of self-stress)
+make the constraint Jacobian rank-deficient: Exudyn's default dense solver, ignoreSingularJacobian set, then stops
+at the first step ("System Jacobian seems to be singular", or a Newton diverging), so on such scenes the Eigen
+dense solver with ignoreSingularJacobian is used, Exudyn's own advice for redundant constraints.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..index1 import Index1System
 from .base import Method, RunResult, Timer, n_steps
 
 
@@ -73,7 +76,9 @@ class ExudynGenAlpha(Method):
             ss.solutionSettings.writeSolutionToFile = False
             ss.solutionSettings.writeInitialValues = False
             ss.linearSolver.ignoreSingularJacobian = True
-            if 3 * spec.K > 300:   # Exudyn's own advice above 1000 unknowns; sparse LU pays from a few hundred
+            if Index1System(spec).redundant:
+                ss.linearSolver.solverType = exu.LinearSolverType.EigenDense
+            elif 3 * spec.K > 300:   # Exudyn's own advice above 1000 unknowns; sparse LU pays from a few hundred
                 ss.linearSolver.solverType = exu.LinearSolverType.EigenSparse
         with Timer() as tm:
             ok = mbs.SolveDynamic(ss) if hasattr(mbs, "SolveDynamic") else exu.SolveDynamic(mbs, ss)

@@ -161,16 +161,21 @@ def diagnose(scene: str = "net_10x10", t_end: float = 0.25):
     from ..work_precision import load_benchmark_scene
     spec = load_benchmark_scene(scene)
     sys_ = Index1System(spec)
-    times = [0.0, 0.025, 0.05, 0.075, 0.09, 0.1, 0.125, 0.15, 0.2, 0.25]
-    times = [t for t in times if t <= t_end]
+    times = [t for t in (0.0, 0.025, 0.05, 0.075, 0.09, 0.1, 0.125, 0.15, 0.2, 0.25) if t <= t_end]
+    if t_end > 0.25:   # longer runs (the redundant scenes in motion): every 0.1 s beyond
+        times += [float(t) for t in np.arange(0.3, t_end, 0.1)] + [t_end]
     sol = solve_ivp(sys_.rhs, (0, t_end), sys_.y0(), method="DOP853", rtol=1e-10, atol=1e-13, t_eval=times)
     inv_m = np.where(spec.fixed, 1.0 / ANCHOR_MASS, 1.0 / np.where(spec.fixed, 1.0, spec.mass))
     M0 = _scaled_coupling(spec, spec.X0, inv_m)
     print(f"{scene}: radius of CCMA's iteration along the motion (> 1: diverges)")
     for t, y in zip(sol.t, sol.y.T):
         X, _ = sys_.split(y)
+        try:
+            hinted = f"{jacobi_radius(spec, X, M0):.4f}"
+        except np.linalg.LinAlgError:   # redundant links: the coupling matrix has a state of self-stress
+            hinted = "none (the t = 0 coupling matrix is singular: self-stress)"
         print(f"  t = {t:5.3f} s   as OpenMM runs it (identity matrix, plain Jacobi): {jacobi_radius(spec, X):.4f}"
-              f"   with the t = 0 angles supplied: {jacobi_radius(spec, X, M0):.4f}")
+              f"   with the t = 0 angles supplied: {hinted}")
     print("when OpenMM's coordinates become non-finite:")
     for dt, kw in ((1e-3, {}), (1e-4, {}), (1e-5, {}), (1e-4, {"anchor_mass": 1e3}), (1e-4, {"tol": 1e-6}),
                    (1e-4, {"platform": "CPU"}), (1e-4, {"angle_hints": True})):
@@ -179,4 +184,4 @@ def diagnose(scene: str = "net_10x10", t_end: float = 0.25):
 
 if __name__ == "__main__":
     import sys
-    diagnose(*sys.argv[1:2])
+    diagnose(*sys.argv[1:2], *map(float, sys.argv[2:3]))   # [scene [t_end]]
