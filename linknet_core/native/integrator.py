@@ -52,6 +52,19 @@ class _Internals:
                           self.finest_split, self.jumps, drive, last_jump)
 
 
+def _rows_of(array: np.ndarray):
+    """(its first element as lib.first_double gives it, the distance between its rows in elements) of a 2-D float64
+    array whose rows are contiguous: a C-contiguous array or some of its columns."""
+    if array.flags.c_contiguous:
+        return lib.first_double(array), array.shape[1]
+    itemsize = array.itemsize
+    if array.dtype != np.float64 or array.ndim != 2 or array.strides[1] != itemsize or array.strides[0] % itemsize:
+        raise ValueError("the native core takes float64 rows, each contiguous")
+    if not array.size:
+        return None, 0
+    return ctypes.c_double.from_address(array.__array_interface__["data"][0]), array.strides[0] // itemsize
+
+
 class NativeIntegrator(Integrator):
     """``method_cls``: the reference integrator class whose method this runs (its gammas or tableau, name,
     order, guarantees). ``static``: a scene with no degrees of freedom (an advance moves t only)."""
@@ -71,6 +84,10 @@ class NativeIntegrator(Integrator):
         self._model_p, self._method_p, self._data_p = model.pointer, self.method.pointer, self.data._ptr
         self._d = self.data.struct
         self._out = (None, None)  # the arrays last handed out as the state (the data holds the same values)
+        self._input_zero = True  # whether the data's held input is all zero (as a new data's is)
+        # ln_sample's first arguments and its count of samples written: the data's addresses never change
+        self._sample = functools.partial(lib.sample, self._model_p, self._method_p, self._data_p)
+        self._written = lib.ln_int(0)
         # driven anchors: scene time 0 is t0; input-driven anchors are rows input_slots of the drive arrays
         self._d.drive_t0 = self._d.drive_hold_t = t0
         self.scene = scene = model.scene  # the model holds it weakly
@@ -105,12 +122,18 @@ class NativeIntegrator(Integrator):
         return {"native": _Internals(d.t, d.h_next, d.planar, d.steps, d.rejected, d.n_rhs, d.split_steps,
                                      d.finest_split, d.jumps, drive, last_jump)}
 
-    def reset(self, internals: dict) -> None:
-        """Back to a new integrator's data (NativeData.reset: every counter, the projection floor's included, and
-        the scratch), then to ``internals`` (those it had when new)."""
+    def reset(self, internals: dict | None = None) -> None:
+        """Back to a new integrator's data (NativeData.reset: every counter, the projection floor's included, the
+        driven anchors' hold and the scratch), then to ``internals`` unless None (None: the internals a new
+        integrator has, which the reset data holds already)."""
         self.data.reset()
         self._motion_error = None
-        self.set_internals(internals)
+        self._input_zero = True
+        if internals is not None:
+            self.set_internals(internals)
+            return
+        self._motion = None  # the reset data follows no callable (its drive_callback is NULL)
+        self._out = (None, None)
 
     def set_internals(self, data: dict) -> None:
         saved = data["native"]
@@ -172,10 +195,12 @@ class NativeIntegrator(Integrator):
             self.data.X[...] = X
             self.data.U[...] = U
         self._d.t = state.t
-        if F_input is None:
-            self.data.F_input.fill(0.0)
-        else:
+        if F_input is not None:
             self.data.F_input[...] = F_input
+            self._input_zero = False
+        elif not self._input_zero:
+            self.data.F_input.fill(0.0)
+            self._input_zero = True
 
     def advance(self, state, t_target: float, F_input, max_steps: int) -> None:
         self._load(state, F_input)
@@ -190,17 +215,23 @@ class NativeIntegrator(Integrator):
     def sample(self, state, times, F_input, max_steps: int, X, U, T, diagnostics, advance_first: bool) -> None:
         """Samples at ``times`` (advance to each, then the outputs there) with F_input held, in one call into C
         (ln_sample), into X, U (n,K,3) and T (n,L), and unless ``diagnostics`` is None each sample's energy,
-        residuals of (11) and (12) and kinetic energy into its row of ``diagnostics`` (n,4) (needs
-        ``diagnostics_in_c``); every array C-contiguous float64, ``times`` too. Sample 0 is taken at the current
-        state unless ``advance_first``. On a failure the samples before it are written, ``state`` is where the
-        run stopped, and the SolverError says why, as ``advance`` and ``outputs`` would."""
+        residuals of (11) and (12) and kinetic energy into its column of ``diagnostics`` (4,n), one row per
+        quantity (needs ``diagnostics_in_c``); X, U, T and ``times`` C-contiguous float64, ``diagnostics`` float64
+        with contiguous rows (a C-contiguous array or columns of one). Sample 0 is taken at the current state
+        unless ``advance_first``. On a failure the samples before it are written, ``state`` is where the run
+        stopped, and the SolverError says why, as ``advance`` and ``outputs`` would."""
         self._load(state, F_input)
         t_before = state.t
-        written = lib.ln_int(0)
+        written = self._written
         ref = lib.first_double
-        status = lib.sample(self._model_p, self._method_p, self._data_p, ref(times), times.size, int(advance_first),
-                            max_steps, ref(X), ref(U), ref(T), None if diagnostics is None else self._energy_terms,
-                            None if diagnostics is None else ref(diagnostics), written)
+        if diagnostics is None:
+            terms = first = None
+            stride = 0
+        else:
+            terms = self._energy_terms
+            first, stride = _rows_of(diagnostics)
+        status = self._sample(ref(times), times.size, advance_first, max_steps, ref(X), ref(U), ref(T), terms, first,
+                              stride, written)
         if written.value or status != lib.OK:
             X_now, U_now = self.data.X.copy(), self.data.U.copy()
             state.X, state.U, state.t = X_now, U_now, float(self._d.t)
@@ -230,10 +261,12 @@ class NativeIntegrator(Integrator):
     def outputs(self, X, U, F_input=None):
         """(T, the force the network exerts on each anchor) at (X, U) with F_input held, in one call."""
         F = self.data.F_input
-        if F_input is None:
-            F.fill(0.0)
-        else:
+        if F_input is not None:
             F[...] = F_input
+            self._input_zero = False
+        elif not self._input_zero:
+            F.fill(0.0)
+            self._input_zero = True
         X = np.ascontiguousarray(X, np.float64)
         U = np.ascontiguousarray(U, np.float64)
         status = lib.evaluate(self._model_p, self._data_p, lib.pointer(X), lib.pointer(U))

@@ -280,9 +280,11 @@ class Simulator:
     @functools.cached_property
     def run_description(self) -> tuple:
         """(tension solver's structure, right-hand side kernel, notes on the initial state and the specialisation,
-        the specialisation in words): what the stats of every run say of this simulator (fixed at construction)."""
+        the specialisation in words, whether the scene has driven anchors): what the stats of every run say of this
+        simulator (fixed at construction)."""
         return (self.dyn.structure.kind, self.dyn.rhs_kernel,
-                tuple(self.initial_report.lines(self.scene) + self.specialisation.notes), self.specialisation.text())
+                tuple(self.initial_report.lines(self.scene) + self.specialisation.notes), self.specialisation.text(),
+                bool(self.scene.driven.any()))
 
     @property
     def rhs_evaluations(self) -> int:
@@ -442,10 +444,11 @@ class Simulator:
         """What ``advance(t_i, F_input)`` then ``outputs(F_input)`` do at each of ``times``, in one call into the
         native core (the point-mass path, no driven anchors: see ``samples_in_one_call``): X[i], U[i], T[i] of each
         sample into X, U (n,K,3) and T (n,L), and, unless ``diagnostics`` is None, its energy, residuals of (11) and
-        (12) and kinetic energy into diagnostics[i] (n,4) (where ``diagnostics_in_one_call``): the values
+        (12) and kinetic energy into diagnostics[:, i] (4,n) (where ``diagnostics_in_one_call``): the values
         Dynamics.energy, constraint_residual, velocity_residual and dynamics.forces.kinetic_energy give. Every array
-        C-contiguous float64, ``times`` too. Sample 0 is taken at the current state unless ``advance_first``. On a
-        failure the samples before it are written and the SolverError is raised."""
+        C-contiguous float64, ``times`` too (``diagnostics`` may be columns of one). Sample 0 is taken at the
+        current state unless ``advance_first``. On a failure the samples before it are written and the SolverError
+        is raised."""
         F = self.check_input(F_input)
         try:
             self.integrator.sample(self.state, times, F, self.max_steps_per_call, X, U, T, diagnostics, advance_first)
@@ -511,7 +514,7 @@ class Simulator:
         driven anchors' hold and every counter (steps, right-hand sides, the projection floor's)."""
         self.state = self._initial.copy()
         if type(self.integrator) is NativeIntegrator:
-            self.integrator.reset(self._initial_internals)
+            self.integrator.reset()  # a new integrator's internals, which are those it had at construction
         else:
             self.integrator.set_internals(copy.deepcopy(self._initial_internals))
         self.dyn.rhs_evaluations, self.dyn.floor_stops, self.dyn.floor_reached = self._initial_counts
@@ -690,9 +693,9 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
     U = np.empty((n, K, 3))
     T = np.empty((n, L))
     in_one_call = not callable(forces) and sim.samples_in_one_call
-    # the samples' diagnostics from the native core as it samples, where it can: one row (energy, residual of (11),
-    # of (12), kinetic energy) per sample
-    diagnostics = np.empty((n, 4)) if in_one_call and sim.integrator.diagnostics_in_c else None
+    # the samples' diagnostics from the native core as it samples, where it can: one row per quantity (energy,
+    # residual of (11), of (12), kinetic energy), as the result holds them
+    diagnostics = np.empty((4, n)) if in_one_call and sim.integrator.diagnostics_in_c else None
     # progress on stderr: always with progress=True, never with False; by default (None) on a terminal once the run
     # has taken a second
     auto = progress is None
@@ -715,7 +718,7 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
                     sim.sample(times, F, X, U, T, advance_first=False, diagnostics=diagnostics)
                 else:
                     sim.sample(times[done:stop], F, X[done:stop], U[done:stop], T[done:stop], advance_first=done > 0,
-                               diagnostics=None if diagnostics is None else diagnostics[done:stop])
+                               diagnostics=None if diagnostics is None else diagnostics[:, done:stop])
                 done = stop
                 now = time.perf_counter()
                 if now - start > 1.0 and show is None:
@@ -750,7 +753,7 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
         part = slice(0, done)
         raise SimulationInterrupted(Result(scene, method, times[part], X[part], U[part], T[part],
                                            *_diagnostics(sim, X[part], U[part],
-                                                         None if diagnostics is None else diagnostics[part]),
+                                                         None if diagnostics is None else diagnostics[:, part]),
                                            stats)) from None
     wall = time.perf_counter() - start
     if drawn:
@@ -775,10 +778,10 @@ def _output_times(t_end: float, n: int) -> np.ndarray:
 
 def _diagnostics(sim, X: np.ndarray, U: np.ndarray, from_core: np.ndarray | None):
     """(energy, residual of (11), residual of (12), kinetic energy) of every sample of a run: the native core's
-    rows, where it filled them as it sampled, or the numpy reference's."""
+    rows (4,n), where it filled them as it sampled, or the numpy reference's."""
     if from_core is None:
         return _sample_diagnostics(sim.dyn, X, U)
-    return tuple(from_core.T.copy())
+    return tuple(from_core)
 
 
 def _sample_diagnostics(dyn: Dynamics, X: np.ndarray, U: np.ndarray):
@@ -789,12 +792,15 @@ def _sample_diagnostics(dyn: Dynamics, X: np.ndarray, U: np.ndarray):
 
 
 def _run_stats(sim, method, dt, rtol, scene, wall) -> dict:
-    driven = {"anchor_jumps": sim.anchor_report()["jumps"]} if scene.driven.any() else {}
-    floor_stops, floor_reached = sim.integrator.projection_floor()
-    structure, rhs_kernel, initial, specialisation = sim.run_description
-    return dict(sim.integrator.stats.as_dict(), **driven, wall_time=wall, rhs_evaluations=sim.rhs_evaluations,
-                floor_stops=floor_stops, floor_reached=floor_reached, structure=structure, method=method, dt=dt,
-                rtol=rtol, rhs_kernel=rhs_kernel, initial=list(initial), specialisation=specialisation)
+    structure, rhs_kernel, initial, specialisation, driven = sim.run_description
+    stats = sim.integrator.stats.as_dict()
+    if driven:
+        stats["anchor_jumps"] = sim.anchor_report()["jumps"]
+    stats["wall_time"], stats["rhs_evaluations"] = wall, sim.rhs_evaluations
+    stats["floor_stops"], stats["floor_reached"] = sim.integrator.projection_floor()
+    stats["structure"], stats["method"], stats["dt"], stats["rtol"] = structure, method, dt, rtol
+    stats["rhs_kernel"], stats["initial"], stats["specialisation"] = rhs_kernel, list(initial), specialisation
+    return stats
 
 
 def _progress_bar(done: int, total: int, elapsed: float) -> None:

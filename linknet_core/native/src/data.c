@@ -303,7 +303,7 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
 
 int ln_sample(const ln_model *m, const ln_method *meth, ln_data *d, const double *times, ln_int n, int advance_first,
               ln_int max_steps, double *X_out, double *U_out, double *T_out, const ln_energy_terms *energy,
-              double *diagnostics_out, ln_int *written)
+              double *diagnostics_out, ln_int diagnostics_stride, ln_int *written)
 {
     const size_t state_bytes = (size_t)(3 * m->K) * sizeof(double), T_bytes = (size_t)m->L * sizeof(double);
     *written = 0;
@@ -314,7 +314,11 @@ int ln_sample(const ln_model *m, const ln_method *meth, ln_data *d, const double
         memcpy(X_out + 3 * m->K * i, d->X, state_bytes);
         memcpy(U_out + 3 * m->K * i, d->U, state_bytes);
         if (T_bytes) memcpy(T_out + m->L * i, d->T, T_bytes);
-        if (diagnostics_out) ln_sample_diagnostics(m, energy, d->X, d->U, diagnostics_out + 4 * i);
+        if (diagnostics_out) {
+            double values[4];
+            ln_sample_diagnostics(m, energy, d->X, d->U, values);
+            for (int j = 0; j < 4; j++) diagnostics_out[j * diagnostics_stride + i] = values[j];
+        }
         *written = i + 1;
     }
     return LN_OK;
