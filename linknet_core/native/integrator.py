@@ -212,14 +212,17 @@ class NativeIntegrator(Integrator):
         state.X, state.U, state.t = X, U, t_target
         self._out = (X, U)
 
-    def sample(self, state, times, F_input, max_steps: int, X, U, T, diagnostics, advance_first: bool) -> None:
+    def sample(self, state, times, F_input, max_steps: int, X, U, T, diagnostics, advance_first: bool,
+               update_state: bool = True) -> None:
         """Samples at ``times`` (advance to each, then the outputs there) with F_input held, in one call into C
         (ln_sample), into X, U (n,K,3) and T (n,L), and unless ``diagnostics`` is None each sample's energy,
         residuals of (11) and (12) and kinetic energy into its column of ``diagnostics`` (4,n), one row per
         quantity (needs ``diagnostics_in_c``); X, U, T and ``times`` C-contiguous float64, ``diagnostics`` float64
         with contiguous rows (a C-contiguous array or columns of one). Sample 0 is taken at the current state
         unless ``advance_first``. On a failure the samples before it are written, ``state`` is where the run
-        stopped, and the SolverError says why, as ``advance`` and ``outputs`` would."""
+        stopped, and the SolverError says why, as ``advance`` and ``outputs`` would. Unless ``update_state``,
+        ``state`` is left as it was (the next advance starts from it again; the internals and counters move on):
+        for a run whose end state nobody reads."""
         self._load(state, F_input)
         t_before = state.t
         written = self._written
@@ -232,7 +235,9 @@ class NativeIntegrator(Integrator):
             first, stride = _rows_of(diagnostics)
         status = self._sample(ref(times), times.size, advance_first, max_steps, ref(X), ref(U), ref(T), terms, first,
                               stride, written)
-        if written.value or status != lib.OK:
+        if not update_state:
+            self._out = (None, None)  # the data no longer holds the state
+        elif written.value or status != lib.OK:
             X_now, U_now = self.data.X.copy(), self.data.U.copy()
             state.X, state.U, state.t = X_now, U_now, float(self._d.t)
             self._out = (X_now, U_now)
@@ -245,7 +250,7 @@ class NativeIntegrator(Integrator):
         raise SolverError(self.explain(status, float(times[i - 1]) if i > 0 else t_before, float(times[i]),
                                        max_steps))
 
-    @property
+    @functools.cached_property
     def diagnostics_in_c(self) -> bool:
         """Whether ``sample`` can fill the samples' diagnostics (a scene whose potentials the core knows)."""
         return self._energy_terms is not None

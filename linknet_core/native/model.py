@@ -318,6 +318,7 @@ class NativeData:
         if not self._ptr:
             raise MemoryError("the native core could not allocate its data (out of memory)")
         self.struct = self._ptr.contents
+        self._reset = functools.partial(lib.data_reset, model.pointer, self._ptr)  # reset's arguments, made once
         K = model.K
         # what every advance and output reads or writes; the other views are made when first used
         self.X, self.U, self.F_input = self._view("X", K, 3), self._view("U", K, 3), self._view("F_input", K, 3)
@@ -334,7 +335,7 @@ class NativeData:
     def reset(self) -> None:
         """Back to what a new data of the model holds (ln_data_reset: state, internals, counters, the driven
         anchors' hold, scratch), keeping its allocations, its views and its scene time origin."""
-        lib.data_reset(self.model.pointer, self._ptr)
+        self._reset()
 
     acc = functools.cached_property(lambda self: self._view("acc", self.model.K, 3))
     reaction = functools.cached_property(lambda self: self._view("reaction", int(self.model.struct.n_fixed), 3))

@@ -265,6 +265,7 @@ class Simulator:
         self._initial_internals = internals if type(self.integrator) is NativeIntegrator else copy.deepcopy(internals)
         self.max_steps_per_call = max_steps_per_call
         self.state = self._initial.copy()
+        self._reset_arrays = (self.state.X, self.state.U)  # the state's arrays as made from the initial state
         # what the Dynamics counts (the numpy reference's right-hand sides and projection floor), as reset finds it
         self._initial_counts = (self.dyn.rhs_evaluations, getattr(self.dyn, "floor_stops", 0),
                                 getattr(self.dyn, "floor_reached", 0.0))
@@ -440,7 +441,7 @@ class Simulator:
         return out
 
     def sample(self, times, F_input, X: np.ndarray, U: np.ndarray, T: np.ndarray, advance_first: bool = True,
-               diagnostics: np.ndarray | None = None) -> None:
+               diagnostics: np.ndarray | None = None, update_state: bool = True) -> None:
         """What ``advance(t_i, F_input)`` then ``outputs(F_input)`` do at each of ``times``, in one call into the
         native core (the point-mass path, no driven anchors: see ``samples_in_one_call``): X[i], U[i], T[i] of each
         sample into X, U (n,K,3) and T (n,L), and, unless ``diagnostics`` is None, its energy, residuals of (11) and
@@ -448,24 +449,26 @@ class Simulator:
         Dynamics.energy, constraint_residual, velocity_residual and dynamics.forces.kinetic_energy give. Every array
         C-contiguous float64, ``times`` too (``diagnostics`` may be columns of one). Sample 0 is taken at the
         current state unless ``advance_first``. On a failure the samples before it are written and the SolverError
-        is raised."""
+        is raised. ``update_state`` False leaves ``state`` as it was (the integrator's internals and counters move
+        on): for a run's last call when the simulator is reset before any further use (simulate)."""
         F = self.check_input(F_input)
         try:
-            self.integrator.sample(self.state, times, F, self.max_steps_per_call, X, U, T, diagnostics, advance_first)
+            self.integrator.sample(self.state, times, F, self.max_steps_per_call, X, U, T, diagnostics, advance_first,
+                                   update_state)
         except SolverError as exc:
             if F is None:
                 raise
             raise SolverError(f"{exc}{self._input_note(F)}") from None
 
-    @property
+    @functools.cached_property
     def diagnostics_in_one_call(self) -> bool:
         """Whether ``sample`` can fill the samples' diagnostics too."""
         return self.samples_in_one_call and self.integrator.diagnostics_in_c
 
-    @property
+    @functools.cached_property
     def samples_in_one_call(self) -> bool:
         """Whether ``sample`` is available: the native point-mass path (free rigid bodies and the numpy reference
-        step from Python) of a scene without driven anchors."""
+        step from Python) of a scene without driven anchors (fixed at construction)."""
         return type(self.integrator) is NativeIntegrator and not self.scene.motions  # one motion per driven anchor
 
     def anchor_report(self) -> dict:
@@ -509,10 +512,17 @@ class Simulator:
         self.integrator.set_internals(copy.deepcopy(snapshot["integrator"]))
         self.dyn.rhs_evaluations = snapshot.get("rhs_evaluations", self.dyn.rhs_evaluations)
 
-    def reset(self) -> None:
+    def reset(self, state_untouched: bool = False) -> None:
         """Back to the initial state, as a new Simulator of the same settings: state, integrator internals, the
-        driven anchors' hold and every counter (steps, right-hand sides, the projection floor's)."""
-        self.state = self._initial.copy()
+        driven anchors' hold and every counter (steps, right-hand sides, the projection floor's).
+        ``state_untouched``: the caller vouches that nothing wrote into the state's arrays since the last reset
+        (simulate's pool, whose Simulators nobody else sees): a state that still holds the arrays that reset put
+        there, at the initial time, is kept instead of copied again."""
+        state, initial = self.state, self._initial
+        if not (state_untouched and state.X is self._reset_arrays[0] and state.U is self._reset_arrays[1]
+                and state.t == initial.t):
+            self.state = state = initial.copy()
+            self._reset_arrays = (state.X, state.U)
         if type(self.integrator) is NativeIntegrator:
             self.integrator.reset()  # a new integrator's internals, which are those it had at construction
         else:
@@ -660,7 +670,7 @@ def _take_pooled(scene: Scene, key) -> Simulator | None:
     except IndexError:  # another thread took the last one
         return None
     if sim is not None:
-        sim.reset()
+        sim.reset(state_untouched=True)
     return sim
 
 
@@ -695,7 +705,7 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
     in_one_call = not callable(forces) and sim.samples_in_one_call
     # the samples' diagnostics from the native core as it samples, where it can: one row per quantity (energy,
     # residual of (11), of (12), kinetic energy), as the result holds them
-    diagnostics = np.empty((4, n)) if in_one_call and sim.integrator.diagnostics_in_c else None
+    diagnostics = np.empty((4, n)) if in_one_call and sim.diagnostics_in_one_call else None
     # progress on stderr: always with progress=True, never with False; by default (None) on a terminal once the run
     # has taken a second
     auto = progress is None
@@ -714,11 +724,14 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
             chunk = 2
             while done < n:
                 stop = min(n, done + chunk)
+                # the run's last call leaves sim.state alone: nothing reads it (sim is dropped, or reset when
+                # pooled), and a state that reset made and nothing replaced is not copied again there
                 if stop - done == n:  # the whole run in one call (two samples)
-                    sim.sample(times, F, X, U, T, advance_first=False, diagnostics=diagnostics)
+                    sim.sample(times, F, X, U, T, advance_first=False, diagnostics=diagnostics, update_state=False)
                 else:
                     sim.sample(times[done:stop], F, X[done:stop], U[done:stop], T[done:stop], advance_first=done > 0,
-                               diagnostics=None if diagnostics is None else diagnostics[:, done:stop])
+                               diagnostics=None if diagnostics is None else diagnostics[:, done:stop],
+                               update_state=stop < n)
                 done = stop
                 now = time.perf_counter()
                 if now - start > 1.0 and show is None:
@@ -726,7 +739,8 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
                 if show and (not auto or now - start > 1.0):
                     _progress_bar(done, n, now - start)
                     drawn, last_print = True, now
-                chunk = max(1, int(0.1 * done / max(now - start, 1e-9)))
+                if done < n:
+                    chunk = max(1, int(0.1 * done / max(now - start, 1e-9)))
         if done < n and show is None:
             show = sys.stderr.isatty()
         for i in range(done, n):
@@ -781,7 +795,7 @@ def _diagnostics(sim, X: np.ndarray, U: np.ndarray, from_core: np.ndarray | None
     rows (4,n), where it filled them as it sampled, or the numpy reference's."""
     if from_core is None:
         return _sample_diagnostics(sim.dyn, X, U)
-    return tuple(from_core)
+    return from_core[0], from_core[1], from_core[2], from_core[3]
 
 
 def _sample_diagnostics(dyn: Dynamics, X: np.ndarray, U: np.ndarray):

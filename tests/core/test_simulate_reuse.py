@@ -129,3 +129,23 @@ def test_kept_simulator_does_not_keep_the_scene(models_dir):
     del scene, other
     gc.collect()
     assert alive() is None
+
+
+def test_samples_that_leave_the_state_alone(models_dir):
+    """Simulator.sample(update_state=False), simulate's last call on a Simulator it resets before reuse: the
+    samples are those of the stepping interface, the state stays where it was and the next advance starts from it
+    (fixed steps: the run from there is the same run again); a reset then gives the initial state."""
+    sim = ln.Simulator(ln.load_scene(models_dir / "chain_10.json"), method="rattle", dt=1e-3)
+    X0, U0 = sim.state.X.copy(), sim.state.U.copy()
+    times = np.array([0.0, 0.05, 0.1])
+    n, K, L = times.size, sim.scene.K, sim.scene.L
+    X, U, T, diagnostics = np.empty((n, K, 3)), np.empty((n, K, 3)), np.empty((n, L)), np.empty((4, n))
+    sim.sample(times, None, X, U, T, advance_first=False, diagnostics=diagnostics, update_state=False)
+    assert sim.state.t == 0.0 and np.array_equal(sim.state.X, X0) and np.array_equal(sim.state.U, U0)
+    sim.advance(0.05)
+    sim.advance(0.1)
+    out = sim.outputs()
+    assert np.array_equal(out["X"], X[-1]) and np.array_equal(out["U"], U[-1]) and np.array_equal(out["T"], T[-1])
+    assert diagnostics[3, -1] > 0  # the kinetic energy of the moving chain, in its row
+    sim.reset(state_untouched=True)  # the state was replaced by the advances: made afresh
+    assert sim.state.t == 0.0 and np.array_equal(sim.state.X, X0) and np.array_equal(sim.state.U, U0)
