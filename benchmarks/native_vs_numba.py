@@ -8,11 +8,13 @@ figure is the best of the rounds. A JIT-compiled tree gets one numba cache folde
 
     python -m benchmarks.native_vs_numba kernel --trees before=/work/before after=/work/main [--rounds 2]
     python -m benchmarks.native_vs_numba work-precision --trees before=/work/before after=/work/main \
-        [--rounds 2] [--scenes pendulum chain_10 chain_100 net_10x10]
+        [--rounds 2] [--scenes pendulum chain_10 chain_100 net_10x10] [--wp-args='--sweep-budget 45']
     python -m benchmarks.native_vs_numba report
 
-``kernel`` and ``work-precision`` write DIR/kernel.json and DIR/work_precision.json (DIR: --out, default
-docs/benchmarks/native_vs_numba), each tree's raw rounds included; ``kernel`` also writes the after tree's
+``work-precision`` runs linknet's own methods only (the peers are the same code in both trees), every tree with
+the same work_precision arguments (--wp-args, for example smaller sweep budgets for both), and records each
+sweep's wall time and the load when it started. ``kernel`` and ``work-precision`` write DIR/kernel.json and
+DIR/work_precision.json (DIR: --out, default docs/benchmarks/native_vs_numba), each tree's raw rounds included; ``kernel`` also writes the after tree's
 best rounds in bench_kernel's own format (DIR/kernel_after/kernel.md). ``report`` renders DIR.md (by default
 docs/benchmarks/native_vs_numba.md) from DIR/findings.md (written by hand), these JSON files and
 bench_fixed_costs.py's and bench_cold_start.py's outputs in the same folder.
@@ -163,25 +165,34 @@ def _kernel_run(tree: str, path: Path, numba_cache: Path, args: list[str]) -> di
 
 
 # ------------------------------------------------------------------------------------------------ work-precision
-def run_work_precision(trees: dict, rounds: int, scenes, out: Path) -> dict:
+def run_work_precision(trees: dict, rounds: int, scenes, out: Path, extra_args=()) -> dict:
+    """extra_args: passed to every tree's work_precision (for example a smaller --sweep-budget for both)."""
     numba_cache = Path(tempfile.mkdtemp(prefix="linknet_numba_cache_"))
     work = Path(tempfile.mkdtemp(prefix="linknet_wp_"))
+    extra_args = list(extra_args)
     meta = _meta("python -m benchmarks.native_vs_numba work-precision --trees "
-                 + " ".join(f"{k}={v}" for k, v in trees.items()) + f" --rounds {rounds} --scenes {' '.join(scenes)}")
+                 + " ".join(f"{k}={v}" for k, v in trees.items()) + f" --rounds {rounds} --scenes {' '.join(scenes)}"
+                 + (f" --wp-args='{' '.join(extra_args)}'" if extra_args else ""))
     meta["commits"] = {t: _commit(p) for t, p in trees.items()}
     methods = [f"linknet-{m}" for m in LINKNET_METHODS]
     meta["inner_command"] = ("python -m benchmarks.work_precision --scenes SCENE --methods " + " ".join(methods)
-                             + " --out DIR --merge")
+                             + "".join(f" {a}" for a in extra_args) + " --out DIR --merge")
     order = list(trees.items())
+    meta["runs"] = []
     for i in range(rounds):
-        for scene in scenes:
-            for tree, path in (order if i % 2 == 0 else order[::-1]):
+        for j, scene in enumerate(scenes):
+            # which tree goes first alternates scene by scene and round by round
+            for tree, path in (order if (i + j) % 2 == 0 else order[::-1]):
                 env = _env(path, numba_cache)
                 _check_tree(path, env)
-                print(f"work_precision round {i + 1} {scene}: {tree} ({path}), load {_load()}", flush=True)
+                load = _load()
+                print(f"work_precision round {i + 1} {scene}: {tree} ({path}), load {load}", flush=True)
+                start = time.perf_counter()
                 subprocess.run([sys.executable, "-m", "benchmarks.work_precision", "--scenes", scene, "--methods",
-                                *methods, "--out", str(work / f"{tree}_{i}"), "--merge"], cwd=path, env=env,
-                               check=True)
+                                *methods, *extra_args, "--out", str(work / f"{tree}_{i}"), "--merge"], cwd=path,
+                               env=env, check=True)
+                meta["runs"].append({"round": i + 1, "scene": scene, "tree": tree, "load_start": load,
+                                     "wall_seconds": round(time.perf_counter() - start, 1)})
     meta["load_end"] = _load()
     raw = {t: [json.loads((work / f"{t}_{i}" / "results.json").read_text()) for i in range(rounds)] for t in trees}
     best = {}
@@ -315,6 +326,20 @@ def work_precision_section(data: dict) -> list[str]:
             lines.append(f"| {scene} | ≤ {level} m | {lb['linknet_best']} {_fmt_s(lb['seconds'])} | "
                          f"{la['linknet_best']} {_fmt_s(la['seconds'])} | **{la['seconds'] / lb['seconds']:.2f}** | "
                          f"{worst[0]} {worst[1]:.2f} |")
+    if m.get("runs"):
+        lines += ["", "Wall time of each tree's sweep per scene (all linknet methods; worker start-up, references, "
+                  "warm-ups and repeats included) and the load average when it started:", "",
+                  "| round | scene | " + " | ".join(f"{n} s | {n} load" for n in names) + " |",
+                  "|---:|---|" + "---:|---|" * len(names)]
+        cells = {}
+        for run in m["runs"]:
+            cells.setdefault((run["round"], run["scene"]), {})[run["tree"]] = run
+        for (rnd, scene), per in cells.items():
+            lines.append(f"| {rnd} | {scene} | " + " | ".join(
+                f"{per[n]['wall_seconds']:.0f} | {per[n]['load_start'][0]:.1f}" if n in per else "— | —"
+                for n in names) + " |")
+        totals = {n: sum(r["wall_seconds"] for r in m["runs"] if r["tree"] == n) for n in names}
+        lines.append("| | **total** | " + " | ".join(f"**{totals[n]:.0f}** | " for n in names) + " |")
     lines += ["", "Per setting (the same method at the same dt or rtol in both trees, so the same steps up to "
               "round-off): the distribution of the time ratio after / before over every setting both ran.", "",
               "| scene | settings | median | best | worst (setting) |", "|---|---:|---:|---:|---|"]
@@ -355,14 +380,16 @@ def main(argv=None):
     ap.add_argument("what", choices=("kernel", "work-precision", "report"))
     ap.add_argument("--trees", nargs="+", metavar="NAME=PATH", help="before first, after second")
     ap.add_argument("--rounds", type=int, default=2)
-    ap.add_argument("--scenes", nargs="+", default=list(WP_SCENES))
+    ap.add_argument("--scenes", nargs="+", default=list(WP_SCENES), help="work-precision scenes")
+    ap.add_argument("--wp-args", default="", help="extra arguments for every tree's work_precision, the same for "
+                    "all trees (for example '--sweep-budget 45 --sweep-cap 60')")
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
     trees = {k: Path(v).resolve() for k, v in (x.split("=", 1) for x in args.trees or [])}
     if args.what == "kernel":
         run_kernel(trees, args.rounds, args.out)
     elif args.what == "work-precision":
-        run_work_precision(trees, args.rounds, args.scenes, args.out)
+        run_work_precision(trees, args.rounds, args.scenes, args.out, args.wp_args.split())
     report(args.out)
 
 
