@@ -81,6 +81,7 @@ class NativeIntegrator(Integrator):
         self.method = native_method(method_cls, dt=dt, rtol=rtol, atol=self.atol, position_tol=position_tol,
                                     static=static)
         self.data = NativeData(model, self.method.n_stages)
+        self._static = static
         self._model_p, self._method_p, self._data_p = model.pointer, self.method.pointer, self.data._ptr
         self._d = self.data.struct
         self._out = (None, None)  # the arrays last handed out as the state (the data holds the same values)
@@ -208,6 +209,10 @@ class NativeIntegrator(Integrator):
         if status != lib.OK:
             self._raise_motion_error()
             raise SolverError(self.explain(status, state.t, t_target, max_steps))
+        if self._static:  # 0 degrees of freedom: ln_advance moved t only, so the state's arrays still hold X, U
+            state.t = t_target
+            self._out = (state.X, state.U)
+            return
         X, U = self.data.X.copy(), self.data.U.copy()
         state.X, state.U, state.t = X, U, t_target
         self._out = (X, U)
