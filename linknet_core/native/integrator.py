@@ -203,6 +203,13 @@ class NativeIntegrator(Integrator):
             self.data.F_input.fill(0.0)
             self._input_zero = True
 
+    def hold(self, state) -> None:
+        """Put ``state``'s X and U into the data now (a new Simulator's initial state), so that the first advance
+        finds them there."""
+        self.data.X[...] = state.X
+        self.data.U[...] = state.U
+        self._out = (state.X, state.U)
+
     def advance(self, state, t_target: float, F_input, max_steps: int) -> None:
         self._load(state, F_input)
         status = lib.advance(self._model_p, self._method_p, self._data_p, t_target, max_steps)

@@ -266,6 +266,8 @@ class Simulator:
         self.max_steps_per_call = max_steps_per_call
         self.state = self._initial.copy()
         self._reset_arrays = (self.state.X, self.state.U)  # the state's arrays as made from the initial state
+        if type(self.integrator) is NativeIntegrator:
+            self.integrator.hold(self.state)
         # what the Dynamics counts (the numpy reference's right-hand sides and projection floor), as reset finds it
         self._initial_counts = (self.dyn.rhs_evaluations, getattr(self.dyn, "floor_stops", 0),
                                 getattr(self.dyn, "floor_reached", 0.0))
