@@ -49,7 +49,14 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
+# One BLAS thread, as the work-precision benchmark's references: the numpy reference factors A of a general scene
+# of up to 200 links densely (LAPACK dpotrf), which OpenBLAS threads; on the 2 shared cores a 180-link factorisation
+# then took 35 ms of CPU time (the helper threads spin while descheduled) against 85 us on one thread, and the
+# numpy column timed that contention instead of the reference. Only effective before numpy is first imported.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
 
 import linknet_core as ln
 from linknet_core.scene import builders
