@@ -203,12 +203,18 @@ class NativeIntegrator(Integrator):
             self.data.F_input.fill(0.0)
             self._input_zero = True
 
+    def _hand_out(self, X, U) -> None:
+        """X and U become the state's arrays that the data holds too: read-only, so that a change of the state
+        replaces them, which the next _load sees (an edit in place would leave the data behind)."""
+        X.flags.writeable = U.flags.writeable = False
+        self._out = (X, U)
+
     def hold(self, state) -> None:
-        """Put ``state``'s X and U into the data now (a new Simulator's initial state), so that the first advance
-        finds them there."""
+        """Put ``state``'s X and U (arrays of the Simulator's own, which become read-only) into the data now, so that
+        the first advance finds them there."""
         self.data.X[...] = state.X
         self.data.U[...] = state.U
-        self._out = (state.X, state.U)
+        self._hand_out(state.X, state.U)
 
     def advance(self, state, t_target: float, F_input, max_steps: int) -> None:
         self._load(state, F_input)
@@ -216,13 +222,12 @@ class NativeIntegrator(Integrator):
         if status != lib.OK:
             self._raise_motion_error()
             raise SolverError(self.explain(status, state.t, t_target, max_steps))
-        if self._static:  # 0 degrees of freedom: ln_advance moved t only, so the state's arrays still hold X, U
-            state.t = t_target
-            self._out = (state.X, state.U)
+        if self._static and state.X is self._out[0] and state.U is self._out[1]:
+            state.t = t_target  # 0 degrees of freedom: ln_advance moved t only, the arrays handed out still hold X, U
             return
         X, U = self.data.X.copy(), self.data.U.copy()
         state.X, state.U, state.t = X, U, t_target
-        self._out = (X, U)
+        self._hand_out(X, U)
 
     def sample(self, state, times, F_input, max_steps: int, X, U, T, diagnostics, advance_first: bool,
                update_state: bool = True) -> None:
@@ -252,7 +257,7 @@ class NativeIntegrator(Integrator):
         elif written.value or status != lib.OK:
             X_now, U_now = self.data.X.copy(), self.data.U.copy()
             state.X, state.U, state.t = X_now, U_now, float(self._d.t)
-            self._out = (X_now, U_now)
+            self._hand_out(X_now, U_now)
         if status == lib.OK:
             return
         self._raise_motion_error()

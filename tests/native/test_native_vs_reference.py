@@ -216,3 +216,27 @@ def test_reported_outputs_agree_with_the_reference(name):
     np.testing.assert_allclose(a["T"], b["T"], rtol=0, atol=1e-9 * scale)
     np.testing.assert_allclose(a["Freact"], b["Freact"], rtol=0, atol=1e-9 * scale)
     assert a["Freact"].shape == (scene.fixed_indices.size, 3)
+
+
+def test_a_changed_state_is_taken_by_both_backends_and_an_edit_in_place_is_refused():
+    """The native core keeps the state in its data between advances: the arrays it hands out are read-only, so an
+    edit in place fails loudly instead of being left behind, and replacing them moves the run as on numpy."""
+    scene = ln.load_scene(MODELS / "pendulum.json")
+    ends = {}
+    for backend in ("numpy", "native"):
+        sim = ln.Simulator(scene, method="dop853", rtol=1e-10, backend=backend)
+        if backend == "native":
+            with pytest.raises(ValueError):
+                sim.state.X[1, 0] += 0.1
+        sim.advance(0.1)
+        X = sim.state.X.copy()
+        X[1] = X[0] + (X[1] - X[0]) @ np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])  # 90 degrees
+        sim.state.X = X
+        sim.state.U = np.zeros_like(X)
+        sim.advance(0.3)
+        ends[backend] = sim.state.X
+    np.testing.assert_allclose(ends["native"], ends["numpy"], atol=1e-9)
+    # released from the turned position, not from where the run was: far from an untouched run's end
+    untouched = ln.Simulator(scene, method="dop853", rtol=1e-10)
+    untouched.advance(0.3)
+    assert np.abs(ends["native"] - untouched.state.X).max() > 1e-2
