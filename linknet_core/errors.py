@@ -31,13 +31,10 @@ class StepFailure(SolverError):
         self.parts = parts
 
 
-# The failure texts are the native core's (src/explain.c), for every path; so are the thresholds they use.
-# NEAR_FLOOR: a residual that stalled within this factor of the floor its last Newton step allowed stalled at that
-# floor. STABILITY_LIMIT: h omega above which an explicit step amplifies an oscillation of angular frequency omega
-# instead of following it. READS_LOW: the margin of omega's estimate (it can read that many times low).
-NEAR_FLOOR = ctypes.c_double.in_dll(_core, "ln_near_floor").value
+# The failure texts are the native core's (src/explain.c), for every path; so are the thresholds they use, among
+# them STABILITY_LIMIT: h omega above which an explicit step amplifies an oscillation of angular frequency omega
+# instead of following it.
 STABILITY_LIMIT = ctypes.c_double.in_dll(_core, "ln_stability_limit").value
-READS_LOW = ctypes.c_double.in_dll(_core, "ln_reads_low").value
 _projection_failure = _core.ln_projection_failure
 _projection_failure.restype = None
 _projection_failure.argtypes = [ctypes.c_char_p] + [ctypes.c_double] * 6 + [ctypes.c_char_p, ctypes.c_size_t]

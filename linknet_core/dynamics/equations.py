@@ -386,13 +386,13 @@ class Dynamics:
     def _self_stress_share(self, X, b, cut):
         """The (near-)self-stresses of A(X) and b's share on them, by a dense eigen-decomposition: the
         eigenvalues at most ``cut`` times the largest, relative to it (w), their orthonormal eigenvectors (N,
-        columns) and N^T b. At cut = SINGULAR_RCOND these are the self-stresses (27), (31) that the minimum-norm
-        solves leave out; above it, stiff directions a configuration is close to losing."""
+        columns), N^T b and the largest eigenvalue. At cut = SINGULAR_RCOND these are the self-stresses (27), (31)
+        that the minimum-norm solves leave out; above it, stiff directions a configuration is close to losing."""
         w, V = np.linalg.eigh(self.tension_matrix(X).toarray())
         largest = max(float(w.max()), 1e-300)
         keep = w <= cut * largest
         N = V[:, keep]
-        return w[keep] / largest, N, N.T @ b
+        return w[keep] / largest, N, N.T @ b, largest
 
     def _stress_links(self, stress) -> str:
         """The links a self-stress (one column of N) runs through, named (at most 12)."""
@@ -417,7 +417,7 @@ class Dynamics:
             b = b + np.einsum("ij,ij->i", self.unit_vectors(X), anchor_acc[self._k2] - anchor_acc[self._k1])
         # the same cut as the minimum-norm solver (SINGULAR_RCOND), so that a state accepted here is one whose
         # tensions that solver gets right
-        _, N, proj = self._self_stress_share(X, b, SINGULAR_RCOND)
+        _, N, proj, _ = self._self_stress_share(X, b, SINGULAR_RCOND)
         scale = np.linalg.norm(b)
         if N.shape[1] and scale > 0 and np.max(np.abs(proj)) > rtol * scale:
             i = int(np.argmax(np.abs(proj)))
@@ -445,7 +445,7 @@ class Dynamics:
         try:
             F = self.forces(X, U, F_input)
             B = rhs(scene, X, U, F, anchor_acc=anchor_acc)
-            w, N, proj = self._self_stress_share(X, B, NEAR_SELF_STRESS_CUT)
+            w, N, proj, largest = self._self_stress_share(X, B, NEAR_SELF_STRESS_CUT)
         except (SolverError, np.linalg.LinAlgError, ValueError):
             return ""
         size = float(np.linalg.norm(B))
@@ -456,7 +456,6 @@ class Dynamics:
         if share <= NEAR_SELF_STRESS_LOAD:
             return ""
         ratio = max(float(w[i]), 0.0)
-        largest = float(np.linalg.eigvalsh(self.tension_matrix(X).toarray()).max())
         eigenvalue = max(ratio * largest, np.finfo(float).tiny)
         tension = abs(float(proj[i])) / eigenvalue
         return (f"The links {self._stress_links(N[:, i])} are at a near-self-stress (eigenvalue {ratio:.2g} of the "
