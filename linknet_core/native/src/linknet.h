@@ -329,6 +329,19 @@ LN_API size_t ln_sizeof(int which);
 /* The code of a force element kind named as in linknet_core.dynamics.forces (stages/forces.c), or -1. */
 LN_API ln_int ln_force_kind(const char *name);
 
+/* ---- error_estimate.c: a run's global error from a companion run ---------------------------------- */
+
+/* The companion run's settings for a run of a method (adaptive or of fixed step dt and order p) and the factor
+   that turns the largest position gap between the two runs (ln_position_gap) into the run's error estimate:
+   a fixed step is compared with half the step (Richardson: factor 2^p / (2^p - 1)), an error-controlled method
+   with a tenth of its tolerances (factor 1, rtol no lower than ln_rtol_min). */
+LN_API double ln_companion_settings(int adaptive, int order, double dt, double rtol, double atol,
+                                    double *dt_companion, double *rtol_companion, double *atol_companion);
+LN_API extern const double ln_rtol_min, ln_companion_rtol_ratio;
+
+/* The largest distance |Xa_k - Xb_k| over K masses (K,3), m; NaN if a coordinate is not finite. */
+LN_API double ln_position_gap(ln_int K, const double *Xa, const double *Xb);
+
 /* ---- explain.c: a failed advance in words (every path's one text) ---------------------------------- */
 
 /* What a status is called ("projection failed", ...). */
