@@ -46,3 +46,33 @@ LN_API double ln_position_gap(ln_int K, const double *Xa, const double *Xb)
     }
     return worst;
 }
+
+/* What a run is asked for, in metres of position: the goal its error estimate is held to (a warning where it is
+   exceeded). Local error control keeps each step's error within rtol; over a run those errors add up and the
+   motion amplifies them, and on the shipped scenes the global error ends 1-20 times rtol times the scene's size
+   (docs/accuracy.md), so the goal is ln_goal_per_rtol times that: 1e-6 of the scene's size at the default rtol.
+   A fixed-step run is held to the default's goal. */
+LN_API const double ln_default_rtol = 1e-8;
+LN_API const double ln_goal_per_rtol = 100.0;
+
+LN_API double ln_error_goal(int adaptive, double rtol, double atol, double size)
+{
+    if (!adaptive)
+        rtol = atol = ln_default_rtol;
+    return ln_goal_per_rtol * fmax(rtol * size, atol);
+}
+
+LN_API double ln_scene_size(ln_int K, const double *X)
+{
+    double size = 0.0;
+    for (int i = 0; i < 3; i++) {
+        double lo = INFINITY, hi = -INFINITY;
+        for (ln_int k = 0; k < K; k++) {
+            lo = fmin(lo, X[3 * k + i]);
+            hi = fmax(hi, X[3 * k + i]);
+        }
+        if (hi - lo > size)
+            size = hi - lo;
+    }
+    return size > 0.0 ? size : 1.0;
+}

@@ -342,6 +342,14 @@ LN_API extern const double ln_rtol_min, ln_companion_rtol_ratio;
 /* The largest distance |Xa_k - Xb_k| over K masses (K,3), m; NaN if a coordinate is not finite. */
 LN_API double ln_position_gap(ln_int K, const double *Xa, const double *Xb);
 
+/* The position error (m) a run is held to: ln_goal_per_rtol times max(rtol times the scene's size, atol); a
+   fixed-step run (adaptive 0) is held to that of ln_default_rtol. */
+LN_API double ln_error_goal(int adaptive, double rtol, double atol, double size);
+LN_API extern const double ln_default_rtol, ln_goal_per_rtol;
+
+/* A scene's size: the largest extent of the positions X (K,3) along an axis, m (1 if they all coincide). */
+LN_API double ln_scene_size(ln_int K, const double *X);
+
 /* ---- explain.c: a failed advance in words (every path's one text) ---------------------------------- */
 
 /* What a status is called ("projection failed", ...). */
