@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Build an FMI 2.0 Co-Simulation FMU from a linknet scene (or one of the composition helpers).
 
-    python build_fmu.py models/chain_10.json [-o chain_10.fmu] [--integrator rattle --step 1e-3]
+    python build_fmu.py models/chain_10.json [-o chain_10.fmu]         # dop853, rtol 1e-8, error estimate on
+    python build_fmu.py models/chain_10.json --integrator rattle --step 1e-3
     python build_fmu.py --component pd_controller -o pd_controller.fmu
     python build_fmu.py --component spring_damper -o spring_damper.fmu
     python build_fmu.py --component cart -o cart.fmu
@@ -40,6 +41,7 @@ HERE = Path(__file__).resolve().parent
 FMU_SRC = HERE / "fmu_src"
 sys.path.insert(0, str(FMU_SRC))
 
+DEFAULT_STEP = 1e-3  # s: the internal step of a fixed-step integrator chosen without a step (parameter "step")
 COMPONENTS = {"pd_controller": "pd_controller.py", "spring_damper": "spring_damper.py", "cart": "cart.py"}
 
 
@@ -247,8 +249,12 @@ def check_build_options(integrator, step, tolerance, out, stop_time=None, comm_s
 
 def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=None, inputs=None,
                     outputs=None, stop_time=None, comm_step=None, link_python=True, quiet=False,
-                    native=False) -> Path:
+                    native=False, error_estimate=None) -> Path:
+    """The FMU of a scene file. integrator None: the scene file's "fmu" section's, else the library's default
+    (linknet_core.accuracy.default_method: dop853 at rtol `tolerance`, default 1e-8, or RATTLE when a step is given);
+    error_estimate None: the section's, else True (the companion run of the output error_estimate)."""
     import linknet_core as ln
+    from linknet_core.accuracy import DEFAULT_RTOL, default_method
     from linknet_fmu.layout import Layout
 
     scene_path = Path(scene_path)
@@ -266,9 +272,18 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
     name = scene.name
     ident = _identifier(str(name))
     integrators = sorted(ln.METHODS)
-    integrator = integrator or fmu_opts.get("integrator", "rattle")
-    check_build_options(integrator, step if step is not None else fmu_opts.get("step", 1e-3),
-                        tolerance if tolerance is not None else fmu_opts.get("tolerance", 1e-8),
+    # the library's choice (linknet_core.accuracy.default_method): error control (dop853) unless a method is named;
+    # a step given without a method is a fixed-step run (RATTLE) at exactly that step
+    step = step if step is not None else fmu_opts.get("step")
+    integrator = default_method(integrator or fmu_opts.get("integrator"), step)
+    step = DEFAULT_STEP if step is None else step
+    tolerance = tolerance if tolerance is not None else fmu_opts.get("tolerance", DEFAULT_RTOL)
+    if error_estimate is None:
+        error_estimate = fmu_opts.get("error_estimate", True)
+    if not isinstance(error_estimate, bool):
+        raise SystemExit(f"build_fmu: the scene's \"fmu\" section: error_estimate must be true or false, got "
+                         f"{error_estimate!r}")
+    check_build_options(integrator, step, tolerance,
                         Path(out) if out else None, stop_time if stop_time is not None else fmu_opts.get("stop_time"),
                         comm_step if comm_step is not None else fmu_opts.get("comm_step"))
     if integrator not in integrators:
@@ -276,6 +291,12 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
     cfg = dict(
         model_identifier=ident,
         description=(f"linknet network '{name}': {scene.K} point masses, {scene.L} rigid links. "
+                     f"Integrator {integrator} ("
+                     + (f"error-controlled, rtol {float(tolerance):g}" if ln.METHODS[integrator].adaptive
+                        else f"fixed step {float(step):g} s")
+                     + "; parameters integrator, tolerance, step). "
+                     "Output error_estimate (m): the estimated largest position error of any mass, from a companion "
+                     "run (parameter estimate_error); a warning is logged when it exceeds the run's goal. "
                      "Inputs F[k,i] (N) are held constant over each communication step."
                      + (" Inputs P[k,i] (m), V[k,i] (m/s), A[k,i] (m/s2) move driven anchor k as P + V tau + A tau^2/2 "
                         "from the communication point where they are set; Freact[k,i] is the force on each anchor, "
@@ -283,8 +304,9 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
                         if len(scene.input_driven_indices) else "")),
         integrator=integrator,
         integrators=integrators,
-        step=float(step if step is not None else fmu_opts.get("step", 1e-3)),
-        tolerance=float(tolerance if tolerance is not None else fmu_opts.get("tolerance", 1e-8)),
+        step=float(step),
+        tolerance=float(tolerance),
+        error_estimate=error_estimate,
         inputs=_parse_masses(inputs if inputs is not None else fmu_opts.get("inputs"), scene),
         outputs=_parse_masses(outputs if outputs is not None else fmu_opts.get("outputs"), scene),
         version="1",
@@ -382,11 +404,15 @@ def main(argv=None):
     p.add_argument("-o", "--output", type=_output((".fmu",), "the FMU"),
                    help="FMU file to write (default: <model name>.fmu)")
     p.add_argument("--integrator", choices=sorted(METHODS), help="default integrator (FMU parameter 'integrator'): "
-                   "rattle (default), yoshida4/6/8, suzuki4 (fixed step), dopri5, dop853 (adaptive)")
+                   "dop853 (error-controlled, the default), dopri5, or rattle, yoshida4/6/8, suzuki4 (fixed step; "
+                   "rattle is the default when --step is given)")
     p.add_argument("--step", type=positive_number,
-                   help="internal step of fixed-step integrators (parameter 'step'), > 0")
+                   help="internal step of fixed-step integrators (parameter 'step', default 1e-3 s), > 0")
     p.add_argument("--tolerance", type=relative_tolerance,
-                   help="relative tolerance of adaptive integrators, in [1e-15, 0.1)")
+                   help="relative tolerance of adaptive integrators (parameter 'tolerance', default 1e-8), "
+                   "in [1e-15, 0.1)")
+    p.add_argument("--no-error-estimate", action="store_true",
+                   help="start with the error estimate's companion run off (parameter 'estimate_error' false)")
     p.add_argument("--inputs", type=_mass_list,
                    help="expose force inputs only for these masses (1-based numbers or names, comma-separated)")
     p.add_argument("--outputs", type=_mass_list, help="expose X/U outputs only for these masses")
@@ -402,7 +428,8 @@ def main(argv=None):
         build_component_fmu(a.component, a.output, link_python=not a.no_link_libpython)
     elif a.scene:
         build_scene_fmu(a.scene, a.output, a.integrator, a.step, a.tolerance, a.inputs, a.outputs,
-                        a.stop_time, a.comm_step, link_python=not a.no_link_libpython, native=a.native)
+                        a.stop_time, a.comm_step, link_python=not a.no_link_libpython, native=a.native,
+                        error_estimate=False if a.no_error_estimate else None)
     else:
         p.error("give a scene file or --component")
 

@@ -36,11 +36,12 @@ except ImportError as _exc:  # say why fmi2Instantiate returns NULL, whether the
         "numpy and scipy (or PYTHONHOME at that Python's prefix) in the host's environment.\n")
     raise
 
-from pythonfmu import Fmi2Slave, Fmi2Causality, Fmi2Variability, Fmi2Initial, Real, String
+from pythonfmu import Boolean, Fmi2Slave, Fmi2Causality, Fmi2Variability, Fmi2Initial, Real, String
 from pythonfmu.enums import Fmi2Status
 
 from linknet_fmu import thread_state
-from linknet_fmu.layout import DERIVATIVE_VR_BASE, Layout
+from linknet_fmu.layout import (DERIVATIVE_VR_BASE, ERROR_ESTIMATE_CATEGORY, ERROR_ESTIMATE_CATEGORY_DESCRIPTION,
+                                 ESTIMATE_ERROR_DESCRIPTION, Layout)
 from linknet_fmu.parameters import parameter_problem
 
 CONFIG_FILE = "linknet_fmu.json"
@@ -48,7 +49,7 @@ SCENE_FILE = "linknet_scene.json"
 # An FMU state names its format and the FMU it belongs to (a fingerprint of the scene, the exposed masses and the
 # model identifier): fmi2SetFMUstate refuses another FMU's state, and deserialization checks a header and a
 # checksum before unpickling anything. Raise the number when the state's content changes.
-STATE_FORMAT = "linknet-fmu-state-3"
+STATE_FORMAT = "linknet-fmu-state-4"
 STATE_MAGIC = b"LINKNET-FMU-STATE\0"
 # an input's declared type -> what a refused value of it is called
 INPUT_QUANTITY = {"Force": "force", "Position": "position", "Velocity": "velocity", "Acceleration": "acceleration"}
@@ -131,6 +132,13 @@ class LinknetNetwork(Fmi2Slave):
         self._real[lay.tolerance_vr] = cfg["tolerance"]
         self._real[lay.step_vr] = cfg["step"]
         self._integrator = cfg["integrator"]
+        # the error estimate (Simulator(error_estimate=...)): the parameter estimate_error, and whether the estimate
+        # was beyond the goal after the last step (its warning is logged once per crossing)
+        self._estimate_error = bool(cfg.get("error_estimate", True))
+        self._over_goal = False
+        # an instance copy (the class's dict is pythonfmu's, shared by every slave of the process)
+        self.log_categories = dict(self.log_categories)
+        self.log_categories[ERROR_ESTIMATE_CATEGORY] = ERROR_ESTIMATE_CATEGORY_DESCRIPTION
         self._t0 = 0.0                 # fmi2SetupExperiment's startTime: the scene's initial state is given there
         self._identity = hashlib.sha256(json.dumps(
             [STATE_FORMAT, self._scene0.fingerprint, cfg["model_identifier"], cfg.get("inputs"), cfg.get("outputs")]
@@ -155,6 +163,12 @@ class LinknetNetwork(Fmi2Slave):
             initial=Fmi2Initial.exact,
             description="integration method: " + ", ".join(cfg["integrators"]),
             getter=lambda: self._integrator, setter=self._set_integrator))
+        self.register_variable(Boolean(
+            "estimate_error", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+            initial=Fmi2Initial.exact, description=ESTIMATE_ERROR_DESCRIPTION,
+            getter=lambda: self._estimate_error, setter=lambda value: self.set_boolean([lay.estimate_error_vr],
+                                                                                       [value])))
+        assert self.vars[lay.estimate_error_vr].name == "estimate_error"
 
     # ------------------------------------------------------------------ helpers
     def _error(self, msg, status=Fmi2Status.error):
@@ -169,7 +183,8 @@ class LinknetNetwork(Fmi2Slave):
             kwargs = dict(rtol=float(self._real[self._layout.tolerance_vr]))
         else:
             kwargs = dict(dt=float(self._real[self._layout.step_vr]))
-        self._sim = ln.Simulator(scene, method=method, t0=self._t0, **kwargs)
+        self._sim = ln.Simulator(scene, method=method, t0=self._t0, error_estimate=self._estimate_error, **kwargs)
+        self._over_goal = False
         self._scene = scene
         self._F = np.zeros((scene.K, 3))
         self._F_flat = self._F.reshape(-1)  # a view: set_real writes the inputs through it
@@ -187,6 +202,9 @@ class LinknetNetwork(Fmi2Slave):
 
     def _refresh_outputs(self):
         lay = self._layout
+        # the companion's gap at the current time (m; inf when the companion failed), NaN when it is switched off
+        self._real[lay.error_estimate_vr] = (float(self._sim.error_estimate) if self._estimate_error
+                                             else float("nan"))
         try:
             out = self._sim.outputs(self._F, anchors=self._anchors())
             # X, U: the state (a driven anchor where its held motion took it, whichever backend: the numpy
@@ -280,8 +298,8 @@ class LinknetNetwork(Fmi2Slave):
                 self.set_real_input_derivatives([vr % DERIVATIVE_VR_BASE], [vr // DERIVATIVE_VR_BASE], [value])
                 continue
             if not 0 <= vr < lay.n_real:
-                what = "the String parameter integrator" if vr == lay.integrator_vr else "unknown"
-                self._error(f"setReal: value reference {vr} is {what} (no Real variable); value {value!r} ignored")
+                self._error(f"setReal: value reference {vr} is {self._kind_of(vr)} (no Real variable); value "
+                            f"{value!r} ignored")
                 continue
             var = lay.reals[vr]
             if var.causality == "output":
@@ -360,7 +378,8 @@ class LinknetNetwork(Fmi2Slave):
         self._integrator = value
         self._parameters_dirty = True
 
-    # Integer, Boolean and String: the FMU has one String (integrator) and no Integer or Boolean variable.
+    # Integer, Boolean and String: the FMU has one String (integrator), one Boolean (estimate_error) and no Integer
+    # variable.
     # pythonfmu's own versions raise on any other value reference (fmi2Fatal); these log and go on.
     @guarded(_values(""))
     def get_string(self, vrs):
@@ -393,16 +412,40 @@ class LinknetNetwork(Fmi2Slave):
 
     @guarded(_values(False))
     def get_boolean(self, vrs):
-        self._error(f"getBoolean: this FMU has no Boolean variables (value references {list(vrs)!r})")
-        return [False] * len(vrs)
+        out = []
+        for vr in vrs:
+            if vr == self._layout.estimate_error_vr:
+                out.append(self._estimate_error)
+            else:
+                self._error(f"getBoolean: value reference {vr} is {self._kind_of(vr)}, not a Boolean variable (the "
+                            f"only one is estimate_error, {self._layout.estimate_error_vr})")
+                out.append(False)
+        return out
 
     @guarded(_none)
     def set_boolean(self, vrs, values):
-        self._error(f"setBoolean: this FMU has no Boolean variables (value references {list(vrs)!r}); nothing set")
+        for vr, value in zip(vrs, values):
+            if vr != self._layout.estimate_error_vr:
+                self._error(f"setBoolean: value reference {vr} is {self._kind_of(vr)}, not a Boolean variable (the "
+                            f"only one is estimate_error, {self._layout.estimate_error_vr}); value {value!r} ignored")
+                continue
+            value = bool(value)
+            if self._initialized:
+                if value != self._estimate_error:
+                    self._error(f"estimate_error is a fixed parameter and cannot be changed after initialization "
+                                f"(value {value!r}, current {self._estimate_error!r}); nothing set")
+                continue
+            if value != self._estimate_error:
+                self._estimate_error = value
+                self._parameters_dirty = True
 
     def _kind_of(self, vr):
         if isinstance(vr, int) and 0 <= vr < self._layout.n_real:
             return f"the Real {self._layout.reals[vr].name}"
+        if vr == self._layout.integrator_vr:
+            return "the String integrator"
+        if vr == self._layout.estimate_error_vr:
+            return "the Boolean estimate_error"
         return "unknown"
 
     # ------------------------------------------------------------------ FMI: life cycle
@@ -491,6 +534,14 @@ class LinknetNetwork(Fmi2Slave):
             return False
         self._anchors_set = False
         self._outputs_stale = True
+        if self._estimate_error:
+            # beyond the goal (or the companion failed): said once per crossing, with fmi2Warning status in its own
+            # log category, and the step stays fmi2OK: its result is computed as asked, the warning is information
+            # (the front layer does not count messages of the FMU's own categories towards the call's status)
+            note = self._sim.error_note()
+            if note and not self._over_goal:
+                self.log(f"doStep to t={self._sim.state.t!r}: {note}", Fmi2Status.warning, ERROR_ESTIMATE_CATEGORY)
+            self._over_goal = bool(note)
         return True
 
     # ------------------------------------------------------------------ FMI: FMU state
@@ -504,6 +555,8 @@ class LinknetNetwork(Fmi2Slave):
             "sim": copy.deepcopy(self._sim.get_state()),
             "real": self._real.copy(),
             "integrator": self._integrator,
+            "estimate_error": self._estimate_error,
+            "over_goal": self._over_goal,
             "t0": self._t0,
             "scene": self._scene,
             "bad": dict(self._bad),
@@ -537,15 +590,18 @@ class LinknetNetwork(Fmi2Slave):
             lay = self._layout
             params = np.concatenate([lay.M_vr, lay.R_vr, lay.g_vr, [lay.tolerance_vr, lay.step_vr]])
             same_setup = (state["integrator"] == self._integrator and state.get("t0", 0.0) == self._t0
+                          and state["estimate_error"] == self._estimate_error
                           and np.array_equal(state["real"][params], self._real[params]))
             self._real = state["real"].copy()
             self._integrator = state["integrator"]
+            self._estimate_error = state["estimate_error"]
             self._t0 = state.get("t0", 0.0)
             if not same_setup:  # otherwise keep the simulator (building one analyses the structure)
                 self._make_simulator(state["scene"])
             self._F[lay.input_masses] = self._real[lay.F_vr]
             self._sim.set_state(copy.deepcopy(state["sim"]))
             self._anchors_set = bool(state.get("anchors_set", False))
+            self._over_goal = bool(state["over_goal"])
             self._bad = dict(state["bad"])
             self._broken = state["broken"]
             self._initialized = state["initialized"]

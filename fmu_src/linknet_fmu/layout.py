@@ -4,7 +4,8 @@ One `Layout` per FMU instance (never module-global: several scenes' FMUs share o
 interpreter and one sys.modules). Real variables get value references 0..n_real-1 in the
 order of `self.reals`; the one String parameter (`integrator`) comes last.
 Names are Modelica-style, 1-based: F[k,i], P[k,i], V[k,i], A[k,i], X[k,i], U[k,i], T[l], Freact[k,i],
-Jreact[k,i], M[k], R[l], g[i]. P, V, A (the motion of an anchor driven by inputs) and Jreact (the impulse on a
+Jreact[k,i], error_estimate, M[k], R[l], g[i], tolerance, step; then the String parameter integrator (value reference
+n_real) and the Boolean parameter estimate_error (n_real + 1). P, V, A (the motion of an anchor driven by inputs) and Jreact (the impulse on a
 driven anchor) exist only for scenes with driven anchors, so a scene without them keeps its value references.
 """
 from __future__ import annotations
@@ -19,6 +20,16 @@ AXES = ("x", "y", "z")
 # order * DERIVATIVE_VR_BASE + vr (pythonfmu's own binary has no path for it): the front layer of the binary
 # encodes, linknet_slave.py decodes and answers. Far above any FMU's value references.
 DERIVATIVE_VR_BASE = 1 << 28
+
+# The Boolean parameter that switches the error estimate's companion run on (the default) or off, and the log
+# category of the message an FMU logs when its estimate exceeds the run's goal: both FMU kinds write these.
+ESTIMATE_ERROR_DESCRIPTION = ("estimate the run's global error with a companion run (output error_estimate; about "
+                              "twice the work per step for error control, three times for a fixed step); false: "
+                              "no companion, error_estimate is NaN")
+ERROR_ESTIMATE_CATEGORY = "logErrorEstimate"  # = LINKNET_NOTE_CATEGORY of fmu_src/native/fmi2_api.h
+ERROR_ESTIMATE_CATEGORY_DESCRIPTION = (
+    "The error estimate exceeded the run's goal (or its companion run failed): logged with fmi2Warning status once "
+    "per crossing; the doStep still returns fmi2OK (its result is computed as asked).")
 
 # declaredType -> (quantity, unit); written into TypeDefinitions by build_fmu.py
 TYPES = {
@@ -150,6 +161,11 @@ class Layout:
                                               "communication step (a jump of its velocity input: the links take "
                                               "it at once, as in an inelastic collision); 0 if none")
                                     for i in range(3)] for k in self.driven_indices], dtype=int).reshape(-1, 3)
+        self.error_estimate_vr = self._add(
+            "error_estimate", "output", "continuous", "calculated", "Position",
+            "estimated largest position error of any mass at the current time (a companion run of the same scene with "
+            "half the step, or a tenth of the tolerances, never re-synchronised: the run's global error); NaN when "
+            "the estimate is switched off (estimate_error = false), +inf when the companion run failed")
         self.M_vr = np.array([self._add(f"M[{k + 1}]", "parameter", "fixed", "exact", "Mass",
                                         f"mass of {self._mass_label(k)} (> 0)")
                               for k in self.free_indices], dtype=int)
@@ -164,6 +180,7 @@ class Layout:
                                  "internal step of the fixed-step integrators (rattle, yoshida*); > 0")
         self.n_real = len(self.reals)
         self.integrator_vr = self.n_real  # the String parameter, registered after all Reals
+        self.estimate_error_vr = self.n_real + 1  # the Boolean parameter, after it
         kinds = np.empty(self.n_real, dtype=object)
         for v in self.reals:
             kinds[v.vr] = v.causality
@@ -210,7 +227,8 @@ class Layout:
     def dependencies(self, inv_mass) -> dict:
         """name -> list of names of the inputs it depends on at a communication point.
 
-        X and U are integrated states: no direct feedthrough (the rows of a driven anchor are where its held
+        X and U are integrated states: no direct feedthrough (nor has error_estimate: the gap between two integrated
+        states) (the rows of a driven anchor are where its held
         motion took it at the end of the step). T (via B (26)) and Freact (= the link forces on the anchored
         masses) depend on the inputs of their coupled group of links: the forces on its free masses, and the
         position, velocity and acceleration of its anchors driven by inputs (a driven anchor's P sets the link
@@ -231,7 +249,8 @@ class Layout:
                     if n not in names:
                         names.append(n)
         deps = {}
-        for row in np.concatenate([self.X_vr.ravel(), self.U_vr.ravel(), self.Jreact_vr.ravel()]):
+        for row in np.concatenate([self.X_vr.ravel(), self.U_vr.ravel(), self.Jreact_vr.ravel(),
+                                   [self.error_estimate_vr]]):
             deps[self.reals[row].name] = []
         for l in range(self.L):
             deps[self.reals[self.T_vr[l]].name] = inputs_of_comp[comp[l]]

@@ -39,9 +39,14 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+if str(HERE.parent) not in sys.path:  # fmu_src: the layout both FMU kinds share
+    sys.path.insert(0, str(HERE.parent))
+from linknet_fmu.layout import (ERROR_ESTIMATE_CATEGORY, ERROR_ESTIMATE_CATEGORY_DESCRIPTION,  # noqa: E402
+                                ESTIMATE_ERROR_DESCRIPTION)
+
 GLUE_FILES = ("fmi2Functions.c", "linknet_model.c", "fmi2_api.h", "fmu_model.h", "lnfmu_scene.h")
 SCENE_FILE = "linknet_scene.c"
-STATE_FORMAT = 2  # keep equal to STATE_FORMAT in fmi2Functions.c (a part of the fingerprint)
+STATE_FORMAT = 3  # keep equal to STATE_FORMAT in fmi2Functions.c (a part of the fingerprint)
 # as setup.py compiles the core for the library: the same code generation, so the same results
 CFLAGS = ["-std=c99", "-O3", "-fno-math-errno", "-ffp-contract=off"]
 WARNINGS = ["-Wall", "-Wextra"]
@@ -49,7 +54,8 @@ LOG_CATEGORIES = (("logStatusWarning", "Log messages with fmi2Warning status."),
                   ("logStatusDiscard", "Log messages with fmi2Discard status."),
                   ("logStatusError", "Log messages with fmi2Error status."),
                   ("logStatusFatal", "Log messages with fmi2Fatal status (never sent by this FMU)."),
-                  ("logAll", "Log all messages."))
+                  ("logAll", "Log all messages."),
+                  (ERROR_ESTIMATE_CATEGORY, ERROR_ESTIMATE_CATEGORY_DESCRIPTION))
 
 
 class NativeBuildError(RuntimeError):
@@ -264,9 +270,9 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
         init = struct_initializer(w, mstruct, {"gammas": int(mstruct.n_gammas), "AB": (ns + 1) * ns, "C": ns,
                                                "E1": ns + 1, "E2": ns + 1}, set(), f"method_{name}")
         adaptive = int(bool(ln.METHODS[name].adaptive))
-        methods.append(f"{{{c_string(name)}, {adaptive}, {init}}}")
+        methods.append(f"{{{c_string(name)}, {adaptive}, {int(ln.METHODS[name].order)}, {init}}}")
     kinds = {"F": 0, "X": 1, "U": 2, "T": 3, "Freact": 4, "M": 5, "R": 6, "g": 7, "P": 10, "V": 11, "A": 12,
-             "Jreact": 13}  # enum lnfmu_kind
+             "Jreact": 13, "error_estimate": 14}  # enum lnfmu_kind
     var_rows = {}
     fixed_idx = _pointer_values(model.fixed_idx, n_fixed, ctypes.c_int64)
     fixed_row = {int(k): j for j, k in enumerate([] if fixed_idx is None else fixed_idx)}
@@ -295,6 +301,7 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
         var_rows[int(vr)] = (kinds["R"], l)
     for i, vr in enumerate(layout.g_vr):
         var_rows[int(vr)] = (kinds["g"], i)
+    var_rows[int(layout.error_estimate_vr)] = (kinds["error_estimate"], 0)
     var_rows[int(layout.tolerance_vr)] = (8, 0)
     var_rows[int(layout.step_vr)] = (9, 0)
     if sorted(var_rows) != list(range(layout.n_real)):
@@ -361,12 +368,13 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
     .default_method = {cfg['integrators'].index(cfg['integrator'])},
     .default_step = {c_double(cfg['step'])},
     .default_tolerance = {c_double(cfg['tolerance'])},
+    .default_estimate = {int(bool(cfg.get('error_estimate', True)))},
     .n_real = {layout.n_real},
     .variables = variables,
 }};
 
 const fmu_model_info lnfmu_info = {{
-    {c_string(cfg['model_identifier'])}, LNFMU_GUID, LNFMU_FINGERPRINT, {layout.n_real}, 1
+    {c_string(cfg['model_identifier'])}, LNFMU_GUID, LNFMU_FINGERPRINT, {layout.n_real}, 1, 1
 }};
 """
     out.append(scene_init)
@@ -420,6 +428,10 @@ def raw_model_description(cfg, layout, guid: str, sources: list[str], start_valu
         description="integration method: " + ", ".join(cfg["integrators"]), causality="parameter",
         variability="fixed", initial="exact"))
     ET.SubElement(sv, "String", start=cfg["integrator"])
+    sv = ET.SubElement(variables, "ScalarVariable", dict(
+        name="estimate_error", valueReference=str(layout.estimate_error_vr), description=ESTIMATE_ERROR_DESCRIPTION,
+        causality="parameter", variability="fixed", initial="exact"))
+    ET.SubElement(sv, "Boolean", start="true" if cfg.get("error_estimate", True) else "false")
     ET.SubElement(root, "ModelStructure")
     return ET.tostring(root, encoding="UTF-8")
 

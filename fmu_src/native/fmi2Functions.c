@@ -56,7 +56,7 @@ static const char *category_of(fmi2Status status)
 
 /* The logger's message is a printf format with FMI's #<type><vr># references: a message that is plain text
    has its '%' and '#' doubled, so that hosts which expand them print it as written. */
-static void emit(instance *self, fmi2Status status, const char *text)
+static void emit_in(instance *self, fmi2Status status, const char *category, const char *text)
 {
     if (status == fmi2OK && !self->logging_on) return;
     size_t j = 0;
@@ -67,10 +67,12 @@ static void emit(instance *self, fmi2Status status, const char *text)
     }
     self->line[j] = '\0';
     if (self->logger)
-        self->logger(self->environment, self->name, status, category_of(status), self->line);
+        self->logger(self->environment, self->name, status, category, self->line);
     else
-        fprintf(stderr, "[%s] %s: %s\n", self->name, category_of(status), text);
+        fprintf(stderr, "[%s] %s: %s\n", self->name, category, text);
 }
+
+static void emit(instance *self, fmi2Status status, const char *text) { emit_in(self, status, category_of(status), text); }
 
 static void logf_status(instance *self, fmi2Status status, const char *format, ...)
 {
@@ -100,6 +102,12 @@ static fmi2Status report(instance *self, const char *function, int result)
     case FMU_OK: return fmi2OK;
     case FMU_WARNING: logf_status(self, fmi2Warning, "%s: %s", function, self->msg); return fmi2Warning;
     case FMU_DISCARD: logf_status(self, fmi2Discard, "%s: %s", function, self->msg); return fmi2Discard;
+    case FMU_NOTE: {  /* information on a result computed as asked: seen by the host, the call is fmi2OK */
+        char text[FMU_MESSAGE + 256];
+        snprintf(text, sizeof text, "%s: %s", function, self->msg);
+        emit_in(self, fmi2Warning, LINKNET_NOTE_CATEGORY, text);
+        return fmi2OK;
+    }
     default: logf_status(self, fmi2Error, "%s: %s", function, self->msg); return fmi2Error;
     }
 }
@@ -293,14 +301,30 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     return report(self, fn, fmu_model_set_string(self->model, vr, nvr, value, self->mode >= MODE_STEPPING, self->msg));
 }
 
-/* The model has Real and String variables only. */
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
+{
+    ENTER("fmi2GetBoolean");
+    if (!vr_arguments(self, fn, vr, nvr, value)) return fmi2Error;
+    return report(self, fn, fmu_model_get_boolean(self->model, vr, nvr, value, self->msg));
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[])
+{
+    ENTER("fmi2SetBoolean");
+    if (!mode_allows(self, fn, IN(MODE_INSTANTIATED) | IN(MODE_INITIALIZATION) | IN(MODE_STEPPING))) return fmi2Error;
+    if (!vr_arguments(self, fn, vr, nvr, value)) return fmi2Error;
+    return report(self, fn, fmu_model_set_boolean(self->model, vr, nvr, value, self->mode >= MODE_STEPPING,
+                                                  self->msg));
+}
+
+/* The model has no Integer variables. */
 static fmi2Status no_such_type(instance *self, const char *fn, const char *type, const fmi2ValueReference vr[],
                                size_t nvr)
 {
     if (nvr == 0) return fmi2OK;
     if (vr == NULL) return refuse(self, fn, "vr is NULL with nvr = %zu", nvr);
-    return refuse(self, fn, "value reference %u is not a variable of type %s (this FMU has Real and String "
-                  "variables only)", vr[0], type);
+    return refuse(self, fn, "value reference %u is not a variable of type %s (this FMU has Real, String and "
+                  "Boolean variables only)", vr[0], type);
 }
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
@@ -310,12 +334,6 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
     return no_such_type(self, fn, "Integer", vr, nvr);
 }
 
-fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
-{
-    (void)value;
-    ENTER("fmi2GetBoolean");
-    return no_such_type(self, fn, "Boolean", vr, nvr);
-}
 
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[])
 {
@@ -324,12 +342,6 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
     return no_such_type(self, fn, "Integer", vr, nvr);
 }
 
-fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[])
-{
-    (void)value;
-    ENTER("fmi2SetBoolean");
-    return no_such_type(self, fn, "Boolean", vr, nvr);
-}
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown,
@@ -342,7 +354,7 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 
 /* ---- FMU states ---------------------------------------------------------------------------------- */
 
-#define STATE_FORMAT 2u
+#define STATE_FORMAT 3u  /* 3: the error estimate's companion run and settings added to the model's state */
 #define STATE_BYTE_ORDER 0x01020304u
 static const char state_magic[8] = {'L', 'N', 'K', 'F', 'M', 'U', 'S', 'T'};
 

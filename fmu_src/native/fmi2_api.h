@@ -158,13 +158,16 @@ FMI2_Export fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind
 /* The log categories both linknet FMU kinds declare (fmu_src/native/build.py: LOG_CATEGORIES) and accept in
    fmi2SetDebugLogging, and the check of a host's list against them: written here once for the native FMU's glue and
    the pythonfmu FMU's front layer. */
-#define LINKNET_LOG_CATEGORIES "logStatusWarning, logStatusDiscard, logStatusError, logStatusFatal, logAll"
+#define LINKNET_NOTE_CATEGORY "logErrorEstimate"  /* information on a result computed as asked: the error estimate
+                                                   beyond its goal (fmi2Warning status, the call's status unchanged) */
+#define LINKNET_LOG_CATEGORIES "logStatusWarning, logStatusDiscard, logStatusError, logStatusFatal, logAll, " \
+                               LINKNET_NOTE_CATEGORY
 
 /* The first of categories[0..n) that is none of them ("(null)" for a NULL name), or NULL when every one is known. */
 static inline const char *linknet_unknown_log_category(size_t n, const fmi2String categories[])
 {
     static const char *const known[] = {"logStatusWarning", "logStatusDiscard", "logStatusError", "logStatusFatal",
-                                        "logAll"};
+                                        "logAll", LINKNET_NOTE_CATEGORY};
     for (size_t i = 0; i < n; i++) {
         if (categories[i] == NULL) return "(null)";
         size_t k = 0;

@@ -21,7 +21,11 @@ enum fmu_result {
     FMU_OK = 0,
     FMU_WARNING = 1,    /* done, with something worth saying in msg */
     FMU_DISCARD = 2,    /* the step could not be completed; nothing changed */
-    FMU_ERROR = 3       /* refused (bad argument or value); nothing changed */
+    FMU_ERROR = 3,      /* refused (bad argument or value); nothing changed */
+    FMU_NOTE = 4        /* done, as asked (the call returns fmi2OK), with information in msg that the host must see
+                           although nothing went wrong: logged with fmi2Warning status in the category
+                           LINKNET_NOTE_CATEGORY (fmi2_api.h),
+                           logging on or not (the model's error estimate exceeded the run's goal) */
 };
 
 typedef struct fmu_model fmu_model;
@@ -32,6 +36,7 @@ typedef struct fmu_model_info {
     uint64_t fingerprint;       /* identity of the model's build: a state carries it and is refused by others */
     unsigned n_real;            /* Real variables have value references 0 .. n_real - 1 */
     unsigned n_string;          /* String variables follow: n_real .. n_real + n_string - 1 */
+    unsigned n_boolean;         /* then Boolean variables: n_real + n_string .. */
 } fmu_model_info;
 
 const fmu_model_info *fmu_model_info_get(void);
@@ -55,10 +60,13 @@ int fmu_model_set_real_input_derivatives(fmu_model *m, const unsigned *vr, size_
 int fmu_model_get_string(fmu_model *m, const unsigned *vr, size_t n, const char **value, char *msg);
 int fmu_model_set_string(fmu_model *m, const unsigned *vr, size_t n, const char *const *value, int initialized,
                          char *msg);
+/* Booleans as 0 / 1 (fmi2Boolean is an int; any non-zero value set is true). */
+int fmu_model_get_boolean(fmu_model *m, const unsigned *vr, size_t n, int *value, char *msg);
+int fmu_model_set_boolean(fmu_model *m, const unsigned *vr, size_t n, const int *value, int initialized, char *msg);
 
 /* End of initialization: the parameters set so far take effect. */
 int fmu_model_initialize(fmu_model *m, char *msg);
-/* One communication step from t to t + h with the inputs held. All or nothing. */
+/* One communication step from t to t + h with the inputs held. All or nothing (FMU_NOTE: done, with a note). */
 int fmu_model_do_step(fmu_model *m, double t, double h, char *msg);
 double fmu_model_time(const fmu_model *m);
 

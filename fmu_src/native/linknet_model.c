@@ -9,6 +9,13 @@
  * ln_project_state; zero for a static scene) and, for free rigid bodies, their layout and initial body states
  * (ln_rigid_layout).
  *
+ * The error estimate (output error_estimate, Boolean parameter estimate_error): a companion run of the same scene,
+ * a second ln_data advanced by a second ln_method after the run's own advance in every doStep, to the same
+ * communication points with the same inputs, and never re-synchronised with the run (that would measure only the
+ * local error). Its settings, the factor that turns the gap between the two runs into the estimate and the goal
+ * the estimate is held to are the core's rule (error_estimate.c: ln_companion_settings, ln_position_gap,
+ * ln_error_goal, ln_scene_size), the library's Simulator follows the same one: this file only calls it.
+ *
  * Everything an instance changes lives in its fmu_model: instances are independent.
  */
 #include <math.h>
@@ -40,6 +47,8 @@ struct fmu_model {
     double *applied;            /* (n_real) the parameter values the current model was built with */
     ln_int applied_integrator;
     int dirty;                  /* a parameter was set since the model was built */
+    int estimate;               /* the Boolean parameter estimate_error as set */
+    int applied_estimate;       /* the one the current run started with: the companion runs */
     int outputs_stale;          /* T and Freact not evaluated at the current state and inputs */
 
     ln_model model;
@@ -48,6 +57,15 @@ struct fmu_model {
     struct ln_rigid_model rigid;        /* the bodies of a changed scene */
     ln_data *d;
     ln_int n_bodies;
+
+    /* the error estimate: the companion's method (ln_companion_settings of the run's) and data, the factor that
+       turns the largest position gap into the estimate, the run's goal (m), the estimate at the current time (0 at
+       the start, +inf once the companion failed) and whether it was beyond the goal after the last step (the note
+       is given once per crossing) */
+    ln_method method_c;
+    ln_data *dc;
+    double factor, goal, error;
+    int over_goal;
 
     /* a model built from changed parameters points into these */
     double *R, *weights;                /* (L), (ln_model_weights_size) */
@@ -220,7 +238,7 @@ static int project_state(fmu_model *m, double *X, double *U, int positions, char
 /* The model, method and initial state for the parameters in values and integrator. At the scene's defaults
    the baked ones; otherwise rebuilt here. On failure msg says why and the model is left half-built: the
    caller builds the previous parameters again. */
-static int build(fmu_model *m, const double *values, ln_int integrator, char *msg)
+static int build_run(fmu_model *m, const double *values, ln_int integrator, char *msg)
 {
     const lnfmu_scene *s = m->s;
     const ln_int K = s->K, L = s->L;
@@ -283,11 +301,30 @@ static int build(fmu_model *m, const double *values, ln_int integrator, char *ms
     return FMU_OK;
 }
 
-/* The data at the current model's initial state, at the start time, with the inputs as set. */
-static int set_initial_state(fmu_model *m, char *msg)
+/* build_run, and the companion's method, factor and goal for it (the core's rule, error_estimate.c). */
+static int build(fmu_model *m, const double *values, ln_int integrator, char *msg)
+{
+    const int result = build_run(m, values, integrator, msg);
+    if (result != FMU_OK) return result;
+    const lnfmu_method *meth = &m->s->methods[integrator];
+    double dt_c, rtol_c, atol_c;
+    m->method_c = m->method;
+    m->factor = ln_companion_settings(meth->adaptive, meth->order, m->method.dt, m->method.rtol, m->method.atol, &dt_c,
+                                      &rtol_c, &atol_c);
+    if (meth->adaptive) {
+        m->method_c.rtol = rtol_c;
+        m->method_c.atol = atol_c;
+    } else {
+        m->method_c.dt = dt_c;
+    }
+    m->goal = ln_error_goal(meth->adaptive, m->method.rtol, m->method.atol, ln_scene_size(m->s->K, m->X_init));
+    return FMU_OK;
+}
+
+/* One data (the run's or the companion's) at the current model's initial state, at the start time. */
+static int start_data(fmu_model *m, ln_data *d, char *msg)
 {
     const lnfmu_scene *s = m->s;
-    ln_data *d = m->d;
     const size_t n3 = (size_t)(3 * s->K);
     if (n3) {
         memcpy(d->X, m->X_init, n3 * sizeof(double));
@@ -309,8 +346,34 @@ static int set_initial_state(fmu_model *m, char *msg)
             memcpy(d->U, m->U_init, n3 * sizeof(double));
         }
     }
-    m->outputs_stale = 1;
     return FMU_OK;
+}
+
+/* The run and its companion at the current model's initial state, at the start time, with the inputs as set. */
+static int set_initial_state(fmu_model *m, char *msg)
+{
+    int result = start_data(m, m->d, msg);
+    if (result == FMU_OK) result = start_data(m, m->dc, msg);
+    m->error = 0.0;
+    m->over_goal = 0;
+    m->outputs_stale = 1;
+    return result;
+}
+
+/* The inputs as set in the run's data (held forces, the input-driven anchors' hold and its start) into the
+   companion's: the same inputs over the same step. */
+static void companion_inputs(fmu_model *m)
+{
+    const ln_data *d = m->d;
+    ln_data *dc = m->dc;
+    const size_t n3 = (size_t)(3 * m->s->K), nd = (size_t)(3 * m->s->model->n_driven);
+    if (n3) memcpy(dc->F_input, d->F_input, n3 * sizeof(double));
+    if (nd) {
+        memcpy(dc->drive_P, d->drive_P, nd * sizeof(double));
+        memcpy(dc->drive_V, d->drive_V, nd * sizeof(double));
+        memcpy(dc->drive_A, d->drive_A, nd * sizeof(double));
+    }
+    dc->drive_hold_t = d->drive_hold_t;
 }
 
 /* Apply the parameters as set: the model is rebuilt, the state starts again. On failure the previous
@@ -327,6 +390,7 @@ static int apply_parameters(fmu_model *m, char *msg)
     }
     memcpy(m->applied, m->value, (size_t)s->n_real * sizeof(double));
     m->applied_integrator = m->integrator;
+    m->applied_estimate = m->estimate;
     m->dirty = 0;
     return set_initial_state(m, msg);
 }
@@ -349,6 +413,7 @@ static void start_values(fmu_model *m)
         m->value[vr] = x;
     }
     m->integrator = s->default_method;
+    m->estimate = s->default_estimate;
     m->start_time = 0.0;
     if (m->d) load_inputs(m);
 }
@@ -359,6 +424,7 @@ void fmu_model_free(fmu_model *m)
 {
     if (!m) return;
     ln_data_free(m->d);
+    ln_data_free(m->dc);
     ln_ldl_symbolic_free(m->ldl);
     double *arrays[] = {m->value, m->applied, m->R, m->weights, m->r, m->inertia, m->body_mass, m->mass_full,
                         m->gravity, m->X_init, m->U_init, m->Y_init, m->Xo, m->Uo, m->Ys};
@@ -419,7 +485,8 @@ fmu_model *fmu_model_new(char *msg)
     m->model.ldl = m->ldl;
     m->model.rigid = s->rigid;
     m->d = ln_data_new(&m->model, stages);
-    if (!m->d) {
+    m->dc = ln_data_new(&m->model, stages);
+    if (!m->d || !m->dc) {
         fmu_model_free(m);
         fail(msg, FMU_ERROR, "the native core could not allocate its data (out of memory)");
         return NULL;
@@ -427,6 +494,7 @@ fmu_model *fmu_model_new(char *msg)
     start_values(m);
     memcpy(m->applied, m->value, (size_t)s->n_real * sizeof(double));
     m->applied_integrator = m->integrator;
+    m->applied_estimate = m->estimate;
     if (build(m, m->value, m->integrator, msg) != FMU_OK || set_initial_state(m, msg) != FMU_OK) {
         fmu_model_free(m);
         return NULL;
@@ -442,6 +510,7 @@ int fmu_model_reset(fmu_model *m, char *msg)
     if (result != FMU_OK) return result;
     memcpy(m->applied, m->value, (size_t)m->s->n_real * sizeof(double));
     m->applied_integrator = m->integrator;
+    m->applied_estimate = m->estimate;
     return set_initial_state(m, msg);
 }
 
@@ -449,8 +518,8 @@ int fmu_model_set_start_time(fmu_model *m, double start_time, char *msg)
 {
     (void)msg;
     m->start_time = start_time;
-    m->d->t = start_time;  /* the scene's initial state, at t0 */
-    m->d->drive_t0 = m->d->drive_hold_t = start_time;
+    m->d->t = m->dc->t = start_time;  /* the scene's initial state, at t0 */
+    m->d->drive_t0 = m->d->drive_hold_t = m->dc->drive_t0 = m->dc->drive_hold_t = start_time;
     m->outputs_stale = 1;
     return FMU_OK;
 }
@@ -506,6 +575,7 @@ int fmu_model_get_real(fmu_model *m, const unsigned *vr, size_t n, double *value
         case LNFMU_X: value[i] = d->X[v->index]; break;
         case LNFMU_U: value[i] = d->U[v->index]; break;
         case LNFMU_JREACT: value[i] = d->impulse[v->index]; break;
+        case LNFMU_ERROR_ESTIMATE: value[i] = m->applied_estimate ? m->error : NAN; break;
         case LNFMU_T:
         case LNFMU_FREACT:
             if (m->outputs_stale && result == FMU_OK) result = evaluate_outputs(m, msg);
@@ -687,30 +757,106 @@ int fmu_model_initialize(fmu_model *m, char *msg)
 
 int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
 {
+    const lnfmu_scene *s = m->s;
     const double t_fmu = m->d->t, t_target = t + h;
     if (t_target <= t_fmu) return FMU_OK;  /* h below half an ulp of t: nothing to integrate */
-    const int status = ln_advance(&m->model, &m->method, m->d, t_target, m->s->max_steps);
+    const int status = ln_advance(&m->model, &m->method, m->d, t_target, s->max_steps);
     if (status != LN_OK) {
         char why[FMU_MESSAGE - 128], label[512] = "";
-        if (m->d->fail_link >= 0) link_label(m->s, m->d->fail_link, label, sizeof label);
-        ln_explain(&m->model, &m->method, m->d, status, t_fmu, t_target, m->s->max_steps, label, why, sizeof why);
+        if (m->d->fail_link >= 0) link_label(s, m->d->fail_link, label, sizeof label);
+        ln_explain(&m->model, &m->method, m->d, status, t_fmu, t_target, s->max_steps, label, why, sizeof why);
         return fail(msg, FMU_DISCARD, "step from t=%.17g with h=%.17g failed, the FMU stays at t=%.17g: %s", t, h,
                     t_fmu, why);
     }
     m->outputs_stale = 1;
+    if (!m->applied_estimate || !isfinite(m->error)) return FMU_OK;  /* off, or the companion failed before */
+
+    /* the companion: the same step with the same inputs, at its own settings */
+    companion_inputs(m);
+    const int companion = ln_advance(&m->model, &m->method_c, m->dc, t_target, s->max_steps);
+    const char *method = s->methods[m->applied_integrator].name;
+    if (companion != LN_OK) {
+        /* the run's own result stands; the estimate is +inf from here on (until a reset or a restored state) */
+        char why[FMU_MESSAGE - 512], label[512] = "";
+        if (m->dc->fail_link >= 0) link_label(s, m->dc->fail_link, label, sizeof label);
+        ln_explain(&m->model, &m->method_c, m->dc, companion, t_fmu, t_target, s->max_steps, label, why, sizeof why);
+        m->error = INFINITY;
+        m->over_goal = 1;
+        return fail(msg, FMU_NOTE, "step to t=%.17g: the error estimate's companion run (%s at %s) failed: %s. "
+                    "error_estimate is +inf from here on; the run's own result (the outputs) stands", t_target,
+                    method, s->methods[m->applied_integrator].adaptive ? "a tenth of the tolerances" : "half the step",
+                    why);
+    }
+    m->error = m->factor * ln_position_gap(s->K, m->d->X, m->dc->X);
+    const int over = !(m->error <= m->goal);
+    const int crossing = over && !m->over_goal;
+    m->over_goal = over;
+    if (!crossing) return FMU_OK;
+    if (s->methods[m->applied_integrator].adaptive)
+        return fail(msg, FMU_NOTE, "at t=%.17g the error estimate %.3g m exceeds the goal %.3g m of %s at rtol %g "
+                    "(100 x rtol x the scene's size): the result is computed as asked; a smaller tolerance gives a "
+                    "closer one (said again only after the estimate comes back within the goal)", t_target, m->error,
+                    m->goal, method, m->method.rtol);
+    return fail(msg, FMU_NOTE, "at t=%.17g the error estimate %.3g m exceeds the goal %.3g m (that of the default "
+                "rtol for a fixed-step run) of %s at step %g s: the result is computed as asked; a smaller step or an "
+                "error-controlled integrator gives a closer one (said again only after the estimate comes back within "
+                "the goal)", t_target, m->error, m->goal, method, m->method.dt);
+}
+
+/* ---- Booleans: estimate_error -------------------------------------------------------------------- */
+
+static unsigned estimate_vr(const lnfmu_scene *s) { return (unsigned)s->n_real + 1u; }
+
+int fmu_model_get_boolean(fmu_model *m, const unsigned *vr, size_t n, int *value, char *msg)
+{
+    const lnfmu_scene *s = m->s;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] != estimate_vr(s))
+            return fail(msg, FMU_ERROR, "value reference %u is not a Boolean variable of this FMU (the only one is "
+                        "estimate_error, %u)", vr[i], estimate_vr(s));
+        value[i] = m->estimate;
+    }
+    return FMU_OK;
+}
+
+int fmu_model_set_boolean(fmu_model *m, const unsigned *vr, size_t n, const int *value, int initialized, char *msg)
+{
+    const lnfmu_scene *s = m->s;
+    int chosen = m->estimate;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] != estimate_vr(s))
+            return fail(msg, FMU_ERROR, "value reference %u is not a Boolean variable of this FMU (the only one is "
+                        "estimate_error, %u); nothing set", vr[i], estimate_vr(s));
+        const int x = value[i] != 0;
+        if (initialized && x != m->estimate)
+            return fail(msg, FMU_ERROR, "estimate_error is a fixed parameter and cannot be changed after "
+                        "initialization (%s, current %s); nothing set", x ? "true" : "false",
+                        m->estimate ? "true" : "false");
+        chosen = x;
+    }
+    if (chosen != m->estimate) {
+        m->estimate = chosen;
+        m->dirty = 1;
+    }
     return FMU_OK;
 }
 
 /* ---- state --------------------------------------------------------------------------------------- */
 
-/* start time; integrator, applied integrator, dirty; values; applied; t, h_next; planar, steps, rejected, n_rhs;
-   X, U; body states; the driven anchors' clock (t0, start of the hold), their last jump (position, velocity,
-   count), their held motion P, V, A and their impulse */
-size_t fmu_model_state_size(const fmu_model *m)
+/* A data's part of the state (the run's, then the companion's): t, h_next; planar, steps, rejected, n_rhs; X, U;
+   body states; the driven anchors' clock (t0, start of the hold), their last jump (position, velocity, count), their
+   held motion P, V, A and their impulse. */
+static size_t data_state_doubles(const fmu_model *m)
 {
     const lnfmu_scene *s = m->s;
-    return sizeof(double) * (size_t)(1 + 3 + 2 * s->n_real + 2 + 4 + 6 * s->K + LN_RIGID_STATE * m->n_bodies + 5
-                                     + 12 * s->model->n_driven);
+    return (size_t)(2 + 4 + 6 * s->K + LN_RIGID_STATE * m->n_bodies + 5 + 12 * s->model->n_driven);
+}
+
+/* start time; integrator, applied integrator, dirty, estimate, applied estimate, over goal; the estimate; values;
+   applied; the run's data; the companion's data */
+size_t fmu_model_state_size(const fmu_model *m)
+{
+    return sizeof(double) * ((size_t)(1 + 6 + 1 + 2 * m->s->n_real) + 2 * data_state_doubles(m));
 }
 
 static void put(unsigned char **p, const void *x, size_t n)
@@ -734,40 +880,50 @@ static ln_int get_int(const unsigned char **p)
     return x;
 }
 
+static void save_data(const fmu_model *m, const ln_data *d, unsigned char **p)
+{
+    const lnfmu_scene *s = m->s;
+    const size_t n3 = (size_t)(3 * s->K) * sizeof(double), nd = (size_t)(3 * s->model->n_driven) * sizeof(double);
+    put(p, &d->t, sizeof(double));
+    put(p, &d->h_next, sizeof(double));
+    put_int(p, d->planar);
+    put_int(p, d->steps);
+    put_int(p, d->rejected);
+    put_int(p, d->n_rhs);
+    put(p, d->X, n3);
+    put(p, d->U, n3);
+    if (m->n_bodies) {
+        ln_rigid_get_state(&m->model, d, m->Ys);
+        put(p, m->Ys, (size_t)(LN_RIGID_STATE * m->n_bodies) * sizeof(double));
+    }
+    put(p, &d->drive_t0, sizeof(double));
+    put(p, &d->drive_hold_t, sizeof(double));
+    put(p, &d->jump_position, sizeof(double));
+    put(p, &d->jump_velocity, sizeof(double));
+    put_int(p, d->jumps);
+    put(p, d->drive_P, nd);
+    put(p, d->drive_V, nd);
+    put(p, d->drive_A, nd);
+    put(p, d->impulse, nd);
+}
+
 void fmu_model_state_save(const fmu_model *m, unsigned char *buffer)
 {
     const lnfmu_scene *s = m->s;
-    const ln_data *d = m->d;
     unsigned char *p = buffer;
-    const size_t nr = (size_t)s->n_real * sizeof(double), n3 = (size_t)(3 * s->K) * sizeof(double);
+    const size_t nr = (size_t)s->n_real * sizeof(double);
     put(&p, &m->start_time, sizeof(double));
     put_int(&p, m->integrator);
     put_int(&p, m->applied_integrator);
     put_int(&p, m->dirty);
+    put_int(&p, m->estimate);
+    put_int(&p, m->applied_estimate);
+    put_int(&p, m->over_goal);
+    put(&p, &m->error, sizeof(double));
     put(&p, m->value, nr);
     put(&p, m->applied, nr);
-    put(&p, &d->t, sizeof(double));
-    put(&p, &d->h_next, sizeof(double));
-    put_int(&p, d->planar);
-    put_int(&p, d->steps);
-    put_int(&p, d->rejected);
-    put_int(&p, d->n_rhs);
-    put(&p, d->X, n3);
-    put(&p, d->U, n3);
-    if (m->n_bodies) {
-        ln_rigid_get_state(&m->model, d, m->Ys);
-        put(&p, m->Ys, (size_t)(LN_RIGID_STATE * m->n_bodies) * sizeof(double));
-    }
-    const size_t nd = (size_t)(3 * s->model->n_driven) * sizeof(double);
-    put(&p, &d->drive_t0, sizeof(double));
-    put(&p, &d->drive_hold_t, sizeof(double));
-    put(&p, &d->jump_position, sizeof(double));
-    put(&p, &d->jump_velocity, sizeof(double));
-    put_int(&p, d->jumps);
-    put(&p, d->drive_P, nd);
-    put(&p, d->drive_V, nd);
-    put(&p, d->drive_A, nd);
-    put(&p, d->impulse, nd);
+    save_data(m, m->d, &p);
+    save_data(m, m->dc, &p);
 }
 
 static int finite_all(const double *x, size_t n)
@@ -777,49 +933,113 @@ static int finite_all(const double *x, size_t n)
     return isfinite(total);
 }
 
+/* A data's part of a state as read: arrays point into the restore's buffer. */
+typedef struct data_state {
+    double t, h_next;
+    ln_int planar, steps, rejected, n_rhs;
+    double *X, *U, *Y;
+    double drive_t0, drive_hold_t, jump_position, jump_velocity;
+    ln_int jumps;
+    double *drive;  /* P, V, A, impulse: 3 n_driven each */
+} data_state;
+
+static void read_data(const fmu_model *m, const unsigned char **p, data_state *ds, double *arrays)
+{
+    const size_t n3 = (size_t)(3 * m->s->K), nb = (size_t)(LN_RIGID_STATE * m->n_bodies);
+    const size_t nd = (size_t)(3 * m->s->model->n_driven);
+    ds->X = arrays;
+    ds->U = ds->X + n3;
+    ds->Y = ds->U + n3;
+    ds->drive = ds->Y + nb;
+    get(p, &ds->t, sizeof(double));
+    get(p, &ds->h_next, sizeof(double));
+    ds->planar = get_int(p);
+    ds->steps = get_int(p);
+    ds->rejected = get_int(p);
+    ds->n_rhs = get_int(p);
+    get(p, ds->X, n3 * sizeof(double));
+    get(p, ds->U, n3 * sizeof(double));
+    get(p, ds->Y, nb * sizeof(double));
+    get(p, &ds->drive_t0, sizeof(double));
+    get(p, &ds->drive_hold_t, sizeof(double));
+    get(p, &ds->jump_position, sizeof(double));
+    get(p, &ds->jump_velocity, sizeof(double));
+    ds->jumps = get_int(p);
+    get(p, ds->drive, 4 * nd * sizeof(double));
+}
+
+/* What a data's state says that is not possible, or NULL. */
+static const char *data_problem(const fmu_model *m, const data_state *ds)
+{
+    const size_t n3 = (size_t)(3 * m->s->K), nb = (size_t)(LN_RIGID_STATE * m->n_bodies);
+    const size_t nd = (size_t)(3 * m->s->model->n_driven);
+    if ((ds->planar != 0 && ds->planar != 1) || ds->steps < 0 || ds->rejected < 0 || ds->n_rhs < 0)
+        return "invalid internals";
+    if (!isfinite(ds->t) || !(isfinite(ds->h_next) && ds->h_next >= 0.0)) return "a non-finite time or step";
+    if (!finite_all(ds->X, 2 * n3) || !finite_all(ds->Y, nb)) return "a non-finite state";
+    if (!(isfinite(ds->drive_t0) && isfinite(ds->drive_hold_t) && isfinite(ds->jump_position)
+          && isfinite(ds->jump_velocity)) || ds->jumps < 0 || !finite_all(ds->drive, 4 * nd))
+        return "a non-finite or invalid motion of the driven anchors";
+    return NULL;
+}
+
+static void apply_data(fmu_model *m, ln_data *d, const data_state *ds)
+{
+    const size_t n3 = (size_t)(3 * m->s->K), nd = (size_t)(3 * m->s->model->n_driven);
+    d->t = ds->t;
+    d->h_next = ds->h_next;
+    d->planar = (int)ds->planar && m->model.planar;
+    d->steps = ds->steps;
+    d->rejected = ds->rejected;
+    d->n_rhs = ds->n_rhs;
+    if (n3) {
+        memcpy(d->X, ds->X, n3 * sizeof(double));
+        memcpy(d->U, ds->U, n3 * sizeof(double));
+    }
+    d->drive_t0 = ds->drive_t0;
+    d->drive_hold_t = ds->drive_hold_t;
+    d->jump_position = ds->jump_position;
+    d->jump_velocity = ds->jump_velocity;
+    d->jumps = ds->jumps;
+    if (nd) {
+        memcpy(d->drive_P, ds->drive, nd * sizeof(double));
+        memcpy(d->drive_V, ds->drive + nd, nd * sizeof(double));
+        memcpy(d->drive_A, ds->drive + 2 * nd, nd * sizeof(double));
+        memcpy(d->impulse, ds->drive + 3 * nd, nd * sizeof(double));
+    }
+}
+
 int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t size, char *msg)
 {
     const lnfmu_scene *s = m->s;
     if (size != fmu_model_state_size(m)) return fail(msg, FMU_ERROR, "a state of the wrong size");
-    const size_t n_real = (size_t)s->n_real, n3 = (size_t)(3 * s->K), nb = (size_t)(LN_RIGID_STATE * m->n_bodies);
-    const size_t nd = (size_t)(3 * s->model->n_driven);
-    double *value = malloc((2 * n_real + 2 * n3 + nb + 4 * nd + 1) * sizeof(double));
+    const size_t n_real = (size_t)s->n_real, per_data = data_state_doubles(m);
+    double *value = malloc((2 * n_real + 2 * per_data + 1) * sizeof(double));
     if (!value) return fail(msg, FMU_ERROR, "out of memory");
-    double *applied = value + n_real, *X = applied + n_real, *U = X + n3, *Y = U + n3;
-    double *drive = Y + nb;  /* P, V, A, impulse: nd each */
+    double *applied = value + n_real, *arrays = applied + n_real;
     const unsigned char *p = buffer;
-    double start_time, t, h_next;
+    double start_time, error;
     get(&p, &start_time, sizeof(double));
     const ln_int integrator = get_int(&p), applied_integrator = get_int(&p), dirty = get_int(&p);
+    const ln_int estimate = get_int(&p), applied_estimate = get_int(&p), over_goal = get_int(&p);
+    get(&p, &error, sizeof(double));
     get(&p, value, n_real * sizeof(double));
     get(&p, applied, n_real * sizeof(double));
-    get(&p, &t, sizeof(double));
-    get(&p, &h_next, sizeof(double));
-    const ln_int planar = get_int(&p), steps = get_int(&p), rejected = get_int(&p), n_rhs = get_int(&p);
-    get(&p, X, n3 * sizeof(double));
-    get(&p, U, n3 * sizeof(double));
-    get(&p, Y, nb * sizeof(double));
-    double drive_t0, drive_hold_t, jump_position, jump_velocity;
-    get(&p, &drive_t0, sizeof(double));
-    get(&p, &drive_hold_t, sizeof(double));
-    get(&p, &jump_position, sizeof(double));
-    get(&p, &jump_velocity, sizeof(double));
-    const ln_int jumps = get_int(&p);
-    get(&p, drive, 4 * nd * sizeof(double));
+    data_state run, companion;
+    read_data(m, &p, &run, arrays);
+    read_data(m, &p, &companion, arrays + per_data);
 
     /* what the state says must be possible for this FMU */
     const char *problem = NULL;
     if (integrator < 0 || integrator >= s->n_methods || applied_integrator < 0 || applied_integrator >= s->n_methods)
         problem = "an integrator index out of range";
-    else if ((dirty != 0 && dirty != 1) || (planar != 0 && planar != 1) || steps < 0 || rejected < 0 || n_rhs < 0)
+    else if ((dirty != 0 && dirty != 1) || (estimate != 0 && estimate != 1) || (applied_estimate != 0
+             && applied_estimate != 1) || (over_goal != 0 && over_goal != 1) || !(error >= 0.0))
         problem = "invalid internals";
-    else if (!isfinite(start_time) || !isfinite(t) || !(isfinite(h_next) && h_next >= 0.0))
+    else if (!isfinite(start_time))
         problem = "a non-finite time or step";
-    else if (!finite_all(X, 2 * n3) || !finite_all(Y, nb))
-        problem = "a non-finite state";
-    else if (!(isfinite(drive_t0) && isfinite(drive_hold_t) && isfinite(jump_position) && isfinite(jump_velocity))
-             || jumps < 0 || !finite_all(drive, 4 * nd))
-        problem = "a non-finite or invalid motion of the driven anchors";
+    if (!problem) problem = data_problem(m, &run);
+    if (!problem) problem = data_problem(m, &companion);
     for (size_t vr = 0; vr < n_real && !problem; vr++) {
         const int kind = s->variables[vr].kind;
         char why[256];
@@ -848,36 +1068,21 @@ int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t si
         memcpy(m->applied, applied, n_real * sizeof(double));
         m->applied_integrator = applied_integrator;
     }
-    ln_data *d = m->d;
-    if (m->n_bodies && ln_rigid_set_state(&m->model, d, Y) != LN_OK) {
+    if (m->n_bodies && (ln_rigid_set_state(&m->model, m->d, run.Y) != LN_OK
+                        || ln_rigid_set_state(&m->model, m->dc, companion.Y) != LN_OK)) {
         free(value);
         return fail(msg, FMU_ERROR, "refused: the rigid-body state is not valid (zero quaternion)");
     }
     memcpy(m->value, value, n_real * sizeof(double));
     m->integrator = integrator;
     m->dirty = (int)dirty;
+    m->estimate = (int)estimate;
+    m->applied_estimate = (int)applied_estimate;
+    m->over_goal = (int)over_goal;
+    m->error = error;
     m->start_time = start_time;
-    d->t = t;
-    d->h_next = h_next;
-    d->planar = (int)planar && m->model.planar;
-    d->steps = steps;
-    d->rejected = rejected;
-    d->n_rhs = n_rhs;
-    if (n3) {
-        memcpy(d->X, X, n3 * sizeof(double));
-        memcpy(d->U, U, n3 * sizeof(double));
-    }
-    d->drive_t0 = drive_t0;
-    d->drive_hold_t = drive_hold_t;
-    d->jump_position = jump_position;
-    d->jump_velocity = jump_velocity;
-    d->jumps = jumps;
-    if (nd) {
-        memcpy(d->drive_P, drive, nd * sizeof(double));
-        memcpy(d->drive_V, drive + nd, nd * sizeof(double));
-        memcpy(d->drive_A, drive + 2 * nd, nd * sizeof(double));
-        memcpy(d->impulse, drive + 3 * nd, nd * sizeof(double));
-    }
+    apply_data(m, m->d, &run);
+    apply_data(m, m->dc, &companion);
     load_inputs(m);
     m->outputs_stale = 1;
     free(value);

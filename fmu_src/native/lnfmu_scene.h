@@ -31,7 +31,8 @@ enum lnfmu_kind {
                            ln_model.driven_idx */
     LNFMU_V = 11,       /* input: its velocity; index as P */
     LNFMU_A = 12,       /* input: its acceleration; index as P */
-    LNFMU_JREACT = 13   /* output: impulse on a driven anchor at the last step's start; index as P */
+    LNFMU_JREACT = 13,  /* output: impulse on a driven anchor at the last step's start; index as P */
+    LNFMU_ERROR_ESTIMATE = 14   /* output: the run's estimated largest position error (the companion run's gap) */
 };
 
 /* The specialisation the library chose for the scene (linknet_core.Simulator). */
@@ -46,6 +47,7 @@ typedef struct lnfmu_variable {
 typedef struct lnfmu_method {
     const char *name;
     int adaptive;                   /* the parameter "tolerance" applies (else "step") */
+    int order;                      /* the method's order (ln_companion_settings: a fixed step's Richardson factor) */
     ln_method method;               /* as the library builds it; dt, rtol and atol come from the parameters */
 } lnfmu_method;
 
@@ -88,8 +90,10 @@ typedef struct lnfmu_scene {
     const lnfmu_method *methods;
     ln_int default_method;
     double default_step, default_tolerance;
+    int default_estimate;           /* the Boolean parameter "estimate_error" (value reference n_real + 1) */
 
-    /* Real variables by value reference; the String parameter "integrator" has value reference n_real */
+    /* Real variables by value reference; the String parameter "integrator" has value reference n_real, the Boolean
+       parameter "estimate_error" n_real + 1 */
     ln_int n_real;
     const lnfmu_variable *variables;
 } lnfmu_scene;

@@ -2,7 +2,8 @@
  * FMI 2.0 functions and forwards each call to pythonfmu's own binary, shipped beside it (FRONT_INNER_LIBRARY,
  * loaded with dlopen at the first fmi2Instantiate), adding what pythonfmu 0.7.0 cannot give a Python slave:
  *
- * - the status of a call is the worst of pythonfmu's answer and the statuses the slave logged during the call
+ * - the status of a call is the worst of pythonfmu's answer and the statuses the slave logged during the call in
+ *   the status categories (messages of the slave's own categories are information: counts_towards_status)
  *   (pythonfmu ignores what the slave's methods return, but each message the slave logs reaches pythonfmu's
  *   logger callback before the call returns, and that callback is this layer's `relay`). So a refused
  *   setReal/getReal/get or set String, Integer, Boolean returns the fmi2Error the slave logged;
@@ -161,6 +162,16 @@ static void emit(front *self, fmi2Status status, const char *category, const cha
         fprintf(stderr, "[%s] %s: %s\n", self->name, category, text ? text : "");
 }
 
+/* Whether a message the slave logged sets the call's status: those of the status categories (logStatusWarning ...,
+   and logAll, where pythonfmu files a status without a category of its own) do. A message of a category the slave
+   declared for itself (a linknet scene FMU's logErrorEstimate: its error estimate exceeded the goal) is information
+   about a result computed as asked: it reaches the host with its status, and the call's status stays as it was. */
+static int counts_towards_status(const char *category)
+{
+    return category == NULL || category[0] == '\0' || strncmp(category, "logStatus", 9) == 0
+           || strcmp(category, "logAll") == 0;
+}
+
 /* pythonfmu's logger callback: pythonfmu passes the slave's message as the format (with no arguments). */
 static void relay(fmi2ComponentEnvironment environment, fmi2String instanceName, fmi2Status status,
                   fmi2String category, fmi2String message, ...)
@@ -168,7 +179,7 @@ static void relay(fmi2ComponentEnvironment environment, fmi2String instanceName,
     (void)instanceName;  /* a reused instance keeps the name it was made with: the front's is the host's */
     front *self = (front *)environment;
     if (self == NULL) return;
-    if (status > self->worst && status <= fmi2Fatal) self->worst = status;
+    if (status > self->worst && status <= fmi2Fatal && counts_towards_status(category)) self->worst = status;
     emit(self, status, category, message);
 }
 
