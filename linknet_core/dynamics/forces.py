@@ -9,7 +9,7 @@ from typing import Callable
 
 import numpy as np
 
-from linknet_core.scene.description import Scene
+from linknet_core.scene.description import FORCE_KIND, Scene, require_force_kinds
 
 
 def scatter_add(K: int, index: np.ndarray, vectors: np.ndarray) -> np.ndarray:
@@ -53,20 +53,21 @@ def _spring_potential(X, masses, p):
 
 @dataclass(frozen=True)
 class ElementKind:
-    """A kind of force element: its forces on all masses, its potential (None: dissipative) and whether it
-    depends on the velocities (per element)."""
+    """The numpy formulas of a kind of force element (linknet_core.scene.description.FORCE_KINDS): its forces on all
+    masses, and its potential (None: dissipative)."""
 
     forces: Callable
     potential: Callable | None
-    velocity_dependent: Callable
 
 
-# The kinds of scene.ForceElements; the native core's stages/forces.c has the same names and formulas.
+# The numpy formula of every kind of FORCE_KINDS; checked against the table here, at import, so that a kind the
+# reference lacks stops it instead of being skipped.
 ELEMENT_KINDS = {
-    "drag": ElementKind(_drag, None, lambda p: p[:, 0] != 0),
-    "quadratic_drag": ElementKind(_quadratic_drag, None, lambda p: p[:, 0] != 0),
-    "spring": ElementKind(_spring, _spring_potential, lambda p: p[:, 2] != 0),
+    "drag": ElementKind(_drag, None),
+    "quadratic_drag": ElementKind(_quadratic_drag, None),
+    "spring": ElementKind(_spring, _spring_potential),
 }
+require_force_kinds(ELEMENT_KINDS, "the numpy reference (linknet_core.dynamics.forces.ELEMENT_KINDS)")
 
 
 def element_forces(scene: Scene, X: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -95,7 +96,7 @@ def has_velocity_dependent_forces(scene: Scene) -> bool:
     """A force element that depends on the velocities (drag, a damper): RATTLE's second half kick is then
     implicit in the new velocity."""
     elements = scene.force_elements
-    return any(bool(np.any(ELEMENT_KINDS[kind].velocity_dependent(elements.of_kind(kind)[1])))
+    return any(bool(np.any(elements.of_kind(kind)[1][:, FORCE_KIND[kind].velocity_parameter] != 0))
                for kind in dict.fromkeys(elements.kinds))
 
 

@@ -144,7 +144,8 @@ evaluate_repeated = _declare("ln_evaluate_repeated", ctypes.c_int, Model_p, Data
 model_weights_size = _declare("ln_model_weights_size", ln_int, Model_p)
 model_weights = _declare("ln_model_weights", ctypes.c_int, Model_p, c_double_p, c_double_p, c_double_p, c_double_p,
                          c_double_p)
-force_kind = _declare("ln_force_kind", ln_int, ctypes.c_char_p)
+_force_kind = _declare("ln_force_kind", ln_int, ctypes.c_char_p)
+force_kind_name = _declare("ln_force_kind_name", ctypes.c_char_p, ln_int)
 fixed_step_count = _declare("ln_fixed_step_count", ln_int, ctypes.c_double, ctypes.c_double)
 sizeof = _declare("ln_sizeof", ctypes.c_size_t, ctypes.c_int)
 # the structure analysis's graph routines (src/graph.h); arrays passed by address (np.ndarray.ctypes.data)
@@ -196,3 +197,28 @@ def forest_depth(n_nodes: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if _forest_depth(n_nodes, a.size, a.ctypes.data, b.ctypes.data, depth.ctypes.data) != 0:
         raise ValueError("forest depth: the graph has a cycle (or an edge end out of range, or out of memory)")
     return depth
+
+
+def require_force_kinds() -> None:
+    """The core's force element kinds (stages/forces.c) are those of FORCE_KINDS, with its codes, or
+    ForceKindMissing names the kind."""
+    from linknet_core.scene.description import require_force_kinds as require
+
+    names = []
+    while (name := force_kind_name(len(names))) is not None:
+        names.append(name.decode())
+    require(names, "the native core (native/src/stages/forces.c)", by_code=True)
+
+
+_force_kinds_checked = False
+
+
+def force_kind(name: bytes) -> int:
+    """The core's code of a force element kind (-1: none). The first call checks every kind of the core against
+    FORCE_KINDS (require_force_kinds), so a kind the core lacks stops the first model with force elements instead of
+    being skipped; not when this library loads, since linknet_core.errors loads it before the scene package can."""
+    global _force_kinds_checked
+    if not _force_kinds_checked:
+        require_force_kinds()
+        _force_kinds_checked = True
+    return _force_kind(name)

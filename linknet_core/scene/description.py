@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from linknet_core.errors import SceneError
+from linknet_core.errors import LinknetError, SceneError
 from linknet_core.scene.motion import AnchorMotion, parse_motion
 
 _MASS_KEYS = {"name", "mass", "position", "velocity", "fixed", "driven", "motion", "force", "drag", "quadratic_drag"}
@@ -73,12 +73,58 @@ FORCE_ELEMENT_PARAMETERS = 4  # parameters per force element (their meaning is t
 
 
 @dataclass(frozen=True)
+class ForceKind:
+    """One kind of force element, as every force path knows it. Its formula is written once per path (the numpy
+    reference linknet_core.dynamics.forces.ELEMENT_KINDS, the native core's native/src/stages/forces.c, the casadi
+    derivation linknet_core.symbolic.derivation.CASADI_ELEMENT_KINDS); each path is checked against FORCE_KINDS
+    by require_force_kinds, so a kind one of them lacks stops it instead of being skipped."""
+
+    name: str  # the kind's name in ForceElements.kinds, the paths' tables and messages
+    ends: int  # 1: acts on one mass (masses column 0); 2: between two masses (columns 0 and 1)
+    parameters: tuple[str, ...]  # the meaning of its parameter columns, in order
+    velocity_parameter: int  # the parameter column that makes the force depend on the velocities when nonzero
+    formula: str  # the force, in words (docs and messages)
+
+
+# Every kind of force element. A kind's position here is its code in the native core (enum ln_force_kind_code in
+# native/src/stages/forces.c; native/library.py checks the core's kinds and codes against this table before the first
+# model with force elements is built), so a new kind is appended.
+FORCE_KINDS: tuple[ForceKind, ...] = (
+    ForceKind("drag", 1, ("c",), 0, "-c U_k on its mass (viscous drag)"),
+    ForceKind("spring", 2, ("k", "d0", "c"), 2,
+              "k (d - d0) + c d' along the axis, pulling the two masses together when stretched (spring-damper)"),
+    ForceKind("quadratic_drag", 1, ("c",), 0, "-c |U_k| U_k on its mass (aerodynamic drag)"),
+)
+FORCE_KIND = {kind.name: kind for kind in FORCE_KINDS}
+
+
+class ForceKindMissing(LinknetError):
+    """A force path (numpy, native, casadi) lacks a kind of FORCE_KINDS, or has one the table does not list."""
+
+
+def require_force_kinds(implemented, where: str, by_code: bool = False) -> None:
+    """Raise ForceKindMissing unless ``implemented`` (the kind names a force path has a formula for) are exactly
+    the kinds of FORCE_KINDS; ``by_code``: ``implemented`` is a sequence whose positions are the path's codes,
+    which must be the table's positions too (the native core's enum)."""
+    names = [kind.name for kind in FORCE_KINDS]
+    implemented = list(implemented)
+    problems = [f"no formula for force element kind {name!r}" for name in names if name not in implemented]
+    problems += [f"a formula for kind {name!r}, which linknet_core.scene.description.FORCE_KINDS does not list"
+                 for name in implemented if name not in FORCE_KIND]
+    if by_code and not problems and implemented != names:
+        problems = [f"kind {name!r} has code {code} there but {names.index(name)} in FORCE_KINDS"
+                    for code, name in enumerate(implemented) if names[code] != name]
+    if problems:
+        raise ForceKindMissing(f"{where}: " + "; ".join(problems) + " (every force path implements every kind of "
+                               "FORCE_KINDS, so that none is skipped)")
+
+
+@dataclass(frozen=True)
 class ForceElements:
-    """The state-dependent force elements of F_k (9) as one table, the form both force paths take: a kind per
-    element (its formula is in linknet_core.dynamics.forces and in the native core's stages/forces.c), the masses it
-    acts on (two columns, -1 where unused, 0-based) and its parameters (FORCE_ELEMENT_PARAMETERS columns,
-    their meaning the kind's). Gravity, constant and input forces are not elements: they do not depend on
-    the state."""
+    """The state-dependent force elements of F_k (9) as one table, the form every force path takes: a kind per
+    element (one of FORCE_KINDS; its formula is in each path's table), the masses it acts on (two columns, -1 where
+    unused, 0-based) and its parameters (FORCE_ELEMENT_PARAMETERS columns, their meaning the kind's). Gravity,
+    constant and input forces are not elements: they do not depend on the state."""
 
     kinds: tuple[str, ...]
     masses: np.ndarray  # (n, 2) int
@@ -125,9 +171,8 @@ class Scene:
     # ---- derived, read-only views -------------------------------------------------------------
     @cached_property
     def force_elements(self) -> ForceElements:
-        """Drag on the free masses that have it (c: force -c U), quadratic (aerodynamic) drag (c: force -c |U| U)
-        and the spring-dampers (stiffness k, rest
-        length d0, damping c: force k (d - d0) + c d' along the axis), as one table."""
+        """Drag on the free masses that have it, quadratic (aerodynamic) drag and the spring-dampers, as one table;
+        each row's kind, masses and parameters are as FORCE_KINDS defines them."""
         rows = []
         for k in np.flatnonzero((self.drag != 0) & ~self.fixed):
             rows.append(("drag", (k, -1), (self.drag[k],)))
@@ -138,7 +183,11 @@ class Scene:
             rows.append(("spring", (s.a[i], s.b[i]), (s.stiffness[i], s.rest_length[i], s.damping[i])))
         masses = np.full((len(rows), 2), -1, np.int64)
         parameters = np.zeros((len(rows), FORCE_ELEMENT_PARAMETERS))
-        for i, (_, ends, values) in enumerate(rows):
+        for i, (kind, ends, values) in enumerate(rows):
+            spec = FORCE_KIND.get(kind)
+            if spec is None or sum(k >= 0 for k in ends) != spec.ends or len(values) != len(spec.parameters):
+                raise ForceKindMissing(f"scene {self.name!r}: a force element of kind {kind!r} that FORCE_KINDS does "
+                                       "not define (its name, masses and parameters are the table's)")
             masses[i] = ends
             parameters[i, :len(values)] = values
         masses.setflags(write=False)

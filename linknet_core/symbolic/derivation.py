@@ -48,9 +48,10 @@ Coordinates: ``x`` is the row-major flattening of the free masses' reduced posit
 ``(X[free] - origin) @ basis`` (``p`` the same for the driven anchors, in scene order): all three
 coordinates by default (basis = identity), two for a planar scene (basis = two orthonormal vectors of
 its plane). Velocities and forces reduce as ``V[free] @ basis``.
-The external forces F_k (gravity, constant forces, drag, spring-dampers, input forces) are also written
-symbolically (:meth:`SymbolicTensionSystem.forces_function`), so a generated kernel needs no numeric
-force evaluation.
+The external forces F_k (gravity, constant forces, input forces and every force element kind of
+``linknet_core.scene.description.FORCE_KINDS``: drag, quadratic drag, spring-dampers) are also written
+symbolically (:meth:`SymbolicTensionSystem.forces_function`, one casadi formula per kind in
+``CASADI_ELEMENT_KINDS``), so a generated kernel needs no numeric force evaluation.
 """
 
 from __future__ import annotations
@@ -58,10 +59,13 @@ from __future__ import annotations
 import numpy as np
 import casadi as ca
 
+from linknet_core.scene.description import ForceKindMissing, require_force_kinds
+
 __all__ = [
     "SymbolicTensionSystem",
     "sign_pattern",
     "shared_vertex_pairs",
+    "CASADI_ELEMENT_KINDS",
 ]
 
 
@@ -260,11 +264,11 @@ class SymbolicTensionSystem:
     def forces_function(self, input_masses=None):
         """casadi Function F(x, u, fin, p, v) -> total external force on the free masses (reduced, flat).
 
-        Gravity M_k g, the constant force, viscous drag -c_k U_k, linear spring-dampers
-        f = k (d - d0) + c d' along the spring axis (pulling its ends together when f > 0; a spring's
-        driven end moves with the anchor's p, v), and an input
-        force for the masses in ``input_masses`` only (0-based mass indices, free masses; default all
-        free masses): masses without input get no input term at all.
+        Gravity M_k g, the constant force, the scene's force elements (``scene.force_elements``, each kind by its
+        casadi formula in CASADI_ELEMENT_KINDS: a kind without one raises ForceKindMissing here, at derivation
+        time; a spring's driven end moves with the anchor's p, v), and an input force for the masses in
+        ``input_masses`` only (0-based mass indices, free masses; default all free masses): masses without input
+        get no input term at all.
         """
         sc = self.scene
         d, nf, free = self.dim, self.nf, self.free
@@ -281,29 +285,14 @@ class SymbolicTensionSystem:
         g = np.asarray(sc.gravity, float) @ P
         const = np.asarray(sc.force, float)[free] @ P                       # (nf, d)
         F = ca.SX(ca.DM((mass_free[:, None] * g[None, :] + const).T))        # d x nf
-        drag = np.asarray(sc.drag, float)[free]
-        if np.any(drag != 0):
-            F = F - ca.reshape(u, d, nf) * ca.repmat(ca.DM(drag).T, d, 1)
-        springs = sc.springs
-        if springs.count:
-            a = np.asarray(springs.a, np.int64)
-            b = np.asarray(springs.b, np.int64)
-            Dsp = self._Xfull[:, b.tolist()] - self._Xfull[:, a.tolist()]
-            Vsp = self._Vfull[:, b.tolist()] - self._Vfull[:, a.tolist()]
-            dist = ca.sqrt(ca.sum1(Dsp * Dsp))
-            # coincident ends: no direction, no force (as the numeric force model does)
-            safe = ca.if_else(dist > 0, dist, 1.0)
-            e = Dsp / ca.repmat(safe, d, 1)
-            rate = ca.sum1(e * Vsp)
-            fs = ca.DM(springs.stiffness).T * (dist - ca.DM(springs.rest_length).T) \
-                + ca.DM(springs.damping).T * rate
-            S = springs.count
-            rows = np.concatenate([self._col_of[a], self._col_of[b]])
-            cols = np.concatenate([np.arange(S), np.arange(S)])
-            vals = np.concatenate([np.ones(S), -np.ones(S)])
-            keep = rows >= 0
-            Inc = ca.DM.triplet(rows[keep].tolist(), cols[keep].tolist(), vals[keep].tolist(), nf, S)
-            F = F + ca.mtimes(e * ca.repmat(fs, d, 1), Inc.T)
+        elements = sc.force_elements
+        for kind in dict.fromkeys(elements.kinds):
+            formula = CASADI_ELEMENT_KINDS.get(kind)
+            if formula is None:
+                raise ForceKindMissing(f"scene {sc.name!r}: the casadi derivation has no formula for force element "
+                                       f"kind {kind!r} (CASADI_ELEMENT_KINDS)")
+            masses, parameters = elements.of_kind(kind)
+            F = F + formula(self, np.asarray(masses, np.int64), np.asarray(parameters, float))
         if input_masses.size:
             sel = ca.DM.triplet(np.arange(input_masses.size).tolist(),
                                 self._col_of[input_masses].tolist(),
@@ -311,6 +300,14 @@ class SymbolicTensionSystem:
             F = F + ca.mtimes(ca.reshape(fin, d, input_masses.size), sel)
         return ca.Function("forces_sym", [x, u, fin, self.p_sym, self.v_sym], [ca.reshape(F, nf * d, 1)],
                            ["x", "u", "fin", "p", "v"], ["F"])
+
+    def on_masses(self, f, masses):
+        """Forces f (d x n), column i acting on mass masses[i], summed onto the free masses (d x nf); columns on
+        anchors drop out (no force acts on an anchor)."""
+        cols = self._col_of[masses]
+        keep = np.flatnonzero(cols >= 0)
+        scatter = ca.DM.triplet(keep.tolist(), cols[keep].tolist(), [1.0] * keep.size, len(masses), self.nf)
+        return ca.mtimes(f, scatter)
 
     # ---- conversions between the (K, 3) state arrays and the reduced symbolic coordinates ----
     def reduce(self, Z, origin=False, rows=None):
@@ -402,6 +399,49 @@ class SymbolicTensionSystem:
         if anchor_acc is not None:
             acc[self.driven] = (np.asarray(anchor_acc, float)[self.driven] @ self.basis) @ self.basis.T
         return acc, T
+
+
+# ---- the casadi formula of every force element kind (linknet_core.scene.description.FORCE_KINDS) ----
+# Each takes the system, the kind's rows of scene.force_elements (masses (n, 2), parameters (n, 4)) and returns its
+# forces on the free masses (d x nf), written from the kind's definition, not from the numpy reference.
+
+def _drag_sym(sys, masses, parameters):
+    """-c U_k on mass k."""
+    k = masses[:, 0]
+    U = sys._Vfull[:, k.tolist()]
+    return sys.on_masses(-U * ca.repmat(ca.DM(parameters[:, 0]).T, sys.dim, 1), k)
+
+
+def _quadratic_drag_sym(sys, masses, parameters):
+    """-c |U_k| U_k on mass k."""
+    k = masses[:, 0]
+    U = sys._Vfull[:, k.tolist()]
+    speed = ca.sqrt(ca.sum1(U * U))                      # 1 x n
+    return sys.on_masses(-U * ca.repmat(ca.DM(parameters[:, 0]).T * speed, sys.dim, 1), k)
+
+
+def _spring_sym(sys, masses, parameters):
+    """f = k (d - d0) + c d' along the axis from a to b, +f e on a and -f e on b (pulling the ends together when
+    f > 0); an end on a driven anchor moves with its p, v."""
+    a, b = masses[:, 0], masses[:, 1]
+    D = sys._Xfull[:, b.tolist()] - sys._Xfull[:, a.tolist()]
+    V = sys._Vfull[:, b.tolist()] - sys._Vfull[:, a.tolist()]
+    dist = ca.sqrt(ca.sum1(D * D))
+    e = D / ca.repmat(ca.if_else(dist > 0, dist, 1.0), sys.dim, 1)  # coincident ends: no direction, no force
+    rate = ca.sum1(e * V)
+    f = ca.DM(parameters[:, 0]).T * (dist - ca.DM(parameters[:, 1]).T) + ca.DM(parameters[:, 2]).T * rate
+    fe = e * ca.repmat(f, sys.dim, 1)
+    return sys.on_masses(fe, a) - sys.on_masses(fe, b)
+
+
+CASADI_ELEMENT_KINDS = {
+    "drag": _drag_sym,
+    "quadratic_drag": _quadratic_drag_sym,
+    "spring": _spring_sym,
+}
+# checked against the table at import (a kind the derivation lacks stops it here), and again per scene at derivation
+require_force_kinds(CASADI_ELEMENT_KINDS,
+                    "the casadi derivation (linknet_core.symbolic.derivation.CASADI_ELEMENT_KINDS)")
 
 
 def _dm_to_scipy(M):

@@ -326,8 +326,10 @@ LN_API ln_int ln_fixed_step_count(double span, double dt);
    (which = 0, 1, 2, 3): the binding checks its struct layouts against these. */
 LN_API size_t ln_sizeof(int which);
 
-/* The code of a force element kind named as in linknet_core.dynamics.forces (stages/forces.c), or -1. */
+/* The code of a force element kind named as in linknet_core.scene.description.FORCE_KINDS (stages/forces.c), or -1;
+   the name of a code, or NULL past the last kind (the binding checks the kinds against FORCE_KINDS with it). */
 LN_API ln_int ln_force_kind(const char *name);
+LN_API const char *ln_force_kind_name(ln_int code);
 
 /* ---- error_estimate.c: a run's global error from a companion run ---------------------------------- */
 

@@ -1,7 +1,9 @@
 /* F_k of (9): everything but the link tensions. The part fixed over an interval (gravity, constant and
    input forces: F_base, zero on anchors) is summed once per advance by data.c; here the state-dependent
-   force elements are added to it. Each kind has a name (the one linknet_core.forces and the scene use), a
-   formula and its parameters' meaning; a new kind is a name below and a case in ln_scene_forces. */
+   force elements are added to it. The kinds are those of the one table linknet_core.scene.description.FORCE_KINDS
+   (name, masses, parameters' meaning); a kind's code below is its position there. native/library.py checks the
+   names and codes (ln_force_kind_name) against that table before the first model with force elements is built, so
+   a new kind is a row there, a code and a name here and a case in ln_scene_forces, or no such model is built. */
 #include <math.h>
 #include <string.h>
 
@@ -27,6 +29,11 @@ ln_int ln_force_kind(const char *name)
     for (int i = 0; i < LN_FORCE_KIND_COUNT; i++)
         if (strcmp(name, force_kind_names[i]) == 0) return i;
     return -1;
+}
+
+const char *ln_force_kind_name(ln_int code)
+{
+    return code >= 0 && code < LN_FORCE_KIND_COUNT ? force_kind_names[code] : NULL;
 }
 #endif
 
@@ -67,7 +74,9 @@ void FN(ln_scene_forces)(const ln_model *m, const double *X, const double *U, co
             for (int e = 0; e < DIM; e++) F[a * DIM + e] -= c * U[a * DIM + e];
             break;
         }
-        default:
+        default:  /* a code without a case (the model builder refuses unknown kinds): never skipped silently,
+                     the forces become NaN and the step fails as non-finite */
+            for (int e = 0; e < DIM; e++) F[a * DIM + e] = NAN;
             break;
         }
     }
