@@ -417,8 +417,8 @@ class LinknetNetwork(Fmi2Slave):
             if vr == self._layout.estimate_error_vr:
                 out.append(self._estimate_error)
             else:
-                self._error(f"getBoolean: value reference {vr} is {self._kind_of(vr)}, not a Boolean variable (the "
-                            f"only one is estimate_error, {self._layout.estimate_error_vr})")
+                self._error(f"getBoolean: value reference {vr} is {self._kind_of(vr)}: no Boolean variable of this "
+                            f"FMU has it (the only one is estimate_error, {self._layout.estimate_error_vr})")
                 out.append(False)
         return out
 
@@ -426,8 +426,9 @@ class LinknetNetwork(Fmi2Slave):
     def set_boolean(self, vrs, values):
         for vr, value in zip(vrs, values):
             if vr != self._layout.estimate_error_vr:
-                self._error(f"setBoolean: value reference {vr} is {self._kind_of(vr)}, not a Boolean variable (the "
-                            f"only one is estimate_error, {self._layout.estimate_error_vr}); value {value!r} ignored")
+                self._error(f"setBoolean: value reference {vr} is {self._kind_of(vr)}: no Boolean variable of this "
+                            f"FMU has it (the only one is estimate_error, {self._layout.estimate_error_vr}); value "
+                            f"{value!r} ignored")
                 continue
             value = bool(value)
             if self._initialized:
@@ -540,7 +541,7 @@ class LinknetNetwork(Fmi2Slave):
             # (the front layer does not count messages of the FMU's own categories towards the call's status)
             note = self._sim.error_note()
             if note and not self._over_goal:
-                self.log(f"doStep to t={self._sim.state.t!r}: {note}", Fmi2Status.warning, ERROR_ESTIMATE_CATEGORY)
+                self.log(note, Fmi2Status.warning, ERROR_ESTIMATE_CATEGORY)
             self._over_goal = bool(note)
         return True
 

@@ -209,7 +209,8 @@ def _simulators(scene, cfg):
     dyn = None
     for name in [cfg["integrator"]] + [n for n in cfg["integrators"] if n != cfg["integrator"]]:
         kwargs = dict(rtol=cfg["tolerance"]) if ln.METHODS[name].adaptive else dict(dt=cfg["step"])
-        sims[name] = ln.Simulator(scene, method=name, dynamics=dyn, **kwargs)
+        # the baked model and methods are the run's; the companion's are made from them in C (linknet_model.c)
+        sims[name] = ln.Simulator(scene, method=name, dynamics=dyn, error_estimate=False, **kwargs)
         dyn = sims[name].dyn
     return sims
 

@@ -774,33 +774,27 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
     /* the companion: the same step with the same inputs, at its own settings */
     companion_inputs(m);
     const int companion = ln_advance(&m->model, &m->method_c, m->dc, t_target, s->max_steps);
-    const char *method = s->methods[m->applied_integrator].name;
     if (companion != LN_OK) {
-        /* the run's own result stands; the estimate is +inf from here on (until a reset or a restored state) */
+        /* the run's own result stands; the estimate is +inf from here on (until a reset or a restored state). The
+           words are the library's (Simulator.error_note), the reason the core's (ln_explain) */
         char why[FMU_MESSAGE - 512], label[512] = "";
         if (m->dc->fail_link >= 0) link_label(s, m->dc->fail_link, label, sizeof label);
         ln_explain(&m->model, &m->method_c, m->dc, companion, t_fmu, t_target, s->max_steps, label, why, sizeof why);
         m->error = INFINITY;
         m->over_goal = 1;
-        return fail(msg, FMU_NOTE, "step to t=%.17g: the error estimate's companion run (%s at %s) failed: %s. "
-                    "error_estimate is +inf from here on; the run's own result (the outputs) stands", t_target,
-                    method, s->methods[m->applied_integrator].adaptive ? "a tenth of the tolerances" : "half the step",
-                    why);
+        return fail(msg, FMU_NOTE, "%s: the error of this run at t = %g s cannot be estimated: its companion run failed "
+                    "at t = %g s: %s (error_estimate is +inf from here on; the run's own result stands)",
+                    s->scene_name, t_target, m->dc->t, why);
     }
     m->error = m->factor * ln_position_gap(s->K, m->d->X, m->dc->X);
-    const int over = !(m->error <= m->goal);
+    const int over = m->error > m->goal;
     const int crossing = over && !m->over_goal;
     m->over_goal = over;
     if (!crossing) return FMU_OK;
-    if (s->methods[m->applied_integrator].adaptive)
-        return fail(msg, FMU_NOTE, "at t=%.17g the error estimate %.3g m exceeds the goal %.3g m of %s at rtol %g "
-                    "(100 x rtol x the scene's size): the result is computed as asked; a smaller tolerance gives a "
-                    "closer one (said again only after the estimate comes back within the goal)", t_target, m->error,
-                    m->goal, method, m->method.rtol);
-    return fail(msg, FMU_NOTE, "at t=%.17g the error estimate %.3g m exceeds the goal %.3g m (that of the default "
-                "rtol for a fixed-step run) of %s at step %g s: the result is computed as asked; a smaller step or an "
-                "error-controlled integrator gives a closer one (said again only after the estimate comes back within "
-                "the goal)", t_target, m->error, m->goal, method, m->method.dt);
+    /* the library's words (linknet_core.accuracy.accuracy_text); said again only after the estimate came back */
+    return fail(msg, FMU_NOTE, "%s: the estimated position error %.3g m at t = %g s exceeds the run's goal %.3g m. "
+                "Tighten rtol (or the step); where a tighter tolerance does not bring it down, the motion passes a "
+                "configuration it cannot resolve (docs/accuracy.md)", s->scene_name, m->error, t_target, m->goal);
 }
 
 /* ---- Booleans: estimate_error -------------------------------------------------------------------- */
@@ -812,7 +806,7 @@ int fmu_model_get_boolean(fmu_model *m, const unsigned *vr, size_t n, int *value
     const lnfmu_scene *s = m->s;
     for (size_t i = 0; i < n; i++) {
         if (vr[i] != estimate_vr(s))
-            return fail(msg, FMU_ERROR, "value reference %u is not a Boolean variable of this FMU (the only one is "
+            return fail(msg, FMU_ERROR, "value reference %u: no Boolean variable of this FMU has it (the only one is "
                         "estimate_error, %u)", vr[i], estimate_vr(s));
         value[i] = m->estimate;
     }
@@ -825,7 +819,7 @@ int fmu_model_set_boolean(fmu_model *m, const unsigned *vr, size_t n, const int 
     int chosen = m->estimate;
     for (size_t i = 0; i < n; i++) {
         if (vr[i] != estimate_vr(s))
-            return fail(msg, FMU_ERROR, "value reference %u is not a Boolean variable of this FMU (the only one is "
+            return fail(msg, FMU_ERROR, "value reference %u: no Boolean variable of this FMU has it (the only one is "
                         "estimate_error, %u); nothing set", vr[i], estimate_vr(s));
         const int x = value[i] != 0;
         if (initialized && x != m->estimate)

@@ -72,6 +72,7 @@ typedef struct {
     fmi2Status (*set_real)(fmi2Component, const fmi2ValueReference *, size_t, const fmi2Real *);
     fmi2Status (*get_integer)(fmi2Component, const fmi2ValueReference *, size_t, fmi2Integer *);
     fmi2Status (*get_boolean)(fmi2Component, const fmi2ValueReference *, size_t, fmi2Boolean *);
+    fmi2Status (*set_boolean)(fmi2Component, const fmi2ValueReference *, size_t, const fmi2Boolean *);
     fmi2Status (*get_string)(fmi2Component, const fmi2ValueReference *, size_t, fmi2String *);
     fmi2Status (*set_string)(fmi2Component, const fmi2ValueReference *, size_t, const fmi2String *);
     fmi2Status (*set_integer)(fmi2Component, const fmi2ValueReference *, size_t, const fmi2Integer *);
@@ -98,13 +99,12 @@ static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status
                    fmi2String message, ...)
 {
     (void)env;
-    (void)category;
     if (status == fmi2Fatal) fatal_seen = 1;
     va_list args;
     va_start(args, message);
     vsnprintf(last_log, sizeof last_log, message, args);  /* the FMU doubles '%': expand as the standard says */
     va_end(args);
-    if (getenv("NATIVE_HOST_VERBOSE")) fprintf(stderr, "[%s] %d %s\n", instance, (int)status, last_log);
+    if (getenv("NATIVE_HOST_VERBOSE")) fprintf(stderr, "[%s] %d %s %s\n", instance, (int)status, category, last_log);
 }
 
 static void quiet_logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status, fmi2String category,
@@ -150,6 +150,7 @@ static void *load(const char *dir, const char *id)
     BIND(set_real, "fmi2SetReal");
     BIND(get_integer, "fmi2GetInteger");
     BIND(get_boolean, "fmi2GetBoolean");
+    BIND(set_boolean, "fmi2SetBoolean");
     BIND(get_string, "fmi2GetString");
     BIND(set_string, "fmi2SetString");
     BIND(set_integer, "fmi2SetInteger");
@@ -180,9 +181,10 @@ static void *load(const char *dir, const char *id)
 #define MAX_VARS 8192
 typedef struct {
     const char *method;
-    size_t n_par, n_in, n_out;
-    fmi2ValueReference par_vr[MAX_VARS], in_vr[MAX_VARS], out_vr[MAX_VARS];
-    double par[MAX_VARS], amp[MAX_VARS], omega[MAX_VARS];
+    size_t n_par, n_in, n_out, n_bool, n_detour;
+    fmi2ValueReference par_vr[MAX_VARS], in_vr[MAX_VARS], out_vr[MAX_VARS], bool_vr[16], detour_vr[16];
+    double par[MAX_VARS], amp[MAX_VARS], omega[MAX_VARS], detour[16];
+    fmi2Boolean bool_value[16];
 } plan;
 
 static plan P;
@@ -205,6 +207,12 @@ static void parse_options(int argc, char **argv, int first)
             P.in_vr[P.n_in] = (fmi2ValueReference)strtoul(v, NULL, 10);
             P.amp[P.n_in] = strtod(strchr(v, '=') + 1, &end);
             P.omega[P.n_in++] = *end == ',' ? strtod(end + 1, NULL) : 0.0;
+        } else if (strcmp(a, "-b") == 0 && P.n_bool < 16) {  /* a Boolean parameter: vr=0|1 */
+            P.bool_vr[P.n_bool] = (fmi2ValueReference)strtoul(v, NULL, 10);
+            P.bool_value[P.n_bool++] = atoi(strchr(v, '=') + 1) != 0;
+        } else if (strcmp(a, "-q") == 0 && P.n_detour < 16) {  /* a parameter set (and applied) before the -p ones */
+            P.detour_vr[P.n_detour] = (fmi2ValueReference)strtoul(v, NULL, 10);
+            P.detour[P.n_detour++] = strtod(strchr(v, '=') + 1, NULL);
         } else if (strcmp(a, "-o") == 0 && P.n_out < MAX_VARS) {
             P.out_vr[P.n_out++] = (fmi2ValueReference)strtoul(v, NULL, 10);
         } else {
@@ -215,12 +223,36 @@ static void parse_options(int argc, char **argv, int first)
 }
 
 
+/* Initialization of an instantiated (or reset) instance as the plan says. With detour, the -q parameters are set
+   first and applied (an output read in initialization mode applies the parameters set so far), then the plan's. */
+static void initialize(fmi2Component c, double t0, int detour)
+{
+    MUST(F.setup(c, 0, 0.0, t0, 0, 0.0));
+    MUST(F.enter_init(c));
+    if (detour && P.n_detour) {
+        double ignored[MAX_VARS];
+        MUST(F.set_real(c, P.detour_vr, P.n_detour, P.detour));
+        if (P.n_out) MUST(F.get_real(c, P.out_vr, P.n_out, ignored));
+    }
+    if (P.method) {
+        fmi2String m = P.method;
+        MUST(F.set_string(c, &integrator_vr, 1, &m));
+    }
+    if (P.n_bool) MUST(F.set_boolean(c, P.bool_vr, P.n_bool, P.bool_value));
+    if (P.n_par) MUST(F.set_real(c, P.par_vr, P.n_par, P.par));
+    MUST(F.exit_init(c));
+}
+
 static fmi2Component start(const char *name, double t0, fmi2CallbackFunctions *cb)
 {
     fmi2Component c = F.instantiate(name, fmi2CoSimulation, GUID, resources, cb, 0, 0);
     if (!c) {
         fprintf(stderr, "fmi2Instantiate failed: %s\n", last_log);
         exit(4);
+    }
+    if (P.n_bool || P.n_detour) {
+        initialize(c, t0, 0);
+        return c;
     }
     MUST(F.setup(c, 0, 0.0, t0, 0, 0.0));
     MUST(F.enter_init(c));
@@ -305,6 +337,41 @@ static int cmd_replay(int argc, char **argv)
     F.free_instance(c);
     F.free_instance(d);
     free(bytes), free(first), free(again), free(fresh);
+    return 0;
+}
+
+/* The same run three ways, bit for bit: a fresh instance; the same instance after fmi2Reset (initialized again as
+   the plan says); a new instance whose parameters were first set to the -q values and applied (the model and the
+   error estimate's companion rebuilt there) and then to the plan's. Prints reset_identical and detour_identical. */
+static int cmd_rerun(int argc, char **argv)
+{
+    if (argc < 7) return 2;
+    const long N = atol(argv[5]);
+    const double h = atof(argv[6]);
+    parse_options(argc, argv, 7);
+    const size_t per = P.n_out ? P.n_out : 1, n_rows = (size_t)(N + 1) * per;
+    double *fresh = calloc(n_rows, sizeof(double)), *reset = calloc(n_rows, sizeof(double)),
+           *detour = calloc(n_rows, sizeof(double));
+    fmi2Component c = F.instantiate("rerun", fmi2CoSimulation, GUID, resources, &callbacks, 0, 0);
+    if (!c) return 4;
+    initialize(c, 0.0, 0);
+    steps(c, 0.0, N, h, 0, fresh);
+    MUST(F.reset(c));
+    initialize(c, 0.0, 0);
+    steps(c, 0.0, N, h, 0, reset);
+    fmi2Component d = F.instantiate("detour", fmi2CoSimulation, GUID, resources, &callbacks, 0, 0);
+    if (!d) return 4;
+    initialize(d, 0.0, 1);
+    steps(d, 0.0, N, h, 0, detour);
+    printf("reset_identical %d\ndetour_identical %d\n", same(fresh, reset, n_rows), same(fresh, detour, n_rows));
+    for (long n = 0; n <= N; n++) {
+        printf("%.17g", (double)n * h);
+        for (size_t j = 0; j < P.n_out; j++) printf(",%.17g", fresh[(size_t)n * P.n_out + j]);
+        printf("\n");
+    }
+    F.free_instance(c);
+    F.free_instance(d);
+    free(fresh), free(reset), free(detour);
     return 0;
 }
 
@@ -639,7 +706,7 @@ static double now(void)
 int main(int argc, char **argv)
 {
     if (argc < 5) {
-        fprintf(stderr, "usage: %s run|replay|twins|contract|savestate|coldstart|cycles DIR ID GUID ...\n", argv[0]);
+        fprintf(stderr, "usage: %s run|replay|rerun|twins|contract|savestate|coldstart|cycles DIR ID GUID ...\n", argv[0]);
         return 2;
     }
     const char *what = argv[1];
@@ -650,6 +717,7 @@ int main(int argc, char **argv)
     int rc;
     if (strcmp(what, "run") == 0) rc = cmd_run(argc, argv);
     else if (strcmp(what, "replay") == 0) rc = cmd_replay(argc, argv);
+    else if (strcmp(what, "rerun") == 0) rc = cmd_rerun(argc, argv);
     else if (strcmp(what, "twins") == 0) rc = cmd_twins(argc, argv);
     else if (strcmp(what, "contract") == 0) rc = cmd_contract(argc, argv);
     else if (strcmp(what, "savestate") == 0) rc = cmd_savestate(argc, argv);
