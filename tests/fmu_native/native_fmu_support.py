@@ -96,7 +96,8 @@ def input_force(k: int, K: int, t: float) -> np.ndarray:
 
 
 def output_names(fmu: Built) -> list[str]:
-    return fmu.names("X") + fmu.names("U") + fmu.names("T") + fmu.names("Freact")
+    """The outputs the runs compare: X, U, T, Freact and, last, the error estimate (m)."""
+    return fmu.names("X") + fmu.names("U") + fmu.names("T") + fmu.names("Freact") + ["error_estimate"]
 
 
 def host_options(fmu: Built, method: str | None = None, parameters: dict | None = None) -> list[str]:
@@ -121,8 +122,8 @@ def library_rows(scene, fmu: Built, method: str, step=1e-3, tolerance=1e-8, n=N_
     k = input_mass(fmu)
     picks = []
     for name in output_names(fmu):
-        kind, idx = name.split("[")
-        idx = [int(i) - 1 for i in idx.rstrip("]").split(",")]
+        kind, _, idx = name.partition("[")
+        idx = [int(i) - 1 for i in idx.rstrip("]").split(",")] if idx else []
         picks.append((kind, idx))
     fixed_row = {int(m): j for j, m in enumerate(scene.fixed_indices)}
     rows = []
@@ -132,7 +133,9 @@ def library_rows(scene, fmu: Built, method: str, step=1e-3, tolerance=1e-8, n=N_
         o = sim.outputs(F)
         row = [t]
         for kind, idx in picks:
-            if kind == "T":
+            if kind == "error_estimate":  # the companion's gap at t (the library's own companion run)
+                row.append(sim.error_estimate)
+            elif kind == "T":
                 row.append(o["T"][idx[0]])
             elif kind == "Freact":
                 row.append(np.asarray(o["Freact"])[fixed_row[idx[0]], idx[1]])
@@ -144,10 +147,16 @@ def library_rows(scene, fmu: Built, method: str, step=1e-3, tolerance=1e-8, n=N_
     return np.array(rows)
 
 
-def assert_round_off(a: np.ndarray, b: np.ndarray, what: str):
-    """Equal to round-off: the outputs of a few steps agree to ~1e-12 of their own size."""
+def assert_round_off(a: np.ndarray, b: np.ndarray, what: str, names: list[str] | None = None):
+    """Equal to round-off: the outputs of a few steps agree to ~1e-12 of their own size. names: the columns after t
+    (output_names); the error estimate, a gap between two runs' positions, is held to the positions' size (its
+    round-off is that of the positions it subtracts, whatever its own size)."""
     assert a.shape == b.shape, f"{what}: shapes {a.shape} vs {b.shape}"
     scale = np.maximum(np.abs(b).max(axis=0), 1e-300)
+    if names is not None and "error_estimate" in names:
+        columns = [1 + j for j, name in enumerate(names) if name.startswith("X[")]
+        j = 1 + names.index("error_estimate")
+        scale[j] = max(scale[j], np.abs(b[:, columns]).max() if columns else 1.0)
     err = np.abs(a - b) / scale
     worst = np.unravel_index(np.argmax(err), err.shape)
     assert err.max() <= 1e-11, f"{what}: worst relative difference {err.max():.3g} at row {worst[0]}, column {worst[1]}"
