@@ -111,6 +111,39 @@ def test_every_check_passes_on_every_shipped_scene(path):
     assert len(results) == 8 or (scene.driven.any() and len(results) > 8)   # driven scenes get their own lines
 
 
+@pytest.mark.parametrize("path", SCENES, ids=[p.stem for p in SCENES])
+def test_linknet_check_passes_on_every_shipped_scene_as_a_user_runs_it(path, capsys):
+    """`linknet check models/<scene>.json` with its defaults (5 states on and 5 off the manifold, seed 0) exits 0.
+    On triangulated_net its states lie near flat folds of the net, where A has eigenvalues from round-off up to
+    1e-12 lambda_max next to the solver's rank cut (1e-10): the reference must cut where the solver does."""
+    parser = argparse.ArgumentParser()
+    checks.add_arguments(parser)
+    status = checks.main(parser.parse_args([str(path)]))
+    out = capsys.readouterr().out
+    assert status == 0, out
+    assert "FAIL" not in out and "all checks passed" in out
+
+
+def test_a_solver_that_cuts_the_rank_finer_than_its_contract_is_caught():
+    """A minimum-norm solve that keeps eigenvalues of A down to 1e-13 lambda_max (the solver's contract drops them
+    below 1e-10) resolves near-self-stresses of triangulated_net's sampled states into large tensions: the
+    accelerations line reports it. The same solve cut at the contract passes."""
+    scene = ln.load_scene(MODELS / "triangulated_net.json")
+
+    def solver(rcond):
+        dyn = CorruptedDynamics(scene, lambda A, X: A)
+        dyn.rcond = rcond
+        return dyn
+
+    def line(dyn):
+        results = checks.run_checks(scene, samples=5, seed=0, dynamics=dyn)
+        return next(r for r in results if r.name.startswith("accelerations"))
+
+    assert line(solver(1e-10)).passed
+    fine = line(solver(1e-13))
+    assert not fine.passed and fine.discrepancy > 1e3 * fine.tolerance, fine.line()
+
+
 def test_cli_main_prints_one_line_per_check_and_exits_zero(capsys):
     parser = argparse.ArgumentParser()
     checks.add_arguments(parser)
@@ -172,6 +205,8 @@ class CorruptedDynamics:
     """The real Dynamics with its tension matrix replaced by ``corrupt(A, X)``; tensions and accelerations
     are then solved from the corrupted matrix, as a wrong assembly inside the solver would do."""
 
+    rcond = 1e-10  # the minimum-norm solve's cut (an eigenvalue cut: lstsq on the symmetric A)
+
     def __init__(self, scene, corrupt, accept_everything=False):
         self.real = ln.Dynamics(scene)
         self.scene = scene
@@ -190,7 +225,7 @@ class CorruptedDynamics:
 
     def tensions(self, X, U, F_input=None):
         B = self.tension_rhs(X, U, self.forces(X, U, F_input))
-        return np.linalg.lstsq(self.tension_matrix(X), B, rcond=1e-10)[0]
+        return np.linalg.lstsq(self.tension_matrix(X), B, rcond=self.rcond)[0]
 
     def link_forces(self, X, T):
         return self.real.link_forces(X, T)
