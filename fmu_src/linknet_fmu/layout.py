@@ -24,8 +24,7 @@ DERIVATIVE_VR_BASE = 1 << 28
 # The Boolean parameter that switches the error estimate's companion run on (the default) or off, and the log
 # category of the message an FMU logs when its estimate exceeds the run's goal: both FMU kinds write these.
 ESTIMATE_ERROR_DESCRIPTION = ("estimate the run's global error with a companion run (output error_estimate; about "
-                              "twice the work per step for error control, three times for a fixed step); false: "
-                              "no companion, error_estimate is NaN")
+                              "2 to 2.5 times the work of a step); false: no companion, error_estimate is NaN")
 ERROR_ESTIMATE_CATEGORY = "logErrorEstimate"  # = LINKNET_NOTE_CATEGORY of fmu_src/native/fmi2_api.h
 ERROR_ESTIMATE_CATEGORY_DESCRIPTION = (
     "The error estimate exceeded the run's goal (or its companion run failed): logged with fmi2Warning status once "

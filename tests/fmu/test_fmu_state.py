@@ -30,7 +30,7 @@ def run(f, t, n, h=0.013):
 
 f = Fmu({str(fmu)!r}, 'a')
 f.init()
-names = f.names('X') + f.names('U') + f.names('T')
+names = f.names('X') + f.names('U') + f.names('T') + ['error_estimate']
 t, first = run(f, 0.0, 15)
 state = f.slave.getFMUstate()
 blob = f.slave.serializeFMUstate(state)
