@@ -121,7 +121,8 @@ def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3, substeps=1, inp
     scene = ln.load_scene(ROOT / "models" / f"{scene_name}.json")
     h = dt / substeps
     fmu = build_fmu.build_scene_fmu(ROOT / "models" / f"{scene_name}.json",
-                                    fmu_dir / f"{scene_name}_{substeps}.fmu", step=h, quiet=True)
+                                    fmu_dir / f"{scene_name}_{substeps}.fmu", integrator="rattle", step=h,
+                                    error_estimate=False, quiet=True)  # pinned: RATTLE without the companion
     unzipped = _extract(fmu)
     md, slave = _open(fmu, unzipped)
     vr = {v.name: v.valueReference for v in md.modelVariables}
@@ -143,7 +144,7 @@ def bench_dostep(scene_name, fmu_dir, n_steps, repeats, dt=1e-3, substeps=1, inp
             slave.doStep(currentCommunicationPoint=t, communicationStepSize=dt)
             t += dt
 
-    sim = ln.Simulator(scene, method="rattle", dt=h)
+    sim = ln.Simulator(scene, method="rattle", dt=h, error_estimate=False)  # as the FMU: no companion
     F = np.zeros((scene.K, 3))
     F[tip, 2] = 0.1
 
@@ -217,7 +218,7 @@ def _max_abs_diff(a, b):
 
 def bench_outputs(scene_name, fmu_dir, n_steps, repeats, dt=1e-3):
     fmu = build_fmu.build_scene_fmu(ROOT / "models" / f"{scene_name}.json", fmu_dir / f"{scene_name}_out.fmu",
-                                    step=dt, quiet=True)
+                                    integrator="rattle", step=dt, error_estimate=False, quiet=True)
     md, slave = _open(fmu)
     out_vrs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
     initial = slave.getFMUstate()
@@ -252,7 +253,7 @@ def bench_getter_paths(scene_name, fmu_dir, repeats):
     import zipfile
     from pythonfmu.fmi2slave import Fmi2Slave
     fmu = build_fmu.build_scene_fmu(ROOT / "models" / f"{scene_name}.json", fmu_dir / f"{scene_name}_py.fmu",
-                                    quiet=True)
+                                    integrator="rattle", step=1e-3, error_estimate=False, quiet=True)
     res = fmu_dir / f"{scene_name}_py_resources"
     with zipfile.ZipFile(fmu) as z:
         z.extractall(res)
