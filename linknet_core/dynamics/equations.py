@@ -435,7 +435,45 @@ class Dynamics:
         lambda along it, and the rigid-link model has no bounded-tension solution there (a flat braced cell loaded
         across its plane, a taut string loaded sideways: held at second order only). '' otherwise, and on scenes
         without self-stresses or mechanisms or above DENSE_DIAGNOSIS_LIMIT links (a dense eigen-decomposition:
-        failure path only)."""
+        failure path only). Either way, the flexes that a self-stress blocks at second order and that the velocities
+        or the load move along (structure.rigidity.second_order_rigid_flexes: hypothesis (35) fails along them, or
+        the tensions grow without bound) are named in the scene's terms: a straight string between anchors, a flat
+        braced panel."""
+        blocked = self._loaded_blocked_flexes(X, U, F_input)
+        near = self._near_self_stress_text(X, U, F_input, anchor_acc)
+        if not blocked:
+            return near
+        where = (f"At the start of the failed step {blocked}: a velocity or load along such a flex admits no "
+                 "accelerations consistent with the links (hypothesis (35)) or needs unbounded tensions.")
+        if near:
+            return f"{near} {where}"
+        return (f"{where} A smaller step cannot help: brace the structure so that no cell is flat and no string "
+                "straight, or model the compliance with a spring instead of a rigid link.")
+
+    def _loaded_blocked_flexes(self, X, U, F_input=None) -> str:
+        """The second-order rigid flexes at X (structure.rigidity.second_order_rigid_flexes) along which the
+        velocities U, or the accelerations the external forces alone would give, have more than
+        NEAR_SELF_STRESS_LOAD of their size, in the scene's words ('' for none; skipped above DENSE_DIAGNOSIS_LIMIT
+        links and on scenes without self-stresses)."""
+        from linknet_core.structure.rigidity import second_order_rigid_flexes
+
+        scene = self.scene
+        if scene.L == 0 or scene.L > DENSE_DIAGNOSIS_LIMIT or self.structure.self_stresses == 0:
+            return ""
+        try:
+            found = second_order_rigid_flexes(scene, X)
+            along = (U, self.forces(X, U, F_input) * self._inv_mass3)
+        except (SolverError, np.linalg.LinAlgError, ValueError):
+            return ""
+        # the share of U (or of F/M) along the blocked flexes: the norm of its projection onto their span
+        named = [flex.description for flex in found
+                 if max(float(np.linalg.norm(np.einsum("jki,ki->j", flex.span, v))) / max(float(np.linalg.norm(v)),
+                                                                                           1e-300) for v in along)
+                 > NEAR_SELF_STRESS_LOAD]
+        return "; ".join(named)
+
+    def _near_self_stress_text(self, X, U, F_input=None, anchor_acc=None) -> str:
+        """The eigenvalue test of near_self_stress_load in words ('' where no near-self-stress carries the load)."""
         scene = self.scene
         structure = self.structure
         if scene.L == 0 or scene.L > DENSE_DIAGNOSIS_LIMIT:

@@ -291,6 +291,92 @@ def crane(n_links=5, rope_length=2.0, load=10.0, rope_mass=1.0, travel=3.0, trav
         "links": [{"a": i + 1, "b": i + 2, "length": h} for i in range(n)]})
 
 
+def triangulated_net_corners(n=4, spacing=0.1, total_mass=1.0, fold=0.0, gravity=G_EARTH,
+                             name="triangulated_net_4x4_corners") -> Scene:
+    """An n x n net with one diagonal per cell, all parallel to the diagonal from mass n0_0 to mass n{n-1}_{n-1},
+    hung from those two opposite corners, released at rest. The diagonal links between the anchors lie on one
+    straight line: a taut string whose inner masses are held at second order only (a self-stress with a flex
+    across it). The two triangulated halves hang folded below the string, at z = -fold spacing (i - j)^2 / (n - 1)
+    (i, j the row and column): curved, so the only flat, loaded place is the string. Lengths are those of that
+    shape. Gravity pulls the string's inner masses across it, so the rigid links have no bounded tensions there."""
+    anchors = {(0, 0), (n - 1, n - 1)}
+    entries = []
+    for i in range(n):
+        for j in range(n):
+            z = -fold * spacing * (i - j) ** 2 / (n - 1)
+            entries.append(_mass(f"n{i}_{j}", (j * spacing, i * spacing, z), total_mass / (n * n - len(anchors)),
+                                 fixed=(i, j) in anchors))
+    idx = lambda i, j: i * n + j + 1  # noqa: E731
+    links = []
+    for i in range(n):
+        for j in range(n):
+            if j + 1 < n:
+                links.append({"a": idx(i, j), "b": idx(i, j + 1)})
+            if i + 1 < n:
+                links.append({"a": idx(i, j), "b": idx(i + 1, j)})
+            if i + 1 < n and j + 1 < n:
+                links.append({"a": idx(i, j), "b": idx(i + 1, j + 1)})
+    return Scene.from_dict({"name": name, "description": f"{n} x {n} net with one diagonal per cell, hung from two "
+                            "opposite corners: the diagonal links between them are a taut straight string (second-"
+                            "order rigid), the halves folded below it", "gravity": list(gravity),
+                            "masses": entries, "links": links})
+
+
+def tilted_tower(width=1.0, storey=1.0, mass=1.0, tilt=(0.3, 0.2), braced_faces=(0, 1), name="tilted_tower") -> Scene:
+    """braced_tower with one diagonal brace in ``braced_faces`` of the first storey's four side faces (face c joins
+    corners c and c+1), gravity tilted by ``tilt`` = (g_x, g_y) / g. The braces stiffen the first storey against
+    sway in their planes, so the tilted load twists it while the top storey sways; in its motion the constraint
+    Jacobian loses rank (a new self-stress appears) where links come into line."""
+    gx, gy = tilt
+    g = 9.81
+    gravity = [g * gx, g * gy, -g * math.sqrt(1.0 - gx * gx - gy * gy)]
+    tower = braced_tower(width, storey, mass, tilt).to_dict()
+    tower["links"] += [{"a": f"a{c}", "b": f"s1_{(c + 1) % 4}"} for c in braced_faces]
+    tower.update(name=name, gravity=gravity, description="two-storey tower on four anchors, first storey braced on "
+                 f"faces {list(braced_faces)}, both diagonals in the top square, gravity tilted")
+    return Scene.from_dict(tower)
+
+
+def braced_panel_net(n=4, spacing=0.1, total_mass=1.0, fold_deg=60.0, tilt_deg=30.0, spin=(1.0, 2.0, 3.0),
+                     gravity=G_EARTH, name="braced_panel_net") -> Scene:
+    """An n x n net with both diagonals in every cell (each cell a flat doubly braced square: a self-stress and a
+    first-order twist out of its plane that is no finite motion, (27)), pinned at its corner n0_0, folded by
+    ``fold_deg`` along the grid line x = spacing, the whole turned by ``tilt_deg`` about the x axis and spinning
+    rigidly about the pin at ``spin`` (rad/s). The true motion keeps every cell flat; the minimum-norm tensions give
+    the cells' twists no resistance (hypothesis (35) fails along them as soon as a velocity acquires one)."""
+    a, t = math.radians(fold_deg), math.radians(tilt_deg)
+    pts = []
+    for i in range(n):
+        for j in range(n):
+            x, y = j * spacing, i * spacing
+            if x > spacing:  # the part beyond the fold line turned up by the fold angle about it
+                r = x - spacing
+                x, z = spacing + r * math.cos(a), r * math.sin(a)
+            else:
+                z = 0.0
+            pts.append((x, y, z))
+    rot = np.array([[1.0, 0.0, 0.0], [0.0, math.cos(t), -math.sin(t)], [0.0, math.sin(t), math.cos(t)]])
+    pts = np.asarray(pts) @ rot.T
+    w = np.asarray(spin, float)
+    vel = np.cross(w, pts - pts[0])
+    entries = [_mass(f"n{i}_{j}", pts[i * n + j], total_mass / (n * n - 1), vel[i * n + j], fixed=(i, j) == (0, 0))
+               for i in range(n) for j in range(n)]
+    idx = lambda i, j: i * n + j + 1  # noqa: E731
+    links = []
+    for i in range(n):
+        for j in range(n):
+            if j + 1 < n:
+                links.append({"a": idx(i, j), "b": idx(i, j + 1)})
+            if i + 1 < n:
+                links.append({"a": idx(i, j), "b": idx(i + 1, j)})
+            if i + 1 < n and j + 1 < n:
+                links.append({"a": idx(i, j), "b": idx(i + 1, j + 1)})
+                links.append({"a": idx(i, j + 1), "b": idx(i + 1, j)})
+    return Scene.from_dict({"name": name, "description": f"{n} x {n} net of flat doubly braced cells (second-order "
+                            f"rigid), pinned at a corner, folded {fold_deg} deg, tilted {tilt_deg} deg, spinning",
+                            "gravity": list(gravity), "masses": entries, "links": links})
+
+
 def shipped_scenes() -> dict[str, Scene]:
     """The scenes in models/ (regenerate with ``python models/generate.py``)."""
     return {
@@ -305,4 +391,7 @@ def shipped_scenes() -> dict[str, Scene]:
         "crane": crane(),
         "triangulated_net": triangulated_net(),
         "braced_tower": braced_tower(),
+        "triangulated_net_4x4_corners": triangulated_net_corners(),
+        "tilted_tower": tilted_tower(),
+        "braced_panel_net": braced_panel_net(),
     }
