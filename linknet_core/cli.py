@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import warnings
 import os
 import sys
 from pathlib import Path
@@ -24,8 +25,8 @@ def _add_simulate(sub):
     p.add_argument("scene", type=readable_file, help="scene JSON file")
     p.add_argument("--t-end", type=positive_number, required=True, help="end time, s (> 0)")
     p.add_argument("--method", default=None, choices=sorted(METHODS),
-                   help="rattle (default with --dt), yoshida4, suzuki4, yoshida6, yoshida8, dopri5, dop853 "
-                        "(default with --rtol)")
+                   help="dop853 (the default: error-controlled at rtol 1e-8), dopri5, or a fixed-step method: "
+                        "rattle (the default with --dt), yoshida4, suzuki4, yoshida6, yoshida8 (dt 1e-3 unless --dt)")
     step = p.add_mutually_exclusive_group()
     step.add_argument("--dt", type=positive_number, help="step of a fixed-step method, s (> 0)")
     step.add_argument("--rtol", type=relative_tolerance,
@@ -41,6 +42,9 @@ def _add_simulate(sub):
                    help="project initial positions onto the link lengths instead of refusing them")
     p.add_argument("--no-progress", action="store_true",
                    help="no progress bar (shown by default on a terminal, on stderr, for runs longer than a second)")
+    p.add_argument("--no-error-estimate", action="store_true",
+                   help="skip the companion run that estimates the run's error (about halves the run time; the "
+                        "summary then says how accurate the run is not known)")
     p.add_argument("--rhs-kernel", choices=["numpy", "casadi"], default="numpy",
                    help="right-hand side of the Runge-Kutta methods: numpy, or a casadi-generated C kernel "
                         "specialised to the scene (compiled once, cached)")
@@ -74,26 +78,34 @@ def _add_ensemble(sub):
 
 
 def cmd_simulate(args) -> int:
+    from linknet_core.accuracy import DEFAULT_STEP, AccuracyWarning, default_method
     from linknet_core.integrators import METHODS
     from linknet_core.scene.description import load_scene
     from linknet_core.simulator.simulator import SimulationInterrupted, simulate
 
     scene = load_scene(args.scene)
-    method = args.method or ("dop853" if args.rtol is not None else "rattle")
+    method = default_method(args.method, args.dt)
     dt = args.dt
-    if dt is None and args.rtol is None and not METHODS[method].adaptive:
-        dt = 1e-3
+    if dt is None and not METHODS[method].adaptive:
+        dt = DEFAULT_STEP
     interrupted = False
     try:
-        res = simulate(scene, args.t_end, method=method, dt=dt, rtol=args.rtol, atol=args.atol, n_out=args.n_out,
-                       progress=False if args.no_progress else None, project_initial=args.project_initial or None,
-                       rhs_kernel=args.rhs_kernel)
+        with warnings.catch_warnings(record=True) as caught:  # said once, below the summary, in the CLI's words
+            warnings.simplefilter("always", AccuracyWarning)
+            res = simulate(scene, args.t_end, method=method, dt=dt, rtol=args.rtol, atol=args.atol, n_out=args.n_out,
+                           progress=False if args.no_progress else None, project_initial=args.project_initial or None,
+                           rhs_kernel=args.rhs_kernel, error_estimate=not args.no_error_estimate)
     except SimulationInterrupted as stop:  # Ctrl-C: keep what was computed
         res, interrupted = stop.result, True
     if res.stats.get("initial"):
         for line in res.stats["initial"]:
             print("note:", line)
     print(res.summary())
+    for w in caught:
+        if issubclass(w.category, AccuracyWarning):
+            print(f"linknet simulate: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     written = _write_outputs(res, args)
     if interrupted:
         what = f"wrote the {res.t.size} samples computed so far ({', '.join(written)})" if written else \

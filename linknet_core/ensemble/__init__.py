@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from linknet_core.accuracy import DEFAULT_STEP, default_method
 from linknet_core.errors import LinknetError
 from linknet_core.integrators import METHODS
 from linknet_core.scene import Scene, load_scene
@@ -182,8 +183,9 @@ def _output_times(t_end: float, n_out: int, output_dt: float | None) -> np.ndarr
 
 
 def _solver(method, dt, rtol, atol, fmu_config):
-    """The study's method, dt and rtol. Library: as ``linknet simulate`` (rattle at dt 1e-3, or dop853 when
-    rtol is given). FMU: None leaves the FMU's own setting."""
+    """The study's method, dt and rtol. Library: as ``linknet simulate`` (the error-controlled default of
+    linknet_core.accuracy; RATTLE when a step dt is given; a fixed-step method named without dt steps
+    DEFAULT_STEP). FMU: None leaves the FMU's own setting."""
     for name, value in (("dt", dt), ("rtol", rtol), ("atol", atol)):
         if value is not None and not (math.isfinite(value) and value > 0):
             raise LinknetError(f"{name} must be a positive number, got {value!r}")
@@ -191,13 +193,13 @@ def _solver(method, dt, rtol, atol, fmu_config):
         raise LinknetError(f"unknown method {method!r}; choose one of {sorted(METHODS)}")
     if fmu_config:
         return method, dt, rtol
-    method = method or ("dop853" if rtol is not None else "rattle")
+    method = default_method(method, dt)
     if METHODS[method].adaptive and dt is not None:
         raise LinknetError(f"method {method} chooses its own steps: give rtol, not dt")
     if not METHODS[method].adaptive and (rtol is not None or atol is not None) and dt is None:
         raise LinknetError(f"method {method} has a fixed step: give dt, not rtol/atol")
     if not METHODS[method].adaptive and dt is None:
-        dt = 1e-3
+        dt = DEFAULT_STEP
     return method, dt, rtol
 
 

@@ -9,6 +9,7 @@ stacked; a member that fails is recorded with its error and the batch goes on.
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import sys
@@ -97,11 +98,12 @@ class StudyRuntime:
     def run(self, setting: dict) -> dict:
         """One member: the requested outputs at every output time, and the quantities of interest."""
         if self.fmu is not None:
-            X, U, T, Freact = self.fmu.run(self.spec, setting, self.base_scene)
+            X, U, T, Freact, error = self.fmu.run(self.spec, setting, self.base_scene)
         else:
-            X, U, T, Freact = self._run_library(setting)
+            X, U, T, Freact, error = self._run_library(setting)
         out = {name: array for name, array in zip(OUTPUTS, (X, U, T, Freact)) if name in self.spec.outputs}
         out.update(quantities_of_interest(T, X, self.spec.tip))
+        out["error_estimate"] = error
         return out
 
     def _run_library(self, setting: dict):
@@ -116,12 +118,14 @@ class StudyRuntime:
         X, U = np.empty((n, scene.K, 3)), np.empty((n, scene.K, 3))
         T, Freact = np.empty((n, scene.L)), np.empty((n, scene.fixed_indices.size, 3))
         # the same sequence of advance and outputs calls as ln.simulate with a constant force
+        error = 0.0
         for i, t in enumerate(spec.times):
             if i:
                 sim.advance(t, forces)
+                error = max(error, sim.error_estimate)
             out = sim.outputs(forces)
             X[i], U[i], T[i], Freact[i] = out["X"], out["U"], out["T"], out["Freact"]
-        return X, U, T, Freact
+        return X, U, T, Freact, error
 
 
 def quantities_of_interest(T: np.ndarray, X: np.ndarray, tip: int) -> dict:
@@ -300,7 +304,7 @@ class FmuRunner:
             slave.doStep(currentCommunicationPoint=float(spec.times[i - 1]),
                          communicationStepSize=float(spec.times[i] - spec.times[i - 1]))
             values[i] = slave.getReal(read.vrs)
-        return read.split(values)
+        return (*read.split(values), read.error_estimate(values))
 
 
 class _OutputMap:
@@ -315,8 +319,18 @@ class _OutputMap:
                  + [f"Freact[{k + 1},{i + 1}]" for k in self.fixed for i in range(3)])
         self.present = np.array([name in vr for name in names])
         self.vrs = [vr[name] for name in np.array(names)[self.present]]
+        # the FMU's error estimate (an FMU built before it had one has none: NaN), read last
+        self.has_error = "error_estimate" in vr
+        if self.has_error:
+            self.vrs.append(vr["error_estimate"])
+
+    def error_estimate(self, values: np.ndarray) -> float:
+        """The largest estimated position error over the samples read, m (NaN if the FMU reports none)."""
+        return float(values[:, -1].max()) if self.has_error else math.nan
 
     def split(self, values: np.ndarray):
+        if self.has_error:
+            values = values[:, :-1]
         full = np.full((values.shape[0], self.present.size), np.nan)
         full[:, self.present] = values
         n, K3 = values.shape[0], 3 * self.K

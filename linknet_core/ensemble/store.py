@@ -36,6 +36,8 @@ _QOI_META = {
     "max_tension_link": ((), "1", "link carrying the largest tension (1-based; 0: no links)"),
     "min_tension": ((), "N", "smallest tension over links and output samples (< 0: compression)"),
     "tip_final": (("axis",), "m", "position of the tip mass at t_end"),
+    "error_estimate": ((), "m", "largest estimated position error of any mass over the output samples "
+                                "(linknet_core.accuracy; NaN where the member's FMU does not report one)"),
 }
 FLUSH_SECONDS = 2.0  # at most this much finished work is only in memory should the client process die
 

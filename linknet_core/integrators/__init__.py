@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 
+from linknet_core.accuracy import DEFAULT_RTOL, RTOL_MIN
 from linknet_core.errors import SolverError
 from linknet_core.integrators.base import FixedStepIntegrator, Integrator
 from linknet_core.integrators.composition import Composition, Suzuki4, Yoshida4, Yoshida6, Yoshida8
@@ -15,7 +16,7 @@ METHODS = {cls.name: cls for cls in (Rattle, Yoshida4, Suzuki4, Yoshida6, Yoshid
 # ask these functions. rtol lies in [RTOL_MIN, RTOL_MAX): below, double precision cannot deliver it; from 0.1 on
 # the error control accepts steps whose projections onto the link lengths no longer converge, so the run fails
 # later with a projection error instead of being refused here.
-RTOL_MIN, RTOL_MAX = 1e-15, 0.1
+RTOL_MAX = 0.1
 
 
 def real_number(value) -> float | None:
@@ -70,7 +71,7 @@ def method_settings(method: str, dt=None, rtol=None, atol=None):
     if cls.adaptive:
         if dt is not None:
             raise SolverError(f"method {method!r} chooses its own steps: give rtol (and atol), not dt")
-        rtol = 1e-8 if rtol is None else rtol
+        rtol = DEFAULT_RTOL if rtol is None else rtol
         if rtol_problem(rtol):
             raise SolverError(f"rtol {rtol_problem(rtol)}")
         if atol is not None and positive_problem(atol):

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from linknet_core.accuracy import (accuracy_text, companion, default_method, error_goal, position_gap, scene_size,
+                                   warn_accuracy)
 from linknet_core.dynamics.drive import AnchorDrive, anchor_jump
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import SceneError, SolverError
@@ -30,7 +32,7 @@ BACKENDS = ("auto", "native", "numpy")
 # Snapshots (get_state) name the simulator they come from: this format, the scene's fingerprint, the method and the
 # path (backend and specialisation), so set_state refuses another scene's or another path's snapshot rather than
 # projecting foreign positions onto this scene's lengths. Raise the number when a snapshot's content changes.
-SNAPSHOT_FORMAT = "linknet-snapshot-2"
+SNAPSHOT_FORMAT = "linknet-snapshot-3"
 # Input forces are refused beyond this magnitude (N), as scene values are (scene.description.MAX_MAGNITUDE): the
 # solver would overflow on them and report a projection failure that does not name the force.
 MAX_FORCE = 1e100
@@ -212,18 +214,27 @@ class Simulator:
     ``advance(t_next, F_input)`` integrates from the current time to ``t_next`` with the input forces
     held constant (zero-order hold), which is exactly what an FMI co-simulation step does.
 
+    ``method``: with neither a method nor a step, the error-controlled default (linknet_core.accuracy:
+    DEFAULT_METHOD at rtol DEFAULT_RTOL); with a step dt and no method, RATTLE.
+
     ``specialise`` (default True): a static scene (0 degrees of freedom) or a scene of free rigid bodies
     takes the specialised path of :mod:`linknet_core.simulator.specialisation`, chosen once here and reported in
     ``specialisation`` and ``summary()``; False (or an explicit ``backend`` naming a point-mass loop)
     keeps the point-mass path.
+
+    ``error_estimate`` (default True): a companion simulator (linknet_core.accuracy: half the step, or a tenth of
+    the tolerances) is advanced alongside with the same inputs, and ``error_estimate`` holds the estimated largest
+    position error (m) at the current time, ``error_goal`` what the run is held to, ``error_note()`` a warning's
+    text where the estimate exceeds it. It about doubles the cost of an advance; False skips it.
     """
 
-    def __init__(self, scene: Scene | str | os.PathLike, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
-                 atol: float | None = None, *, project_initial: bool | None = None,
+    def __init__(self, scene: Scene | str | os.PathLike, method: str | None = None, dt: float | None = None,
+                 rtol: float | None = None, atol: float | None = None, *, project_initial: bool | None = None,
                  length_tol: float = DEFAULT_LENGTH_TOL, max_steps_per_call: int = 100_000_000,
                  dynamics: Dynamics | None = None, backend: str = "auto", rhs_kernel: str = "numpy",
-                 specialise: bool = True, t0: float = 0.0):
+                 specialise: bool = True, t0: float = 0.0, error_estimate: bool = True):
         scene = as_scene(scene)
+        method = default_method(method, dt)
         t0 = t0 if type(t0) is float else _as_time(t0, "the start time t0")
         if not math.isfinite(t0):
             raise SolverError(f"the start time t0 must be finite, got {t0!r}")
@@ -268,6 +279,16 @@ class Simulator:
         self._reset_arrays = (self.state.X, self.state.U)  # the state's arrays as made from the initial state
         if type(self.integrator) is NativeIntegrator:
             self.integrator.hold(self.state)
+        self.error_goal = error_goal(method_cls, rtol, atol, scene_size(X0))
+        self.error_estimate = 0.0
+        self._error_factor, self._companion_failure, self.companion = 1.0, None, None
+        if error_estimate and self.specialisation.kind != STATIC:  # nothing moves in a static scene: no error
+            settings = companion(method_cls, dt, rtol, atol)
+            self._error_factor = settings.factor
+            self.companion = Simulator(scene, method, dt=settings.dt, rtol=settings.rtol, atol=settings.atol,
+                                       project_initial=project_initial, length_tol=length_tol,
+                                       max_steps_per_call=max_steps_per_call, backend=backend, rhs_kernel=rhs_kernel,
+                                       specialise=specialise, t0=t0, error_estimate=False)
         # what the Dynamics counts (the numpy reference's right-hand sides and projection floor), as reset finds it
         self._initial_counts = (self.dyn.rhs_evaluations, getattr(self.dyn, "floor_stops", 0),
                                 getattr(self.dyn, "floor_reached", 0.0))
@@ -357,7 +378,32 @@ class Simulator:
         return tuple(out)
 
     def advance(self, t_next: float, F_input=None, anchors=None) -> None:
-        """Integrate to t_next with F_input held. ``anchors``: the input-driven anchors' motion from now on, (P, V,
+        """Integrate to t_next with F_input held, then the companion (``error_estimate``) with the same inputs. A
+        companion that fails leaves the run's result standing and its estimate infinite (``error_note`` says why).
+        See :meth:`_advance_run` for the run's own advance."""
+        self._advance_run(t_next, F_input, anchors)
+        if self.companion is None or self._companion_failure is not None:
+            return
+        try:
+            self.companion._advance_run(t_next, F_input, anchors)
+        except SolverError as exc:
+            self._companion_failure = f"its companion run failed at t = {self.companion.state.t:g} s: {exc}"
+            self.error_estimate = math.inf
+            return
+        self.error_estimate = self._error_factor * position_gap(self.state.X, self.companion.state.X)
+
+    def error_note(self) -> str | None:
+        """What to warn of: the estimate beyond the goal, or a companion that could not estimate it (None if
+        neither)."""
+        if self._companion_failure is not None:
+            return (f"{self.scene.name}: the error of this run at t = {self.state.t:g} s cannot be estimated: "
+                    f"{self._companion_failure}")
+        if self.error_estimate > self.error_goal:
+            return accuracy_text(self.scene.name, self.state.t, self.error_estimate, self.error_goal)
+        return None
+
+    def _advance_run(self, t_next: float, F_input=None, anchors=None) -> None:
+        """Integrate the run (not its companion) to t_next with F_input held. ``anchors``: the input-driven anchors' motion from now on, (P, V,
         A) held as P + V s + A s^2/2 (s from the current time), or a callable f(t) -> (P, V, A); None keeps the
         last. A composition's inner stages may call it a little outside [t, t_next] (yoshida8: up to half a step). Where the anchors jump (a new V, or P), the velocities are projected onto (12) first: an inelastic
         impulse, reported by ``anchor_report``. On success the state is finite; on any error the simulator is left
@@ -437,7 +483,7 @@ class Simulator:
                     drive.set_internals(saved)
             T = self.dyn.tensions(X_at, U_at, F, anchor_acc=anchor_acc)
             Freact = self.dyn.anchor_reactions(X_at, T)
-        out = {"t": t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": Freact}
+        out = {"t": t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": Freact, "error_estimate": self.error_estimate}
         if self.scene.driven.any():
             out["impulse"] = self.anchor_report()["impulse"]
         return out
@@ -488,7 +534,9 @@ class Simulator:
     def get_state(self) -> dict:
         """Everything needed to continue bit-identically: time, positions, velocities, integrator internals."""
         return {"identity": dict(self.identity), "state": self.state.copy(),
-                "integrator": copy.deepcopy(self.integrator.internals()), "rhs_evaluations": self.dyn.rhs_evaluations}
+                "integrator": copy.deepcopy(self.integrator.internals()), "rhs_evaluations": self.dyn.rhs_evaluations,
+                "error": (self.error_estimate, self._companion_failure,
+                          None if self.companion is None else self.companion.get_state())}
 
     def snapshot_problem(self, snapshot) -> str | None:
         """Why ``snapshot`` cannot be restored here (None if it can): not a snapshot, another format, another scene
@@ -510,9 +558,17 @@ class Simulator:
         problem = self.snapshot_problem(snapshot)
         if problem:
             raise SolverError(f"{self.scene.name}: cannot restore {problem}")
+        error = snapshot.get("error", (0.0, None, None))
+        if (error[2] is None) != (self.companion is None):
+            raise SolverError(f"{self.scene.name}: cannot restore a snapshot taken "
+                              f"{'without' if error[2] is None else 'with'} an error estimate into a simulator "
+                              f"{'with' if error[2] is None else 'without'} one (error_estimate=)")
         self.state = snapshot["state"].copy()
         self.integrator.set_internals(copy.deepcopy(snapshot["integrator"]))
         self.dyn.rhs_evaluations = snapshot.get("rhs_evaluations", self.dyn.rhs_evaluations)
+        self.error_estimate, self._companion_failure = error[0], error[1]
+        if self.companion is not None:
+            self.companion.set_state(error[2])
 
     def reset(self, state_untouched: bool = False) -> None:
         """Back to the initial state, as a new Simulator of the same settings: state, integrator internals, the
@@ -530,6 +586,9 @@ class Simulator:
         else:
             self.integrator.set_internals(copy.deepcopy(self._initial_internals))
         self.dyn.rhs_evaluations, self.dyn.floor_stops, self.dyn.floor_reached = self._initial_counts
+        self.error_estimate, self._companion_failure = 0.0, None
+        if self.companion is not None:
+            self.companion.reset(state_untouched)
 
     def summary(self) -> str:
         """Scene, method and the specialisation chosen for it (and why)."""
@@ -556,6 +615,36 @@ class Result:
     velocity_residual: np.ndarray  # max violation of (12) per sample, m/s
     kinetic: np.ndarray  # kinetic energy per sample
     stats: dict = field(default_factory=dict)
+    # the estimated largest position error of any mass per sample, m (linknet_core.accuracy; None: not estimated),
+    # the goal it is held to, m, and why it could not be estimated where it could not (its companion run failed)
+    error_estimate: np.ndarray | None = None
+    error_goal: float = math.nan
+    error_failure: str | None = None
+
+    @property
+    def max_error_estimate(self) -> float:
+        """The largest estimated position error over the run, m (nan if not estimated)."""
+        return math.nan if self.error_estimate is None else float(np.max(self.error_estimate))
+
+    def accuracy_note(self) -> str | None:
+        """What to warn of: the estimate beyond the goal (from when), or a companion run that failed; None if
+        neither (or not estimated)."""
+        if self.error_failure is not None:
+            return f"{self.scene.name}: the error of this run cannot be estimated: {self.error_failure}"
+        if self.error_estimate is None or not self.max_error_estimate > self.error_goal:
+            return None
+        first = int(np.argmax(self.error_estimate > self.error_goal))
+        return accuracy_text(self.scene.name, float(self.t[first]), float(self.error_estimate[first]),
+                             self.error_goal, self.max_error_estimate)
+
+    def _accuracy_line(self) -> str:
+        if self.error_estimate is None:
+            return "  error estimate: not computed (error_estimate=False)\n"
+        note = self.accuracy_note()
+        if note is not None:
+            return f"  WARNING: {note}\n"
+        return (f"  estimated position error = {self.max_error_estimate:.3g} m at most (goal {self.error_goal:.3g} m: "
+                "within)\n")
 
     @property
     def energy_scale(self) -> float:
@@ -588,6 +677,7 @@ class Result:
                 + (f"  {s['floor_stops']} position projections stopped at the round-off floor the conditioning "
                    f"allows, above the tolerance (largest residual there {s['floor_reached']:.3g} relative)\n"
                    if s.get("floor_stops") else "")
+                + self._accuracy_line()
                 + f"  final energy drift = {self.energy_drift:.3e} (relative), max constraint residual = "
                 f"{float(self.residual.max()):.3e} (relative), max velocity residual = "
                 f"{float(self.velocity_residual.max()):.3e} m/s\n"
@@ -595,11 +685,12 @@ class Result:
                 f"min tension = {float(np.min(self.T)) if self.T.size else 0.0:.6g} N")
 
 
-def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str = "rattle", dt: float | None = None, rtol: float | None = None,
-             atol: float | None = None, n_out: int | None = None, output_dt: float | None = None,
-             forces=None, progress: bool | None = None, project_initial: bool | None = None,
-             backend: str = "auto", rhs_kernel: str = "numpy", specialise: bool = True, motions: dict | None = None,
-             anchors=None) -> Result:
+def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None = None, dt: float | None = None,
+             rtol: float | None = None, atol: float | None = None, n_out: int | None = None,
+             output_dt: float | None = None, forces=None, progress: bool | None = None,
+             project_initial: bool | None = None, backend: str = "auto", rhs_kernel: str = "numpy",
+             specialise: bool = True, motions: dict | None = None, anchors=None,
+             error_estimate: bool = True) -> Result:
     """Simulate ``scene`` (a Scene, or the path of a scene file) from t = 0 to ``t_end``.
 
     ``forces``: None, a (K,3) array held constant, or a callable ``f(t) -> (K,3)`` evaluated at each
@@ -610,8 +701,15 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str = "ratt
     (``{"kind": "sine", ...}``, see linknet_core.scene.motion), replacing the scene's; ``anchors`` moves the
     input-driven ones: a callable ``f(t) -> (P, V, A)`` followed wherever the integrator needs it, or (P, V, A)
     held as P + V t + A t^2/2 from t = 0.
+
+    ``method``: with neither a method nor a step, the error-controlled default (linknet_core.accuracy); with a step
+    dt and no method, RATTLE. ``error_estimate`` (default True): the run is repeated by its companion (half the step,
+    or a tenth of the tolerances) over the same outputs, with the same inputs (a ``forces`` callable is called by
+    both runs), and ``Result.error_estimate`` holds the estimated position error of every sample; an estimate beyond
+    the run's goal is reported by an AccuracyWarning and in the summary. False skips the companion.
     """
     scene = as_scene(scene)
+    method = default_method(method, dt)
     t_end_value = t_end if type(t_end) is float else real_number(t_end)
     if t_end_value is None or not (math.isfinite(t_end_value) and t_end_value > 0):
         raise SolverError(f"t_end must be a positive finite time, got {t_end!r}")
@@ -631,14 +729,44 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str = "ratt
     pool_key = None if motions else _settings_key(method, dt, rtol, atol, project_initial, DEFAULT_LENGTH_TOL,
                                                   backend, rhs_kernel, specialise)
     sim = _take_pooled(scene, pool_key)
-    if sim is None:
+    if sim is None:  # the error estimate's companion is a run of its own below, so that it samples in C too
         sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial,
-                        backend=backend, rhs_kernel=rhs_kernel, specialise=specialise)
+                        backend=backend, rhs_kernel=rhs_kernel, specialise=specialise, error_estimate=False)
     try:
-        return _run(sim, scene, t_end, method, dt, rtol, n_out, output_dt, forces, progress, anchors)
+        result = _run(sim, scene, t_end, method, dt, rtol, n_out, output_dt, forces, progress, anchors)
+        goal, static = sim.error_goal, sim.specialisation.kind == STATIC
+        settings = companion(*method_settings(method, dt, rtol, atol))
     finally:
         if pool_key is not None and type(sim.integrator) is NativeIntegrator:
             _hand_back(scene, pool_key, sim)
+    result.error_goal = goal
+    if not error_estimate:
+        return result
+    if static:  # nothing moves: no error
+        result.error_estimate = np.zeros(result.t.size)
+        return result
+    try:
+        shadow = simulate(scene, t_end, method, dt=settings.dt, rtol=settings.rtol, atol=settings.atol,
+                          n_out=result.t.size, forces=forces, progress=False, project_initial=project_initial,
+                          backend=backend, rhs_kernel=rhs_kernel, specialise=specialise, motions=motions,
+                          anchors=anchors, error_estimate=False)
+    except SolverError as exc:
+        result.error_estimate = np.full(result.t.size, math.inf)
+        result.error_estimate[0] = 0.0
+        result.error_failure = f"its companion run ({_companion_words(settings)}) failed: {exc}"
+    except KeyboardInterrupt:  # the run itself is complete: hand it over, without an estimate
+        raise SimulationInterrupted(result) from None
+    else:
+        result.error_estimate = np.array([settings.factor * position_gap(a, b) for a, b in zip(result.X, shadow.X)])
+        result.stats["companion_steps"] = shadow.stats.get("steps")
+    note = result.accuracy_note()
+    if note is not None:
+        warn_accuracy(note)
+    return result
+
+
+def _companion_words(settings) -> str:
+    return f"dt {settings.dt:g}" if settings.dt is not None else f"rtol {settings.rtol:g}, atol {settings.atol:g}"
 
 
 class _SimulatorPool(dict):
