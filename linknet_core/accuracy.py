@@ -39,6 +39,11 @@ _position_gap = _core.ln_position_gap
 _position_gap.restype = ctypes.c_double
 _position_gap.argtypes = [ctypes.c_int64, _c_double_p, _c_double_p]
 
+_accuracy_text = _core.ln_accuracy_text
+_accuracy_text.restype = None
+_accuracy_text.argtypes = [ctypes.c_char_p, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double,
+                           ctypes.c_char_p, ctypes.c_size_t]
+
 RTOL_MIN = ctypes.c_double.in_dll(_core, "ln_rtol_min").value
 DEFAULT_RTOL = ctypes.c_double.in_dll(_core, "ln_default_rtol").value
 GOAL_PER_RTOL = ctypes.c_double.in_dll(_core, "ln_goal_per_rtol").value
@@ -100,11 +105,11 @@ def position_gap(Xa: np.ndarray, Xb: np.ndarray) -> float:
 
 
 def accuracy_text(name: str, t: float, estimate: float, goal: float, largest: float | None = None) -> str:
-    """The warning of a run whose estimated error exceeds its goal, from time t on."""
-    worst = f" (largest {largest:.3g} m)" if largest is not None and largest > estimate else ""
-    return (f"{name}: the estimated position error {estimate:.3g} m at t = {t:g} s exceeds the run's goal "
-            f"{goal:.3g} m{worst}. Tighten rtol (or the step); where a tighter tolerance does not bring it down, the "
-            "motion passes a configuration it cannot resolve (docs/accuracy.md)")
+    """The warning of a run whose estimated error exceeds its goal from time t on (the core's ln_accuracy_text,
+    the native FMU's words too)."""
+    out = ctypes.create_string_buffer(1024)
+    _accuracy_text(str(name).encode("utf-8", "replace"), t, estimate, goal, largest or 0.0, out, len(out))
+    return out.value.decode("utf-8", "replace")
 
 
 class AccuracyWarning(UserWarning):

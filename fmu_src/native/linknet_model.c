@@ -773,7 +773,7 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
 
     /* the companion: the same step with the same inputs, at its own settings */
     companion_inputs(m);
-    const int companion = ln_advance(&m->model, &m->method_c, m->dc, t_target, s->max_steps);
+    const int companion = ln_companion_advance(&m->model, &m->method_c, m->dc, t_target, s->max_steps);
     if (companion != LN_OK) {
         /* the run's own result stands; the estimate is +inf from here on (until a reset or a restored state). The
            words are the library's (Simulator.error_note), the reason the core's (ln_explain) */
@@ -791,10 +791,10 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
     const int crossing = over && !m->over_goal;
     m->over_goal = over;
     if (!crossing) return FMU_OK;
-    /* the library's words (linknet_core.accuracy.accuracy_text); said again only after the estimate came back */
-    return fail(msg, FMU_NOTE, "%s: the estimated position error %.3g m at t = %g s exceeds the run's goal %.3g m. "
-                "Tighten rtol (or the step); where a tighter tolerance does not bring it down, the motion passes a "
-                "configuration it cannot resolve (docs/accuracy.md)", s->scene_name, m->error, t_target, m->goal);
+    /* the library's words (the core's ln_accuracy_text); said again only after the estimate came back */
+    char note[FMU_MESSAGE - 64];
+    ln_accuracy_text(s->scene_name, t_target, m->error, m->goal, 0.0, note, sizeof note);
+    return fail(msg, FMU_NOTE, "%s", note);
 }
 
 /* ---- Booleans: estimate_error -------------------------------------------------------------------- */

@@ -341,6 +341,16 @@ LN_API double ln_companion_settings(int adaptive, int order, double dt, double r
                                     double *dt_companion, double *rtol_companion, double *atol_companion);
 LN_API extern const double ln_rtol_min, ln_companion_rtol_ratio;
 
+/* Advance the companion run dc to t_target: a fixed-step companion in two halves at its half step (twice the run's
+   steps over every interval, however short), an error-controlled one straight on. LN_OK or ln_advance's status. */
+LN_API int ln_companion_advance(const ln_model *m, const ln_method *companion, ln_data *dc, double t_target,
+                                ln_int max_steps);
+
+/* The warning of a run whose estimated error exceeds its goal from time t on, into out (n bytes); largest: the
+   run's largest estimate, named where above estimate (0: none). The library's and the native FMU's one text. */
+LN_API void ln_accuracy_text(const char *name, double t, double estimate, double goal, double largest, char *out,
+                             size_t n);
+
 /* The largest distance |Xa_k - Xb_k| over K masses (K,3), m; NaN if a coordinate is not finite. */
 LN_API double ln_position_gap(ln_int K, const double *Xa, const double *Xb);
 
