@@ -391,6 +391,15 @@ def shipped_scenes() -> dict[str, Scene]:
         "crane": crane(),
         "triangulated_net": triangulated_net(),
         "braced_tower": braced_tower(),
+    }
+
+
+def degenerate_scenes() -> dict[str, Scene]:
+    """The scenes in models/degenerate/: nets that people build whose rigid parts are rigid only at second order
+    (a taut straight string between anchors, flat doubly braced panels) or that reach a configuration where the
+    constraint Jacobian loses rank. The point-mass methods do not carry them through yet (docs/robust_stepping.md):
+    they are kept apart from the shipped scenes, which run to their stop time with every method."""
+    return {
         "triangulated_net_4x4_corners": triangulated_net_corners(),
         "tilted_tower": tilted_tower(),
         "braced_panel_net": braced_panel_net(),
