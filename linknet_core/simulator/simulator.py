@@ -746,9 +746,11 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None 
         sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial,
                         backend=backend, rhs_kernel=rhs_kernel, specialise=specialise, error_estimate=False)
     try:
-        result = _run(sim, scene, t_end, method, dt, rtol, n_out, output_dt, forces, progress, anchors)
+        validated = method_settings(method, dt, rtol, atol)  # the run's stats name the settings used, defaults too
+        result = _run(sim, scene, t_end, method, validated[1], validated[2], n_out, output_dt, forces, progress,
+                      anchors)
         goal, static = sim.error_goal, sim.specialisation.kind == STATIC
-        settings = companion(*method_settings(method, dt, rtol, atol))
+        settings = companion(*validated)
     finally:
         if pool_key is not None and type(sim.integrator) is NativeIntegrator:
             _hand_back(scene, pool_key, sim)
