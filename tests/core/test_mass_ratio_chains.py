@@ -15,7 +15,7 @@ from linknet_core.errors import STABILITY_LIMIT
 from linknet_core.scene import builders
 
 T_END = 0.05
-ADVICE = re.compile(r"Use dt below ([0-9.e+-]+) s")
+ADVICE = re.compile(r"use dt below ([0-9.e+-]+) s")
 
 
 def chain(ratio, light_at_anchor):
@@ -44,15 +44,24 @@ def test_the_estimate_is_the_stability_limit_of_a_hanging_chain():
 @pytest.mark.parametrize("light_at_anchor", [True, False], ids=["light_at_anchor", "heavy_at_anchor"])
 @pytest.mark.parametrize("ratio", [1e3, 1e6, 1e9, 1e12])
 def test_a_step_beyond_the_limit_fails_saying_so_and_its_advice_runs(ratio, light_at_anchor):
+    """The advice's first remedy, the error-controlled default, runs at the first retry. Its fixed-step remedy is
+    taken at omega read where the failing step started, and omega grows about in proportion to time as the chain
+    loads up from rest (9.2e4 rad/s at 5 ms, 7.6e5 at 50 ms for ratio 1e12), so each dt it advises carries the run
+    further before the next failure: how many rounds that takes depends on round-off (the run near the limit is
+    chaotic; 1e12: 5 to 7 rounds on the native core, 2 on the numpy reference), so the loop allows 10."""
     scene = chain(ratio, light_at_anchor)
     dt, failures = 0.03, []
-    for _ in range(6):
+    for _ in range(10):
         try:
             result = ln.simulate(scene, T_END, method="rattle", dt=dt, backend="native", n_out=2)
             break
         except ln.SolverError as e:
             message = str(e)
             assert "stability limit of explicit steps" in message and "cannot help" not in message, message
+            if not failures:
+                assert "Use dop853 (the default" in message, message
+                default = ln.simulate(scene, T_END, backend="native", n_out=2)  # the first remedy, at once
+                assert default.method == "dop853"
             h_omega = float(re.search(r"h omega = ([0-9.e+-]+),", message).group(1))
             assert h_omega > STABILITY_LIMIT / 4, message
             advised = float(ADVICE.search(message).group(1))

@@ -77,7 +77,7 @@ def test_the_fmu_discards_with_the_library_words(case, fmu_root, host, no_python
     assert head, message
     assert message[head.end():] == expected  # the same words and numbers as the library's
     if case == "stability_limit":
-        assert "stability limit of explicit steps" in message and re.search(r"Use dt below [0-9.e+-]+ s", message)
+        assert "stability limit of explicit steps" in message and re.search(r"use dt below [0-9.e+-]+ s", message)
         assert "Reduce the step" not in message and "cannot help" not in message
     else:
         assert "it stalls at the floor this configuration allows" in message and "stability limit" not in message

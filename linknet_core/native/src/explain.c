@@ -88,8 +88,10 @@ void ln_projection_failure(const char *where, double reached, double before, dou
                  "step h = %.3g s%s and omega = %.3g rad/s, the fastest oscillation of a mass between its tensioned "
                  "links, estimated at the start of the step that failed. The limit is h omega = %g; once the "
                  "oscillation has grown the estimate can read up to %g times low, and omega grows with the tensions "
-                 "as the motion goes on. Use dt below %.3g s (h omega = %g) or an adaptive method (dop853), which "
-                 "follows omega", head, h * omega, h, stage, omega, ln_stability_limit, ln_reads_low,
+                 "as the motion goes on. Use dop853 (the default: error-controlled, it follows omega as it grows), "
+                 "or with a fixed step use dt below %.3g s (h omega = %g at this estimate; a motion that is still "
+                 "loading up can need a smaller one later)", head, h * omega, h, stage, omega, ln_stability_limit,
+                 ln_reads_low,
                  safe / (stage_fraction * omega), safe);
     } else if (floor > 0 && reached <= ln_near_floor * floor) {
         /* the linear model itself cannot remove the residual: a smaller step does not help */
