@@ -501,6 +501,25 @@ class Simulator:
             out["impulse"] = self.anchor_report()["impulse"]
         return out
 
+    def outputs_after_jump(self, F_input, anchors) -> dict:
+        """The outputs as the next advance will start from them once ``anchors`` (as for :meth:`advance`) are held:
+        the driven anchors brought to their new motion at the current time and, where they jump, the free masses'
+        positions projected onto (11) and velocities onto (12) (the inelastic impulse every advance starts with),
+        by the numpy reference on either backend. The simulator's state is not changed: the advance does the same
+        jump itself. (simulate's sample at t = 0 of a run whose anchors= set the input-driven anchors' motion.)"""
+        F = self.check_input(F_input)
+        hold = self.check_anchors(anchors)
+        t = self.state.t
+        drive = AnchorDrive(self.scene, self._initial.t)  # scene time 0 is the start time t0
+        if self.backend != "native":
+            drive.set_internals(self.integrator.drive.internals())
+        drive.set_input(t, hold)
+        X, U, impulse, _, _ = anchor_jump(self.dyn, drive, t, self.state.X, self.state.U)
+        X_at, U_at, anchor_acc = drive.apply(t, X, U)
+        T = self.dyn.tensions(X_at, U_at, F, anchor_acc=anchor_acc)
+        return {"t": t, "X": X_at, "U": U_at, "T": T, "Freact": self.dyn.anchor_reactions(X_at, T),
+                "error_estimate": self.error_estimate, "impulse": impulse}
+
     def sample(self, times, F_input, X: np.ndarray, U: np.ndarray, T: np.ndarray, advance_first: bool = True,
                diagnostics: np.ndarray | None = None, update_state: bool = True) -> None:
         """What ``advance(t_i, F_input)`` then ``outputs(F_input)`` do at each of ``times``, in one call into the
@@ -902,8 +921,12 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
             if i > 0:
                 sim.advance(t, force_at(times[i - 1]), anchor_hold if i == 1 else None)
             # tensions feel the input directly: report them with the input of the step starting at t_i,
-            # and at the last sample with the input of the step that ended there
-            out = sim.outputs(force_at(times[min(i, n - 2)]))
+            # and at the last sample with the input of the step that ended there; at t = 0 with the anchors' motion
+            # the run starts with, after the jump to it that the first advance makes
+            if i == 0 and anchor_hold is not None:
+                out = sim.outputs_after_jump(force_at(times[0]), anchor_hold)
+            else:
+                out = sim.outputs(force_at(times[min(i, n - 2)]))
             X[i], U[i], T[i] = out["X"], out["U"], out["T"]
             done = i + 1
             now = time.perf_counter()
