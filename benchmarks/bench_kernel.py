@@ -297,10 +297,16 @@ def _native_dim(sim):
     return 2 if data.struct.planar else 3
 
 
+def _no_estimate() -> dict:
+    """The kernel's time alone: no companion run of the error estimate (a tree before it has no such option)."""
+    import inspect
+    return {"error_estimate": False} if "error_estimate" in inspect.signature(ln.Simulator).parameters else {}
+
+
 def _time_advance(scene, method, rtol, backend, t_end, repeats, numpy_budget, planar=True, dt=None):
     """CPU time of one Simulator.advance(t_end) (best of ``repeats``); ``planar`` False makes the native core
     run a planar scene in 3-D; ``dt`` for fixed-step methods (then rtol is None)."""
-    sim = ln.Simulator(scene, method=method, rtol=rtol, dt=dt, backend=backend)
+    sim = ln.Simulator(scene, method=method, rtol=rtol, dt=dt, backend=backend, **_no_estimate())
     if not planar and _native_dim(sim) == 2:
         # the data's mode is what the core reads at each interval: 3-D from the start, and after every reset
         sim.integrator.data.struct.planar = 0
@@ -371,7 +377,7 @@ def _sensitivity(scene, method, rtol, t_end, kick=1e-13):
     amplification of round-off by the dynamics (chaotic scenes), the scale for comparing the two paths."""
     ends = []
     for dz in (0.0, kick):
-        sim = ln.Simulator(scene, method=method, rtol=rtol, backend="native")
+        sim = ln.Simulator(scene, method=method, rtol=rtol, backend="native", **_no_estimate())
         sim.state.X = sim.state.X.copy()
         sim.state.X[-1, 2] += dz
         sim.advance(t_end)

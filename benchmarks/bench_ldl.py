@@ -108,7 +108,7 @@ def measure(name: str, scene: Scene, ordering, repeats: int, lib=None) -> dict:
 def step_time(repeats: int) -> float:
     import linknet_core as ln
 
-    sim = ln.Simulator(builders.net(100, 100), method="rattle", dt=1e-4)
+    sim = ln.Simulator(builders.net(100, 100), method="rattle", dt=1e-4, error_estimate=False)
     sim.advance(1e-4)
     steps = 10
     best = float("inf")

@@ -59,7 +59,7 @@ def main(argv=None):
         scene = scene_of(name)
         best, steps = None, 0
         for _ in range(args.rounds):
-            sim = ln.Simulator(scene, method=method, **settings)
+            sim = ln.Simulator(scene, method=method, error_estimate=False, **settings)
             sim.advance(1e-3)
             before = sim.integrator.stats.steps
             gc.disable()

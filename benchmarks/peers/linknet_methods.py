@@ -49,6 +49,8 @@ class LinknetMethod(Method):
                 if name in params:
                     kwargs[name] = MAX_STEPS
                     break
+            if "error_estimate" in params:  # the integration alone, as the peers' (the estimate's cost:
+                kwargs["error_estimate"] = False  # benchmarks/accuracy.py)
             sim = ln.Simulator(scene, method=self.method, **kwargs)
             # warm-up on a throwaway simulator: one-time compilation (numba/codegen caches) is setup, as
             # OpenMM's Context creation and MuJoCo's model compilation are for the peers
