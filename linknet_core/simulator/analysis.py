@@ -17,6 +17,7 @@ from linknet_core.dynamics.equations import Dynamics
 from linknet_core.native.model import NativeModel
 from linknet_core.simulator.specialisation import Specialisation, choose_specialisation
 from linknet_core.scene.description import Scene
+from linknet_core.structure.rigidity import DENSE_RIGIDITY_LIMIT, second_order_rigid_flexes
 
 
 @dataclass
@@ -35,6 +36,9 @@ class RigidityReport:
     condition_A: float
     condition_note: str
     specialisation: Specialisation  # the path a Simulator takes for this scene (linknet_core.simulator.specialisation)
+    # flexes of the initial configuration blocked only at second order by a self-stress (structure.rigidity): the
+    # minimum-norm tensions (31) give them no resistance, so a run that loads one stops or loses the motion
+    blocked_flexes: list = None
 
     @property
     def rigid(self) -> bool:
@@ -79,6 +83,14 @@ class RigidityReport:
         if self.specialisation.kind != "none":
             native_path += f" (not used: the {self.specialisation.kind} specialisation stands in)"
         lines.append(f"native path (RATTLE, compositions, Runge-Kutta): {native_path}")
+        if self.blocked_flexes is None:
+            lines.append("second-order rigidity: not checked (no self-stress, or above the check's size limit)")
+        elif not self.blocked_flexes:
+            lines.append("second-order rigidity: no flex blocked only at second order")
+        else:
+            lines.append(f"second-order rigidity: {len(self.blocked_flexes)} flexes blocked only at second order (a "
+                         "run that loads one stops, naming them, or its error estimate flags it; docs/accuracy.md):")
+            lines += [f"  {flex.description}" for flex in self.blocked_flexes]
         lines += [f"note: {n}" for n in st.notes]
         return "\n".join(lines)
 
@@ -131,5 +143,6 @@ def analyze_scene(scene: Scene) -> RigidityReport:
         lo = eigsh(A, k=1, sigma=0, which="LM", return_eigenvectors=False)[0]
         cond = float(hi / lo) if lo > 0 else float("inf")
         note = "extreme eigenvalues by Lanczos"
+    blocked = second_order_rigid_flexes(scene) if st.self_stresses and scene.L <= DENSE_RIGIDITY_LIMIT else None
     return RigidityReport(scene, dyn, scene.K, scene.L, scene.fixed_indices.tolist(), st.rank_G, st.rank_exact, dof,
-                          rbm, dof - rbm, st.self_stresses, cond, note, choose_specialisation(scene, dyn))
+                          rbm, dof - rbm, st.self_stresses, cond, note, choose_specialisation(scene, dyn), blocked)

@@ -10,6 +10,8 @@ against the hand-derived answers:
   diagonals, omega^T q/R = -16: blocked, ratio 1, the flex the twist;
 * configurations with no such flex: a chain, the same square lifted out of plane (a tetrahedron: no flex but the
   rigid motions), the string with its middle mass also held by a link off the line (no flex across it)."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -82,3 +84,15 @@ def test_a_failure_diagnosis_names_a_string_loaded_across():
     text = Dynamics(scene).near_self_stress_load(scene.X0, scene.U0)
     assert "links 1 and 2 are a straight string between anchors left and right" in text
     assert "smaller step cannot help" in text
+
+
+def test_linknet_analyze_names_the_flat_braced_panels():
+    """`linknet analyze` reports the flexes blocked only at second order: the braced panel net's flat cells, none
+    on the braced tower (its posts block the top square's twist at first order)."""
+    from linknet_core.simulator.analysis import analyze_scene
+    models = Path(__file__).resolve().parents[2] / "models"
+    panels = analyze_scene(ln.load_scene(models / "degenerate" / "braced_panel_net.json"))
+    assert len(panels.blocked_flexes) == 11
+    assert "doubly braced panel of masses n0_0, n0_1, n1_0 and n1_1" in panels.text()
+    tower = analyze_scene(ln.load_scene(models / "braced_tower.json"))
+    assert tower.blocked_flexes == [] and "no flex blocked only at second order" in tower.text()
