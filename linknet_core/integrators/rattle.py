@@ -34,9 +34,11 @@ class Rattle(FixedStepIntegrator):
         if drive is not None:  # driven anchors: the position stage targets |X_k - P_a(t + h)| = R_l (11)
             X_free = drive.place(t_end, X_free)
         # position stage: X_new = X_free + M^-1 C(X)^T mu on the manifold (11); mu = (h^2/2) * multipliers
+        newton_projections = dyn.exact_newton_projections
         X_new, _ = dyn.project_positions(X_free, tol=self.position_tol, direction_at=X,
                                          step=(self.dt, max(abs(g) for g in self.gammas), U, F_input))
-        U_half = (X_new - X) / h
+        U_half = self._velocity_after_position_stage(X, X_free, X_new, U_half, h,
+                                                     newton_projections == dyn.exact_newton_projections)
         # velocity stage: half kick with the new forces, then projection onto (12) at X_new (relative to the
         # driven anchors' V_a(t + h))
         F1 = dyn.forces(X_new, U_half, F_input)
@@ -47,6 +49,19 @@ class Rattle(FixedStepIntegrator):
         if has_velocity_dependent_forces(self.dyn.scene):
             U_new = self._implicit_kick(X_new, U_half, U_new, h, F_input, t_end)
         return X_new, U_new
+
+    def _velocity_after_position_stage(self, X, X_free, X_new, U_half, h, factored_at_X):
+        """U_half plus the position stage's correction M^-1 C(X)^T mu over h (seed (9), (11)), as the native core
+        takes it (velocity_after_position_stage, stages/rattle.c): not read off as the rounded X_new - X, whose
+        coordinates' rounding, ulp(|X|) / h per step, would make the positions drift like ulp(|X|) N^1.5 over N
+        steps, but as the normal part of X_new - X_free at X in the mass metric (what the velocity projection at X
+        removes, on A(X) still factored), whose leftover rounding lies along the links. After exact Newton or
+        Gauss-Newton (A no longer factored at X): (X_new - X) / h. Anchors: (X_new - X) / h."""
+        if not factored_at_X or self.dyn.scene.L == 0:
+            return (X_new - X) / h
+        shift = X_new - X_free
+        normal = shift - self.dyn.project_velocities(X, shift)
+        return np.where(self.dyn._inv_mass3 == 0.0, (X_new - X) / h, U_half + normal / h)
 
     def _implicit_kick(self, X_new, U_half, U_new, h, F_input, t_end):
         """Second half kick with the forces at U_{n+1} itself (drag, dampers): the step stays symmetric and

@@ -23,8 +23,8 @@ void ln_data_free(ln_data *d)
 {
     if (!d) return;
     double *arrays[] = {d->X, d->U, d->F_input, d->T, d->acc, d->reaction, d->X_start, d->U_start, d->X_step, d->U_step, d->Xp, d->Up, d->Fp,
-                        d->F_base, d->F, d->Uh, d->Xc, d->U_iterate, d->acc1, d->Xs, d->Us, d->Xn, d->Un, d->E0,
-                        d->E1, d->B, d->mu, d->phi, d->scale, d->work, d->KX, d->KU, d->pair_values, d->chain_sub,
+                        d->F_base, d->F, d->Uh, d->Xc, d->U_iterate, d->acc1, d->Xs, d->Us, d->Xn, d->Un, d->X_drift,
+                        d->E0, d->E1, d->B, d->mu, d->phi, d->scale, d->work, d->KX, d->KU, d->pair_values, d->chain_sub,
                         d->chain_Dinv, d->krylov, d->drive_P, d->drive_V, d->drive_A, d->impulse, d->drive_scratch};
     for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
     ln_ldl_numeric_free(d->ldl);
@@ -55,7 +55,7 @@ ln_data *ln_data_new(const ln_model *m, ln_int n_stages)
     d->Xp = doubles(K2); d->Up = doubles(K2); d->Fp = doubles(K2);
     d->F_base = doubles(K3); d->F = doubles(K3); d->Uh = doubles(K3); d->Xc = doubles(K3);
     d->U_iterate = doubles(K3); d->acc1 = doubles(K3); d->Xs = doubles(K3); d->Us = doubles(K3);
-    d->Xn = doubles(K3); d->Un = doubles(K3);
+    d->Xn = doubles(K3); d->Un = doubles(K3); d->X_drift = doubles(K3);
     d->E0 = doubles(L3); d->E1 = doubles(L3);
     d->B = doubles(L); d->mu = doubles(L); d->phi = doubles(L); d->scale = doubles(L); d->work = doubles(L);
     d->n_stages_allocated = n_stages > 0 ? n_stages : 0;
@@ -67,7 +67,7 @@ ln_data *ln_data_new(const ln_model *m, ln_int n_stages)
     d->drive_P = doubles(3 * n_driven); d->drive_V = doubles(3 * n_driven); d->drive_A = doubles(3 * n_driven);
     d->impulse = doubles(3 * n_driven); d->drive_scratch = doubles(18 * n_driven);
     int ok = d->X && d->U && d->F_input && d->T && d->acc && d->reaction && d->X_start && d->U_start && d->X_step && d->U_step && d->Xp && d->Up && d->Fp
-             && d->F_base && d->F && d->Uh && d->Xc && d->U_iterate && d->acc1 && d->Xs && d->Us && d->Xn && d->Un
+             && d->F_base && d->F && d->Uh && d->Xc && d->U_iterate && d->acc1 && d->Xs && d->Us && d->Xn && d->Un && d->X_drift
              && d->E0 && d->E1 && d->B && d->mu && d->phi && d->scale && d->work && d->KX && d->KU
              && d->pair_values && d->chain_sub && d->chain_Dinv
              && d->drive_P && d->drive_V && d->drive_A && d->impulse && d->drive_scratch;
@@ -89,7 +89,7 @@ void ln_data_reset(const ln_model *m, ln_data *d)
         {d->X, K3}, {d->U, K3}, {d->F_input, K3}, {d->T, L}, {d->acc, K3}, {d->reaction, 3 * m->n_fixed},
         {d->X_start, K3}, {d->U_start, K3}, {d->X_step, K3}, {d->U_step, K3}, {d->Xp, K2}, {d->Up, K2},
         {d->Fp, K2}, {d->F_base, K3}, {d->F, K3}, {d->Uh, K3}, {d->Xc, K3}, {d->U_iterate, K3}, {d->acc1, K3},
-        {d->Xs, K3}, {d->Us, K3}, {d->Xn, K3}, {d->Un, K3}, {d->E0, L3}, {d->E1, L3}, {d->B, L}, {d->mu, L},
+        {d->Xs, K3}, {d->Us, K3}, {d->Xn, K3}, {d->Un, K3}, {d->X_drift, K3}, {d->E0, L3}, {d->E1, L3}, {d->B, L}, {d->mu, L},
         {d->phi, L}, {d->scale, L}, {d->work, L}, {d->KX, stage_values}, {d->KU, stage_values},
         {d->pair_values, m->n_pairs}, {d->chain_sub, L}, {d->chain_Dinv, L}, {d->drive_P, 3 * n_driven},
         {d->drive_V, 3 * n_driven}, {d->drive_A, 3 * n_driven}, {d->impulse, 3 * n_driven},

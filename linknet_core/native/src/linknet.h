@@ -208,6 +208,7 @@ typedef struct ln_data {
     double *X_step, *U_step;        /* (K,3) the state at the start of a fixed step (for splitting it) */
     double *Xp, *Up, *Fp;           /* (K,2) the state and base force in the plane's coordinates */
     double *F_base, *F, *Uh, *Xc, *U_iterate, *acc1, *Xs, *Us, *Xn, *Un;    /* (K,3) */
+    double *X_drift;                /* (K,3) a RATTLE stage's drift X + h U_half, before its position stage */
     double *E0, *E1;                /* (L,3) unit vectors */
     double *B, *mu, *phi, *scale, *work;                                    /* (L) */
     double *KX, *KU;                /* ((s+1),K,3) Runge-Kutta stages */

@@ -5,6 +5,8 @@
  *   X_new  = X + h U_half + M^-1 C(X)^T mu   on (11)     drift, then the position stage (projections.c)
  *   U_half = (X_new - X) / h
  *   U_new  = U_half + h/2 M^-1 F(X_new, U_half), projected onto (12) at X_new
+ * The velocity U_half after the position stage is taken from the stage's correction itself, not from the rounded
+ * X_new - X (velocity_after_position_stage): that keeps the coordinates' round-off out of the velocity.
  * With velocity-dependent forces (drag, dampers) the second half kick is implicit in U_new (fixed-point
  * iteration), which keeps the step symmetric and so second order. A composition takes RATTLE steps of
  * gamma_i h in turn (method->gammas); the velocity projection's factorisation at X_new is the next stage's
@@ -28,6 +30,42 @@ static inline const double *rattle_forces(const ln_model *m, ln_data *d, const d
     if (m->n_elements == 0) return F_base;
     FN(ln_scene_forces)(m, X, U, F_base, d->F);
     return d->F;
+}
+
+/* U_half after the position stage of a RATTLE stage of size hs: the drift's U_half plus the position stage's
+   correction M^-1 C(X)^T mu over hs (seed (9), (11)). The correction is not read off as X_new - X_drift: both are
+   coordinates of size |X|, so that difference carries the rounding of every update of X_new, ulp(|X|), in every
+   direction; divided by hs it enters the velocity as ulp(|X|) / hs each stage, its part along the manifold survives
+   the velocity projection, and over N steps the positions drift like ulp(|X|) N^1.5: the error grew as dt shrank
+   and with the scene's distance from the origin (benchmarks/roundoff.py). The correction's own part is its component
+   along M^-1 C(X)^T, the normal part of X_new - X_drift in the mass metric, M^-1 C^T A^-1 C (X_new - X_drift) with
+   A(X) (25) still factored from the stage's start: what is left of the rounding there is along the links, which
+   the velocity projection removes. One solve on the factorisation at hand. Where the position stage needed exact
+   Newton or Gauss-Newton (the factorisation may no longer be A(X)), the difference X_new - X over hs as before.
+   Anchored masses (inv_m = 0; driven anchors move where the drive puts them) keep (X_new - X) / hs, their mean
+   velocity over the stage. */
+LN_ALWAYS_INLINE void velocity_after_position_stage(const ln_model *m, ln_data *d, const double *X, const double *Xc,
+                                                    const double *E0, double hs, int factored_at_X, double *Uh)
+{
+    const ln_int K = m->K;
+    const double *X_drift = d->X_drift;
+    if (!factored_at_X || m->L == 0) {
+        for (ln_int i = 0; i < K * DIM; i++) Uh[i] = (Xc[i] - X[i]) / hs;
+        return;
+    }
+    double *rhs = d->phi, *mu = d->mu;
+    for (ln_int l = 0; l < m->L; l++) {
+        const ln_int a = m->k1[l], b = m->k2[l];
+        double s = 0.0;
+        for (int e = 0; e < DIM; e++)
+            s += E0[l * DIM + e] * ((Xc[a * DIM + e] - X_drift[a * DIM + e]) - (Xc[b * DIM + e] - X_drift[b * DIM + e]));
+        rhs[l] = s;
+    }
+    FN(ln_solve_tension_system)(m, d, rhs, mu);
+    for (ln_int k = 0; k < K; k++)
+        if (m->inv_m[k] == 0.0)
+            for (int e = 0; e < DIM; e++) Uh[k * DIM + e] = (Xc[k * DIM + e] - X[k * DIM + e]) / hs;
+    FN(ln_add_correction)(m, E0, mu, 1.0 / hs, Uh);
 }
 
 /* One step of size h from t to t_end: the composition's RATTLE stages in turn, with A(X) factored at *E0 on
@@ -54,10 +92,12 @@ LN_ALWAYS_INLINE int composition_step(const ln_model *m, const ln_method *meth, 
                 Xc[i] = X[i] + hs * Uh[i];
             }
         if (m->n_driven && (status = ln_drive_rows(m, d, stage_end, Xc, NULL, NULL, DIM)) != LN_OK) return status;
+        for (ln_int i = 0; i < K * DIM; i++) d->X_drift[i] = Xc[i];
         /* position stage: Xc + M^-1 C(X)^T mu on (11), simplified Newton with A(X) factored */
+        const ln_int newton_projections = d->exact_newton_projections;
         status = project_positions(m, d, Xc, E0, meth->position_tol, meth->max_projection_iter);
         if (status != LN_OK) return status;
-        for (ln_int i = 0; i < K * DIM; i++) Uh[i] = (Xc[i] - X[i]) / hs;
+        velocity_after_position_stage(m, d, X, Xc, E0, hs, newton_projections == d->exact_newton_projections, Uh);
         /* second half kick, then the velocity projection onto (12) at the new positions */
         F = rattle_forces(m, d, Xc, Uh, F_base);
         for (ln_int k = 0; k < K; k++)
