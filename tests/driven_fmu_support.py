@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from linknet_core.accuracy import DEFAULT_METHOD
+
 H = 0.01        # communication step
 N_STEPS = 25
 ACCEL = np.array([3.0, 0.0, -2.0])      # anchor acceleration amplitude, m/s2
@@ -92,9 +94,9 @@ def output_names(md) -> list[str]:
     return [v.name for v in md.modelVariables if v.causality == "output"]
 
 
-def library_outputs(scene, names, method="rattle", jump_step=None, n_steps=N_STEPS, h=H, read_after=False,
+def library_outputs(scene, names, method=DEFAULT_METHOD, jump_step=None, n_steps=N_STEPS, h=H, read_after=False,
                     **settings) -> np.ndarray:
-    """The run on linknet_core's Simulator: at each communication point the outputs `names` (FMU names) with the
+    """The run on linknet_core's Simulator (by default with the FMUs' default method): at each communication point the outputs `names` (FMU names) with the
     inputs of that point, then an advance to the next with them held. Rows: t, then names. ``read_after``: the
     outputs are read after each advance instead, before the next inputs (as fmpy's simulate_fmu reads them): the
     driven anchors where their held motion took them (rows t_1 .. t_N)."""
@@ -118,6 +120,9 @@ def library_outputs(scene, names, method="rattle", jump_step=None, n_steps=N_STE
             out = sim.outputs(F, anchors=anchors)
         row = [(n + 1) * h if read_after else n * h]
         for name in names:
+            if name == "error_estimate":  # the FMU's companion run, as the Simulator's
+                row.append(out["error_estimate"])
+                continue
             kind, idx = name.split("[")
             idx = [int(i) - 1 for i in idx.rstrip("]").split(",")]
             if kind == "T":

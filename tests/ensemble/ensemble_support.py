@@ -19,10 +19,11 @@ def _span(text: str) -> slice:
     return slice(int(first) - 1, int(last or first))
 
 
-def serial_run(scene, setting: dict, t_end: float, n_out: int, method="rattle", dt=1e-3, rtol=None,
+def serial_run(scene, setting: dict, t_end: float, n_out: int, method=None, dt=None, rtol=None,
                project_initial=None):
     """The member run serially in this process through the library's public API only (its own reading of
-    the parameter names, not the ensemble module's): ``ln.simulate`` on the scene with the member's values."""
+    the parameter names, not the ensemble module's): ``ln.simulate`` on the scene with the member's values (with
+    neither method nor dt, the library's default, as a study's)."""
     mass, length, gravity = np.array(scene.mass), np.array(scene.length), np.array(scene.gravity)
     U0 = np.array(scene.U0)
     forces = np.zeros((scene.K, 3))
@@ -55,3 +56,6 @@ def assert_member_equals(ds, member: int, reference, atol=1e-12) -> None:
     assert ds["max_tension"].values[member] == pytest.approx(reference.T.max(), rel=1e-10)
     tip = int(ds.attrs["tip_mass"]) - 1
     np.testing.assert_allclose(ds["tip_final"].values[member], reference.X[-1, tip], rtol=0, atol=atol)
+    # the member's error estimate (its companion run, advanced output by output) is the serial run's (its companion
+    # sampled in one call), to the positions' round-off
+    assert ds["error_estimate"].values[member] == pytest.approx(reference.max_error_estimate, rel=1e-6, abs=atol)

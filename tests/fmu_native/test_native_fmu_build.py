@@ -92,7 +92,7 @@ def test_fmpy_simulates_it(fmu_root):
     fmu = built(fmu_root, "chain_10")
     signal = np.array([(0.0, 0.7), (1.0, 0.7)], dtype=[("time", float), ("F[11,3]", float)])
     res = fmpy.simulate_fmu(str(fmu.path), stop_time=0.2, output_interval=0.01, input=signal,
-                            start_values={"step": 5e-4}, output=["X[11,3]", "T[1]"])
+                            start_values={"integrator": "rattle", "step": 5e-4}, output=["X[11,3]", "T[1]"])
     scene = ln.load_scene(MODELS / "chain_10.json")
     sim = ln.Simulator(scene, method="rattle", dt=5e-4)
     F = np.zeros((scene.K, 3))
