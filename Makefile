@@ -1,7 +1,7 @@
 # The two quick-start commands of the README: `make demo` and `make test`.
 PYTHON ?= python3
 
-.PHONY: install demo test bench bench-quick bench-ensemble stress
+.PHONY: install demo test bench bench-quick bench-ensemble bench-accuracy stress
 
 install:
 	$(PYTHON) -m pip install -q -e '.[test]'
@@ -23,3 +23,8 @@ bench-quick: install
 # ensembles on Dask: members/s on 1 and 2 workers, per-member overhead, cold start (docs/ensemble.md)
 bench-ensemble: install
 	$(PYTHON) -m benchmarks.bench_ensemble
+
+# accuracy by default: scene x method -> error against the independent reference, the run's estimate, the time with
+# and without it (docs/accuracy.md); --quick in CI
+bench-accuracy: install
+	$(PYTHON) -m benchmarks.accuracy
