@@ -86,6 +86,26 @@ def double_pendulum(l1=1.0, l2=1.0, m1=1.0, m2=1.0, gravity=G_EARTH, name="doubl
         "links": [{"a": "pivot", "b": "a", "length": l1}, {"a": "a", "b": "b", "length": l2}]})
 
 
+def _grid_links(n: int, m: int, diagonals: tuple[str, ...] = ()) -> list[dict]:
+    """The links of an n x m grid of masses numbered row by row from 1, cell by cell in row order: to the right
+    neighbour, to the one below, then the cell's diagonals named in ``diagonals`` ("down": (i, j)-(i+1, j+1),
+    "up": (i, j+1)-(i+1, j)). Lengths are left to the positions."""
+    idx = lambda i, j: i * m + j + 1  # noqa: E731
+    ends = {"down": lambda i, j: (idx(i, j), idx(i + 1, j + 1)), "up": lambda i, j: (idx(i, j + 1), idx(i + 1, j))}
+    links = []
+    for i in range(n):
+        for j in range(m):
+            if j + 1 < m:
+                links.append({"a": idx(i, j), "b": idx(i, j + 1)})
+            if i + 1 < n:
+                links.append({"a": idx(i, j), "b": idx(i + 1, j)})
+            if i + 1 < n and j + 1 < m:
+                for kind in diagonals:
+                    a, b = ends[kind](i, j)
+                    links.append({"a": a, "b": b})
+    return links
+
+
 def net(n: int, m: int, spacing=0.1, total_mass=1.0, anchors: str | Iterable[tuple[int, int]] = "opposite_corners",
         gravity=G_EARTH, name=None, diagonals=False) -> Scene:
     """An n x m net (cloth) of masses in the horizontal x-y plane, joined to their grid neighbours.
@@ -219,17 +239,7 @@ def triangulated_net(n=6, m=6, spacing=0.1, total_mass=1.0, sag=0.3, gravity=G_E
             z = -sag * spacing * (m - 1) * 4.0 * u * (1.0 - u) * (0.3 + v)
             entries.append(_mass(f"n{i}_{j}", (j * spacing, i * spacing, z), total_mass / (n * m - len(anchors)),
                                  fixed=(i, j) in anchors))
-    idx = lambda i, j: i * m + j + 1  # noqa: E731
-    links = []
-    for i in range(n):
-        for j in range(m):
-            if j + 1 < m:
-                links.append({"a": idx(i, j), "b": idx(i, j + 1)})
-            if i + 1 < n:
-                links.append({"a": idx(i, j), "b": idx(i + 1, j)})
-            if i + 1 < n and j + 1 < m:
-                links.append({"a": idx(i, j), "b": idx(i + 1, j + 1)})
-                links.append({"a": idx(i, j + 1), "b": idx(i + 1, j)})
+    links = _grid_links(n, m, ("down", "up"))
     return Scene.from_dict({"name": name, "description": f"{n} x {m} cloth with both diagonals per cell, sagged, "
                             "hung from two corners (states of self-stress and mechanisms)",
                             "gravity": list(gravity), "masses": entries, "links": links})
@@ -306,16 +316,7 @@ def triangulated_net_corners(n=4, spacing=0.1, total_mass=1.0, fold=0.0, gravity
             z = -fold * spacing * (i - j) ** 2 / (n - 1)
             entries.append(_mass(f"n{i}_{j}", (j * spacing, i * spacing, z), total_mass / (n * n - len(anchors)),
                                  fixed=(i, j) in anchors))
-    idx = lambda i, j: i * n + j + 1  # noqa: E731
-    links = []
-    for i in range(n):
-        for j in range(n):
-            if j + 1 < n:
-                links.append({"a": idx(i, j), "b": idx(i, j + 1)})
-            if i + 1 < n:
-                links.append({"a": idx(i, j), "b": idx(i + 1, j)})
-            if i + 1 < n and j + 1 < n:
-                links.append({"a": idx(i, j), "b": idx(i + 1, j + 1)})
+    links = _grid_links(n, n, ("down",))
     return Scene.from_dict({"name": name, "description": f"{n} x {n} net with one diagonal per cell, hung from two "
                             "opposite corners: the diagonal links between them are a taut straight string (second-"
                             "order rigid), the halves folded below it", "gravity": list(gravity),
@@ -361,17 +362,7 @@ def braced_panel_net(n=4, spacing=0.1, total_mass=1.0, fold_deg=60.0, tilt_deg=3
     vel = np.cross(w, pts - pts[0])
     entries = [_mass(f"n{i}_{j}", pts[i * n + j], total_mass / (n * n - 1), vel[i * n + j], fixed=(i, j) == (0, 0))
                for i in range(n) for j in range(n)]
-    idx = lambda i, j: i * n + j + 1  # noqa: E731
-    links = []
-    for i in range(n):
-        for j in range(n):
-            if j + 1 < n:
-                links.append({"a": idx(i, j), "b": idx(i, j + 1)})
-            if i + 1 < n:
-                links.append({"a": idx(i, j), "b": idx(i + 1, j)})
-            if i + 1 < n and j + 1 < n:
-                links.append({"a": idx(i, j), "b": idx(i + 1, j + 1)})
-                links.append({"a": idx(i, j + 1), "b": idx(i + 1, j)})
+    links = _grid_links(n, n, ("down", "up"))
     return Scene.from_dict({"name": name, "description": f"{n} x {n} net of flat doubly braced cells (second-order "
                             f"rigid), pinned at a corner, folded {fold_deg} deg, tilted {tilt_deg} deg, spinning",
                             "gravity": list(gravity), "masses": entries, "links": links})
