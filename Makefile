@@ -9,8 +9,9 @@ install:
 demo: install
 	$(PYTHON) examples/demo.py
 
+# on every core, a test file per worker at a time (files share session-scoped builds: FMUs, references)
 test: install
-	$(PYTHON) -m pytest -q
+	$(PYTHON) -m pytest -q -n auto --dist loadfile
 
 bench: install
 	$(PYTHON) -m pip install -q -e '.[bench]'
