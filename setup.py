@@ -2,29 +2,74 @@
 
 The library is plain C loaded with ctypes (linknet_core/native/library.py), not a Python extension module:
 it has no Python API in it, so the same sources serve the self-contained FMU. setuptools' extension machinery
-is used only to compile and link it with the platform's compiler and put it inside the package.
+is used only to compile and link it with the platform's compiler and put it inside the package. Two things
+follow from that, both set here:
+  * the file is named without the interpreter's tag (`_linknet.so`, the last of EXTENSION_SUFFIXES, which
+    library.py also looks for), since any Python 3 can load it;
+  * the wheel is tagged `py3-none-<platform>` (say `py3-none-linux_x86_64`): platform-specific, because it holds
+    compiled code, but for any Python 3 and no CPython ABI, rather than setuptools' `cp311-cp311-<platform>`.
 """
+import importlib.machinery
 from pathlib import Path
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
 
+try:  # setuptools >= 70.1 carries bdist_wheel; before that it is the `wheel` package's
+    from setuptools.command.bdist_wheel import bdist_wheel
+except ImportError:  # pragma: no cover - older setuptools
+    from wheel.bdist_wheel import bdist_wheel
+
 SOURCE_DIR = Path("linknet_core") / "native" / "src"
+LIBRARY = "linknet_core.native._linknet"
+# the interpreter-independent suffix (".so" on Linux and macOS, ".pyd" on Windows)
+LIBRARY_SUFFIX = importlib.machinery.EXTENSION_SUFFIXES[-1]
+
+
+def _remove_stale_libraries(folder: Path):
+    for stale in folder.glob("_linknet.*"):
+        if stale.name != "_linknet" + LIBRARY_SUFFIX and stale.suffix in (".so", ".pyd", ".dylib"):
+            stale.unlink()
 
 
 class BuildNativeLibrary(build_ext):
     def get_export_symbols(self, ext):
         return []  # no PyInit_ function to export: the library is loaded with ctypes
 
+    def get_ext_filename(self, fullname):
+        # asked with the full name and (distutils' get_ext_fullpath) with the last part alone
+        if fullname in (LIBRARY, LIBRARY.rsplit(".", 1)[-1]):
+            return str(Path(*fullname.split("."))) + LIBRARY_SUFFIX
+        return super().get_ext_filename(fullname)
+
+    def run(self):
+        # a library of an earlier build named with the interpreter's tag (_linknet.cpython-311-x86_64-linux-gnu.so)
+        # would be found before _linknet.so and loaded stale: gone from the build folder (whence the wheel's files
+        # come) and, in place (editable installs), from the package folder
+        _remove_stale_libraries(Path(self.build_lib) / "linknet_core" / "native")
+        if self.inplace or getattr(self, "editable_mode", False):
+            _remove_stale_libraries(Path(self.get_finalized_command("build_py").get_package_dir("linknet_core.native")))
+        super().run()
+
+
+class PlatformWheel(bdist_wheel):
+    def finalize_options(self):
+        super().finalize_options()
+        self.root_is_pure = False  # compiled code inside: the platform tag must say which platform
+
+    def get_tag(self):
+        _, _, platform = super().get_tag()
+        return "py3", "none", platform
+
 
 setup(
     ext_modules=[Extension(
-        "linknet_core.native._linknet",
+        LIBRARY,
         # AMD (src/amd, vendored): only its int64 entry points, each of which includes its generic source
         sources=sorted(str(p) for p in [*SOURCE_DIR.glob("*.c"), *SOURCE_DIR.glob("amd/amd_l*.c")]),
         include_dirs=[str(SOURCE_DIR)],
         depends=sorted(str(p) for p in SOURCE_DIR.rglob("*.[ch]")),
         extra_compile_args=["-std=c99", "-O3", "-fno-math-errno", "-ffp-contract=off", "-fvisibility=hidden", "-Wall", "-Wextra"],
     )],
-    cmdclass={"build_ext": BuildNativeLibrary},
+    cmdclass={"build_ext": BuildNativeLibrary, "bdist_wheel": PlatformWheel},
 )
