@@ -399,6 +399,7 @@ def main(argv=None):
     from linknet_core.integrators import METHODS
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--version", action="version", version=f"%(prog)s (linknet {__import__('linknet_core').__version__})")
     p.add_argument("scene", nargs="?", type=readable_file, help="scene JSON file (models/*.json)")
     p.add_argument("--component", choices=sorted(COMPONENTS), help="build a composition helper FMU instead")
     p.add_argument("-o", "--output", type=_output((".fmu",), "the FMU"),

@@ -178,6 +178,7 @@ def cmd_check(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="linknet", description="Networks of point masses joined by rigid links.")
+    parser.add_argument("--version", action="version", version=f"linknet {__import__('linknet_core').__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     _add_simulate(sub)
     _add_analyze(sub)
