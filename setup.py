@@ -42,14 +42,16 @@ class BuildNativeLibrary(build_ext):
             return str(Path(*fullname.split("."))) + LIBRARY_SUFFIX
         return super().get_ext_filename(fullname)
 
+    # A library of an earlier build named with the interpreter's tag (_linknet.cpython-311-x86_64-linux-gnu.so)
+    # would be found before _linknet.so and loaded stale: removed from the build folder (whence the wheel's files
+    # come) before the build and, once the new library is in place (editable installs), from the package folder.
     def run(self):
-        # a library of an earlier build named with the interpreter's tag (_linknet.cpython-311-x86_64-linux-gnu.so)
-        # would be found before _linknet.so and loaded stale: gone from the build folder (whence the wheel's files
-        # come) and, in place (editable installs), from the package folder
         _remove_stale_libraries(Path(self.build_lib) / "linknet_core" / "native")
-        if self.inplace or getattr(self, "editable_mode", False):
-            _remove_stale_libraries(Path(self.get_finalized_command("build_py").get_package_dir("linknet_core.native")))
         super().run()
+
+    def copy_extensions_to_source(self):
+        super().copy_extensions_to_source()
+        _remove_stale_libraries(Path(self.get_finalized_command("build_py").get_package_dir("linknet_core.native")))
 
 
 class PlatformWheel(bdist_wheel):
