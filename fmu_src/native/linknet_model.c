@@ -764,7 +764,11 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
     if (status != LN_OK) {
         char why[FMU_MESSAGE - 128], label[512] = "";
         if (m->d->fail_link >= 0) link_label(s, m->d->fail_link, label, sizeof label);
-        ln_explain(&m->model, &m->method, m->d, status, t_fmu, t_target, s->max_steps, label, why, sizeof why);
+        /* a fixed-step method's count is known before any step: the span, dt, the count and the limit, as the
+           library says them */
+        if (!(status == LN_TOO_MANY_STEPS && m->method.kind == LN_COMPOSITION
+              && ln_step_count_problem(t_fmu, t_target, m->method.dt, s->max_steps, why, sizeof why)))
+            ln_explain(&m->model, &m->method, m->d, status, t_fmu, t_target, s->max_steps, label, why, sizeof why);
         return fail(msg, FMU_DISCARD, "step from t=%.17g with h=%.17g failed, the FMU stays at t=%.17g: %s", t, h,
                     t_fmu, why);
     }

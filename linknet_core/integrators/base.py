@@ -21,6 +21,23 @@ from linknet_core.state import State
 # A fixed step whose position stage (or implicit half kick) fails is taken again from its start as 2, 4, ...,
 # 2^MAX_SPLIT_LEVEL equal sub-steps, each the whole method: the native core's bound (stages/rattle.c), read from it.
 MAX_SPLIT_LEVEL = ctypes.c_int.in_dll(_core, "ln_max_split_level").value
+# The most steps one advance counts (2^53, beyond which span / dt is no longer a whole number in double): the
+# native core's limit, read from it; a larger max_steps means this.
+MAX_STEP_COUNT = ctypes.c_int64.in_dll(_core, "ln_max_step_count").value
+_step_count_problem = _core.ln_step_count_problem
+_step_count_problem.restype = ctypes.c_int
+_step_count_problem.argtypes = [ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_int64, ctypes.c_char_p,
+                                ctypes.c_size_t]
+
+
+def step_count_problem(t_start: float, t_target: float, dt: float, max_steps: int) -> str | None:
+    """Why a fixed-step advance from t_start to t_target cannot be taken in at most max_steps steps of dt (naming the
+    span, dt, the count and the limit), or None where it can: the native core's rule and words
+    (ln_step_count_problem), which the native FMU says too."""
+    out = ctypes.create_string_buffer(512)
+    if not _step_count_problem(t_start, t_target, dt, min(int(max_steps), MAX_STEP_COUNT), out, len(out)):
+        return None
+    return out.value.decode()
 
 
 @dataclass
@@ -117,10 +134,10 @@ class FixedStepIntegrator(Integrator):
 
     def advance(self, state, t_target, F_input, max_steps):
         span = t_target - state.t
+        problem = step_count_problem(state.t, t_target, self.dt, max_steps)
+        if problem:
+            raise SolverError(problem)
         n = fixed_step_count(span, self.dt)  # the native core's rule, so both paths take the same steps
-        if n > max_steps:
-            raise SolverError(f"reaching t = {t_target} needs {n} steps of dt = {self.dt}, more than the "
-                              f"limit of {max_steps}; raise max_steps or the step")
         h = span / n
         # finiteness of the result is checked once, by Simulator.advance, for every path
         try:

@@ -16,7 +16,7 @@ import numpy as np
 
 from linknet_core.dynamics.drive import call_motion
 from linknet_core.errors import SolverError
-from linknet_core.integrators.base import Integrator, StepStats
+from linknet_core.integrators.base import Integrator, StepStats, step_count_problem
 from linknet_core.native import library as lib
 from linknet_core.native.model import NativeData, NativeModel, native_method
 
@@ -307,6 +307,11 @@ class NativeIntegrator(Integrator):
     def explain(self, status: int, t_start: float, t_target: float, max_steps: int) -> str:
         """The failure of an advance in words, naming the link, the residuals and what may help: the core's text
         (ln_explain, src/explain.c; the native FMU says the same)."""
+        if status == lib.TOO_MANY_STEPS and not self.adaptive and self.dt is not None:
+            # a fixed-step method's count is known before any step: say it, with the span and dt
+            problem = step_count_problem(t_start, t_target, self.dt, max_steps)
+            if problem:
+                return problem
         d = self._d
         link = self.scene.link_label(int(d.fail_link)).encode() if d.fail_link >= 0 else None
         out = ctypes.create_string_buffer(4096)

@@ -1,6 +1,8 @@
 /* The data (mutable state, internals, scratch) and the whole-interval advance: one call per output or
    communication interval runs every step, assembly, factorisation and projection in C, all or nothing. */
+#include <float.h>
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -111,12 +113,38 @@ void ln_data_reset(const ln_model *m, ln_data *d)
     initial_values(m, d);
 }
 
+/* The most steps one advance counts: beyond 2^53 the ratio span / dt is no longer a whole number in double (and
+   no run takes that many steps: 2^53 of 1 ns each are 104 days of computing). */
+LN_API const ln_int ln_max_step_count = (ln_int)1 << 53;
+
 ln_int ln_fixed_step_count(double span, double dt)
 {
     const double ratio = span / dt, nearest = round(ratio);
+    /* more than the limit, or not a number (dt = 0, an infinite span): more than any advance may take. Converted
+       to ln_int such a ratio would be undefined (INT64_MIN on x86-64: a run of 0 steps reported as done) */
+    if (!(ratio <= (double)ln_max_step_count)) return ln_max_step_count + 1;
     /* a whole number of steps up to round-off in t (which grows with t) is that number, not one more */
     const double n = fabs(ratio - nearest) <= 1e-9 * fmax(ratio, 1.0) ? nearest : ceil(ratio);
     return n < 1.0 ? 1 : (ln_int)n;
+}
+
+int ln_step_count_problem(double t, double t_target, double dt, ln_int max_steps, char *out, size_t n)
+{
+    if (max_steps > ln_max_step_count) max_steps = ln_max_step_count;
+    const double span = t_target - t;
+    const ln_int steps = ln_fixed_step_count(span, dt);
+    if (steps <= max_steps) return 0;
+    char count[64];
+    if (steps <= ln_max_step_count)
+        snprintf(count, sizeof count, "%lld", (long long)steps);
+    else if (isfinite(span / dt))
+        snprintf(count, sizeof count, "about %.3g", span / dt);
+    else
+        snprintf(count, sizeof count, "more than %.3g", DBL_MAX);
+    snprintf(out, n, "reaching t = %g from t = %g (a span of %g s) takes %s steps of dt = %g: more than %lld steps, "
+             "the limit of one advance; advance over intervals of at most %g s, or use a longer dt", t_target, t, span,
+             count, dt, (long long)max_steps, (double)max_steps * dt);
+    return 1;
 }
 
 int ln_base_forces(const ln_model *m, const ln_data *d, double *F_base)
@@ -259,6 +287,7 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
     d->fail_link = -1;
     d->fail_t = d->t;
     if (!(isfinite(t_target) && t_target > d->t) || max_steps < 1) return d->status = LN_BAD_ARGUMENT;
+    if (max_steps > ln_max_step_count) max_steps = ln_max_step_count;  /* no count beyond it is a count */
     if (!ln_base_forces(m, d, d->F_base)) return d->status = LN_NON_FINITE;
     if (meth->kind == LN_STATIC) {  /* 0 degrees of freedom: nothing moves */
         d->t = t_target;

@@ -320,8 +320,14 @@ LN_API int ln_model_weights(ln_model *m, const double *mass, const double *R, co
                             const double *force, double *weights);
 
 /* Equal steps no longer than dt that land on the target: how many (a whole number up to round-off is that
-   number, not one more). */
+   number, not one more); ln_max_step_count + 1 where there would be more than ln_max_step_count (2^53, the most
+   one advance takes: ln_advance lowers a larger max_steps to it) or span / dt is not a number. */
+LN_API extern const ln_int ln_max_step_count;
 LN_API ln_int ln_fixed_step_count(double span, double dt);
+/* Whether a fixed-step advance from t to t_target takes more than max_steps steps of dt (1), and then why, in words
+   naming the span, dt, the count and the limit, into out (n bytes): the library's SolverError and the native FMU's
+   message. 0, out untouched, where the count is within the limit. */
+LN_API int ln_step_count_problem(double t, double t_target, double dt, ln_int max_steps, char *out, size_t n);
 
 /* sizeof(ln_model), sizeof(ln_method), the part of ln_data the Python binding mirrors and sizeof(ln_energy_terms)
    (which = 0, 1, 2, 3): the binding checks its struct layouts against these. */
