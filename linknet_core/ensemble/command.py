@@ -6,7 +6,10 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -14,17 +17,37 @@ from linknet_core.errors import LinknetError
 from linknet_core.options import (_output, count, positive_number, random_seed, readable_file, readable_file_with,
                                   relative_tolerance, sample_count, text_with)
 
+
+@dataclass(frozen=True)
+class Distribution:
+    """A --sample distribution: its two parameters' names, the rule they must meet (checked by ``problem``, which
+    says what breaks it, or None), and its draws. numpy's own checks would end the command in a traceback."""
+
+    parameters: tuple[str, str]
+    rule: str
+    problem: Callable[[float, float], str | None]
+    draw: Callable[[np.random.Generator, float, float, int], np.ndarray]
+
+
 _DISTRIBUTIONS = {
-    "uniform": lambda rng, a, b, n: rng.uniform(a, b, n),
-    "normal": lambda rng, mean, sd, n: rng.normal(mean, sd, n),
+    "uniform": Distribution(
+        ("LOW", "HIGH"), "LOW <= HIGH, and HIGH - LOW a finite number",
+        lambda low, high: (f"LOW = {low:g} is above HIGH = {high:g}" if low > high else
+                           f"HIGH - LOW = {high - low:g} overflows" if not math.isfinite(high - low) else None),
+        lambda rng, low, high, n: rng.uniform(low, high, n)),
+    "normal": Distribution(
+        ("MEAN", "SD"), "SD >= 0 (a standard deviation)",
+        lambda mean, sd: f"SD = {sd:g} is negative" if sd < 0 else None,
+        lambda rng, mean, sd, n: rng.normal(mean, sd, n)),
 }
+_SAMPLE_FORMS = " or ".join(f"NAME={kind}:{':'.join(d.parameters)}" for kind, d in _DISTRIBUTIONS.items())
 
 
 _NUMBER = r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
 # the form of each text option is checked when it is parsed, its meaning (names against the scene) before the run
 vary_text = text_with("NAME=VALUES", r"[^=\s]+=\S.*", "M[3]=0.5:2:10")
-sample_text = text_with("NAME=uniform:LOW:HIGH or NAME=normal:MEAN:SD",
-                        rf"[^=\s]+=(uniform|normal):{_NUMBER}:{_NUMBER}", "M[3]=uniform:0.5:2")
+sample_text = text_with(_SAMPLE_FORMS, rf"[^=\s]+=({'|'.join(_DISTRIBUTIONS)}):{_NUMBER}:{_NUMBER}",
+                        "M[3]=uniform:0.5:2")
 output_list = text_with("a comma-separated list of X, U, T, Freact, or none", r"(?i:none)|\w+(\s*,\s*\w+)*", "X,T")
 mass_text = text_with("a mass (1-based number or name)", r".+", "11")
 scheduler_address = text_with("a Dask scheduler address", r"(\w+://)?\S+:\d+", "tcp://host:8786")
@@ -44,8 +67,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "studies also X0[k,i], U0[k,i], drag[k], stiffness[s], damping[s], rest_length[s]. "
                         "Several --vary make a full factorial grid")
     p.add_argument("--sample", action="append", type=sample_text, default=[], metavar="NAME=DIST:A:B",
-                   help="Monte Carlo: NAME drawn from uniform:LOW:HIGH or normal:MEAN:SD, --n-samples times "
-                        "(with --vary, every grid point runs every sample)")
+                   help="Monte Carlo: NAME drawn from uniform:LOW:HIGH (LOW <= HIGH) or normal:MEAN:SD (SD >= 0), "
+                        "--n-samples times (with --vary, every grid point runs every sample)")
     p.add_argument("--samples", metavar="CSV", type=readable_file, help="parameter sets from a CSV file: a header of parameter "
                                                     "names, one member per row")
     p.add_argument("--n-samples", type=count, default=100, help="number of --sample draws (default 100)")
@@ -88,37 +111,80 @@ def _vary(texts, scene) -> dict:
     return vary
 
 
-def _samples(args, scene) -> dict | None:
+def parse_sample(text: str) -> tuple[str, Distribution, float, float]:
+    """A --sample text: (the parameter's name, the distribution, its two parameters), each parameter a finite number
+    and the two meeting the distribution's rule; a LinknetError naming the parameter, the distribution and the rule
+    otherwise."""
+    name, _, spec = text.partition("=")
+    kind, *numbers = spec.split(":")
+    if kind not in _DISTRIBUTIONS or len(numbers) != 2:
+        raise LinknetError(f"--sample {text!r}: write {_SAMPLE_FORMS}")
+    distribution = _DISTRIBUTIONS[kind]
+    form = f"{kind}:{':'.join(distribution.parameters)}"
+    values = []
+    for parameter, number in zip(distribution.parameters, numbers):
+        try:
+            value = float(number)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            raise LinknetError(f"--sample {text!r}: {parameter} = {number!r} of the {kind} distribution "
+                               f"({form}) must be a finite number")
+        values.append(value)
+    problem = distribution.problem(*values)
+    if problem:
+        raise LinknetError(f"--sample {text!r}: {problem}; the {kind} distribution ({form}) needs {distribution.rule}")
+    return name, distribution, values[0], values[1]
+
+
+def read_samples_csv(path, scene) -> dict:
+    """The parameter sets of a --samples CSV file: a header of parameter names, then one member per line, a value per
+    name. A line with another number of values, or a cell of a numeric parameter that is not a finite number, is
+    refused naming the file, the line and the column."""
     from linknet_core.ensemble.parameters import check_values, parse_name
 
+    try:
+        with open(path) as f:
+            header = [name.strip() for name in f.readline().strip().split(",")]
+            rows = [(number, line.strip().split(",")) for number, line in enumerate(f, start=2) if line.strip()]
+    except OSError as exc:
+        raise LinknetError(f"cannot read --samples {path}: {exc.strerror}") from None
+    if not rows:
+        raise LinknetError(f"--samples {path}: no parameter sets below the header (one member per line)")
+    for number, row in rows:
+        if len(row) != len(header):
+            raise LinknetError(f"--samples {path}: line {number} has {len(row)} value(s), the header names "
+                               f"{len(header)} ({', '.join(header)})")
     columns: dict = {}
-    if args.samples:
-        try:
-            with open(args.samples) as f:
-                header = f.readline().strip().split(",")
-                rows = [line.strip().split(",") for line in f if line.strip()]
-        except OSError as exc:
-            raise LinknetError(f"cannot read --samples {args.samples}: {exc.strerror}") from None
-        for j, name in enumerate(header):
-            parameter = parse_name(name, scene)
+    for j, name in enumerate(header):
+        parameter = parse_name(name, scene)
+        cells = [(number, row[j].strip()) for number, row in rows]
+        if parameter.family.text:
+            columns[parameter.name] = check_values(parameter, [cell for _, cell in cells])
+            continue
+        values = []
+        for number, cell in cells:
             try:
-                values = [row[j] for row in rows]
-            except IndexError:
-                raise LinknetError(f"--samples {args.samples}: a row has fewer than {len(header)} values") from None
-            columns[parameter.name] = check_values(parameter, values if parameter.family.text
-                                                   else [float(v) for v in values])
+                value = float(cell)
+            except ValueError:
+                value = math.nan
+            if not math.isfinite(value):
+                raise LinknetError(f"--samples {path}: line {number}, column {j + 1} ({name}): {cell!r} is not a "
+                                   "finite number")
+            values.append(value)
+        columns[parameter.name] = check_values(parameter, values)
+    return columns
+
+
+def _samples(args, scene) -> dict | None:
+    from linknet_core.ensemble.parameters import parse_name
+
+    columns: dict = read_samples_csv(args.samples, scene) if args.samples else {}
     rng = np.random.default_rng(args.seed)
     for text in args.sample:
-        name, _, spec = text.partition("=")
-        kind, *numbers = spec.split(":")
-        if kind not in _DISTRIBUTIONS or len(numbers) != 2:
-            raise LinknetError(f"--sample {text!r}: write NAME=uniform:LOW:HIGH or NAME=normal:MEAN:SD")
-        try:
-            a, b = float(numbers[0]), float(numbers[1])
-        except ValueError:
-            raise LinknetError(f"--sample {text!r}: the distribution's two numbers are not numbers") from None
+        name, distribution, a, b = parse_sample(text)
         parameter = parse_name(name, scene)
-        draws = _DISTRIBUTIONS[kind](rng, a, b, args.n_samples)
+        draws = distribution.draw(rng, a, b, args.n_samples)
         if columns and len(next(iter(columns.values()))) != draws.size:
             raise LinknetError(f"--sample draws {draws.size} values (--n-samples) but --samples has "
                                f"{len(next(iter(columns.values())))} rows")
