@@ -4,13 +4,15 @@
  * in time, with that code.
  *
  *   exit_host FMU_DIR MODEL_ID GUID MODE EXIT_CODE      MODE: free (instantiate/free only) | step | cycles:N
- *                                                        | atexit
+ *                                                        | atexit | span:H
  *
  * cycles:N instantiates, initializes, steps and frees N times and prints the resident memory (KiB) after the
  * first tenth and after all: "rss_tenth A rss_end B".
  * atexit is a host that tears down in its own exit handler (as a C++ host does in the destructor of a static
  * object): registered before the FMU is loaded, it runs after the FMU's own exit handlers, steps the instance main
  * left live and frees it, printing "late step S" and "late freed".
+ * span:H follows the good step with one of h = H (a span of more steps than can be taken: issue 25) and another of
+ * 0.01, printing "span step S" and "after span step S".
  */
 #include <dlfcn.h>
 #include <stdio.h>
@@ -82,7 +84,12 @@ int main(int argc, char **argv) {
             enter(c);
             exit_init(c);
             printf("step %d\n", do_step(c, 0.0, 0.01, 1));
-            if (cycles == 1) printf("refused step %d\n", do_step(c, 5.0, 0.01, 1)); /* t is not the FMU's time */
+            if (strncmp(argv[4], "span:", 5) == 0) {
+                printf("span step %d\n", do_step(c, 0.01, atof(argv[4] + 5), 1));
+                printf("after span step %d\n", do_step(c, 0.01, 0.01, 1));
+            } else if (cycles == 1) {
+                printf("refused step %d\n", do_step(c, 5.0, 0.01, 1)); /* t is not the FMU's time */
+            }
         }
         if (late) {
             late_instance = c;

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from contract_support import MODELS, ROOT
+from contract_support import MODELS, ROOT, extract
 from fmu_harness import FMU_CLIENT_LIB, build_cached, run_client
 import linknet_core as ln
 from linknet_core.integrators.base import MAX_STEP_COUNT
@@ -103,3 +103,22 @@ save(result=np.array(json.dumps([statuses, logs, moved])))
         text = " ".join(logs[name])
         assert "reaching t = " in text and "steps of dt = 0.001: more than" in text and "limit of one advance" in text
     assert statuses["sub-ulp"] == 0 and not moved["sub-ulp"] and not logs["sub-ulp"]
+
+
+@pytest.mark.parametrize("native", [False, True], ids=["pythonfmu", "native"])
+def test_a_c_host_gets_discard_and_the_message_for_a_span_of_too_many_steps(native, exit_host, tmp_path):
+    fmu = build_cached(tmp_path, str(MODELS / "pendulum.json"), integrator="rattle", step=1e-3, native=native)
+    folder, ident, guid = extract(fmu, tmp_path / "unzipped")
+    proc = subprocess.run([str(exit_host), str(folder), ident, guid, "span:1e17", "0"], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "step 0\nspan step 2\nafter span step 0\n" in proc.stdout, proc.stdout
+    assert "takes about 1e+20 steps of dt = 0.001: more than" in proc.stderr, proc.stderr
+
+
+def test_free_rigid_bodies_refuse_too_many_steps_in_the_same_words():
+    sim = ln.Simulator(ln.load_scene(MODELS / "spinning_tetrahedron.json"), method="yoshida4", dt=1e-3)
+    assert sim.specialisation.kind == "rigid"
+    with pytest.raises(ln.SolverError, match=r"takes about 1e\+20 steps of dt = 0.001: more than 100000000 steps"):
+        sim.advance(1e17)
+    assert sim.state.t == 0.0
