@@ -393,16 +393,15 @@ class Simulator:
         self.error_estimate = self._error_factor * position_gap(self.state.X, self.companion.state.X)
 
     def _advance_companion(self, t_next: float, F_input, anchors) -> None:
-        """The companion to t_next as the core's rule says (ln_companion_advance): a fixed-step companion through the
-        interval's midpoint, so that it takes twice the run's steps however short the interval; an error-controlled
-        one straight on."""
+        """The companion to t_next as the core's rule says (ln_companion_advance): through the interval's midpoint, so
+        that it takes twice the run's steps however short the interval (fixed steps), and never the very steps of an
+        error-controlled run whose steps the communication points set."""
         companion = self.companion
-        if not companion.integrator.adaptive:
-            t = companion.state.t
-            t_mid = t + 0.5 * (float(t_next) - t)
-            if t < t_mid < t_next:
-                companion._advance_run(t_mid, F_input, anchors)
-                anchors = None  # held from the midpoint on as set there
+        t = companion.state.t
+        t_mid = t + 0.5 * (float(t_next) - t)
+        if t < t_mid < t_next:
+            companion._advance_run(t_mid, F_input, anchors)
+            anchors = None  # held from the midpoint on as set there
         companion._advance_run(t_next, F_input, anchors)
 
     def error_note(self) -> str | None:
@@ -779,12 +778,11 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None 
     if static:  # nothing moves: no error
         result.error_estimate = np.zeros(result.t.size)
         return result
-    # a fixed-step companion samples every output interval's midpoint too (ln_companion_advance: twice the run's
-    # steps over every interval); the midpoints of linspace's times are those of twice as many, exactly
-    halves = settings.dt is not None
-    n_shadow = 2 * result.t.size - 1 if halves else result.t.size
+    # the companion samples every output interval's midpoint too (ln_companion_advance); the midpoints of linspace's
+    # times are those of twice as many, exactly
+    n_shadow = 2 * result.t.size - 1
     shadow_forces = forces
-    if halves and callable(forces):  # the input of each output interval, held over both its halves
+    if callable(forces):  # the input of each output interval, held over both its halves
         shadow_forces = lambda t: forces(float(result.t[min(int(np.searchsorted(result.t, t, "right")) - 1,  # noqa
                                                              result.t.size - 1)]))
     try:
@@ -799,7 +797,7 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None 
     except KeyboardInterrupt:  # the run itself is complete: hand it over, without an estimate
         raise SimulationInterrupted(result) from None
     else:
-        shadow_X = shadow.X[::2] if halves else shadow.X
+        shadow_X = shadow.X[::2]
         result.error_estimate = np.array([settings.factor * position_gap(a, b) for a, b in zip(result.X, shadow_X)])
         result.stats["companion_steps"] = shadow.stats.get("steps")
     note = result.accuracy_note()

@@ -4,10 +4,14 @@
    A fixed-step method of order p (RATTLE 2, the compositions 4, 6, 8) is compared with itself at half the step:
    with err(h) ~ C h^p (Richardson), x(h) - x(h/2) = err(h) (1 - 2^-p), so err(h) ~ 2^p / (2^p - 1) |x(h) - x(h/2)|.
    Half the step, not twice: an interval shorter than two steps (an FMU whose communication step equals its step)
-   would give a doubled step the very same steps. And the companion takes each interval between two communication
-   points (or outputs) as two halves at half the step (ln_companion_advance): n equal steps of the run then become
-   exactly 2n of the companion, also where the interval is shorter than the step (n = 1), where a companion stepping
-   dt/2 over the whole interval would take the run's single step.
+   would give a doubled step the very same steps.
+
+   Either companion takes each interval between two communication points (or outputs) as two halves
+   (ln_companion_advance): n equal steps of a fixed-step run then become exactly 2n of the companion, also where the
+   interval is shorter than the step (n = 1), where a companion stepping dt/2 over the whole interval would take the
+   run's single step; and an error-controlled run whose every step is cut short by the communication points (an FMU
+   stepping faster than its tolerance needs) gets a companion that steps twice as often, where one at a tenth of the
+   tolerance would accept the very same steps and read 0.
 
    An error-controlled method is compared with itself at a tenth of its tolerances. Its global error follows the
    tolerance roughly in proportion, so the companion's is about a tenth of the run's and |x(rtol) - x(rtol/10)|
@@ -81,19 +85,16 @@ LN_API double ln_scene_size(ln_int K, const double *X)
     return size > 0.0 ? size : 1.0;
 }
 
-/* Advance the companion dc to t_target as the rule above says: a fixed-step companion through the interval's
-   midpoint (two halves at its half step: twice the run's steps), an error-controlled one straight on. LN_OK or the
+/* Advance the companion dc to t_target as the rule above says: through the interval's midpoint. LN_OK or the
    failing ln_advance's status. */
 LN_API int ln_companion_advance(const ln_model *m, const ln_method *companion, ln_data *dc, double t_target,
                                 ln_int max_steps)
 {
-    if (companion->kind != LN_RUNGE_KUTTA) {
-        const double t_mid = dc->t + 0.5 * (t_target - dc->t);
-        if (t_mid > dc->t && t_mid < t_target) {
-            const int status = ln_advance(m, companion, dc, t_mid, max_steps);
-            if (status != LN_OK)
-                return status;
-        }
+    const double t_mid = dc->t + 0.5 * (t_target - dc->t);
+    if (t_mid > dc->t && t_mid < t_target) {
+        const int status = ln_advance(m, companion, dc, t_mid, max_steps);
+        if (status != LN_OK)
+            return status;
     }
     return ln_advance(m, companion, dc, t_target, max_steps);
 }

@@ -348,8 +348,9 @@ LN_API double ln_companion_settings(int adaptive, int order, double dt, double r
                                     double *dt_companion, double *rtol_companion, double *atol_companion);
 LN_API extern const double ln_rtol_min, ln_companion_rtol_ratio;
 
-/* Advance the companion run dc to t_target: a fixed-step companion in two halves at its half step (twice the run's
-   steps over every interval, however short), an error-controlled one straight on. LN_OK or ln_advance's status. */
+/* Advance the companion run dc to t_target in two halves (a fixed-step companion at its half step: twice the run's
+   steps over every interval, however short; an error-controlled one twice as many steps where the communication
+   points set the run's). LN_OK or ln_advance's status. */
 LN_API int ln_companion_advance(const ln_model *m, const ln_method *companion, ln_data *dc, double t_target,
                                 ln_int max_steps);
 
