@@ -18,7 +18,10 @@ from setuptools.command.build_ext import build_ext
 try:  # setuptools >= 70.1 carries bdist_wheel; before that it is the `wheel` package's
     from setuptools.command.bdist_wheel import bdist_wheel
 except ImportError:  # pragma: no cover - older setuptools
-    from wheel.bdist_wheel import bdist_wheel
+    try:
+        from wheel.bdist_wheel import bdist_wheel
+    except ImportError:  # no wheel to build here (an in-place build of the library): nothing to tag
+        bdist_wheel = None
 
 SOURCE_DIR = Path("linknet_core") / "native" / "src"
 LIBRARY = "linknet_core.native._linknet"
@@ -54,14 +57,18 @@ class BuildNativeLibrary(build_ext):
         _remove_stale_libraries(Path(self.get_finalized_command("build_py").get_package_dir("linknet_core.native")))
 
 
-class PlatformWheel(bdist_wheel):
-    def finalize_options(self):
-        super().finalize_options()
-        self.root_is_pure = False  # compiled code inside: the platform tag must say which platform
+commands = {"build_ext": BuildNativeLibrary}
+if bdist_wheel is not None:
+    class PlatformWheel(bdist_wheel):
+        def finalize_options(self):
+            super().finalize_options()
+            self.root_is_pure = False  # compiled code inside: the platform tag must say which platform
 
-    def get_tag(self):
-        _, _, platform = super().get_tag()
-        return "py3", "none", platform
+        def get_tag(self):
+            _, _, platform = super().get_tag()
+            return "py3", "none", platform
+
+    commands["bdist_wheel"] = PlatformWheel
 
 
 setup(
@@ -73,5 +80,5 @@ setup(
         depends=sorted(str(p) for p in SOURCE_DIR.rglob("*.[ch]")),
         extra_compile_args=["-std=c99", "-O3", "-fno-math-errno", "-ffp-contract=off", "-fvisibility=hidden", "-Wall", "-Wextra"],
     )],
-    cmdclass={"build_ext": BuildNativeLibrary, "bdist_wheel": PlatformWheel},
+    cmdclass=commands,
 )
