@@ -123,11 +123,8 @@ def parse_sample(text: str) -> tuple[str, Distribution, float, float]:
     form = f"{kind}:{':'.join(distribution.parameters)}"
     values = []
     for parameter, number in zip(distribution.parameters, numbers):
-        try:
-            value = float(number)
-        except ValueError:
-            value = math.nan
-        if not math.isfinite(value):
+        value = _finite_number(number)
+        if value is None:
             raise LinknetError(f"--sample {text!r}: {parameter} = {number!r} of the {kind} distribution "
                                f"({form}) must be a finite number")
         values.append(value)
@@ -135,6 +132,15 @@ def parse_sample(text: str) -> tuple[str, Distribution, float, float]:
     if problem:
         raise LinknetError(f"--sample {text!r}: {problem}; the {kind} distribution ({form}) needs {distribution.rule}")
     return name, distribution, values[0], values[1]
+
+
+def _finite_number(text: str) -> float | None:
+    """text as a finite number, or None (not a number, or inf or nan)."""
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
 
 
 def read_samples_csv(path, scene) -> dict:
@@ -164,11 +170,8 @@ def read_samples_csv(path, scene) -> dict:
             continue
         values = []
         for number, cell in cells:
-            try:
-                value = float(cell)
-            except ValueError:
-                value = math.nan
-            if not math.isfinite(value):
+            value = _finite_number(cell)
+            if value is None:
                 raise LinknetError(f"--samples {path}: line {number}, column {j + 1} ({name}): {cell!r} is not a "
                                    "finite number")
             values.append(value)
