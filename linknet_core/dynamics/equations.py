@@ -450,6 +450,24 @@ class Dynamics:
         return (f"{where} A smaller step cannot help: brace the structure so that no cell is flat and no string "
                 "straight, or model the compliance with a spring instead of a rigid link.")
 
+    def check_no_loaded_blocked_flex(self, X, U) -> None:
+        """Refuse (X, U) whose velocities or external loads move along a flex that a self-stress blocks only at second
+        order (structure.rigidity): the minimum-norm tensions (31) give it no resistance, so a run either stops at
+        once or, worse, finishes with the flex's motion wrong behind small link residuals (a flat doubly braced
+        panel twisting out of its plane; a taut straight string between anchors loaded across it). The second-order
+        analogue of hypothesis (35), checked with it at the start; ``"options": {"run_loaded_blocked_flexes":
+        true}`` runs such a scene anyway (its error estimate then says how far off it ends)."""
+        if self.scene.options.get("run_loaded_blocked_flexes", False):
+            return
+        blocked = self._loaded_blocked_flexes(X, U)
+        if blocked:
+            raise ConsistencyError(
+                f"{self.scene.name}: at the start {blocked}. The velocities or loads move along these flexes, which "
+                "the links hold only at second order: the minimum-norm tensions (31) give them no resistance, so no "
+                "method follows the motion (it stops, or ends off with small link residuals). Brace the structure "
+                "so that no cell is flat and no string straight, or model the compliance with springs; to run it "
+                "anyway, \"options\": {\"run_loaded_blocked_flexes\": true} in the scene")
+
     def _loaded_blocked_flexes(self, X, U, F_input=None) -> str:
         """The second-order rigid flexes at X (structure.rigidity.second_order_rigid_flexes) along which the
         velocities U, or the accelerations the external forces alone would give, have more than

@@ -25,7 +25,8 @@ _LINK_KEYS = {"a", "b", "length", "name"}
 _SPRING_KEYS = {"a", "b", "stiffness", "rest_length", "damping", "name"}
 _SCENE_KEYS = {"name", "description", "gravity", "masses", "links", "springs", "options"}
 # "options": key -> what its value must be (each is a JSON boolean)
-_OPTION_KEYS = {"project_initial_positions": "a JSON boolean (true or false)"}
+_OPTION_KEYS = {"project_initial_positions": "a JSON boolean (true or false)",
+                "run_loaded_blocked_flexes": "a JSON boolean (true or false)"}
 
 # Largest magnitude of any number in a scene (SI units). The physics multiplies up to three of them (the energy
 # M |U|^2, a force M g on a lever X): below 1e100 every such product stays far from the 1.8e308 where floats

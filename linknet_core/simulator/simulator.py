@@ -74,7 +74,8 @@ def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: boo
     * positions must satisfy every link length (11) to ``length_tol`` relative, unless projection is
       asked for (argument, or ``"options": {"project_initial_positions": true}`` in the scene);
     * velocities are projected onto (12) and the correction is reported;
-    * hypothesis (35) is checked: velocities that admit no consistent accelerations are refused.
+    * hypothesis (35) is checked: velocities that admit no consistent accelerations are refused; so are velocities
+      or loads along a flex held only at second order (Dynamics.check_no_loaded_blocked_flex).
     """
     if project_positions is None:
         project_positions = bool(scene.options.get("project_initial_positions", False))
@@ -113,6 +114,7 @@ def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: boo
     if dv <= 1e-14 * max(1.0, float(np.abs(U).max())):
         dv, worst_mass = 0.0, -1
     dyn.check_consistent_velocities(X, U_projected, anchor_acc=anchor_acc)
+    dyn.check_no_loaded_blocked_flex(X, U_projected)
     return X, U_projected, InitialReport(worst, projected, dv, worst_mass)
 
 
