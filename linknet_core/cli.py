@@ -12,6 +12,7 @@ import numpy as np
 from linknet_core import visual  # light: matplotlib and plotly are imported only when a picture is drawn
 from linknet_core.ensemble import command as ensemble_command  # light: Dask and xarray are imported only when a study runs
 from linknet_core.errors import LinknetError
+from linknet_core.output import WriteError
 # one validated type per option, for every command (build_fmu.py imports them from here too)
 from linknet_core.options import (  # noqa: F401
     _numbers_may_be_negative, _output, animation_path, npz_path, one_line_errors, plot_path, positive_number,
@@ -116,17 +117,38 @@ def cmd_simulate(args) -> int:
 
 
 def _write_outputs(res, args) -> list:
-    """Write what the options ask for; every path was checked before the run (its type)."""
-    written = []
-    for path, write in ((args.out, res.save_npz), (args.plot, lambda p: plot_result(res, p)),
+    """Write what the options ask for (every path was checked before the run, by its type), each whole or not at
+    all (linknet_core.output.atomic_write). A write that fails anyway (a full disk) is one line naming the file;
+    the others are still written, the arrays are kept in the temporary folder instead (the line names where),
+    and the command then ends with exit status 1: nothing computed is lost, no failure reported as success."""
+    from linknet_core.output import atomic_write, rescue_path
+
+    written, failed = [], []
+    for path, write in ((args.out, res.save_npz),
+                        (args.plot, lambda p: atomic_write(p, lambda tmp: plot_result(res, tmp))),
                         (args.animate, lambda p: visual.animate_result(res, p))):
         if not path:
             continue
-        Path(os.path.abspath(Path(path).expanduser())).parent.mkdir(parents=True, exist_ok=True)
-        write(path)
+        try:
+            write(path)
+        except LinknetError as exc:
+            message = str(exc)
+            if path is args.out:
+                rescue = rescue_path(path)
+                try:
+                    res.save_npz(rescue)
+                    message += f"; the results are in {rescue} instead"
+                except WriteError as again:
+                    message += (f"; keeping them in the temporary folder failed too ({again.reason}): they are "
+                                f"lost, rerun with --out on a disk with room")
+            print(f"linknet {args.command}: error: {message}", file=sys.stderr)
+            failed.append(path)
+            continue
         if path is not args.animate:
             print(f"wrote {path}")
         written.append(path)
+    if failed:
+        raise SystemExit(1)
     return written
 
 
@@ -198,6 +220,9 @@ def main(argv=None) -> int:
                 "view": visual.cmd_view, "ensemble": ensemble_command.cmd_ensemble}
     try:
         return handlers[args.command](args)
+    except WriteError as exc:  # an output that could not be written (a full disk): not the input's fault
+        print(f"linknet {args.command}: error: {exc}", file=sys.stderr)
+        return 1
     except LinknetError as exc:
         print(f"linknet {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from linknet_core.errors import LinknetError
+from linknet_core.output import atomic_write
 from linknet_core.options import (_output, animation_path, colour_map, count, finite_number, positive_number,
                                   readable_file, validated)
 
@@ -383,15 +384,14 @@ def write_animation(motion: Motion, path, *, view: str = "auto", max_frames: int
     frames = motion.frame_indices(max_frames, fps, speed)
     picture = NetworkFigure(motion, view, size, cmap, tension_range, elev, azim, frame_times=motion.t[frames])
     writer = animation.PillowWriter(fps=fps) if suffix == ".gif" else animation.FFMpegWriter(fps=fps, codec="h264")
-    try:
-        with writer.saving(picture.fig, str(path), dpi=DPI):
+
+    def write(tmp):
+        with writer.saving(picture.fig, tmp, dpi=DPI):
             for i in frames:
                 picture.show(int(i))
                 writer.grab_frame()
-    except OSError as exc:
-        raise LinknetError(f"cannot write {path}: {exc.strerror or exc}") from None
-    except (RuntimeError, ValueError) as exc:  # ffmpeg failing part way
-        raise LinknetError(f"cannot write {path}: {exc}") from None
+
+    atomic_write(path, write, errors=(RuntimeError, ValueError))  # ffmpeg failing part way: RuntimeError
     seconds = time.perf_counter() - start
     span = float(motion.t[frames[-1]] - motion.t[frames[0]])
     playback = (len(frames) - 1) / fps
@@ -410,10 +410,7 @@ def write_still(motion: Motion, path, *, at: float | None = None, view: str = "a
     i = len(motion.t) - 1 if at is None else int(np.argmin(np.abs(motion.t - at)))
     picture = NetworkFigure(motion, view, size, cmap, tension_range, elev, azim)
     picture.show(i)
-    try:
-        picture.fig.savefig(path, dpi=DPI)
-    except OSError as exc:
-        raise LinknetError(f"cannot write {path}: {exc.strerror or exc}") from None
+    atomic_write(path, lambda tmp: picture.fig.savefig(tmp, dpi=DPI))
     return Written(path, 1, len(motion.t), time.perf_counter() - start,
                    f"t = {motion.t[i]:g} s, {size[0]}x{size[1]} px, {picture.view} view")
 
@@ -559,11 +556,8 @@ def write_html(motion: Motion, path, **options) -> Written:
     _output_dir(path)
     start = time.perf_counter()
     figure, frames = build_html_figure(motion, **options)
-    try:
-        pio.write_html(figure, str(path), include_plotlyjs=True, full_html=True, auto_play=False,
-                       config=dict(displaylogo=False, scrollZoom=True))
-    except OSError as exc:
-        raise LinknetError(f"cannot write {path}: {exc.strerror or exc}") from None
+    atomic_write(path, lambda tmp: pio.write_html(figure, tmp, include_plotlyjs=True, full_html=True, auto_play=False,
+                                                  config=dict(displaylogo=False, scrollZoom=True)))
     return Written(path, len(frames), len(motion.t), time.perf_counter() - start,
                    f"{figure.layout.scene.camera.projection.type} camera, plotly.js inline")
 

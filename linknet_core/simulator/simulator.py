@@ -691,10 +691,14 @@ class Result:
         return float(self.energy[-1] - self.energy[0]) / self.energy_scale
 
     def save_npz(self, path) -> None:
-        np.savez_compressed(
-            path, t=self.t, X=self.X, U=self.U, T=self.T, energy=self.energy, residual=self.residual,
+        """Write the run's arrays to ``path`` (.npz) whole or not at all (``linknet_core.output.atomic_write``):
+        a failure raises ``WriteError`` naming the file and leaves what was there before."""
+        from linknet_core.output import atomic_write
+
+        atomic_write(path, lambda tmp: np.savez_compressed(
+            tmp, t=self.t, X=self.X, U=self.U, T=self.T, energy=self.energy, residual=self.residual,
             velocity_residual=self.velocity_residual, mass_names=np.array(self.scene.mass_names),
-            k1=self.scene.k1 + 1, k2=self.scene.k2 + 1, fixed=self.scene.fixed, method=self.method)
+            k1=self.scene.k1 + 1, k2=self.scene.k2 + 1, fixed=self.scene.fixed, method=self.method))
 
     def summary(self) -> str:
         s = self.stats
