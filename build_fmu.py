@@ -160,9 +160,11 @@ def _system_library(soname: str) -> str | None:
     return None
 
 
-def rewrite_fmu(fmu: Path, model_description: bytes, link_python: bool) -> str | None:
+def rewrite_fmu(fmu: Path, model_description: bytes, link_python: bool, dest: Path | None = None) -> str | None:
     """Replace modelDescription.xml, (optionally) relink pythonfmu's Linux binary and put the front layer
-    (fmu_src/pythonfmu_front) in front of it, in place."""
+    (fmu_src/pythonfmu_front) in front of it: written to ``dest`` (default: in place) whole or not at all
+    (linknet_core.output.atomic_write), a failed write one line naming the file."""
+    from linknet_core.output import WriteError, atomic_write
     from linknet_fmu.layout import DERIVATIVE_VR_BASE  # how input derivatives reach the slaves (see front.c)
     from pythonfmu_front.build import FrontBuildError, compile_front, inner_library_name
     root = ET.fromstring(model_description)
@@ -195,9 +197,15 @@ def rewrite_fmu(fmu: Path, model_description: bytes, link_python: bool) -> str |
                 out.append((f"binaries/linux64/{inner_library_name(ident)}", data))
                 continue
             out.append((info.filename, data))
-        with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zout:
-            for name, data in out:
-                zout.writestr(name, data)
+        def write(tmp):
+            with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
+                for name, data in out:
+                    zout.writestr(name, data)
+
+        try:
+            atomic_write(fmu if dest is None else dest, write)
+        except WriteError as e:
+            raise SystemExit(f"build_fmu: {e}") from None
     return linked
 
 
@@ -338,19 +346,17 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
         # an input-driven anchor's P takes derivatives (its V and A): fmi2SetRealInputDerivatives, via the front layer
         built = _pythonfmu_build(FMU_SRC / "linknet_slave.py", stage / "out", project,
                                  interpolate_inputs=bool(layout.anchor_inputs.size))
-        shutil.move(str(built), out)
-
-    with zipfile.ZipFile(out) as z:
-        xml = z.read("modelDescription.xml")
-    inv_mass = scene.inv_mass
-    deps = layout.dependencies(inv_mass)
-    declared = {v.name: v.declared_type for v in layout.reals}
-    initial = layout.initial_dependencies(inv_mass)
-    experiment = dict(startTime=0.0, stopTime=float(stop_time or fmu_opts.get("stop_time", 2.0)),
-                      stepSize=float(comm_step or fmu_opts.get("comm_step", 1e-2)),
-                      tolerance=cfg["tolerance"])
-    md = postprocess_model_description(xml, declared, deps, initial, experiment, cfg["description"])
-    linked = rewrite_fmu(out, md, link_python)
+        with zipfile.ZipFile(built) as z:
+            xml = z.read("modelDescription.xml")
+        inv_mass = scene.inv_mass
+        deps = layout.dependencies(inv_mass)
+        declared = {v.name: v.declared_type for v in layout.reals}
+        initial = layout.initial_dependencies(inv_mass)
+        experiment = dict(startTime=0.0, stopTime=float(stop_time or fmu_opts.get("stop_time", 2.0)),
+                          stepSize=float(comm_step or fmu_opts.get("comm_step", 1e-2)),
+                          tolerance=cfg["tolerance"])
+        md = postprocess_model_description(xml, declared, deps, initial, experiment, cfg["description"])
+        linked = rewrite_fmu(built, md, link_python, dest=out)  # out is written once, whole
     if not quiet:
         print(f"built {out} (model {ident}: {sum(v.causality == 'input' for v in layout.reals)} inputs, "
               f"{sum(v.causality == 'output' for v in layout.reals)} outputs"
@@ -370,14 +376,13 @@ def build_component_fmu(component: str, out=None, link_python=True, quiet=False)
         shutil.copytree(FMU_SRC / "linknet_fmu", stage / "linknet_fmu",
                         ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
         built = _pythonfmu_build(script, stage / "out", [stage / "linknet_fmu"])
-        shutil.move(str(built), out)
-    with zipfile.ZipFile(out) as z:
-        xml = z.read("modelDescription.xml")
-    md = postprocess_model_description(xml, module.DECLARED_TYPES, module.OUTPUT_DEPENDENCIES,
-                                       getattr(module, "INITIAL_DEPENDENCIES", module.OUTPUT_DEPENDENCIES),
-                                       module.DEFAULT_EXPERIMENT,
-                                       module.DESCRIPTION)
-    linked = rewrite_fmu(out, md, link_python)
+        with zipfile.ZipFile(built) as z:
+            xml = z.read("modelDescription.xml")
+        md = postprocess_model_description(xml, module.DECLARED_TYPES, module.OUTPUT_DEPENDENCIES,
+                                           getattr(module, "INITIAL_DEPENDENCIES", module.OUTPUT_DEPENDENCIES),
+                                           module.DEFAULT_EXPERIMENT,
+                                           module.DESCRIPTION)
+        linked = rewrite_fmu(built, md, link_python, dest=out)  # out is written once, whole
     if not quiet:
         print(f"built {out} ({component}" + (f"; binary linked to {linked})" if linked else ")"))
     return out

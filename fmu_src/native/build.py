@@ -599,19 +599,21 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
         md = postprocess(raw, {v.name: v.declared_type for v in layout.reals}, layout.dependencies(inv_mass),
                          layout.initial_dependencies(inv_mass), experiment, cfg["description"])
         (tmp / "fmu" / "modelDescription.xml").write_bytes(md)
-        packed = tmp / "out.fmu"  # written whole, then moved: a failed build leaves no half FMU behind
-        with zipfile.ZipFile(packed, "w", zipfile.ZIP_DEFLATED) as z:
-            z.write(tmp / "fmu" / "modelDescription.xml", "modelDescription.xml")
-            if binary is not None:
-                z.write(binary, f"binaries/{folder}/{ident}.so")
-            for p in sorted(sources.rglob("*")):
-                if p.is_file():
-                    z.write(p, "sources/" + p.relative_to(sources).as_posix())
+        from linknet_core.output import WriteError, atomic_write
+
+        def pack(target):  # written whole, then renamed into place: a failed build leaves no half FMU behind
+            with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
+                z.write(tmp / "fmu" / "modelDescription.xml", "modelDescription.xml")
+                if binary is not None:
+                    z.write(binary, f"binaries/{folder}/{ident}.so")
+                for p in sorted(sources.rglob("*")):
+                    if p.is_file():
+                        z.write(p, "sources/" + p.relative_to(sources).as_posix())
+
         try:
-            out.parent.mkdir(parents=True, exist_ok=True)
-            shutil.move(str(packed), str(out))
-        except OSError as e:
-            raise NativeBuildError(f"cannot write {out}: {e.strerror or e}") from None
+            atomic_write(out, pack)
+        except WriteError as e:
+            raise NativeBuildError(str(e)) from None
     if not quiet:
         size = out.stat().st_size
         print(f"built {out} (native model {ident}: {sum(v.causality == 'input' for v in layout.reals)} inputs, "
