@@ -31,7 +31,8 @@ DEFAULT_OUTPUTS = ("X", "U", "T")
 def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, method: str | None = None,
              dt: float | None = None, rtol: float | None = None, atol: float | None = None, n_out: int = 201,
              output_dt: float | None = None, outputs=DEFAULT_OUTPUTS, tip=None, project_initial: bool | None = None,
-             out=None, client=None, workers: int | None = None, members_per_task: int | None = None, progress=None):
+             out=None, client=None, workers: int | None = None, members_per_task: int | None = None, progress=None,
+             connect_timeout: float | None = None):
     """Run a study: one member per parameter set, each a ``Simulator`` run (or an FMU run through fmpy).
 
     scene: a :class:`Scene` or a scene JSON file.
@@ -54,6 +55,9 @@ def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, met
     out: netCDF file to write (members stream into it as they finish); None keeps the study in memory.
     client: None (a LocalCluster, ``workers`` processes, default one per core), a scheduler address, or a
         ``distributed.Client``. members_per_task: fixed batch size (default: adaptive).
+    connect_timeout: seconds (default 10) to reach a scheduler address and see its Dask handshake; an address
+        where none answers (refused, unreachable, an HTTP server such as the dashboard's port, a server that
+        never answers) raises LinknetError naming the address and what was found there.
     progress: True for a progress bar on stderr, or a callable taking an ``engine.Progress``.
 
     Returns an xarray Dataset: X, U (member, time, mass, axis), T (member, time, link), Freact, the
@@ -105,7 +109,8 @@ def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, met
              "varied": [p.name for p in plan.parameters], "grid_shape": list(plan.grid_shape),
              "n_samples": plan.n_samples, "created": datetime.now(timezone.utc).isoformat(timespec="seconds")}
     started = time.perf_counter()
-    with Engine(client, workers) as engine:  # connect first: an unreachable cluster leaves no file behind
+    # connect first: an unreachable cluster leaves no file behind
+    with Engine(client, workers, **_connect_timeout(connect_timeout, client)) as engine:
         facts["engine"] = engine.description
         try:
             sink = StudyFile(path, spec, plan, base)
@@ -129,6 +134,21 @@ def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, met
             if final is None and keep_in_memory:
                 path.unlink(missing_ok=True)
     return _open(path, keep_in_memory)
+
+
+def _connect_timeout(seconds, client) -> dict:
+    """Engine's keyword for ``connect_timeout=`` (None: its default, CONNECT_TIMEOUT), which bounds only the
+    connection to a scheduler address."""
+    if seconds is None:
+        return {}
+    if not isinstance(client, str):
+        raise LinknetError("connect_timeout (--connect-timeout) bounds the connection to a scheduler address "
+                           "(client='tcp://HOST:PORT', --scheduler); "
+                           + ("the LocalCluster is started here" if client is None else "this client is connected"))
+    if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not (math.isfinite(seconds)
+                                                                                  and seconds > 0):
+        raise LinknetError(f"connect_timeout must be a positive finite number of seconds, got {seconds!r}")
+    return {"connect_timeout": float(seconds)}
 
 
 def _open(path: Path, keep_in_memory: bool):

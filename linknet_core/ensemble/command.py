@@ -92,6 +92,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=_output((), "the netCDF file"), help="netCDF file the members stream into (read it with xarray.open_dataset)")
     p.add_argument("--scheduler", metavar="ADDR", type=scheduler_address, help="run on an existing Dask cluster (tcp://host:8786) instead "
                                                        "of a LocalCluster")
+    p.add_argument("--connect-timeout", metavar="SECONDS", type=positive_number, default=None,
+                   help="seconds to reach the --scheduler and see its Dask handshake (default 10); an address where "
+                        "no scheduler answers (refused, unreachable, the dashboard's HTTP port, a silent server) is "
+                        "one line saying what was found there")
     p.add_argument("--workers", type=count, help="worker processes of the LocalCluster (default one per core)")
     p.add_argument("--members-per-task", type=count, help="fixed batch size (default: sized from the member time)")
     p.add_argument("--plot", metavar="PNG", type=_output((".png",), "the plot"), help="draw the quantities of interest against the varied parameters")
@@ -211,6 +215,7 @@ def cmd_ensemble(args) -> int:
         ds = ensemble(args.scene, fmu=args.fmu, vary=vary, samples=samples, t_end=args.t_end, method=args.method,
                       dt=args.dt, rtol=args.rtol, atol=args.atol, n_out=args.n_out, outputs=outputs, tip=args.tip,
                       project_initial=args.project_initial, out=args.out, client=args.scheduler,
+                      connect_timeout=args.connect_timeout,
                       workers=args.workers, members_per_task=args.members_per_task, progress=not args.no_progress)
     except KeyboardInterrupt:
         kept = f"; the members finished so far are in {args.out}" if args.out else ""

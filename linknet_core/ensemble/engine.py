@@ -21,6 +21,8 @@ from __future__ import annotations
 import logging
 import math
 import os
+import socket
+import struct
 import threading
 import time
 from collections import deque
@@ -36,6 +38,9 @@ TASK_SECONDS = 0.25  # target work per task once the member time is known
 # study keeps below this many tasks per second, so on a large cluster tasks grow to threads / this seconds
 MAX_TASKS_PER_SECOND = 500
 WORKER_WAIT_SECONDS = 60.0  # how long a study waits for the first worker of an existing cluster
+CONNECT_TIMEOUT = 10.0  # seconds to connect to a scheduler address and see its Dask handshake (connect_timeout=)
+SCHEDULER_PORT = 8786  # Dask's default scheduler port (its dashboard's HTTP server: 8787)
+_HANDSHAKE_MAX_BYTES = 1 << 20  # a scheduler's handshake is ~100 bytes; a first frame announcing more is not one
 
 
 @dataclass
@@ -66,7 +71,7 @@ def available_cores() -> int:
 class Engine:
     """A Dask client for one study; closes what it opened (never a cluster it was given)."""
 
-    def __init__(self, client=None, workers: int | None = None, connect_timeout: float = 10.0):
+    def __init__(self, client=None, workers: int | None = None, connect_timeout: float = CONNECT_TIMEOUT):
         from distributed import Client, LocalCluster
 
         self._cluster = None
@@ -90,10 +95,11 @@ class Engine:
             raise LinknetError("workers= sets the size of the embedded LocalCluster; an existing cluster "
                                "(client=...) keeps the workers it has")
         if isinstance(client, str):
+            check_scheduler(client, connect_timeout)  # bounded: distributed's own handshake read has no timeout
             try:
                 self.client = Client(client, timeout=connect_timeout)
-            except (OSError, TimeoutError) as exc:
-                raise LinknetError(f"cannot reach the Dask scheduler at {client}: {exc}") from None
+            except Exception as exc:  # OSError, TimeoutError, a reply that is not Dask's (MemoryError), ...
+                raise LinknetError(f"cannot reach the Dask scheduler at {client}: {error_text(exc)}") from None
             self._owns_client = True
         elif isinstance(client, Client):
             self.client = client
@@ -123,6 +129,117 @@ class Engine:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT) -> None:
+    """Refuse, in one line naming the address, a scheduler address where no Dask scheduler answers, within
+    ``timeout`` seconds in all. ``distributed.Client(address, timeout=)`` bounds the TCP connect but not the
+    read of the scheduler's handshake: a server that accepts and never answers hangs it, and an HTTP server's
+    answer read as a Dask frame length asks for exabytes (a MemoryError). So a plain socket looks first:
+
+    * the TCP connect (a refused connection is tried again until the timeout, as Dask does: a scheduler that
+      is just starting refuses for a moment); refused, unreachable, an unknown host are each said so;
+    * a Dask scheduler speaks first (its handshake, one frame whose 8-byte length is small): the probe waits
+      up to half the timeout for the peer's first bytes, sending nothing;
+    * a peer still silent then gets an HTTP request (``GET /``): an HTTP answer is the dashboard-port slip
+      (8787 for 8786); no answer at all within the timeout is a server that never speaks Dask.
+
+    Only tcp:// (or no scheme) addresses are probed this way; tls:// and ws(s):// get the TCP connect check
+    (their client speaks first), other schemes are left to Dask.
+    """
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(address)
+        if scheme not in ("tcp", "tls", "ws", "wss"):
+            return
+        host, port = parse_host_port(location)
+    except (ValueError, TypeError) as exc:
+        raise LinknetError(f"{address!r} is not a Dask scheduler address ({exc}); write tcp://HOST:PORT, e.g. "
+                           f"tcp://127.0.0.1:{SCHEDULER_PORT}") from None
+    if not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0):
+        raise LinknetError(f"connect_timeout must be a positive number of seconds, got {timeout!r}")
+    start = time.monotonic()
+    deadline = start + timeout
+
+    def fail(found: str):
+        raise LinknetError(f"no Dask scheduler at {address}: {found}")
+
+    sock = _connect(host, port, deadline, timeout, fail)
+    with sock:
+        if scheme != "tcp":
+            return
+        first = _receive(sock, start + timeout / 2)
+        if first is None:  # silent so far: an HTTP server waits for a request
+            try:
+                sock.sendall(f"GET / HTTP/1.0\r\nHost: {host}:{port}\r\n\r\n".encode())
+                answer = _receive(sock, deadline)
+            except OSError:
+                answer = b""
+            if answer is None:
+                fail(f"the server accepted the connection but never answered the Dask handshake within "
+                     f"{timeout:g} s (nor an HTTP request)")
+            if answer.startswith(b"HTTP/"):
+                fail(f"an HTTP server answered ({_first_line(answer)}): is this the dashboard port? the scheduler's default port "
+                     f"is {SCHEDULER_PORT}")
+            if not answer:
+                fail("the server accepted the connection and closed it without the Dask handshake")
+            fail(f"the server did not start the Dask handshake and answered an HTTP request with {answer[:40]!r}")
+        if not first:
+            fail("the server accepted the connection and closed it without the Dask handshake")
+        if first.startswith(b"HTTP/"):
+            fail(f"an HTTP server spoke ({_first_line(first)}): is this the dashboard port? the scheduler's default "
+                 f"port is {SCHEDULER_PORT}")
+        if len(first) < 8 or not 0 < struct.unpack("<Q", first[:8])[0] <= _HANDSHAKE_MAX_BYTES:
+            length = struct.unpack("<Q", first[:8])[0] if len(first) >= 8 else None
+            meaning = "" if length is None else (f"; read as a Dask frame, its first 8 bytes announce "
+                                                 f"{_bytes_text(length)}, which is no handshake")
+            fail(f"the server speaks another protocol: it sent {first[:40]!r}{meaning}")
+
+
+def _connect(host, port, deadline, timeout, fail) -> socket.socket:
+    """A TCP connection to (host, port) by the deadline; a refused one is tried again until then."""
+    delay = 0.05
+    while True:
+        try:
+            return socket.create_connection((host, port), timeout=max(deadline - time.monotonic(), 0.01))
+        except ConnectionRefusedError:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                fail(f"the connection was refused (tried again for {timeout:g} s): nothing listens on port {port} "
+                     f"of {host}; is the scheduler running, and is this its port? (its default is {SCHEDULER_PORT})")
+            time.sleep(min(delay, left))
+            delay = min(2 * delay, 1.0)
+        except socket.gaierror as exc:
+            fail(f"the host name {host!r} cannot be resolved ({exc.strerror or exc})")
+        except TimeoutError:
+            fail(f"unreachable: no answer to the TCP connection within {timeout:g} s (no such host on the "
+                 "network, or a firewall dropping the connection)")
+        except OSError as exc:  # EHOSTUNREACH, ENETUNREACH, ...
+            fail(f"unreachable ({exc.strerror or exc})")
+
+
+def _receive(sock: socket.socket, deadline: float) -> bytes | None:
+    """The first bytes the peer sends by the deadline; b"" if it closed the connection, None if it stayed
+    silent."""
+    try:
+        sock.settimeout(max(deadline - time.monotonic(), 0.001))
+        return sock.recv(4096)
+    except TimeoutError:
+        return None
+    except OSError:  # reset by the peer
+        return b""
+
+
+def _first_line(data: bytes) -> str:
+    return data.split(b"\r\n", 1)[0].split(b"\n", 1)[0].decode("latin-1").strip()[:80]
+
+
+def _bytes_text(n: int) -> str:
+    for unit, size in (("EiB", 1 << 60), ("PiB", 1 << 50), ("TiB", 1 << 40), ("GiB", 1 << 30), ("MiB", 1 << 20)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{n} bytes"
 
 
 class _BatchSizer:
