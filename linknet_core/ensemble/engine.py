@@ -163,7 +163,7 @@ def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT) -> None:
     deadline = start + timeout
 
     def fail(found: str):
-        raise LinknetError(f"no Dask scheduler at {address}: {found}")
+        raise LinknetError(f"cannot reach the Dask scheduler at {address}: {found}")
 
     sock = _connect(host, port, deadline, timeout, fail)
     with sock:
