@@ -19,17 +19,17 @@ class WriteError(LinknetError):
     """An output could not be written (disk full, file too large, permissions, a folder that vanished); nothing
     was left at the path but what was there before. ``path`` is the file, ``reason`` what happened."""
 
-    def __init__(self, path, reason: str, kept: bool = False):
+    def __init__(self, path, reason: str, kept: bool = False, detail: str | None = None):
         self.path, self.reason = str(path), reason
-        left = "the previous file there is kept" if kept else "nothing was left there"
+        left = detail or ("the previous file there is kept" if kept else "nothing was left there")
         super().__init__(f"cannot write {path}: {reason} ({left})")
 
 
 def failure_reason(exc: BaseException) -> str:
     """An OSError in a few words: 'No space left on device (errno 28)'; other errors as 'Type: message'."""
-    if isinstance(exc, OSError) and exc.strerror:
+    if isinstance(exc, OSError) and exc.strerror and exc.errno:
         return f"{exc.strerror} (errno {exc.errno})"
-    text = str(exc) or type(exc).__name__
+    text = " ".join(str(exc).split()) or type(exc).__name__  # one line, whatever the library wrote
     return text if isinstance(exc, OSError) else f"{type(exc).__name__}: {text}"
 
 

@@ -13,10 +13,13 @@ then written into those variables through h5py, which h5netcdf itself calls: und
 from __future__ import annotations
 
 import json
+import os
+import re
 import time
 
 import numpy as np
 
+from linknet_core.output import WriteError, failure_reason, rescue_path
 from linknet_core.version import __version__
 from linknet_core.scene import Scene
 from linknet_core.ensemble.members import OUTPUTS, StudySpec
@@ -40,22 +43,102 @@ _QOI_META = {
                                 "(linknet_core.accuracy; NaN where the member's FMU does not report one)"),
 }
 FLUSH_SECONDS = 2.0  # at most this much finished work is only in memory should the client process die
+_QOI_KEYS = frozenset(_QOI_META)
+
+
+def _h5_reason(exc: BaseException) -> str:
+    """What an h5py/HDF5 failure comes down to, in one line: 'No space left on device (errno 28)' where HDF5's
+    text names the system error (its messages span lines and carry buffer addresses)."""
+    text = str(exc)
+    match = re.search(r"errno = (\d+), error message = '([^']*)'", text)
+    return f"{match.group(2)} (errno {match.group(1)})" if match else failure_reason(exc)
+
+
+def _abandon(h5file) -> None:
+    """Close an h5py file whose writes failed without writing anything more to it. HDF5 closing a file it cannot
+    write (a full disk) fails, and its objects' deallocation later crashed the process (SIGSEGV at exit): its
+    descriptor is pointed at /dev/null first, so the close succeeds and what reached the disk stays as it was."""
+    if h5file is None:
+        return
+    _silence(h5file)
+    try:
+        h5file.close()
+    except Exception:
+        pass
+
+
+def _silence(h5file) -> None:
+    """Point the file's descriptor at /dev/null: HDF5 writes nothing more to the disk, and its writes succeed."""
+    try:
+        fd = h5file.id.get_vfd_handle()
+        null = os.open(os.devnull, os.O_RDWR)
+        try:
+            os.dup2(null, fd)
+        finally:
+            os.close(null)
+    except Exception:  # no descriptor (closed already, another driver): close as it is
+        pass
 
 
 class StudyFile:
     """Creates the file, writes batches of members, records retries, and closes it with the study's facts."""
 
     def __init__(self, path, spec: StudySpec, plan: Plan, scene: Scene):
-        import h5netcdf
         import h5py
 
         self.path = str(path)
         self._string = h5py.string_dtype()
+        self._setup = (spec, plan, scene)  # to lay out a rescue file like this one
+        self._held: list = []  # batches written since the last flush that reached the disk, whole
+        self._flushed: list = []  # batches on disk: their quantities of interest, status and errors only
+        self._failure: WriteError | None = None
+        self._is_rescue = False
+        self.h5 = None
+        problem = self._room_problem(spec, plan, scene)
+        if problem:
+            raise WriteError(self.path, problem)
+        try:
+            self._layout(spec, plan, scene)
+            self.h5 = h5py.File(self.path, "r+")
+            self._variables = {name: self.h5[name] for name in  # looked up once: a lookup costs ~0.1 ms
+                               [*spec.outputs, *_QOI_META, "status", "error", "worker", "run_seconds", "retried"]}
+        except Exception as exc:  # nothing computed yet: no half file left
+            _abandon(self.h5)
+            try:
+                os.unlink(self.path)
+            except OSError:
+                pass
+            raise WriteError(self.path, _h5_reason(exc)) from None
+        self._last_flush = time.monotonic()
+
+    def _room_problem(self, spec: StudySpec, plan: Plan, scene: Scene) -> str | None:
+        """Why the study cannot fit, said before anything runs: its numbers alone (uncompressed doubles) exceed the
+        free space of the file's disk or the process's file size limit (None if they fit). Disk space taken while it
+        runs is answered by the rescue file instead."""
+        import resource
+        import shutil
+
+        per_time = {"X": 3 * scene.K, "U": 3 * scene.K, "T": scene.L, "Freact": 3 * scene.fixed_indices.size}
+        values = plan.n_members * (spec.times.size * sum(per_time[o] for o in spec.outputs) + 9)
+        need = 8 * values
+        free = shutil.disk_usage(os.path.dirname(os.path.abspath(self.path))).free
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+        room = min(free, limit if limit != resource.RLIM_INFINITY else free)
+        if need > room:
+            what = "the free space on its disk" if room == free else "the file size limit (ulimit -f)"
+            return (f"the study's {plan.n_members} members need at least {need / 1e6:.3g} MB, {what} is "
+                    f"{room / 1e6:.3g} MB; keep fewer outputs (--outputs), fewer times (--n-out) or write elsewhere")
+        return None
+
+    def _layout(self, spec: StudySpec, plan: Plan, scene: Scene) -> None:
+        import h5netcdf
+
         n, nt = plan.n_members, spec.times.size
         dims = {"member": n, "time": nt, "mass": scene.K, "axis": 3, "link": scene.L,
                 "anchor": scene.fixed_indices.size}
         member_coordinates = " ".join(p.name for p in plan.parameters)
-        with h5netcdf.File(self.path, "w") as f:
+        f = h5netcdf.File(self.path, "w")
+        try:
             f.dimensions = dims
             self._coordinate(f, "member", ("member",), np.arange(n), "", "member number (0-based, in plan order)")
             self._coordinate(f, "time", ("time",), spec.times, "s", "output time")
@@ -86,10 +169,10 @@ class StudyFile:
             retried = self._per_member(f, "retried", "1 if the member ran again after its worker died", "",
                                        dtype="i1")
             retried[:] = np.zeros(n, dtype="i1")
-        self.h5 = h5py.File(self.path, "r+")
-        self._variables = {name: self.h5[name] for name in  # looked up once: a lookup costs ~0.1 ms
-                           [*spec.outputs, *_QOI_META, "status", "error", "worker", "run_seconds", "retried"]}
-        self._last_flush = time.monotonic()
+            f.close()
+        except BaseException:
+            _abandon(f._h5file)
+            raise
 
     def _coordinate(self, f, name, dims, values, unit, long_name):
         text = np.asarray(values).dtype == object
@@ -121,35 +204,152 @@ class StudyFile:
         return var
 
     def write(self, batch: dict) -> None:
-        """One finished batch (members.run_batch's result): consecutive members, written as one slab."""
-        rows = slice(batch["first"], batch["first"] + batch["count"])
-        variables = self._variables
-        for name, values in batch["outputs"].items():
-            variables[name][rows] = values
-        errors = batch["error"]
-        variables["status"][rows] = np.array(["failed" if e else "ok" for e in errors], dtype=object)
-        variables["error"][rows] = np.array(errors, dtype=object)
-        variables["worker"][rows] = np.array([batch["worker"]] * batch["count"], dtype=object)
-        variables["run_seconds"][rows] = batch["run_seconds"]
-        now = time.monotonic()
-        if now - self._last_flush > FLUSH_SECONDS:
-            self.h5.flush()
-            self._last_flush = now
+        """One finished batch (members.run_batch's result): consecutive members, written as one slab. Held in
+        memory until a flush has put it on the disk; a write or flush that fails (a full disk) raises WriteError,
+        and ``close`` then keeps what the file could not take in a rescue file."""
+        if self._failure is not None:
+            raise self._failure
+        self._held.append(batch)
+        try:
+            rows = slice(batch["first"], batch["first"] + batch["count"])
+            variables = self._variables
+            for name, values in batch["outputs"].items():
+                variables[name][rows] = values
+            errors = batch["error"]
+            variables["status"][rows] = np.array(["failed" if e else "ok" for e in errors], dtype=object)
+            variables["error"][rows] = np.array(errors, dtype=object)
+            variables["worker"][rows] = np.array([batch["worker"]] * batch["count"], dtype=object)
+            variables["run_seconds"][rows] = batch["run_seconds"]
+            now = time.monotonic()
+            if now - self._last_flush > FLUSH_SECONDS:
+                self.h5.flush()
+                self._flushed_now()
+                self._last_flush = now
+        except Exception as exc:
+            raise self._fail(exc) from None
+
+    def _flushed_now(self) -> None:
+        """The held batches reached the disk: keep only their small part (what a damaged file would lose)."""
+        for batch in self._held:
+            self._flushed.append({**batch, "outputs": {k: v for k, v in batch["outputs"].items() if k in _QOI_KEYS}})
+        self._held = []
+
+    def _fail(self, exc: BaseException) -> WriteError:
+        """The file cannot be written: abandon it (nothing more is written to it) and remember why."""
+        if self.h5 is not None:
+            _silence(self.h5)  # before any of its objects is released: releasing one flushes it
+        self._variables = {}
+        _abandon(self.h5)
+        self.h5 = None
+        self._failure = WriteError(self.path, _h5_reason(exc))
+        return self._failure
 
     def mark_retried(self, members) -> None:
         members = sorted(members)
-        if members:
-            self._variables["retried"][members] = np.ones(len(members), dtype="i1")
+        if members and self._failure is None:
+            try:
+                self._variables["retried"][members] = np.ones(len(members), dtype="i1")
+            except Exception as exc:
+                raise self._fail(exc) from None
 
     def close(self, attrs: dict) -> None:
         """Close the streaming writes, then write the study's facts as netCDF global attributes (None values
-        are left out)."""
+        are left out). If the file could not be written (now or before), the members it may lack are written to a
+        rescue file in the temporary folder, and a WriteError says which members are readable where."""
         import h5netcdf
 
-        self.h5.close()
         attrs = {"title": "linknet ensemble", "linknet_version": __version__, **attrs}
-        with h5netcdf.File(self.path, "a") as f:
-            for key, value in attrs.items():
-                if value is None:
-                    continue
-                f.attrs[key] = json.dumps(value) if isinstance(value, (dict, list, tuple)) else value
+        if self._failure is None:
+            try:
+                self.h5.flush()  # a full disk fails here, with every object still open, not inside close
+                self._variables = {}
+                self.h5.close()
+                self.h5 = None
+                self._flushed_now()
+                with h5netcdf.File(self.path, "a") as f:
+                    for key, value in attrs.items():
+                        if value is None:
+                            continue
+                        f.attrs[key] = json.dumps(value) if isinstance(value, (dict, list, tuple)) else value
+                return
+            except Exception as exc:
+                self._fail(exc)
+        if self._is_rescue:  # a rescue file that cannot be written either: the caller says what is lost
+            raise self._failure
+        self._rescue({**attrs, "complete": 0})
+
+    def _readable_members(self) -> int | None:
+        """How many members the abandoned file shows as run (ok or failed), or None if it cannot be read as a
+        dataset (xarray opens every variable's metadata; the per-member variables are read whole)."""
+        import xarray as xr
+
+        try:
+            with xr.open_dataset(self.path, engine="h5netcdf") as ds:
+                for name in (*_QOI_META, "status", "error"):
+                    ds[name].load()
+                return int(np.sum(ds["status"].values != "not run"))
+        except Exception:
+            return None
+
+    def _salvage(self, batches: list) -> list:
+        """The batches on the disk of a file that cannot be read back as a whole, with the outputs (X, U, T,
+        Freact) that can still be read from it (HDF5 on a full disk damages the metadata it was writing: the
+        string heap, a dataset's header; the others stay readable)."""
+        import h5py
+
+        try:
+            f = h5py.File(self.path, "r")
+        except Exception:
+            return batches
+        salvaged = []
+        with f:
+            for batch in batches:
+                rows = slice(batch["first"], batch["first"] + batch["count"])
+                outputs = dict(batch["outputs"])
+                ran = np.array([not e for e in batch["error"]])
+                for name in self._setup[0].outputs:
+                    try:
+                        values = f[name][rows]
+                    except Exception:
+                        continue
+                    if np.isfinite(values[ran]).all():  # a chunk that never reached the disk reads as NaN
+                        outputs[name] = values
+                salvaged.append({**batch, "outputs": outputs})
+        return salvaged
+
+    def _rescue(self, attrs: dict) -> None:
+        failure = self._failure
+        on_disk = sum(b["count"] for b in self._flushed)
+        readable = self._readable_members()
+        intact = readable is not None and readable >= on_disk
+        keep = self._held if intact else self._salvage(self._flushed) + self._held  # a damaged file: all held
+        count = sum(b["count"] for b in keep)
+        if intact:
+            where = f"the {readable} members written before are readable in it" if readable else \
+                "it holds no finished member"
+        else:
+            where = "the failed write damaged it: it cannot be opened as a dataset"
+        if not count:
+            raise WriteError(self.path, failure.reason, detail=f"{where}; no other member had finished") from None
+        rescue = rescue_path(self.path)
+        try:
+            sink = StudyFile(rescue, *self._setup)
+            sink._is_rescue = True
+            for batch in keep:
+                sink.write(batch)
+            sink.close({**attrs, "rescued_from": self.path})
+        except WriteError as again:
+            try:
+                os.unlink(rescue)
+            except OSError:
+                pass
+            raise WriteError(self.path, failure.reason,
+                             detail=f"{where}; {count} more finished member(s) could not be kept in the temporary "
+                                    f"folder either ({again.reason}) and are lost") from None
+        outputs = self._setup[0].outputs
+        partial = 0 if intact else sum(b["count"] for b in keep if any(o not in b["outputs"] for o in outputs))
+        quantities = f" ({partial} of them with their quantities of interest, status and errors only)" if partial \
+            else ""
+        raise WriteError(self.path, failure.reason,
+                         detail=f"{where}; {count} finished member(s){quantities} are in {rescue}, a study file "
+                                "of the same layout (xarray.open_dataset)") from None
