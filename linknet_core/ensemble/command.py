@@ -228,7 +228,9 @@ def cmd_ensemble(args) -> int:
     print(summary(ds))
     if args.out:
         print(f"wrote {args.out}")
-    if args.plot:
-        plot(ds, args.plot)
+    if args.plot:  # whole or not at all; a failed write is one line naming it (WriteError, exit 1)
+        from linknet_core.output import atomic_write
+
+        atomic_write(args.plot, lambda tmp: plot(ds, tmp))
         print(f"wrote {args.plot}")
     return 0

@@ -291,3 +291,17 @@ def test_study_file_write_failure_is_a_write_error(tmp_path, monkeypatch):
     with xr.open_dataset(rescued, engine="h5netcdf") as ds:
         assert list(ds["status"].values) == ["ok", "ok"]
         assert float(ds["T"].sum()) == 12.0
+
+
+def test_ensemble_plot_on_a_full_disk(tmp_path, small_disk):
+    """The study fits, its --plot does not: the study is written and said, the plot is one error line, exit 1.
+    (report.py's own matplotlib warning on a one-parameter plot may precede it on stderr: not an error.)"""
+    study, plot = tmp_path / "s.nc", small_disk("16k") / "s.png"  # the plot is ~40 KB (measured)
+    proc = run(ENSEMBLE + ["--outputs", "none", "--out", str(study), "--plot", str(plot)], tmp_path)
+    assert proc.returncode == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    errors = [line for line in proc.stderr.splitlines() if "error:" in line]
+    assert errors == [f"linknet ensemble: error: cannot write {plot}: No space left on device (errno 28) (nothing "
+                      "was left there)"], proc.stderr
+    assert f"wrote {study}" in proc.stdout and not plot.exists()
+    assert list(plot.parent.iterdir()) == []
