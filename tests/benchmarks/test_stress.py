@@ -49,6 +49,10 @@ def test_singular_passages_continue_correctly_or_stop_clearly():
     c = stress.case_singular(quick=True)
     m = c["measured"]
     assert m["taut_string_moving"]["outcome"] == "refused"
+    # its weight across the straight string: refused at the start, naming the string's links
+    for method in ("rattle", "dop853"):
+        v = m[f"taut_string_gravity_{method}"]
+        assert v["outcome"] == "refused" and "links 1 and 2 are a straight string" in v["message"], v
     for key, v in m.items():
         assert v["outcome"] in ("continued", "stopped", "refused"), (key, v)
         if v["outcome"] == "stopped":
