@@ -154,11 +154,17 @@ def _connect_timeout(seconds, client) -> dict:
 def _open(path: Path, keep_in_memory: bool):
     import xarray as xr
 
+    from linknet_core.accuracy import warn_accuracy
+    from linknet_core.ensemble.report import accuracy_note
+
     ds = xr.open_dataset(path, engine="h5netcdf")
     if keep_in_memory:
         ds.load()
         ds.close()
         path.unlink(missing_ok=True)
+    note = accuracy_note(ds)
+    if note:
+        warn_accuracy(f"{ds.attrs.get('scene_name')}: {note}")
     return ds
 
 

@@ -99,11 +99,12 @@ class StudyRuntime:
         """One member: the requested outputs at every output time, and the quantities of interest."""
         if self.fmu is not None:
             X, U, T, Freact, error = self.fmu.run(self.spec, setting, self.base_scene)
+            goal = math.nan  # the FMU holds its own goal, and logs its crossing itself
         else:
-            X, U, T, Freact, error = self._run_library(setting)
+            X, U, T, Freact, error, goal = self._run_library(setting)
         out = {name: array for name, array in zip(OUTPUTS, (X, U, T, Freact)) if name in self.spec.outputs}
         out.update(quantities_of_interest(T, X, self.spec.tip))
-        out["error_estimate"] = error
+        out["error_estimate"], out["error_goal"] = error, goal
         return out
 
     def _run_library(self, setting: dict):
@@ -125,7 +126,7 @@ class StudyRuntime:
                 error = max(error, sim.error_estimate)
             out = sim.outputs(forces)
             X[i], U[i], T[i], Freact[i] = out["X"], out["U"], out["T"], out["Freact"]
-        return X, U, T, Freact, error
+        return X, U, T, Freact, error, sim.error_goal
 
 
 def quantities_of_interest(T: np.ndarray, X: np.ndarray, tip: int) -> dict:

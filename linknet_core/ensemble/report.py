@@ -64,6 +64,20 @@ def _table(header: list[str], rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
+def accuracy_note(ds) -> str | None:
+    """The members whose estimated error exceeds their goal (linknet_core.accuracy), in words, or None."""
+    if "error_estimate" not in ds or "error_goal" not in ds:
+        return None
+    ok = ds["status"].values.astype(str) == "ok"
+    estimate, goal = ds["error_estimate"].values, ds["error_goal"].values
+    over = np.flatnonzero(ok & (estimate > goal))  # NaN (not estimated, or an FMU's goal) compares False
+    if not over.size:
+        return None
+    worst = int(over[np.argmax(estimate[over] / goal[over])])
+    return (f"{over.size} of {int(ok.sum())} members' estimated position error exceeds their goal (member {worst}: "
+            f"{estimate[worst]:.3g} m against {goal[worst]:.3g} m). Tighten rtol (or the step); docs/accuracy.md")
+
+
 def summary(ds) -> str:
     """The study in a few lines: what ran, and the quantities of interest (largest tension, final tip
     position) against the varied parameters: member by member for small studies, else per value of each
@@ -79,6 +93,12 @@ def summary(ds) -> str:
              f'  engine: {ds.attrs.get("engine")}; {ds.attrs.get("wall_seconds", float("nan")):.2f} s wall and '
              f'first result after {ds.attrs.get("first_result_seconds", float("nan")):.2f} s (engine start included), '
              f'{ds.attrs.get("members_per_second", float("nan")):.1f} members/s once running', ""]
+    note = accuracy_note(ds)
+    if note:
+        lines.insert(2, f"  WARNING: {note}")
+    elif "error_estimate" in ds and ok.any() and np.isfinite(ds["error_estimate"].values[ok]).any():
+        lines.insert(2, f"  estimated position error: {np.nanmax(ds['error_estimate'].values[ok]):.3g} m at most, every "
+                        "member within its goal")
     max_t, tip_final = ds["max_tension"].values, ds["tip_final"].values
     qoi_header = ["max T [N]", "link", "tip x [m]", "tip z [m]"]
     if ds.sizes["member"] <= ROW_LIMIT or not names:

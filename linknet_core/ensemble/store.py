@@ -41,6 +41,8 @@ _QOI_META = {
     "tip_final": (("axis",), "m", "position of the tip mass at t_end"),
     "error_estimate": ((), "m", "largest estimated position error of any mass over the output samples "
                                 "(linknet_core.accuracy; NaN where the member's FMU does not report one)"),
+    "error_goal": ((), "m", "the position error the member's run is held to (linknet_core.accuracy; NaN for FMU "
+                            "members, whose FMU logs a crossing itself)"),
 }
 FLUSH_SECONDS = 2.0  # at most this much finished work is only in memory should the client process die
 _QOI_KEYS = frozenset(_QOI_META)
