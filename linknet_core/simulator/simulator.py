@@ -870,9 +870,10 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
     else:
         times = _output_times(t_end, 201 if n_out is None else int(n_out))
     if callable(forces):
-        force_at = forces
+        def force_at(t):
+            return _forces_value(forces(t), scene.K, t)
     else:
-        constant = None if forces is None else np.asarray(forces, float)
+        constant = None if forces is None else _forces_value(forces, scene.K)
         force_at = lambda t: constant  # noqa: E731
     n = times.size
     K, L = scene.K, scene.L
@@ -955,6 +956,30 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
         sys.stderr.write("\n")
     stats = _run_stats(sim, method, dt, rtol, scene, wall)
     return Result(scene, method, times, X, U, T, *_diagnostics(sim, X, U, diagnostics), stats)
+
+
+def _forces_value(value, K: int, t=None) -> np.ndarray:
+    """simulate's ``forces`` (t None) or what its callable returned when called at ``t``, as a (K,3) array of real
+    numbers; anything else is a SolverError naming ``forces``, the value and the rule (a callable returning None is
+    refused: None as ``forces`` itself means no input, a return of None is more likely a missing ``return``)."""
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (K, 3):
+        return value
+    rule = f"forces must be None, a ({K}, 3) array of real numbers, or a callable f(t) returning one"
+    what = "forces" if t is None else f"forces(t) called at t = {float(t)!r} returned"
+    shown = " ".join(repr(value).split())
+    shown = shown if len(shown) <= 80 else shown[:77] + "..."
+    kind = type(value).__name__
+    if value is None:  # only a callable's return reaches here with None
+        raise SolverError(f"{what} None: {rule} (return np.zeros(({K}, 3)) for no input)")
+    if isinstance(value, (str, bytes)):
+        raise SolverError(f"{what} {shown} (a {kind}): {rule}")
+    try:
+        F = np.asarray(value, float)
+    except (TypeError, ValueError):
+        raise SolverError(f"{what} {shown} (a {kind}), which is not an array of real numbers: {rule}") from None
+    if F.shape != (K, 3):
+        raise SolverError(f"{what} an array of shape {F.shape}: {rule}")
+    return F
 
 
 def _output_times(t_end: float, n: int) -> np.ndarray:

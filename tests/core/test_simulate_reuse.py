@@ -96,7 +96,7 @@ def test_nested_run_builds_its_own(models_dir):
 
     def forces(t):
         inner.append(ln.simulate(scene, 0.5, method="dop853", rtol=1e-8, n_out=3))
-        return None
+        return np.zeros((scene.K, 3))
 
     outer = ln.simulate(scene, 0.5, method="dop853", rtol=1e-8, n_out=3, forces=forces)
     reference = _fresh(path, 0.5, method="dop853", rtol=1e-8, n_out=3)

@@ -113,7 +113,8 @@ def test_diagnostics_filled_while_sampling_are_the_reference_diagnostics(shipped
         assert got.shape == want.shape == (31,)
         np.testing.assert_allclose(got, want, rtol=0, atol=16 * eps * scale)
     assert res.kinetic[-1] > 0.01 * energy_scale and res.residual.max() > 0  # the run moved and the checks see it
-    looped = ln.simulate(scene, 0.3, method=method, n_out=31, progress=False, forces=lambda t: None, **settings)
+    looped = ln.simulate(scene, 0.3, method=method, n_out=31, progress=False,  # a callable input: the Python loop
+                         forces=lambda t: np.zeros((scene.K, 3)), **settings)
     assert np.array_equal(looped.X, res.X)
     for field in ("energy", "residual", "velocity_residual", "kinetic"):
         np.testing.assert_allclose(getattr(res, field), getattr(looped, field), rtol=0,
