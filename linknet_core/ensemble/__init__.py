@@ -73,6 +73,8 @@ def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, met
 
     base, fmu_bytes, fmu_config, source = load_source(scene, fmu)
     plan = make_plan(base, vary, samples)
+    if out is not None and Path(out).suffix.lower() != ".nc":  # the rule of linknet ensemble --out
+        raise LinknetError(f"out={str(out)!r}: the study is written as a netCDF file, whose name ends in .nc")
     if not (isinstance(t_end, (int, float)) and math.isfinite(t_end) and t_end > 0):
         raise LinknetError(f"t_end must be a positive finite time, got {t_end!r}")
     times = _output_times(t_end, n_out, output_dt)

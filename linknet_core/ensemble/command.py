@@ -89,7 +89,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--project-initial", action=argparse.BooleanOptionalAction, default=None,
                    help="project initial positions onto each member's link lengths (default: when R or X0 "
                         "is varied)")
-    p.add_argument("--out", type=_output((), "the netCDF file"), help="netCDF file the members stream into (read it with xarray.open_dataset)")
+    p.add_argument("--out", type=_output((".nc",), "the study (a netCDF file)"), help="netCDF file the members stream into (read it with xarray.open_dataset)")
     p.add_argument("--scheduler", metavar="ADDR", type=scheduler_address, help="run on an existing Dask cluster (tcp://host:8786) instead "
                                                        "of a LocalCluster")
     p.add_argument("--connect-timeout", metavar="SECONDS", type=positive_number, default=None,
@@ -105,13 +105,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _vary(texts, scene) -> dict:
     from linknet_core.ensemble.parameters import parse_name, parse_values
 
-    vary = {}
+    vary, given = {}, {}
     for text in texts:
         name, sep, values = text.partition("=")
         if not sep:
             raise LinknetError(f"--vary {text!r}: write NAME=VALUES, e.g. M[3]=0.5:2:10")
         parameter = parse_name(name, scene)
+        if parameter.name in vary:  # the second would silently replace the first
+            raise LinknetError(f"--vary {parameter.name} is given twice ({given[parameter.name]!r} and {text!r}): "
+                               "vary each parameter once, all its values in one --vary (a list a,b,c or "
+                               "start:stop:count)")
         vary[parameter.name] = parse_values(values, parameter)
+        given[parameter.name] = text
     return vary
 
 
@@ -168,6 +173,9 @@ def read_samples_csv(path, scene) -> dict:
     columns: dict = {}
     for j, name in enumerate(header):
         parameter = parse_name(name, scene)
+        if parameter.name in columns:  # the second column would silently replace the first
+            raise LinknetError(f"--samples {path}: the header names {parameter.name} twice (column {j + 1}); give "
+                               "each parameter one column")
         cells = [(number, row[j].strip()) for number, row in rows]
         if parameter.family.text:
             columns[parameter.name] = check_values(parameter, [cell for _, cell in cells])
@@ -187,10 +195,15 @@ def _samples(args, scene) -> dict | None:
     from linknet_core.ensemble.parameters import parse_name
 
     columns: dict = read_samples_csv(args.samples, scene) if args.samples else {}
+    csv_names = set(columns)
     rng = np.random.default_rng(args.seed)
     for text in args.sample:
         name, distribution, a, b = parse_sample(text)
         parameter = parse_name(name, scene)
+        if parameter.name in columns:  # the second would silently replace the first
+            raise LinknetError(f"--sample {text!r}: {parameter.name} is already set by "
+                               + ("--samples" if parameter.name in csv_names else "an earlier --sample")
+                               + "; sample each parameter once")
         draws = distribution.draw(rng, a, b, args.n_samples)
         if columns and len(next(iter(columns.values()))) != draws.size:
             raise LinknetError(f"--sample draws {draws.size} values (--n-samples) but --samples has "
@@ -201,14 +214,15 @@ def _samples(args, scene) -> dict | None:
 
 def cmd_ensemble(args) -> int:
     from linknet_core.ensemble import load_source, ensemble, plot, summary
+    from linknet_core.ensemble.parameters import NOTHING_TO_VARY
 
     if args.plot and not args.plot.lower().endswith(".png"):
         raise LinknetError(f"--plot {args.plot}: the plot is a PNG file")
     scene = load_source(args.scene, args.fmu)[0]
     vary = _vary(args.vary, scene)
     samples = _samples(args, scene)
-    if not vary and not samples:
-        raise LinknetError("nothing to vary: give --vary NAME=VALUES, --sample or --samples")
+    if not vary and not samples:  # the library's rule and words (make_plan)
+        raise LinknetError(NOTHING_TO_VARY)
     outputs = [] if args.outputs.strip().lower() == "none" else [o.strip() for o in args.outputs.split(",")
                                                                   if o.strip()]
     try:

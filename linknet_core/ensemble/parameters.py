@@ -156,9 +156,10 @@ def check_values(parameter: Parameter, values) -> np.ndarray:
     are not range-checked here: a value that makes an invalid scene is that member's recorded error."""
     if parameter.family.text:
         values = np.atleast_1d(np.asarray(values, dtype=object)).astype(str)
-        unknown = sorted(set(values) - set(METHODS))
+        unknown = sorted({str(v) for v in values} - set(METHODS))  # plain strings, not np.str_('rk99')
         if unknown:
-            raise LinknetError(f"parameter integrator: unknown method(s) {unknown}; choose from {sorted(METHODS)}")
+            raise LinknetError(f"parameter integrator: unknown method(s) {', '.join(map(repr, unknown))}; "
+                               f"choose from {', '.join(sorted(METHODS))}")
         return values
     try:
         values = np.atleast_1d(np.asarray(values, dtype=float))
@@ -220,10 +221,17 @@ def _as_samples(samples) -> dict[str, list]:
     return {name: [row[name] for row in rows] for name in names}
 
 
+# a study varies something: the rule of ln.ensemble and of linknet ensemble (whose options the text names too)
+NOTHING_TO_VARY = ("nothing to vary: a study needs a varied parameter, vary={NAME: VALUES} or samples (on the command "
+                   "line --vary NAME=VALUES, --sample or --samples)")
+
+
 def make_plan(scene: Scene, vary: Mapping | None = None, samples=None) -> Plan:
     """Resolve the names against ``scene`` and lay out the members; errors say which parameter and why."""
     vary = dict(vary or {})
     columns = _as_samples(samples)
+    if not vary and not columns:
+        raise LinknetError(NOTHING_TO_VARY)
     parameters: list[Parameter] = []
     grid_values: list[np.ndarray] = []
     sample_values: list[np.ndarray] = []
