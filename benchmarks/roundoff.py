@@ -1,4 +1,4 @@
-"""Round-off of the fixed-step methods as the step shrinks, and where the scene sits (issue 23).
+"""Round-off of the fixed-step methods as the step shrinks, and where the scene sits.
 
 RATTLE and its compositions add a small increment h U to positions of size |X| every step. Each sum is rounded to
 ulp(|X|); where that rounding reaches the velocity (U_half = (X_new - X) / h) it becomes a velocity error of

@@ -44,10 +44,12 @@ _accuracy_text.restype = None
 _accuracy_text.argtypes = [ctypes.c_char_p, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double,
                            ctypes.c_char_p, ctypes.c_size_t]
 
+_estimate_failure_text = _core.ln_estimate_failure_text
+_estimate_failure_text.restype = None
+_estimate_failure_text.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p, ctypes.c_size_t]
+
 RTOL_MIN = ctypes.c_double.in_dll(_core, "ln_rtol_min").value
 DEFAULT_RTOL = ctypes.c_double.in_dll(_core, "ln_default_rtol").value
-GOAL_PER_RTOL = ctypes.c_double.in_dll(_core, "ln_goal_per_rtol").value
-COMPANION_RTOL_RATIO = ctypes.c_double.in_dll(_core, "ln_companion_rtol_ratio").value
 
 # With neither a method nor a step given, every entry point (library, CLI, ensembles, FMUs) runs this one:
 # error-controlled, and on every shipped scene the fastest of linknet's methods to 1e-6 m and below
@@ -109,6 +111,14 @@ def accuracy_text(name: str, t: float, estimate: float, goal: float, largest: fl
     the native FMU's words too)."""
     out = ctypes.create_string_buffer(1024)
     _accuracy_text(str(name).encode("utf-8", "replace"), t, estimate, goal, largest or 0.0, out, len(out))
+    return out.value.decode("utf-8", "replace")
+
+
+def estimate_failure_text(name: str, why: str) -> str:
+    """The note of a run whose companion failed (``why``: where and how) where the run went through (the core's
+    ln_estimate_failure_text, the native FMU's words too)."""
+    out = ctypes.create_string_buffer(4096)
+    _estimate_failure_text(str(name).encode("utf-8", "replace"), str(why).encode("utf-8", "replace"), out, len(out))
     return out.value.decode("utf-8", "replace")
 
 

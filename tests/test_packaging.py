@@ -1,4 +1,4 @@
-"""The wheel route (issue 26): `pip wheel` of the project holds every package of linknet_core, the compiled
+"""The wheel route: `pip wheel` of the project holds every package of linknet_core, the compiled
 library and the C sources, is tagged py3-none-<platform> (the library is plain C loaded with ctypes, not a
 CPython extension), and imports and simulates from its own files outside the checkout.
 

@@ -786,9 +786,10 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
         ln_explain(&m->model, &m->method_c, m->dc, companion, t_fmu, t_target, s->max_steps, label, why, sizeof why);
         m->error = INFINITY;
         m->over_goal = 1;
-        return fail(msg, FMU_NOTE, "%s: the error of this run at t = %g s cannot be estimated: its companion run failed "
-                    "at t = %g s: %s (error_estimate is +inf from here on; the run's own result stands)",
-                    s->scene_name, t_target, m->dc->t, why);
+        char where[FMU_MESSAGE - 256], note[FMU_MESSAGE - 64];
+        snprintf(where, sizeof where, "at t = %g s: %s", m->dc->t, why);
+        ln_estimate_failure_text(s->scene_name, where, note, sizeof note);
+        return fail(msg, FMU_NOTE, "%s", note);
     }
     m->error = m->factor * ln_position_gap(s->K, m->d->X, m->dc->X);
     const int over = m->error > m->goal;

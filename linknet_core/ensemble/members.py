@@ -320,7 +320,7 @@ class _OutputMap:
                  + [f"Freact[{k + 1},{i + 1}]" for k in self.fixed for i in range(3)])
         self.present = np.array([name in vr for name in names])
         self.vrs = [vr[name] for name in np.array(names)[self.present]]
-        # the FMU's error estimate (an FMU built before it had one has none: NaN), read last
+        # the FMU's error estimate (an FMU without that output: NaN), read last
         self.has_error = "error_estimate" in vr
         if self.has_error:
             self.vrs.append(vr["error_estimate"])

@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from linknet_core.accuracy import (accuracy_text, companion, default_method, error_goal, position_gap, scene_size,
-                                   warn_accuracy)
+from linknet_core.accuracy import (accuracy_text, companion, default_method, error_goal, estimate_failure_text,
+                                   position_gap, scene_size, warn_accuracy)
 from linknet_core.dynamics.drive import AnchorDrive, anchor_jump
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import SceneError, SolverError
@@ -389,7 +389,7 @@ class Simulator:
         try:
             self._advance_companion(t_next, F_input, anchors)
         except SolverError as exc:
-            self._companion_failure = f"its companion run failed at t = {self.companion.state.t:g} s: {exc}"
+            self._companion_failure = f"at t = {self.companion.state.t:g} s: {exc}"
             self.error_estimate = math.inf
             return
         self.error_estimate = self._error_factor * position_gap(self.state.X, self.companion.state.X)
@@ -410,8 +410,7 @@ class Simulator:
         """What to warn of: the estimate beyond the goal, or a companion that could not estimate it (None if
         neither)."""
         if self._companion_failure is not None:
-            return (f"{self.scene.name}: the error of this run at t = {self.state.t:g} s cannot be estimated: "
-                    f"{self._companion_failure}")
+            return estimate_failure_text(self.scene.name, self._companion_failure)
         if self.error_estimate > self.error_goal:
             return accuracy_text(self.scene.name, self.state.t, self.error_estimate, self.error_goal)
         return None
@@ -663,7 +662,7 @@ class Result:
         """What to warn of: the estimate beyond the goal (from when), or a companion run that failed; None if
         neither (or not estimated)."""
         if self.error_failure is not None:
-            return f"{self.scene.name}: the error of this run cannot be estimated: {self.error_failure}"
+            return estimate_failure_text(self.scene.name, self.error_failure)
         if self.error_estimate is None or not self.max_error_estimate > self.error_goal:
             return None
         first = int(np.argmax(self.error_estimate > self.error_goal))
@@ -799,7 +798,7 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None 
     except SolverError as exc:
         result.error_estimate = np.full(result.t.size, math.inf)
         result.error_estimate[0] = 0.0
-        result.error_failure = f"its companion run ({_companion_words(settings)}) failed: {exc}"
+        result.error_failure = f"({_companion_words(settings)}): {exc}"
     except KeyboardInterrupt:  # the run itself is complete: hand it over, without an estimate
         raise SimulationInterrupted(result) from None
     else:

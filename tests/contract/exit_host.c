@@ -11,7 +11,7 @@
  * atexit is a host that tears down in its own exit handler (as a C++ host does in the destructor of a static
  * object): registered before the FMU is loaded, it runs after the FMU's own exit handlers, steps the instance main
  * left live and frees it, printing "late step S" and "late freed".
- * span:H follows the good step with one of h = H (a span of more steps than can be taken: issue 25) and another of
+ * span:H follows the good step with one of h = H (a span of more steps than can be taken) and another of
  * 0.01, printing "span step S" and "after span step S".
  */
 #include <dlfcn.h>

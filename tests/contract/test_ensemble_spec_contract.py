@@ -1,4 +1,4 @@
-"""Ensemble sampling specs (issue 25): each --sample distribution's parameters are finite numbers meeting the
+"""Ensemble sampling specs: each --sample distribution's parameters are finite numbers meeting the
 distribution's rule, and each --samples CSV cell of a numeric parameter is a finite number, checked where the spec is
 read (linknet_core/ensemble/command.py) with an error naming the parameter (or the file, line and column), the
 distribution and the rule; the CLI says it in one line, never numpy's traceback."""

@@ -1,4 +1,4 @@
-"""Issue 25, results lost on a full disk: every output is written whole or not at all (linknet_core/output.py,
+"""A full disk: every output is written whole or not at all (linknet_core/output.py,
 atomic_write), a failed write is one line naming the file with a non-zero exit and no traceback, the target holds
 no file or the previous one intact, and what was computed is kept (simulate's arrays, an ensemble's members).
 

@@ -1,4 +1,4 @@
-"""Issue 25, "scheduler addresses that hang": an address where no Dask scheduler answers is one line naming the
+"""Scheduler addresses that hang: an address where no Dask scheduler answers is one line naming the
 address and what was found there, within the connect timeout (``connect_timeout=``, ``--connect-timeout``, default
 10 s), from ``ln.ensemble(client=...)`` (a LinknetError) and from ``linknet ensemble --scheduler`` (exit 2, no
 traceback). Every server here is started by the test on 127.0.0.1 and stopped by it; the unreachable case is a

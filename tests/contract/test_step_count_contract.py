@@ -1,4 +1,4 @@
-"""Step counts (issue 25): an advance that would take more fixed steps than can be counted or than the limit of one
+"""Step counts: an advance that would take more fixed steps than can be counted or than the limit of one
 advance is refused naming the span, dt, the count and the limit (the native core's rule and words,
 ln_step_count_problem), by the library on both backends, the CLI in one line and both FMUs with fmi2Discard and a
 logged message, the instance usable after; never 0 steps reported as done. An h below half an ulp of t is an

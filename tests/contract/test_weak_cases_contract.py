@@ -1,5 +1,5 @@
-"""Weak cases of issue 25 made clear answers: each bad value is refused with an error naming the option or value
-and the rule, never a traceback or a silent default (docs/contract.md, the rows marked "issue 25, weak")."""
+"""Weak cases made clear answers: each bad value is refused with an error naming the option or value
+and the rule, never a traceback or a silent default (docs/contract.md)."""
 import numpy as np
 import pytest
 

@@ -1,10 +1,9 @@
-"""Round-off of the fixed-step methods as the step shrinks and where the scene sits (issue 23).
+"""Round-off of the fixed-step methods as the step shrinks and where the scene sits.
 
 The references are independent of linknet_core: the pendulum's analytic motion (Jacobi elliptic functions,
 benchmarks.roundoff.pendulum_exact) and, for the scene of 1e3 m and 1e-4 m links, scipy's DOP853 on the index-1
-form written from the seed (benchmarks.reference.solve_index1). Before the fix (velocity read off the rounded
-X_new - X) the native rattle pendulum at t = 0.1 s ended 2.0e-10 m off at dt 1e-6 at the origin and 6.0e-9 m 1 km
-away, against 4.7e-13 and 4.2e-12 m at dt 1e-5 (benchmarks/roundoff.py, docs/robust_stepping.md).
+form written from the seed (benchmarks.reference.solve_index1). A velocity read off the rounded X_new - X would make
+the error grow as dt shrinks and with the distance from the origin (benchmarks/roundoff.py, docs/robust_stepping.md).
 """
 from __future__ import annotations
 

@@ -26,15 +26,15 @@
 #include <stdio.h>
 
 LN_API const double ln_rtol_min = 1e-15;     /* below, double precision cannot deliver a relative tolerance */
-LN_API const double ln_companion_rtol_ratio = 0.1;
+static const double companion_rtol_ratio = 0.1;
 
 LN_API double ln_companion_settings(int adaptive, int order, double dt, double rtol, double atol,
                                     double *dt_companion, double *rtol_companion, double *atol_companion)
 {
     if (adaptive) {
         *dt_companion = 0.0;
-        *rtol_companion = fmax(rtol * ln_companion_rtol_ratio, ln_rtol_min);
-        *atol_companion = atol * ln_companion_rtol_ratio;
+        *rtol_companion = fmax(rtol * companion_rtol_ratio, ln_rtol_min);
+        *atol_companion = atol * companion_rtol_ratio;
         return 1.0;
     }
     const double gain = ldexp(1.0, order);  /* 2^p */
@@ -58,16 +58,16 @@ LN_API double ln_position_gap(ln_int K, const double *Xa, const double *Xb)
 /* What a run is asked for, in metres of position: the goal its error estimate is held to (a warning where it is
    exceeded). Local error control keeps each step's error within rtol; over a run those errors add up and the
    motion amplifies them, and on the shipped scenes the global error ends 1-20 times rtol times the scene's size
-   (docs/accuracy.md), so the goal is ln_goal_per_rtol times that: 1e-6 of the scene's size at the default rtol.
+   (docs/accuracy.md), so the goal is goal_per_rtol times that: 1e-6 of the scene's size at the default rtol.
    A fixed-step run is held to the default's goal. */
 LN_API const double ln_default_rtol = 1e-8;
-LN_API const double ln_goal_per_rtol = 100.0;
+static const double goal_per_rtol = 100.0;
 
 LN_API double ln_error_goal(int adaptive, double rtol, double atol, double size)
 {
     if (!adaptive)
         rtol = atol = ln_default_rtol;
-    return ln_goal_per_rtol * fmax(rtol * size, atol);
+    return goal_per_rtol * fmax(rtol * size, atol);
 }
 
 LN_API double ln_scene_size(ln_int K, const double *X)
@@ -110,4 +110,12 @@ LN_API void ln_accuracy_text(const char *name, double t, double estimate, double
     snprintf(out, n, "%s: the estimated position error %.3g m at t = %g s exceeds the run's goal %.3g m%s. Tighten "
              "rtol (or the step); where a tighter tolerance does not bring it down, the motion passes a configuration "
              "it cannot resolve (docs/accuracy.md)", name, estimate, t, goal, worst);
+}
+
+/* The note of a run whose companion failed where the run went through (why: where and how the companion failed):
+   the run's result stands, its error is unknown from there on. The library's and the native FMU's one text. */
+LN_API void ln_estimate_failure_text(const char *name, const char *why, char *out, size_t n)
+{
+    snprintf(out, n, "%s: the error of this run cannot be estimated: its companion run failed %s (the error estimate "
+             "is +inf from there on; the run's own result stands)", name, why);
 }

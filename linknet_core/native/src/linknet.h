@@ -346,7 +346,7 @@ LN_API const char *ln_force_kind_name(ln_int code);
    with a tenth of its tolerances (factor 1, rtol no lower than ln_rtol_min). */
 LN_API double ln_companion_settings(int adaptive, int order, double dt, double rtol, double atol,
                                     double *dt_companion, double *rtol_companion, double *atol_companion);
-LN_API extern const double ln_rtol_min, ln_companion_rtol_ratio;
+LN_API extern const double ln_rtol_min;
 
 /* Advance the companion run dc to t_target in two halves (a fixed-step companion at its half step: twice the run's
    steps over every interval, however short; an error-controlled one twice as many steps where the communication
@@ -359,13 +359,16 @@ LN_API int ln_companion_advance(const ln_model *m, const ln_method *companion, l
 LN_API void ln_accuracy_text(const char *name, double t, double estimate, double goal, double largest, char *out,
                              size_t n);
 
+/* The note of a run whose companion failed (why: where and how) where the run itself went through, into out. */
+LN_API void ln_estimate_failure_text(const char *name, const char *why, char *out, size_t n);
+
 /* The largest distance |Xa_k - Xb_k| over K masses (K,3), m; NaN if a coordinate is not finite. */
 LN_API double ln_position_gap(ln_int K, const double *Xa, const double *Xb);
 
-/* The position error (m) a run is held to: ln_goal_per_rtol times max(rtol times the scene's size, atol); a
+/* The position error (m) a run is held to: 100 times max(rtol times the scene's size, atol); a
    fixed-step run (adaptive 0) is held to that of ln_default_rtol. */
 LN_API double ln_error_goal(int adaptive, double rtol, double atol, double size);
-LN_API extern const double ln_default_rtol, ln_goal_per_rtol;
+LN_API extern const double ln_default_rtol;
 
 /* A scene's size: the largest extent of the positions X (K,3) along an axis, m (1 if they all coincide). */
 LN_API double ln_scene_size(ln_int K, const double *X);

@@ -41,7 +41,7 @@ static inline const double *rattle_forces(const ln_model *m, ln_data *d, const d
    along M^-1 C(X)^T, the normal part of X_new - X_drift in the mass metric, M^-1 C^T A^-1 C (X_new - X_drift) with
    A(X) (25) still factored from the stage's start: what is left of the rounding there is along the links, which
    the velocity projection removes. One solve on the factorisation at hand. Where the position stage needed exact
-   Newton or Gauss-Newton (the factorisation may no longer be A(X)), the difference X_new - X over hs as before.
+   Newton or Gauss-Newton (the factorisation may no longer be A(X)), the difference X_new - X over hs.
    Anchored masses (inv_m = 0; driven anchors move where the drive puts them) keep (X_new - X) / hs, their mean
    velocity over the stage. */
 LN_ALWAYS_INLINE void velocity_after_position_stage(const ln_model *m, ln_data *d, const double *X, const double *Xc,
