@@ -21,6 +21,7 @@ import numpy as np
 
 from linknet_core.errors import SolverError
 from linknet_core.scene.description import Scene
+from linknet_core.scene.motion import sharpest_waypoint, step_cannot_follow
 
 
 class AnchorDrive:
@@ -149,3 +150,21 @@ def anchor_jump(dyn, drive: AnchorDrive, t: float, X: np.ndarray, U: np.ndarray)
         U = U - CT_mu * dyn._inv_mass3
         impulse = -CT_mu[rows]
     return X, U, impulse, dP, dV
+
+
+def check_step_follows_motions(scene: Scene, dt: float) -> None:
+    """Refuse a fixed step dt that cannot follow a driven anchor's prescribed motion (scene.motion.step_cannot_follow),
+    naming the anchor, rather than run a motion the steps alias or jump over."""
+    for k, motion in zip(scene.driven_indices, scene.motions):
+        problem = step_cannot_follow(motion, dt)
+        if problem:
+            raise SolverError(f"{scene.name}: {scene.mass_label(int(k))} is driven, and {problem}; or leave the "
+                              "method and step out for the error-controlled default, whose steps follow the motion")
+
+
+def motion_note(scene: Scene, tau0: float, tau1: float) -> str:
+    """What to add to a step-size failure between scene times tau0 and tau1: the driven anchors' waypoint splines
+    there, if any, with their prescribed accelerations (a waypoint a short time away needs an enormous one)."""
+    notes = [f"{scene.mass_label(int(k))} is driven: {note}" for k, motion in zip(scene.driven_indices, scene.motions)
+             if (note := sharpest_waypoint(motion, tau0, tau1))]
+    return f" ({'; '.join(notes)})" if notes else ""

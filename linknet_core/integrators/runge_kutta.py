@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from linknet_core.dynamics.drive import motion_note
 from linknet_core.errors import SolverError, StepFailure
 from linknet_core.integrators import tableaux
 from linknet_core.integrators.base import Integrator, explain_step_failure
@@ -155,8 +156,10 @@ class ProjectedRungeKutta(Integrator):
             if h < remaining < 1.1 * h:  # avoid a sliver of a last step: split the rest in two
                 h = 0.5 * remaining
             if h <= 16 * np.spacing(max(abs(t), 1.0)) and h < remaining:
+                note = "" if self.drive is None else motion_note(self.drive.scene, t - self.drive.t0,
+                                                                   t + h - self.drive.t0)
                 raise SolverError(f"step size underflow at t = {t}: the tolerance rtol = {self.rtol} cannot be "
-                                  "met (singular configuration or discontinuous input?)")
+                                  f"met (singular configuration or discontinuous input?){note}")
             t_new = t_target if h == remaining else t + h
             X_new, U_new, KX, KU = self._attempt(X, U, h, k0, F_input, t, t_new)
             err = self.error_norm(KX, KU, h, self._scale(X, U, X_new, U_new))

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from linknet_core.dynamics.drive import call_motion
+from linknet_core.dynamics.drive import call_motion, motion_note
 from linknet_core.errors import SolverError
 from linknet_core.integrators.base import Integrator, StepStats, step_count_problem
 from linknet_core.native import library as lib
@@ -320,6 +320,8 @@ class NativeIntegrator(Integrator):
         message = out.value.decode(errors="replace")
         if status in (lib.PROJECTION_FAILED, lib.STEP_UNDERFLOW) and d.fail_link >= 0:
             message = self._near_self_stress(message)
+        if status == lib.STEP_UNDERFLOW:
+            message += motion_note(self.scene, t_start - d.drive_t0, t_target - d.drive_t0)
         return message
 
     def _near_self_stress(self, message: str) -> str:

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from linknet_core.errors import LinknetError, SceneError
+from linknet_core.output import atomic_write
 from linknet_core.scene.motion import AnchorMotion, parse_motion
 
 _MASS_KEYS = {"name", "mass", "position", "velocity", "fixed", "driven", "motion", "force", "drag", "quadratic_drag"}
@@ -301,7 +302,10 @@ class Scene:
         return out
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n")
+        """Write the scene file whole or not at all (a failure, e.g. a full disk, leaves any file there as it was
+        and raises a WriteError naming it)."""
+        text = json.dumps(self.to_dict(), indent=1) + "\n"
+        atomic_write(path, lambda tmp: Path(tmp).write_text(text))
 
     def with_state(self, X0=None, U0=None) -> "Scene":
         """A copy of this scene with another initial state (the description is otherwise shared)."""
@@ -434,8 +438,12 @@ def _boolean(value, what: str, source: str) -> bool:
     return bool(value)
 
 
+ABSENT = object()  # a field left out, as against one given as JSON null
+
+
 def _text(value, what: str, source: str, default: str) -> str:
-    if value is None and default is not None:
+    """A text field: its default where the field is left out (ABSENT); JSON null is refused like any non-string."""
+    if value is ABSENT:
         return default
     if not isinstance(value, str):
         raise SceneError(f"{source}: {what} must be a string, got {value!r} (a JSON {_json_type(value)})")
@@ -475,7 +483,7 @@ def _parse_scene(data: dict, source: str) -> Scene:
         if not isinstance(entry, dict):
             raise SceneError(f"{source}: mass {k + 1} must be an object")
         _check_keys(entry, _MASS_KEYS, f"mass {k + 1}", source)
-        name = _text(entry.get("name"), f"mass {k + 1} name", source, f"m{k + 1}")
+        name = _text(entry.get("name", ABSENT), f"mass {k + 1} name", source, f"m{k + 1}")
         label = f'mass {k + 1} ("{name}")'
         if name in index_of:
             raise SceneError(f"{source}: {label} repeats the name of mass {index_of[name] + 1}; names must be unique")
@@ -491,6 +499,10 @@ def _parse_scene(data: dict, source: str) -> Scene:
             if "velocity" in entry:
                 raise SceneError(f"{source}: {label} is driven: its velocity comes from its motion, so it cannot "
                                  "have a \"velocity\"; give the motion (e.g. {\"kind\": \"velocity\", ...})")
+            if "mass" in entry:
+                raise SceneError(f"{source}: {label} is driven: its motion is prescribed whatever pulls on it, so a "
+                                 "\"mass\" would have no effect (the links' pull on it is reported as Freact); leave "
+                                 "\"mass\" out, or make it a free mass")
             fixed[k] = True
             motions.append(parse_motion(entry.get("motion"), X0[k], f"{label} motion", source, _vector, _number))
         elif "motion" in entry:
@@ -563,7 +575,7 @@ def _parse_scene(data: dict, source: str) -> Scene:
                 raise SceneError(f"{source}: {label} has no length and its ends coincide, so the default "
                                  "(initial distance) would be zero")
             length[l] = distance
-        link_names.append(_text(entry.get("name"), f"{label} name", source, f"l{l + 1}"))
+        link_names.append(_text(entry.get("name", ABSENT), f"{label} name", source, f"l{l + 1}"))
 
     springs_data = data.get("springs", [])
     if not isinstance(springs_data, list):
@@ -583,7 +595,7 @@ def _parse_scene(data: dict, source: str) -> Scene:
         damping[s] = _number(entry.get("damping", 0.0), f"spring {s + 1} damping", source, nonnegative=True)
         d0 = float(np.linalg.norm(X0[sb[s]] - X0[sa[s]]))
         rest[s] = _number(entry.get("rest_length", d0), f"spring {s + 1} rest_length", source, nonnegative=True)
-        spring_names.append(_text(entry.get("name"), f"spring {s + 1} name", source, f"s{s + 1}"))
+        spring_names.append(_text(entry.get("name", ABSENT), f"spring {s + 1} name", source, f"s{s + 1}"))
 
     gravity = _vector(data.get("gravity"), "gravity", source, default=[0, 0, 0])
     options = data.get("options", {})
@@ -595,8 +607,8 @@ def _parse_scene(data: dict, source: str) -> Scene:
         raise SceneError(f"{source}: every mass is anchored; there is nothing to simulate")
 
     return Scene(
-        name=_text(data.get("name"), "the scene's name", source, "scene"),
-        description=_text(data.get("description"), "the scene's description", source, ""),
+        name=_text(data.get("name", ABSENT), "the scene's name", source, "scene"),
+        description=_text(data.get("description", ABSENT), "the scene's description", source, ""),
         mass_names=tuple(names),
         mass=_frozen(mass),
         fixed=_frozen_bool(fixed),

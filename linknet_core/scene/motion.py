@@ -77,6 +77,52 @@ class AnchorMotion:
         return P, V, A
 
 
+def step_cannot_follow(motion: AnchorMotion, dt: float) -> str | None:
+    """Why a fixed step dt cannot follow this prescribed motion, or None. A sine needs at least two steps per period
+    (Nyquist: dt 2 pi f <= pi): beyond, the steps alias it into a slower motion, and so does the half-step companion
+    that estimates the error, which then agrees with them. A waypoint spline needs at least one step per interval
+    between waypoints: a longer step jumps over a waypoint."""
+    if motion.kind == "sine":
+        amplitude, omega = motion.sine[3:6], motion.sine[6:9]
+        fastest = np.where(amplitude != 0, omega, 0.0)
+        axis = int(np.argmax(fastest))
+        if dt * fastest[axis] > math.pi:
+            return (f"its sine of {fastest[axis] / (2 * math.pi):.6g} Hz on axis {axis + 1} gets "
+                    f"{2 * math.pi / (dt * fastest[axis]):.3g} steps per period at dt = {dt:g} s, and a fixed step "
+                    f"needs at least 2 (Nyquist): dt <= {math.pi / fastest[axis]:.3g} s")
+    elif motion.kind == "waypoints":
+        times = np.array([0.0] + [float(row[0]) for row in motion.spec["waypoints"]])
+        gaps = np.diff(times)
+        i = int(np.argmin(gaps))
+        if gaps[i] < dt:
+            after = "the start" if i == 0 else f"waypoint {i} (t = {times[i]:g} s)"
+            return (f"its waypoint {i + 1} (t = {times[i + 1]:g} s) comes {gaps[i]:.3g} s after {after}, less than "
+                    f"one step dt = {dt:g} s, which would jump over it: dt <= {gaps[i]:.3g} s")
+    return None
+
+
+def sharpest_waypoint(motion: AnchorMotion, tau0: float, tau1: float) -> str | None:
+    """The waypoint interval of this motion overlapping [tau0, tau1] with the largest prescribed acceleration, said
+    in the scene's terms (None for other kinds or no overlap). The acceleration 2 c2 + 6 c3 s is linear on a
+    piece, so its largest magnitude is at one end."""
+    if motion.kind != "waypoints":
+        return None
+    times = [0.0] + [float(row[0]) for row in motion.spec["waypoints"]]
+    best = None
+    for i in range(len(times) - 1):
+        if times[i + 1] < tau0 or times[i] > tau1:
+            continue
+        c = motion.pieces[i, 2:].reshape(3, 4)
+        peak = max(float(np.linalg.norm(2.0 * c[:, 2] + 6.0 * s * c[:, 3])) for s in (0.0, times[i + 1] - times[i]))
+        if best is None or peak > best[0]:
+            best = (peak, i, times[i], times[i + 1])
+    if best is None:
+        return None
+    peak, i, start, end = best
+    return (f"its spline to waypoint {i + 1} (t = {end:g} s, {end - start:.3g} s after "
+            f"{'the start' if i == 0 else f'waypoint {i}'}) accelerates it at up to {peak:.3g} m/s^2")
+
+
 def _piece(start: float, base: float, coefficients) -> np.ndarray:
     """One table row: coefficients (3, 4) of c0 + c1 s + c2 s^2 + c3 s^3, s = tau - base, per axis."""
     return np.concatenate([[start, base], np.asarray(coefficients, float).reshape(12)])

@@ -14,7 +14,7 @@ import numpy as np
 
 from linknet_core.accuracy import (accuracy_text, companion, default_method, error_goal, estimate_failure_text,
                                    position_gap, scene_size, warn_accuracy)
-from linknet_core.dynamics.drive import AnchorDrive, anchor_jump
+from linknet_core.dynamics.drive import AnchorDrive, anchor_jump, check_step_follows_motions
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import SceneError, SolverError
 from linknet_core.dynamics.forces import kinetic_energy
@@ -159,6 +159,8 @@ def _setup(scene: Scene, dyn: Dynamics, method, dt, rtol, atol, project_initial,
     settings, the initial state (read-only arrays) and its report, the backend and the specialisation. Nothing in it
     refers to the scene (it is kept per scene object)."""
     method_cls, dt, rtol, atol = method_settings(method, dt, rtol, atol)
+    if not method_cls.adaptive:
+        check_step_follows_motions(scene, dt)
     if own_dynamics:
         X0, U0, report = _kept_initial_state(scene, dyn, project_initial, length_tol)
     else:
@@ -519,6 +521,48 @@ class Simulator:
         T = self.dyn.tensions(X_at, U_at, F, anchor_acc=anchor_acc)
         return {"t": t, "X": X_at, "U": U_at, "T": T, "Freact": self.dyn.anchor_reactions(X_at, T),
                 "error_estimate": self.error_estimate, "impulse": impulse}
+
+    def interface_linearization(self, F_input=None, anchors=None):
+        """The exact derivatives of what :meth:`outputs` gives (T, Freact) and of the accelerations dU/dt with respect
+        to the inputs (the forces F and the input-driven anchors' P, V, A) at the current state, with ``F_input``
+        and ``anchors`` taken as :meth:`outputs` takes them (the simulator is left as it was). The state X, U has no
+        direct feedthrough. Returns a linearization (linknet_core.dynamics.interface_jacobian): its
+        ``directional(dF=, dP=, dV=, dA=)`` is the derivative along one seed (one solve with the factorisation the
+        tensions used, where A is regular), its ``jacobian()`` every block by name. The native core computes it on
+        the native point-mass path, the numpy reference on the others (docs/interface_jacobians.md)."""
+        F = self.check_input(F_input)
+        hold = self.check_anchors(anchors)
+        X, U, t = self.state.X, self.state.U, self.state.t
+        if type(self.integrator) is NativeIntegrator:
+            from linknet_core.native.interface import NativeLinearization
+
+            integrator = self.integrator
+            saved = integrator.internals() if hold is not None else None
+            try:
+                if hold is not None:
+                    integrator.set_anchors(t, hold)
+                return NativeLinearization(integrator.model, integrator.data, X, U, F)
+            finally:
+                if saved is not None:
+                    integrator.set_internals(saved)
+        from linknet_core.dynamics.interface_jacobian import ReferenceLinearization
+
+        X_at, U_at, anchor_acc = X, U, None
+        drive = getattr(self.integrator, "drive", None)
+        if drive is not None:  # the driven anchors where their motion is now, as outputs() evaluates
+            saved = drive.internals()
+            try:
+                if hold is not None:
+                    drive.set_input(t, hold)
+                X_at, U_at, anchor_acc = drive.apply(t, X, U)
+            finally:
+                drive.set_internals(saved)
+        return ReferenceLinearization(self.dyn, X_at, U_at, F, anchor_acc)
+
+    def interface_jacobian(self, F_input=None, anchors=None):
+        """Every block of :meth:`interface_linearization` at the current state: an InterfaceJacobian, J["T", "F"],
+        J["Freact", "A"], ..., and ``effective_mass(j)``, the network's apparent mass at input-driven anchor j."""
+        return self.interface_linearization(F_input, anchors).jacobian()
 
     def sample(self, times, F_input, X: np.ndarray, U: np.ndarray, T: np.ndarray, advance_first: bool = True,
                diagnostics: np.ndarray | None = None, update_state: bool = True) -> None:
