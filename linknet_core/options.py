@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import tempfile
 import re
 from pathlib import Path
 
@@ -88,6 +89,14 @@ def writable_path_problem(text: str) -> str | None:
         return f"cannot be created: {parent} is not a folder"
     if not os.access(parent, os.W_OK | os.X_OK):
         return f"cannot be created: no write permission in {parent}"
+    # permission bits do not tell everything (root passes access() on /proc, a read-only mount, a full quota):
+    # try the write itself, with a file of our own beside the target, removed at once
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".linknet-write-check-", dir=parent)
+    except OSError as exc:
+        return f"cannot be created in {parent}: {exc.strerror or exc}"
+    os.close(fd)
+    os.unlink(probe)
     return None
 
 

@@ -44,6 +44,8 @@ ORTHOGRAPHIC_ZOOM = 2.5  # a flat view's network fills about the plot's width (m
 HTML_FRAME_BUDGET = 40e6  # bytes of frame data in an HTML view before frames are thinned by default
 ANIMATION_SUFFIXES = (".gif", ".mp4")
 STILL_SUFFIX = ".png"
+# a frame box this many times the network's own size gets a note: the network is a dot in it
+SCALE_NOTE_RATIO = 1e3
 
 
 @dataclass(frozen=True)
@@ -178,6 +180,22 @@ class Motion:
         left = right - 1
         nearest = np.where(np.abs(self.t[left] - targets) <= np.abs(self.t[right] - targets), left, right)
         return np.unique(nearest)
+
+    def scale_notes(self) -> tuple[str, ...]:
+        """A note where the frames' box (bounds) is more than SCALE_NOTE_RATIO times the network's own size (the
+        median over samples of its extent): a mass that ran away (1e300 m) makes every frame a dot."""
+        extent = np.ptp(self.X, axis=1).max(axis=1)  # (n,) the network's size at each sample
+        own = float(np.median(extent))
+        low, high = self.X.reshape(-1, 3).min(axis=0), self.X.reshape(-1, 3).max(axis=0)
+        box = float(np.max(high - low))
+        if not box > SCALE_NOTE_RATIO * own:
+            return ()
+        centre = np.median(self.X, axis=1)  # (n, 3) a centre that one runaway mass does not drag along
+        distance = np.abs(self.X - centre[:, None, :]).max(axis=2)  # the largest coordinate: no overflow at 1e300
+        i, k = np.unravel_index(int(np.argmax(distance)), distance.shape)
+        return (f"the frames span {box:.3g} m, {box / max(own, 1e-300):.3g} times the network's own size "
+                f"({own:.3g} m): mass {k + 1} (\"{self.mass_names[k]}\") is {distance[i, k]:.3g} m from the others along an axis "
+                f"at t = {self.t[i]:g} s, so the network is a dot in every frame",)
 
     def bounds(self, view: str) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper corner of a box holding every mass at every sample, with a margin, so that the
@@ -407,6 +425,9 @@ def write_still(motion: Motion, path, *, at: float | None = None, view: str = "a
     path = Path(path)
     _output_dir(path)
     start = time.perf_counter()
+    if at is not None and not motion.t[0] <= at <= motion.t[-1]:
+        raise LinknetError(f"{path}: the frame's time at = {at:g} s is outside the run, which has samples from "
+                           f"t = {motion.t[0]:g} to {motion.t[-1]:g} s")
     i = len(motion.t) - 1 if at is None else int(np.argmin(np.abs(motion.t - at)))
     picture = NetworkFigure(motion, view, size, cmap, tension_range, elev, azim)
     picture.show(i)
@@ -555,6 +576,10 @@ def write_html(motion: Motion, path, **options) -> Written:
         raise LinknetError(f"{path}: the interactive view is written as .html")
     _output_dir(path)
     start = time.perf_counter()
+    largest, float32_max = float(np.abs(motion.X).max()), float(np.finfo(np.float32).max)
+    if largest > float32_max:
+        raise LinknetError(f"{path}: positions reach {largest:.3g} m, beyond the float32 range the HTML view stores "
+                           f"({float32_max:.3g}); draw this run with linknet animate (float64) instead")
     figure, frames = build_html_figure(motion, **options)
     atomic_write(path, lambda tmp: pio.write_html(figure, tmp, include_plotlyjs=True, full_html=True, auto_play=False,
                                                   config=dict(displaylogo=False, scrollZoom=True)))
@@ -604,7 +629,7 @@ def add_view_arguments(p) -> None:
 
 
 def _print_notes(motion: Motion) -> None:
-    for note in motion.notes:
+    for note in motion.notes + motion.scale_notes():
         print("note:", note)
 
 
@@ -613,6 +638,9 @@ def _picture_options(args) -> dict:
 
 
 def cmd_animate(args) -> int:
+    if args.at is not None and Path(args.out).suffix.lower() != STILL_SUFFIX:
+        raise LinknetError(f"--at picks the one frame of a still (OUT.png), and {args.out} is an animation of the "
+                           "whole run: leave --at out, or write OUT.png")
     motion = Motion.from_npz(args.result)
     _print_notes(motion)
     options = _picture_options(args)

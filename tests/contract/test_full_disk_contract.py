@@ -305,3 +305,13 @@ def test_ensemble_plot_on_a_full_disk(tmp_path, small_disk):
                       "was left there)"], proc.stderr
     assert f"wrote {study}" in proc.stdout and not plot.exists()
     assert list(plot.parent.iterdir()) == []
+
+
+def test_an_out_path_that_cannot_be_written_is_refused_before_the_run(tmp_path):
+    # as root, access() passes /proc; the pre-check tries the write itself, so the run is not made for nothing
+    proc = run(["simulate", DOUBLE_PENDULUM, "--t-end", "0.1", "--out", "/proc/x.npz"], tmp_path)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.strip() == ("linknet simulate: error: argument --out: '/proc/x.npz' cannot be created in "
+                                   "/proc: No such file or directory (see linknet simulate --help)"), proc.stderr
+    assert "t_end" not in proc.stdout  # refused before the run
+    assert not list((tmp_path / "tmp").iterdir())  # no rescue file: nothing was computed
