@@ -95,7 +95,7 @@ def exit_code(argv):
     (["animate", "{good}", "-o", "{dir}/a.avi"], "written as .gif or .mp4"),
     (["animate", "{good}", "-o", "{dir}/a.gif", "--fps", "100"], "at most 50 frames per second"),
     (["view", "{good}", "-o", "{dir}/a.png"], "written as .html"),
-    (["animate", "{good}", "-o", "/proc/nowhere/a.gif"], "cannot write /proc/nowhere/a.gif"),
+    (["animate", "{good}", "-o", "/proc/nowhere/a.gif"], "'/proc/nowhere/a.gif' cannot be created in /proc"),
     (["animate", "{good}", "-o", "{dir}/a.gif", "--max-frames", "0"], "--max-frames: '0' must be at least 1"),
     (["animate", "{good}", "-o", "{dir}/a.gif", "--view", "side"], "--view: invalid choice: 'side'"),
     (["animate", "{good}", "-o", "{dir}/a.gif", "--size", "big"], "--size: WIDTHxHEIGHT"),
