@@ -541,7 +541,11 @@ class Simulator:
             try:
                 if hold is not None:
                     integrator.set_anchors(t, hold)
-                return NativeLinearization(integrator.model, integrator.data, X, U, F)
+                try:
+                    return NativeLinearization(integrator.model, integrator.data, X, U, F)
+                except SolverError:
+                    integrator._raise_motion_error()  # a callable's own failure, where it was one
+                    raise
             finally:
                 if saved is not None:
                     integrator.set_internals(saved)

@@ -454,6 +454,7 @@ def _run_checks(scene, samples, seed, dynamics, dynamics_factory, sym, kernel, n
     results.append(null_result)
     results.append(_check_existence(scene, sym, dyn, on, null_info, factory))
     results.append(_check_accelerations(scene, sym, dyn, Ffn, on))
+    results.append(_check_interface_jacobian(scene, sym, dyn, Ffn, on, off, seed, native))
     if sym.nd:
         results.append(_check_driven(scene, sym, dyn, Ffn, on, off))
         if any(m.kind != "input" for m in getattr(scene, "motions", ())):
@@ -888,6 +889,156 @@ def _check_accelerations(scene, sym, dyn, Ffn, states):
                    "above it only")
     return CheckResult("accelerations (9) and tensions: solver = symbolic", worst <= RTOL_SOLVE * 1e2, worst,
                        RTOL_SOLVE * 1e2, detail)
+
+
+def _interface_ad(sym, Ffn, X, U, Fin, Aa, cut, seeds):
+    """AD of the outputs' derivatives along ``seeds`` (columns over the input forces on the free masses and the
+    driven anchors' p, v, a, in reduced coordinates) at one state: T, the accelerations (9) of the free masses and
+    G_p^T T (the links' force on the driven anchors), as casadi expressions of those inputs, differentiated forward
+    by casadi at the state (x, u fixed). Rows T, acc, reactions.
+
+    The minimum-norm tensions are written without a pseudo-inverse: with V_r, Lambda_r the eigenvectors and
+    eigenvalues of A that the rank cut keeps at the state (numbers, ``cut``), Q(p) = A(p) V_r Lambda_r^-1 spans
+    range(A(p)) wherever the rank of A stays r (its r columns lie in it and are independent near the state; at the
+    state Q = V_r), and T = Q (Q^T A Q)^-1 Q^T B is then A^+ B (T lies in range(A), and A T - B is orthogonal to
+    it), an inconsistent B included: a regular r x r solve that AD differentiates. With r = L it is A^-1 B."""
+    import casadi as ca
+
+    x = ca.DM(sym.reduce_positions(X))
+    u = ca.DM(sym.reduce(U))
+    p0, v0, a0 = sym.anchor_state(X, U, Aa)
+    fin, p, v, a = (ca.MX.sym(name, n) for name, n in (("fin", sym.n), ("p", p0.size), ("v", v0.size),
+                                                       ("a", a0.size)))
+    F = Ffn(x, u, fin, p, v)
+    A = sym.A_fn(x, p)
+    B = sym.B_fn(x, u, F, p, v, a)
+    if cut.kept.sum() < sym.L:
+        Q = ca.mtimes(A, ca.DM(cut.V[:, cut.kept] / cut.w[cut.kept]))
+        T = ca.mtimes(Q, ca.solve(ca.mtimes([Q.T, A, Q]), ca.mtimes(Q.T, B)))
+    else:
+        T = ca.solve(A, B)
+    acc = sym.acc_fn(x, F, T, p)
+    reaction = ca.mtimes(sym.Gp_fn(x, p).T, T)
+    inputs = ca.vertcat(fin, p, v, a)
+    direction = ca.MX.sym("seeds", inputs.shape[0], seeds.shape[1])
+    forward = ca.Function("interface_ad", [fin, p, v, a, direction],
+                          [ca.jtimes(ca.vertcat(T, acc, reaction), inputs, direction)])
+    return np.asarray(forward(sym.reduce(Fin), p0, v0, a0, seeds), float)
+
+
+def _interface_numeric(lin, sym, seeds):
+    """The same derivatives (rows T, acc of the free masses, reactions on the driven anchors, in reduced
+    coordinates) along the same ``seeds`` from a linearization's ``directional``, seeded on every driven anchor
+    (``lin.anchors`` = ``sym.driven``)."""
+    d, basis, nf, nd = sym.dim, sym.basis, sym.nf, sym.nd
+    anchor_rows = np.searchsorted(sym.fixed, sym.driven)
+    out = np.zeros((sym.L + sym.n + nd * d, seeds.shape[1]))
+    for j, seed in enumerate(seeds.T):
+        dF = np.zeros((sym.K, 3))
+        dF[sym.free] = seed[:sym.n].reshape(nf, d) @ basis.T
+        motion = [part.reshape(nd, d) @ basis.T for part in np.split(seed[sym.n:], 3)] if nd else [None] * 3
+        o = lin.directional(dF, *motion)
+        out[:, j] = np.concatenate([o["T"], (o["acc"][sym.free] @ basis).ravel(),
+                                    (o["Freact"][anchor_rows] @ basis).ravel()])
+    return out
+
+
+def _interface_seeds(scene, sym, rng, per_kind=2):
+    """Random seeds in natural units (a typical weight m g for forces, a link length for positions, sqrt(g l) for
+    velocities, g for accelerations), ``per_kind`` on each kind of input alone (F; P, V, A of the driven anchors),
+    and the units of the outputs (rows: m g for tensions and reactions, g for accelerations), in which the
+    derivatives are compared, so that blocks of different dimensions weigh alike."""
+    g = float(np.linalg.norm(scene.gravity)) or 9.81
+    m = float(np.median(np.asarray(scene.mass, float)[sym.free])) if sym.nf else 1.0
+    ell = float(np.median(sym._R)) if sym.L else 1.0
+    d, n, nd = sym.dim, sym.n, sym.nd
+    kinds = [(slice(0, n), m * g)]
+    if nd:
+        for i, unit in enumerate((ell, np.sqrt(g * ell), g)):
+            kinds.append((slice(n + i * nd * d, n + (i + 1) * nd * d), unit))
+    seeds = np.zeros((n + 3 * nd * d, per_kind * len(kinds)))
+    for i, (part, unit) in enumerate(kinds):
+        seeds[part, per_kind * i:per_kind * (i + 1)] = unit * rng.standard_normal((part.stop - part.start, per_kind))
+    rows = np.concatenate([np.full(sym.L, m * g), np.full(n, g), np.full(nd * d, m * g)])
+    return seeds, rows
+
+
+def _check_interface_jacobian(scene, sym, dyn, Ffn, on, off, seed, native):
+    """The interface Jacobians (linknet_core.dynamics.interface_jacobian): the derivatives of T, the accelerations
+    and the reactions on the driven anchors along random seeds on the input forces and the driven anchors' P, V,
+    A (every driven anchor's: the inputs are the input-driven ones', and a scene motion's anchor enters the same
+    equations in the same places), from the numpy reference (and the native core) against casadi's AD of the AD system
+    (:func:`_interface_ad`), on and off the manifold. Compared in natural units (:func:`_interface_seeds`), relative
+    to the largest derivative and divided by cond(A) on its kept range, as the other solved quantities. States with an
+    eigenvalue of A in the band where the solver's and the reference's rank rules may differ (:class:`_RankCut`)
+    are counted and not compared: the minimum-norm tensions are not one function there. The seeds are drawn from a
+    generator of their own (``seed``), so that the other lines' draws are those they have without this one."""
+    from linknet_core.dynamics.interface_jacobian import ReferenceLinearization
+
+    rng = np.random.default_rng((seed, 28))
+
+    name = "interface Jacobians: dT, dU/dt, Freact by F, P, V, A = AD"
+    if not all(hasattr(dyn, attr) for attr in ("_scatter", "solver", "factor", "anchor_reactions", "structure")):
+        return CheckResult(name, True, 0.0, RTOL_SOLVE * 1e2, "the numeric side is not a Dynamics: not compared",
+                           skipped=True)
+    inputs, with_motion = _driven_groups(scene, sym)
+    native_side = None
+    if native:
+        try:
+            from linknet_core.native.interface import NativeInterface
+            from linknet_core.native.model import NativeData, native_model
+
+            model = native_model(scene, dyn.structure)
+            native_side = (model, NativeData(model), NativeInterface(model))
+        except Exception as exc:  # noqa: BLE001 - a missing native core is reported, not raised
+            native_side = f"{type(exc).__name__}: {exc}"
+    worst = {"numpy": 0.0}
+    if isinstance(native_side, tuple):
+        worst["native"] = 0.0
+    worst_cond, ambiguous, used, n_seeds = 1.0, 0, 0, 0
+    for s in on + off:
+        X, U, Aa = np.array(s.X, float), np.array(s.U, float), None if s.anchor_acc is None else np.array(s.anchor_acc)
+        if with_motion.size:  # where the core places them at the sample's scene time
+            P, V, A = scene.anchor_motion(s.tau)
+            rows = np.searchsorted(sym.driven, with_motion)
+            X[with_motion], U[with_motion], Aa[with_motion] = P[rows], V[rows], A[rows]
+        cut = _RankCut.of(sym.A(X).toarray())
+        if cut.ambiguous:
+            ambiguous += 1
+            continue
+        cond = cut.condition()
+        worst_cond = max(worst_cond, cond)
+        seeds, row_unit = _interface_seeds(scene, sym, rng)
+        reference = _interface_ad(sym, Ffn, X, U, s.F_input, Aa, cut, seeds) / row_unit[:, None]
+        sides = {"numpy": ReferenceLinearization(dyn, X, U, s.F_input, Aa, anchors=sym.driven)}
+        if isinstance(native_side, tuple):
+            from linknet_core.native.interface import NativeLinearization
+
+            model, data, interface = native_side
+            data.struct.t = data.struct.drive_hold_t = s.tau if s.tau is not None else 0.0
+            data.struct.drive_t0 = 0.0
+            if inputs.size:
+                slots = np.searchsorted(sym.driven, inputs)
+                data.drive_P[slots], data.drive_V[slots], data.drive_A[slots] = X[inputs], U[inputs], Aa[inputs]
+            sides["native"] = NativeLinearization(model, data, X, U, s.F_input, interface, anchors=sym.driven)
+        for side, lin in sides.items():
+            got = _interface_numeric(lin, sym, seeds) / row_unit[:, None]
+            worst[side] = max(worst[side], float(np.abs(got - reference).max(initial=0.0))
+                              / max(float(np.abs(reference).max(initial=0.0)), 1.0) / cond)
+        used += 1
+        n_seeds = seeds.shape[1]
+    tol = RTOL_SOLVE * 1e2
+    detail = (f"{used} of {len(on) + len(off)} state(s) on and off the manifold, {n_seeds} random seeds each (on F"
+              + (", and on P, V, A of the driven anchors" if sym.nd else "") + "): "
+              + ", ".join(f"{side} {w:.2e}" for side, w in worst.items())
+              + f" (natural units, relative, divided by cond(A), up to {worst_cond:.1e});"
+              " AD of T = Q (Q^T A Q)^-1 Q^T B, Q = A V_r Lambda_r^-1 spanning range(A)")
+    if ambiguous:
+        detail += f"; {ambiguous} state(s) with an eigenvalue of A in the rank band not compared"
+    if isinstance(native_side, str):
+        detail += f"; native: not compared ({native_side})"
+    passed = all(w <= tol for w in worst.values())
+    return CheckResult(name, passed, max(worst.values()), tol, detail, skipped=used == 0)
 
 
 def _check_driven(scene, sym, dyn, Ffn, on, off):

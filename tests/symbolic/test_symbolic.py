@@ -108,7 +108,7 @@ def test_every_check_passes_on_every_shipped_scene(path):
     results = checks.run_checks(scene, samples=3, seed=1)
     failed = [r.line() for r in results if not r.passed]
     assert not failed, "\n".join(failed)
-    assert len(results) == 8 or (scene.driven.any() and len(results) > 8)   # driven scenes get their own lines
+    assert len(results) == 9 or (scene.driven.any() and len(results) > 9)   # driven scenes get their own lines
 
 
 @pytest.mark.parametrize("path", SCENES, ids=[p.stem for p in SCENES])
@@ -150,7 +150,7 @@ def test_cli_main_prints_one_line_per_check_and_exits_zero(capsys):
     status = checks.main(parser.parse_args([str(MODELS / "double_pendulum.json"), "--samples", "2", "--seed", "4"]))
     out = capsys.readouterr().out
     assert status == 0
-    assert out.count("PASS") == 8 and "FAIL" not in out
+    assert out.count("PASS") == 9 and "FAIL" not in out
 
 
 def test_cli_refuses_a_missing_file_and_handles_a_scene_without_links(capsys, tmp_path):
