@@ -6,6 +6,17 @@
  * - no call ever returns fmi2Fatal or brings the process down: a bad argument, a bad value or a call out of
  *   order returns fmi2Error with a logged message and changes nothing, so the instance stays usable; a
  *   step the solver cannot complete returns fmi2Discard and leaves the state where it was;
+ * - after a discarded step fmi2GetBooleanStatus(fmi2Terminated) says whether the master should stop: true where
+ *   the model knows that no retry of the step, however short, can succeed (fmu_model.h FMU_DISCARD_FINAL), and
+ *   when the master asks for the very step that was discarded again from the same model state (its bytes, which
+ *   hold the inputs and parameters too: whatever was set or restored in between): the model is deterministic, so
+ *   it would fail the same way, and such a repeat is answered without being computed. fmi2LastSuccessfulTime is
+ *   the FMU's time, where a discarded step leaves it. A master that retries the same step forever (fmpy's
+ *   simulate_fmu, fmusim) so stops after at most one repeat, with the reason logged;
+ * - an FMU state handle is accepted only when this instance made it and has not freed it (a registry, not a mark
+ *   in the state's memory): a NULL, made-up, freed or foreign handle, a double free, and a state handle passed
+ *   where the address of the host's variable belongs are fmi2Error with a logged message, nothing is read or
+ *   written through them, and the instance goes on working. fmi2FreeInstance frees the states the host left;
  * - errors, discards and warnings always reach the host's logger (with loggingOn or not); other messages
  *   only with logging on;
  * - instances share no mutable data: several instances, on several threads, are independent (one
@@ -39,6 +50,17 @@ typedef struct instance {
     fmu_model *model;
     char msg[FMU_MESSAGE];              /* the model's reason for a refusal */
     char line[2 * FMU_MESSAGE + 256];   /* the logged message, format characters escaped */
+    /* the FMU states this instance handed out (fmi2GetFMUstate, fmi2DeSerializeFMUstate) and has not freed */
+    struct state_header **states;
+    size_t n_states, states_capacity;
+    /* the last discarded step and the model's state it was discarded from: asked again from that same state, it
+       fails the same way */
+    int discarded;
+    double discarded_t, discarded_h;
+    unsigned char *discarded_from;      /* the model's state bytes then (fmu_model_state_save) */
+    unsigned char *state_now;           /* scratch: the model's state bytes now, to compare */
+    int terminated;                     /* fmi2Terminated: the master should stop (at fmi2LastSuccessfulTime) */
+    char discard_reason[FMU_MESSAGE];   /* what the model said when it discarded that step */
 } instance;
 
 /* ---- logging ------------------------------------------------------------------------------------- */
@@ -76,7 +98,7 @@ static void emit(instance *self, fmi2Status status, const char *text) { emit_in(
 
 static void logf_status(instance *self, fmi2Status status, const char *format, ...)
 {
-    char text[FMU_MESSAGE + 256];
+    char text[FMU_MESSAGE + 512];  /* a model's message and the glue's words around it */
     va_list args;
     va_start(args, format);
     vsnprintf(text, sizeof text, format, args);
@@ -101,7 +123,8 @@ static fmi2Status report(instance *self, const char *function, int result)
     switch (result) {
     case FMU_OK: return fmi2OK;
     case FMU_WARNING: logf_status(self, fmi2Warning, "%s: %s", function, self->msg); return fmi2Warning;
-    case FMU_DISCARD: logf_status(self, fmi2Discard, "%s: %s", function, self->msg); return fmi2Discard;
+    case FMU_DISCARD:
+    case FMU_DISCARD_FINAL: logf_status(self, fmi2Discard, "%s: %s", function, self->msg); return fmi2Discard;
     case FMU_NOTE: {  /* information on a result computed as asked: seen by the host, the call is fmi2OK */
         char text[FMU_MESSAGE + 256];
         snprintf(text, sizeof text, "%s: %s", function, self->msg);
@@ -127,6 +150,39 @@ static int mode_allows(instance *self, const char *function, unsigned allowed)
     if (allowed & (1u << self->mode)) return 1;
     refuse(self, function, "not allowed in %s", mode_names[self->mode]);
     return 0;
+}
+
+/* A call that may change what a step computes (a value set, a state restored, a reset) succeeded: the master is
+   no longer asked to stop (whether the discarded step is asked again from the same state, fmi2DoStep tells). */
+static fmi2Status changed_by(instance *self, fmi2Status status)
+{
+    if (status <= fmi2Warning) self->terminated = 0;
+    return status;
+}
+
+/* The step from t with h was discarded from the model's present state: remembered with that state's bytes (0 where
+   there is no memory for them: a repeat is then computed again). */
+static void remember_discard(instance *self, double t, double h)
+{
+    const size_t n = fmu_model_state_size(self->model);
+    if (self->discarded_from == NULL) {
+        self->discarded_from = malloc(n ? n : 1);
+        self->state_now = malloc(n ? n : 1);
+    }
+    self->discarded = self->discarded_from != NULL && self->state_now != NULL;
+    if (!self->discarded) return;
+    self->discarded_t = t;
+    self->discarded_h = h;
+    fmu_model_state_save(self->model, self->discarded_from);
+    snprintf(self->discard_reason, sizeof self->discard_reason, "%s", self->msg);
+}
+
+/* Whether the step from t with h is the one discarded last, asked again from the same model state. */
+static int is_discarded_step(instance *self, double t, double h)
+{
+    if (!self->discarded || t != self->discarded_t || h != self->discarded_h) return 0;
+    fmu_model_state_save(self->model, self->state_now);
+    return memcmp(self->state_now, self->discarded_from, fmu_model_state_size(self->model)) == 0;
 }
 
 #define IN(mode) (1u << (mode))
@@ -202,11 +258,16 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     return self;
 }
 
+static void free_all_states(instance *self);
+
 void fmi2FreeInstance(fmi2Component c)
 {
     instance *self = checked(c);
     if (self == NULL) return;
     self->magic = 0;
+    free_all_states(self);  /* the states the host did not free: they belong to the instance */
+    free(self->discarded_from);
+    free(self->state_now);
     fmu_model_free(self->model);
     free(self->name);
     free(self);
@@ -224,7 +285,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     if (!isfinite(startTime)) return refuse(self, fn, "startTime = %g is not finite", startTime);
     if (stopTimeDefined && !(isfinite(stopTime) && stopTime >= startTime))
         return refuse(self, fn, "stopTime = %g must be finite and >= startTime = %g", stopTime, startTime);
-    return report(self, fn, fmu_model_set_start_time(self->model, startTime, self->msg));
+    return changed_by(self, report(self, fn, fmu_model_set_start_time(self->model, startTime, self->msg)));
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c)
@@ -239,7 +300,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
     ENTER("fmi2ExitInitializationMode");
     if (!mode_allows(self, fn, IN(MODE_INITIALIZATION))) return fmi2Error;
-    const fmi2Status status = report(self, fn, fmu_model_initialize(self->model, self->msg));
+    const fmi2Status status = changed_by(self, report(self, fn, fmu_model_initialize(self->model, self->msg)));
     if (status <= fmi2Warning) self->mode = MODE_STEPPING;  /* else: still in initialization mode, fix and retry */
     return status;
 }
@@ -255,7 +316,7 @@ fmi2Status fmi2Terminate(fmi2Component c)
 fmi2Status fmi2Reset(fmi2Component c)
 {
     ENTER("fmi2Reset");
-    const fmi2Status status = report(self, fn, fmu_model_reset(self->model, self->msg));
+    const fmi2Status status = changed_by(self, report(self, fn, fmu_model_reset(self->model, self->msg)));
     if (status <= fmi2Warning) self->mode = MODE_INSTANTIATED;
     return status;
 }
@@ -283,7 +344,8 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     ENTER("fmi2SetReal");
     if (!mode_allows(self, fn, IN(MODE_INSTANTIATED) | IN(MODE_INITIALIZATION) | IN(MODE_STEPPING))) return fmi2Error;
     if (!vr_arguments(self, fn, vr, nvr, value)) return fmi2Error;
-    return report(self, fn, fmu_model_set_real(self->model, vr, nvr, value, self->mode >= MODE_STEPPING, self->msg));
+    return changed_by(self, report(self, fn, fmu_model_set_real(self->model, vr, nvr, value,
+                                                                self->mode >= MODE_STEPPING, self->msg)));
 }
 
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
@@ -298,7 +360,8 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     ENTER("fmi2SetString");
     if (!mode_allows(self, fn, IN(MODE_INSTANTIATED) | IN(MODE_INITIALIZATION) | IN(MODE_STEPPING))) return fmi2Error;
     if (!vr_arguments(self, fn, vr, nvr, value)) return fmi2Error;
-    return report(self, fn, fmu_model_set_string(self->model, vr, nvr, value, self->mode >= MODE_STEPPING, self->msg));
+    return changed_by(self, report(self, fn, fmu_model_set_string(self->model, vr, nvr, value,
+                                                                  self->mode >= MODE_STEPPING, self->msg)));
 }
 
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
@@ -313,8 +376,8 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     ENTER("fmi2SetBoolean");
     if (!mode_allows(self, fn, IN(MODE_INSTANTIATED) | IN(MODE_INITIALIZATION) | IN(MODE_STEPPING))) return fmi2Error;
     if (!vr_arguments(self, fn, vr, nvr, value)) return fmi2Error;
-    return report(self, fn, fmu_model_set_boolean(self->model, vr, nvr, value, self->mode >= MODE_STEPPING,
-                                                  self->msg));
+    return changed_by(self, report(self, fn, fmu_model_set_boolean(self->model, vr, nvr, value,
+                                                                   self->mode >= MODE_STEPPING, self->msg)));
 }
 
 /* The model has no Integer variables. */
@@ -366,7 +429,7 @@ typedef struct state_header {
     uint64_t size;          /* bytes, this header included */
     uint32_t mode;          /* the instance's mode when the state was taken */
     uint32_t reserved;
-    uint64_t self;          /* in memory: the state's own address (0 when serialized) */
+    uint64_t reserved2;     /* 0 (the instance's registry, not the state, says which handles are live) */
     uint64_t checksum;      /* serialized: FNV-1a of the bytes after the header (0 in memory) */
 } state_header;
 
@@ -399,36 +462,104 @@ static const char *state_problem(const instance *self, const state_header *h, si
     return NULL;
 }
 
-/* A state handle given by the host: one this FMU made (in memory), or NULL after logging why not. */
+/* The registry of the states this instance handed out and has not freed. A handle is live exactly when it is
+   listed: whether one is, is decided by comparing pointers, never by reading through the handle, so a made-up,
+   freed or foreign handle is refused without touching the memory it points to (a mark written into a state before
+   free() could not tell either: the compiler may drop that store, and the block may be reused or unmapped). */
+static size_t state_index(const instance *self, const void *handle)
+{
+    for (size_t i = 0; i < self->n_states; i++)
+        if ((const void *)self->states[i] == handle) return i;
+    return self->n_states;
+}
+
+static int is_live_state(const instance *self, const void *handle)
+{
+    return handle != NULL && state_index(self, handle) < self->n_states;
+}
+
+static int remember_state(instance *self, state_header *h)
+{
+    if (self->n_states == self->states_capacity) {
+        const size_t capacity = self->states_capacity ? 2 * self->states_capacity : 8;
+        state_header **grown = realloc(self->states, capacity * sizeof *grown);
+        if (grown == NULL) return 0;
+        self->states = grown;
+        self->states_capacity = capacity;
+    }
+    self->states[self->n_states++] = h;
+    return 1;
+}
+
+static void forget_state(instance *self, size_t i)
+{
+    self->states[i] = self->states[--self->n_states];
+}
+
+static void free_all_states(instance *self)
+{
+    for (size_t i = 0; i < self->n_states; i++) free(self->states[i]);
+    free(self->states);
+    self->states = NULL;
+    self->n_states = self->states_capacity = 0;
+}
+
+#define NOT_A_LIVE_STATE                                                                                         \
+    "FMUstate is not a live state of this FMU instance (one it made with fmi2GetFMUstate or "                  \
+    "fmi2DeSerializeFMUstate and has not freed): a made-up handle, one already freed, or another FMU's or "    \
+    "instance's; nothing was read or changed (a state moves to another instance serialized)"
+#define HANDLE_FOR_ADDRESS                                                                                       \
+    "FMUstate is a state handle itself where the address of the host's fmi2FMUstate variable belongs (call "  \
+    "%s(c, &state), not %s(c, (fmi2FMUstate *)state)); nothing was freed or written: the state stays live, "   \
+    "and fmi2FreeInstance frees it if the host does not"
+
+/* A state handle given by the host by value: live in this instance, or NULL after logging why not. */
 static state_header *live_state(instance *self, const char *fn, fmi2FMUstate FMUstate)
 {
-    state_header *h = (state_header *)FMUstate;
-    if (h == NULL) {
+    if (FMUstate == NULL) {
         refuse(self, fn, "FMUstate is NULL");
         return NULL;
     }
-    if (memcmp(h->magic, state_magic, sizeof state_magic) != 0 || h->self != (uint64_t)(uintptr_t)h) {
-        refuse(self, fn, "not an FMU state of this FMU (made by fmi2GetFMUstate or fmi2DeSerializeFMUstate)");
+    if (!is_live_state(self, FMUstate)) {
+        refuse(self, fn, NOT_A_LIVE_STATE);
         return NULL;
     }
-    const char *problem = state_problem(self, h, (size_t)h->size);
-    if (problem) {
-        refuse(self, fn, "refused: %s", problem);
-        return NULL;
+    return (state_header *)FMUstate;
+}
+
+/* The address of the host's state variable (fmi2GetFMUstate, fmi2FreeFMUstate, fmi2DeSerializeFMUstate): 1 when
+   it may be read and written, else 0 after logging why. A live state's own handle passed as that address (fmusim
+   0.0.39 frees with fmi2FreeFMUstate(c, (fmi2FMUstate *)state)) is recognised by the registry before anything is
+   read through it: it is refused, not taken as a request to free that state, since FMI asks the FMU to set the
+   host's variable to NULL, which cannot be found here, and a host that gets fmi2OK never learns of its mistake.
+   Any other address is the host's to vouch for: C cannot tell whether an arbitrary pointer may be read. */
+static int state_variable(instance *self, const char *fn, const fmi2FMUstate *FMUstate)
+{
+    if (FMUstate == NULL) {
+        refuse(self, fn, "FMUstate is NULL (the address of the host's fmi2FMUstate variable is expected)");
+        return 0;
     }
-    return h;
+    if (is_live_state(self, FMUstate)) {
+        refuse(self, fn, HANDLE_FOR_ADDRESS, fn, fn);
+        return 0;
+    }
+    return 1;
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     ENTER("fmi2GetFMUstate");
-    if (FMUstate == NULL) return refuse(self, fn, "FMUstate is NULL");
+    if (!state_variable(self, fn, FMUstate)) return fmi2Error;
     state_header *h = NULL;
-    if (*FMUstate != NULL) {  /* a state of this FMU to overwrite */
+    if (*FMUstate != NULL) {  /* a state of this instance to overwrite */
         if ((h = live_state(self, fn, *FMUstate)) == NULL) return fmi2Error;
     } else {
         h = calloc(1, state_size(self));
         if (h == NULL) return refuse(self, fn, "out of memory for a state of %zu bytes", state_size(self));
+        if (!remember_state(self, h)) {
+            free(h);
+            return refuse(self, fn, "out of memory for the list of this instance's states");
+        }
     }
     memcpy(h->magic, state_magic, sizeof state_magic);
     h->format = STATE_FORMAT;
@@ -436,7 +567,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
     h->fingerprint = fmu_model_info_get()->fingerprint;
     h->size = state_size(self);
     h->mode = (uint32_t)self->mode;
-    h->self = (uint64_t)(uintptr_t)h;
+    h->reserved2 = 0;
     h->checksum = 0;
     fmu_model_state_save(self->model, (unsigned char *)(h + 1));
     *FMUstate = h;
@@ -452,18 +583,18 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
                                                (size_t)h->size - sizeof *h, self->msg);
     if (result != FMU_OK) return report(self, fn, result);
     self->mode = (int)h->mode;
-    return fmi2OK;
+    return changed_by(self, fmi2OK);
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     ENTER("fmi2FreeFMUstate");
-    if (FMUstate == NULL) return refuse(self, fn, "FMUstate is NULL");
-    if (*FMUstate == NULL) return fmi2OK;
-    state_header *h = live_state(self, fn, *FMUstate);
-    if (h == NULL) return fmi2Error;
-    memset(h, 0, sizeof *h);  /* a freed state is never taken for a live one */
-    free(h);
+    if (!state_variable(self, fn, FMUstate)) return fmi2Error;
+    if (*FMUstate == NULL) return fmi2OK;  /* nothing to free (FMI: the variable of a freed state holds NULL) */
+    const size_t i = state_index(self, *FMUstate);
+    if (i == self->n_states) return refuse(self, fn, NOT_A_LIVE_STATE);
+    free(self->states[i]);
+    forget_state(self, i);
     *FMUstate = NULL;
     return fmi2OK;
 }
@@ -488,7 +619,6 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byt
     memcpy(serializedState, h, (size_t)h->size);
     state_header copy;
     memcpy(&copy, h, sizeof copy);
-    copy.self = 0;
     copy.checksum = checksum_of((const unsigned char *)(h + 1), (size_t)h->size - sizeof *h);
     memcpy(serializedState, &copy, sizeof copy);
     return fmi2OK;
@@ -498,7 +628,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
                                    fmi2FMUstate *FMUstate)
 {
     ENTER("fmi2DeSerializeFMUstate");
-    if (FMUstate == NULL) return refuse(self, fn, "FMUstate is NULL");
+    if (!state_variable(self, fn, FMUstate)) return fmi2Error;
     if (serializedState == NULL) return refuse(self, fn, "serializedState is NULL");
     state_header header;
     memset(&header, 0, sizeof header);
@@ -509,8 +639,12 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
         return refuse(self, fn, "refused: the state's bytes are damaged (checksum mismatch)");
     state_header *h = malloc(size);
     if (h == NULL) return refuse(self, fn, "out of memory for a state of %zu bytes", size);
+    if (!remember_state(self, h)) {
+        free(h);
+        return refuse(self, fn, "out of memory for the list of this instance's states");
+    }
     memcpy(h, serializedState, size);
-    h->self = (uint64_t)(uintptr_t)h;
+    h->reserved2 = 0;
     h->checksum = 0;
     *FMUstate = h;
     return fmi2OK;
@@ -525,8 +659,9 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
     if (!mode_allows(self, fn, IN(MODE_INITIALIZATION) | IN(MODE_STEPPING))) return fmi2Error;
     if (nvr > 0 && order == NULL) return refuse(self, fn, "order is NULL with nvr = %zu", nvr);
     if (!vr_arguments(self, fn, vr, nvr, value)) return fmi2Error;
-    return report(self, fn, fmu_model_set_real_input_derivatives(self->model, vr, nvr, order, value,
-                                                                 self->mode >= MODE_STEPPING, self->msg));
+    return changed_by(self, report(self, fn, fmu_model_set_real_input_derivatives(self->model, vr, nvr, order, value,
+                                                                                  self->mode >= MODE_STEPPING,
+                                                                                  self->msg)));
 }
 
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
@@ -537,6 +672,11 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
     if (nvr == 0) return fmi2OK;
     return refuse(self, fn, "not provided (maxOutputDerivativeOrder is 0)");
 }
+
+#define REPEATED_STEP                                                                                            \
+    "the step from t=%.17g with h=%.17g was discarded before, from this same state with these same inputs, so it "\
+    "fails again the same way (not computed again); stop here, or set other inputs, restore another state or take " \
+    "a shorter step."
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint)
@@ -555,7 +695,24 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     if (!isfinite(t) || fabs(t - t_fmu) > 1e-9 * fmax(1.0, fabs(t_fmu)))
         return refuse(self, fn, "currentCommunicationPoint t=%.17g differs from the FMU's time %.17g", t, t_fmu);
     if (!isfinite(t + h)) return refuse(self, fn, "t + h = %.17g is not finite", t + h);
-    return report(self, fn, fmu_model_do_step(self->model, t, h, self->msg));
+    if (is_discarded_step(self, t, h)) {
+        /* the model is deterministic: from the same state with the same inputs the same step fails again */
+        self->terminated = 1;
+        logf_status(self, fmi2Discard, "%s: fmi2Terminated is true (fmi2LastSuccessfulTime = %.17g): " REPEATED_STEP
+                    " It failed with: %s", fn, t_fmu, t, h, self->discard_reason);
+        return fmi2Discard;
+    }
+    const int result = fmu_model_do_step(self->model, t, h, self->msg);
+    if (result != FMU_DISCARD && result != FMU_DISCARD_FINAL) {
+        self->discarded = 0;
+        return changed_by(self, report(self, fn, result));
+    }
+    remember_discard(self, t, h);
+    self->terminated = result == FMU_DISCARD_FINAL;
+    if (!self->terminated) return report(self, fn, result);
+    logf_status(self, fmi2Discard, "%s: %s; so fmi2Terminated is true (fmi2LastSuccessfulTime = %.17g)", fn, self->msg,
+                t_fmu);
+    return fmi2Discard;
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c)
@@ -592,7 +749,7 @@ fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boo
     ENTER("fmi2GetBooleanStatus");
     if (value == NULL) return refuse(self, fn, "value is NULL");
     if (s != fmi2Terminated) return refuse(self, fn, "status kind %d is not a Boolean status", (int)s);
-    *value = fmi2False;  /* the model never asks the master to stop */
+    *value = self->terminated ? fmi2True : fmi2False;  /* see fmi2DoStep */
     return fmi2OK;
 }
 

@@ -22,10 +22,13 @@ enum fmu_result {
     FMU_WARNING = 1,    /* done, with something worth saying in msg */
     FMU_DISCARD = 2,    /* the step could not be completed; nothing changed */
     FMU_ERROR = 3,      /* refused (bad argument or value); nothing changed */
-    FMU_NOTE = 4        /* done, as asked (the call returns fmi2OK), with information in msg that the host must see
+    FMU_NOTE = 4,       /* done, as asked (the call returns fmi2OK), with information in msg that the host must see
                            although nothing went wrong: logged with fmi2Warning status in the category
                            LINKNET_NOTE_CATEGORY (fmi2_api.h),
                            logging on or not (the model's error estimate exceeded the run's goal) */
+    FMU_DISCARD_FINAL = 5 /* as FMU_DISCARD, and no retry of this step from this state with these inputs can
+                           succeed, however short the step is made; msg says why. The glue answers fmi2Discard and
+                           reports fmi2Terminated (the master should stop) */
 };
 
 typedef struct fmu_model fmu_model;
@@ -66,7 +69,8 @@ int fmu_model_set_boolean(fmu_model *m, const unsigned *vr, size_t n, const int 
 
 /* End of initialization: the parameters set so far take effect. */
 int fmu_model_initialize(fmu_model *m, char *msg);
-/* One communication step from t to t + h with the inputs held. All or nothing (FMU_NOTE: done, with a note). */
+/* One communication step from t to t + h with the inputs held. All or nothing (FMU_NOTE: done, with a note;
+   FMU_DISCARD: not done, a shorter step may succeed; FMU_DISCARD_FINAL: not done, and no shorter one can). */
 int fmu_model_do_step(fmu_model *m, double t, double h, char *msg);
 double fmu_model_time(const fmu_model *m);
 

@@ -755,6 +755,39 @@ int fmu_model_initialize(fmu_model *m, char *msg)
     return apply_parameters(m, msg);
 }
 
+/* stages/rattle.c: a fixed step whose position stage or implicit half kick fails is taken again as 2, 4, ...,
+   2^ln_max_split_level equal sub-steps before the advance gives up. */
+extern const int ln_max_split_level;
+
+/* Why no retry of a step that failed with `status` can succeed from this state with these inputs, however short
+   the master makes the step, into out (n bytes): 1; or 0 where a shorter step may succeed: more steps than one
+   advance takes (the message names the longest interval that is not), a state that became non-finite or a
+   singular configuration or a driven anchor's motion that failed somewhere within the step (a shorter one may end
+   before), a step of free rigid bodies (their engine does not split a failing step), memory. */
+static int no_retry_helps(const fmu_model *m, int status, char *out, size_t n)
+{
+    switch (status) {
+    case LN_STEP_UNDERFLOW:
+        snprintf(out, n, "the error-controlled integrator already cut its own steps down to 16 ulps of t");
+        return 1;
+    case LN_PROJECTION_FAILED:
+    case LN_IMPLICIT_KICK_FAILED:
+        if (m->model.rigid) return 0;
+        if (m->method.kind == LN_COMPOSITION)
+            snprintf(out, n, "the integrator already took the failing step again as up to %d equal sub-steps, and "
+                     "its own step is the parameter step, fixed during a run%s", 1 << ln_max_split_level,
+                     m->model.n_driven ? " (a failure where the driven anchors jump to new inputs does not depend "
+                                         "on the step at all)" : "");
+        else  /* the Runge-Kutta steps reject and shorten a step whose projection fails: only the jump is left */
+            snprintf(out, n, "the driven anchors' jump to their new inputs could not be followed, which does not "
+                     "depend on the step (the error-controlled integrator shortens its own steps where a "
+                     "projection fails)");
+        return 1;
+    default:
+        return 0;
+    }
+}
+
 int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
 {
     const lnfmu_scene *s = m->s;
@@ -762,13 +795,16 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
     if (t_target <= t_fmu) return FMU_OK;  /* h below half an ulp of t: nothing to integrate */
     const int status = ln_advance(&m->model, &m->method, m->d, t_target, s->max_steps);
     if (status != LN_OK) {
-        char why[FMU_MESSAGE - 128], label[512] = "";
+        char why[FMU_MESSAGE - 512], label[512] = "", final[320] = "";
         if (m->d->fail_link >= 0) link_label(s, m->d->fail_link, label, sizeof label);
         /* a fixed-step method's count is known before any step: the span, dt, the count and the limit, as the
            library says them */
         if (!(status == LN_TOO_MANY_STEPS && m->method.kind == LN_COMPOSITION
               && ln_step_count_problem(t_fmu, t_target, m->method.dt, s->max_steps, why, sizeof why)))
             ln_explain(&m->model, &m->method, m->d, status, t_fmu, t_target, s->max_steps, label, why, sizeof why);
+        if (no_retry_helps(m, status, final, sizeof final))
+            return fail(msg, FMU_DISCARD_FINAL, "step from t=%.17g with h=%.17g failed, the FMU stays at t=%.17g: %s. "
+                        "No retry of this step can succeed, however short: %s", t, h, t_fmu, why, final);
         return fail(msg, FMU_DISCARD, "step from t=%.17g with h=%.17g failed, the FMU stays at t=%.17g: %s", t, h,
                     t_fmu, why);
     }

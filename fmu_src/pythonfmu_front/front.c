@@ -8,8 +8,15 @@
  *   logger callback before the call returns, and that callback is this layer's `relay`). So a refused
  *   setReal/getReal/get or set String, Integer, Boolean returns the fmi2Error the slave logged;
  * - arguments pythonfmu would dereference unchecked are checked first: a component handle that is not a live
- *   instance of this FMU, NULL arrays, NULL or unknown fmi2FMUstate handles (pythonfmu takes any pointer for a
- *   Python object), a serialization buffer smaller than the state. Refused with fmi2Error and a logged message;
+ *   instance of this FMU, NULL arrays, a serialization buffer smaller than the state, and every fmi2FMUstate
+ *   handle (pythonfmu takes any pointer for a Python object): an instance accepts only the states it handed out
+ *   and has not freed (its registry), so NULL, made-up, freed or foreign handles, a double free and a state handle
+ *   passed where the address of the host's variable belongs are refused, as in the native FMU (the same rules and
+ *   words as fmu_src/native/fmi2Functions.c). Refused with fmi2Error and a logged message;
+ * - fmi2GetBooleanStatus(fmi2Terminated) (pythonfmu 0.7.0 answers true after any discarded step, so that a master
+ *   stops even where setting a good input or a shorter step would go on): true when the master asks for the very
+ *   step that was discarded again with nothing set or restored in between, which fails the same way (answered
+ *   without calling the slave), as the native FMU does; false otherwise;
  * - messages: errors, discards and warnings always reach the host's logger, other messages only with logging
  *   on, as in the native FMU (fmu_src/native/fmi2Functions.c). pythonfmu itself runs with logging always on,
  *   so that every status the slave logs is seen here;
@@ -126,10 +133,18 @@ typedef struct front {
     fmi2Status worst;                 /* the worst status logged during the current call */
     fmi2CallbackFunctions callbacks;  /* handed to pythonfmu (which keeps the pointer): its logger is relay() */
     struct front *next_parked;
+    fmi2FMUstate *states;             /* the FMU states this instance handed out and has not freed */
+    size_t n_states, states_capacity;
+    /* the last discarded step, until something is set or restored: the same step asked again fails the same way */
+    int discarded;
+    double discarded_t, discarded_h;
+    int terminated;                   /* fmi2Terminated */
+    char last_discard[2048];          /* the last message the slave logged with fmi2Discard status */
+    char discard_reason[2048];        /* the one it logged when that step was discarded */
     char line[4096];
 } front;
 
-static pthread_mutex_t registry_lock = PTHREAD_MUTEX_INITIALIZER;  /* the parked instances and the live states */
+static pthread_mutex_t registry_lock = PTHREAD_MUTEX_INITIALIZER;  /* the parked instances */
 static front *parked;
 
 static const char *category_of(fmi2Status status)
@@ -180,6 +195,7 @@ static void relay(fmi2ComponentEnvironment environment, fmi2String instanceName,
     front *self = (front *)environment;
     if (self == NULL) return;
     if (status > self->worst && status <= fmi2Fatal && counts_towards_status(category)) self->worst = status;
+    if (status == fmi2Discard) snprintf(self->last_discard, sizeof self->last_discard, "%s", message ? message : "");
     emit(self, status, category, message);
 }
 
@@ -202,6 +218,14 @@ static fmi2Status answer(const front *self, fmi2Status status)
     return self->worst > status ? self->worst : status;
 }
 
+/* A call that may change what a step computes (a value set, a state restored, a reset) succeeded: the discarded
+   step, if any, is no longer known to fail, and the master is no longer asked to stop. */
+static fmi2Status changed_by(front *self, fmi2Status status)
+{
+    if (status <= fmi2Warning) self->discarded = self->terminated = 0;
+    return status;
+}
+
 static front *checked(fmi2Component c)
 {
     front *self = (front *)c;
@@ -222,60 +246,85 @@ static int arrays_given(front *self, const char *fn, size_t n, const void *vr, c
     return 0;
 }
 
-/* ---- FMU states: the handles this FMU handed out and has not freed ------------------------------------ */
+/* ---- FMU states: the handles this instance handed out and has not freed --------------------------------- */
 
-static fmi2FMUstate *live_states;
-static size_t n_live, live_capacity;
-
-static int state_is_live(fmi2FMUstate state)
+/* A handle is live exactly when it is listed: whether one is, is decided by comparing pointers, never by reading
+   through the handle, so a made-up, freed or foreign handle is refused without touching the memory it points to.
+   The same registry and words as the native FMU's (fmu_src/native/fmi2Functions.c). */
+static size_t state_index(const front *self, const void *handle)
 {
-    int found = 0;
-    pthread_mutex_lock(&registry_lock);
-    for (size_t i = 0; i < n_live && !found; i++) found = live_states[i] == state;
-    pthread_mutex_unlock(&registry_lock);
-    return found;
+    for (size_t i = 0; i < self->n_states; i++)
+        if ((const void *)self->states[i] == handle) return i;
+    return self->n_states;
 }
 
-static int remember_state(fmi2FMUstate state)
+static int is_live_state(const front *self, const void *handle)
 {
-    int ok = 1;
-    pthread_mutex_lock(&registry_lock);
-    if (n_live == live_capacity) {
-        const size_t capacity = live_capacity ? 2 * live_capacity : 16;
-        fmi2FMUstate *grown = realloc(live_states, capacity * sizeof *grown);
-        if (grown) {
-            live_states = grown;
-            live_capacity = capacity;
-        } else {
-            ok = 0;
-        }
+    return handle != NULL && state_index(self, handle) < self->n_states;
+}
+
+static int remember_state(front *self, fmi2FMUstate state)
+{
+    if (self->n_states == self->states_capacity) {
+        const size_t capacity = self->states_capacity ? 2 * self->states_capacity : 8;
+        fmi2FMUstate *grown = realloc(self->states, capacity * sizeof *grown);
+        if (grown == NULL) return 0;
+        self->states = grown;
+        self->states_capacity = capacity;
     }
-    if (ok) live_states[n_live++] = state;
-    pthread_mutex_unlock(&registry_lock);
-    return ok;
+    self->states[self->n_states++] = state;
+    return 1;
 }
 
-static void forget_state(fmi2FMUstate state)
+static void forget_state(front *self, fmi2FMUstate state)
 {
-    pthread_mutex_lock(&registry_lock);
-    for (size_t i = 0; i < n_live; i++)
-        if (live_states[i] == state) {
-            live_states[i] = live_states[--n_live];
-            break;
-        }
-    pthread_mutex_unlock(&registry_lock);
+    const size_t i = state_index(self, state);
+    if (i < self->n_states) self->states[i] = self->states[--self->n_states];
 }
 
-/* A state handle given by the host: live, or refused with the reason logged. */
+/* The states the host did not free, freed through pythonfmu (an instance parked or destroyed). */
+static void free_all_states(front *self)
+{
+    for (size_t i = 0; i < self->n_states; i++) inner.fmi2FreeFMUstate(self->inner, &self->states[i]);
+    free(self->states);
+    self->states = NULL;
+    self->n_states = self->states_capacity = 0;
+}
+
+#define NOT_A_LIVE_STATE                                                                                         \
+    "FMUstate is not a live state of this FMU instance (one it made with fmi2GetFMUstate or "                  \
+    "fmi2DeSerializeFMUstate and has not freed): a made-up handle, one already freed, or another FMU's or "    \
+    "instance's; nothing was read or changed (a state moves to another instance serialized)"
+#define HANDLE_FOR_ADDRESS                                                                                       \
+    "FMUstate is a state handle itself where the address of the host's fmi2FMUstate variable belongs (call "  \
+    "%s(c, &state), not %s(c, (fmi2FMUstate *)state)); nothing was freed or written: the state stays live, "   \
+    "and fmi2FreeInstance frees it if the host does not"
+
+/* A state handle given by the host by value: live in this instance, or refused with the reason logged. */
 static int live_state(front *self, const char *fn, fmi2FMUstate state)
 {
     if (state == NULL) {
         refuse(self, fn, "FMUstate is NULL");
         return 0;
     }
-    if (!state_is_live(state)) {
-        refuse(self, fn, "FMUstate is not a live state of this FMU (one made by its fmi2GetFMUstate or "
-                         "fmi2DeSerializeFMUstate and not freed): a state of another FMU, or one already freed");
+    if (!is_live_state(self, state)) {
+        refuse(self, fn, NOT_A_LIVE_STATE);
+        return 0;
+    }
+    return 1;
+}
+
+/* The address of the host's state variable: 1 when it may be read and written, else 0 after logging why. A live
+   state's own handle passed as that address is recognised by the registry before anything is read through it,
+   and refused (as fmu_src/native/fmi2Functions.c's state_variable explains). */
+static int state_variable(front *self, const char *fn, const fmi2FMUstate *state)
+{
+    if (state == NULL) {
+        refuse(self, fn, "FMUstate is NULL (the address of the host's fmi2FMUstate variable is expected)");
+        return 0;
+    }
+    if (is_live_state(self, state)) {
+        refuse(self, fn, HANDLE_FOR_ADDRESS, fn, fn);
         return 0;
     }
     return 1;
@@ -319,6 +368,7 @@ static front *take_parked(const char *resources, const char *guid)
 
 static void destroy(front *self)
 {
+    if (self->inner) free_all_states(self);
     if (self->inner) inner.fmi2FreeInstance(self->inner);
     free(self->resources);
     free(self->guid);
@@ -382,6 +432,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     self->environment = probe.environment;
     self->logging_on = probe.logging_on;
     self->worst = fmi2OK;
+    self->discarded = self->terminated = 0;
     if (self->inner == NULL) {
         /* pythonfmu logs through relay() with this instance: it must log everything, the front filters */
         self->inner = inner.fmi2Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, &self->callbacks,
@@ -405,6 +456,7 @@ void fmi2FreeInstance(fmi2Component c)
     self->name = copy_of("(parked)");
     self->logger = NULL;  /* messages of the reset below (there should be none) go to stderr */
     self->logging_on = 0;
+    free_all_states(self);  /* the states the host did not free: they belong to the instance */
     /* a fresh slave (and pythonfmu's default experiment) for the next instance; one that cannot be reset is
        freed instead */
     fmi2Status status = inner.fmi2Reset(self->inner);
@@ -424,16 +476,16 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
 {
     ENTER("fmi2SetupExperiment");
     (void)fn;
-    return answer(self, inner.fmi2SetupExperiment(self->inner, toleranceDefined, tolerance, startTime,
-                                                  stopTimeDefined, stopTime));
+    return changed_by(self, answer(self, inner.fmi2SetupExperiment(self->inner, toleranceDefined, tolerance,
+                                                                   startTime, stopTimeDefined, stopTime)));
 }
 
-#define FORWARD_NO_ARGUMENTS(function)                              \
-    fmi2Status function(fmi2Component c)                            \
-    {                                                               \
-        ENTER(#function);                                           \
-        (void)fn;                                                   \
-        return answer(self, inner.function(self->inner));           \
+#define FORWARD_NO_ARGUMENTS(function)                                          \
+    fmi2Status function(fmi2Component c)                                        \
+    {                                                                           \
+        ENTER(#function);                                                       \
+        (void)fn;                                                               \
+        return changed_by(self, answer(self, inner.function(self->inner)));     \
     }
 
 FORWARD_NO_ARGUMENTS(fmi2EnterInitializationMode)
@@ -444,22 +496,24 @@ FORWARD_NO_ARGUMENTS(fmi2CancelStep)
 
 /* ---- values ------------------------------------------------------------------------------------------ */
 
-#define FORWARD_VALUES(function, type)                                                              \
+/* sets: a set that succeeded may change what the next step computes (changed_by) */
+#define FORWARD_VALUES(function, type, sets)                                                        \
     fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, type value[])   \
     {                                                                                               \
         ENTER(#function);                                                                           \
         if (!arrays_given(self, fn, nvr, vr, value)) return fmi2Error;                              \
-        return answer(self, inner.function(self->inner, vr, nvr, value));                           \
+        const fmi2Status status = answer(self, inner.function(self->inner, vr, nvr, value));        \
+        return sets ? changed_by(self, status) : status;                                            \
     }
 
-FORWARD_VALUES(fmi2GetReal, fmi2Real)
-FORWARD_VALUES(fmi2GetInteger, fmi2Integer)
-FORWARD_VALUES(fmi2GetBoolean, fmi2Boolean)
-FORWARD_VALUES(fmi2GetString, fmi2String)
-FORWARD_VALUES(fmi2SetReal, const fmi2Real)
-FORWARD_VALUES(fmi2SetInteger, const fmi2Integer)
-FORWARD_VALUES(fmi2SetBoolean, const fmi2Boolean)
-FORWARD_VALUES(fmi2SetString, const fmi2String)
+FORWARD_VALUES(fmi2GetReal, fmi2Real, 0)
+FORWARD_VALUES(fmi2GetInteger, fmi2Integer, 0)
+FORWARD_VALUES(fmi2GetBoolean, fmi2Boolean, 0)
+FORWARD_VALUES(fmi2GetString, fmi2String, 0)
+FORWARD_VALUES(fmi2SetReal, const fmi2Real, 1)
+FORWARD_VALUES(fmi2SetInteger, const fmi2Integer, 1)
+FORWARD_VALUES(fmi2SetBoolean, const fmi2Boolean, 1)
+FORWARD_VALUES(fmi2SetString, const fmi2String, 1)
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown,
@@ -495,7 +549,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
         else
             encoded[i] = (fmi2ValueReference)((unsigned long)order[i] * base + vr[i]);
     }
-    if (status == fmi2OK) status = answer(self, inner.fmi2SetReal(self->inner, encoded, nvr, value));
+    if (status == fmi2OK) status = changed_by(self, answer(self, inner.fmi2SetReal(self->inner, encoded, nvr, value)));
     if (encoded != few) free(encoded);
     return status;
 }
@@ -505,7 +559,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
 {
     ENTER("fmi2SetRealInputDerivatives");
     (void)fn;
-    return answer(self, inner.fmi2SetRealInputDerivatives(self->inner, vr, nvr, order, value));
+    return changed_by(self, answer(self, inner.fmi2SetRealInputDerivatives(self->inner, vr, nvr, order, value)));
 }
 #endif
 
@@ -522,16 +576,16 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     ENTER("fmi2GetFMUstate");
-    if (FMUstate == NULL) return refuse(self, fn, "FMUstate is NULL");
+    if (!state_variable(self, fn, FMUstate)) return fmi2Error;
     if (*FMUstate != NULL && !live_state(self, fn, *FMUstate)) return fmi2Error;  /* else: one to overwrite */
     fmi2FMUstate fresh = NULL;
     const fmi2Status status = answer(self, inner.fmi2GetFMUstate(self->inner, &fresh));
-    if (status > fmi2Warning || fresh == NULL || !remember_state(fresh)) {
+    if (status > fmi2Warning || fresh == NULL || !remember_state(self, fresh)) {
         if (fresh) inner.fmi2FreeFMUstate(self->inner, &fresh);
         return status > fmi2Warning ? status : refuse(self, fn, "no state was made (out of memory?)");
     }
     if (*FMUstate != NULL) {
-        forget_state(*FMUstate);
+        forget_state(self, *FMUstate);
         inner.fmi2FreeFMUstate(self->inner, FMUstate);
     }
     *FMUstate = fresh;
@@ -542,16 +596,16 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
 {
     ENTER("fmi2SetFMUstate");
     if (!live_state(self, fn, FMUstate)) return fmi2Error;
-    return answer(self, inner.fmi2SetFMUstate(self->inner, FMUstate));
+    return changed_by(self, answer(self, inner.fmi2SetFMUstate(self->inner, FMUstate)));
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     ENTER("fmi2FreeFMUstate");
-    if (FMUstate == NULL) return refuse(self, fn, "FMUstate is NULL");
-    if (*FMUstate == NULL) return fmi2OK;
-    if (!live_state(self, fn, *FMUstate)) return fmi2Error;
-    forget_state(*FMUstate);
+    if (!state_variable(self, fn, FMUstate)) return fmi2Error;
+    if (*FMUstate == NULL) return fmi2OK;  /* nothing to free (FMI: the variable of a freed state holds NULL) */
+    if (!is_live_state(self, *FMUstate)) return refuse(self, fn, NOT_A_LIVE_STATE);
+    forget_state(self, *FMUstate);
     const fmi2Status status = answer(self, inner.fmi2FreeFMUstate(self->inner, FMUstate));
     *FMUstate = NULL;
     return status;
@@ -581,11 +635,11 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
                                    fmi2FMUstate *FMUstate)
 {
     ENTER("fmi2DeSerializeFMUstate");
-    if (FMUstate == NULL) return refuse(self, fn, "FMUstate is NULL");
+    if (!state_variable(self, fn, FMUstate)) return fmi2Error;
     if (serializedState == NULL && size > 0) return refuse(self, fn, "serializedState is NULL");
     fmi2FMUstate fresh = NULL;
     const fmi2Status status = answer(self, inner.fmi2DeSerializeFMUstate(self->inner, serializedState, size, &fresh));
-    if (status > fmi2Warning || fresh == NULL || !remember_state(fresh)) {
+    if (status > fmi2Warning || fresh == NULL || !remember_state(self, fresh)) {
         if (fresh) inner.fmi2FreeFMUstate(self->inner, &fresh);
         return status > fmi2Warning ? status : refuse(self, fn, "no state was made (out of memory?)");
     }
@@ -595,13 +649,37 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
 
 /* ---- co-simulation ----------------------------------------------------------------------------------- */
 
+/* the native FMU's words (fmu_src/native/fmi2Functions.c) */
+#define REPEATED_STEP                                                                                            \
+    "the step from t=%.17g with h=%.17g was discarded before, from this same state with these same inputs, so it "\
+    "fails again the same way (not computed again); stop here, or set other inputs, restore another state or take " \
+    "a shorter step."
+
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {
     ENTER("fmi2DoStep");
-    (void)fn;
-    return answer(self, inner.fmi2DoStep(self->inner, currentCommunicationPoint, communicationStepSize,
-                                         noSetFMUStatePriorToCurrentPoint));
+    const double t = currentCommunicationPoint, h = communicationStepSize;
+    if (self->discarded && t == self->discarded_t && h == self->discarded_h) {
+        /* the slave is deterministic: from the same state with the same inputs the same step fails again. pythonfmu's
+           states are Python objects the front cannot compare, so "the same state" is: nothing set, restored or reset
+           since (changed_by forgets the discarded step) */
+        self->terminated = 1;
+        char text[sizeof self->discard_reason + 512];
+        snprintf(text, sizeof text, "%s: fmi2Terminated is true (fmi2LastSuccessfulTime = %.17g): " REPEATED_STEP
+                 " It failed with: %s", fn, t, t, h, self->discard_reason);
+        emit(self, fmi2Discard, NULL, text);
+        return fmi2Discard;
+    }
+    self->last_discard[0] = '\0';
+    const fmi2Status status = answer(self, inner.fmi2DoStep(self->inner, t, h, noSetFMUStatePriorToCurrentPoint));
+    if (status != fmi2Discard) return changed_by(self, status);
+    self->discarded = 1;
+    self->discarded_t = t;
+    self->discarded_h = h;
+    snprintf(self->discard_reason, sizeof self->discard_reason, "%s",
+             self->last_discard[0] ? self->last_discard : "(the slave said nothing)");
+    return status;
 }
 
 #define FORWARD_STATUS(function, type)                                              \
@@ -613,7 +691,15 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     }
 
 FORWARD_STATUS(fmi2GetStatus, fmi2Status)
-FORWARD_STATUS(fmi2GetRealStatus, fmi2Real)
+FORWARD_STATUS(fmi2GetRealStatus, fmi2Real)  /* pythonfmu's: the start of the last discarded step, or its end */
 FORWARD_STATUS(fmi2GetIntegerStatus, fmi2Integer)
-FORWARD_STATUS(fmi2GetBooleanStatus, fmi2Boolean)
 FORWARD_STATUS(fmi2GetStringStatus, fmi2String)
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
+{
+    ENTER("fmi2GetBooleanStatus");
+    if (value == NULL) return refuse(self, fn, "value is NULL");
+    if (s != fmi2Terminated) return refuse(self, fn, "status kind %d is not a Boolean status", (int)s);
+    *value = self->terminated ? fmi2True : fmi2False;  /* see fmi2DoStep */
+    return fmi2OK;
+}

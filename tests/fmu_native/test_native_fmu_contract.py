@@ -63,7 +63,7 @@ EXPECTED = {
     "get_tension": (OK, ""),
     "get_state": (OK, ""),
     "get_state_null": (ERROR, "NULL"),
-    "set_state_garbage": (ERROR, "not an FMU state"),
+    "set_state_garbage": (ERROR, "not a live state of this FMU instance"),
     "set_state_null": (ERROR, "NULL"),
     "deserialize_garbage": (ERROR, "not a linknet FMU state"),
     "deserialize_truncated": (ERROR, "size"),
