@@ -368,6 +368,7 @@ def load_scene(path: str | Path) -> Scene:
         raise SceneError(f"{path}: not valid JSON: {exc}") from None
     if not isinstance(data, dict):
         raise SceneError(f"{path}: a scene must be a JSON object {{...}}, got a JSON {_json_type(data)}")
+    data.pop("fmu", None)  # build_fmu.py's settings for the scene's FMU (docs/fmu.md), checked there
     data.setdefault("name", path.stem)
     return Scene.from_dict(data, source=str(path))
 
