@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 import zipfile
 import zlib
 from dataclasses import dataclass
+from typing import Callable
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +48,7 @@ ANIMATION_SUFFIXES = (".gif", ".mp4")
 STILL_SUFFIX = ".png"
 # a frame box this many times the network's own size gets a note: the network is a dot in it
 SCALE_NOTE_RATIO = 1e3
+PROGRESS_EVERY = 5.0  # seconds between the progress lines of a long animation write
 
 
 @dataclass(frozen=True)
@@ -389,8 +392,9 @@ def _output_dir(path: Path) -> None:
 def write_animation(motion: Motion, path, *, view: str = "auto", max_frames: int = DEFAULT_MAX_FRAMES,
                     fps: float = DEFAULT_FPS, speed: float = 1.0, size=DEFAULT_SIZE, cmap: str = DEFAULT_CMAP,
                     tension_range: float | None = None, elev: float = DEFAULT_ELEV,
-                    azim: float = DEFAULT_AZIM) -> Written:
-    """Write the motion as a GIF (Pillow, always available) or MP4 (ffmpeg) with matplotlib's writers."""
+                    azim: float = DEFAULT_AZIM, progress: Callable[[int, int, float], None] | None = None) -> Written:
+    """Write the motion as a GIF (Pillow, always available) or MP4 (ffmpeg) with matplotlib's writers.
+    ``progress(done, frames, seconds)`` is called after each frame (the CLI prints it every few seconds)."""
     from matplotlib import animation
 
     path = Path(path)
@@ -405,9 +409,11 @@ def write_animation(motion: Motion, path, *, view: str = "auto", max_frames: int
 
     def write(tmp):
         with writer.saving(picture.fig, tmp, dpi=DPI):
-            for i in frames:
+            for done, i in enumerate(frames, 1):
                 picture.show(int(i))
                 writer.grab_frame()
+                if progress is not None:
+                    progress(done, len(frames), time.perf_counter() - start)
 
     atomic_write(path, write, errors=(RuntimeError, ValueError))  # ffmpeg failing part way: RuntimeError
     seconds = time.perf_counter() - start
@@ -628,6 +634,19 @@ def add_view_arguments(p) -> None:
                    help="OUT.html (self-contained: opens without network access)")
 
 
+class ProgressLine:
+    """Prints ``writing OUT: frame i of n, s`` to stderr every PROGRESS_EVERY seconds of a long write (a GIF of a
+    large net takes minutes, its integration seconds), and nothing for a write shorter than that."""
+
+    def __init__(self, path):
+        self.path, self.next_at = path, PROGRESS_EVERY
+
+    def __call__(self, done: int, frames: int, seconds: float) -> None:
+        if seconds >= self.next_at and done < frames:
+            print(f"writing {self.path}: frame {done} of {frames}, {seconds:.0f} s", file=sys.stderr, flush=True)
+            self.next_at = seconds + PROGRESS_EVERY
+
+
 def _print_notes(motion: Motion) -> None:
     for note in motion.notes + motion.scale_notes():
         print("note:", note)
@@ -648,7 +667,7 @@ def cmd_animate(args) -> int:
         written = write_still(motion, args.out, at=args.at, size=args.size, **options)
     else:
         written = write_animation(motion, args.out, max_frames=args.max_frames or DEFAULT_MAX_FRAMES, fps=args.fps,
-                                  speed=args.speed, size=args.size, **options)
+                                  speed=args.speed, size=args.size, progress=ProgressLine(args.out), **options)
     print(written.line())
     return 0
 

@@ -73,3 +73,16 @@ def test_the_html_view_refuses_positions_beyond_float32(runaway_file, tmp_path, 
     err = capsys.readouterr().err
     assert f"{out}: positions reach 1e+300 m, beyond the float32 range the HTML view stores" in err
     assert not out.exists()
+
+
+def test_a_long_animation_write_says_how_far_it_is(result_file, tmp_path, capsys, monkeypatch):
+    from linknet_core import visual
+
+    monkeypatch.setattr(visual, "PROGRESS_EVERY", 0.0)  # every frame counts as long here
+    out = tmp_path / "run.gif"
+    assert main(["animate", str(result_file), "-o", str(out), "--max-frames", "4"]) == 0
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    # a line per frame but the last (the 'wrote' line on stdout says the end)
+    assert [line.split(",")[0] for line in lines] == [f"writing {out}: frame {i} of 4" for i in (1, 2, 3)]
+    assert captured.out.strip().splitlines()[-1].startswith(f"wrote {out}: 4 frames")
