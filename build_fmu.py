@@ -32,15 +32,17 @@ import subprocess
 import sys
 import sysconfig
 import tempfile
-import xml.etree.ElementTree as ET
+from lxml import etree as ET  # fmpy's dependency: C-speed parse and write of a large net's modelDescription
 import zipfile
 from pathlib import Path
-from xml.dom.minidom import parseString
 
 HERE = Path(__file__).resolve().parent
 FMU_SRC = HERE / "fmu_src"
 sys.path.insert(0, str(FMU_SRC))
 
+# dependencies listed in a ModelStructure above which a list holding every known is written as "all knowns" (the
+# attribute left out): about 7 MB of indices, a 300-link chain's worth
+MAX_LISTED_DEPENDENCIES = 1_000_000
 DEFAULT_STEP = 1e-3  # s: the internal step of a fixed-step integrator chosen without a step (parameter "step")
 COMPONENTS = {"pd_controller": "pd_controller.py", "spring_damper": "spring_damper.py", "cart": "cart.py"}
 
@@ -108,22 +110,39 @@ def postprocess_model_description(xml_bytes: bytes, declared_types: dict, output
     root.insert(pos, ET.Element("DefaultExperiment", {k: repr(float(v)) for k, v in default_experiment.items()}))
 
     structure = ET.SubElement(root, "ModelStructure")
+    inputs = {sv.get("name") for sv in variables.findall("ScalarVariable") if sv.get("causality") == "input"}
 
-    def unknown(parent, name, deps):
+    def unknown(parent, name, deps, everything, abridged):
+        """One Unknown. In an ``abridged`` section a list that holds ``everything`` is written as the standard's
+        default, no dependencies attribute ("depends on all knowns"): a connected net's tensions depend on every
+        input, and listing them for every link would make the file L x inputs long (1.1 GB for a 3,000-link
+        chain). Smaller files keep every list (fmpy reads a missing attribute as no dependency)."""
+        if abridged and everything and len(deps) == len(everything):  # drawn from everything, without repeats
+            ET.SubElement(parent, "Unknown", {"index": str(index[name])})
+            return
         attrs = {"index": str(index[name]), "dependencies": " ".join(str(index[d]) for d in deps)}
         if deps:
             attrs["dependenciesKind"] = " ".join("dependent" for _ in deps)
         ET.SubElement(parent, "Unknown", attrs)
 
+    def union(lists) -> set:  # the lists are shared between the links of a group: each counted once
+        return set().union(*{id(d): d for d in lists}.values())
+
     outputs = [sv.get("name") for sv in variables.findall("ScalarVariable") if sv.get("causality") == "output"]
     if outputs:
         node = ET.SubElement(structure, "Outputs")
-        for name in outputs:
-            unknown(node, name, output_deps[name])
+        abridged = sum(len(output_deps[name]) + len(initial_deps[name]) for name in outputs) > MAX_LISTED_DEPENDENCIES
+        for name in outputs:  # at a communication point the knowns are the inputs: exact
+            unknown(node, name, output_deps[name], inputs, abridged)
+        # in Initialization Mode the knowns are the inputs and every parameter; a list holding all of them that any
+        # initial unknown depends on is written as "all knowns", which adds only parameters no output depends on
+        # at the start (the integrator's settings): a superset, safe for a master's ordering
+        initial_knowns = union(initial_deps[name] for name in outputs)
         node = ET.SubElement(structure, "InitialUnknowns")
         for name in sorted(outputs, key=index.get):  # InitialUnknowns must be sorted by index
-            unknown(node, name, initial_deps[name])
-    return parseString(ET.tostring(root, encoding="UTF-8")).toprettyxml(indent="  ", encoding="UTF-8")
+            unknown(node, name, initial_deps[name], initial_knowns, abridged)
+    ET.indent(root, space="  ")
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode").encode() + b"\n"
 
 
 # ---------------------------------------------------------------------------- libpython

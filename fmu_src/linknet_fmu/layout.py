@@ -20,6 +20,10 @@ AXES = ("x", "y", "z")
 # order * DERIVATIVE_VR_BASE + vr (pythonfmu's own binary has no path for it): the front layer of the binary
 # encodes, linknet_slave.py decodes and answers. Far above any FMU's value references.
 DERIVATIVE_VR_BASE = 1 << 28
+# The last of the slots order * DERIVATIVE_VR_BASE that pythonfmu hands to Python intact (as a signed 32-bit int)
+# carries an order the encoding cannot (below 1, or this slot and beyond), with the order itself as the value: the slave
+# refuses it in its own words.
+DERIVATIVE_ORDER_GIVEN = (1 << 31) // DERIVATIVE_VR_BASE - 1
 
 # The Boolean parameter that switches the error estimate's companion run on (the default) or off, and the log
 # category of the message an FMU logs when its estimate exceeds the run's goal: both FMU kinds write these.
@@ -99,8 +103,9 @@ class Layout:
         fixed = np.asarray(scene.fixed_indices, dtype=int)
         inp = free if inputs is None else np.asarray(sorted(inputs), dtype=int)
         out = np.arange(scene.K) if outputs is None else np.asarray(sorted(outputs), dtype=int)
+        free_set = set(free.tolist())
         for k in inp:
-            if k not in set(free.tolist()):
+            if k not in free_set:
                 raise ValueError(f"mass {k + 1} cannot take a force input: it is anchored or does not exist")
         for k in out:
             if not 0 <= k < scene.K:
@@ -191,6 +196,13 @@ class Layout:
         self.derivative_target = np.full((self.n_real, 3), -1, dtype=np.int64)
         self.derivative_target[self.P_vr.reshape(-1), 1] = self.V_vr.reshape(-1)
         self.derivative_target[self.P_vr.reshape(-1), 2] = self.A_vr.reshape(-1)
+        # value reference of an anchor input (P, V, A) -> its anchor's row in anchor_inputs (-1: none), and whether
+        # it is a position
+        self.anchor_row = np.full(self.n_real, -1, dtype=np.int64)
+        for vrs in (self.P_vr, self.V_vr, self.A_vr):
+            self.anchor_row[vrs] = np.arange(len(vrs))[:, None]
+        self.is_position_input = np.zeros(self.n_real, dtype=bool)
+        self.is_position_input[self.P_vr.reshape(-1)] = True
         # value reference of an input -> its entry in the simulator's (K,3) force array, flattened (-1: none)
         self.force_index = np.full(self.n_real, -1, dtype=np.int64)
         self.force_index[self.F_vr.reshape(-1)] = (3 * np.asarray(self.input_masses, dtype=np.int64)[:, None]
@@ -233,6 +245,10 @@ class Layout:
         position, velocity and acceleration of its anchors driven by inputs (a driven anchor's P sets the link
         directions E, its V the relative velocities in |U_k2 - U_k1|^2 / R and its A the term E.(a_k2 - a_k1)
         of B (26)). Jreact is the impulse of the step that ended: no direct feedthrough.
+
+        The links of one group share one list object (and so do anchors touching the same groups): the table is
+        linear in the scene, though the lists it stands for may be L x inputs long (postprocess_model_description
+        writes a list that holds every input as the standard's "all knowns").
         """
         comp = self.link_components(inv_mass)
         inputs_of_mass = {int(k): [self.reals[vr].name for vr in row]
@@ -242,26 +258,31 @@ class Layout:
                                       for vr in vrs[j]]
         inputs_of_comp = {}
         for l in range(self.L):
-            names = inputs_of_comp.setdefault(comp[l], [])
+            names = inputs_of_comp.setdefault(comp[l], {})  # a dict as an ordered set
             for k in (self.k1[l], self.k2[l]):
-                for n in inputs_of_mass.get(int(k), []):
-                    if n not in names:
-                        names.append(n)
+                names.update(dict.fromkeys(inputs_of_mass.get(int(k), ())))
+        inputs_of_comp = {c: list(names) for c, names in inputs_of_comp.items()}
         deps = {}
         for row in np.concatenate([self.X_vr.ravel(), self.U_vr.ravel(), self.Jreact_vr.ravel(),
                                    [self.error_estimate_vr]]):
             deps[self.reals[row].name] = []
         for l in range(self.L):
             deps[self.reals[self.T_vr[l]].name] = inputs_of_comp[comp[l]]
-        for k, row in zip(self.fixed_indices, self.Freact_vr):
-            names = []
-            for l in np.flatnonzero((self.k1 == k) | (self.k2 == k)):
-                for n in inputs_of_comp[comp[l]]:
-                    if n not in names:
-                        names.append(n)
+        for k, row, groups in self._anchor_groups(comp):
+            names = _union(inputs_of_comp[c] for c in groups)
             for vr in row:
                 deps[self.reals[vr].name] = names
         return deps
+
+    def _anchor_groups(self, comp):
+        """(anchored mass, its Freact value references, the groups of the links it holds) per anchored mass, in
+        one pass over the links."""
+        groups = {int(k): {} for k in self.fixed_indices}
+        for l in range(self.L):
+            for k in (int(self.k1[l]), int(self.k2[l])):
+                if k in groups:
+                    groups[k][comp[l]] = None
+        return [(k, row, tuple(groups[int(k)])) for k, row in zip(self.fixed_indices, self.Freact_vr)]
 
     def initial_dependencies(self, inv_mass) -> dict:
         """InitialUnknowns: as `dependencies`, plus the parameters a value depends on at start.
@@ -269,25 +290,35 @@ class Layout:
         X and U start at the scene's initial state (no parameter moves them); T and Freact
         depend on the masses and lengths of their group of links (A (25), B (26)) and on g.
         """
-        deps = {n: list(d) for n, d in self.dependencies(inv_mass).items()}
+        running = self.dependencies(inv_mass)
         comp = self.link_components(inv_mass)
         m_name = {int(k): self.reals[vr].name for k, vr in zip(self.free_indices, self.M_vr)}
         g_names = [self.reals[vr].name for vr in self.g_vr]
         params_of_comp = {}
         for l in range(self.L):
-            names = params_of_comp.setdefault(comp[l], [])
-            names.append(self.reals[self.T_vr[l]].name.replace("T[", "R["))
+            names = params_of_comp.setdefault(comp[l], {})
+            names[self.reals[self.T_vr[l]].name.replace("T[", "R[")] = None
             for k in (self.k1[l], self.k2[l]):
-                if int(k) in m_name and m_name[int(k)] not in names:
-                    names.append(m_name[int(k)])
+                if int(k) in m_name:
+                    names[m_name[int(k)]] = None
+        deps = {name: [] for name, d in running.items() if not d}  # no feedthrough, no parameter either
+        of_comp = {}  # one list per group: its inputs, then its parameters and g
         for l in range(self.L):
-            deps[self.reals[self.T_vr[l]].name] += params_of_comp[comp[l]] + g_names
-        for k, row in zip(self.fixed_indices, self.Freact_vr):
-            extra = []
-            for l in np.flatnonzero((self.k1 == k) | (self.k2 == k)):
-                for n in params_of_comp[comp[l]]:
-                    if n not in extra:
-                        extra.append(n)
+            c = comp[l]
+            if c not in of_comp:
+                of_comp[c] = running[self.reals[self.T_vr[l]].name] + list(params_of_comp[c]) + g_names
+            deps[self.reals[self.T_vr[l]].name] = of_comp[c]
+        for k, row, groups in self._anchor_groups(comp):
+            names = _union([running[self.reals[row[0]].name]] + [list(params_of_comp[c]) for c in groups]
+                           + [g_names])
             for vr in row:
-                deps[self.reals[vr].name] += extra + g_names
+                deps[self.reals[vr].name] = names
         return deps
+
+
+def _union(lists) -> list:
+    """The names of several lists, each once, in first-seen order."""
+    out = {}
+    for names in lists:
+        out.update(dict.fromkeys(names))
+    return list(out)
