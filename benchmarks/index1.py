@@ -10,6 +10,10 @@ twice gives exactly (13). Constraint drift is not corrected: that is what makes 
 
 Where A is singular (redundant links) the minimum-norm tensions are used (the seed (27)-(36) proves any
 solution gives the same forces).
+
+Driven anchors (1/M = 0, position prescribed) follow their scene-file motion, written here from the scene format
+(docs/scenes.md), not read from linknet: at every evaluation their rows of X and U are P(t) and V(t), and their
+acceleration A(t) enters (26) as a_k of that end: B_l = |U_k2 - U_k1|^2 / R_l + E_l . (a_k2 - a_k1).
 """
 from __future__ import annotations
 
@@ -23,6 +27,37 @@ from .scene_spec import SceneSpec
 DENSE_MAX_LINKS = 400
 
 
+def motion_function(spec: dict, origin: np.ndarray):
+    """(t, left) -> (P, V, A) of a driven anchor's motion, from the scene format: velocity P = X0 + v t; sine
+    P_i = X0_i + a_i (sin(2 pi f_i t + phi_i) - sin(phi_i)); waypoints: the clamped cubic spline through (0, X0)
+    and [t, x, y, z] rows, at rest after the last (where A jumps: ``left`` asks for the limit from before it);
+    input: at rest (no input is given to a reference)."""
+    origin = np.asarray(origin, float)
+    kind = spec.get("kind", "input")
+    if kind == "velocity":
+        v = np.asarray(spec["velocity"], float)
+        return lambda t, left=False: (origin + v * t, v.copy(), np.zeros(3))
+    if kind == "sine":
+        a, w = np.asarray(spec["amplitude"], float), 2.0 * np.pi * np.asarray(spec["frequency"], float)
+        phi = np.asarray(spec.get("phase", [0.0, 0.0, 0.0]), float)
+        return lambda t, left=False: (origin + a * (np.sin(w * t + phi) - np.sin(phi)),
+                                      a * w * np.cos(w * t + phi), -a * w * w * np.sin(w * t + phi))
+    if kind == "waypoints":
+        from scipy.interpolate import CubicSpline
+
+        rows = np.asarray(spec["waypoints"], float)
+        times = np.concatenate([[0.0], rows[:, 0]])
+        spline = CubicSpline(times, np.vstack([origin, rows[:, 1:]]), bc_type="clamped")
+        last = rows[-1, 1:]
+
+        def at(t, left=False):
+            if t > times[-1] or (t == times[-1] and not left):
+                return last.copy(), np.zeros(3), np.zeros(3)
+            return spline(t), spline(t, 1), spline(t, 2)
+        return at
+    return lambda t, left=False: (origin.copy(), np.zeros(3), np.zeros(3))
+
+
 class Index1System:
     def __init__(self, spec: SceneSpec):
         self.spec = spec
@@ -30,6 +65,8 @@ class Index1System:
         self.k1, self.k2, self.R = spec.k1, spec.k2, spec.length
         self.invm = spec.inv_mass
         self.g_acc = np.where(spec.fixed[:, None], 0.0, spec.gravity[None, :])  # F_k / M_k for gravity
+        self.driven = np.array([k for k, _ in spec.motions], np.int64)
+        self.motion = [motion_function(m, spec.X0[k]) for k, m in spec.motions]
         self.dense = self.L <= DENSE_MAX_LINKS
         L, K = self.L, self.K
         # pairs (l, l') of distinct links sharing a mass k, with S(l,l') = (-1)^(i+j)  (19)-(22)
@@ -112,14 +149,17 @@ class Index1System:
     def tension_matrix(self, X):
         return self._assemble((X[self.k2] - X[self.k1]) / self.R[:, None])
 
-    def tensions(self, X, U, E=None):
+    def tensions(self, X, U, E=None, known_acc=None):
+        """T of (25)-(26); ``known_acc`` (K, 3): F_k/M_k on free masses, A(t) on driven anchors (default: gravity
+        on free masses, anchors at rest)."""
         if self.L == 0:
             return np.zeros(0)
         if E is None:
             E = (X[self.k2] - X[self.k1]) / self.R[:, None]
+        a = self.g_acc if known_acc is None else known_acc
         dU = U[self.k2] - U[self.k1]
-        # (26): B_l = |U_k2 - U_k1|^2 / R_l + E_l . (F_k2/M_k2 - F_k1/M_k1)
-        B = np.einsum("ij,ij->i", dU, dU) / self.R + np.einsum("ij,ij->i", E, self.g_acc[self.k2] - self.g_acc[self.k1])
+        # (26): B_l = |U_k2 - U_k1|^2 / R_l + E_l . (a_k2 - a_k1), a_k = F_k/M_k, or A(t) on a driven anchor
+        B = np.einsum("ij,ij->i", dU, dU) / self.R + np.einsum("ij,ij->i", E, a[self.k2] - a[self.k1])
         A = self._assemble(E)
         if self.redundant:   # minimum-norm T: no rescaling (it would change which solution is minimal)
             if self.dense:
@@ -134,16 +174,33 @@ class Index1System:
         Dm = sp.diags(d)
         return d * spla.spsolve((Dm @ A @ Dm).tocsc(), d * B)
 
-    def accelerations(self, X, U):
+    def accelerations(self, X, U, known_acc=None):
+        a = self.g_acc if known_acc is None else known_acc
         E = (X[self.k2] - X[self.k1]) / self.R[:, None]
-        T = self.tensions(X, U, E)
-        return self.g_acc + self.invm[:, None] * (self.D @ (T[:, None] * E)), T
+        T = self.tensions(X, U, E, a)
+        return a + self.invm[:, None] * (self.D @ (T[:, None] * E)), T
+
+    def breakpoints(self) -> list:
+        """The times where a driven anchor's prescribed acceleration may jump: its waypoints."""
+        return sorted({float(row[0]) for _, m in self.spec.motions if m.get("kind") == "waypoints"
+                       for row in m["waypoints"]})
+
+    def drive(self, t, X, U, left=False):
+        """X, U with the driven anchors' rows at P(t), V(t), and the known accelerations with A(t) on them (at a
+        breakpoint, ``left``: the limits from before it)."""
+        if not self.driven.size:
+            return X, U, self.g_acc
+        X, U, a = X.copy(), U.copy(), self.g_acc.copy()
+        for k, motion in zip(self.driven, self.motion):
+            X[k], U[k], a[k] = motion(t, left)
+        return X, U, a
+
+    segment_end = np.inf  # the end of the smooth piece being integrated (solve_index1): its motion seen from before
 
     def rhs(self, t, y):
         K = self.K
-        X = y[: 3 * K].reshape(K, 3)
-        U = y[3 * K:].reshape(K, 3)
-        acc, _ = self.accelerations(X, U)
+        X, U, a = self.drive(t, y[: 3 * K].reshape(K, 3), y[3 * K:].reshape(K, 3), left=t >= self.segment_end)
+        acc, _ = self.accelerations(X, U, a)
         return np.concatenate([U.ravel(), acc.ravel()])
 
     def y0(self):

@@ -26,6 +26,8 @@ class SceneSpec:
     k2: np.ndarray        # (L,) 0-based
     length: np.ndarray    # (L,)
     gravity: np.ndarray   # (3,)
+    # driven anchors: (mass index, the scene file's motion dict), their motion prescribed (fixed is True on them)
+    motions: tuple = ()
 
     @property
     def K(self) -> int:
@@ -49,7 +51,7 @@ class SceneSpec:
         masses = d["masses"]
         names = tuple(m.get("name", f"m{i + 1}") for i, m in enumerate(masses))
         index = {n: i for i, n in enumerate(names)}
-        fixed = np.array([bool(m.get("fixed", False)) for m in masses])
+        fixed = np.array([bool(m.get("fixed", False) or m.get("driven", False)) for m in masses])
         mass = np.array([np.inf if f else float(m.get("mass", 1.0)) for m, f in zip(masses, fixed)])
         X0 = np.array([m["position"] for m in masses], dtype=float).reshape(-1, 3)
         U0 = np.array([m.get("velocity", [0.0, 0.0, 0.0]) for m in masses], dtype=float).reshape(-1, 3)
@@ -71,18 +73,21 @@ class SceneSpec:
                            else float(np.linalg.norm(X0[b] - X0[a]))
                            for l, a, b in zip(links, k1, k2)])
         g = np.array(d.get("gravity", [0.0, 0.0, -9.81]), dtype=float)
-        return cls(d.get("name", "scene"), names, mass, fixed, X0, U0, k1, k2, length, g)
+        motions = tuple((i, dict(m["motion"])) for i, m in enumerate(masses) if m.get("driven"))
+        return cls(d.get("name", "scene"), names, mass, fixed, X0, U0, k1, k2, length, g, motions)
 
     @classmethod
     def from_core(cls, scene) -> "SceneSpec":
         """From a linknet_core.Scene (the public attributes of docs/architecture.md)."""
         fixed = np.asarray(scene.fixed, dtype=bool)
+        masses = scene.to_dict()["masses"]  # the scene file's motions, not linknet's tables of them
+        motions = tuple((i, dict(m["motion"])) for i, m in enumerate(masses) if m.get("driven"))
         U0 = np.array(scene.U0, dtype=float)
         U0[fixed] = 0.0
         return cls(getattr(scene, "name", "scene"), tuple(scene.mass_names),
                    np.array(scene.mass, dtype=float), fixed, np.array(scene.X0, dtype=float), U0,
                    np.array(scene.k1, dtype=np.int64), np.array(scene.k2, dtype=np.int64),
-                   np.array(scene.length, dtype=float), np.array(scene.gravity, dtype=float))
+                   np.array(scene.length, dtype=float), np.array(scene.gravity, dtype=float), motions)
 
     def to_dict(self) -> dict:
         return {
@@ -101,6 +106,8 @@ class SceneSpec:
         for a in (self.mass, self.fixed.astype(np.int8), self.X0, self.U0, self.k1, self.k2,
                   self.length, self.gravity):
             h.update(np.ascontiguousarray(a).tobytes())
+        if self.motions:  # a scene without driven anchors keeps the digest its cached references were made with
+            h.update(json.dumps(self.motions, sort_keys=True).encode())
         return h.hexdigest()[:16]
 
     # ------------------------------------------------------------------ diagnostics shared by all methods
