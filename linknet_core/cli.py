@@ -15,8 +15,8 @@ from linknet_core.errors import LinknetError
 from linknet_core.output import WriteError
 # one validated type per option, for every command (build_fmu.py imports them from here too)
 from linknet_core.options import (  # noqa: F401
-    _numbers_may_be_negative, _output, animation_path, npz_path, one_line_errors, plot_path, positive_number,
-    readable_file, relative_tolerance, sample_count, writable_path_problem)
+    _numbers_may_be_negative, _output, npz_path, one_line_errors, plot_path, positive_number, readable_file,
+    relative_tolerance, sample_count, writable_path_problem)
 
 
 def _add_simulate(sub):
@@ -36,7 +36,7 @@ def _add_simulate(sub):
     p.add_argument("--n-out", type=sample_count, default=201, help="number of output samples, >= 2 (default 201)")
     p.add_argument("--out", type=npz_path, help="write arrays to this .npz (checked before the run)")
     p.add_argument("--plot", type=plot_path, help="write a PNG (or PDF, SVG) of positions and tensions against time")
-    p.add_argument("--animate", metavar="PATH", type=animation_path,
+    p.add_argument("--animate", metavar="PATH", type=visual.animation_path,
                    help="write an animation of the network (.gif, or .mp4 with ffmpeg); `linknet animate` has the "
                         "options")
     p.add_argument("--project-initial", action="store_true",

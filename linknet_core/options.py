@@ -116,20 +116,6 @@ npz_path = _output((".npz",), "the result arrays file")
 plot_path = _output((".png", ".pdf", ".svg"), "the plot")
 
 
-@validated("writable animation path")
-def animation_path(text: str) -> str:
-    problem = writable_path_problem(text)
-    if problem:
-        raise argparse.ArgumentTypeError(f"{text!r} {problem}")
-    from linknet_core import visual
-
-    try:
-        visual.check_animation_path(text)
-    except LinknetError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text
-
-
 # argparse reads "-1e-3" as an option name (its number pattern has no exponent) and answers "expected one
 # argument"; with this pattern a negative number is a value, which its option's type then refuses by its rule.
 _NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
@@ -189,17 +175,6 @@ def random_seed(text: str) -> int:
     if not 0 <= n < 2**64:
         raise argparse.ArgumentTypeError(f"{text!r} must lie in [0, 2**64) (a random seed)")
     return n
-
-
-@validated("colour map name")
-def colour_map(text: str) -> str:
-    from linknet_core import visual
-
-    try:
-        visual.tension_colours(text, 1.0)  # the pictures' own rule (a matplotlib colour map)
-    except LinknetError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text
 
 
 def readable_file_with(suffixes: tuple, what: str):

@@ -25,8 +25,8 @@ import numpy as np
 
 from linknet_core.errors import LinknetError
 from linknet_core.output import atomic_write
-from linknet_core.options import (_output, animation_path, colour_map, count, finite_number, positive_number,
-                                  readable_file, validated)
+from linknet_core.options import (_output, count, finite_number, positive_number, readable_file, validated,
+                                  writable_path_problem)
 
 VIEWS = ("auto", "xz", "xy", "yz", "3d")
 PLANES = {"xz": (0, 2), "xy": (0, 1), "yz": (1, 2)}  # the two coordinates a flat view shows
@@ -595,6 +595,28 @@ def write_html(motion: Motion, path, **options) -> Written:
 
 # ---- command line (wired in linknet_core.cli) ------------------------------------------------------------
 
+@validated("writable animation path")
+def animation_path(text: str) -> str:
+    problem = writable_path_problem(text)
+    if problem:
+        raise argparse.ArgumentTypeError(f"{text!r} {problem}")
+    try:
+        check_animation_path(text)
+    except LinknetError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+@validated("colour map name")
+def colour_map_name(text: str) -> str:
+    try:
+        tension_colours(text, 1.0)  # the pictures' own rule (a matplotlib colour map)
+    except LinknetError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+
 def _add_picture_arguments(p, max_frames_help: str) -> None:
     p.add_argument("result", type=readable_file,
                    help="a run written by `linknet simulate --out RESULT.npz`")
@@ -614,7 +636,7 @@ def _add_picture_arguments(p, max_frames_help: str) -> None:
     p.add_argument("--tension-range", type=positive_number, metavar="N",
                    help="colour scale from -N to N newtons (default: the 95th percentile of |T| over the run, so "
                         "that short spikes saturate rather than wash the rest out)")
-    p.add_argument("--cmap", type=colour_map, default=DEFAULT_CMAP, help=f"diverging matplotlib colour map (default {DEFAULT_CMAP})")
+    p.add_argument("--cmap", type=colour_map_name, default=DEFAULT_CMAP, help=f"diverging matplotlib colour map (default {DEFAULT_CMAP})")
 
 
 def add_animate_arguments(p) -> None:
