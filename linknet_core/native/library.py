@@ -199,26 +199,16 @@ def forest_depth(n_nodes: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return depth
 
 
-def require_force_kinds() -> None:
-    """The core's force element kinds (stages/forces.c) are those of FORCE_KINDS, with its codes, or
-    ForceKindMissing names the kind."""
-    from linknet_core.scene.description import require_force_kinds as require
-
+def force_kind_names() -> list[str]:
+    """The core's force element kinds (stages/forces.c), in the order of their codes."""
     names = []
     while (name := force_kind_name(len(names))) is not None:
         names.append(name.decode())
-    require(names, "the native core (native/src/stages/forces.c)", by_code=True)
-
-
-_force_kinds_checked = False
+    return names
 
 
 def force_kind(name: bytes) -> int:
-    """The core's code of a force element kind (-1: none). The first call checks every kind of the core against
-    FORCE_KINDS (require_force_kinds), so a kind the core lacks stops the first model with force elements instead of
-    being skipped; not when this library loads, since linknet_core.errors loads it before the scene package can."""
-    global _force_kinds_checked
-    if not _force_kinds_checked:
-        require_force_kinds()
-        _force_kinds_checked = True
+    """The core's code of a force element kind (-1: none). linknet_core.native.model checks every kind of the core
+    against the scene's FORCE_KINDS when it loads, so a kind the core lacks stops the first native model instead of
+    being skipped."""
     return _force_kind(name)

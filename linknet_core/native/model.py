@@ -22,6 +22,16 @@ from linknet_core.dynamics.tensions import DENSE_MIN_NORM_LIMIT
 from linknet_core.native.ldl import PIVOT_TOL, package_library
 from linknet_core.native import library as lib
 from linknet_core.native.library import float_array, int_array, pointer
+from linknet_core.scene.description import require_force_kinds
+
+
+def check_core_force_kinds() -> None:
+    """The core's force element kinds (stages/forces.c) are those of the scene's FORCE_KINDS, with its codes, or
+    ForceKindMissing names the kind: checked when this module loads, before any native model is built."""
+    require_force_kinds(lib.force_kind_names(), "the native core (native/src/stages/forces.c)", by_code=True)
+
+
+check_core_force_kinds()
 
 
 def scene_plane(scene, normal):

@@ -10,6 +10,7 @@ import pytest
 import linknet_core as ln
 from linknet_core.dynamics.forces import ELEMENT_KINDS
 from linknet_core.native import library
+from linknet_core.native import model as native_model
 from linknet_core.scene import builders
 from linknet_core.scene.description import FORCE_KINDS, ForceKindMissing, require_force_kinds
 from linknet_core.symbolic import codegen, derivation
@@ -29,7 +30,7 @@ def fresh_kernel_cache(tmp_path, monkeypatch):
 def test_every_kind_of_the_table_is_known_to_numpy_native_and_casadi():
     assert sorted(ELEMENT_KINDS) == sorted(TABLE)
     assert sorted(CASADI_ELEMENT_KINDS) == sorted(TABLE)
-    library.require_force_kinds()  # raises naming a kind the core lacks or numbers differently
+    assert library.force_kind_names() == list(TABLE)  # what native.model checks when it loads
     for code, name in enumerate(TABLE):
         assert library.force_kind(name.encode()) == code
         assert library.force_kind_name(code).decode() == name
@@ -50,7 +51,7 @@ def test_the_native_check_reads_the_cores_own_kinds(monkeypatch):
     real = library.force_kind_name
     monkeypatch.setattr(library, "force_kind_name", lambda code: None if code >= len(TABLE) - 1 else real(code))
     with pytest.raises(ForceKindMissing, match=f"native core .*no formula for force element kind '{TABLE[-1]}'"):
-        library.require_force_kinds()
+        native_model.check_core_force_kinds()
 
 
 @needs_cc
