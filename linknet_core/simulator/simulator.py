@@ -486,16 +486,7 @@ class Simulator:
                 if saved is not None:
                     self.integrator.set_internals(saved)
         else:
-            X_at, U_at, anchor_acc = X, U, None
-            drive = self.integrator.drive
-            if drive is not None:  # evaluated with the driven anchors where their motion is now (the state's rows
-                saved = drive.internals()  # are reported, as the native backend does)
-                try:
-                    if hold is not None:
-                        drive.set_input(t, hold)
-                    X_at, U_at, anchor_acc = drive.apply(t, X, U)
-                finally:
-                    drive.set_internals(saved)
+            X_at, U_at, anchor_acc = self._with_anchors_now(t, X, U, hold)
             T = self.dyn.tensions(X_at, U_at, F, anchor_acc=anchor_acc)
             Freact = self.dyn.anchor_reactions(X_at, T)
         out = {"t": t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": Freact, "error_estimate": self.error_estimate}
@@ -551,17 +542,23 @@ class Simulator:
                     integrator.set_internals(saved)
         from linknet_core.dynamics.interface_jacobian import ReferenceLinearization
 
-        X_at, U_at, anchor_acc = X, U, None
-        drive = getattr(self.integrator, "drive", None)
-        if drive is not None:  # the driven anchors where their motion is now, as outputs() evaluates
-            saved = drive.internals()
-            try:
-                if hold is not None:
-                    drive.set_input(t, hold)
-                X_at, U_at, anchor_acc = drive.apply(t, X, U)
-            finally:
-                drive.set_internals(saved)
+        X_at, U_at, anchor_acc = self._with_anchors_now(t, X, U, hold)
         return ReferenceLinearization(self.dyn, X_at, U_at, F, anchor_acc)
+
+    def _with_anchors_now(self, t, X, U, hold):
+        """X, U with the driven anchors' rows where their motion (or the held input ``hold``) has them at t, and
+        their accelerations (None without driven anchors): the state the numpy reference evaluates outputs at, as
+        the native backend does; the drive's own internals are left as they were."""
+        drive = getattr(self.integrator, "drive", None)
+        if drive is None:
+            return X, U, None
+        saved = drive.internals()
+        try:
+            if hold is not None:
+                drive.set_input(t, hold)
+            return drive.apply(t, X, U)
+        finally:
+            drive.set_internals(saved)
 
     def interface_jacobian(self, F_input=None, anchors=None):
         """Every block of :meth:`interface_linearization` at the current state: an InterfaceJacobian, J["T", "F"],
