@@ -173,12 +173,17 @@ def master(fmus: dict, m_c: float, h: float, t_end: float, scheme: str = "cart-f
     except CouplingFailed as exc:
         failed = exc.t
     wall = time.perf_counter() - start
-    for s in (cart, chain):
+    close_quietly(cart, chain)
+    return dict(x=np.array(xs), X=np.array(Xs), a_steps=np.array(a_steps), h=h, failed=failed, wall=wall)
+
+
+def close_quietly(*slaves) -> None:
+    """Close every slave, even after a refused step (an instance that refused a step may refuse terminate too)."""
+    for s in slaves:
         try:
             s.close()
-        except Exception:  # an instance that refused a step may refuse terminate too
+        except Exception:
             pass
-    return dict(x=np.array(xs), X=np.array(Xs), a_steps=np.array(a_steps), h=h, failed=failed, wall=wall)
 
 
 def library_master(m_c: float, h: float, t_end: float, sample=SAMPLE) -> dict:

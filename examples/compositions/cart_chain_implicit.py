@@ -354,11 +354,7 @@ def implicit_master(cart: CouplingSlave, chain: CouplingSlave, h: float, t_end: 
     except cc.CouplingFailed as exc:
         failed = exc.t
     wall = time.perf_counter() - start
-    for s in (cart, chain):
-        try:
-            s.close()
-        except Exception:  # an instance that refused a step may refuse terminate too
-            pass
+    cc.close_quietly(cart, chain)
     return dict(x=np.array(xs), X=np.array(Xs), a_steps=np.array(a_steps), m_eff=np.array(m_eff), defect=defect,
                 h=h, failed=failed, wall=wall)
 
