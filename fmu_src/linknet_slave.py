@@ -39,9 +39,9 @@ except ImportError as _exc:  # say why fmi2Instantiate returns NULL, whether the
 from pythonfmu import Boolean, Fmi2Slave, Fmi2Causality, Fmi2Variability, Fmi2Initial, Real, String
 from pythonfmu.enums import Fmi2Status
 
-from linknet_fmu import thread_state
-from linknet_fmu.layout import (DERIVATIVE_VR_BASE, ERROR_ESTIMATE_CATEGORY, ERROR_ESTIMATE_CATEGORY_DESCRIPTION,
-                                 ESTIMATE_ERROR_DESCRIPTION, Layout)
+from linknet_fmu import anchor_jumps, thread_state
+from linknet_fmu.layout import (DERIVATIVE_ORDER_GIVEN, DERIVATIVE_VR_BASE, ERROR_ESTIMATE_CATEGORY,
+                                 ERROR_ESTIMATE_CATEGORY_DESCRIPTION, ESTIMATE_ERROR_DESCRIPTION, Layout)
 from linknet_fmu.parameters import parameter_problem
 
 CONFIG_FILE = "linknet_fmu.json"
@@ -53,6 +53,8 @@ STATE_FORMAT = "linknet-fmu-state-4"
 STATE_MAGIC = b"LINKNET-FMU-STATE\0"
 # an input's declared type -> what a refused value of it is called
 INPUT_QUANTITY = {"Force": "force", "Position": "position", "Velocity": "velocity", "Acceleration": "acceleration"}
+# the library's bound on input forces and anchor inputs (the native FMU bakes the same, fmu_src/native/build.py)
+MAX_INPUT = getattr(sys.modules[ln.Simulator.__module__], "MAX_FORCE")
 
 
 def guarded(neutral):
@@ -124,6 +126,13 @@ class LinknetNetwork(Fmi2Slave):
         # P, V, A set since the last step: the anchors move as P + V s + A s^2/2 from the time they were set (the
         # current time); until they are, the Simulator keeps the last hold (a read after a step sees where it went)
         self._anchors_set = False
+        # per input-driven anchor, since the last step: whether a P of it was set, and the first V or A set (its value
+        # reference; -1: none). A V or A set without P restarts the held motion from the P last set: said once per
+        # instance, as position jumps shorter than anchor_jumps.LOGGED_ALWAYS of a link are (anchor_jumps)
+        n_anchors = len(lay.anchor_inputs)
+        self._p_set = np.zeros(n_anchors, dtype=bool)
+        self._va_vr = np.full(n_anchors, -1, dtype=np.int64)
+        self._said_short_jump = self._said_set_without_p = False
         self._read_vrs = self._read_idx = None  # the last list of variables read (get_real)
         self._real[lay.P_vr] = np.asarray(self._scene0.X0)[lay.anchor_inputs]  # at rest at the scene's position
         self._real[lay.M_vr] = np.asarray(self._scene0.mass)[lay.free_indices]
@@ -189,7 +198,19 @@ class LinknetNetwork(Fmi2Slave):
         self._F = np.zeros((scene.K, 3))
         self._F_flat = self._F.reshape(-1)  # a view: set_real writes the inputs through it
         self._F[self._layout.input_masses] = self._real[self._layout.F_vr]
+        self._shortest_link = anchor_jumps.shortest_links(scene.k1, scene.k2, scene.length,
+                                                          self._layout.anchor_inputs)
         self._outputs_stale = True
+
+    def _mark_anchor_inputs(self, vrs):
+        """Note which anchors' P, V, A the value references `vrs` (an int array of inputs) set."""
+        lay = self._layout
+        rows = lay.anchor_row[vrs]
+        position = lay.is_position_input[vrs]
+        self._p_set[rows[(rows >= 0) & position]] = True
+        for row, vr in zip(rows[(rows >= 0) & ~position], vrs[(rows >= 0) & ~position]):
+            if self._va_vr[row] < 0:
+                self._va_vr[row] = vr
 
     def _anchors(self):
         """The motion of the anchors driven by inputs as the Simulator takes it: (P, V, A) each (n, 3) in scene
@@ -288,10 +309,18 @@ class LinknetNetwork(Fmi2Slave):
                     if isinstance(force_idx, tuple):
                         self._F_flat[force_idx[1]] = vals[force_idx[0]]
                         self._anchors_set = True
+                        self._mark_anchor_inputs(idx)
                     else:
                         self._F_flat[force_idx] = vals
                     self._outputs_stale = True
                     return
+        if len(vrs) and min(vrs) >= DERIVATIVE_VR_BASE:  # fmi2SetRealInputDerivatives, through the front layer
+            orders = [vr // DERIVATIVE_VR_BASE for vr in vrs]
+            self.set_real_input_derivatives(
+                [vr % DERIVATIVE_VR_BASE for vr in vrs],
+                [int(value) if order == DERIVATIVE_ORDER_GIVEN else order for order, value in zip(orders, values)],
+                [float("nan") if order == DERIVATIVE_ORDER_GIVEN else value for order, value in zip(orders, values)])
+            return
         changed_parameter = False
         for vr, value in zip(vrs, values):
             if vr >= DERIVATIVE_VR_BASE:  # fmi2SetRealInputDerivatives, through the binary's front layer
@@ -313,7 +342,9 @@ class LinknetNetwork(Fmi2Slave):
                     continue
                 self._bad.pop(var.name, None)
                 self._real[vr] = value
-                self._anchors_set |= not bool(lay.is_force_input[vr])
+                if not lay.is_force_input[vr]:
+                    self._anchors_set = True
+                    self._mark_anchor_inputs(np.array([vr]))
                 continue
             # parameter
             if self._initialized:
@@ -340,30 +371,48 @@ class LinknetNetwork(Fmi2Slave):
         """fmi2SetRealInputDerivatives. An anchor's position input P[k,i] takes derivatives of order 1 (they set
         V[k,i]) and 2 (A[k,i]): its motion over the step is the quadratic P + V tau + A tau^2/2. Every other input
         is held constant over the step: a derivative of it is ignored with a warning, so that a master that sends
-        derivatives of all its inputs keeps working. Orders other than 1 and 2, outputs, parameters and unknown
-        value references are refused with an error naming them."""
+        derivatives of all its inputs keeps working. Orders other than 1 and 2, outputs, parameters, unknown value
+        references and values that are not finite or beyond the library's bound are refused with an error naming them,
+        and then nothing of the call is set. The native FMU's rules and words (fmu_model_set_real_input_derivatives)."""
         lay = self._layout
-        for vr, order, value in zip(vrs, orders, values):
+        where = "fmi2SetRealInputDerivatives: "
+        held = None  # the first input held constant, whose derivative is ignored
+        for vr, order, value in zip(vrs, orders, values):  # all checked first: a refused call sets nothing
             if not 0 <= vr < lay.n_real:
-                self._error(f"setRealInputDerivatives: value reference {vr} is not a Real variable of this FMU; "
-                            f"derivative of order {order} ({value!r}) ignored")
-                continue
+                self._error(f"{where}value reference {vr} is not a Real variable of this FMU (Reals are "
+                            f"0..{lay.n_real - 1}); nothing set")
+                return
             var = lay.reals[vr]
             if var.causality != "input":
                 what = "an output" if var.causality == "output" else "a parameter"
-                self._error(f"setRealInputDerivatives: {var.name} is {what}, not an input: derivative of order "
-                            f"{order} ({value!r}) ignored")
-                continue
+                self._error(f"{where}{var.name} is {what}, not an input: it takes no input derivative; nothing set")
+                return
             if order not in (1, 2):
-                self._error(f"setRealInputDerivatives: derivative of order {order} of {var.name} refused: "
-                            "inputs take derivatives of order 1 and 2 only")
-                continue
-            target = int(lay.derivative_target[vr, order])
-            if target < 0:
-                self._error(f"setRealInputDerivatives: {var.name} is held constant over a communication step; its "
-                            f"derivative of order {order} ({value!r}) is ignored", Fmi2Status.warning)
-                continue
-            self.set_real([target], [value])
+                self._error(f"{where}derivative of order {order} of {var.name} refused: inputs take derivatives of "
+                            "order 1 and 2 only; nothing set")
+                return
+            if lay.derivative_target[vr, order] >= 0:
+                what = "velocity" if order == 1 else "acceleration"
+                if not math.isfinite(value):
+                    self._error(f"{where}derivative of order {order} of {var.name} = {value:g} is not a finite "
+                                f"{what}; nothing set")
+                    return
+                if abs(value) > MAX_INPUT:
+                    self._error(f"{where}derivative of order {order} of {var.name} = {value:g}: an anchor's {what} "
+                                f"beyond {MAX_INPUT:g} would overflow the solver; nothing set")
+                    return
+            elif held is None:
+                held = (var.name, order, value)
+        targets = [(int(lay.derivative_target[vr, order]), value) for vr, order, value in zip(vrs, orders, values)
+                   if lay.derivative_target[vr, order] >= 0]
+        if targets:
+            self.set_real([t for t, _ in targets], [v for _, v in targets])
+        if held is not None:
+            name, order, value = held
+            others = " (as are those of any other input but an anchor's position P in this call)" if len(vrs) > 1 \
+                else ""
+            self._error(f"{where}{name} is held constant over a communication step: its derivative of order {order} "
+                        f"({value:g}) is ignored{others}", Fmi2Status.warning)
 
     def _set_integrator(self, value):
         if self._initialized:
@@ -526,14 +575,23 @@ class LinknetNetwork(Fmi2Slave):
         if t + h <= t_fmu:
             # h > 0 but below half an ulp of t: t + h == t in floating point, nothing to integrate
             return True
+        jump = self._position_jump()
         try:
             # Simulator.advance leaves the state at t when it raises (the step can be retried
             # after fmi2SetFMUstate or with other inputs) and guarantees a finite state when it returns
             self._sim.advance(t + h, self._F, anchors=self._anchors())
         except ln.LinknetError as e:
-            self._error(f"doStep from t={t!r} with h={h!r} failed: {e}", Fmi2Status.discard)
+            note = ""
+            if jump is not None:
+                P, X, counted, _ = jump
+                note = anchor_jumps.failure_note(self._jump_items(P, X, counted))
+            self._error(f"doStep from t={t!r} with h={h!r} failed: {e}{note}", Fmi2Status.discard)
             return False
+        if jump is not None:
+            self._say_position_jump(t, *jump)
         self._anchors_set = False
+        self._p_set[:] = False
+        self._va_vr[:] = -1
         self._outputs_stale = True
         if self._estimate_error:
             # beyond the goal (or the companion failed): said once per crossing, with fmi2Warning status in its own
@@ -544,6 +602,53 @@ class LinknetNetwork(Fmi2Slave):
                 self.log(note, Fmi2Status.warning, ERROR_ESTIMATE_CATEGORY)
             self._over_goal = bool(note)
         return True
+
+    def _position_jump(self):
+        """(P, X, counted, long) where inputs set since the last step put an input-driven anchor elsewhere than its
+        held motion had it (anchor_jumps.jumps), else None."""
+        lay = self._layout
+        if not (self._anchors_set and lay.anchor_inputs.size):
+            return None
+        P = self._real[lay.P_vr]
+        X = self._sim.state.X[lay.anchor_inputs]
+        counted, long = anchor_jumps.jumps(P, X, self._shortest_link)
+        return (P.copy(), X.copy(), counted, long) if counted.any() else None
+
+    def _jump_items(self, P, X, mask):
+        lay = self._layout
+        names = [[lay.reals[vr].name for vr in row] for row in lay.P_vr]
+        return anchor_jumps.items(names, lay.P_vr, P, X, mask)
+
+    def _say_position_jump(self, t, P, X, counted, long):
+        """Log the position jump the step began with (anchor_jumps): a jump of P each time it is longer than
+        anchor_jumps.LOGGED_ALWAYS of the shortest link at its anchor, shorter ones once per instance; a V or A set
+        without P once per instance. One message (fmi2Warning), with the impulses the core reported."""
+        lay = self._layout
+        without_p = ~self._p_set & (self._va_vr >= 0)
+        driven_row = {int(k): j for j, k in enumerate(lay.driven_indices)}
+        J = self._sim.anchor_report()["impulse"][[driven_row[int(k)] for k in lay.anchor_inputs]]
+        J_names = [[lay.reals[vr].name for vr in lay.Jreact_vr[driven_row[int(k)]]] for k in lay.anchor_inputs]
+        messages = []
+        moved = counted & ~without_p[:, None]
+        short_first = not self._said_short_jump and bool((moved & ~long).any())
+        if (moved & long).any() or short_first:
+            anchors = np.flatnonzero(moved.any(axis=1))
+            first_short = None
+            if short_first:
+                self._said_short_jump = True
+                first_short = anchor_jumps.LOGGED_ALWAYS * float(self._shortest_link[anchors].min())
+            messages.append(anchor_jumps.position_jump_warning(t, self._jump_items(P, X, moved),
+                                                               anchor_jumps.impulses(J_names, J, anchors), first_short))
+        restarted = counted & without_p[:, None]
+        if restarted.any() and not self._said_set_without_p:
+            self._said_set_without_p = True
+            anchors = np.flatnonzero(restarted.any(axis=1))
+            vr = int(self._va_vr[anchors[0]])
+            messages.append(anchor_jumps.set_without_p_warning(t, lay.reals[vr].name, vr,
+                                                               self._jump_items(P, X, restarted),
+                                                               anchor_jumps.impulses(J_names, J, anchors)))
+        if messages:
+            self._error(" ".join(messages), Fmi2Status.warning)
 
     # ------------------------------------------------------------------ FMI: FMU state
     # pythonfmu's default saves registered variables only; the full state is the simulator
@@ -602,6 +707,8 @@ class LinknetNetwork(Fmi2Slave):
             self._F[lay.input_masses] = self._real[lay.F_vr]
             self._sim.set_state(copy.deepcopy(state["sim"]))
             self._anchors_set = bool(state.get("anchors_set", False))
+            self._p_set[:] = False  # which inputs were set is not in the state: a jump from it is said as one of P
+            self._va_vr[:] = -1
             self._over_goal = bool(state["over_goal"])
             self._bad = dict(state["bad"])
             self._broken = state["broken"]

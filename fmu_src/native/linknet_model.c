@@ -74,6 +74,17 @@ struct fmu_model {
     double *mass_full, *gravity;        /* (K), (3) the parameters being applied */
     double *X_init, *U_init, *Y_init;   /* the current model's initial state */
     double *Xo, *Uo, *Ys;               /* scratch: the state handed to ln_evaluate, body states */
+
+    /* position jumps of the input-driven anchors (see "position jumps" below), per driven anchor: whether a P of it
+       was set since the last step, and the first V or A set (value reference; -1: none); per driven anchor and
+       axis: its P and Jreact value references (n_real: none), and the jump the step begins with (P, where the held
+       motion had the anchor, whether the coordinate's jump counts and whether it is long); what was said once */
+    unsigned char *p_set;
+    long *va_vr;
+    unsigned *p_vr, *jreact_vr;
+    double *jump_P, *jump_X;
+    unsigned char *jump_counted, *jump_long;
+    int said_short_jump, said_set_without_p;
 };
 
 #if defined __GNUC__
@@ -98,6 +109,177 @@ static void link_label(const lnfmu_scene *s, ln_int l, char *out, size_t n)
 }
 
 static const lnfmu_variable *variable(const lnfmu_scene *s, unsigned vr) { return &s->variables[vr]; }
+
+/* ---- position jumps of the input-driven anchors ---------------------------------------------------- */
+
+/* Inputs set at t whose P is not where the held motion had the anchor at t make a position jump there, and so does a
+   V or A set without P (the held motion restarts from the P last set). The core takes it as a relocation
+   (drive.c ln_drive_jump): the anchor is put at P, the free masses are projected onto the link lengths (11) in the
+   mass metric and their velocities onto (12), and the impulse of that velocity projection is reported (Jreact), none
+   for the displacement itself, which made in no time would take an unbounded impulse. The FMU says so, naming the
+   inputs, in the pythonfmu FMU's words and by its rules (fmu_src/linknet_fmu/anchor_jumps.py): a coordinate's jump
+   counts beyond JUMP_ROUND_OFF (|P| + the shortest link at the anchor); a jump of P longer than JUMP_LOGGED_ALWAYS of
+   that link is logged every time, shorter ones once per instance; a V or A set without P once per instance. */
+#define JUMP_ROUND_OFF 1e-12
+#define JUMP_LOGGED_ALWAYS 1e-3
+#define JUMP_MAX_LISTED 6
+#define JUMP_RELOCATION                                                                                           \
+    "A jump of position is no motion the links can follow (made in no time it would take an unbounded impulse), " \
+    "so it was taken as a relocation: the anchor was put there, the free masses were moved to the nearest "      \
+    "positions (in the mass metric) that keep the link lengths, and their velocities were projected onto the "   \
+    "links relative to the anchor's velocity; Jreact is the impulse of that projection alone, none is counted "  \
+    "for the displacement: "
+#define JUMP_RULE                                                                                                 \
+    "a driven anchor's position input must continue its held motion P + V tau + A tau^2/2: a jump is taken by "  \
+    "moving the free masses onto the link lengths at once, which fails where the links cannot follow it; move "  \
+    "the anchor there over several steps (set P, V and A together, or give V and A as P's input derivatives)"
+
+#if defined __GNUC__
+static void append(char *out, size_t n, const char *format, ...) __attribute__((format(printf, 3, 4)));
+#endif
+
+/* printf onto the end of the text in out (n bytes), cut at its end */
+static void append(char *out, size_t n, const char *format, ...)
+{
+    const size_t used = strlen(out);
+    if (used + 1 >= n) return;
+    va_list args;
+    va_start(args, format);
+    vsnprintf(out + used, n - used, format, args);
+    va_end(args);
+}
+
+static void clear_anchor_marks(fmu_model *m)
+{
+    for (ln_int a = 0; a < m->s->model->n_driven; a++) {
+        m->p_set[a] = 0;
+        m->va_vr[a] = -1;
+    }
+}
+
+/* The shortest link at mass k (INFINITY where it has none), at the lengths in force. */
+static double shortest_link_at(const fmu_model *m, ln_int k)
+{
+    double shortest = INFINITY;
+    for (ln_int l = 0; l < m->model.L; l++)
+        if ((m->model.k1[l] == k || m->model.k2[l] == k) && m->model.R[l] < shortest) shortest = m->model.R[l];
+    return shortest;
+}
+
+/* The position jump the step from the present state begins with (inputs set at this time): 1 when a coordinate's
+   jump counts, its P, where the held motion had the anchor and which coordinates count and are long kept. */
+static int position_jump(fmu_model *m)
+{
+    const ln_model *model = &m->model;
+    const ln_data *d = m->d;
+    if (model->n_driven == 0 || d->drive_hold_t != d->t) return 0;  /* the hold goes on: no new inputs */
+    int any = 0;
+    for (ln_int a = 0; a < model->n_driven; a++) {
+        const ln_int k = model->driven_idx[a];
+        double shortest = NAN;
+        for (int e = 0; e < 3; e++) {
+            const ln_int i = 3 * a + e;
+            m->jump_counted[i] = m->jump_long[i] = 0;
+            if (m->p_vr[i] == (unsigned)m->s->n_real) continue;  /* an anchor with a scene motion */
+            const double P = d->drive_P[i], X = d->X[3 * k + e], jump = fabs(P - X);
+            m->jump_P[i] = P;
+            m->jump_X[i] = X;
+            if (!(jump > 0.0)) continue;
+            if (isnan(shortest)) shortest = shortest_link_at(m, k);
+            m->jump_counted[i] = jump > JUMP_ROUND_OFF * (fabs(P) + shortest);
+            m->jump_long[i] = m->jump_counted[i] && jump > JUMP_LOGGED_ALWAYS * shortest;
+            any |= m->jump_counted[i];
+        }
+    }
+    return any;
+}
+
+/* Whether the coordinate i's jump is listed: `restarted` 1 lists those of anchors whose V or A was set without P,
+   0 the others, -1 all. */
+static int jump_listed(const fmu_model *m, ln_int i, int restarted)
+{
+    if (!m->jump_counted[i]) return 0;
+    const ln_int a = i / 3;
+    return restarted < 0 || (!m->p_set[a] && m->va_vr[a] >= 0) == restarted;
+}
+
+/* The listed coordinates: each P's name, value reference, value, where the held motion had the anchor and the jump. */
+static void jump_items(const fmu_model *m, int restarted, char *out, size_t n)
+{
+    const lnfmu_scene *s = m->s;
+    int listed = 0, more = 0;
+    for (ln_int i = 0; i < 3 * s->model->n_driven; i++) {
+        if (!jump_listed(m, i, restarted)) continue;
+        if (listed == JUMP_MAX_LISTED) {
+            more++;
+            continue;
+        }
+        append(out, n, "%s%s (valueReference %u) = %g m where the held motion had the anchor at %g m (a jump of %g m)",
+               listed ? "; " : "", variable(s, m->p_vr[i])->name, m->p_vr[i], m->jump_P[i], m->jump_X[i],
+               fabs(m->jump_P[i] - m->jump_X[i]));
+        listed++;
+    }
+    if (more) append(out, n, "; and %d more", more);
+}
+
+/* Jreact of the anchors with listed coordinates, by name. */
+static void jump_impulses(const fmu_model *m, int restarted, char *out, size_t n)
+{
+    const lnfmu_scene *s = m->s;
+    int listed = 0;
+    for (ln_int a = 0; a < s->model->n_driven; a++) {
+        if (!(jump_listed(m, 3 * a, restarted) || jump_listed(m, 3 * a + 1, restarted)
+              || jump_listed(m, 3 * a + 2, restarted)))
+            continue;
+        for (int e = 0; e < 3; e++, listed++)
+            append(out, n, "%s%s = %g", listed ? ", " : "", variable(s, m->jreact_vr[3 * a + e])->name,
+                   m->d->impulse[3 * a + e]);
+    }
+}
+
+/* The warning of a step that began with a position jump, into out (empty where nothing is to be said). */
+static void say_position_jump(fmu_model *m, double t, char *out, size_t n)
+{
+    const ln_int n3 = 3 * m->s->model->n_driven;
+    int moved_long = 0, moved_short = 0, restarted = 0;
+    double shortest = INFINITY;
+    for (ln_int i = 0; i < n3; i++) {
+        if (jump_listed(m, i, 1)) restarted = 1;
+        if (!jump_listed(m, i, 0)) continue;
+        if (m->jump_long[i]) moved_long = 1;
+        else moved_short = 1;
+        shortest = fmin(shortest, shortest_link_at(m, m->model.driven_idx[i / 3]));
+    }
+    out[0] = '\0';
+    const int short_first = moved_short && !m->said_short_jump;
+    if (moved_long || short_first) {
+        char items[FMU_MESSAGE] = "", impulses[FMU_MESSAGE / 2] = "";
+        jump_items(m, 0, items, sizeof items);
+        jump_impulses(m, 0, impulses, sizeof impulses);
+        append(out, n, "position jump at t=%g: %s. " JUMP_RELOCATION "%s N s. For a motion, set P, V and A together so "
+               "that P continues the held motion P + V tau + A tau^2/2 (or give V and A as P's input derivatives).",
+               t, items, impulses);
+        if (short_first) {
+            m->said_short_jump = 1;
+            append(out, n, " Jumps shorter than a thousandth of the shortest link at the anchor (%g m here) are logged "
+                   "once per instance, this one; longer ones every time.", JUMP_LOGGED_ALWAYS * shortest);
+        }
+    }
+    if (restarted && !m->said_set_without_p) {
+        m->said_set_without_p = 1;
+        long vr = -1;
+        for (ln_int i = 0; i < n3 && vr < 0; i++)
+            if (jump_listed(m, i, 1)) vr = m->va_vr[i / 3];
+        char items[FMU_MESSAGE] = "", impulses[FMU_MESSAGE / 2] = "";
+        jump_items(m, 1, items, sizeof items);
+        jump_impulses(m, 1, impulses, sizeof impulses);
+        append(out, n, "%s%s (valueReference %ld) was set at t=%g without P of its anchor, so the held motion P + V tau "
+               "+ A tau^2/2 restarted from the P last set: %s. This happens at every step where V or A is set without "
+               "P, and is logged once per instance. " JUMP_RELOCATION "%s N s. Set P with V and A so that P continues "
+               "the held motion (or give V and A as P's input derivatives).", out[0] ? " " : "",
+               variable(m->s, (unsigned)vr)->name, vr, t, items, impulses);
+    }
+}
 
 /* ---- parameters ---------------------------------------------------------------------------------- */
 
@@ -430,6 +612,14 @@ void fmu_model_free(fmu_model *m)
                         m->gravity, m->X_init, m->U_init, m->Y_init, m->Xo, m->Uo, m->Ys};
     for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
     free(m->top);
+    free(m->p_set);
+    free(m->va_vr);
+    free(m->p_vr);
+    free(m->jreact_vr);
+    free(m->jump_P);
+    free(m->jump_X);
+    free(m->jump_counted);
+    free(m->jump_long);
     free(m);
 }
 
@@ -463,12 +653,29 @@ fmu_model *fmu_model_new(char *msg)
     m->Xo = doubles(3 * K);
     m->Uo = doubles(3 * K);
     m->Ys = doubles(LN_RIGID_STATE * B);
+    const size_t nd = (size_t)(s->model->n_driven > 0 ? s->model->n_driven : 1);
+    m->p_set = calloc(nd, 1);
+    m->va_vr = calloc(nd, sizeof *m->va_vr);
+    m->p_vr = calloc(3 * nd, sizeof *m->p_vr);
+    m->jreact_vr = calloc(3 * nd, sizeof *m->jreact_vr);
+    m->jump_P = doubles(3 * (ln_int)nd);
+    m->jump_X = doubles(3 * (ln_int)nd);
+    m->jump_counted = calloc(3 * nd, 1);
+    m->jump_long = calloc(3 * nd, 1);
     if (!(m->value && m->applied && m->R && m->weights && m->r && m->inertia && m->body_mass && m->top
-          && m->mass_full && m->gravity && m->X_init && m->U_init && m->Y_init && m->Xo && m->Uo && m->Ys)) {
+          && m->mass_full && m->gravity && m->X_init && m->U_init && m->Y_init && m->Xo && m->Uo && m->Ys && m->p_set
+          && m->va_vr && m->p_vr && m->jreact_vr && m->jump_P && m->jump_X && m->jump_counted && m->jump_long)) {
         fmu_model_free(m);
         fail(msg, FMU_ERROR, "out of memory");
         return NULL;
     }
+    for (size_t i = 0; i < 3 * nd; i++) m->p_vr[i] = m->jreact_vr[i] = (unsigned)s->n_real;
+    for (ln_int vr = 0; vr < s->n_real; vr++) {
+        const lnfmu_variable *v = variable(s, (unsigned)vr);
+        if (v->kind == LNFMU_P) m->p_vr[v->index] = (unsigned)vr;
+        if (v->kind == LNFMU_JREACT) m->jreact_vr[v->index] = (unsigned)vr;
+    }
+    clear_anchor_marks(m);
     if (s->model->solver == LN_SOLVER_LDL) {
         /* the symbolic analysis of A's pattern, in the order the library's structure analysis chose */
         m->ldl = ln_ldl_analyse(L, P, s->model->pair_first, s->model->pair_second, s->ldl_ordering);
@@ -505,6 +712,8 @@ fmu_model *fmu_model_new(char *msg)
 int fmu_model_reset(fmu_model *m, char *msg)
 {
     start_values(m);
+    clear_anchor_marks(m);
+    m->said_short_jump = m->said_set_without_p = 0;
     m->dirty = 0;
     const int result = build(m, m->value, m->integrator, msg);
     if (result != FMU_OK) return result;
@@ -639,6 +848,9 @@ int fmu_model_set_real(fmu_model *m, const unsigned *vr, size_t n, const double 
             anchor_input(m, v->kind)[v->index] = value[i];
             m->d->drive_hold_t = m->d->t;
             m->outputs_stale = 1;
+            const ln_int a = v->index / 3;  /* which of the anchor's inputs were set: see position jumps */
+            if (v->kind == LNFMU_P) m->p_set[a] = 1;
+            else if (m->va_vr[a] < 0) m->va_vr[a] = (long)vr[i];
         } else if (value[i] != m->value[vr[i]]) {
             m->value[vr[i]] = value[i];
             m->dirty = 1;
@@ -788,27 +1000,10 @@ static int no_retry_helps(const fmu_model *m, int status, char *out, size_t n)
     }
 }
 
-int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
+/* The companion's step after the run's (the error estimate): FMU_OK, or FMU_NOTE with the note in note (n bytes). */
+static int companion_step(fmu_model *m, double t_fmu, double t_target, char *note, size_t n)
 {
     const lnfmu_scene *s = m->s;
-    const double t_fmu = m->d->t, t_target = t + h;
-    if (t_target <= t_fmu) return FMU_OK;  /* h below half an ulp of t: nothing to integrate */
-    const int status = ln_advance(&m->model, &m->method, m->d, t_target, s->max_steps);
-    if (status != LN_OK) {
-        char why[FMU_MESSAGE - 512], label[512] = "", final[320] = "";
-        if (m->d->fail_link >= 0) link_label(s, m->d->fail_link, label, sizeof label);
-        /* a fixed-step method's count is known before any step: the span, dt, the count and the limit, as the
-           library says them */
-        if (!(status == LN_TOO_MANY_STEPS && m->method.kind == LN_COMPOSITION
-              && ln_step_count_problem(t_fmu, t_target, m->method.dt, s->max_steps, why, sizeof why)))
-            ln_explain(&m->model, &m->method, m->d, status, t_fmu, t_target, s->max_steps, label, why, sizeof why);
-        if (no_retry_helps(m, status, final, sizeof final))
-            return fail(msg, FMU_DISCARD_FINAL, "step from t=%.17g with h=%.17g failed, the FMU stays at t=%.17g: %s. "
-                        "No retry of this step can succeed, however short: %s", t, h, t_fmu, why, final);
-        return fail(msg, FMU_DISCARD, "step from t=%.17g with h=%.17g failed, the FMU stays at t=%.17g: %s", t, h,
-                    t_fmu, why);
-    }
-    m->outputs_stale = 1;
     if (!m->applied_estimate || !isfinite(m->error)) return FMU_OK;  /* off, or the companion failed before */
 
     /* the companion: the same step with the same inputs, at its own settings */
@@ -822,10 +1017,10 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
         ln_explain(&m->model, &m->method_c, m->dc, companion, t_fmu, t_target, s->max_steps, label, why, sizeof why);
         m->error = INFINITY;
         m->over_goal = 1;
-        char where[FMU_MESSAGE - 256], note[FMU_MESSAGE - 64];
+        char where[FMU_MESSAGE - 256];
         snprintf(where, sizeof where, "at t = %g s: %s", m->dc->t, why);
-        ln_estimate_failure_text(s->scene_name, where, note, sizeof note);
-        return fail(msg, FMU_NOTE, "%s", note);
+        ln_estimate_failure_text(s->scene_name, where, note, n);
+        return FMU_NOTE;
     }
     m->error = m->factor * ln_position_gap(s->K, m->d->X, m->dc->X);
     const int over = m->error > m->goal;
@@ -833,9 +1028,46 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
     m->over_goal = over;
     if (!crossing) return FMU_OK;
     /* the library's words (the core's ln_accuracy_text); said again only after the estimate came back */
-    char note[FMU_MESSAGE - 64];
-    ln_accuracy_text(s->scene_name, t_target, m->error, m->goal, 0.0, note, sizeof note);
-    return fail(msg, FMU_NOTE, "%s", note);
+    ln_accuracy_text(s->scene_name, t_target, m->error, m->goal, 0.0, note, n);
+    return FMU_NOTE;
+}
+
+int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
+{
+    const lnfmu_scene *s = m->s;
+    const double t_fmu = m->d->t, t_target = t + h;
+    if (t_target <= t_fmu) return FMU_OK;  /* h below half an ulp of t: nothing to integrate */
+    const int jumped = position_jump(m);
+    const int status = ln_advance(&m->model, &m->method, m->d, t_target, s->max_steps);
+    if (status != LN_OK) {
+        char why[FMU_MESSAGE], label[512] = "", final[320] = "";
+        if (m->d->fail_link >= 0) link_label(s, m->d->fail_link, label, sizeof label);
+        /* a fixed-step method's count is known before any step: the span, dt, the count and the limit, as the
+           library says them */
+        if (!(status == LN_TOO_MANY_STEPS && m->method.kind == LN_COMPOSITION
+              && ln_step_count_problem(t_fmu, t_target, m->method.dt, s->max_steps, why, sizeof why)))
+            ln_explain(&m->model, &m->method, m->d, status, t_fmu, t_target, s->max_steps, label, why, sizeof why);
+        if (jumped) {  /* the inputs that jumped, and the rule (the pythonfmu FMU's words, anchor_jumps.failure_note) */
+            char items[FMU_MESSAGE] = "";
+            jump_items(m, -1, items, sizeof items);
+            append(why, sizeof why, ". The step began with a position jump: %s; " JUMP_RULE, items);
+        }
+        if (no_retry_helps(m, status, final, sizeof final))
+            return fail(msg, FMU_DISCARD_FINAL, "step from t=%.17g with h=%.17g failed, the FMU stays at t=%.17g: %s. "
+                        "No retry of this step can succeed, however short: %s", t, h, t_fmu, why, final);
+        return fail(msg, FMU_DISCARD, "step from t=%.17g with h=%.17g failed, the FMU stays at t=%.17g: %s", t, h,
+                    t_fmu, why);
+    }
+    m->outputs_stale = 1;
+    char warning[FMU_MESSAGE] = "", note[FMU_MESSAGE - 64] = "";
+    if (jumped) say_position_jump(m, t, warning, sizeof warning);
+    clear_anchor_marks(m);
+    const int result = companion_step(m, t_fmu, t_target, note, sizeof note);
+    /* a position jump is a warning; a note of the error estimate in the same step is said after it */
+    if (warning[0]) return fail(msg, FMU_WARNING, "%s%s%s", warning, result == FMU_NOTE ? " " : "",
+                                result == FMU_NOTE ? note : "");
+    if (result == FMU_NOTE) return fail(msg, FMU_NOTE, "%s", note);
+    return FMU_OK;
 }
 
 /* ---- Booleans: estimate_error -------------------------------------------------------------------- */
@@ -1119,6 +1351,7 @@ int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t si
     apply_data(m, m->d, &run);
     apply_data(m, m->dc, &companion);
     load_inputs(m);
+    clear_anchor_marks(m);  /* which inputs were set is not in the state: a jump from it is said as one of P */
     m->outputs_stale = 1;
     free(value);
     return FMU_OK;

@@ -26,6 +26,13 @@
  *   instantiate/free cycle); a reset does not (docs/fmu.md, tests/contract). A parked instance is reset when it
  *   is parked, so it holds a fresh slave rather than a finished run.
  * - at exit(), pythonfmu's interpreter is released once, not twice (see load_inner).
+ * - the order of calls (pythonfmu checks none): the native FMU's modes and rules (instantiated, initialization mode,
+ *   step mode, terminated), so that a doStep after fmi2Terminate, or input derivatives before initialization, are
+ *   refused with fmi2Error and the native FMU's words; setupExperiment's stopTime checked against its startTime;
+ *   the host's GUID checked against the guid of the FMU's modelDescription.xml at fmi2Instantiate;
+ * - a serialized FMU state is pythonfmu's bytes behind a header (format, byte order, size, the instance's mode and
+ *   a checksum), checked at fmi2DeSerializeFMUstate before pythonfmu unpickles anything: garbage, truncated or
+ *   damaged bytes are refused there, as the native FMU refuses them.
  *
  * - fmi2SetRealInputDerivatives reaches a slave that takes input derivatives (FRONT_DERIVATIVE_VR_BASE defined)
  *   as an fmi2SetReal of encoded value references (see the function).
@@ -37,10 +44,13 @@
  * resource location and GUID).
  */
 #define _GNU_SOURCE
+#include <ctype.h>
 #include <dlfcn.h>
 #include <limits.h>
+#include <math.h>
 #include <pthread.h>
 #include <stdarg.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -121,6 +131,18 @@ static void load_inner(void)
 
 #define FRONT_MAGIC 0x6c6e5046u  /* a live instance; cleared when it is freed (parked) */
 
+/* The order of calls, as the native FMU keeps it (fmu_src/native/fmi2Functions.c: the same modes and words). */
+enum mode { MODE_INSTANTIATED = 0, MODE_INITIALIZATION = 1, MODE_STEPPING = 2, MODE_TERMINATED = 3 };
+static const char *const mode_names[] = {"instantiated (before fmi2EnterInitializationMode)",
+                                         "initialization mode", "step mode", "terminated"};
+#define IN(mode) (1u << (mode))
+
+/* A state this instance handed out and has not freed, and the instance's mode when it was taken (restored with it). */
+typedef struct front_state {
+    fmi2FMUstate handle;
+    int mode;
+} front_state;
+
 typedef struct front {
     unsigned magic;
     fmi2Component inner;              /* pythonfmu's instance */
@@ -133,7 +155,8 @@ typedef struct front {
     fmi2Status worst;                 /* the worst status logged during the current call */
     fmi2CallbackFunctions callbacks;  /* handed to pythonfmu (which keeps the pointer): its logger is relay() */
     struct front *next_parked;
-    fmi2FMUstate *states;             /* the FMU states this instance handed out and has not freed */
+    int mode;                         /* enum mode */
+    front_state *states;              /* the FMU states this instance handed out and has not freed */
     size_t n_states, states_capacity;
     /* the last discarded step, until something is set or restored: the same step asked again fails the same way */
     int discarded;
@@ -239,6 +262,21 @@ static front *checked(fmi2Component c)
     if (self == NULL) return fmi2Error; \
     const char *const fn = function
 
+/* Whether the call is allowed in the instance's mode; refused with the native FMU's words if not. */
+static int mode_allows(front *self, const char *fn, unsigned allowed)
+{
+    if (allowed & IN(self->mode)) return 1;
+    refuse(self, fn, "not allowed in %s", mode_names[self->mode]);
+    return 0;
+}
+
+/* The mode a call moves to when pythonfmu and the slave accepted it. */
+static fmi2Status moving_to(front *self, fmi2Status status, int mode)
+{
+    if (status <= fmi2Warning) self->mode = mode;
+    return status;
+}
+
 static int arrays_given(front *self, const char *fn, size_t n, const void *vr, const void *value)
 {
     if (n == 0 || (vr != NULL && value != NULL)) return 1;
@@ -254,7 +292,7 @@ static int arrays_given(front *self, const char *fn, size_t n, const void *vr, c
 static size_t state_index(const front *self, const void *handle)
 {
     for (size_t i = 0; i < self->n_states; i++)
-        if ((const void *)self->states[i] == handle) return i;
+        if ((const void *)self->states[i].handle == handle) return i;
     return self->n_states;
 }
 
@@ -263,16 +301,18 @@ static int is_live_state(const front *self, const void *handle)
     return handle != NULL && state_index(self, handle) < self->n_states;
 }
 
-static int remember_state(front *self, fmi2FMUstate state)
+static int remember_state(front *self, fmi2FMUstate state, int mode)
 {
     if (self->n_states == self->states_capacity) {
         const size_t capacity = self->states_capacity ? 2 * self->states_capacity : 8;
-        fmi2FMUstate *grown = realloc(self->states, capacity * sizeof *grown);
+        front_state *grown = realloc(self->states, capacity * sizeof *grown);
         if (grown == NULL) return 0;
         self->states = grown;
         self->states_capacity = capacity;
     }
-    self->states[self->n_states++] = state;
+    self->states[self->n_states].handle = state;
+    self->states[self->n_states].mode = mode;
+    self->n_states++;
     return 1;
 }
 
@@ -285,7 +325,7 @@ static void forget_state(front *self, fmi2FMUstate state)
 /* The states the host did not free, freed through pythonfmu (an instance parked or destroyed). */
 static void free_all_states(front *self)
 {
-    for (size_t i = 0; i < self->n_states; i++) inner.fmi2FreeFMUstate(self->inner, &self->states[i]);
+    for (size_t i = 0; i < self->n_states; i++) inner.fmi2FreeFMUstate(self->inner, &self->states[i].handle);
     free(self->states);
     self->states = NULL;
     self->n_states = self->states_capacity = 0;
@@ -376,6 +416,100 @@ static void destroy(front *self)
     free(self);
 }
 
+/* The path of the FMU's modelDescription.xml, from its resource location (a file URI, "file:///DIR/resources",
+   "file://localhost/DIR/resources" or "file:/DIR/resources", percent-encoded; or a plain path): 1, or 0 for a location
+   that is not a local folder. */
+static int model_description_path(const char *resources, char *out, size_t n)
+{
+    const char *p = resources;
+    if (strncmp(p, "file:", 5) == 0) {
+        p += 5;
+        if (strncmp(p, "//", 2) == 0) {
+            p += 2;
+            if (strncmp(p, "localhost", 9) == 0) p += 9;
+            if (*p != '/') return 0;  /* another host */
+        }
+    }
+    if (*p != '/') return 0;
+    size_t j = 0;
+    for (; *p && j + 1 < n; p++) {
+        unsigned hex;
+        if (p[0] == '%' && isxdigit((unsigned char)p[1]) && isxdigit((unsigned char)p[2])
+            && sscanf(p + 1, "%2x", &hex) == 1) {
+            out[j++] = (char)hex;
+            p += 2;
+        } else {
+            out[j++] = *p;
+        }
+    }
+    out[j] = '\0';
+    while (j > 1 && out[j - 1] == '/') out[--j] = '\0';  /* the resources folder's own name goes */
+    char *slash = strrchr(out, '/');
+    if (slash == NULL) return 0;
+    return snprintf(slash, n - (size_t)(slash - out), "/modelDescription.xml") < (int)(n - (size_t)(slash - out));
+}
+
+/* The guid attribute of the root element of a modelDescription.xml (text, NUL-terminated) into guid (n bytes): 1 if
+   found. */
+static int guid_of(const char *text, char *guid, size_t n)
+{
+    const char *root = strstr(text, "<fmiModelDescription");
+    if (root == NULL) return 0;
+    const char *end = strchr(root, '>');
+    for (const char *p = root; p && (end == NULL || p < end); p = strstr(p + 1, "guid")) {
+        if (p == root || !(p[-1] == ' ' || p[-1] == '\t' || p[-1] == '\n' || p[-1] == '\r')) continue;
+        const char *q = p + 4;
+        while (*q == ' ' || *q == '\t' || *q == '\n' || *q == '\r') q++;
+        if (*q++ != '=') continue;
+        while (*q == ' ' || *q == '\t' || *q == '\n' || *q == '\r') q++;
+        const char quote = *q++;
+        if (quote != '"' && quote != '\'') continue;
+        const char *close = strchr(q, quote);
+        if (close == NULL || (size_t)(close - q) >= n) return 0;
+        memcpy(guid, q, (size_t)(close - q));
+        guid[close - q] = '\0';
+        return 1;
+    }
+    return 0;
+}
+
+/* The host's GUID against the guid of the modelDescription.xml beside the FMU's resources (pythonfmu checks none; no
+   GUID is compiled into this layer, see the top of the file): 0 when they agree, 1 when they differ, -1 when the
+   file cannot be read (why says which). */
+static int guid_problem(const char *resources, const char *host_guid, char *why, size_t n)
+{
+    char path[PATH_MAX], guid[256];
+    if (!model_description_path(resources, path, sizeof path)) {
+        snprintf(why, n, "the resource location \"%s\" is not a local folder", resources);
+        return -1;
+    }
+    FILE *file = fopen(path, "rb");
+    if (file == NULL) {
+        snprintf(why, n, "%s cannot be opened", path);
+        return -1;
+    }
+    const size_t cap = (size_t)1 << 18;  /* the root element, with the guid, comes first */
+    char *head = malloc(cap);
+    if (head == NULL) {
+        fclose(file);
+        snprintf(why, n, "no memory to read %s", path);
+        return -1;
+    }
+    const size_t got = fread(head, 1, cap - 1, file);
+    fclose(file);
+    head[got] = '\0';
+    const int found = guid_of(head, guid, sizeof guid);
+    free(head);
+    if (!found) {
+        snprintf(why, n, "%s has no guid in its fmiModelDescription element", path);
+        return -1;
+    }
+    if (strcmp(guid, host_guid) == 0) return 0;
+    snprintf(why, n, "GUID \"%s\" is not this FMU's (%s, in %s): the modelDescription.xml the host read and the FMU "
+             "it loads come from different builds", host_guid, guid, path);
+    return 1;
+}
+
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn)
@@ -397,6 +531,12 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     }
     if (fmuResourceLocation == NULL) {
         refuse(&probe, fn, "fmuResourceLocation is NULL (the slave's Python code is in the FMU's resources)");
+        return NULL;
+    }
+    char why[2 * PATH_MAX + 512];
+    const int guid_differs = guid_problem(fmuResourceLocation, fmuGUID, why, sizeof why);
+    if (guid_differs > 0) {
+        refuse(&probe, fn, "%s", why);
         return NULL;
     }
     pthread_once(&inner_once, load_inner);
@@ -433,6 +573,12 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     self->logging_on = probe.logging_on;
     self->worst = fmi2OK;
     self->discarded = self->terminated = 0;
+    self->mode = MODE_INSTANTIATED;
+    if (guid_differs < 0) {  /* said, and the instance made: pythonfmu finds the slave in the resources or says why */
+        char text[sizeof why + 128];
+        snprintf(text, sizeof text, "%s: the GUID \"%s\" cannot be checked: %s", fn, fmuGUID, why);
+        emit(self, fmi2Warning, NULL, text);
+    }
     if (self->inner == NULL) {
         /* pythonfmu logs through relay() with this instance: it must log everything, the front filters */
         self->inner = inner.fmi2Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, &self->callbacks,
@@ -475,32 +621,53 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
 {
     ENTER("fmi2SetupExperiment");
-    (void)fn;
+    if (!mode_allows(self, fn, IN(MODE_INSTANTIATED))) return fmi2Error;
+    /* the native FMU's rules: a finite start, and a stop time, where given, at or after it */
+    if (!isfinite(startTime)) return refuse(self, fn, "startTime = %g is not finite", startTime);
+    if (stopTimeDefined && !(isfinite(stopTime) && stopTime >= startTime))
+        return refuse(self, fn, "stopTime = %g must be finite and >= startTime = %g", stopTime, startTime);
     return changed_by(self, answer(self, inner.fmi2SetupExperiment(self->inner, toleranceDefined, tolerance,
                                                                    startTime, stopTimeDefined, stopTime)));
 }
 
-#define FORWARD_NO_ARGUMENTS(function)                                          \
-    fmi2Status function(fmi2Component c)                                        \
-    {                                                                           \
-        ENTER(#function);                                                       \
-        (void)fn;                                                               \
-        return changed_by(self, answer(self, inner.function(self->inner)));     \
+/* forwarded in the modes `allowed`; accepted (or whatever the answer, with `always`), the instance moves to mode
+   `to` */
+#define FORWARD_MODE_CHANGE(function, allowed, to, always)                                                  \
+    fmi2Status function(fmi2Component c)                                                                    \
+    {                                                                                                       \
+        ENTER(#function);                                                                                   \
+        if (!mode_allows(self, fn, allowed)) return fmi2Error;                                              \
+        const fmi2Status status = changed_by(self, answer(self, inner.function(self->inner)));              \
+        return always ? (self->mode = (to), status) : moving_to(self, status, to);                          \
     }
 
-FORWARD_NO_ARGUMENTS(fmi2EnterInitializationMode)
-FORWARD_NO_ARGUMENTS(fmi2ExitInitializationMode)
-FORWARD_NO_ARGUMENTS(fmi2Terminate)
-FORWARD_NO_ARGUMENTS(fmi2Reset)
-FORWARD_NO_ARGUMENTS(fmi2CancelStep)
+FORWARD_MODE_CHANGE(fmi2EnterInitializationMode, IN(MODE_INSTANTIATED), MODE_INITIALIZATION, 0)
+/* a slave whose parameters do not define a valid scene still ends initialization (it says why at each doStep, until
+   fmi2Reset): its parameters are fixed from then on, so staying in initialization mode would offer a retry that
+   cannot succeed (where the native FMU keeps initialization mode, fix and retry) */
+FORWARD_MODE_CHANGE(fmi2ExitInitializationMode, IN(MODE_INITIALIZATION), MODE_STEPPING, 1)
+FORWARD_MODE_CHANGE(fmi2Terminate, IN(MODE_STEPPING), MODE_TERMINATED, 0)
+FORWARD_MODE_CHANGE(fmi2Reset, IN(MODE_INSTANTIATED) | IN(MODE_INITIALIZATION) | IN(MODE_STEPPING)
+                               | IN(MODE_TERMINATED), MODE_INSTANTIATED, 0)
+
+fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    ENTER("fmi2CancelStep");
+    (void)fn;
+    return changed_by(self, answer(self, inner.fmi2CancelStep(self->inner)));
+}
 
 /* ---- values ------------------------------------------------------------------------------------------ */
 
-/* sets: a set that succeeded may change what the next step computes (changed_by) */
+/* sets: a set that succeeded may change what the next step computes (changed_by); values are not set after
+   fmi2Terminate (the native FMU's rule) */
 #define FORWARD_VALUES(function, type, sets)                                                        \
     fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, type value[])   \
     {                                                                                               \
         ENTER(#function);                                                                           \
+        if (sets && !mode_allows(self, fn, IN(MODE_INSTANTIATED) | IN(MODE_INITIALIZATION)          \
+                                           | IN(MODE_STEPPING)))                                    \
+            return fmi2Error;                                                                       \
         if (!arrays_given(self, fn, nvr, vr, value)) return fmi2Error;                              \
         const fmi2Status status = answer(self, inner.function(self->inner, vr, nvr, value));        \
         return sets ? changed_by(self, status) : status;                                            \
@@ -527,30 +694,44 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 
 #ifdef FRONT_DERIVATIVE_VR_BASE
 /* pythonfmu 0.7.0 has no path from fmi2SetRealInputDerivatives to the slave: a slave that takes input derivatives
-   receives them as fmi2SetReal of the value reference order * FRONT_DERIVATIVE_VR_BASE + vr, and answers (refuses
-   orders or variables it does not take) itself. Only what cannot be encoded is refused here. */
+   receives them as one fmi2SetReal of the value references order * FRONT_DERIVATIVE_VR_BASE + vr, and answers
+   (refuses orders or variables it does not take, naming them, and sets nothing when it refuses any) itself. An order
+   that the encoding cannot carry (below 1, or beyond the slots) goes in the last slot, DERIVATIVE_ORDER_GIVEN, with
+   the order itself as its value: the slave refuses it in its own words, so the host reads the same rule whatever the
+   order (linknet_fmu.layout.DERIVATIVE_ORDER_GIVEN). pythonfmu hands value references to Python as signed 32-bit
+   ints, so the slots end below 2^31. A value reference beyond the encoding's range is no variable of this FMU:
+   refused here. */
+#define DERIVATIVE_ORDER_GIVEN ((long)(((unsigned long)INT_MAX + 1) / (unsigned long)(FRONT_DERIVATIVE_VR_BASE)) - 1)
+
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[])
 {
     ENTER("fmi2SetRealInputDerivatives");
+    if (!mode_allows(self, fn, IN(MODE_INITIALIZATION) | IN(MODE_STEPPING))) return fmi2Error;
+    if (nvr > 0 && order == NULL) return refuse(self, fn, "order is NULL with nvr = %zu", nvr);
     if (!arrays_given(self, fn, nvr, vr, value)) return fmi2Error;
     if (nvr == 0) return fmi2OK;
-    if (order == NULL) return refuse(self, fn, "order is NULL with nvr = %zu", nvr);
     const unsigned long base = (unsigned long)(FRONT_DERIVATIVE_VR_BASE);
-    const long max_order = (long)(((unsigned long)UINT_MAX - base + 1) / base);
-    fmi2ValueReference few[64];
-    fmi2ValueReference *encoded = nvr <= 64 ? few : malloc(nvr * sizeof *encoded);
-    if (encoded == NULL) return refuse(self, fn, "out of memory for %zu value references", nvr);
-    fmi2Status status = fmi2OK;
-    for (size_t i = 0; i < nvr && status == fmi2OK; i++) {
-        if (order[i] < 1 || order[i] > max_order || vr[i] >= base)
-            status = refuse(self, fn, "derivative of order %d of value reference %u refused: orders are 1 to %ld, "
-                            "value references below %lu", (int)order[i], vr[i], max_order, base);
-        else
-            encoded[i] = (fmi2ValueReference)((unsigned long)order[i] * base + vr[i]);
+    for (size_t i = 0; i < nvr; i++)
+        if (vr[i] >= base)
+            return refuse(self, fn, "value reference %u is not a Real variable of this FMU; nothing set", vr[i]);
+    fmi2ValueReference few_vr[64];
+    fmi2Real few_value[64];
+    fmi2ValueReference *encoded = nvr <= 64 ? few_vr : malloc(nvr * sizeof *encoded);
+    fmi2Real *values = nvr <= 64 ? few_value : malloc(nvr * sizeof *values);
+    if (encoded == NULL || values == NULL) {
+        if (encoded != few_vr) free(encoded);
+        if (values != few_value) free(values);
+        return refuse(self, fn, "out of memory for %zu value references", nvr);
     }
-    if (status == fmi2OK) status = changed_by(self, answer(self, inner.fmi2SetReal(self->inner, encoded, nvr, value)));
-    if (encoded != few) free(encoded);
+    for (size_t i = 0; i < nvr; i++) {
+        const int fits = order[i] >= 1 && order[i] < DERIVATIVE_ORDER_GIVEN;
+        encoded[i] = (fmi2ValueReference)((unsigned long)(fits ? order[i] : DERIVATIVE_ORDER_GIVEN) * base + vr[i]);
+        values[i] = fits ? value[i] : (fmi2Real)order[i];
+    }
+    const fmi2Status status = changed_by(self, answer(self, inner.fmi2SetReal(self->inner, encoded, nvr, values)));
+    if (encoded != few_vr) free(encoded);
+    if (values != few_value) free(values);
     return status;
 }
 #else
@@ -558,7 +739,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
                                        const fmi2Integer order[], const fmi2Real value[])
 {
     ENTER("fmi2SetRealInputDerivatives");
-    (void)fn;
+    if (!mode_allows(self, fn, IN(MODE_INITIALIZATION) | IN(MODE_STEPPING))) return fmi2Error;
     return changed_by(self, answer(self, inner.fmi2SetRealInputDerivatives(self->inner, vr, nvr, order, value)));
 }
 #endif
@@ -580,7 +761,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
     if (*FMUstate != NULL && !live_state(self, fn, *FMUstate)) return fmi2Error;  /* else: one to overwrite */
     fmi2FMUstate fresh = NULL;
     const fmi2Status status = answer(self, inner.fmi2GetFMUstate(self->inner, &fresh));
-    if (status > fmi2Warning || fresh == NULL || !remember_state(self, fresh)) {
+    if (status > fmi2Warning || fresh == NULL || !remember_state(self, fresh, self->mode)) {
         if (fresh) inner.fmi2FreeFMUstate(self->inner, &fresh);
         return status > fmi2Warning ? status : refuse(self, fn, "no state was made (out of memory?)");
     }
@@ -596,7 +777,8 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
 {
     ENTER("fmi2SetFMUstate");
     if (!live_state(self, fn, FMUstate)) return fmi2Error;
-    return changed_by(self, answer(self, inner.fmi2SetFMUstate(self->inner, FMUstate)));
+    const int mode = self->states[state_index(self, FMUstate)].mode;
+    return moving_to(self, changed_by(self, answer(self, inner.fmi2SetFMUstate(self->inner, FMUstate))), mode);
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
@@ -611,12 +793,57 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
     return status;
 }
 
+/* A serialized state: this header, then pythonfmu's bytes (the slave's own serialization). The header is the native
+   FMU's (fmu_src/native/fmi2Functions.c, state_header) less its model fingerprint, which a front that knows nothing
+   of the model cannot give: the slave checks which FMU a state belongs to when it is set. */
+#define FRONT_STATE_FORMAT 1u
+#define FRONT_STATE_BYTE_ORDER 0x01020304u
+static const char front_state_magic[8] = {'L', 'N', 'K', 'P', 'Y', 'F', 'M', 'U'};
+
+typedef struct front_state_header {
+    char magic[8];
+    uint32_t format;        /* FRONT_STATE_FORMAT */
+    uint32_t byte_order;    /* FRONT_STATE_BYTE_ORDER as the writer stored it */
+    uint64_t size;          /* bytes, this header included */
+    uint32_t mode;          /* the instance's mode when the state was taken */
+    uint32_t reserved;
+    uint64_t checksum;      /* FNV-1a of the bytes after the header */
+} front_state_header;
+
+/* FNV-1a, 64 bits, as the native FMU's: a serialized state damaged in storage or transit is refused rather than run. */
+static uint64_t checksum_of(const unsigned char *p, size_t n)
+{
+    uint64_t h = 1469598103934665603ull;
+    for (size_t i = 0; i < n; i++) h = (h ^ p[i]) * 1099511628211ull;
+    return h;
+}
+
+/* Why the n serialized bytes are not a state this front serialized, or NULL (the native FMU's words); their header
+   is copied into *h. */
+static const char *serialized_state_problem(const fmi2Byte *bytes, size_t n, front_state_header *h)
+{
+    memset(h, 0, sizeof *h);
+    memcpy(h, bytes, n < sizeof *h ? n : sizeof *h);
+    if (n < sizeof *h || memcmp(h->magic, front_state_magic, sizeof front_state_magic) != 0)
+        return "not a linknet FMU state";
+    if (h->byte_order != FRONT_STATE_BYTE_ORDER) return "a state written on a machine of another byte order";
+    if (h->format != FRONT_STATE_FORMAT) return "a state of another format version (another linknet FMU release)";
+    if (h->size != n) return "a state of the wrong size";
+    if (h->mode > MODE_TERMINATED) return "a state with an invalid mode";
+    if (h->checksum != checksum_of((const unsigned char *)bytes + sizeof *h, n - sizeof *h))
+        return "the state's bytes are damaged (checksum mismatch)";
+    return NULL;
+}
+
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
 {
     ENTER("fmi2SerializedFMUstateSize");
     if (size == NULL) return refuse(self, fn, "size is NULL");
     if (!live_state(self, fn, FMUstate)) return fmi2Error;
-    return answer(self, inner.fmi2SerializedFMUstateSize(self->inner, FMUstate, size));
+    size_t inner_size = 0;
+    const fmi2Status status = answer(self, inner.fmi2SerializedFMUstateSize(self->inner, FMUstate, &inner_size));
+    if (status <= fmi2Warning) *size = sizeof(front_state_header) + inner_size;
+    return status;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size)
@@ -624,11 +851,24 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byt
     ENTER("fmi2SerializeFMUstate");
     if (!live_state(self, fn, FMUstate)) return fmi2Error;
     if (serializedState == NULL) return refuse(self, fn, "serializedState is NULL");
-    size_t needed = 0;  /* pythonfmu copies the whole state whatever the buffer's size */
-    fmi2Status status = answer(self, inner.fmi2SerializedFMUstateSize(self->inner, FMUstate, &needed));
+    size_t inner_size = 0;  /* pythonfmu copies the whole state whatever the buffer's size */
+    fmi2Status status = answer(self, inner.fmi2SerializedFMUstateSize(self->inner, FMUstate, &inner_size));
     if (status > fmi2Warning) return status;
+    const size_t needed = sizeof(front_state_header) + inner_size;
     if (size < needed) return refuse(self, fn, "a buffer of %zu bytes for a state of %zu", size, needed);
-    return answer(self, inner.fmi2SerializeFMUstate(self->inner, FMUstate, serializedState, size));
+    status = answer(self, inner.fmi2SerializeFMUstate(self->inner, FMUstate, serializedState + sizeof(front_state_header),
+                                                      inner_size));
+    if (status > fmi2Warning) return status;
+    front_state_header header;
+    memset(&header, 0, sizeof header);
+    memcpy(header.magic, front_state_magic, sizeof front_state_magic);
+    header.format = FRONT_STATE_FORMAT;
+    header.byte_order = FRONT_STATE_BYTE_ORDER;
+    header.size = needed;
+    header.mode = (uint32_t)self->states[state_index(self, FMUstate)].mode;
+    header.checksum = checksum_of((const unsigned char *)serializedState + sizeof header, inner_size);
+    memcpy(serializedState, &header, sizeof header);
+    return status;
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
@@ -636,10 +876,14 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
 {
     ENTER("fmi2DeSerializeFMUstate");
     if (!state_variable(self, fn, FMUstate)) return fmi2Error;
-    if (serializedState == NULL && size > 0) return refuse(self, fn, "serializedState is NULL");
+    if (serializedState == NULL) return refuse(self, fn, "serializedState is NULL");
+    front_state_header header;
+    const char *problem = serialized_state_problem(serializedState, size, &header);
+    if (problem) return refuse(self, fn, "refused: %s", problem);
     fmi2FMUstate fresh = NULL;
-    const fmi2Status status = answer(self, inner.fmi2DeSerializeFMUstate(self->inner, serializedState, size, &fresh));
-    if (status > fmi2Warning || fresh == NULL || !remember_state(self, fresh)) {
+    const fmi2Status status = answer(self, inner.fmi2DeSerializeFMUstate(self->inner, serializedState + sizeof header,
+                                                                         size - sizeof header, &fresh));
+    if (status > fmi2Warning || fresh == NULL || !remember_state(self, fresh, (int)header.mode)) {
         if (fresh) inner.fmi2FreeFMUstate(self->inner, &fresh);
         return status > fmi2Warning ? status : refuse(self, fn, "no state was made (out of memory?)");
     }
@@ -659,6 +903,11 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {
     ENTER("fmi2DoStep");
+    if (self->mode != MODE_STEPPING) {  /* the native FMU's words */
+        if (self->mode == MODE_INSTANTIATED || self->mode == MODE_INITIALIZATION)
+            return refuse(self, fn, "called in %s: call fmi2ExitInitializationMode first", mode_names[self->mode]);
+        return refuse(self, fn, "called after fmi2Terminate (fmi2Reset starts again)");
+    }
     const double t = currentCommunicationPoint, h = communicationStepSize;
     if (self->discarded && t == self->discarded_t && h == self->discarded_h) {
         /* the slave is deterministic: from the same state with the same inputs the same step fails again. pythonfmu's
