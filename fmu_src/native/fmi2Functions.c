@@ -410,9 +410,17 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown,
                                         const fmi2Real dvKnown[], fmi2Real dvUnknown[])
 {
-    (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown, (void)dvUnknown;
     ENTER("fmi2GetDirectionalDerivative");
-    return refuse(self, fn, "not provided (providesDirectionalDerivative is false)");
+    if (self->mode == MODE_INSTANTIATED || self->mode == MODE_INITIALIZATION)
+        return refuse(self, fn, "called in %s: derivatives are given at the current state once "
+                      "fmi2ExitInitializationMode has fixed the parameters", mode_names[self->mode]);
+    if (nUnknown > 0 && (vUnknown_ref == NULL || dvUnknown == NULL))
+        return refuse(self, fn, "%s is NULL with nUnknown = %zu", vUnknown_ref == NULL ? "vUnknown_ref" : "dvUnknown",
+                      nUnknown);
+    if (nKnown > 0 && (vKnown_ref == NULL || dvKnown == NULL))
+        return refuse(self, fn, "%s is NULL with nKnown = %zu", vKnown_ref == NULL ? "vKnown_ref" : "dvKnown", nKnown);
+    return report(self, fn, fmu_model_directional_derivative(self->model, vUnknown_ref, nUnknown, vKnown_ref, nKnown,
+                                                             dvKnown, dvUnknown, self->msg));
 }
 
 /* ---- FMU states ---------------------------------------------------------------------------------- */

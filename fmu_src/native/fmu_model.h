@@ -60,6 +60,12 @@ int fmu_model_set_real(fmu_model *m, const unsigned *vr, size_t n, const double 
    an input, a non-finite value) is FMU_ERROR and nothing is set. */
 int fmu_model_set_real_input_derivatives(fmu_model *m, const unsigned *vr, size_t n, const int *order,
                                          const double *value, int initialized, char *msg);
+/* fmi2GetDirectionalDerivative at the current state with the inputs as set (after initialization): the derivatives
+   of the outputs unknown[0..n_unknown) along the seed seed[i] on the inputs known[i], into derivative. A reference
+   that is not an output (unknown) or an input (known), or a seed that is not finite, is FMU_ERROR naming it, and
+   nothing is written. */
+int fmu_model_directional_derivative(fmu_model *m, const unsigned *unknown, size_t n_unknown, const unsigned *known,
+                                     size_t n_known, const double *seed, double *derivative, char *msg);
 int fmu_model_get_string(fmu_model *m, const unsigned *vr, size_t n, const char **value, char *msg);
 int fmu_model_set_string(fmu_model *m, const unsigned *vr, size_t n, const char *const *value, int initialized,
                          char *msg);

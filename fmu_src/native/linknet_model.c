@@ -25,6 +25,7 @@
 #include <string.h>
 
 #include "fmu_model.h"
+#include "interface_jacobian.h"
 #include "ldl.h"
 #include "linknet.h"
 #include "lnfmu_scene.h"
@@ -50,6 +51,7 @@ struct fmu_model {
     int estimate;               /* the Boolean parameter estimate_error as set */
     int applied_estimate;       /* the one the current run started with: the companion runs */
     int outputs_stale;          /* T and Freact not evaluated at the current state and inputs */
+    int interface_stale;        /* the interface linearization not prepared at the current state and inputs */
 
     ln_model model;
     ln_method method;
@@ -85,6 +87,12 @@ struct fmu_model {
     double *jump_P, *jump_X;
     unsigned char *jump_counted, *jump_long;
     int said_short_jump, said_set_without_p;
+
+    /* directional derivatives (fmi2GetDirectionalDerivative): the core's linearization workspace, made at the first
+       call and prepared once per state and inputs; the seed on F (K,3) and on the driven anchors' P, V, A
+       (n_driven,3), and the derivatives of T (L) and Freact (n_fixed,3) along it */
+    ln_interface *interface;
+    double *seed_F, *seed_P, *seed_V, *seed_A, *dT, *dFreact;
 };
 
 #if defined __GNUC__
@@ -538,7 +546,7 @@ static int set_initial_state(fmu_model *m, char *msg)
     if (result == FMU_OK) result = start_data(m, m->dc, msg);
     m->error = 0.0;
     m->over_goal = 0;
-    m->outputs_stale = 1;
+    m->outputs_stale = m->interface_stale = 1;
     return result;
 }
 
@@ -620,6 +628,9 @@ void fmu_model_free(fmu_model *m)
     free(m->jump_X);
     free(m->jump_counted);
     free(m->jump_long);
+    ln_interface_free(m->interface);
+    double *seeds[] = {m->seed_F, m->seed_P, m->seed_V, m->seed_A, m->dT, m->dFreact};
+    for (size_t i = 0; i < sizeof seeds / sizeof seeds[0]; i++) free(seeds[i]);
     free(m);
 }
 
@@ -729,7 +740,7 @@ int fmu_model_set_start_time(fmu_model *m, double start_time, char *msg)
     m->start_time = start_time;
     m->d->t = m->dc->t = start_time;  /* the scene's initial state, at t0 */
     m->d->drive_t0 = m->d->drive_hold_t = m->dc->drive_t0 = m->dc->drive_hold_t = start_time;
-    m->outputs_stale = 1;
+    m->outputs_stale = m->interface_stale = 1;
     return FMU_OK;
 }
 
@@ -840,14 +851,14 @@ int fmu_model_set_real(fmu_model *m, const unsigned *vr, size_t n, const double 
         if (v->kind == LNFMU_F) {
             m->value[vr[i]] = value[i];
             m->d->F_input[v->index] = value[i];
-            m->outputs_stale = 1;
+            m->outputs_stale = m->interface_stale = 1;
         } else if (is_anchor_input(v->kind)) {
             /* P, V, A set at t: the anchor moves as P + V s + A s^2/2, s = t' - t, from now until they are set
                again (reads between a step and the next inputs see where that motion took it) */
             m->value[vr[i]] = value[i];
             anchor_input(m, v->kind)[v->index] = value[i];
             m->d->drive_hold_t = m->d->t;
-            m->outputs_stale = 1;
+            m->outputs_stale = m->interface_stale = 1;
             const ln_int a = v->index / 3;  /* which of the anchor's inputs were set: see position jumps */
             if (v->kind == LNFMU_P) m->p_set[a] = 1;
             else if (m->va_vr[a] < 0) m->va_vr[a] = (long)vr[i];
@@ -911,6 +922,114 @@ int fmu_model_set_real_input_derivatives(fmu_model *m, const unsigned *vr, size_
         return fail(msg, FMU_WARNING, "%s is held constant over a communication step: its derivative of order %d "
                     "(%g) is ignored%s", variable(s, vr[held])->name, order[held], value[held],
                     n > 1 ? " (as are those of any other input but an anchor's position P in this call)" : "");
+    return FMU_OK;
+}
+
+/* ---- directional derivatives ------------------------------------------------------------------- */
+
+static int is_output(int kind)
+{
+    return kind == LNFMU_X || kind == LNFMU_U || kind == LNFMU_T || kind == LNFMU_FREACT || kind == LNFMU_JREACT
+           || kind == LNFMU_ERROR_ESTIMATE;
+}
+
+/* What a variable that is not of the role asked is, for a refusal. */
+static const char *role_of(int kind)
+{
+    return is_input(kind) ? "an input" : is_parameter(kind) ? "a parameter" : "an output";
+}
+
+/* The seeds and results of directional derivatives, and the core's workspace: made at the first call. */
+static int interface_workspace(fmu_model *m, char *msg)
+{
+    if (m->interface) return FMU_OK;
+    const ln_int K3 = 3 * m->s->K, n3 = 3 * m->s->model->n_driven;
+    m->seed_F = doubles(K3);
+    m->seed_P = doubles(n3);
+    m->seed_V = doubles(n3);
+    m->seed_A = doubles(n3);
+    m->dT = doubles(m->s->L);
+    m->dFreact = doubles(3 * m->s->model->n_fixed);
+    if (m->seed_F && m->seed_P && m->seed_V && m->seed_A && m->dT && m->dFreact)
+        m->interface = ln_interface_new(&m->model);
+    if (m->interface) return FMU_OK;
+    return fail(msg, FMU_ERROR, "out of memory for the interface linearization");
+}
+
+/* The derivatives of the outputs unknown[] along the seed seed[] on the inputs known[], at the current state with the
+   inputs as set: one seed, one derivative of the tension system (25)-(26) by the core (ln_interface_directional),
+   with the linearization prepared once per state and inputs (ln_interface_prepare). X, U, Jreact and the error
+   estimate have no direct feedthrough (ModelStructure): their derivatives are 0. A known reference listed twice
+   adds its seeds (the derivative is linear in the seed). */
+int fmu_model_directional_derivative(fmu_model *m, const unsigned *unknown, size_t n_unknown, const unsigned *known,
+                                     size_t n_known, const double *seed, double *derivative, char *msg)
+{
+    const lnfmu_scene *s = m->s;
+    /* all checked first: a refused call writes nothing */
+    for (size_t i = 0; i < n_known; i++) {
+        if (known[i] >= (unsigned)s->n_real)
+            return fail(msg, FMU_ERROR, "known value reference %u is not a Real variable of this FMU (Reals are "
+                        "0..%lld): a directional derivative is taken with respect to the inputs F, P, V, A", known[i],
+                        (long long)(s->n_real - 1));
+        const lnfmu_variable *v = variable(s, known[i]);
+        if (!is_input(v->kind))
+            return fail(msg, FMU_ERROR, "known %s (value reference %u) is %s, not an input: a directional derivative "
+                        "is taken with respect to the inputs F, P, V, A", v->name, known[i], role_of(v->kind));
+        if (!isfinite(seed[i]))
+            return fail(msg, FMU_ERROR, "the seed dvKnown of %s (value reference %u) is %g: a seed must be finite",
+                        v->name, known[i], seed[i]);
+    }
+    int feedthrough = 0;
+    for (size_t i = 0; i < n_unknown; i++) {
+        if (unknown[i] >= (unsigned)s->n_real)
+            return fail(msg, FMU_ERROR, "unknown value reference %u is not a Real variable of this FMU (Reals are "
+                        "0..%lld): a directional derivative is that of an output", unknown[i],
+                        (long long)(s->n_real - 1));
+        const lnfmu_variable *v = variable(s, unknown[i]);
+        if (!is_output(v->kind))
+            return fail(msg, FMU_ERROR, "unknown %s (value reference %u) is %s, not an output: a directional "
+                        "derivative is that of an output (X, U, T, Freact, Jreact, error_estimate)", v->name,
+                        unknown[i], role_of(v->kind));
+        feedthrough |= v->kind == LNFMU_T || v->kind == LNFMU_FREACT;
+    }
+    if (feedthrough && m->model.rigid)
+        return fail(msg, FMU_ERROR, "directional derivatives of T and Freact are not provided for a scene with free "
+                    "rigid bodies (the core linearizes the point-mass tension system (25)-(26) only)");
+    if (!feedthrough) {  /* no output asked has direct feedthrough */
+        for (size_t i = 0; i < n_unknown; i++) derivative[i] = 0.0;
+        return FMU_OK;
+    }
+    int result = interface_workspace(m, msg);
+    if (result != FMU_OK) return result;
+    if (m->interface_stale) {
+        const int status = ln_interface_prepare(&m->model, m->interface, m->d, m->d->X, m->d->U, m->d->F_input);
+        if (status != LN_OK)
+            return fail(msg, FMU_ERROR, "the tension system (25)-(26) cannot be linearized at t=%.17g (native status "
+                        "%d: %s)", m->d->t, status, ln_status_name(status));
+        m->interface_stale = 0;
+    }
+    const size_t K3 = (size_t)(3 * s->K), n3 = (size_t)(3 * s->model->n_driven);
+    memset(m->seed_F, 0, (K3 ? K3 : 1) * sizeof(double));
+    if (n3) {
+        memset(m->seed_P, 0, n3 * sizeof(double));
+        memset(m->seed_V, 0, n3 * sizeof(double));
+        memset(m->seed_A, 0, n3 * sizeof(double));
+    }
+    for (size_t i = 0; i < n_known; i++) {
+        const lnfmu_variable *v = variable(s, known[i]);
+        double *slot = v->kind == LNFMU_F ? m->seed_F : v->kind == LNFMU_P ? m->seed_P
+                       : v->kind == LNFMU_V ? m->seed_V : m->seed_A;
+        slot[v->index] += seed[i];
+    }
+    const int status = ln_interface_directional(&m->model, m->interface, m->seed_F, m->seed_P, m->seed_V, m->seed_A,
+                                                m->dT, m->dFreact, NULL);
+    if (status != LN_OK)
+        return fail(msg, FMU_ERROR, "the directional derivative at t=%.17g is not finite (native status %d: %s)",
+                    m->d->t, status, ln_status_name(status));
+    for (size_t i = 0; i < n_unknown; i++) {
+        const lnfmu_variable *v = variable(s, unknown[i]);
+        derivative[i] = v->kind == LNFMU_T ? m->dT[v->index] : v->kind == LNFMU_FREACT ? m->dFreact[v->index] : 0.0;
+    }
     return FMU_OK;
 }
 
@@ -1058,7 +1177,7 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
         return fail(msg, FMU_DISCARD, "step from t=%.17g with h=%.17g failed, the FMU stays at t=%.17g: %s", t, h,
                     t_fmu, why);
     }
-    m->outputs_stale = 1;
+    m->outputs_stale = m->interface_stale = 1;
     char warning[FMU_MESSAGE] = "", note[FMU_MESSAGE - 64] = "";
     if (jumped) say_position_jump(m, t, warning, sizeof warning);
     clear_anchor_marks(m);
@@ -1352,7 +1471,7 @@ int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t si
     apply_data(m, m->dc, &companion);
     load_inputs(m);
     clear_anchor_marks(m);  /* which inputs were set is not in the state: a jump from it is said as one of P */
-    m->outputs_stale = 1;
+    m->outputs_stale = m->interface_stale = 1;
     free(value);
     return FMU_OK;
 }
