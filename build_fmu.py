@@ -86,6 +86,12 @@ def postprocess_model_description(xml_bytes: bytes, declared_types: dict, output
     if description:
         root.set("description", description)
     variables = root.find("ModelVariables")
+    # A linknet network FMU (either kind) answers fmi2GetDirectionalDerivative: its variables (linknet_fmu.layout)
+    # always hold the output error_estimate and the Boolean parameter estimate_error. The component FMUs (cart, ...)
+    # do not answer it, and a master asks every FMU that declares it (cart_chain_implicit.FmuSlave).
+    causality = {sv.get("name"): sv.get("causality") for sv in variables.findall("ScalarVariable")}
+    if causality.get("error_estimate") == "output" and causality.get("estimate_error") == "parameter":
+        root.find("CoSimulation").set("providesDirectionalDerivative", "true")
     index = {}  # name -> 1-based index in ModelVariables
     for i, sv in enumerate(variables.findall("ScalarVariable"), start=1):
         name = sv.get("name")

@@ -53,6 +53,13 @@ STATE_FORMAT = "linknet-fmu-state-4"
 STATE_MAGIC = b"LINKNET-FMU-STATE\0"
 # an input's declared type -> what a refused value of it is called
 INPUT_QUANTITY = {"Force": "force", "Position": "position", "Velocity": "velocity", "Acceleration": "acceleration"}
+# fmi2GetDirectionalDerivative reaches the slave through the binary's front layer (pythonfmu 0.7.0 has no path for
+# it) as two calls of encoded value references (fmu_src/pythonfmu_front/front.c), which pythonfmu hands to Python as
+# signed 32-bit ints: one set_real of the seed, DIRECTIONAL_SEED_START first, then DIRECTIONAL_SEED + vr of each
+# known with its seed; then one get_real of DIRECTIONAL_DERIVATIVE + vr of each unknown.
+DIRECTIONAL_SEED = -(1 << 31)
+DIRECTIONAL_SEED_START = DIRECTIONAL_SEED + DERIVATIVE_VR_BASE
+DIRECTIONAL_DERIVATIVE = -(1 << 30)
 # the library's bound on input forces and anchor inputs (the native FMU bakes the same, fmu_src/native/build.py)
 MAX_INPUT = getattr(sys.modules[ln.Simulator.__module__], "MAX_FORCE")
 
@@ -155,7 +162,7 @@ class LinknetNetwork(Fmi2Slave):
         self._bad = {}                 # variable name -> reason; a pending bad input fails doStep
         self._broken = None            # reason the solver cannot continue (until reset / set state)
         self._initialized = False
-        self._outputs_stale = True
+        self._outputs_stale = self._linearization_stale = True
         self._parameters_dirty = False
         self._make_simulator(self._scene0)
 
@@ -200,7 +207,7 @@ class LinknetNetwork(Fmi2Slave):
         self._F[self._layout.input_masses] = self._real[self._layout.F_vr]
         self._shortest_link = anchor_jumps.shortest_links(scene.k1, scene.k2, scene.length,
                                                           self._layout.anchor_inputs)
-        self._outputs_stale = True
+        self._outputs_stale = self._linearization_stale = True
 
     def _mark_anchor_inputs(self, vrs):
         """Note which anchors' P, V, A the value references `vrs` (an int array of inputs) set."""
@@ -257,6 +264,8 @@ class LinknetNetwork(Fmi2Slave):
     # ------------------------------------------------------------------ FMI: values
     @guarded(_values(float("nan")))
     def get_real(self, vrs):
+        if len(vrs) and DIRECTIONAL_DERIVATIVE <= min(vrs) and max(vrs) < DIRECTIONAL_DERIVATIVE + DERIVATIVE_VR_BASE:
+            return self._directional_derivative([vr - DIRECTIONAL_DERIVATIVE for vr in vrs])
         if self._parameters_dirty and not self._initialized:
             # initial unknowns read in initialization mode: T depends on M, R, g (ModelStructure)
             self._apply_parameters_safely()
@@ -283,6 +292,9 @@ class LinknetNetwork(Fmi2Slave):
     @guarded(_none)
     def set_real(self, vrs, values):
         lay = self._layout
+        if len(vrs) and vrs[0] == DIRECTIONAL_SEED_START:  # fmi2GetDirectionalDerivative's seed, through the front
+            self._directional_seed([vr - DIRECTIONAL_SEED for vr in vrs[1:]], list(values[1:]))
+            return
         if not self._bad:
             # the common call, every communication step: finite forces onto input variables. One array
             # assignment instead of a Python loop per variable (~0.5 us each: 300 inputs of chain_100 would
@@ -312,7 +324,7 @@ class LinknetNetwork(Fmi2Slave):
                         self._mark_anchor_inputs(idx)
                     else:
                         self._F_flat[force_idx] = vals
-                    self._outputs_stale = True
+                    self._outputs_stale = self._linearization_stale = True
                     return
         if len(vrs) and min(vrs) >= DERIVATIVE_VR_BASE:  # fmi2SetRealInputDerivatives, through the front layer
             orders = [vr // DERIVATIVE_VR_BASE for vr in vrs]
@@ -362,7 +374,7 @@ class LinknetNetwork(Fmi2Slave):
             self._real[vr] = value
             changed_parameter = True
         self._F[lay.input_masses] = self._real[lay.F_vr]
-        self._outputs_stale = True
+        self._outputs_stale = self._linearization_stale = True
         if changed_parameter:
             self._parameters_dirty = True
 
@@ -413,6 +425,85 @@ class LinknetNetwork(Fmi2Slave):
                 else ""
             self._error(f"{where}{name} is held constant over a communication step: its derivative of order {order} "
                         f"({value:g}) is ignored{others}", Fmi2Status.warning)
+
+    # ------------------------------------------------------------------ FMI: directional derivatives
+    def _directional_seed(self, vrs, values):
+        """The seed of one fmi2GetDirectionalDerivative on the known inputs vrs (F, P, V, A), checked whole (the
+        native FMU's rules and words, fmu_model_directional_derivative): a reference that is not an input or a seed
+        that is not finite is refused naming it, and no seed is kept."""
+        lay = self._layout
+        self._seed = None
+        where = "fmi2GetDirectionalDerivative: "
+        for vr, value in zip(vrs, values):
+            if not 0 <= vr < lay.n_real:
+                self._error(f"{where}known value reference {vr} is not a Real variable of this FMU (Reals are "
+                            f"0..{lay.n_real - 1}): a directional derivative is taken with respect to the inputs F, "
+                            "P, V, A")
+                return
+            var = lay.reals[vr]
+            if var.causality != "input":
+                what = "an output" if var.causality == "output" else "a parameter"
+                self._error(f"{where}known {var.name} (value reference {vr}) is {what}, not an input: a directional "
+                            "derivative is taken with respect to the inputs F, P, V, A")
+                return
+            if not math.isfinite(value):
+                self._error(f"{where}the seed dvKnown of {var.name} (value reference {vr}) is {value:g}: a seed must "
+                            "be finite")
+                return
+        self._seed = (np.asarray(vrs, dtype=np.int64), np.asarray(values, dtype=float))
+
+    def _directional_derivative(self, vrs):
+        """The derivatives of the outputs vrs along the seed just set, at the current state with the inputs as set:
+        Simulator.interface_linearization (kept while the state and inputs stay) along one seed. X, U, Jreact and
+        error_estimate have no direct feedthrough: 0."""
+        lay = self._layout
+        where = "fmi2GetDirectionalDerivative: "
+        seed, self._seed = getattr(self, "_seed", None), None
+        nan = [float("nan")] * len(vrs)
+        for vr in vrs:
+            if not 0 <= vr < lay.n_real:
+                self._error(f"{where}unknown value reference {vr} is not a Real variable of this FMU (Reals are "
+                            f"0..{lay.n_real - 1}): a directional derivative is that of an output")
+                return nan
+            var = lay.reals[vr]
+            if var.causality != "output":
+                what = "an input" if var.causality == "input" else "a parameter"
+                self._error(f"{where}unknown {var.name} (value reference {vr}) is {what}, not an output: a "
+                            "directional derivative is that of an output (X, U, T, Freact, Jreact, error_estimate)")
+                return nan
+        if seed is None:
+            self._error(f"{where}no seed was given before the derivative was asked for")
+            return nan
+        derivative = np.zeros(lay.n_real)  # by value reference; only T and Freact have direct feedthrough
+        feedthrough = np.concatenate([lay.T_vr.reshape(-1), lay.Freact_vr.reshape(-1)])
+        if np.isin(vrs, feedthrough).any():
+            try:
+                if self._linearization_stale or getattr(self, "_linearization", None) is None:
+                    self._linearization = self._sim.interface_linearization(self._F, anchors=self._anchors())
+                    self._linearization_stale = False
+                known, values = seed
+                dF = np.zeros(3 * self._scene.K)
+                np.add.at(dF, lay.force_index[known[lay.is_force_input[known]]], values[lay.is_force_input[known]])
+                anchors = {}
+                for name, table in (("P", lay.P_vr), ("V", lay.V_vr), ("A", lay.A_vr)):
+                    d = np.zeros(table.shape)
+                    for vr, value in zip(known, values):
+                        hit = np.argwhere(table == vr)
+                        if hit.size:
+                            d[tuple(hit[0])] += value
+                    anchors[name] = d if table.size else None
+                out = self._linearization.directional(dF=dF.reshape(-1, 3), dP=anchors["P"], dV=anchors["V"],
+                                                      dA=anchors["A"])
+            except Exception as e:  # a state the tensions cannot be linearized at: said, never raised to pythonfmu
+                self._error(f"{where}the tension system (25)-(26) cannot be linearized at t={self._sim.state.t!r}: "
+                            f"{e}")
+                return nan
+            derivative[lay.T_vr] = out["T"]
+            Freact = np.asarray(out["Freact"])
+            if Freact.shape[0] == self._scene.K:  # (K,3) form: keep the anchored rows
+                Freact = Freact[lay.fixed_indices]
+            derivative[lay.Freact_vr] = Freact
+        return derivative[vrs].tolist()
 
     def _set_integrator(self, value):
         if self._initialized:
@@ -592,7 +683,7 @@ class LinknetNetwork(Fmi2Slave):
         self._anchors_set = False
         self._p_set[:] = False
         self._va_vr[:] = -1
-        self._outputs_stale = True
+        self._outputs_stale = self._linearization_stale = True
         if self._estimate_error:
             # beyond the goal (or the companion failed): said once per crossing, with fmi2Warning status in its own
             # log category, and the step stays fmi2OK: its result is computed as asked, the warning is information
@@ -714,7 +805,7 @@ class LinknetNetwork(Fmi2Slave):
             self._broken = state["broken"]
             self._initialized = state["initialized"]
             self._parameters_dirty = False
-            self._outputs_stale = True
+            self._outputs_stale = self._linearization_stale = True
         except Exception as e:
             self._broken = f"setFMUstate failed: {e}"
             self._error(self._broken)

@@ -156,6 +156,7 @@ typedef struct front {
     fmi2CallbackFunctions callbacks;  /* handed to pythonfmu (which keeps the pointer): its logger is relay() */
     struct front *next_parked;
     int mode;                         /* enum mode */
+    int directional;                  /* the modelDescription declares providesDirectionalDerivative */
     front_state *states;              /* the FMU states this instance handed out and has not freed */
     size_t n_states, states_capacity;
     /* the last discarded step, until something is set or restored: the same step asked again fails the same way */
@@ -473,11 +474,31 @@ static int guid_of(const char *text, char *guid, size_t n)
     return 0;
 }
 
+/* Whether the CoSimulation element of a modelDescription.xml (text, NUL-terminated) declares
+   providesDirectionalDerivative="true". */
+static int declares_directional(const char *text)
+{
+    const char *element = strstr(text, "<CoSimulation");
+    if (element == NULL) return 0;
+    const char *end = strchr(element, '>');
+    const char *p = strstr(element, "providesDirectionalDerivative");
+    if (p == NULL || (end != NULL && p > end)) return 0;
+    p += strlen("providesDirectionalDerivative");
+    while (*p == ' ' || *p == '\t' || *p == '\n' || *p == '\r') p++;
+    if (*p++ != '=') return 0;
+    while (*p == ' ' || *p == '\t' || *p == '\n' || *p == '\r') p++;
+    if (*p != '"' && *p != '\'') return 0;
+    p++;
+    return strncmp(p, "true", 4) == 0 || (p[0] == '1' && (p[1] == '"' || p[1] == '\''));
+}
+
 /* The host's GUID against the guid of the modelDescription.xml beside the FMU's resources (pythonfmu checks none; no
    GUID is compiled into this layer, see the top of the file): 0 when they agree, 1 when they differ, -1 when the
-   file cannot be read (why says which). */
-static int guid_problem(const char *resources, const char *host_guid, char *why, size_t n)
+   file cannot be read (why says which). *directional: whether the file declares providesDirectionalDerivative (0
+   where it cannot be read). */
+static int guid_problem(const char *resources, const char *host_guid, char *why, size_t n, int *directional)
 {
+    *directional = 0;
     char path[PATH_MAX], guid[256];
     if (!model_description_path(resources, path, sizeof path)) {
         snprintf(why, n, "the resource location \"%s\" is not a local folder", resources);
@@ -499,6 +520,7 @@ static int guid_problem(const char *resources, const char *host_guid, char *why,
     fclose(file);
     head[got] = '\0';
     const int found = guid_of(head, guid, sizeof guid);
+    *directional = declares_directional(head);
     free(head);
     if (!found) {
         snprintf(why, n, "%s has no guid in its fmiModelDescription element", path);
@@ -534,7 +556,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         return NULL;
     }
     char why[2 * PATH_MAX + 512];
-    const int guid_differs = guid_problem(fmuResourceLocation, fmuGUID, why, sizeof why);
+    int directional;
+    const int guid_differs = guid_problem(fmuResourceLocation, fmuGUID, why, sizeof why, &directional);
     if (guid_differs > 0) {
         refuse(&probe, fn, "%s", why);
         return NULL;
@@ -574,6 +597,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     self->worst = fmi2OK;
     self->discarded = self->terminated = 0;
     self->mode = MODE_INSTANTIATED;
+    self->directional = directional;
     if (guid_differs < 0) {  /* said, and the instance made: pythonfmu finds the slave in the resources or says why */
         char text[sizeof why + 128];
         snprintf(text, sizeof text, "%s: the GUID \"%s\" cannot be checked: %s", fn, fmuGUID, why);
@@ -682,6 +706,66 @@ FORWARD_VALUES(fmi2SetInteger, const fmi2Integer, 1)
 FORWARD_VALUES(fmi2SetBoolean, const fmi2Boolean, 1)
 FORWARD_VALUES(fmi2SetString, const fmi2String, 1)
 
+#ifdef FRONT_DERIVATIVE_VR_BASE
+/* pythonfmu 0.7.0 has no path from fmi2GetDirectionalDerivative to the slave: a slave whose modelDescription declares
+   providesDirectionalDerivative receives one directional derivative as two calls of encoded value references (the
+   variables' own lie below FRONT_DERIVATIVE_VR_BASE, as for the input derivatives): one fmi2SetReal of the seed,
+   DIRECTIONAL_SEED_START first (value: the number of knowns), then DIRECTIONAL_SEED + vKnown_ref[i] with dvKnown[i];
+   then, where the slave took the seed, one fmi2GetReal of DIRECTIONAL_DERIVATIVE + vUnknown_ref[j] into dvUnknown.
+   The slave answers (refuses a known that is not an input or an unknown that is not an output, naming it) itself.
+   pythonfmu hands value references to Python as signed 32-bit ints: these arrive negative, apart from every
+   variable's and every input derivative's (linknet_slave.py decodes them). */
+#define DIRECTIONAL_SEED 0x80000000u
+#define DIRECTIONAL_SEED_START (DIRECTIONAL_SEED + (unsigned long)(FRONT_DERIVATIVE_VR_BASE))
+#define DIRECTIONAL_DERIVATIVE 0xC0000000u
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
+                                        const fmi2ValueReference vKnown_ref[], size_t nKnown,
+                                        const fmi2Real dvKnown[], fmi2Real dvUnknown[])
+{
+    ENTER("fmi2GetDirectionalDerivative");
+    if (!self->directional) return refuse(self, fn, "not provided (providesDirectionalDerivative is false)");
+    if (self->mode == MODE_INSTANTIATED || self->mode == MODE_INITIALIZATION)
+        return refuse(self, fn, "called in %s: derivatives are given at the current state once "
+                      "fmi2ExitInitializationMode has fixed the parameters", mode_names[self->mode]);
+    if (nUnknown > 0 && (vUnknown_ref == NULL || dvUnknown == NULL))
+        return refuse(self, fn, "%s is NULL with nUnknown = %zu", vUnknown_ref == NULL ? "vUnknown_ref" : "dvUnknown",
+                      nUnknown);
+    if (nKnown > 0 && (vKnown_ref == NULL || dvKnown == NULL))
+        return refuse(self, fn, "%s is NULL with nKnown = %zu", vKnown_ref == NULL ? "vKnown_ref" : "dvKnown", nKnown);
+    const unsigned long base = (unsigned long)(FRONT_DERIVATIVE_VR_BASE);
+    for (size_t i = 0; i < nKnown; i++)
+        if (vKnown_ref[i] >= base)
+            return refuse(self, fn, "known value reference %u is not a Real variable of this FMU", vKnown_ref[i]);
+    for (size_t j = 0; j < nUnknown; j++)
+        if (vUnknown_ref[j] >= base)
+            return refuse(self, fn, "unknown value reference %u is not a Real variable of this FMU", vUnknown_ref[j]);
+    if (nUnknown == 0) return fmi2OK;
+    fmi2ValueReference *seed_vr = malloc((nKnown + 1) * sizeof *seed_vr);
+    fmi2Real *seed = malloc((nKnown + 1) * sizeof *seed);
+    fmi2ValueReference *unknown_vr = malloc(nUnknown * sizeof *unknown_vr);
+    fmi2Status status = fmi2Error;
+    if (seed_vr == NULL || seed == NULL || unknown_vr == NULL) {
+        refuse(self, fn, "out of memory for %zu value references", nKnown + nUnknown);
+    } else {
+        seed_vr[0] = (fmi2ValueReference)DIRECTIONAL_SEED_START;
+        seed[0] = (fmi2Real)nKnown;
+        for (size_t i = 0; i < nKnown; i++) {
+            seed_vr[i + 1] = (fmi2ValueReference)(DIRECTIONAL_SEED + vKnown_ref[i]);
+            seed[i + 1] = dvKnown[i];
+        }
+        for (size_t j = 0; j < nUnknown; j++)
+            unknown_vr[j] = (fmi2ValueReference)(DIRECTIONAL_DERIVATIVE + vUnknown_ref[j]);
+        status = answer(self, inner.fmi2SetReal(self->inner, seed_vr, nKnown + 1, seed));
+        if (status <= fmi2Warning)
+            status = answer(self, inner.fmi2GetReal(self->inner, unknown_vr, nUnknown, dvUnknown));
+    }
+    free(seed_vr);
+    free(seed);
+    free(unknown_vr);
+    return status;
+}
+#else
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown,
                                         const fmi2Real dvKnown[], fmi2Real dvUnknown[])
@@ -691,6 +775,7 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
     return answer(self, inner.fmi2GetDirectionalDerivative(self->inner, vUnknown_ref, nUnknown, vKnown_ref, nKnown,
                                                            dvKnown, dvUnknown));
 }
+#endif
 
 #ifdef FRONT_DERIVATIVE_VR_BASE
 /* pythonfmu 0.7.0 has no path from fmi2SetRealInputDerivatives to the slave: a slave that takes input derivatives
