@@ -12,22 +12,15 @@ import numpy as np
 from linknet_core.errors import ConsistencyError, SolverError, StepFailure, projection_failure
 from linknet_core.dynamics.forces import external_forces, kinetic_energy, potential_energy, scatter_add
 from linknet_core.scene.description import Scene
-from linknet_core.structure.topology import RETRY_SINGULAR_RCOND, SINGULAR_RCOND, Structure, analyse
+from linknet_core.structure.topology import Structure, analyse
+from linknet_core.tolerances import FLOOR_CAP_OVER_TOL, FLOOR_SAFETY, RETRY_SINGULAR_RCOND, SINGULAR_RCOND
 from linknet_core.dynamics.tensions import TensionSolver, make_solver, rhs, unit_vectors
 
 
 # Newton on the position manifold (11): a step that does not lower the largest scaled residual is halved at
-# most this many times; a residual within the round-off floor plus FLOOR_SAFETY times what the step leaves by
-# construction is at the floor the conditioning allows (native/src/stages/projections.c uses the same rule).
+# most this many times (native/src/stages/projections.c the same); its stopping rule's FLOOR_SAFETY and
+# FLOOR_CAP_OVER_TOL are in linknet_core.tolerances.
 LINE_SEARCH_HALVINGS = 8
-FLOOR_SAFETY = 2.0
-# ... but never above this many times the tolerance: far from (11) a redundant system can stall at a least-squares
-# point off the manifold (its residual along a self-stress), which no round-off explains. Below the cap, the floor is
-# what the conditioning allows: at a singular configuration (a taut string under gravity, a flat braced cell pushed
-# out of its plane) a residual eps leaves a mass up to ~sqrt(2 eps) R off the exact position, which the run reports
-# as the floor reached (benchmarks/stress.py checks the taut string's sag against it). The native core takes both
-# numbers from here (ln_model.floor_safety, floor_cap).
-FLOOR_CAP_OVER_TOL = 1e4
 # A failed projection's diagnosis (Dynamics.near_self_stress_load, failure path only): an eigenvalue of A (25) below
 # NEAR_SELF_STRESS_CUT of the largest is a near-self-stress, and one that carries more than NEAR_SELF_STRESS_LOAD of
 # |B| (26) is a load the rigid links can hold only with unbounded tensions; a dense eigen-decomposition, skipped above

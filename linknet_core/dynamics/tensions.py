@@ -16,13 +16,12 @@ from __future__ import annotations
 import numpy as np
 
 from linknet_core.scene.description import Scene
-from linknet_core.native.ldl import PIVOT_TOL
-from linknet_core.structure.topology import SINGULAR_RCOND, Structure, link_pairs
+from linknet_core.tolerances import DENSE_MIN_NORM_LIMIT, PIVOT_TOL, SINGULAR_RCOND
+from linknet_core.structure.topology import Structure, link_pairs
 
 # scipy (sparse matrices, dense and sparse factorisations) is imported inside the functions of this reference path
 # that use it: a Simulator on the native core never calls them, and importing scipy.sparse and scipy.linalg costs
 # ~0.2 s of every command's start-up.
-DENSE_MIN_NORM_LIMIT = 2500  # links; above it the redundant path uses MINRES (min-norm from x0 = 0)
 DENSE_FACTOR_LIMIT = 200  # links; up to here the reference factors A densely
 
 

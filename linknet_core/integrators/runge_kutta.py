@@ -20,8 +20,8 @@ from linknet_core.dynamics.drive import motion_note
 from linknet_core.errors import SolverError, StepFailure
 from linknet_core.integrators import tableaux
 from linknet_core.integrators.base import Integrator, explain_step_failure
+from linknet_core.tolerances import MAX_FACTOR, MIN_FACTOR, SAFETY
 
-SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 
 
 class ProjectedRungeKutta(Integrator):

@@ -10,11 +10,12 @@ import ctypes
 
 import numpy as np
 
+from linknet_core.tolerances import PIVOT_TOL
+
 ln_int = ctypes.c_int64
 _ln_int_p = ctypes.POINTER(ln_int)
 _double_p = ctypes.POINTER(ctypes.c_double)
 
-PIVOT_TOL = 1e-11  # a pivot below this times its diagonal entry means A is singular (every factorisation's rule)
 
 
 def declare(lib: ctypes.CDLL) -> ctypes.CDLL:

@@ -14,12 +14,10 @@ import weakref
 
 import numpy as np
 from linknet_core.dynamics.forces import ELEMENT_KINDS, has_velocity_dependent_forces
-from linknet_core.integrators.runge_kutta import MAX_FACTOR, MIN_FACTOR, SAFETY
-from linknet_core.structure.topology import (PLANE_TOL, RETRY_SINGULAR_RCOND, SINGULAR_RCOND, analyse, kept_per_scene,
-                                            link_pairs)
-from linknet_core.dynamics.equations import FLOOR_CAP_OVER_TOL, FLOOR_SAFETY
-from linknet_core.dynamics.tensions import DENSE_MIN_NORM_LIMIT
-from linknet_core.native.ldl import PIVOT_TOL, package_library
+from linknet_core.structure.topology import analyse, kept_per_scene, link_pairs
+from linknet_core.tolerances import (DENSE_MIN_NORM_LIMIT, FLOOR_CAP_OVER_TOL, FLOOR_SAFETY, MAX_FACTOR, MIN_FACTOR,
+                                     PIVOT_TOL, PLANE_TOL, RETRY_SINGULAR_RCOND, SAFETY, SINGULAR_RCOND)
+from linknet_core.native.ldl import package_library
 from linknet_core.native import library as lib
 from linknet_core.native.library import float_array, int_array, pointer
 from linknet_core.scene.description import require_force_kinds

@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from linknet_core.scene.description import Scene
-from linknet_core.structure.topology import DENSE_RANK_LIMIT, SINGULAR_RCOND, constraint_jacobian
+from linknet_core.structure.topology import constraint_jacobian
+from linknet_core.tolerances import DENSE_RANK_LIMIT, SINGULAR_RCOND
 
 DENSE_RIGIDITY_LIMIT = DENSE_RANK_LIMIT  # links (the SVD of C costs ~L (3 K_free)^2)
 # |omega^T q(p)/R| / sum |omega_l| q_l(p)/R_l, for the flex p that omega's stress form moves most (unit stress,

@@ -20,22 +20,8 @@ import numpy as np
 from linknet_core.native.ldl import amd_ordering, zero_pivots
 from linknet_core.native.library import forest_depth, graph_components
 from linknet_core.scene.description import Scene
+from linknet_core.tolerances import DENSE_RANK_LIMIT, PLANE_TOL, SINGULAR_RCOND
 
-DENSE_RANK_LIMIT = 2500  # links; above it, rank is estimated from the LDL pivots
-# One cut decides "singular" everywhere (rank, self-stresses, minimum-norm solve, hypothesis (35)): an
-# eigenvalue of A = C M^-1 C^T below SINGULAR_RCOND times the largest is zero. In terms of singular values
-# of C that is sqrt(SINGULAR_RCOND) = 1e-5 relative.
-SINGULAR_RCOND = 1e-10
-# The cut of a position projection's Gauss-Newton retry, taken only where the iteration with SINGULAR_RCOND would
-# fail: a flat braced cell pushed out of its plane has a near-self-stress whose eigenvalue (~(delta/R)^2 of the
-# largest) falls below SINGULAR_RCOND, so Gauss-Newton never moves along it and stalls at a residual of ~delta^2/R.
-# The minimum-norm solves of both paths cut the pivots of a completely pivoted Cholesky factorisation relative to A's
-# largest diagonal entry (dynamics.tensions.MinNormSolver, native stages/minnorm.c). On the pushed triangulated net
-# (tests/fmu_native) that direction's pivot was 1.5e-11..2.5e-11 of it at the start of a failing projection, and its
-# eigenvalue fell to 6.5e-15 of the largest (2.3e-14 of the largest diagonal entry) at the iterates where a cut at
-# 1e-13 stalled; the exact self-stresses' pivots sit at 1e-16..5e-16, a decade and more below this cut.
-RETRY_SINGULAR_RCOND = 1e-14
-PLANE_TOL = 1e-12  # an out-of-plane component at most this relative to its size is round-off (dropped in 2-D)
 
 
 @dataclass(frozen=True)

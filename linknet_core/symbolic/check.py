@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from linknet_core.scene.description import FORCE_KINDS
-from linknet_core.structure import SINGULAR_RCOND
+from linknet_core.tolerances import SINGULAR_RCOND
 from linknet_core.symbolic.derivation import SymbolicTensionSystem, sign_pattern
 
 __all__ = ["CheckResult", "Sample", "run_checks", "add_arguments", "main", "sample_states", "taut_string_scene"]

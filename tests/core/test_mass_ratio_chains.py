@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import linknet_core as ln
-from linknet_core.dynamics.equations import FLOOR_CAP_OVER_TOL, fastest_oscillation
+from linknet_core.dynamics.equations import fastest_oscillation
+from linknet_core.tolerances import FLOOR_CAP_OVER_TOL
 from linknet_core.errors import STABILITY_LIMIT
 from linknet_core.scene import builders
 

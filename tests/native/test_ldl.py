@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from linknet_core.scene import builders
-from linknet_core.native.ldl import PIVOT_TOL, NativeLDL, amd_ordering, vector_kernels, zero_pivots
+from linknet_core.native.ldl import NativeLDL, amd_ordering, vector_kernels, zero_pivots
+from linknet_core.tolerances import PIVOT_TOL
 from linknet_core.scene.description import Scene, load_scene
 from linknet_core.structure.topology import _dense_rank, _rank_from_pivots, analyse, link_pairs
 

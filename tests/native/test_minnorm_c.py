@@ -28,7 +28,8 @@ import pytest
 
 from linknet_core.scene import builders
 from linknet_core.scene.description import Scene
-from linknet_core.structure.topology import SINGULAR_RCOND, link_pairs
+from linknet_core.structure.topology import link_pairs
+from linknet_core.tolerances import SINGULAR_RCOND
 
 HERE = Path(__file__).resolve().parent
 SOURCE_DIR = HERE.parents[1] / "linknet_core" / "native" / "src"
