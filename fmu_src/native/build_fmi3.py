@@ -1,0 +1,410 @@
+"""Build the FMI 3.0 Co-Simulation FMU of a scene on the native C core (`build_fmu.py --native --fmi-version 3`).
+
+The same model as the FMI 2.0 native FMU (fmu_src/native/build.py): the scene baked as data by build.scene_source,
+the core and linknet_model.c through fmu_model.h, compiled and cached by build.compile_binaries, with the FMI 3.0 glue
+(fmi3Functions.c, the standard's headers in fmi3/) in place of the FMI 2.0 one. What differs is the variables: the
+Layout's scalars (fmu_src/linknet_fmu/layout.py, the one both FMI 2.0 FMUs use) grouped into FMI 3 array variables,
+X [K,3], U [K,3], T [L], Freact [anchored,3], F [inputs,3], P, V, A [input anchors,3], Jreact [driven,3], M [free],
+R [L], g [3], with <Dimension> elements; a table of them (fmi3_variables.h) is appended to the scene's data.
+
+    python3 fmu_src/native/build_fmi3.py models/chain_10.json -o chain_10_fmi3.fmu [--platforms host]
+    python3 -m fmu_src.native.build_fmi3 models/chain_10.json -o chain_10_fmi3.fmu
+
+Every option of build_fmu.py applies (its scene options are resolved there); build_fmi3_fmu is the function
+build_fmu.py calls with what it resolved.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import inspect
+import math
+import shutil
+import struct
+import sys
+import tempfile
+import uuid
+import xml.etree.ElementTree as ET
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+for _path in (ROOT, HERE.parent):  # the checkout (build_fmu, linknet_core) and fmu_src (native.build, linknet_fmu)
+    if str(_path) not in sys.path:
+        sys.path.insert(0, str(_path))
+
+from native import build  # noqa: E402  (the module build_fmu.py imports: one NativeBuildError)
+from native.build import NativeBuildError  # noqa: E402
+
+# the FMI 3 glue in sources/linknet/ in place of fmi2Functions.c; fmi2_api.h stays for the log categories it defines
+FMI3_GLUE = ("fmi3Functions.c", "fmi3_variables.h", "fmu_states.h")
+FMI3_HEADERS = ("fmi3PlatformTypes.h", "fmi3FunctionTypes.h", "fmi3Functions.h")  # the standard's, in fmi3/
+FMI2_ONLY = ("fmi2Functions.c",)
+# headers of the standard's that linknet_fmu_unit.h does not list: <stdbool.h> declares no function (only the macros
+# bool, true, false), so the symbol hiding after it cannot touch it
+HIDING_SAFE_HEADERS = {"stdbool.h"}
+
+# build.py's binaries/ folders -> the FMI 3.0 platform tuples of their binaries (the macOS universal binary is split
+# into its two thin slices, one per tuple)
+FMI3_PLATFORMS = {"linux64": ("x86_64-linux",), "win64": ("x86_64-windows",),
+                  "darwin64": ("x86_64-darwin", "aarch64-darwin"), "aarch64-linux": ("aarch64-linux",)}
+MACH_O_CPU = {"x86_64-darwin": 0x01000007, "aarch64-darwin": 0x0100000C}  # CPU_TYPE_X86_64, CPU_TYPE_ARM64
+
+
+@dataclass
+class Variable:
+    """One FMI 3 variable: `count` consecutive Layout value references from `first` (None: time), row-major."""
+
+    name: str
+    kind: str               # Float64 | String | Boolean; "time" for the independent variable
+    causality: str
+    variability: str
+    initial: str | None
+    declared_type: str | None
+    description: str
+    first: int | None
+    shape: tuple            # () for a scalar
+    vr: int = -1
+
+    @property
+    def count(self) -> int:
+        return int(np.prod(self.shape)) if self.shape else 1
+
+
+def _mass_rows(layout, masses) -> str:
+    """Which mass each row is, 1-based as in the FMI 2.0 names: 'rows 1..n: masses 2..11 (name, ...)'."""
+    numbers = [int(k) + 1 for k in masses]
+    if numbers == list(range(numbers[0], numbers[0] + len(numbers))):
+        span = f"masses {numbers[0]}..{numbers[-1]}" if len(numbers) > 1 else f"mass {numbers[0]}"
+    else:
+        span = "masses " + ", ".join(map(str, numbers))
+    return f"row r is the r-th of {span}"
+
+
+def fmi3_variables(layout, cfg) -> list[Variable]:
+    """The FMI 3 variables of a Layout, in value-reference order (0: time). An array with no rows is left out (the
+    FMI 2.0 FMUs have no scalar of it either)."""
+    out = [Variable("time", "time", "independent", "continuous", None, "Time", "simulation time", None, ())]
+
+    def array(name, vrs, rows_of, what):
+        vrs = np.asarray(vrs, dtype=int)
+        if vrs.size == 0:
+            return
+        flat = vrs.ravel()
+        if not np.array_equal(flat, np.arange(flat[0], flat[0] + flat.size)):
+            raise NativeBuildError(f"the Layout's {name} value references are not consecutive: teach "
+                                   "fmu_src/native/build_fmi3.py")
+        v = layout.reals[int(flat[0])]
+        rows = f"; {_mass_rows(layout, rows_of)}" if rows_of is not None else ""
+        out.append(Variable(name, "Float64", v.causality, v.variability, v.initial, v.declared_type, what + rows,
+                            int(flat[0]), tuple(vrs.shape)))
+
+    held = "held constant over each communication step"
+    motion = ("the anchor moves as P + V tau + A tau^2/2, tau from the communication point where they were set, until "
+              "they are set again")
+    array("F", layout.F_vr, layout.input_masses, f"external forces on the masses (N), columns x, y, z, {held}")
+    array("P", layout.P_vr, layout.anchor_inputs, f"positions of the input-driven anchors (m); {motion}")
+    array("V", layout.V_vr, layout.anchor_inputs, f"velocities of the input-driven anchors (m/s); {motion}")
+    array("A", layout.A_vr, layout.anchor_inputs, f"accelerations of the input-driven anchors (m/s2); {motion}")
+    array("X", layout.X_vr, layout.output_masses, "positions of the masses (m), columns x, y, z")
+    array("U", layout.U_vr, layout.output_masses, "velocities of the masses (m/s), columns x, y, z")
+    array("T", layout.T_vr, None, "tensions in the links (N), in the scene's link order; > 0 pulls the masses "
+          "together; each depends directly on the inputs of its group of links")
+    array("Freact", layout.Freact_vr, layout.fixed_indices, "forces the network exerts on the anchored masses (N)")
+    array("Jreact", layout.Jreact_vr, layout.driven_indices, "impulses the network gave the driven anchors at the "
+          "start of the last communication step (N.s; a jump of a velocity input); 0 if none")
+    e = layout.reals[layout.error_estimate_vr]
+    out.append(Variable(e.name, "Float64", e.causality, e.variability, e.initial, e.declared_type, e.description,
+                        int(layout.error_estimate_vr), ()))
+    array("M", layout.M_vr, layout.free_indices, "masses of the free masses (kg, > 0)")
+    array("R", layout.R_vr, None, "lengths of the links (m, > 0; the initial positions must satisfy them), in the "
+          "scene's link order")
+    array("g", layout.g_vr, None, "gravitational acceleration (m/s2), x, y, z")
+    for vr in (layout.tolerance_vr, layout.step_vr):
+        v = layout.reals[vr]
+        out.append(Variable(v.name, "Float64", v.causality, v.variability, v.initial, v.declared_type, v.description,
+                            int(vr), ()))
+    out.append(Variable("integrator", "String", "parameter", "fixed", "exact", None,
+                        "integration method: " + ", ".join(cfg["integrators"]), int(layout.integrator_vr), ()))
+    out.append(Variable("estimate_error", "Boolean", "parameter", "fixed", "exact", None,
+                        build.ESTIMATE_ERROR_DESCRIPTION, int(layout.estimate_error_vr), ()))
+    for vr, v in enumerate(out):
+        v.vr = vr
+    return out
+
+
+def variable_table_c(variables) -> str:
+    """fmi3_variables.h's table for the scene's file: data only."""
+    kinds = {"time": "FMI3_TIME", "Float64": "FMI3_FLOAT64", "String": "FMI3_STRING", "Boolean": "FMI3_BOOLEAN"}
+    rows = ",\n".join(f"    {{{build.c_string(v.name)}, {kinds[v.kind]}, {v.first or 0}, {v.count}}}"
+                      for v in variables)
+    return ("\n/* The FMI 3.0 variables over the model's (fmi3_variables.h), generated by fmu_src/native/build_fmi3.py. */\n"
+            '#include "fmi3_variables.h"\n'
+            f"const fmi3_variable lnfmi3_variables[] = {{\n{rows}\n}};\n"
+            f"const unsigned lnfmi3_n_variables = {len(variables)};\n")
+
+
+# ---------------------------------------------------------------------------- modelDescription.xml
+def _array_dependencies(variables, layout, deps: dict) -> dict:
+    """FMI 3 variable name -> the value references of the variables its elements depend on (the Layout's scalar lists,
+    each shared list counted once, mapped onto the arrays their elements belong to), in value-reference order."""
+    vr_of = {v.name: v.vr for v in variables}
+    out = {}
+    for v in variables:
+        if v.causality != "output":
+            continue
+        lists = {}
+        for r in range(v.first, v.first + v.count):
+            names = deps[layout.reals[r].name]
+            lists[id(names)] = names
+        arrays = {vr_of[name.split("[")[0]] for names in lists.values() for name in names}
+        out[v.name] = sorted(arrays)
+    return out
+
+
+def model_description(cfg, layout, variables, guid: str, start_values: dict, experiment: dict, inv_mass) -> bytes:
+    from linknet_fmu.layout import TYPES, UNITS
+    now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    root = ET.Element("fmiModelDescription", dict(
+        fmiVersion="3.0", modelName=cfg["model_identifier"], instantiationToken=guid,
+        description=cfg["description"] + " FMI 3.0: the FMI 2.0 FMU's variables as arrays.",
+        version=str(cfg.get("version", "1")), generationTool="linknet build_fmu.py --native --fmi-version 3",
+        generationDateAndTime=now, variableNamingConvention="structured"))
+    ET.SubElement(root, "CoSimulation", dict(
+        modelIdentifier=cfg["model_identifier"], needsExecutionTool="false", canBeInstantiatedOnlyOncePerProcess="false",
+        canGetAndSetFMUState="true", canSerializeFMUState="true", providesDirectionalDerivatives="true",
+        providesAdjointDerivatives="false", providesPerElementDependencies="false",
+        canHandleVariableCommunicationStepSize="true", maxOutputDerivativeOrder="0", providesIntermediateUpdate="false",
+        mightReturnEarlyFromDoStep="false", canReturnEarlyAfterIntermediateUpdate="false", hasEventMode="false",
+        providesEvaluateDiscreteStates="false"))
+    types_used = sorted({v.declared_type for v in variables if v.declared_type})
+    units = ET.SubElement(root, "UnitDefinitions")
+    for name in sorted({TYPES[t][1] for t in types_used}):
+        ET.SubElement(ET.SubElement(units, "Unit", name=name), "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
+    typedefs = ET.SubElement(root, "TypeDefinitions")
+    for name in types_used:
+        ET.SubElement(typedefs, "Float64Type", name=name, quantity=TYPES[name][0], unit=TYPES[name][1])
+    cats = ET.SubElement(root, "LogCategories")
+    for name, text in build.LOG_CATEGORIES:
+        ET.SubElement(cats, "Category", name=name, description=text.replace("fmi2", "fmi3"))
+    ET.SubElement(root, "DefaultExperiment", {k: repr(float(x)) for k, x in experiment.items()})
+    model_variables = ET.SubElement(root, "ModelVariables")
+    for v in variables:
+        attrs = dict(name=v.name, valueReference=str(v.vr), description=v.description, causality=v.causality,
+                     variability=v.variability)
+        if v.declared_type:
+            attrs["declaredType"] = v.declared_type
+        if v.kind in ("time", "Float64") and v.declared_type:
+            attrs["unit"] = TYPES[v.declared_type][1]
+        if v.initial:
+            attrs["initial"] = v.initial
+        if v.kind == "Boolean":
+            attrs["start"] = "true" if cfg.get("error_estimate", True) else "false"
+        elif v.kind == "Float64" and v.causality in ("input", "parameter"):
+            attrs["start"] = " ".join(build._start(start_values[r]) for r in range(v.first, v.first + v.count))
+        node = ET.SubElement(model_variables, "Float64" if v.kind == "time" else v.kind, attrs)
+        if v.kind == "String":
+            ET.SubElement(node, "Start", value=cfg["integrator"])
+        for n in v.shape:
+            ET.SubElement(node, "Dimension", start=str(n))
+    structure = ET.SubElement(root, "ModelStructure")
+    running = _array_dependencies(variables, layout, layout.dependencies(inv_mass))
+    initial = _array_dependencies(variables, layout, layout.initial_dependencies(inv_mass))
+    for tag, table in (("Output", running), ("InitialUnknown", initial)):
+        for v in variables:
+            if v.causality == "output":
+                attrs = dict(valueReference=str(v.vr), dependencies=" ".join(map(str, table[v.name])))
+                if table[v.name]:
+                    attrs["dependenciesKind"] = " ".join("dependent" for _ in table[v.name])
+                ET.SubElement(structure, tag, attrs)
+    ET.indent(root, space="  ")
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode").encode() + b"\n"
+
+
+def build_description(ident: str, units: list[str]) -> bytes:
+    """sources/buildDescription.xml (FMI 3.0): the files a tool compiles, sources/ the include folder, libm."""
+    root = ET.Element("fmiBuildDescription", fmiVersion="3.0")
+    config = ET.SubElement(root, "BuildConfiguration", modelIdentifier=ident)
+    files = ET.SubElement(config, "SourceFileSet", language="C99",
+                          compilerOptions="-ffp-contract=off -fno-math-errno")
+    for name in units:
+        ET.SubElement(files, "SourceFile", name=name)
+    ET.SubElement(files, "IncludeDirectory", name=".")
+    ET.SubElement(config, "Library", name="m", external="true", description="the C math library (libm), Unix only")
+    ET.indent(root, space="  ")
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode").encode() + b"\n"
+
+
+# ---------------------------------------------------------------------------- sources/ and binaries/
+def stage_fmi3_sources(scene_c: str, dest: Path, ident: str) -> list[str]:
+    """sources/ as build.stage_sources lays it out, with the FMI 3 glue in place of fmi2Functions.c; the units."""
+    units = build.stage_sources(scene_c, dest, ident)
+    inner = dest / build.CORE_FOLDER
+    for name in FMI2_ONLY:
+        (inner / name).unlink()
+        (dest / name).unlink()
+        units.remove(name)
+    for name in FMI3_GLUE:
+        if (inner / name).exists():
+            raise NativeBuildError(f"the core's sources now have a file named {name}, as the FMU glue does: rename one")
+        shutil.copy2(HERE / name, inner / name)
+    (inner / "fmi3").mkdir()
+    for name in FMI3_HEADERS:
+        shutil.copy2(HERE / "fmi3" / name, inner / "fmi3" / name)
+    allowed = build._system_headers((HERE / build.UNIT_HEADER).read_text()) | HIDING_SAFE_HEADERS
+    for p in [inner / n for n in FMI3_GLUE] + [inner / "fmi3" / n for n in FMI3_HEADERS]:
+        extra = build._system_headers(p.read_text()) - allowed
+        if extra:
+            raise NativeBuildError(f"{p.name} includes <{'>, <'.join(sorted(extra))}>, which fmu_src/native/"
+                                   f"{build.UNIT_HEADER} does not declare before hiding the FMU's symbols: add it there")
+    unit = "fmi3Functions.c"
+    (dest / unit).write_text(f"/* {build.CORE_FOLDER}/{unit}, compiled after {build.UNIT_HEADER} (see there). */\n"
+                             f'#include "{build.UNIT_HEADER}"\n#include "{build.CORE_FOLDER}/{unit}"\n')
+    units = sorted(units + [unit])
+    (dest / "CMakeLists.txt").write_text(build.cmake_lists(ident, units))
+    return units
+
+
+def fmi3_platforms(spec) -> tuple[str, ...]:
+    """build.py's folders to compile for a --platforms value: all, host, FMI 3.0 tuples (x86_64-linux,
+    x86_64-windows, x86_64-darwin, aarch64-darwin, aarch64-linux) or build.py's own names."""
+    if spec is None or spec in ("all", "host"):
+        return build.platforms_from(spec)
+    by_tuple = {t: folder for folder, tuples in FMI3_PLATFORMS.items() for t in tuples}
+    items = [s.strip() for s in (spec.split(",") if isinstance(spec, str) else spec) if s.strip()]
+    return build.platforms_from([by_tuple.get(item, item) for item in items])
+
+
+def thin_mach_o(universal: bytes, cpu: int) -> bytes:
+    """The slice of CPU type ``cpu`` of a universal Mach-O (build.universal_mach_o's layout)."""
+    magic, n = struct.unpack_from(">II", universal)
+    if magic != build.FAT_MAGIC:
+        raise NativeBuildError("the macOS binary is not a universal Mach-O: it cannot be split into FMI 3.0's folders")
+    for i in range(n):
+        cputype, _, offset, size, _ = struct.unpack_from(">iiIII", universal, 8 + 20 * i)
+        if cputype == cpu:
+            return universal[offset:offset + size]
+    raise NativeBuildError(f"the macOS universal binary has no slice of CPU type {cpu:#x}")
+
+
+def fmi3_binaries(built: dict) -> dict[str, bytes]:
+    """binaries/<FMI 3.0 tuple>/<file> -> bytes, from build.compile_binaries' folders."""
+    out = {}
+    for folder, binary in built.items():
+        for tuple_ in FMI3_PLATFORMS[folder]:
+            data = binary.read_bytes()
+            out[f"{tuple_}/{binary.name}"] = thin_mach_o(data, MACH_O_CPU[tuple_]) if tuple_ in MACH_O_CPU else data
+    return out
+
+
+def build_fmi3_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, quiet: bool = False,
+                   platforms=None) -> Path:
+    """Write the FMI 3.0 native FMU of ``scene`` to ``out``; the arguments are build.build_native_fmu's (without the
+    FMI 2.0 model description's postprocess); ``platforms`` as fmi3_platforms takes them."""
+    import time
+
+    import linknet_core as ln
+    from linknet_core.output import WriteError, atomic_write
+    started = time.perf_counter()
+    out = Path(out)
+    folders = fmi3_platforms(platforms)
+    step, tolerance = float(cfg["step"]), float(cfg["tolerance"])
+    if not (math.isfinite(step) and step > 0):  # the FMU's own rules for its parameters (linknet_model.c)
+        raise NativeBuildError(f"step = {step!r} must be finite and > 0 (seconds)")
+    low, high = build.library_tolerance_range()
+    if not (low <= tolerance < high):
+        raise NativeBuildError(f"tolerance = {tolerance!r} must lie in [{low:g}, {high:g})")
+    try:
+        scene_c, facts = build.scene_source(scene, cfg, layout, build.core_source_dir())
+    except ln.LinknetError as e:
+        raise NativeBuildError(f"{scene.name}: {e}") from None
+    variables = fmi3_variables(layout, cfg)
+    scene_c += variable_table_c(variables)
+    ident = cfg["model_identifier"]
+    with tempfile.TemporaryDirectory(prefix="linknet_fmi3_fmu_") as tmp:
+        tmp = Path(tmp)
+        sources = tmp / "fmu" / "sources"
+        units = stage_fmi3_sources("", sources, ident)
+        digest = build.fingerprint(sources, scene_c)  # the sources differ from FMI 2.0's: another GUID and states
+        guid = "{" + str(uuid.UUID(bytes=digest)) + "}"
+        finger = int.from_bytes(digest[:8], "little")
+        header = (f"#define LNFMU_GUID {build.c_string(guid)}\n"
+                  f"#define LNFMU_FINGERPRINT UINT64_C(0x{finger:016x})\n")
+        text = scene_c.replace('#include "fmu_model.h"', header + '#include "fmu_model.h"', 1)
+        (sources / build.CORE_FOLDER / build.SCENE_FILE).write_text(text)
+        (sources / "buildDescription.xml").write_bytes(build_description(ident, units))
+        binaries = fmi3_binaries(build.compile_binaries(sources, units, ident, folders, tmp / "binaries"))
+        md = model_description(cfg, layout, variables, guid, build.start_values(scene, cfg, layout), experiment,
+                               scene.inv_mass)
+
+        def pack(target):  # written whole, then renamed into place: a failed build leaves no half FMU behind
+            with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
+                z.writestr("modelDescription.xml", md)
+                for name, data in sorted(binaries.items()):
+                    z.writestr(f"binaries/{name}", data)
+                for p in sorted(sources.rglob("*")):
+                    if p.is_file():
+                        z.write(p, "sources/" + p.relative_to(sources).as_posix())
+
+        try:
+            atomic_write(out, pack)
+        except WriteError as e:
+            raise NativeBuildError(str(e)) from None
+    if not quiet:
+        arrays = ", ".join(f"{v.name} {list(v.shape)}" for v in variables if v.shape)
+        print(f"built {out} (FMI 3.0 native model {ident}: arrays {arrays}; {facts['specialisation']} specialisation; "
+              f"binaries for {', '.join(sorted({n.split('/')[0] for n in binaries}))}; {out.stat().st_size / 1024:.0f} "
+              f"KiB; {time.perf_counter() - started:.1f} s)")
+    return out
+
+
+# ---------------------------------------------------------------------------- command line
+def build_scene_fmi3(scene_path, out=None, platforms=None, **options) -> Path:
+    """The FMI 3.0 FMU of a scene file, build_fmu.build_scene_fmu's options (integrator, step, tolerance, inputs,
+    outputs, stop_time, comm_step, error_estimate, quiet) resolved by it as for its FMI 2.0 native FMU."""
+    import build_fmu
+    accepted = inspect.signature(build_fmu.build_scene_fmu).parameters
+    if platforms is not None and "platforms" in accepted:
+        options["platforms"] = platforms
+    if "fmi_version" in accepted:
+        return build_fmu.build_scene_fmu(scene_path, out, native=True, fmi_version=3, **options)
+    # a build_fmu.py without --fmi-version: it resolves the scene's options and hands them to the native build, which
+    # is this module's for the call
+    fmi2_build = build.build_native_fmu
+
+    def fmi3_build(scene, cfg, layout, out, experiment, postprocess, quiet=False, platforms=None):
+        return build_fmi3_fmu(scene, cfg, layout, out, experiment, quiet=quiet, platforms=platforms)
+
+    build.build_native_fmu = fmi3_build
+    try:
+        return build_fmu.build_scene_fmu(scene_path, out, native=True, **options)
+    finally:
+        build.build_native_fmu = fmi2_build
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description="Build the FMI 3.0 Co-Simulation FMU of a linknet scene on the native C "
+                                "core (array variables; no Python on the host).")
+    p.add_argument("scene", help="scene file (JSON)")
+    p.add_argument("-o", "--output", help="FMU path (default: <scene name>.fmu)")
+    p.add_argument("--integrator")
+    p.add_argument("--step", type=float)
+    p.add_argument("--tolerance", type=float)
+    p.add_argument("--inputs", help="masses with force inputs: 1-based numbers or names, comma-separated (default: every free mass)")
+    p.add_argument("--outputs", help="masses with position and velocity outputs: 1-based numbers or names (default: all)")
+    p.add_argument("--stop-time", type=float)
+    p.add_argument("--comm-step", type=float)
+    p.add_argument("--no-error-estimate", action="store_true")
+    p.add_argument("--platforms", metavar="LIST", help="all, host, or FMI 3.0 platform tuples, comma-separated")
+    a = p.parse_args(argv)
+    build_scene_fmi3(a.scene, a.output, platforms=a.platforms, integrator=a.integrator, step=a.step,
+                     tolerance=a.tolerance, inputs=a.inputs, outputs=a.outputs, stop_time=a.stop_time,
+                     comm_step=a.comm_step, error_estimate=False if a.no_error_estimate else None)
+
+
+if __name__ == "__main__":
+    main()
