@@ -992,9 +992,6 @@ int fmu_model_directional_derivative(fmu_model *m, const unsigned *unknown, size
                         unknown[i], role_of(v->kind));
         feedthrough |= v->kind == LNFMU_T || v->kind == LNFMU_FREACT;
     }
-    if (feedthrough && m->model.rigid)
-        return fail(msg, FMU_ERROR, "directional derivatives of T and Freact are not provided for a scene with free "
-                    "rigid bodies (the core linearizes the point-mass tension system (25)-(26) only)");
     if (!feedthrough) {  /* no output asked has direct feedthrough */
         for (size_t i = 0; i < n_unknown; i++) derivative[i] = 0.0;
         return FMU_OK;

@@ -10,7 +10,8 @@ X, U, Jreact and error_estimate have no direct feedthrough: their derivatives ar
 output (unknown) or an input (known), and calls before initialization ends, are refused with fmi2Error naming them,
 and the instance stays usable. The scenes: chain_10, net_10x10, a chain hanging from an input-driven anchor (with a
 fixed pivot and an anchor driven by a scene motion), and the redundant truss (minimum-norm tensions: the derivative
-of the pseudo-inverse) with one of its supports an input-driven anchor (held still: a rigid truss cannot follow it).
+of the pseudo-inverse) with one of its supports an input-driven anchor (held still: a rigid truss cannot follow it),
+and a free rigid body (spinning_tetrahedron: the native FMU's rigid-body specialisation).
 
 Each FMU is driven in a subprocess client (the pythonfmu FMU embeds this Python), built once per module."""
 from __future__ import annotations
@@ -31,7 +32,7 @@ import linknet_core as ln  # noqa: E402
 from fmu_harness import build_cached, run_client  # noqa: E402
 
 KINDS = ("native", "python")
-SCENES = ("chain_10", "net_10x10", "driven_chain", "redundant_truss_driven")
+SCENES = ("chain_10", "net_10x10", "driven_chain", "redundant_truss_driven", "spinning_tetrahedron")
 H = 0.01
 N_STEPS = 3
 # the input motion of an input-driven anchor: P0 + V0 t + A0 t^2 / 2, set (P, V, A) at every communication point
