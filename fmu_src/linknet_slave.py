@@ -141,6 +141,20 @@ class LinknetNetwork(Fmi2Slave):
         self._va_vr = np.full(n_anchors, -1, dtype=np.int64)
         self._said_short_jump = self._said_set_without_p = False
         self._read_vrs = self._read_idx = None  # the last list of variables read (get_real)
+        # fmi2GetDirectionalDerivative: the seed of the call in progress, the linearization at the current state and
+        # inputs (stale once they change), and per value reference which seed it enters (0: F, 1: P, 2: V, 3: A,
+        # -1: none) at which flat index, and whether it is an output with direct feedthrough (T, Freact)
+        self._seed = self._linearization = None
+        self._linearization_stale = True
+        self._seed_kind = np.full(lay.n_real, -1, dtype=np.int64)
+        self._seed_index = np.full(lay.n_real, -1, dtype=np.int64)
+        self._seed_kind[lay.F_vr.reshape(-1)] = 0
+        self._seed_index[lay.F_vr.reshape(-1)] = lay.force_index[lay.F_vr.reshape(-1)]
+        for kind, table in enumerate((lay.P_vr, lay.V_vr, lay.A_vr), start=1):
+            self._seed_kind[table.reshape(-1)] = kind
+            self._seed_index[table.reshape(-1)] = np.arange(table.size)
+        self._feedthrough = np.zeros(lay.n_real, dtype=bool)
+        self._feedthrough[lay.T_vr] = self._feedthrough[lay.Freact_vr.reshape(-1)] = True
         self._real[lay.P_vr] = np.asarray(self._scene0.X0)[lay.anchor_inputs]  # at rest at the scene's position
         self._real[lay.M_vr] = np.asarray(self._scene0.mass)[lay.free_indices]
         self._real[lay.R_vr] = self._scene0.length
@@ -264,8 +278,8 @@ class LinknetNetwork(Fmi2Slave):
     # ------------------------------------------------------------------ FMI: values
     @guarded(_values(float("nan")))
     def get_real(self, vrs):
-        if len(vrs) and DIRECTIONAL_DERIVATIVE <= min(vrs) and max(vrs) < DIRECTIONAL_DERIVATIVE + DERIVATIVE_VR_BASE:
-            return self._directional_derivative([vr - DIRECTIONAL_DERIVATIVE for vr in vrs])
+        if len(vrs) and DIRECTIONAL_DERIVATIVE <= vrs[0] < DIRECTIONAL_DERIVATIVE + DERIVATIVE_VR_BASE:
+            return self._directional_derivative(np.asarray(vrs, dtype=np.int64) - DIRECTIONAL_DERIVATIVE)
         if self._parameters_dirty and not self._initialized:
             # initial unknowns read in initialization mode: T depends on M, R, g (ModelStructure)
             self._apply_parameters_safely()
@@ -458,42 +472,41 @@ class LinknetNetwork(Fmi2Slave):
         error_estimate have no direct feedthrough: 0."""
         lay = self._layout
         where = "fmi2GetDirectionalDerivative: "
-        seed, self._seed = getattr(self, "_seed", None), None
+        seed, self._seed = self._seed, None
         nan = [float("nan")] * len(vrs)
-        for vr in vrs:
-            if not 0 <= vr < lay.n_real:
-                self._error(f"{where}unknown value reference {vr} is not a Real variable of this FMU (Reals are "
-                            f"0..{lay.n_real - 1}): a directional derivative is that of an output")
-                return nan
+        outside = (vrs < 0) | (vrs >= lay.n_real)
+        if outside.any():
+            vr = int(vrs[outside][0])
+            self._error(f"{where}unknown value reference {vr} is not a Real variable of this FMU (Reals are "
+                        f"0..{lay.n_real - 1}): a directional derivative is that of an output")
+            return nan
+        not_output = lay.is_input[vrs] | lay.is_parameter[vrs]
+        if not_output.any():
+            vr = int(vrs[not_output][0])
             var = lay.reals[vr]
-            if var.causality != "output":
-                what = "an input" if var.causality == "input" else "a parameter"
-                self._error(f"{where}unknown {var.name} (value reference {vr}) is {what}, not an output: a "
-                            "directional derivative is that of an output (X, U, T, Freact, Jreact, error_estimate)")
-                return nan
+            what = "an input" if var.causality == "input" else "a parameter"
+            self._error(f"{where}unknown {var.name} (value reference {vr}) is {what}, not an output: a "
+                        "directional derivative is that of an output (X, U, T, Freact, Jreact, error_estimate)")
+            return nan
         if seed is None:
             self._error(f"{where}no seed was given before the derivative was asked for")
             return nan
         derivative = np.zeros(lay.n_real)  # by value reference; only T and Freact have direct feedthrough
-        feedthrough = np.concatenate([lay.T_vr.reshape(-1), lay.Freact_vr.reshape(-1)])
-        if np.isin(vrs, feedthrough).any():
+        if self._feedthrough[vrs].any():
             try:
-                if self._linearization_stale or getattr(self, "_linearization", None) is None:
+                if self._linearization_stale or self._linearization is None:
                     self._linearization = self._sim.interface_linearization(self._F, anchors=self._anchors())
                     self._linearization_stale = False
                 known, values = seed
-                dF = np.zeros(3 * self._scene.K)
-                np.add.at(dF, lay.force_index[known[lay.is_force_input[known]]], values[lay.is_force_input[known]])
-                anchors = {}
-                for name, table in (("P", lay.P_vr), ("V", lay.V_vr), ("A", lay.A_vr)):
-                    d = np.zeros(table.shape)
-                    for vr, value in zip(known, values):
-                        hit = np.argwhere(table == vr)
-                        if hit.size:
-                            d[tuple(hit[0])] += value
-                    anchors[name] = d if table.size else None
-                out = self._linearization.directional(dF=dF.reshape(-1, 3), dP=anchors["P"], dV=anchors["V"],
-                                                      dA=anchors["A"])
+                n_anchors = len(lay.anchor_inputs)
+                seeds = [np.zeros(3 * self._scene.K)] + [np.zeros(3 * n_anchors) for _ in range(3)]
+                kinds = self._seed_kind[known]
+                for kind, flat in enumerate(seeds):
+                    mine = kinds == kind
+                    np.add.at(flat, self._seed_index[known[mine]], values[mine])  # a reference twice: seeds add
+                anchors = [flat.reshape(-1, 3) if n_anchors else None for flat in seeds[1:]]
+                out = self._linearization.directional(dF=seeds[0].reshape(-1, 3), dP=anchors[0], dV=anchors[1],
+                                                      dA=anchors[2])
             except Exception as e:  # a state the tensions cannot be linearized at: said, never raised to pythonfmu
                 self._error(f"{where}the tension system (25)-(26) cannot be linearized at t={self._sim.state.t!r}: "
                             f"{e}")
