@@ -149,6 +149,7 @@ for j, name in enumerate(inputs):
 rng = np.random.default_rng(7)
 seed = rng.standard_normal(len(inputs))
 combined = np.array(s.getDirectionalDerivative(out_vr, [vr[n] for n in inputs], list(seed)))
+no_seed = np.array(s.getDirectionalDerivative(out_vr, [], []))  # no known: the derivative along a zero seed
 # central differences of the FMU's own outputs: an input moved, the outputs read, no step
 FD = np.zeros((len(feedthrough), len(inputs)))
 steps_used = np.zeros(len(inputs))
@@ -180,7 +181,7 @@ s.freeInstance()
 fresh = instance("before_init")
 early_instantiated = refused(lambda: fresh.getDirectionalDerivative([vr[feedthrough[0]]], [vr[inputs[0]]], [1.0]))
 fresh.freeInstance()
-save(J=J, combined=combined, seed=seed, FD=FD, steps_used=steps_used, X=X, U=U, t=np.array(t), again=again,
+save(J=J, combined=combined, seed=seed, no_seed=no_seed, FD=FD, steps_used=steps_used, X=X, U=U, t=np.array(t), again=again,
      feed_now=feed_now, inputs=np.array(inputs), outputs=np.array(outputs), feedthrough=np.array(feedthrough),
      bad=np.array(bad), bad_names=np.array([parameter, outputs[0], inputs[0], parameter, "99999", inputs[0]]),
      early=np.array([early_init, early_instantiated]),
@@ -265,6 +266,7 @@ def test_directional_derivatives_against_differences_and_the_library(fmus, name,
     np.testing.assert_allclose(r["combined"], J @ r["seed"], rtol=0,
                                atol=1e-11 * np.abs(J).max() * np.abs(r["seed"]).sum())
     np.testing.assert_array_equal(r["again"], J[:, 0])
+    assert np.all(r["no_seed"] == 0.0)
 
 
 @pytest.mark.parametrize("kind", KINDS)
