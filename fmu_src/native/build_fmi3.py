@@ -75,14 +75,14 @@ class Variable:
         return int(np.prod(self.shape)) if self.shape else 1
 
 
-def _mass_rows(layout, masses) -> str:
-    """Which mass each row is, 1-based as in the FMI 2.0 names: 'rows 1..n: masses 2..11 (name, ...)'."""
+def _mass_rows(masses) -> str:
+    """Which mass each row is, 1-based as in the FMI 2.0 names: 'rows 1..10 are masses 2..11'."""
     numbers = [int(k) + 1 for k in masses]
+    if len(numbers) == 1:
+        return f"row 1 is mass {numbers[0]}"
     if numbers == list(range(numbers[0], numbers[0] + len(numbers))):
-        span = f"masses {numbers[0]}..{numbers[-1]}" if len(numbers) > 1 else f"mass {numbers[0]}"
-    else:
-        span = "masses " + ", ".join(map(str, numbers))
-    return f"row r is the r-th of {span}"
+        return f"rows 1..{len(numbers)} are masses {numbers[0]}..{numbers[-1]}"
+    return f"rows 1..{len(numbers)} are masses {', '.join(map(str, numbers))}"
 
 
 def fmi3_variables(layout, cfg) -> list[Variable]:
@@ -99,7 +99,7 @@ def fmi3_variables(layout, cfg) -> list[Variable]:
             raise NativeBuildError(f"the Layout's {name} value references are not consecutive: teach "
                                    "fmu_src/native/build_fmi3.py")
         v = layout.reals[int(flat[0])]
-        rows = f"; {_mass_rows(layout, rows_of)}" if rows_of is not None else ""
+        rows = f"; {_mass_rows(rows_of)}" if rows_of is not None else ""
         out.append(Variable(name, "Float64", v.causality, v.variability, v.initial, v.declared_type, what + rows,
                             int(flat[0]), tuple(vrs.shape)))
 

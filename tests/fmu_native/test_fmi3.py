@@ -266,7 +266,7 @@ def test_directional_derivative_of_the_tensions_is_the_finite_difference(scene_p
 
 
 # ---------------------------------------------------------------------------- FMU states
-def test_fmu_states_replay_bit_for_bit_and_serialize_into_a_fresh_instance(scene_paths, fmi3_root):
+def test_fmu_states_replay_bit_for_bit_and_serialize_into_a_fresh_instance(scene_paths, fmi3_root, fmu_root):
     fmu = fmi3_built(fmi3_root, scene_paths[DRIVEN])
     import linknet_core as ln
     scene = ln.Scene.from_dict(drive.SCENES[DRIVEN])
@@ -306,7 +306,14 @@ def test_fmu_states_replay_bit_for_bit_and_serialize_into_a_fresh_instance(scene
     other.initialize()
     with pytest.raises(FMICallException):
         other.slave.deserializeFMUState(data)
+    # the FMI 2.0 FMU of the same scene: its state is another build's
+    s2 = Slave2(built(fmu_root, scene_paths[DRIVEN]))
+    fmi2_state = s2.slave.serializeFMUstate(s2.slave.getFMUstate())
+    s2.slave.freeInstance()
+    with pytest.raises(FMICallException):
+        b.slave.deserializeFMUState(fmi2_state)
     assert any("checksum mismatch" in m for m in b.errors()), b.log
+    assert sum("a state of another FMU" in m for m in b.errors()) == 1, b.log
     assert any("a state of another FMU" in m for m in other.errors()), other.log
     b.slave.setFMUState(restored)
     np.testing.assert_array_equal(coast(b, 2, 6), first)
