@@ -60,8 +60,8 @@ no directional derivatives, and a slave that provides none is differentiated by 
 the input moved by the seed, read, restore: no step is taken), which is exact where the output is affine in the
 input, as the cart's a(F) is; ``directional`` refuses it where a second secant disagrees.
 
-Until the chain FMU provides directional derivatives, --fmu differentiates it by that secant too (exact: Freact
-is affine in A); FmuSlave takes fmi2GetDirectionalDerivative as soon as the modelDescription declares it.
+Both chain FMU kinds provide directional derivatives: --fmu takes them through fmi2GetDirectionalDerivative
+(FmuSlave uses it wherever the modelDescription declares it).
 
 The tables (docs/interface_jacobians.md): for each m_c/m_chain, the implicit master's error against the monolithic
 reference at each h and its order as h halves (and the explicit loop's, where it is stable); then, at every
