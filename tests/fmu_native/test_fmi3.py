@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from native_fmu_support import MODELS, ROOT, SCENES, built
+from native_fmu_support import GCC, MODELS, ROOT, SCENES, built
 
 os.environ.setdefault("LINKNET_FMU_PLATFORMS", "host")  # this machine's binary only (the suite's setting)
 sys.path.insert(0, str(ROOT / "tests"))
@@ -415,3 +415,37 @@ def test_a_repeated_discarded_step_asks_the_master_to_stop(scene_paths, fmi3_roo
     assert "discarded before, from this same state" in s.log[-1][2]
     assert step(H) == (OK, False, H)
     s.free()
+
+
+# ---------------------------------------------------------------------------- sources/
+@pytest.mark.skipif(GCC is None, reason="no C compiler")
+def test_sources_build_a_binary_exporting_only_fmi3_with_the_shipped_results(scene_paths, fmi3_root, tmp_path):
+    """A tool compiles sources/*.c as the buildDescription.xml lists them (gcc, warnings as errors, pedantic C99):
+    the binary exports every function fmi3Functions.h declares and nothing else, and runs as the shipped one, bit
+    for bit."""
+    import shutil
+    import subprocess
+    fmu = fmi3_built(fmi3_root, scene_paths["chain_10"])
+    copy = tmp_path / "unzipped"
+    shutil.copytree(fmu.dir, copy)
+    binary = copy / "binaries" / "x86_64-linux" / f"{fmu.ident}.so"
+    binary.unlink()
+    subprocess.run([GCC, "-std=c99", "-O2", "-ffp-contract=off", "-fno-math-errno", "-Wall", "-Wextra", "-Werror",
+                    "-pedantic", "-shared", "-fPIC", *sorted(str(p) for p in (copy / "sources").glob("*.c")), "-lm",
+                    "-o", str(binary)], check=True, capture_output=True, text=True)
+    exports = subprocess.run(["nm", "-D", "--defined-only", str(binary)], check=True, capture_output=True,
+                             text=True).stdout.split()[2::3]
+    import re
+    declared = re.findall(r"FMI3_Export\s+\w+TYPE\s+(\w+);",
+                          (ROOT / "fmu_src" / "native" / "fmi3" / "fmi3Functions.h").read_text())
+    assert len(declared) > 70 and sorted(exports) == sorted(declared)  # every function of the standard, no other
+    rebuilt = Fmi3Built.__new__(Fmi3Built)
+    rebuilt.__dict__.update(fmu.__dict__, dir=copy)
+    runs = []
+    for f in (fmu, rebuilt):
+        s = Slave3(f)
+        s.initialize()
+        runs.append(run(s, f))
+        s.free()
+    for key in runs[0]:
+        np.testing.assert_array_equal(runs[1][key], runs[0][key], err_msg=key)
