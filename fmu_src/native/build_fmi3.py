@@ -248,7 +248,7 @@ def stage_fmi3_sources(scene_c: str, dest: Path, ident: str) -> list[str]:
         (inner / name).unlink()
         (dest / name).unlink()
         units.remove(name)
-    for name in FMI3_GLUE:
+    for name in (n for n in FMI3_GLUE if n not in build.GLUE_FILES):  # the ones build.py does not stage already
         if (inner / name).exists():
             raise NativeBuildError(f"the core's sources now have a file named {name}, as the FMU glue does: rename one")
         shutil.copy2(HERE / name, inner / name)
