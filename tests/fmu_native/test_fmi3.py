@@ -449,3 +449,28 @@ def test_sources_build_a_binary_exporting_only_fmi3_with_the_shipped_results(sce
         s.free()
     for key in runs[0]:
         np.testing.assert_array_equal(runs[1][key], runs[0][key], err_msg=key)
+
+
+def test_every_platform_in_its_fmi3_folder(scene_paths, fmi3_root):
+    """binaries/<FMI 3.0 platform tuple>/: each binary is of its tuple's machine (read from its header); the macOS
+    universal binary is split into a thin slice per tuple; the host's binary runs (the other tests)."""
+    import struct
+    out = fmi3_root / "pendulum_all_platforms.fmu"
+    build_scene_fmi3(str(scene_paths["pendulum"]), out, platforms="all", quiet=True)
+    with zipfile.ZipFile(out) as z:
+        binaries = {n: z.read(n) for n in z.namelist() if n.startswith("binaries/")}
+    machine = {}
+    for name, data in binaries.items():
+        if data[:4] == b"\x7fELF":
+            machine[name] = ("elf", struct.unpack_from("<H", data, 18)[0])
+        elif data[:2] == b"MZ":
+            machine[name] = ("pe", struct.unpack_from("<H", data, struct.unpack_from("<I", data, 0x3C)[0] + 4)[0])
+        else:
+            machine[name] = ("mach-o", *struct.unpack_from("<Ii", data))
+    assert machine == {
+        "binaries/x86_64-linux/pendulum.so": ("elf", 0x3E),
+        "binaries/aarch64-linux/pendulum.so": ("elf", 0xB7),
+        "binaries/x86_64-windows/pendulum.dll": ("pe", 0x8664),
+        "binaries/x86_64-darwin/pendulum.dylib": ("mach-o", 0xFEEDFACF, 0x01000007),
+        "binaries/aarch64-darwin/pendulum.dylib": ("mach-o", 0xFEEDFACF, 0x0100000C),
+    }
