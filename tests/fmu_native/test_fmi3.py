@@ -474,3 +474,26 @@ def test_every_platform_in_its_fmi3_folder(scene_paths, fmi3_root):
         "binaries/x86_64-darwin/pendulum.dylib": ("mach-o", 0xFEEDFACF, 0x01000007),
         "binaries/aarch64-darwin/pendulum.dylib": ("mach-o", 0xFEEDFACF, 0x0100000C),
     }
+
+
+def test_a_step_no_retry_can_fix_sets_terminate_simulation_at_once(fmi3_root):
+    """Explicit steps beyond their stability limit (a chain whose masses grow by 1e12, RATTLE at 1e-4 s): the model
+    knows that no shorter communication step succeeds, so the first discard already says terminateSimulation, with
+    the reason logged, and lastSuccessfulTime is the start."""
+    import json
+
+    from fmpy.fmi3 import fmi3Boolean, fmi3Float64
+    from test_native_fmu_failures import mass_ratio_chain
+    path = fmi3_root / "mass_ratio_chain.json"
+    path.write_text(json.dumps(mass_ratio_chain().to_dict()))
+    fmu = fmi3_built(fmi3_root, path, integrator="rattle", step=1e-4)
+    s = Slave3(fmu)
+    s.initialize()
+    out = [fmi3Boolean(), fmi3Boolean(), fmi3Boolean(), fmi3Float64()]
+    status = s.raw("fmi3DoStep", fmi3Float64(0.0), fmi3Float64(0.01), fmi3Boolean(True),
+                   *[ctypes.byref(x) for x in out])
+    assert (status, out[1].value, out[3].value) == (DISCARD, True, 0.0)
+    discards = [m for status, _, m in s.log if status == DISCARD]
+    assert discards and "the step exceeds the stability limit of explicit steps" in discards[-1]
+    assert "terminateSimulation is true" in discards[-1]
+    s.free()
