@@ -4,8 +4,9 @@ The same model as the FMI 2.0 native FMU (fmu_src/native/build.py): the scene ba
 the core and linknet_model.c through fmu_model.h, compiled and cached by build.compile_binaries, with the FMI 3.0 glue
 (fmi3Functions.c, the standard's headers in fmi3/) in place of the FMI 2.0 one. What differs is the variables: the
 Layout's scalars (fmu_src/linknet_fmu/layout.py, the one both FMI 2.0 FMUs use) grouped into FMI 3 array variables,
-X [K,3], U [K,3], T [L], Freact [anchored,3], F [inputs,3], P, V, A [input anchors,3], Jreact [driven,3], M [free],
-R [L], g [3], with <Dimension> elements; a table of them (fmi3_variables.h) is appended to the scene's data.
+X and U [masses with outputs,3], T [L], Freact [anchored,3], F [masses with inputs,3], P, V, A [input-driven
+anchors,3], Jreact [driven,3], M [free], R [L], g [3], with <Dimension> elements; a table of them
+(fmi3_variables.h) is appended to the scene's data.
 
     python3 fmu_src/native/build_fmi3.py models/chain_10.json -o chain_10_fmi3.fmu [--platforms host]
     python3 -m fmu_src.native.build_fmi3 models/chain_10.json -o chain_10_fmi3.fmu
