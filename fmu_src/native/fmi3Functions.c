@@ -163,9 +163,10 @@ static int vr_arguments(instance *self, const char *fn, const void *vr, size_t n
 
 /* The model's value references of the variables vr[0..nvr) (each of one of the kinds in the mask `kinds`), their
    elements in order, into self->scratch; 1, or 0 after logging why not (an unknown value reference, one of another
-   type, or element counts that do not add up to nValues). `what` names the list in messages. */
+   type, or element counts that do not add up to nValues). `what` and `count` name the list and its number of values
+   in messages. */
 static int expand(instance *self, const char *fn, const char *what, const fmi3ValueReference vr[], size_t nvr,
-                  unsigned kinds, size_t nValues, size_t offset)
+                  unsigned kinds, size_t nValues, const char *count, size_t offset)
 {
     size_t total = 0;
     for (size_t i = 0; i < nvr; i++) {
@@ -183,8 +184,8 @@ static int expand(instance *self, const char *fn, const char *what, const fmi3Va
         total += v->count;
     }
     if (total != nValues) {
-        refuse(self, fn, "the %zu value references of %s hold %zu values, not %zu (an array variable holds all its "
-               "elements, row-major)", nvr, what, total, nValues);
+        refuse(self, fn, "the %zu variables of %s hold %zu values, but %s is %zu (an array variable moves all its "
+               "elements, row-major)", nvr, what, total, count, nValues);
         return 0;
     }
     if (offset + total > self->scratch_capacity) {
@@ -211,7 +212,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance_, const fmi3ValueReference vr[],
 {
     ENTER("fmi3GetFloat64");
     if (!vr_arguments(self, fn, vr, nvr, values, nValues)) return fmi3Error;
-    if (!expand(self, fn, "valueReferences", vr, nvr, KIND(FMI3_TIME) | KIND(FMI3_FLOAT64), nValues, 0))
+    if (!expand(self, fn, "valueReferences", vr, nvr, KIND(FMI3_TIME) | KIND(FMI3_FLOAT64), nValues, "nValues", 0))
         return fmi3Error;
     /* variable by variable, time among them; each read leaves the model as it was (outputs are evaluated lazily) */
     size_t j = 0;
@@ -239,7 +240,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance_, const fmi3ValueReference vr[],
         if (vr[i] < lnfmi3_n_variables && lnfmi3_variables[vr[i]].kind == FMI3_TIME)
             return refuse(self, fn, "valueReferences[%zu] = %u is time, the independent variable: it is not set "
                           "(doStep advances it)", i, (unsigned)vr[i]);
-    if (!expand(self, fn, "valueReferences", vr, nvr, KIND(FMI3_FLOAT64), nValues, 0)) return fmi3Error;
+    if (!expand(self, fn, "valueReferences", vr, nvr, KIND(FMI3_FLOAT64), nValues, "nValues", 0)) return fmi3Error;
     /* one call: the model checks every value before it sets any */
     return changed_by(self, report(self, fn, fmu_model_set_real(self->model, self->scratch, nValues, values,
                                                                 self->mode >= MODE_STEPPING, self->msg)));
@@ -250,7 +251,7 @@ fmi3Status fmi3GetString(fmi3Instance instance_, const fmi3ValueReference vr[], 
 {
     ENTER("fmi3GetString");
     if (!vr_arguments(self, fn, vr, nvr, values, nValues)) return fmi3Error;
-    if (!expand(self, fn, "valueReferences", vr, nvr, KIND(FMI3_STRING), nValues, 0)) return fmi3Error;
+    if (!expand(self, fn, "valueReferences", vr, nvr, KIND(FMI3_STRING), nValues, "nValues", 0)) return fmi3Error;
     return report(self, fn, fmu_model_get_string(self->model, self->scratch, nValues, values, self->msg));
 }
 
@@ -260,7 +261,7 @@ fmi3Status fmi3SetString(fmi3Instance instance_, const fmi3ValueReference vr[], 
     ENTER("fmi3SetString");
     if (!mode_allows(self, fn, IN(MODE_INSTANTIATED) | IN(MODE_INITIALIZATION) | IN(MODE_STEPPING))) return fmi3Error;
     if (!vr_arguments(self, fn, vr, nvr, values, nValues)) return fmi3Error;
-    if (!expand(self, fn, "valueReferences", vr, nvr, KIND(FMI3_STRING), nValues, 0)) return fmi3Error;
+    if (!expand(self, fn, "valueReferences", vr, nvr, KIND(FMI3_STRING), nValues, "nValues", 0)) return fmi3Error;
     return changed_by(self, report(self, fn, fmu_model_set_string(self->model, self->scratch, nValues, values,
                                                                   self->mode >= MODE_STEPPING, self->msg)));
 }
@@ -271,7 +272,7 @@ fmi3Status fmi3GetBoolean(fmi3Instance instance_, const fmi3ValueReference vr[],
 {
     ENTER("fmi3GetBoolean");
     if (!vr_arguments(self, fn, vr, nvr, values, nValues)) return fmi3Error;
-    if (!expand(self, fn, "valueReferences", vr, nvr, KIND(FMI3_BOOLEAN), nValues, 0)) return fmi3Error;
+    if (!expand(self, fn, "valueReferences", vr, nvr, KIND(FMI3_BOOLEAN), nValues, "nValues", 0)) return fmi3Error;
     int *flags = malloc((nValues ? nValues : 1) * sizeof *flags);
     if (flags == NULL) return refuse(self, fn, "out of memory for %zu values", nValues);
     const int result = fmu_model_get_boolean(self->model, self->scratch, nValues, flags, self->msg);
@@ -287,7 +288,7 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance_, const fmi3ValueReference vr[],
     ENTER("fmi3SetBoolean");
     if (!mode_allows(self, fn, IN(MODE_INSTANTIATED) | IN(MODE_INITIALIZATION) | IN(MODE_STEPPING))) return fmi3Error;
     if (!vr_arguments(self, fn, vr, nvr, values, nValues)) return fmi3Error;
-    if (!expand(self, fn, "valueReferences", vr, nvr, KIND(FMI3_BOOLEAN), nValues, 0)) return fmi3Error;
+    if (!expand(self, fn, "valueReferences", vr, nvr, KIND(FMI3_BOOLEAN), nValues, "nValues", 0)) return fmi3Error;
     int *flags = malloc((nValues ? nValues : 1) * sizeof *flags);
     if (flags == NULL) return refuse(self, fn, "out of memory for %zu values", nValues);
     for (size_t i = 0; i < nValues; i++) flags[i] = values[i] ? 1 : 0;
@@ -423,8 +424,8 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     }
     if (nRequiredIntermediateVariables > 0) {
         say_before_instance(name, instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: %zu intermediate "
-                            "variables required, but %s provides no intermediate update", nRequiredIntermediateVariables,
-                            info->model_identifier);
+                            "variables required, but %s provides no intermediate update",
+                            nRequiredIntermediateVariables, info->model_identifier);
         return NULL;
     }
     instance *self = calloc(1, sizeof *self);
@@ -745,8 +746,10 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance_, const fmi3ValueR
     if (nSensitivity > 0 && sensitivity == NULL)
         return refuse(self, fn, "sensitivity is NULL with nSensitivity = %zu", nSensitivity);
     /* the unknowns' elements, then the knowns', in one list: the model names what is not an output or an input */
-    if (!expand(self, fn, "knowns", knowns, nKnowns, KIND(FMI3_FLOAT64), nSeed, nSensitivity)) return fmi3Error;
-    if (!expand(self, fn, "unknowns", unknowns, nUnknowns, KIND(FMI3_FLOAT64), nSensitivity, 0)) return fmi3Error;
+    if (!expand(self, fn, "knowns", knowns, nKnowns, KIND(FMI3_FLOAT64), nSeed, "nSeed", nSensitivity))
+        return fmi3Error;
+    if (!expand(self, fn, "unknowns", unknowns, nUnknowns, KIND(FMI3_FLOAT64), nSensitivity, "nSensitivity", 0))
+        return fmi3Error;
     return report(self, fn, fmu_model_directional_derivative(self->model, self->scratch, nSensitivity,
                                                              self->scratch + nSensitivity, nSeed, seed, sensitivity,
                                                              self->msg));

@@ -338,7 +338,7 @@ def test_bad_input_is_fmi3_error_with_a_message_and_the_fmu_goes_on(scene_paths,
     cases = [  # (call, words of the logged message)
         (lambda: s.raw("fmi3DoStep", fmi3Float64(0.0), fmi3Float64(H), fmi3Boolean(True), *refs),
          "call fmi3ExitInitializationMode first"),
-        (lambda: set_float64([s.vr("F")], [1.0] * (nF - 1)), f"hold {nF} values, not {nF - 1}"),
+        (lambda: set_float64([s.vr("F")], [1.0] * (nF - 1)), f"hold {nF} values, but nValues is {nF - 1}"),
         (lambda: set_float64([s.vr("X")], [0.0] * fmu.size("X")), "X[1,1]"),
         (lambda: set_float64([999], [1.0]), "999 is not a value reference of this FMU"),
         (lambda: set_float64([s.vr("F")], [float("nan")] + [0.0] * (nF - 1)), "F[2,1]"),
@@ -511,8 +511,8 @@ def test_a_plain_c_host_runs_it_without_python_leaks_nothing_and_gets_the_same_n
     import subprocess
     exe = tmp_path / "fmi3_host"
     subprocess.run([GCC, "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-I",
-                    str(ROOT / "fmu_src" / "native" / "fmi3"), "-o", str(exe), str(Path(__file__).parent / "fmi3_host.c"),
-                    "-ldl", "-lm"], check=True)
+                    str(ROOT / "fmu_src" / "native" / "fmi3"), "-o", str(exe),
+                    str(Path(__file__).parent / "fmi3_host.c"), "-ldl", "-lm"], check=True)
     fmu = fmi3_built(fmi3_root, scene_paths["chain_10"])
     steps, cycles = 4, 3
     command = [str(exe), str(fmu.dir / "binaries" / "x86_64-linux" / f"{fmu.ident}.so"), fmu.md.guid,
