@@ -129,7 +129,9 @@ def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, met
                              members_per_second=final.total / final.elapsed,
                              first_result_seconds=None if final.first_result_seconds is None
                              else final.first_result_seconds + final.started - started, workers=final.workers,
-                             failed=final.failed, retried=final.retried, tasks=final.tasks, complete=1)
+                             failed=final.failed, retried=final.retried, tasks=final.tasks,
+                             member_cpu_seconds=final.member_cpu_seconds,
+                             client_write_cpu_seconds=final.write_cpu_seconds, complete=1)
             else:  # interrupted: the members written so far stay readable, marked as such
                 facts["complete"] = 0
             sink.close(facts)

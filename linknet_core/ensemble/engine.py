@@ -6,8 +6,9 @@
 * Members go out in batches of consecutive members, at most two batches per worker thread in flight, so
   the scheduler holds a few tasks whatever the study's size. The first batches hold one member each (the
   first result comes as soon as possible); later batches are sized from the measured member time to about
-  ``TASK_SECONDS`` each, which keeps Dask's per-task cost (a few ms of scheduler and network time) small
-  against the work, and never so large that the last batches leave workers idle.
+  ``TASK_SECONDS`` each, so that Dask's cost per task (TASK_OVERHEAD_SECONDS of CPU time in the client,
+  scheduler and worker) stays about TASK_OVERHEAD_SHARE of the work, and never so large that the last batches
+  leave workers idle.
 * Results are fetched as they finish and handed to the sink (the study file) at once, then released, so the
   cluster never holds more than the batches in flight. A fetch that fails (a connection fault) is tried
   again, and after FETCH_ATTEMPTS the batch runs again: a study never waits on a result that cannot come.
@@ -18,6 +19,7 @@
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import os
@@ -30,13 +32,23 @@ from concurrent.futures import CancelledError
 from dataclasses import dataclass, field
 
 from linknet_core.errors import LinknetError
-from linknet_core.ensemble.members import StudyPayload, StudySpec, error_text, run_batch
+from linknet_core.scene import Scene
+from linknet_core.ensemble.members import StudyPayload, StudySpec, error_text, output_values, run_batch
 from linknet_core.ensemble.parameters import Plan
 
-TASK_SECONDS = 0.25  # target work per task once the member time is known
-# Scheduler and client spend ~1.8 ms per task (benchmarks/bench_ensemble.py: empty tasks, 2 shared cores): a
-# study keeps below this many tasks per second, so on a large cluster tasks grow to threads / this seconds
-MAX_TASKS_PER_SECOND = 500
+# CPU time Dask spends on one task of a study, whatever its size: 3.5-5 ms in the client and scheduler (submit, the
+# scheduler's transitions, the result's fetch and release, the batch's writes into the file) and 2-2.5 ms in the
+# worker (benchmarks/bench_ensemble.py's per-task figures k_c, k_w: studies of trivial members, one per task, on
+# this project's 2-core machine)
+TASK_OVERHEAD_SECONDS = 0.006
+TASK_OVERHEAD_SHARE = 0.01  # a task holds about 1 / this times its overhead in work
+TASK_SECONDS = TASK_OVERHEAD_SECONDS / TASK_OVERHEAD_SHARE  # target work per task once the member time is known
+# The client's and scheduler's part, ~5 ms per task, is kept to about a fifth of their core: at most this many
+# tasks per second, so on a large cluster tasks grow to threads / MAX_TASKS_PER_SECOND seconds of work
+MAX_TASKS_PER_SECOND = 40
+# a batch's outputs stay below this: a finished batch is held whole by its worker until fetched, and by the
+# client until written
+MAX_TASK_BYTES = 64 << 20
 WORKER_WAIT_SECONDS = 60.0  # how long a study waits for the first worker of an existing cluster
 CONNECT_TIMEOUT = 10.0  # seconds to connect to a scheduler address and see its Dask handshake (connect_timeout=)
 SCHEDULER_PORT = 8786  # Dask's default scheduler port (its dashboard's HTTP server: 8787)
@@ -55,6 +67,8 @@ class Progress:
     tasks: int = 0  # batches submitted (a batch split after KilledWorker counts its singles too)
     started: float = field(default_factory=time.perf_counter)
     first_result_seconds: float | None = None
+    member_cpu_seconds: float = 0.0  # CPU time of the members' own runs, summed over the workers
+    write_cpu_seconds: float = 0.0  # CPU time of this thread writing the results into the study file
 
     @property
     def elapsed(self) -> float:
@@ -68,26 +82,80 @@ def available_cores() -> int:
         return os.cpu_count() or 1
 
 
+# Dask settings of the LocalCluster a study starts (its scheduler, client, nannies and workers). Dask's defaults
+# suit a long-lived cluster watched on its dashboard; here they cost the study's cores (benchmarks/bench_ensemble.py,
+# 2 workers: ~30 ms of CPU time per second in the client and scheduler and as much in the workers, ~10 with
+# these settings), and the workers' statistical profiler, which samples the running task's stack every 10 ms for
+# the dashboard's profile page, cost 0.1-0.3 ms per chain_10 member (up to 5 % of its work).
+LOCAL_CLUSTER_CONFIG = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "200ms",  # the event loops' health check (a warning when one blocks 3 s)
+    "distributed.admin.system-monitor.interval": "2s",  # CPU and memory samples for the dashboard and heartbeats
+}
+
+
+def local_cluster(workers: int):
+    """The LocalCluster a study starts, and a client of it: ``workers`` single-threaded worker processes on
+    127.0.0.1 (the solver holds the GIL in its Python layers, so threads in one process would queue), Dask's log
+    messages below ERROR silenced, LOCAL_CLUSTER_CONFIG set (the nannies pass it to their workers)."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    with dask.config.set(LOCAL_CLUSTER_CONFIG):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+        try:
+            return cluster, Client(cluster)
+        except BaseException:
+            cluster.close()
+            raise
+
+
+_DASK_LOGGERS = ("distributed", "tornado")
+
+
+@contextlib.contextmanager
+def quiet_shutdown(client):
+    """While a study's own LocalCluster closes: Dask's messages about the cluster going away (a worker's
+    heartbeat meeting a scheduler that closed first, a comm closed under a message) say nothing about the study,
+    whose results are written by then, so they are silenced in the workers and, until the cluster is closed,
+    here."""
+    loggers = [logging.getLogger(name) for name in _DASK_LOGGERS]
+    levels = [logger.level for logger in loggers]
+    try:
+        client.run(_silence_dask_logs)
+    except Exception:  # a worker already gone: nothing of it to silence
+        pass
+    _silence_dask_logs()
+    try:
+        yield
+    finally:
+        for logger, level in zip(loggers, levels):
+            logger.setLevel(level)
+
+
+def _silence_dask_logs() -> None:
+    for name in _DASK_LOGGERS:
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+
+
 class Engine:
     """A Dask client for one study; closes what it opened (never a cluster it was given)."""
 
     def __init__(self, client=None, workers: int | None = None, connect_timeout: float = CONNECT_TIMEOUT):
-        from distributed import Client, LocalCluster
+        from distributed import Client
 
         self._cluster = None
         if client is None:
             n = workers or available_cores()
-            # single-threaded workers: the solver holds the GIL in its Python layers, so threads would queue
             try:
-                self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                             dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+                self._cluster, self.client = local_cluster(n)
             except Exception as exc:
                 # the usual cause: a script without a main guard, which each spawned worker imports again and
                 # which then tries to start a cluster of its own while it is being imported
                 raise LinknetError(f"the LocalCluster's worker processes did not start ({error_text(exc)}). Dask "
                                    "starts each worker by importing the main script again, so a script must call "
                                    "ln.ensemble under `if __name__ == \"__main__\":`") from None
-            self.client = Client(self._cluster)
             self._owns_client = True
             self.description = f"LocalCluster on 127.0.0.1, {n} worker process(es)"
             return
@@ -119,9 +187,12 @@ class Engine:
         return max(1, sum(self.client.nthreads().values()))
 
     def close(self) -> None:
-        if self._owns_client:
+        if self._cluster is None:
+            if self._owns_client:
+                self.client.close()
+            return
+        with quiet_shutdown(self.client):
             self.client.close()
-        if self._cluster is not None:
             self._cluster.close()
 
     def __enter__(self):
@@ -244,11 +315,13 @@ def _bytes_text(n: int) -> str:
 
 class _BatchSizer:
     """Members per task: 1 until a member time is known, then about TASK_SECONDS of work (longer on clusters
-    with more than TASK_SECONDS * MAX_TASKS_PER_SECOND threads), capped so that the remaining members still
-    make two tasks per worker thread (no idle workers at the end)."""
+    with more than TASK_SECONDS * MAX_TASKS_PER_SECOND threads), at most MAX_TASK_BYTES of outputs, capped so
+    that the remaining members still make two tasks per worker thread (no idle workers at the end). ``fixed``
+    (members_per_task=) overrides it."""
 
-    def __init__(self, fixed: int | None):
+    def __init__(self, fixed: int | None, member_bytes: int = 0):
         self.fixed = fixed
+        self.member_bytes = member_bytes
         self._seconds = 0.0
         self._members = 0
 
@@ -263,7 +336,8 @@ class _BatchSizer:
             return 1
         per_member = max(self._seconds / self._members, 1e-6)
         task_seconds = max(TASK_SECONDS, threads / MAX_TASKS_PER_SECOND)
-        return max(1, min(int(task_seconds / per_member), math.ceil(remaining / (2 * threads))))
+        largest = MAX_TASK_BYTES // self.member_bytes if self.member_bytes else remaining
+        return max(1, min(int(task_seconds / per_member), largest, math.ceil(remaining / (2 * threads))))
 
 
 def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=None,
@@ -283,7 +357,9 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
 
     threads = engine.threads()
     progress = Progress(total=plan.n_members, workers=threads)
-    sizer = _BatchSizer(members_per_task)
+    # a batch's outputs in bytes, per member: 8 per number kept, ~100 for its quantities of interest and status
+    member_bytes = 8 * output_values(Scene.from_dict(spec.scene), spec.outputs, spec.times.size) + 100
+    sizer = _BatchSizer(members_per_task, member_bytes)
     lock = threading.Lock()  # the event handler runs on the client's event-loop thread
     in_flight: dict[str, tuple[int, int]] = {}  # task key -> (first member, count)
     retried: set[int] = set()
@@ -338,7 +414,10 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
             result, failure = _fetch(future)
             future.release()
             if result is not None:
+                cpu = time.thread_time()
                 sink.write(result)
+                progress.write_cpu_seconds += time.thread_time() - cpu
+                progress.member_cpu_seconds += float(sum(result["cpu_seconds"]))
                 sizer.record([s for s, e in zip(result["run_seconds"], result["error"]) if not e])
                 progress.failed += sum(1 for e in result["error"] if e)
                 progress.done += count

@@ -1,10 +1,15 @@
-"""What a Dask worker does: run members, one ``Simulator`` run or one FMU run through fmpy each.
+"""What a Dask worker does: run members, one ``ln.simulate`` run or one FMU run through fmpy each.
 
 A study reaches the workers once, as a worker plugin (:class:`StudyPayload`): the scene, the settings and
 the FMU's bytes, if any. Dask gives a plugin to every worker of the cluster, including workers that start
 later (a nanny restarting a killed one), so tasks carry only member indices and values, and nothing a task
-needs can be lost with a worker. Each task runs a batch of consecutive members and returns their outputs
-stacked; a member that fails is recorded with its error and the batch goes on.
+needs can be lost with a worker. Each task runs a batch of consecutive members and returns their outputs as
+one numpy array per output (member first), filled in place; a member that fails is recorded with its error
+(its rows stay NaN) and the batch goes on.
+
+A library member is one ``ln.simulate`` call, the very call a serial loop over the members makes: its outputs
+and its error estimate are bit-identical to that loop's, sampled in the native core (not output by output from
+Python), with the same companion run.
 """
 from __future__ import annotations
 
@@ -16,16 +21,18 @@ import sys
 import tempfile
 import threading
 import time
+import warnings
 import zipfile
 from dataclasses import dataclass
 
 import numpy as np
 from distributed import WorkerPlugin, get_worker
 
+from linknet_core.accuracy import AccuracyWarning
 from linknet_core.errors import LinknetError, SceneError
 from linknet_core.integrators import METHODS
 from linknet_core.scene import Scene
-from linknet_core.simulator import Simulator
+from linknet_core.simulator import simulate
 from linknet_core.ensemble.parameters import Parameter, member_forces, member_scene
 
 OUTPUTS = ("X", "U", "T", "Freact")  # what a study can keep per member and time
@@ -56,6 +63,12 @@ class StudySpec:
         if method is None:
             return None, dt, rtol
         return (method, None, rtol) if METHODS[method].adaptive else (method, dt, None)
+
+
+def output_values(scene: Scene, outputs, n_times: int) -> int:
+    """How many numbers one member keeps of ``outputs`` (X, U, T, Freact) over ``n_times`` output times."""
+    per_time = {"X": 3 * scene.K, "U": 3 * scene.K, "T": scene.L, "Freact": 3 * scene.fixed_indices.size}
+    return n_times * sum(per_time[name] for name in outputs)
 
 
 def error_text(exc: BaseException) -> str:
@@ -90,10 +103,22 @@ class StudyRuntime:
         self.spec = spec
         self.base_scene = Scene.from_dict(spec.scene, source=spec.scene.get("name", "scene"))
         self.fmu = FmuRunner(spec.fmu, spec.study_id) if spec.fmu is not None else None
+        scene, n = self.base_scene, spec.times.size
+        shapes = {"X": (n, scene.K, 3), "U": (n, scene.K, 3), "T": (n, scene.L),
+                  "Freact": (n, scene.fixed_indices.size, 3)}
+        # what one member returns, by name: its shape (a batch stacks them, member first)
+        self.shapes = {name: shapes[name] for name in OUTPUTS if name in spec.outputs}
+        self.shapes.update({"max_tension": (), "max_tension_link": (), "min_tension": (), "tip_final": (3,),
+                            "error_estimate": (), "error_goal": ()})
 
     def close(self):
         if self.fmu is not None:
             self.fmu.close()
+
+    def blank_batch(self, count: int) -> dict:
+        """The arrays of a batch of ``count`` members, NaN (no link: 0) until a member fills its rows."""
+        return {name: np.zeros(count, np.int32) if name == "max_tension_link" else np.full((count, *shape), np.nan)
+                for name, shape in self.shapes.items()}
 
     def run(self, setting: dict) -> dict:
         """One member: the requested outputs at every output time, and the quantities of interest."""
@@ -108,25 +133,29 @@ class StudyRuntime:
         return out
 
     def _run_library(self, setting: dict):
+        """The member's scene (the base scene object itself when the member changes nothing in it, so that what
+        is kept per scene, its analysis and simulate's pooled Simulators, serves every such member), then
+        ``simulate`` with the member's solver and its constant input force."""
         spec = self.spec
         data = member_scene(spec.scene, spec.parameters, setting)
         scene = self.base_scene if data is None else Scene.from_dict(data, source=self.base_scene.name)
         method, dt, rtol = spec.solver(setting)
-        sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=spec.atol if rtol is not None else None,
-                        project_initial=spec.project_initial)
         forces = member_forces(spec.parameters, setting, scene.K)
-        n = spec.times.size
-        X, U = np.empty((n, scene.K, 3)), np.empty((n, scene.K, 3))
-        T, Freact = np.empty((n, scene.L)), np.empty((n, scene.fixed_indices.size, 3))
-        # the same sequence of advance and outputs calls as ln.simulate with a constant force
-        error = 0.0
-        for i, t in enumerate(spec.times):
-            if i:
-                sim.advance(t, forces)
-                error = max(error, sim.error_estimate)
-            out = sim.outputs(forces)
-            X[i], U[i], T[i], Freact[i] = out["X"], out["U"], out["T"], out["Freact"]
-        return X, U, T, Freact, error, sim.error_goal
+        result = simulate(scene, float(spec.times[-1]), method=method, dt=dt, rtol=rtol,
+                          atol=spec.atol if rtol is not None else None, n_out=spec.times.size, forces=forces,
+                          progress=False, project_initial=spec.project_initial)
+        Freact = _anchor_reactions(scene, result.X, result.T) if "Freact" in spec.outputs else None
+        return result.X, result.U, result.T, Freact, result.max_error_estimate, result.error_goal
+
+
+def _anchor_reactions(scene: Scene, X: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """The force the network exerts on each anchored mass at every sample (n, anchors, 3): the library's
+    Dynamics.anchor_reactions of each sample's positions and tensions."""
+    from linknet_core.dynamics.equations import Dynamics
+
+    dyn = Dynamics(scene)
+    return np.stack([dyn.anchor_reactions(x, t) for x, t in zip(X, T)]) if X.shape[0] else \
+        np.zeros((0, scene.fixed_indices.size, 3))
 
 
 def quantities_of_interest(T: np.ndarray, X: np.ndarray, tip: int) -> dict:
@@ -136,34 +165,40 @@ def quantities_of_interest(T: np.ndarray, X: np.ndarray, tip: int) -> dict:
         qoi = {"max_tension": float(T[worst]), "max_tension_link": int(worst[1]) + 1, "min_tension": float(T.min())}
     else:
         qoi = {"max_tension": np.nan, "max_tension_link": 0, "min_tension": np.nan}
-    qoi["tip_final"] = X[-1, tip].copy()
+    qoi["tip_final"] = X[-1, tip]
     return qoi
 
 
 def run_batch(study_id: str, first: int, settings: list[dict]) -> dict:
-    """Members first .. first + len(settings) - 1, stacked: one dict of arrays per batch (NaN where a member
-    failed), with each member's error ('' if none), run time and this worker's address."""
+    """Members first .. first + len(settings) - 1: one numpy array per output, member first (NaN where a member
+    failed), each member's error ('' if none), its wall and CPU time, and this worker's address.
+
+    The members' AccuracyWarnings are not raised here: each member's estimate and goal are in the study, which
+    warns once, on the client, of the members beyond their goal."""
     runtime = _RUNTIMES.get(study_id)
     if runtime is None:  # the plugin installs the study before a worker takes its tasks
         raise RuntimeError(f"study {study_id} is not installed on worker {get_worker().address}")
-    results, errors, seconds = [], [], []
-    for setting in settings:
-        start = time.perf_counter()
-        try:
-            results.append(runtime.run(setting))
-            errors.append("")
-        except Exception as exc:  # a member's failure is its result; the batch goes on
-            results.append(None)
-            errors.append(error_text(exc))
-        seconds.append(time.perf_counter() - start)
-    template = next((r for r in results if r is not None), None)
-    stacked = {}
-    if template is not None:
-        for key, value in template.items():
-            blank = np.full(np.shape(value), np.nan) if key != "max_tension_link" else 0
-            stacked[key] = np.stack([np.asarray(r[key] if r is not None else blank) for r in results])
-    return {"first": first, "count": len(settings), "outputs": stacked, "error": errors,
-            "run_seconds": np.array(seconds), "worker": get_worker().address}
+    count = len(settings)
+    outputs = runtime.blank_batch(count)
+    errors = [""] * count
+    seconds, cpu_seconds = np.empty(count), np.empty(count)
+    # the filters are the process's: on a worker with several threads a batch ending may restore them under
+    # another one still running, which then warns (or, the other way round, leaves AccuracyWarnings ignored in
+    # that worker); both are about the workers' own stderr, never a member's result
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", AccuracyWarning)
+        for i, setting in enumerate(settings):
+            start, cpu_start = time.perf_counter(), time.thread_time()
+            try:
+                member = runtime.run(setting)
+            except Exception as exc:  # a member's failure is its result; the batch goes on
+                errors[i] = error_text(exc)
+            else:
+                for name, value in member.items():
+                    outputs[name][i] = value
+            seconds[i], cpu_seconds[i] = time.perf_counter() - start, time.thread_time() - cpu_start
+    return {"first": first, "count": count, "outputs": outputs, "error": errors, "run_seconds": seconds,
+            "cpu_seconds": cpu_seconds, "worker": get_worker().address}
 
 
 # ---- FMU members ------------------------------------------------------------------------------------

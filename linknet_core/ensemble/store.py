@@ -22,7 +22,7 @@ import numpy as np
 from linknet_core.output import WriteError, failure_reason, rescue_path
 from linknet_core.version import __version__
 from linknet_core.scene import Scene
-from linknet_core.ensemble.members import OUTPUTS, StudySpec
+from linknet_core.ensemble.members import OUTPUTS, StudySpec, output_values
 from linknet_core.ensemble.parameters import Plan
 
 _AXES = np.array(["x", "y", "z"])
@@ -45,6 +45,10 @@ _QOI_META = {
                             "members, whose FMU logs a crossing itself)"),
 }
 FLUSH_SECONDS = 2.0  # at most this much finished work is only in memory should the client process die
+# Members per chunk of the quantities of interest. One member per chunk, as a trajectory has, would cost the client
+# ~1.3 us per member and variable in HDF5's chunk handling and give the chunk index an entry per 8 bytes; a
+# batch's slab touches one or two chunks of this size, which HDF5's chunk cache holds
+MEMBERS_PER_CHUNK = 4096
 _QOI_KEYS = frozenset(_QOI_META)
 
 
@@ -120,8 +124,7 @@ class StudyFile:
         import resource
         import shutil
 
-        per_time = {"X": 3 * scene.K, "U": 3 * scene.K, "T": scene.L, "Freact": 3 * scene.fixed_indices.size}
-        values = plan.n_members * (spec.times.size * sum(per_time[o] for o in spec.outputs) + 9)
+        values = plan.n_members * (output_values(scene, spec.outputs, spec.times.size) + 9)
         need = 8 * values
         free = shutil.disk_usage(os.path.dirname(os.path.abspath(self.path))).free
         limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
@@ -187,7 +190,9 @@ class StudyFile:
     def _data(self, f, name, meta, dims, coordinates, integer=False):
         shape_dims, unit, long_name = meta
         all_dims = ("member",) + shape_dims
-        chunks = tuple([1] + [dims[d] or 1 for d in shape_dims])
+        # a member's trajectory (time first) is its own chunk; per-member quantities go many members to a chunk
+        members = 1 if "time" in shape_dims else min(dims["member"], MEMBERS_PER_CHUNK)
+        chunks = tuple([members] + [dims[d] or 1 for d in shape_dims])
         # integers get no _FillValue: xarray would read every 0 (no link, not run) as missing
         var = f.create_variable(name, all_dims, "i4" if integer else "f8", chunks=chunks,
                                 fillvalue=None if integer else np.nan)

@@ -62,3 +62,16 @@ def test_errors_are_one_line(args, words):
 def test_missing_scene_is_one_line(tmp_path):
     run = linknet(tmp_path / "missing.json", "--t-end", "1", "--vary", "M[2]=1")
     assert run.returncode == 2 and "missing.json' is not a file" in run.stderr and "Traceback" not in run.stderr
+
+
+def test_a_successful_run_on_its_own_local_cluster_says_nothing_on_stderr(tmp_path):
+    """The default engine, a LocalCluster the command starts and closes: nothing from Dask on stderr, neither
+    while it runs nor at its shutdown (no heartbeat or CommClosedError traceback, no log line), in each of a few
+    runs (shutdown messages depend on timing)."""
+    for n in range(3):
+        out = tmp_path / f"study{n}.nc"
+        run = linknet(MODELS / "chain_10.json", "--vary", "M[11]=0.5:2:16", "--t-end", "0.3", "--n-out", "11",
+                      "--workers", "2", "--no-progress", "--out", out)
+        assert run.returncode == 0, run.stderr
+        assert run.stderr == "", run.stderr
+        assert (xr.open_dataset(out, engine="h5netcdf")["status"].values == "ok").all()

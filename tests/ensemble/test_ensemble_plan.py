@@ -95,3 +95,24 @@ def test_study_options_are_checked_before_anything_runs():
         ln.ensemble(scene, vary={"M[3]": [1]}, t_end=1, outputs=["Y"])
     with pytest.raises(ln.LinknetError, match="give rtol, not dt"):
         ln.ensemble(scene, vary={"M[3]": [1]}, t_end=1, method="dop853", dt=1e-3)
+
+
+def test_batch_size_follows_member_time_output_size_and_the_end_of_the_study():
+    """Members per task: one until a member's time is known; then TASK_SECONDS of work; on a cluster of more
+    threads than TASK_SECONDS * MAX_TASKS_PER_SECOND, threads / MAX_TASKS_PER_SECOND seconds; never more outputs
+    than MAX_TASK_BYTES; and near the end, at most the remaining members over two tasks per thread."""
+    from linknet_core.ensemble.engine import MAX_TASK_BYTES, MAX_TASKS_PER_SECOND, TASK_SECONDS, _BatchSizer
+
+    chain_member_bytes = 8 * 201 * (33 + 33 + 10) + 100  # chain_10 with X, U, T at 201 times
+    sizer = _BatchSizer(None, chain_member_bytes)
+    assert sizer.size(remaining=10_000, threads=2) == 1
+    sizer.record([0.004, 0.006])  # 5 ms per member
+    assert sizer.size(remaining=10_000, threads=2) == int(TASK_SECONDS / 0.005)
+    many = 10 * TASK_SECONDS * MAX_TASKS_PER_SECOND
+    assert sizer.size(remaining=10**9, threads=int(many)) == MAX_TASK_BYTES // chain_member_bytes
+    assert _BatchSizer(None, 100).size(remaining=10**9, threads=1) == 1  # nothing recorded yet
+    quantities_only = _BatchSizer(None, 100)
+    quantities_only.record([0.005])
+    assert quantities_only.size(remaining=10**9, threads=int(many)) == int(many / MAX_TASKS_PER_SECOND / 0.005)
+    assert sizer.size(remaining=10, threads=2) == 3  # ceil(10 / 4): the last members spread over both threads
+    assert _BatchSizer(7, chain_member_bytes).size(remaining=10_000, threads=2) == 7  # members_per_task=7
