@@ -1,44 +1,59 @@
-"""Ensembles on Dask: throughput, scaling, per-member overhead, time to first result (measure; never asserted).
+"""Ensembles on Dask against the serial loop: throughput, CPU time per component, projection to big clusters
+(measures; asserts only the members' correctness).
 
 Study: chain_10 (models/chain_10.json), 1000 members varying the tip mass M[11] and gravity g[3] (a 40 x 25
 grid), t_end = 2 s, RATTLE at dt = 1e-3 s, 201 outputs of X, U, T per member streamed into a netCDF file.
 
-1. bare: each member's ``Simulator`` run in this process, serially (scene built with the member's values,
-   Simulator construction, 200 advance + 201 outputs calls): the work a member must do anyway.
-2. LocalCluster with 1 and with 2 worker processes (started, and warmed with a 4-member study, outside the
-   timed span; the study run 3 times on each, alternating, best of 3): members per second, scaling efficiency
-   = rate(2) / (2 rate(1)), the per-member overhead (1-worker wall time per member minus the bare time), and
-   the CPU time per member spent in the workers and in this process (client, and the LocalCluster's
-   scheduler), which unlike wall time does not depend on what else runs on the machine; the same study on 2
-   workers keeping only the quantities of interest (outputs=[]) shows what streaming X, U, T costs.
-3. Cold start: ``ln.ensemble(client=None, workers=1)`` from the call to its first finished member (cluster
-   start, worker process start and imports, the study's plugin, the first member), and the first member's own
-   time on its worker.
-4. What a bigger cluster would feel: the scheduler's cost per task (2000 empty tasks), and the client's cost
-   per member streamed into the file (StudyFile.write of 1000 members' X, U, T, without Dask).
+1. Throughput, in one run: the serial loop (each member's scene from ``with_parameters``, then ``ln.simulate``,
+   in this process) and the study on a LocalCluster of each ``--workers`` count, as ln.ensemble starts one
+   (engine.local_cluster; started and warmed outside the timed span), and on the 2-worker one keeping the
+   quantities of interest only, interleaved round by round (``--rounds``). A round's ratio is the serial loop's
+   time per member over the study's, both from that round, so the machine's load (other jobs on shared cores)
+   moves both alike; the table gives the median over rounds and the range. Beside wall time, every study's CPU
+   time: the worker processes with their nannies, the members' own runs (as the workers measured them), this
+   process's main thread (the study loop, the file writes) and its other threads (the LocalCluster's scheduler,
+   the client's communication). CPU time grows far less than wall time when other jobs share the cores: the
+   CPU-time ratio, min(N / w, 1 / c, cores / (w + c)) times the serial loop's CPU time per member (w, c: the
+   workers' and the client's CPU time per member), is what the machine would give without them.
+2. Per-member CPU breakdown, in this process (thread CPU time, medians of interleaved repeats over members of
+   the grid): scene build, structure analysis, Simulator construction, the integration with its companion,
+   a worker's bookkeeping, the serialisation of a batch's results, the client's write into the file.
+3. Costs by cause, on the 2-worker cluster: idle (CPU time per second of an idle cluster); per study and per
+   task (studies of 2 and of 200 trivial members, one per task); per member beyond its run (studies of 2000
+   short members in batches of 200, with X, U, T and with the quantities of interest only). With them, each
+   study's CPU time per member is split by cause.
+4. Projection to 16 and 100 workers from these figures (the model is printed with them; docs/ensemble.md).
 
-    python -m benchmarks.bench_ensemble [--quick] [--members 1000] [--rounds 3] [--out build/bench_ensemble.json]
+    python -m benchmarks.bench_ensemble [--workers 1,2] [--members 1000] [--rounds 5] [--out build/bench_ensemble.json]
+    python -m benchmarks.bench_ensemble --quick    # CI: 16 short members on 1 worker, checked against serial runs
 
---quick: 40 members of 0.2 s, checks one member against its serial run, prints the same table (a smoke test).
+--quick is a smoke test of correctness only (each member bit-identical to its serial ln.simulate run); it times
+nothing.
 """
 from __future__ import annotations
 
 import argparse
 import json
-import logging
 import os
-import resource
+import sys
 import tempfile
+import threading
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 import linknet_core as ln
+from linknet_core.accuracy import AccuracyWarning
 from linknet_core.ensemble import make_plan
+from linknet_core.ensemble.engine import local_cluster, quiet_shutdown  # the cluster ln.ensemble starts
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENE = ROOT / "models" / "chain_10.json"
+DT, N_OUT, T_END = 1e-3, 201, 2.0
+OUTPUTS = ("X", "U", "T")
+PROJECTED_WORKERS = (16, 100)
 
 
 def study_grid(members: int) -> dict:
@@ -48,230 +63,542 @@ def study_grid(members: int) -> dict:
     return {"M[11]": np.linspace(0.05, 0.5, n_mass), "g[3]": np.linspace(-9.81, -1.0, n_g)}
 
 
-def cpu_seconds() -> float:
-    """CPU time of this process (user + system): unlike wall time, it does not grow when other jobs share the
-    cores."""
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    return usage.ru_utime + usage.ru_stime
+def member_settings(vary: dict) -> list[tuple[float, float]]:
+    return [(m, g) for m in vary["M[11]"] for g in vary["g[3]"]]
 
 
-def bare_and_study_member(scene, vary, t_end, dt, n_out, samples=40) -> dict:
-    """One member's work done directly with the library (bare), and the same member as a worker runs it
-    (StudyRuntime.run: the member's scene from its values, the Simulator run, outputs kept, quantities of
-    interest), interleaved in this process: medians of wall and CPU time."""
-    from linknet_core.ensemble.members import StudyRuntime, StudySpec
+def serial_member(scene, mass: float, gravity: float, t_end: float, n_out: int):
+    """One member as a user's serial loop runs it: the scene with the member's values, then ln.simulate."""
+    masses = np.array(scene.mass)
+    masses[10] = mass
+    member = scene.with_parameters(mass=masses, gravity=[0.0, 0.0, gravity])
+    return ln.simulate(member, t_end, dt=DT, n_out=n_out)
+
+
+def serial_loop(scene, vary: dict, t_end: float, n_out: int) -> dict:
+    settings = member_settings(vary)
+    wall, cpu = time.perf_counter(), time.thread_time()
+    for mass, gravity in settings:
+        serial_member(scene, mass, gravity, t_end, n_out)
+    wall, cpu = time.perf_counter() - wall, time.thread_time() - cpu
+    return {"members": len(settings), "wall_s": wall, "members_per_s": len(settings) / wall,
+            "cpu_member_s": cpu / len(settings)}
+
+
+# ---- CPU time of processes and threads ----------------------------------------------------------------
+
+def cluster_processes(client) -> list:
+    """The worker processes of a cluster and their nannies (psutil handles, read from here: asking the workers
+    themselves would cost them CPU time)."""
+    import psutil
+
+    pids = set()
+    for pid, parent in client.run(lambda: (os.getpid(), os.getppid())).values():
+        pids.add(pid)
+        if parent != os.getpid():  # a nanny (a LocalCluster's workers are its nannies' children)
+            pids.add(parent)
+    return [psutil.Process(pid) for pid in sorted(pids)]
+
+
+def processes_cpu(processes) -> float:
+    total = 0.0
+    for p in processes:
+        times = p.cpu_times()
+        total += times.user + times.system
+    return total
+
+
+def other_threads_cpu() -> float:
+    """CPU time of this process's threads but the main one (the event loop: a LocalCluster's scheduler and the
+    client's communication)."""
+    total = 0.0
+    for thread in threading.enumerate():
+        if thread is not threading.main_thread() and thread.ident is not None:
+            try:
+                total += time.clock_gettime(time.pthread_getcpuclockid(thread.ident))
+            except OSError:  # a thread that just ended
+                pass
+    return total
+
+
+class CpuMeter:
+    """CPU time over a span: the cluster's processes, this main thread, this process's other threads. Threads
+    that end inside the span (none do in a study) would be missed."""
+
+    def __init__(self, processes):
+        self.processes = processes
+
+    def __enter__(self):
+        self._start = (processes_cpu(self.processes), time.thread_time(), other_threads_cpu(), time.perf_counter())
+        return self
+
+    def __exit__(self, *exc):
+        end = (processes_cpu(self.processes), time.thread_time(), other_threads_cpu(), time.perf_counter())
+        self.workers, self.main, self.others, self.wall = (b - a for a, b in zip(self._start, end))
+
+
+def timed_study(client, processes, vary, t_end, n_out, out, outputs=OUTPUTS, members_per_task=None) -> dict:
+    """One study on an existing cluster: its wall time, and CPU time of the workers (with their nannies), of the
+    members' own runs (as the workers measured them), of this main thread and of this process's other threads."""
+    with CpuMeter(processes) as meter:
+        ds = ln.ensemble(SCENE, vary=vary, t_end=t_end, dt=DT, n_out=n_out, client=client, out=out,
+                         outputs=outputs, members_per_task=members_per_task)
+    n = int(ds.sizes["member"])
+    figures = {"members": n, "ok": int((ds["status"].values == "ok").sum()), "wall_s": meter.wall,
+               "members_per_s": n / meter.wall, "tasks": int(ds.attrs["tasks"]),
+               "first_result_s": float(ds.attrs["first_result_seconds"]), "workers_cpu_s": meter.workers,
+               "member_cpu_s": float(ds.attrs["member_cpu_seconds"]), "client_main_cpu_s": meter.main,
+               "client_other_cpu_s": meter.others, "client_write_cpu_s": float(ds.attrs["client_write_cpu_seconds"])}
+    ds.close()
+    if figures["ok"] != n:
+        raise RuntimeError(f"{n - figures['ok']} members of the benchmark's study failed")
+    return figures
+
+
+def decompose(row: dict, idle: dict, costs: dict) -> dict:
+    """A study's CPU time per member, by cause: the members' runs; per study, per task and idle (per second of
+    wall time, from the separate measurements) on the workers and in the client and scheduler; the rest is per
+    member (Dask sending and receiving the results, the client writing them)."""
+    n, wall, tasks = row["members"], row["wall_s"], row["tasks"]
+    client = row["client_main_cpu_s"] + row["client_other_cpu_s"]
+    parts = {"member": row["member_cpu_s"] / n,
+             "workers_idle": idle["workers"] * wall / n, "workers_task": costs["workers_task_s"] * tasks / n,
+             "workers_study": costs["workers_study_s"] / n,
+             "client_idle": idle["client"] * wall / n, "client_task": costs["client_task_s"] * tasks / n,
+             "client_study": costs["client_study_s"] / n, "client_write": row["client_write_cpu_s"] / n}
+    parts["workers_total"] = row["workers_cpu_s"] / n
+    parts["client_total"] = client / n
+    parts["workers_member"] = parts["workers_total"] - parts["member"] - parts["workers_idle"] - \
+        parts["workers_task"] - parts["workers_study"]
+    parts["client_member"] = parts["client_total"] - parts["client_idle"] - parts["client_task"] - parts["client_study"]
+    return parts
+
+
+# ---- in-process breakdown ------------------------------------------------------------------------------
+
+def median_cpu(function, repeats: int) -> float:
+    """Median thread CPU time of ``function(i)`` over i = 0 .. repeats - 1."""
+    values = []
+    for i in range(repeats):
+        start = time.thread_time()
+        function(i)
+        values.append(time.thread_time() - start)
+    return float(np.median(values))
+
+
+def member_breakdown(scene, vary, t_end, n_out, batch: int, samples: int = 30) -> dict:
+    """CPU time of each part of a member and of its batch, medians over members spread over the grid, the
+    parts interleaved member by member."""
+    from distributed.protocol import dumps, loads, to_serialize
+
+    from linknet_core.ensemble.members import StudyRuntime, StudySpec, quantities_of_interest
+    from linknet_core.ensemble.parameters import member_scene
+    from linknet_core.ensemble.store import StudyFile
+    from linknet_core.structure.topology import analyse
 
     plan = make_plan(scene, vary)
     times = np.linspace(0.0, t_end, n_out)
-    spec = StudySpec("bench", scene.to_dict(), plan.parameters, times, "rattle", dt, None, None, None,
-                     ("X", "U", "T"), 10)
+    spec = StudySpec("bench", scene.to_dict(), plan.parameters, times, "rattle", DT, None, None, None, OUTPUTS, 10)
     runtime = StudyRuntime(spec)
+    base = spec.scene
+    picks = np.linspace(0, plan.n_members - 1, samples).astype(int)
+    settings = [plan.setting(int(i)) for i in picks]
+    built = [ln.Scene.from_dict(member_scene(base, plan.parameters, s)) for s in settings]
+    pooled = built[0]
+    ln.simulate(pooled, t_end, dt=DT, n_out=n_out)  # its Simulators are now in the scene's pool
 
-    def bare(setting):
-        mass = np.array(scene.mass)
-        mass[10] = setting["M[11]"]
-        member = scene.with_parameters(mass=mass, gravity=[0.0, 0.0, setting["g[3]"]])
-        sim = ln.Simulator(member, method="rattle", dt=dt)
-        for k, t in enumerate(times):
-            if k:
-                sim.advance(t)
-            sim.outputs()
+    parts = {
+        "serial": lambda i: serial_member(scene, settings[i]["M[11]"], settings[i]["g[3]"], t_end, n_out),
+        "worker_member": lambda i: runtime.run(settings[i]),
+        "scene_build": lambda i: ln.Scene.from_dict(member_scene(base, plan.parameters, settings[i])),
+        # on a scene of its own, as every member's is: nothing is kept for it yet
+        "structure_analysis": lambda i: analyse(ln.Scene.from_dict(built[i].to_dict())),
+        "scene_copy": lambda i: ln.Scene.from_dict(built[i].to_dict()),
+        # the run's Simulator and its companion's (half the step), as simulate builds them for a new scene
+        "simulators": lambda i: ln.Simulator(ln.Scene.from_dict(built[i].to_dict()), method="rattle", dt=DT),
+        # the integration and its companion, no construction: simulate's pooled Simulators of one scene
+        "integration": lambda i: ln.simulate(pooled, t_end, dt=DT, n_out=n_out),
+    }
+    figures = {name: [] for name in parts}
+    for i in range(len(settings)):
+        for name, part in parts.items():
+            start = time.thread_time()
+            part(i)
+            figures[name].append(time.thread_time() - start)
+    out = {f"{name}_s": float(np.median(values[2:])) for name, values in figures.items()}
+    # analysis and Simulators were timed on a scene rebuilt from its dict: that part is the scene's, not theirs
+    copy = out.pop("scene_copy_s")
+    out["structure_analysis_s"] -= copy
+    out["simulators_s"] -= copy + out["structure_analysis_s"]
 
-    figures = {"bare": [], "bare_cpu": [], "study": [], "study_cpu": []}
-    for i in np.linspace(0, plan.n_members - 1, samples).astype(int):
-        setting = plan.setting(int(i))
-        for name, run in (("bare", bare), ("study", runtime.run)):
-            wall, cpu = time.perf_counter(), cpu_seconds()
-            run(setting)
-            figures[name].append(time.perf_counter() - wall)
-            figures[name + "_cpu"].append(cpu_seconds() - cpu)
-    return {f"{name}_member_s": float(np.median(values[2:])) for name, values in figures.items()}
+    result = ln.simulate(pooled, t_end, dt=DT, n_out=n_out)
+    blank = runtime.blank_batch(batch)
+
+    def bookkeeping(i):
+        member = {"X": result.X, "U": result.U, "T": result.T,
+                  **quantities_of_interest(result.T, result.X, 10), "error_estimate": 0.0, "error_goal": 0.0}
+        for name, value in member.items():
+            blank[name][i % batch] = value
+
+    out["worker_bookkeeping_s"] = median_cpu(bookkeeping, 200)
+    payload = {"first": 0, "count": batch, "outputs": runtime.blank_batch(batch), "error": [""] * batch,
+               "run_seconds": np.zeros(batch), "cpu_seconds": np.zeros(batch), "worker": "tcp://127.0.0.1:1"}
+    for name in payload["outputs"]:
+        payload["outputs"][name][...] = 1.0
+    frames = dumps({"data": to_serialize(payload)})
+    out["batch_bytes_member"] = sum(len(memoryview(f).cast("B")) for f in frames) / batch
+    out["serialise_s"] = median_cpu(lambda i: dumps({"data": to_serialize(payload)}), 50) / batch
+    out["deserialise_s"] = median_cpu(lambda i: loads(frames), 50) / batch
+    with tempfile.TemporaryDirectory() as folder:
+        sink = StudyFile(Path(folder) / "w.nc", spec, plan, scene)
+        rounds = plan.n_members // batch
+
+        def write(i):
+            sink.write({**payload, "first": (i % rounds) * batch})
+
+        out["client_write_s"] = median_cpu(write, max(rounds, 20)) / batch
+        sink.close({})
+    out["batch"] = batch
+    return out
 
 
-def timed_study(client, vary, t_end, dt, n_out, out, workers=None, outputs=("X", "U", "T")) -> dict:
-    """Wall time of a study from the call to its end and to its first finished member; with a given
-    client also the CPU time its workers and this process (client and, for a LocalCluster, the scheduler)
-    spent on it."""
+def cold_start(folder) -> dict:
+    """ln.ensemble(client=None, workers=1) from the call to its first finished member (the LocalCluster's start:
+    scheduler, a worker process and its imports; the study's plugin; the first member) and to its end."""
     first = {}
-
-    def worker_cpu():
-        if client is None:
-            return 0.0
-        return sum(client.run(lambda: sum(resource.getrusage(resource.RUSAGE_SELF)[:2])).values())
-
-    workers_before, client_before = worker_cpu(), cpu_seconds()
     start = time.perf_counter()
-
-    def note(progress):
-        first.setdefault("seconds", time.perf_counter() - start)
-
-    ds = ln.ensemble(SCENE, vary=vary, t_end=t_end, dt=dt, n_out=n_out, client=client, workers=workers, out=out,
-                     outputs=outputs, progress=note)
-    wall = time.perf_counter() - start
-    n = int(ds.sizes["member"])
-    figures = {"members": n, "ok": int((ds["status"].values == "ok").sum()), "wall_s": wall,
-               "members_per_s": n / wall, "tasks": int(ds.attrs["tasks"]),
-               "worker_member_s": float(np.nanmedian(ds["run_seconds"].values)),
-               "worker_cpu_member_s": (worker_cpu() - workers_before) / n,
-               "client_cpu_member_s": (cpu_seconds() - client_before) / n,
-               "first_result_s": first.get("seconds")}
+    ds = ln.ensemble(SCENE, vary={"M[11]": [0.1, 0.2]}, t_end=T_END, dt=DT, n_out=N_OUT, workers=1,
+                     out=Path(folder) / "cold.nc",
+                     progress=lambda progress: first.setdefault("s", time.perf_counter() - start))
+    figures = {"first_result_s": first["s"], "wall_s": time.perf_counter() - start,
+               "member_s": float(np.nanmax(ds["run_seconds"].values))}
     ds.close()
     return figures
 
 
-def local_cluster(workers: int):
-    from distributed import Client, LocalCluster
-
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
-    return cluster, Client(cluster)
-
-
-def import_seconds() -> float:
-    """What a cold worker imports to run a member (the study's module, linknet_core with its native library,
-    numpy, scipy, Dask's worker side), in a fresh interpreter: best of 3."""
-    import subprocess
-    import sys
-
-    code = ("import time; t = time.perf_counter(); import linknet_core.ensemble.members; "
-            "print(time.perf_counter() - t)")
-    return min(float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                                    cwd=str(ROOT)).stdout) for _ in range(3))
+def idle_costs(client, processes, seconds: float = 4.0) -> dict:
+    """CPU time per second of wall time of an idle cluster: this process (client and scheduler: heartbeats,
+    health checks) and the workers with their nannies."""
+    time.sleep(0.5)
+    with CpuMeter(processes) as meter:
+        time.sleep(seconds)
+    return {"client": (meter.main + meter.others) / meter.wall, "workers": meter.workers / meter.wall}
 
 
-def scheduler_seconds_per_task(client, n=2000) -> float:
-    """Wall time per empty task through submit, scheduling, run and gather (the floor of any task)."""
-    client.gather(client.map(int, range(50), pure=False))  # warm
-    start = time.perf_counter()
-    client.gather(client.map(int, range(n), pure=False))
-    return (time.perf_counter() - start) / n
+def trivial_study(client, processes, folder, members: int, idle: dict) -> dict:
+    """A study of ``members`` trivial members (one step, quantities of interest only), one per task: its CPU
+    time beyond the idle cluster's and, on the workers, beyond the members' own runs."""
+    with CpuMeter(processes) as meter:
+        ds = ln.ensemble(SCENE, vary={"M[11]": np.linspace(0.1, 0.5, members)}, t_end=DT, dt=DT, n_out=2, outputs=(),
+                         client=client, out=Path(folder) / "trivial.nc", members_per_task=1)
+    tasks, member_cpu = int(ds.attrs["tasks"]), float(ds.attrs["member_cpu_seconds"])
+    ds.close()
+    return {"tasks": tasks, "client": meter.main + meter.others - idle["client"] * meter.wall,
+            "workers": meter.workers - member_cpu - idle["workers"] * meter.wall, "wall": meter.wall}
 
 
-def client_write_seconds_per_member(scene, vary, n_out, members=1000, batch=16) -> float:
-    """The client's cost of streaming one member (X, U, T of chain_10) into the study file, without Dask."""
-    from linknet_core.ensemble.members import StudySpec
-    from linknet_core.ensemble.store import StudyFile
+def fixed_and_task_costs(client, processes, folder, idle: dict, repeats: int = 3) -> dict:
+    """What a study costs whatever its size (F: the file's layout, the plugin on every worker, the dataset opened
+    at the end) and per task (k: submit, scheduling, the result's fetch and release, the batch's writes), in the
+    client and scheduler and in the workers: from studies of 2 and of 200 trivial members, one per task
+    (F + 2 k and F + 200 k), medians of ``repeats``."""
+    small, large = [], []
+    for _ in range(repeats):
+        small.append(trivial_study(client, processes, folder, 2, idle))
+        large.append(trivial_study(client, processes, folder, 200, idle))
+    out = {}
+    for side in ("client", "workers"):
+        a = float(np.median([r[side] for r in small]))
+        b = float(np.median([r[side] for r in large]))
+        task = (b - a) / (large[0]["tasks"] - small[0]["tasks"])
+        out[f"{side}_task_s"], out[f"{side}_study_s"] = task, a - small[0]["tasks"] * task
+    out["wall_task_s"] = float(np.median([r["wall"] for r in large])) / large[0]["tasks"]
+    return out
 
-    plan = make_plan(scene, vary)
-    times = np.linspace(0, 2, n_out)
-    spec = StudySpec("bench", scene.to_dict(), plan.parameters, times, "rattle", 1e-3, None, None, None,
-                     ("X", "U", "T"), 10)
-    rng = np.random.default_rng(0)
-    outputs = {"X": rng.random((batch, n_out, scene.K, 3)), "U": rng.random((batch, n_out, scene.K, 3)),
-               "T": rng.random((batch, n_out, scene.L)), "max_tension": rng.random(batch),
-               "max_tension_link": np.ones(batch, int), "min_tension": rng.random(batch),
-               "tip_final": rng.random((batch, 3))}
-    with tempfile.TemporaryDirectory() as folder:
-        sink = StudyFile(Path(folder) / "w.nc", spec, plan, scene)
-        start = time.perf_counter()
-        for first in range(0, min(members, plan.n_members) - batch + 1, batch):
-            sink.write({"first": first, "count": batch, "outputs": outputs, "error": [""] * batch,
-                        "run_seconds": np.zeros(batch), "worker": "tcp://127.0.0.1:1"})
-        seconds = time.perf_counter() - start
-        sink.close({})
-    return seconds / (members // batch * batch)
+
+def per_member_costs(client, processes, folder, idle: dict, costs: dict, outputs, members: int = 2000,
+                     per_task: int = 200, repeats: int = 3) -> dict:
+    """CPU time per member beyond its own run, per study, per task and idle: on the workers (d: Dask sending
+    the member's results) and in the client and scheduler (c: receiving them, writing them into the file). From
+    a study of short members (t_end 0.2 s: one step per output interval, the same 201 outputs) in batches of
+    ``per_task``: the per-member part is a large share of its CPU time there, and the study is over before the
+    machine's load moves much. Medians of ``repeats``."""
+    vary = {"M[11]": np.linspace(0.05, 0.5, members)}
+    figures = []
+    for _ in range(repeats):
+        with CpuMeter(processes) as meter:
+            ds = ln.ensemble(SCENE, vary=vary, t_end=0.2, dt=DT, n_out=N_OUT, outputs=outputs, client=client,
+                             out=Path(folder) / "short.nc", members_per_task=per_task)
+        tasks, member_cpu = int(ds.attrs["tasks"]), float(ds.attrs["member_cpu_seconds"])
+        ds.close()
+        client_cpu = meter.main + meter.others - idle["client"] * meter.wall - costs["client_study_s"] - \
+            costs["client_task_s"] * tasks
+        workers_cpu = meter.workers - member_cpu - idle["workers"] * meter.wall - costs["workers_study_s"] - \
+            costs["workers_task_s"] * tasks
+        figures.append((client_cpu / members, workers_cpu / members))
+    c, d = np.median(figures, axis=0)
+    return {"client_member_s": float(c), "workers_member_s": float(d)}
+
+
+# ---- projection ----------------------------------------------------------------------------------------
+
+def heartbeats_per_second(workers: int) -> float:
+    from distributed.scheduler import heartbeat_interval
+
+    return workers / heartbeat_interval(workers)
+
+
+def projection(s: float, m: float, worker_member: float, client_member: float, costs: dict, idle: dict,
+               member_bytes: int) -> dict:
+    """Members per second on N single-threaded workers with a core each, the client and scheduler sharing one
+    more core (as a LocalCluster's do):
+
+        rate(N) = min(N (1 - i_w) / (m + d + k_w / B),  (1 - i_c(N)) / (c + k_c / B))
+
+    m: a member's own CPU time on a worker; d: Dask's on the worker per member (its results' sending);
+    c: the client's per member (receiving and writing its results); k_w, k_c: per task, on the worker and in
+    the client and scheduler; B(N): the members per task the study chooses on N threads (engine._BatchSizer,
+    without the last batches' shrinking); i_w: the share of a worker's core its idle costs take (heartbeats,
+    health checks), i_c(N) = a + b h(N) the client's and scheduler's, h(N) the heartbeats per second Dask asks
+    of N workers. Against N times the serial loop's rate 1 / s."""
+    from linknet_core.ensemble.engine import MAX_TASK_BYTES, MAX_TASKS_PER_SECOND, TASK_SECONDS
+
+    rows = {}
+    for n in PROJECTED_WORKERS:
+        batch = max(1, min(int(max(TASK_SECONDS, n / MAX_TASKS_PER_SECOND) / m), MAX_TASK_BYTES // member_bytes))
+        idle_client = idle["a"] + idle["b"] * heartbeats_per_second(n)
+        workers_rate = n * (1 - idle["worker"]) / (m + worker_member + costs["workers_task_s"] / batch)
+        client_rate = max(1 - idle_client, 0.0) / (client_member + costs["client_task_s"] / batch)
+        rate = min(workers_rate, client_rate)
+        rows[n] = {"members_per_task": batch, "idle_client": idle_client, "workers_rate": workers_rate,
+                   "client_rate": client_rate, "rate": rate, "ratio": rate * s / n,
+                   "bound_by": "workers" if workers_rate <= client_rate else "client and scheduler"}
+    return rows
+
+
+# ---- the run -------------------------------------------------------------------------------------------
+
+def quick(args) -> int:
+    """CI's smoke test: a short study on a 1-worker LocalCluster, every member bit-identical to its serial run,
+    and nothing on stderr from Dask."""
+    scene = ln.load_scene(SCENE)
+    vary = {"M[11]": np.linspace(0.05, 0.5, 4), "g[3]": np.linspace(-9.81, -1.0, 4)}
+    t_end, n_out = 0.2, 21
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", AccuracyWarning)
+        ds = ln.ensemble(SCENE, vary=vary, t_end=t_end, dt=DT, n_out=n_out, workers=1)
+        for m, (mass, gravity) in enumerate(member_settings(vary)):
+            reference = serial_member(scene, mass, gravity, t_end, n_out)
+            for name in OUTPUTS:
+                if not np.array_equal(ds[name].values[m], getattr(reference, name)):
+                    raise AssertionError(f"member {m}: {name} differs from its serial ln.simulate run")
+            if ds["error_estimate"].values[m] != reference.max_error_estimate:
+                raise AssertionError(f"member {m}: its error estimate differs from its serial run's")
+    print(f"bench_ensemble --quick: {ds.sizes['member']} members on 1 worker, each bit-identical to its serial "
+          "ln.simulate run")
+    return 0
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--quick", action="store_true", help="smoke mode: 40 members of 0.2 s")
+    p.add_argument("--quick", action="store_true", help="CI smoke test: correctness of a short study only")
+    p.add_argument("--workers", default="1,2", help="comma-separated LocalCluster sizes (default 1,2)")
     p.add_argument("--members", type=int, default=1000)
-    p.add_argument("--rounds", type=int, default=3, help="studies per cluster, alternating; the best counts")
+    p.add_argument("--rounds", type=int, default=5, help="rounds of serial loop and studies, interleaved")
+    p.add_argument("--members-per-task", type=int, default=None, help="fixed batch size (default: the study's)")
     p.add_argument("--out", default=str(ROOT / "build" / "bench_ensemble.json"))
     args = p.parse_args(argv)
-    members, t_end = (40, 0.2) if args.quick else (args.members, 2.0)
-    dt, n_out = 1e-3, 201
-    scene = ln.load_scene(SCENE)
-    vary = study_grid(members)
-    results: dict = {"scene": "chain_10", "t_end": t_end, "dt": dt, "n_out": n_out, "cores": os.cpu_count(),
-                     "load_before": os.getloadavg()[0]}
-
-    # 3 first: the cold start must meet no worker process left by another measurement
-    with tempfile.TemporaryDirectory() as folder:
-        out = Path(folder) / "cold.nc"
-        cold = timed_study(None, {"M[11]": [0.1, 0.2]}, t_end, dt, n_out, out, workers=1)
-        results["cold"] = cold
-
-    results.update(bare_and_study_member(scene, vary, t_end, dt, n_out))
-    bare = results["bare_member_s"]
-    # both clusters alive, studies alternating between them: the machine's load (other jobs on the shared
-    # cores) moves over minutes, so each cluster keeps its best of the rounds
-    started = time.perf_counter()
-    clusters = {1: local_cluster(1)}
-    results["cluster_start_1_s"] = time.perf_counter() - started  # scheduler, one worker process, its imports
-    clusters[2] = local_cluster(2)
-    results["worker_import_s"] = import_seconds()
+    if args.quick:
+        return quick(args)
     try:
+        sizes = sorted({int(w) for w in args.workers.split(",") if w.strip()})
+    except ValueError:
+        p.error(f"--workers must be comma-separated whole numbers, got {args.workers!r}")
+    if not sizes or min(sizes) < 1:
+        p.error("--workers needs at least one size, each at least 1")
+    warnings.simplefilter("ignore", AccuracyWarning)  # the serial loop's; a study warns once, on the client
+    scene = ln.load_scene(SCENE)
+    vary = study_grid(args.members)
+    results: dict = {"scene": "chain_10", "t_end": T_END, "dt": DT, "n_out": N_OUT,
+                     "members": len(member_settings(vary)), "cores": os.cpu_count(), "workers": sizes,
+                     "load_before": os.getloadavg()[0], "python": sys.version.split()[0]}
+    qoi_size = 2 if 2 in sizes else sizes[-1]
+    with tempfile.TemporaryDirectory() as folder:  # first: no worker process of another measurement around yet
+        results["cold"] = cold_start(folder)
+    clusters = {}
+    try:
+        for n in sizes:
+            clusters[n] = local_cluster(n)
+        processes = {n: cluster_processes(client) for n, (_, client) in clusters.items()}
+        rounds: dict[str, list] = {"serial": [], **{f"workers_{n}": [] for n in sizes}, "workers_qoi_only": []}
         with tempfile.TemporaryDirectory() as folder:
-            for workers, (_, client) in clusters.items():
-                timed_study(client, {"M[11]": [0.1, 0.2, 0.3, 0.4]}, 0.05, dt, 11, Path(folder) / "warm.nc")
-            for _ in range(1 if args.quick else args.rounds):
-                for name, workers, outputs in (("workers_1", 1, ("X", "U", "T")), ("workers_2", 2, ("X", "U", "T")),
-                                               ("workers_2_qoi_only", 2, ())):
-                    run = timed_study(clusters[workers][1], vary, t_end, dt, n_out, Path(folder) / "s.nc",
-                                      outputs=outputs)
-                    if name not in results or run["members_per_s"] > results[name]["members_per_s"]:
-                        results[name] = run
-        results["scheduler_task_s"] = scheduler_seconds_per_task(clusters[2][1], 500 if args.quick else 2000)
+            for n, (_, client) in clusters.items():  # warm: imports, the study's code on every worker
+                ln.ensemble(SCENE, vary={"M[11]": [0.1, 0.2, 0.3, 0.4]}, t_end=0.05, dt=DT, n_out=11, client=client,
+                            out=Path(folder) / "warm.nc").close()
+            for r in range(args.rounds):
+                rounds["serial"].append(serial_loop(scene, vary, T_END, N_OUT))
+                for n, (_, client) in clusters.items():
+                    rounds[f"workers_{n}"].append(timed_study(client, processes[n], vary, T_END, N_OUT,
+                                                              Path(folder) / "s.nc",
+                                                              members_per_task=args.members_per_task))
+                rounds["workers_qoi_only"].append(timed_study(clusters[qoi_size][1], processes[qoi_size], vary, T_END,
+                                                              N_OUT, Path(folder) / "q.nc", outputs=(),
+                                                              members_per_task=args.members_per_task))
+                print(f"  round {r + 1}/{args.rounds}: serial {rounds['serial'][-1]['members_per_s']:.1f}/s, "
+                      + ", ".join(f"{n} worker(s) {rounds[f'workers_{n}'][-1]['members_per_s']:.1f}/s" for n in sizes),
+                      file=sys.stderr)
+            results["idle"] = {n: idle_costs(client, processes[n]) for n, (_, client) in clusters.items()}
+            results["costs"] = fixed_and_task_costs(clusters[qoi_size][1], processes[qoi_size], folder,
+                                                    results["idle"][qoi_size])
+            results["member_costs"] = {
+                name: per_member_costs(clusters[qoi_size][1], processes[qoi_size], folder, results["idle"][qoi_size],
+                                       results["costs"], outputs)
+                for name, outputs in (("outputs", OUTPUTS), ("qoi_only", ()))}
     finally:
-        for cluster, client in clusters.values():
-            client.close()
-            cluster.close()
-    results["client_write_member_s"] = client_write_seconds_per_member(scene, vary, n_out,
-                                                                       members=160 if args.quick else 1000)
-    one, two = results["workers_1"], results["workers_2"]
-    results["scaling_efficiency"] = two["members_per_s"] / (2 * one["members_per_s"])
-    # what the CPU time allows, whatever else runs: one worker is bound by its own CPU per member; two workers
-    # on these 2 cores share them with this process (client and scheduler)
-    results["ceiling_1_per_s"] = 1 / one["worker_cpu_member_s"]
-    results["ceiling_2_per_s"] = min(2 / two["worker_cpu_member_s"],
-                                     2 / (two["worker_cpu_member_s"] + two["client_cpu_member_s"]))
-    results["overhead_member_s"] = one["wall_s"] / one["members"] - bare
-    # in CPU time, which other jobs on the machine do not inflate: what a member costs beyond its bare run
-    results["overhead_worker_cpu_member_s"] = one["worker_cpu_member_s"] - results["bare_cpu_member_s"]
-    results["bookkeeping_cpu_member_s"] = results["study_cpu_member_s"] - results["bare_cpu_member_s"]
+        # the last started first: each LocalCluster restores, when it closes, the log level it found when it
+        # started, so closing the first one first would let the others' shutdown messages through
+        for cluster, client in reversed(clusters.values()):
+            with quiet_shutdown(client):
+                client.close()
+                cluster.close()
+    results["rounds"] = rounds
+    typical = rounds[f"workers_{sizes[-1]}"][-1]
+    batch = max(1, round(typical["members"] / max(typical["tasks"], 1)))
+    results["breakdown"] = member_breakdown(scene, vary, T_END, N_OUT, batch=batch)
     results["load_after"] = os.getloadavg()[0]
-
-    if args.quick:  # correctness of what was timed: one member against its serial run
-        ds = ln.ensemble(SCENE, vary={"M[11]": [0.3]}, t_end=t_end, dt=dt, n_out=n_out, workers=1)
-        mass = np.array(scene.mass)
-        mass[10] = 0.3
-        ref = ln.simulate(scene.with_parameters(mass=mass), t_end, dt=dt, n_out=n_out)
-        assert np.max(np.abs(ds["X"].values[0] - ref.X)) < 1e-12, "member differs from its serial run"
-
-    ms = 1e3
-    print(f"chain_10, t_end {t_end:g} s, rattle dt {dt:g}, {n_out} outputs of X, U, T; "
-          f"{one['members']} members; {results['cores']} cores, load average {results['load_before']:.1f} -> "
-          f"{results['load_after']:.1f}")
-    print(f"  bare Simulator run per member, in process: {bare * ms:.2f} ms wall, "
-          f"{results['bare_cpu_member_s'] * ms:.2f} ms CPU; as a worker runs it (StudyRuntime.run): "
-          f"{results['study_member_s'] * ms:.2f} ms wall, {results['study_cpu_member_s'] * ms:.2f} ms CPU")
-    for name, label in (("workers_1", "1 worker "), ("workers_2", "2 workers"),
-                        ("workers_2_qoi_only", "2 workers, quantities of interest only (outputs=[])")):
-        r = results[name]
-        print(f"  {label}: {r['members_per_s']:6.1f} members/s ({r['wall_s']:.2f} s, {r['tasks']} tasks, "
-              f"first result {r['first_result_s']:.2f} s); per member: {r['worker_member_s'] * ms:.2f} ms wall on "
-              f"the worker, CPU {r['worker_cpu_member_s'] * ms:.2f} ms in workers + "
-              f"{r['client_cpu_member_s'] * ms:.2f} ms in client and scheduler")
-    ceiling_efficiency = results["ceiling_2_per_s"] / (2 * results["ceiling_1_per_s"])
-    print(f"  scaling efficiency 1 -> 2 workers: {results['scaling_efficiency'] * 100:.1f} % (CPU-time ceilings: "
-          f"{results['ceiling_1_per_s']:.0f}/s on 1 worker, {results['ceiling_2_per_s']:.0f}/s on 2 workers sharing "
-          f"these 2 cores with the client: {ceiling_efficiency * 100:.0f} %)")
-    print(f"  overhead per member over the bare run, CPU time (1 worker): "
-          f"{results['overhead_worker_cpu_member_s'] * ms:.2f} ms in the worker (the study's own part "
-          f"{results['bookkeeping_cpu_member_s'] * ms:.2f} ms, the rest Dask's), "
-          f"{one['client_cpu_member_s'] * ms:.2f} ms in client and scheduler; wall time (load-dependent): "
-          f"{results['overhead_member_s'] * ms:.2f} ms")
-    print(f"  cold start to first result (ln.ensemble with client=None, 1 worker): {cold['first_result_s']:.2f} s "
-          f"(of which the member itself {cold['worker_member_s'] * ms:.1f} ms)")
-    print(f"  of which: a LocalCluster with 1 worker starts in {results['cluster_start_1_s']:.2f} s; a fresh "
-          f"interpreter imports what a member needs in {results['worker_import_s']:.2f} s")
-    print(f"  scheduler round trip per empty task (2 workers): {results['scheduler_task_s'] * ms:.3f} ms")
-    print(f"  client, per member written to netCDF (X, U, T, 122 kB): {results['client_write_member_s'] * ms:.3f} ms")
+    report(results, sizes, qoi_size)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(results, indent=1) + "\n")
     print(f"wrote {args.out}")
     return 0
+
+
+def _median(rows, key):
+    return float(np.median([r[key] for r in rows]))
+
+
+def _idle_model(idle: dict) -> dict:
+    """i_c(N) = a + b h(N) from the idle client's CPU time per second at the cluster sizes measured, and a
+    worker's share i_w (their mean per worker)."""
+    sizes = sorted(idle)
+    hb = [heartbeats_per_second(n) for n in sizes]
+    values = [idle[n]["client"] for n in sizes]
+    if len(sizes) > 1 and hb[-1] > hb[0]:
+        b = max((values[-1] - values[0]) / (hb[-1] - hb[0]), 0.0)
+    else:
+        b = values[0] / hb[0]  # one size: all of it taken as per heartbeat (the pessimistic reading)
+    a = max(values[0] - b * hb[0], 0.0)
+    worker = float(np.mean([idle[n]["workers"] / n for n in sizes]))
+    return {"a": a, "b": b, "worker": worker}
+
+
+def report(results: dict, sizes: list[int], qoi_size: int) -> None:
+    ms = 1e3
+    rounds = results["rounds"]
+    serial = rounds["serial"]
+    s = _median(serial, "cpu_member_s")
+    names = [f"workers_{n}" for n in sizes] + ["workers_qoi_only"]
+    size_of = {**{f"workers_{n}": n for n in sizes}, "workers_qoi_only": qoi_size}
+    print(f"chain_10, {results['members']} members, t_end {T_END:g} s, rattle dt {DT:g}, {N_OUT} outputs of X, U, T; "
+          f"{results['cores']} cores, load average {results['load_before']:.1f} -> {results['load_after']:.1f}; "
+          f"{len(serial)} rounds, interleaved")
+    print()
+    print("| | members/s (median, range) | against serial, wall (median, range) | against serial, CPU time | tasks |")
+    print("|---|---|---|---|---|")
+    print(f"| serial loop (`ln.simulate` per member) | {_median(serial, 'members_per_s'):.1f} "
+          f"({min(r['members_per_s'] for r in serial):.1f}-{max(r['members_per_s'] for r in serial):.1f}) | 1.00 | "
+          f"1.00 ({s * ms:.2f} ms per member) | |")
+    results["ratios"] = {}
+    cores = results["cores"] or 1
+    for name in names:
+        rows, n = rounds[name], size_of[name]
+        ratios = [a["wall_s"] / a["members"] / (b["wall_s"] / b["members"]) for a, b in zip(serial, rows)]
+        worker = _median(rows, "workers_cpu_s") / rows[0]["members"]
+        client = float(np.median([r["client_main_cpu_s"] + r["client_other_cpu_s"] for r in rows])) / rows[0]["members"]
+        # each worker and the client a core of their own, or all of them sharing the cores there are
+        cpu_ratio = min(n / worker, 1 / client, cores / (worker + client)) * s
+        label = f"{n} worker(s)" if name != "workers_qoi_only" else f"{n} workers, quantities of interest only"
+        results["ratios"][name] = {"wall_median": float(np.median(ratios)), "wall_min": min(ratios),
+                                   "wall_max": max(ratios), "cpu": cpu_ratio}
+        print(f"| {label} | {_median(rows, 'members_per_s'):.1f} ({min(r['members_per_s'] for r in rows):.1f}-"
+              f"{max(r['members_per_s'] for r in rows):.1f}) | {np.median(ratios):.2f} ({min(ratios):.2f}-"
+              f"{max(ratios):.2f}) | {cpu_ratio:.2f} | {_median(rows, 'tasks'):.0f} |")
+    idle, costs = results["idle"], results["costs"]
+    print()
+    print("CPU time per member in the studies, by cause (ms; medians over rounds; idle, per task and per study from the "
+          "separate measurements below, per member the rest):")
+    print("| | workers, all | members' runs | Dask per member | per task | idle | per study | client and scheduler, "
+          "all | per member | of it file writes | per task | idle | per study |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    results["decomposed"] = {}
+    for name in names:
+        parts = [decompose(r, idle[size_of[name]], costs) for r in rounds[name]]
+        med = {key: float(np.median([p[key] for p in parts])) for key in parts[0]}
+        results["decomposed"][name] = med
+        print(f"| {name} | " + " | ".join(f"{med[key] * ms:.3f}" for key in (
+            "workers_total", "member", "workers_member", "workers_task", "workers_idle", "workers_study",
+            "client_total", "client_member", "client_write", "client_task", "client_idle", "client_study")) + " |")
+    b = results["breakdown"]
+    print()
+    print("Per-member CPU time by part, in one process (ms, medians over 28 members, the parts interleaved):")
+    print("| part | ms |")
+    print("|---|---|")
+    rows = [("serial loop's member (`with_parameters` + `ln.simulate`)", b["serial_s"]),
+            ("a worker's member (`StudyRuntime.run`: scene from its values, `ln.simulate`, quantities of interest)",
+             b["worker_member_s"]),
+            ("  scene from the member's values (`member_scene` + `Scene.from_dict`)", b["scene_build_s"]),
+            ("  structure analysis of the new scene (`analyse`)", b["structure_analysis_s"]),
+            ("  Simulator construction, run and companion, beyond the analysis", b["simulators_s"]),
+            ("  integration with its companion, and the error estimate (pooled Simulators)", b["integration_s"]),
+            ("worker bookkeeping (quantities of interest, copy into the batch)", b["worker_bookkeeping_s"]),
+            (f"serialise a batch's results (Dask's protocol; {b['batch']} members, "
+             f"{b['batch_bytes_member'] / 1e3:.0f} kB each)", b["serialise_s"]),
+            ("deserialise them on the client", b["deserialise_s"]),
+            (f"client's write into the study file (batches of {b['batch']})", b["client_write_s"])]
+    for label, seconds in rows:
+        print(f"| {label} | {seconds * ms:.3f} |")
+    print()
+    print(f"Per task (studies of trivial members, one per task, {qoi_size} workers): k_c = "
+          f"{costs['client_task_s'] * ms:.2f} ms CPU in client and scheduler, k_w = {costs['workers_task_s'] * ms:.2f} "
+          f"ms in the workers ({costs['wall_task_s'] * ms:.2f} ms wall per task). Per study: "
+          f"{costs['client_study_s'] * ms:.0f} ms in client and scheduler, {costs['workers_study_s'] * ms:.0f} ms in "
+          "the workers. Idle cluster, CPU time per second: " + ", ".join(
+              f"{n} worker(s): {v['client'] * ms:.1f} ms client and scheduler, {v['workers'] * ms:.1f} ms workers"
+              for n, v in idle.items()))
+    cold = results["cold"]
+    print(f"Cold start (ln.ensemble with client=None, 1 worker, 2 members): first result after "
+          f"{cold['first_result_s']:.2f} s (the member itself {cold['member_s'] * ms:.1f} ms on its worker), "
+          f"{cold['wall_s']:.2f} s to the end (the LocalCluster closed).")
+    model = _idle_model(idle)
+    results["idle_model"] = model
+    # a member's own CPU time and the serial loop's, both from the in-process breakdown: one measurement, without
+    # the contention of the studies' processes (which inflates a member's CPU time on this machine's 2 cores)
+    m, s_alone = b["worker_member_s"], b["serial_s"]
+    results["projection"] = {}
+    print()
+    print("Per member beyond its run (studies of 2000 members of 0.2 s, the same outputs, 200 per task; per study, "
+          "per task and idle taken off): " + "; ".join(
+              f"{label}: d = {v['workers_member_s'] * ms:.3f} ms on the workers, c = {v['client_member_s'] * ms:.3f} ms in "
+              "client and scheduler" for label, v in (("X, U, T", results["member_costs"]["outputs"]),
+                                                      ("quantities of interest only", results["member_costs"]["qoi_only"]))))
+    for label, name, outputs in (("X, U, T streamed", "outputs", OUTPUTS),
+                                 ("quantities of interest only", "qoi_only", ())):
+        per_member = results["member_costs"][name]
+        d, c = max(per_member["workers_member_s"], 0.0), max(per_member["client_member_s"], 0.0)
+        member_bytes = 8 * N_OUT * sum({"X": 33, "U": 33, "T": 10}[o] for o in outputs) + 100
+        rows_p = projection(s_alone, m, d, c, costs, model, member_bytes)
+        results["projection"][name] = rows_p
+        print()
+        print(f"Projection, {label}: s = {s_alone * ms:.3f} ms, m = {m * ms:.3f} ms, d = {d * ms:.3f} ms, "
+              f"c = {c * ms:.3f} ms, k_w = {costs['workers_task_s'] * ms:.2f} ms, k_c = "
+              f"{costs['client_task_s'] * ms:.2f} ms, i_w = {model['worker'] * 100:.1f} %, i_c(N) = "
+              f"{model['a'] * 100:.2f} % + {model['b'] * 100:.3f} % per heartbeat per second")
+        print("| workers | members per task | i_c | workers' rate | client's rate | members/s | against N x serial "
+              "| bound by |")
+        print("|---|---|---|---|---|---|---|---|")
+        for n, row in rows_p.items():
+            print(f"| {n} | {row['members_per_task']} | {row['idle_client'] * 100:.1f} % | {row['workers_rate']:.0f}/s | "
+                  f"{row['client_rate']:.0f}/s | {row['rate']:.0f} | {row['ratio']:.2f} | {row['bound_by']} |")
 
 
 if __name__ == "__main__":
