@@ -7,6 +7,7 @@
     python build_fmu.py --component spring_damper -o spring_damper.fmu
     python build_fmu.py --component cart -o cart.fmu
     python build_fmu.py models/chain_10.json --native -o chain_10.fmu   # no Python on the host (C core inside)
+    python build_fmu.py models/chain_10.json --native --platforms host  # only this machine's binary (faster)
 
 pythonfmu 0.7.0 writes the FMU; this script then
   1. post-processes modelDescription.xml: UnitDefinitions, TypeDefinitions, unit/declaredType
@@ -282,7 +283,7 @@ def check_build_options(integrator, step, tolerance, out, stop_time=None, comm_s
 
 def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=None, inputs=None,
                     outputs=None, stop_time=None, comm_step=None, link_python=True, quiet=False,
-                    native=False, error_estimate=None) -> Path:
+                    native=False, error_estimate=None, platforms=None) -> Path:
     """The FMU of a scene file. integrator None: the scene file's "fmu" section's, else the library's default
     (linknet_core.accuracy.default_method: dop853 at rtol `tolerance`, default 1e-8, or RATTLE when a step is given);
     error_estimate None: the section's, else True (the companion run of the output error_estimate)."""
@@ -355,7 +356,8 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
         experiment = dict(startTime=0.0, stopTime=float(stop_time or fmu_opts.get("stop_time", 2.0)),
                           stepSize=float(comm_step or fmu_opts.get("comm_step", 1e-2)), tolerance=cfg["tolerance"])
         try:
-            return build_native_fmu(scene, cfg, layout, out, experiment, postprocess_model_description, quiet=quiet)
+            return build_native_fmu(scene, cfg, layout, out, experiment, postprocess_model_description, quiet=quiet,
+                                    platforms=platforms)
         except NativeBuildError as e:
             raise SystemExit(f"build_fmu: {e}")
 
@@ -451,15 +453,21 @@ def main(argv=None):
     p.add_argument("--comm-step", type=positive_number, help="DefaultExperiment stepSize (default 0.01)")
     p.add_argument("--native", action="store_true",
                    help="build the self-contained FMU on the native C core (no Python on the host; C sources inside)")
+    p.add_argument("--platforms", metavar="LIST",
+                   help="with --native: the binaries to build, comma-separated: linux64, win64, darwin64, aarch64-linux, "
+                   "host (this machine's only) or all (default: $LINKNET_FMU_PLATFORMS, else all)")
     p.add_argument("--no-link-libpython", action="store_true",
                    help="leave the binary unlinked (C hosts must then preload libpython)")
     _numbers_may_be_negative(p)
     a = p.parse_args(argv)
+    if a.platforms is not None and not a.native:
+        p.error("--platforms chooses the binaries of the native FMU: give --native too")
     if a.component:
         build_component_fmu(a.component, a.output, link_python=not a.no_link_libpython)
     elif a.scene:
         build_scene_fmu(a.scene, a.output, a.integrator, a.step, a.tolerance, a.inputs, a.outputs,
                         a.stop_time, a.comm_step, link_python=not a.no_link_libpython, native=a.native,
+                        platforms=a.platforms,
                         error_estimate=False if a.no_error_estimate else None)
     else:
         p.error("give a scene file or --component")

@@ -2,6 +2,7 @@
 scene_builders.py, the FMU harness, build_fmu.py and the benchmarks), and fixtures for the shipped scenes."""
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -12,6 +13,9 @@ ROOT = TESTS.parent
 for folder in (ROOT, TESTS):
     if str(folder) not in sys.path:
         sys.path.insert(0, str(folder))
+# the suite's native FMUs carry this machine's binary only (build_fmu.py --native --platforms host), built faster;
+# tests/fmu_native/test_native_platforms.py builds and checks every platform's
+os.environ.setdefault("LINKNET_FMU_PLATFORMS", "host")
 
 import linknet_core as ln  # noqa: E402
 

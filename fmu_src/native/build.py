@@ -1,20 +1,24 @@
 """Build the self-contained FMI 2.0 Co-Simulation FMU of a scene on the native C core (`build_fmu.py --native`).
 
-The FMU holds no Python. Its binary is compiled here with the system C compiler from:
+The FMU holds no Python. Its binaries (PLATFORMS: linux64, win64, darwin64, aarch64-linux; --platforms chooses) are
+compiled here with Zig's C compiler (PyPI's ziglang) from sources/, as a tool would compile them:
 
-* the native core, linknet_core/native/src (copied as it is: every .c file that no other .c file includes is
-  compiled, so the DIM-generic stages come in through dim2.c/dim3.c and AMD through its amd_l*.c wrappers);
+* the native core, linknet_core/native/src, copied as it is into sources/linknet/ (every .c file that no other .c
+  file includes is a translation unit, so the DIM-generic stages come in through dim2.c/dim3.c and AMD through its
+  amd_l*.c wrappers);
 * the FMI glue, fmu_src/native/fmi2Functions.c (scene-independent, FMI only) and linknet_model.c (the core as
-  the glue's model, fmu_model.h), with fmi2_api.h, fmu_model.h, lnfmu_scene.h;
+  the glue's model, fmu_model.h), with fmi2_api.h, fmu_model.h, lnfmu_scene.h, beside the core;
 * one generated file, linknet_scene.c: the scene as constant data. The ln_model and every integrator's
   ln_method are read field by field from the structs linknet_core's own Simulator hands the core for this
   scene (the ctypes mirrors in linknet_core.native), so the FMU at its default parameters runs the library's
   arithmetic bit for bit. Plus what a changed mass, length or gravity needs, the initial state and internals,
-  and the variable table of fmu_src/linknet_fmu/layout.py (the same Layout the pythonfmu FMU uses).
+  and the variable table of fmu_src/linknet_fmu/layout.py (the same Layout the pythonfmu FMU uses);
+* at the top of sources/, one two-line file per translation unit (linknet_fmu_unit.h, then the unit: only the fmi2
+  functions leave the binary, however it is built) and a CMakeLists.txt.
 
-All of these go into the FMU's sources/ and are listed in <SourceFiles>, so a tool on another platform can build
-the binary itself. The modelDescription.xml goes through build_fmu.postprocess_model_description, as the
-pythonfmu FMU's does: the two agree on variables, units, types, DefaultExperiment and ModelStructure.
+The top-level .c files are the <SourceFiles>, so `cc -shared -fPIC sources/*.c -lm` builds the binary on any
+platform. The modelDescription.xml goes through build_fmu.postprocess_model_description, as the pythonfmu FMU's
+does: the two agree on variables, units, types, DefaultExperiment and ModelStructure.
 """
 from __future__ import annotations
 
@@ -22,18 +26,21 @@ import ctypes
 import datetime
 import hashlib
 import importlib
+import importlib.util
 import inspect
 import math
 import os
 import platform
 import re
 import shutil
+import struct
 import subprocess
 import sys
 import tempfile
 import uuid
 import xml.etree.ElementTree as ET
 import zipfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -455,19 +462,76 @@ def start_values(scene, cfg, layout) -> dict:
     return out
 
 
-# ---------------------------------------------------------------------------- compile and pack
-def platform_folder() -> str | None:
-    """FMI 2.0 binaries/ folder of this machine, where a binary is built and tested (Linux x86-64 only)."""
-    if sys.platform.startswith("linux") and platform.machine() in ("x86_64", "AMD64"):
-        return "linux64"
+# ---------------------------------------------------------------------------- platforms and the compiler
+@dataclass(frozen=True)
+class Platform:
+    """A folder of binaries/ and how its binary is made: one Zig target, or two slices of one universal Mach-O."""
+
+    folder: str
+    targets: tuple[str, ...]
+    suffix: str
+    runs_on: str
+
+
+# The FMI 2.0 folders (win64, linux64, darwin64) and, for Linux on ARM, the FMI 3.0 platform tuple that FMI 2.0.4
+# prescribes for platforms 2.0 does not name (see fmu_src/native/README.md). Versions are minimums: glibc 2.17 is
+# the manylinux2014 baseline (RHEL/CentOS 7, Ubuntu 14.04, Debian 8), 2.17 also the first glibc for aarch64; macOS
+# 10.13 for Intel and 11.0, the first for Apple silicon.
+PLATFORMS = {
+    "linux64": Platform("linux64", ("x86_64-linux-gnu.2.17",), ".so", "Linux x86-64 with glibc 2.17 or newer"),
+    "win64": Platform("win64", ("x86_64-windows-gnu",), ".dll",
+                      "Windows x86-64 with the Universal C Runtime (Windows 10 and later, 7 and 8.1 updated)"),
+    "darwin64": Platform("darwin64", ("x86_64-macos.10.13", "aarch64-macos.11.0"), ".dylib",
+                         "macOS 10.13 or newer on Intel, 11.0 or newer on Apple silicon (one universal binary)"),
+    "aarch64-linux": Platform("aarch64-linux", ("aarch64-linux-gnu.2.17",), ".so",
+                              "Linux on 64-bit ARM with glibc 2.17 or newer"),
+}
+PLATFORMS_VARIABLE = "LINKNET_FMU_PLATFORMS"  # the default of --platforms where it is set (e.g. host, for speed)
+
+
+def host_platform() -> str | None:
+    """The binaries/ folder of this machine, None where no platform of PLATFORMS runs here."""
+    machine = platform.machine().lower()
+    if sys.platform.startswith("linux"):
+        return {"x86_64": "linux64", "amd64": "linux64", "aarch64": "aarch64-linux", "arm64": "aarch64-linux"}.get(machine)
+    if sys.platform == "win32":
+        return "win64" if machine in ("amd64", "x86_64") else None
+    if sys.platform == "darwin":
+        return "darwin64"
     return None
 
 
-def compiler() -> str:
-    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
-    if not cc:
-        raise NativeBuildError("no C compiler found (set CC, or install gcc or clang)")
-    return cc
+def platforms_from(spec) -> tuple[str, ...]:
+    """The folders a --platforms value names: "all", "host", or a comma-separated list of PLATFORMS' keys (None:
+    $LINKNET_FMU_PLATFORMS, else all). Refuses an unknown name, naming it and the known ones."""
+    if spec is None:
+        spec = os.environ.get(PLATFORMS_VARIABLE) or "all"
+    items = [s.strip() for s in (spec.split(",") if isinstance(spec, str) else spec) if s.strip()]
+    if not items:
+        raise NativeBuildError(f"platforms {spec!r} names none (give all, host, or some of {', '.join(PLATFORMS)})")
+    chosen = []
+    for item in items:
+        if item == "all":
+            names = list(PLATFORMS)
+        elif item == "host":
+            if host_platform() is None:
+                raise NativeBuildError(f"platforms: this machine ({sys.platform}, {platform.machine()}) is none of "
+                                       f"{', '.join(PLATFORMS)}: name the platforms to build")
+            names = [host_platform()]
+        elif item in PLATFORMS:
+            names = [item]
+        else:
+            raise NativeBuildError(f"platforms: unknown platform {item!r} (known: all, host, {', '.join(PLATFORMS)})")
+        chosen += [n for n in names if n not in chosen]
+    return tuple(chosen)
+
+
+def zig_cc() -> list[str]:
+    """Zig's C compiler (PyPI's ziglang): clang with the C libraries of every target, glibc 2.17 included."""
+    if importlib.util.find_spec("ziglang") is None:
+        raise NativeBuildError("the native FMU's binaries are compiled with Zig's C compiler, which is not installed: "
+                               "pip install ziglang")
+    return [sys.executable, "-m", "ziglang", "cc"]
 
 
 def _cache_dir() -> Path:
@@ -476,72 +540,179 @@ def _cache_dir() -> Path:
     return Path(root)
 
 
-def _compile_object(cmd: list[str]) -> None:
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+def _run_compiler(cmd: list[str], cwd: Path) -> None:
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd)
     if proc.returncode != 0:
         raise NativeBuildError(f"compiling the native FMU failed ({' '.join(cmd)}):\n{proc.stderr[-4000:]}")
     if proc.stderr.strip():
         print(proc.stderr.strip(), file=sys.stderr)
 
 
-def compile_binary(sources_dir: Path, units: list[str], out: Path, cc: str | None = None,
-                   flags: list[str] | None = None, cache: bool = True) -> None:
-    """The FMU's shared library from its sources/ alone; only the fmi2 functions are exported (a GNU linker
-    version script).
+def _link_options(target: str, ident: str) -> list[str]:
+    if "-linux-" in target:  # -s: no symbol table beyond the dynamic one
+        return ["-Wl,--no-undefined", f"-Wl,-soname,{ident}.so", "-s", "-lm"]
+    if "-macos" in target:
+        return [f"-Wl,-install_name,@rpath/{ident}.dylib", "-s"]
+    return ["-s"]  # windows: only the dllexport'ed fmi2 functions are exported
 
-    The objects of everything but the scene's data are the same for every scene of one checkout: they are
-    kept in a per-user cache (LINKNET_FMU_CACHE, default ~/.cache/linknet/native-fmu), keyed by the compiler,
-    the flags and the content of every source file, so that building a second scene compiles one file."""
+
+def compile_binaries(sources_dir: Path, units: list[str], ident: str, folders: tuple[str, ...], out_dir: Path,
+                     cache: bool = True) -> dict[str, Path]:
+    """binaries/<folder>/<ident><suffix> of every platform in ``folders``, each from the FMU's sources/ alone, as a
+    tool compiles them (the <SourceFiles>, sources/ the only include folder); returns folder -> binary.
+
+    The objects of everything but the scene's data are the same for every scene of one checkout: they are kept in a
+    per-user cache (LINKNET_FMU_CACHE, default ~/.cache/linknet/native-fmu), keyed by the compiler, the target, the
+    flags and the content of every source file, so that building a further scene compiles one file per target."""
     from concurrent.futures import ThreadPoolExecutor
 
-    cc = cc or compiler()
-    flags = (CFLAGS + WARNINGS if flags is None else list(flags)) + ["-fPIC", "-fvisibility=hidden",
-                                                                    "-I", str(sources_dir)]
-    shared = [u for u in units if u != SCENE_FILE]
-    h = hashlib.sha256()
-    version = subprocess.run([cc, "--version"], capture_output=True, text=True).stdout
-    h.update(("\0".join([shutil.which(cc) or cc, version] + flags[:-2]) + "\0").encode())
+    cc = zig_cc()
+    flags = CFLAGS + WARNINGS + ["-fPIC", "-I", str(sources_dir)]
+    version = subprocess.run(cc[:-1] + ["version"], capture_output=True, text=True).stdout.strip()
+    content = hashlib.sha256()
     for p in sorted(sources_dir.rglob("*")):
         if p.is_file() and p.name != SCENE_FILE:
-            h.update(p.relative_to(sources_dir).as_posix().encode() + b"\0" + p.read_bytes())
-    key = h.hexdigest()[:32]
+            content.update(p.relative_to(sources_dir).as_posix().encode() + b"\0" + p.read_bytes())
+    shared = [u for u in units if u != SCENE_FILE]
+    targets = [t for folder in folders for t in PLATFORMS[folder].targets]
     with tempfile.TemporaryDirectory(prefix="linknet_objects_") as tmp:
         tmp = Path(tmp)
-        store = _cache_dir() / key if cache else tmp / "objects"
-        objects = {u: store / (u.replace("/", "__") + ".o") for u in shared}
-        missing = [u for u in shared if not objects[u].exists()]
-        if missing:
-            work = tmp / "new"
-            work.mkdir()
-            jobs = [[cc] + flags + ["-c", str(sources_dir / u), "-o", str(work / objects[u].name)] for u in missing]
-            with ThreadPoolExecutor(max_workers=os.cpu_count() or 2) as pool:
-                list(pool.map(_compile_object, jobs))
+        objects, jobs, fresh = {}, [], []
+        for target in targets:
+            key = hashlib.sha256("\0".join(["zig cc", version, target] + flags[:-2]).encode()
+                                 + content.digest()).hexdigest()[:32]
+            store = _cache_dir() / key if cache else tmp / "objects" / target
+            work = tmp / "new" / target
+            work.mkdir(parents=True)
+            for u in units:
+                name = u.replace("/", "__") + ".o"
+                cached = u != SCENE_FILE
+                objects[target, u] = (store if cached else work) / name
+                if not objects[target, u].exists():
+                    jobs.append(([*cc, "-target", target, *flags, "-c", str(sources_dir / u), "-o", str(work / name)],
+                                 work))
+                    if cached:
+                        fresh.append((work / name, store))
+        with ThreadPoolExecutor(max_workers=os.cpu_count() or 2) as pool:
+            list(pool.map(lambda job: _run_compiler(*job), jobs))
+        for made, store in fresh:  # rename is atomic: a concurrent build never sees half an object
             store.mkdir(parents=True, exist_ok=True)
-            for u in missing:  # rename is atomic: a concurrent build never sees half an object
-                os.replace(work / objects[u].name, objects[u])
-        scene_object = tmp / "scene.o"
-        if SCENE_FILE in units:
-            _compile_object([cc] + flags + ["-c", str(sources_dir / SCENE_FILE), "-o", str(scene_object)])
-        # only the FMI functions leave the binary: the core marks its own interface visible (LN_API), and an
-        # exported ln_* could bind to another copy of the core loaded globally in the host's process
-        exports = tmp / "exports.map"
-        exports.write_text("{\n  global: fmi2*;\n  local: *;\n};\n")
-        link = ([cc, "-shared", "-o", str(out)] + [str(objects[u]) for u in shared]
-                + ([str(scene_object)] if SCENE_FILE in units else [])
-                + ["-Wl,--no-undefined", f"-Wl,--version-script={exports}", "-s", "-lm"])
-        _compile_object(link)
+            os.replace(made, store / made.name)
+
+        def link(target: str) -> Path:
+            folder = next(f for f in folders if target in PLATFORMS[f].targets)
+            binary = tmp / "linked" / target / f"{ident}{PLATFORMS[folder].suffix}"
+            binary.parent.mkdir(parents=True)  # its own folder: the Windows link leaves an import library beside it
+            _run_compiler([*cc, "-target", target, "-shared", "-o", str(binary)]
+                          + [str(objects[target, u]) for u in shared + [SCENE_FILE] if (target, u) in objects]
+                          + _link_options(target, ident), binary.parent)
+            return binary
+
+        with ThreadPoolExecutor(max_workers=os.cpu_count() or 2) as pool:
+            linked = dict(zip(targets, pool.map(link, targets)))
+        built = {}
+        for folder in folders:
+            spec = PLATFORMS[folder]
+            binary = out_dir / folder / f"{ident}{spec.suffix}"
+            binary.parent.mkdir(parents=True, exist_ok=True)
+            slices = [linked[t].read_bytes() for t in spec.targets]
+            binary.write_bytes(slices[0] if len(slices) == 1 else universal_mach_o(slices))
+            built[folder] = binary
+    return built
 
 
-def stage_sources(scene_c: str, dest: Path) -> list[str]:
-    """sources/: the core's src tree as it is, the glue, the generated scene; returns the files to compile."""
-    src = core_source_dir()
-    shutil.copytree(src, dest, ignore=shutil.ignore_patterns("__pycache__", "*.o", "*.so"))
+# ---------------------------------------------------------------------------- the universal Mach-O
+MACH_O_64 = 0xFEEDFACF  # a thin 64-bit Mach-O, little-endian on x86-64 and arm64
+FAT_MAGIC = 0xCAFEBABE  # the universal header: big-endian, 32-bit offsets
+FAT_ALIGN = 14  # each slice at a 2^14 (16 KiB, arm64's page) boundary, as lipo places arm64
+
+
+def universal_mach_o(slices: list[bytes]) -> bytes:
+    """One universal ("fat") Mach-O holding the thin ones, as lipo -create writes it: a fat_header, one fat_arch per
+    slice (CPU type and subtype read from the slice's own header), each slice at a page boundary after them."""
+    page = 1 << FAT_ALIGN
+    offset = -(-(8 + 20 * len(slices)) // page) * page
+    arches, placed = [], []
+    for data in slices:
+        magic, cputype, cpusubtype = struct.unpack_from("<Iii", data)
+        if magic != MACH_O_64:
+            raise NativeBuildError("a macOS slice is not a 64-bit Mach-O: the universal binary cannot be made")
+        arches.append(struct.pack(">iiIII", cputype, cpusubtype, offset, len(data), FAT_ALIGN))
+        placed.append((offset, data))
+        offset = -(-(offset + len(data)) // page) * page
+    fat = bytearray(placed[-1][0] + len(placed[-1][1]))
+    head = struct.pack(">II", FAT_MAGIC, len(slices)) + b"".join(arches)
+    fat[:len(head)] = head
+    for at, data in placed:
+        fat[at:at + len(data)] = data
+    return bytes(fat)
+
+
+# ---------------------------------------------------------------------------- sources/
+CORE_FOLDER = "linknet"  # sources/linknet/: the core's tree as it is, the FMI glue and the scene's data
+UNIT_HEADER = "linknet_fmu_unit.h"  # included first by every translation unit (fmu_src/native/linknet_fmu_unit.h)
+
+
+def _system_headers(text: str) -> set[str]:
+    return set(re.findall(r"^\s*#\s*include\s*<([^>]+)>", text, re.M))
+
+
+def stage_sources(scene_c: str, dest: Path, ident: str) -> list[str]:
+    """sources/: the core's src tree as it is, the glue and the generated scene in sources/linknet/; at the top, one
+    two-line wrapper per translation unit (UNIT_HEADER, then the unit), the unit header and a CMakeLists.txt.
+    Returns the files to compile, the wrappers: sources/*.c."""
+    inner = dest / CORE_FOLDER
+    shutil.copytree(core_source_dir(), inner, ignore=shutil.ignore_patterns("__pycache__", "*.o", "*.so"))
     for name in GLUE_FILES:
-        if (dest / name).exists():
+        if (inner / name).exists():
             raise NativeBuildError(f"the core's sources now have a file named {name}, as the FMU glue does: rename one")
-        shutil.copy2(HERE / name, dest / name)
-    (dest / SCENE_FILE).write_text(scene_c)
-    return translation_units(dest)
+        shutil.copy2(HERE / name, inner / name)
+    (inner / SCENE_FILE).write_text(scene_c)
+    shutil.copy2(HERE / UNIT_HEADER, dest / UNIT_HEADER)
+    allowed = _system_headers((HERE / UNIT_HEADER).read_text())
+    for p in sorted(inner.rglob("*.[ch]")):
+        extra = _system_headers(p.read_text(errors="replace")) - allowed
+        if extra:
+            raise NativeBuildError(f"{p.relative_to(inner)} includes <{'>, <'.join(sorted(extra))}>, which "
+                                   f"fmu_src/native/{UNIT_HEADER} does not declare before hiding the FMU's symbols: "
+                                   "add it there")
+    units = []
+    for unit in translation_units(inner):
+        name = Path(unit).name
+        if name in units:
+            raise NativeBuildError(f"two translation units of the FMU are named {name}: rename one")
+        units.append(name)
+        (dest / name).write_text(f'/* {CORE_FOLDER}/{unit}, compiled after {UNIT_HEADER} (see there). */\n'
+                                 f'#include "{UNIT_HEADER}"\n#include "{CORE_FOLDER}/{unit}"\n')
+    units.sort()
+    (dest / "CMakeLists.txt").write_text(cmake_lists(ident, units))
+    return units
+
+
+def cmake_lists(ident: str, units: list[str]) -> str:
+    """sources/CMakeLists.txt: the shared library from the <SourceFiles> with the arithmetic of the shipped binaries."""
+    files = "\n".join(f"  {u}" for u in units)
+    return f"""# The FMU's binary from its sources, as the binaries/ in this FMU were built (fmu_src/native/build.py):
+#   cmake -S sources -B build -DCMAKE_BUILD_TYPE=Release && cmake --build build --config Release
+# gives build/{ident}.so (.dll, .dylib), for binaries/<platform>/ of the unzipped FMU.
+# cc -shared -fPIC -std=c99 -O2 -ffp-contract=off sources/*.c -lm -o {ident}.so does the same by hand.
+cmake_minimum_required(VERSION 3.10)
+project({ident} C)
+if(NOT CMAKE_BUILD_TYPE AND NOT CMAKE_CONFIGURATION_TYPES)
+  set(CMAKE_BUILD_TYPE Release)
+endif()
+add_library({ident} SHARED
+{files}
+)
+set_target_properties({ident} PROPERTIES PREFIX "" C_STANDARD 99 C_STANDARD_REQUIRED ON C_EXTENSIONS OFF)
+if(CMAKE_C_COMPILER_ID MATCHES "GNU|Clang")
+  # no fused multiply-add (a*b+c rounded twice, as on every platform) and no errno from libm: the shipped arithmetic
+  target_compile_options({ident} PRIVATE -ffp-contract=off -fno-math-errno)
+endif()
+if(UNIX AND NOT APPLE)
+  target_link_libraries({ident} PRIVATE m)
+endif()
+"""
 
 
 def fingerprint(sources_dir: Path, scene_c: str) -> bytes:
@@ -556,11 +727,15 @@ def fingerprint(sources_dir: Path, scene_c: str) -> bytes:
 
 
 def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, postprocess, quiet: bool = False,
-                     cc: str | None = None) -> Path:
+                     platforms=None) -> Path:
     """Write the native FMU of ``scene`` to ``out``. ``cfg``, ``layout`` and ``experiment`` are build_fmu.py's
     (identifier, description, integrators and defaults; the variables; DefaultExperiment); ``postprocess`` is
-    build_fmu.postprocess_model_description."""
+    build_fmu.postprocess_model_description; ``platforms`` the binaries to build (platforms_from: None is
+    $LINKNET_FMU_PLATFORMS, else all)."""
+    import time
+    started = time.perf_counter()
     out = Path(out)
+    folders = platforms_from(platforms)
     step, tolerance = float(cfg["step"]), float(cfg["tolerance"])
     if not (math.isfinite(step) and step > 0):  # the FMU's own rules for its parameters (linknet_model.c)
         raise NativeBuildError(f"step = {step!r} must be finite and > 0 (seconds)")
@@ -577,23 +752,15 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
     with tempfile.TemporaryDirectory(prefix="linknet_native_fmu_") as tmp:
         tmp = Path(tmp)
         sources = tmp / "fmu" / "sources"
-        units = stage_sources("", sources)
+        units = stage_sources("", sources, ident)
         digest = fingerprint(sources, scene_c)
         guid = "{" + str(uuid.UUID(bytes=digest)) + "}"
         finger = int.from_bytes(digest[:8], "little")
         header = (f"#define LNFMU_GUID {c_string(guid)}\n"
                   f"#define LNFMU_FINGERPRINT UINT64_C(0x{finger:016x})\n")
         text = scene_c.replace('#include "fmu_model.h"', header + '#include "fmu_model.h"', 1)
-        (sources / SCENE_FILE).write_text(text)
-        folder = platform_folder()
-        binary = None
-        if folder:
-            binary = tmp / "fmu" / "binaries" / folder / f"{ident}.so"
-            binary.parent.mkdir(parents=True)
-            compile_binary(sources, units, binary, cc)
-        elif not quiet:
-            print("build_fmu: WARNING: no binary built for this platform (only linux64 is); the FMU carries its "
-                  "sources/ for the importing tool to compile", file=sys.stderr)
+        (sources / CORE_FOLDER / SCENE_FILE).write_text(text)
+        binaries = compile_binaries(sources, units, ident, folders, tmp / "fmu" / "binaries")
         raw = raw_model_description(cfg, layout, guid, units, start_values(scene, cfg, layout))
         inv_mass = scene.inv_mass
         md = postprocess(raw, {v.name: v.declared_type for v in layout.reals}, layout.dependencies(inv_mass),
@@ -604,8 +771,8 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
         def pack(target):  # written whole, then renamed into place: a failed build leaves no half FMU behind
             with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
                 z.write(tmp / "fmu" / "modelDescription.xml", "modelDescription.xml")
-                if binary is not None:
-                    z.write(binary, f"binaries/{folder}/{ident}.so")
+                for folder, binary in binaries.items():
+                    z.write(binary, f"binaries/{folder}/{binary.name}")
                 for p in sorted(sources.rglob("*")):
                     if p.is_file():
                         z.write(p, "sources/" + p.relative_to(sources).as_posix())
@@ -618,5 +785,6 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
         size = out.stat().st_size
         print(f"built {out} (native model {ident}: {sum(v.causality == 'input' for v in layout.reals)} inputs, "
               f"{sum(v.causality == 'output' for v in layout.reals)} outputs; {facts['specialisation']} "
-              f"specialisation; {size / 1024:.0f} KiB; no Python needed by hosts)")
+              f"specialisation; binaries for {', '.join(folders)}; {size / 1024:.0f} KiB; "
+              f"{time.perf_counter() - started:.1f} s; no Python needed by hosts)")
     return out

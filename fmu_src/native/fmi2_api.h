@@ -52,12 +52,16 @@ typedef struct {
 #define fmi2Version "2.0"
 #define fmi2TypesPlatform "default"
 
+/* The fmi2 functions are the binary's only exports: dllexport on Windows (a DLL then exports nothing else), visible
+   elsewhere, where linknet_fmu_unit.h hides every other symbol. A tool may define FMI2_Export itself. */
+#ifndef FMI2_Export
 #if defined _WIN32 || defined __CYGWIN__
 #define FMI2_Export __declspec(dllexport)
 #elif defined __GNUC__ && __GNUC__ >= 4
 #define FMI2_Export __attribute__((visibility("default")))
 #else
 #define FMI2_Export
+#endif
 #endif
 
 #ifdef FMI2_FUNCTION_PREFIX

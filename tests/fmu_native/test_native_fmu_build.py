@@ -77,7 +77,7 @@ def test_source_files_listed_and_present(fmu_root):
         assert (fmu.dir / "sources" / name).is_file(), name
     # the stage files are compiled through dim2.c / dim3.c, not on their own
     assert not any(name.startswith("stages/") for name in files)
-    assert (fmu.dir / "sources" / "stages" / "rattle.c").is_file()
+    assert (fmu.dir / "sources" / "linknet" / "stages" / "rattle.c").is_file()
 
 
 def test_fmpy_validates_clean(fmu_root):

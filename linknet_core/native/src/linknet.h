@@ -22,6 +22,15 @@
 #include <stddef.h>
 #include <stdint.h>
 
+/* No fused multiply-add: every a*b+c of the core is rounded twice, as the platforms without FMA do, so that one
+   source gives one arithmetic wherever it is compiled. Every build passes -ffp-contract=off as well; clang and MSVC
+   also obey the pragma (clang contracts by default), GCC's ISO C modes (-std=c99) do not contract. */
+#if defined(__clang__)
+#pragma STDC FP_CONTRACT OFF
+#elif defined(_MSC_VER)
+#pragma fp_contract(off)
+#endif
+
 #ifdef __cplusplus
 extern "C" {
 #endif
