@@ -283,7 +283,7 @@ def check_build_options(integrator, step, tolerance, out, stop_time=None, comm_s
 
 def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=None, inputs=None,
                     outputs=None, stop_time=None, comm_step=None, link_python=True, quiet=False,
-                    native=False, error_estimate=None, platforms=None) -> Path:
+                    native=False, error_estimate=None, platforms=None, fmi_version=2) -> Path:
     """The FMU of a scene file. integrator None: the scene file's "fmu" section's, else the library's default
     (linknet_core.accuracy.default_method: dop853 at rtol `tolerance`, default 1e-8, or RATTLE when a step is given);
     error_estimate None: the section's, else True (the companion run of the output error_estimate)."""
@@ -356,6 +356,9 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
         experiment = dict(startTime=0.0, stopTime=float(stop_time or fmu_opts.get("stop_time", 2.0)),
                           stepSize=float(comm_step or fmu_opts.get("comm_step", 1e-2)), tolerance=cfg["tolerance"])
         try:
+            if fmi_version == 3:  # the same model behind the FMI 3.0 glue, with array variables
+                from native.build_fmi3 import build_fmi3_fmu
+                return build_fmi3_fmu(scene, cfg, layout, out, experiment, quiet=quiet, platforms=platforms)
             return build_native_fmu(scene, cfg, layout, out, experiment, postprocess_model_description, quiet=quiet,
                                     platforms=platforms)
         except NativeBuildError as e:
@@ -456,10 +459,14 @@ def main(argv=None):
     p.add_argument("--platforms", metavar="LIST",
                    help="with --native: the binaries to build, comma-separated: linux64, win64, darwin64, aarch64-linux, "
                    "host (this machine's only) or all (default: $LINKNET_FMU_PLATFORMS, else all)")
+    p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2,
+                   help="2 (default), or 3: the native FMU as FMI 3.0 Co-Simulation with array variables (implies "
+                   "--native; docs/fmu.md, FMI 3.0)")
     p.add_argument("--no-link-libpython", action="store_true",
                    help="leave the binary unlinked (C hosts must then preload libpython)")
     _numbers_may_be_negative(p)
     a = p.parse_args(argv)
+    a.native = a.native or a.fmi_version == 3
     if a.platforms is not None and not a.native:
         p.error("--platforms chooses the binaries of the native FMU: give --native too")
     if a.component:
@@ -467,7 +474,7 @@ def main(argv=None):
     elif a.scene:
         build_scene_fmu(a.scene, a.output, a.integrator, a.step, a.tolerance, a.inputs, a.outputs,
                         a.stop_time, a.comm_step, link_python=not a.no_link_libpython, native=a.native,
-                        platforms=a.platforms,
+                        platforms=a.platforms, fmi_version=a.fmi_version,
                         error_estimate=False if a.no_error_estimate else None)
     else:
         p.error("give a scene file or --component")

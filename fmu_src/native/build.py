@@ -51,9 +51,9 @@ if str(HERE.parent) not in sys.path:  # fmu_src: the layout both FMU kinds share
 from linknet_fmu.layout import (ERROR_ESTIMATE_CATEGORY, ERROR_ESTIMATE_CATEGORY_DESCRIPTION,  # noqa: E402
                                 ESTIMATE_ERROR_DESCRIPTION)
 
-GLUE_FILES = ("fmi2Functions.c", "linknet_model.c", "fmi2_api.h", "fmu_model.h", "lnfmu_scene.h")
+GLUE_FILES = ("fmi2Functions.c", "linknet_model.c", "fmi2_api.h", "fmu_model.h", "fmu_states.h", "lnfmu_scene.h")
 SCENE_FILE = "linknet_scene.c"
-STATE_FORMAT = 3  # keep equal to STATE_FORMAT in fmi2Functions.c (a part of the fingerprint)
+STATE_FORMAT = 3  # keep equal to FMU_STATE_FORMAT in fmu_states.h (a part of the fingerprint)
 # as setup.py compiles the core for the library: the same code generation, so the same results
 CFLAGS = ["-std=c99", "-O3", "-fno-math-errno", "-ffp-contract=off"]
 WARNINGS = ["-Wall", "-Wextra"]

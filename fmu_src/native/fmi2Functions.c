@@ -33,6 +33,7 @@
 
 #include "fmi2_api.h"
 #include "fmu_model.h"
+#include "fmu_states.h"
 
 enum mode { MODE_INSTANTIATED = 0, MODE_INITIALIZATION = 1, MODE_STEPPING = 2, MODE_TERMINATED = 3 };
 static const char *const mode_names[] = {"instantiated (before fmi2EnterInitializationMode)",
@@ -50,17 +51,9 @@ typedef struct instance {
     fmu_model *model;
     char msg[FMU_MESSAGE];              /* the model's reason for a refusal */
     char line[2 * FMU_MESSAGE + 256];   /* the logged message, format characters escaped */
-    /* the FMU states this instance handed out (fmi2GetFMUstate, fmi2DeSerializeFMUstate) and has not freed */
-    struct state_header **states;
-    size_t n_states, states_capacity;
-    /* the last discarded step and the model's state it was discarded from: asked again from that same state, it
-       fails the same way */
-    int discarded;
-    double discarded_t, discarded_h;
-    unsigned char *discarded_from;      /* the model's state bytes then (fmu_model_state_save) */
-    unsigned char *state_now;           /* scratch: the model's state bytes now, to compare */
+    fmu_state_registry states;          /* the FMU states this instance handed out and has not freed */
+    fmu_discard_memory discard;         /* the last discarded step and the state it was discarded from */
     int terminated;                     /* fmi2Terminated: the master should stop (at fmi2LastSuccessfulTime) */
-    char discard_reason[FMU_MESSAGE];   /* what the model said when it discarded that step */
 } instance;
 
 /* ---- logging ------------------------------------------------------------------------------------- */
@@ -160,31 +153,6 @@ static fmi2Status changed_by(instance *self, fmi2Status status)
     return status;
 }
 
-/* The step from t with h was discarded from the model's present state: remembered with that state's bytes (0 where
-   there is no memory for them: a repeat is then computed again). */
-static void remember_discard(instance *self, double t, double h)
-{
-    const size_t n = fmu_model_state_size(self->model);
-    if (self->discarded_from == NULL) {
-        self->discarded_from = malloc(n ? n : 1);
-        self->state_now = malloc(n ? n : 1);
-    }
-    self->discarded = self->discarded_from != NULL && self->state_now != NULL;
-    if (!self->discarded) return;
-    self->discarded_t = t;
-    self->discarded_h = h;
-    fmu_model_state_save(self->model, self->discarded_from);
-    snprintf(self->discard_reason, sizeof self->discard_reason, "%s", self->msg);
-}
-
-/* Whether the step from t with h is the one discarded last, asked again from the same model state. */
-static int is_discarded_step(instance *self, double t, double h)
-{
-    if (!self->discarded || t != self->discarded_t || h != self->discarded_h) return 0;
-    fmu_model_state_save(self->model, self->state_now);
-    return memcmp(self->state_now, self->discarded_from, fmu_model_state_size(self->model)) == 0;
-}
-
 #define IN(mode) (1u << (mode))
 #define ANY_MODE (IN(MODE_INSTANTIATED) | IN(MODE_INITIALIZATION) | IN(MODE_STEPPING) | IN(MODE_TERMINATED))
 
@@ -258,16 +226,13 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     return self;
 }
 
-static void free_all_states(instance *self);
-
 void fmi2FreeInstance(fmi2Component c)
 {
     instance *self = checked(c);
     if (self == NULL) return;
     self->magic = 0;
-    free_all_states(self);  /* the states the host did not free: they belong to the instance */
-    free(self->discarded_from);
-    free(self->state_now);
+    fmu_state_free_all(&self->states);  /* the states the host did not free: they belong to the instance */
+    fmu_discard_free(&self->discard);
     fmu_model_free(self->model);
     free(self->name);
     free(self);
@@ -425,93 +390,6 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 
 /* ---- FMU states ---------------------------------------------------------------------------------- */
 
-#define STATE_FORMAT 3u  /* 3: the error estimate's companion run and settings added to the model's state */
-#define STATE_BYTE_ORDER 0x01020304u
-static const char state_magic[8] = {'L', 'N', 'K', 'F', 'M', 'U', 'S', 'T'};
-
-typedef struct state_header {
-    char magic[8];
-    uint32_t format;        /* STATE_FORMAT */
-    uint32_t byte_order;    /* STATE_BYTE_ORDER as the writer stored it */
-    uint64_t fingerprint;   /* the model's: which FMU build wrote the state */
-    uint64_t size;          /* bytes, this header included */
-    uint32_t mode;          /* the instance's mode when the state was taken */
-    uint32_t reserved;
-    uint64_t reserved2;     /* 0 (the instance's registry, not the state, says which handles are live) */
-    uint64_t checksum;      /* serialized: FNV-1a of the bytes after the header (0 in memory) */
-} state_header;
-
-/* FNV-1a, 64 bits: a serialized state damaged in storage or transit is refused rather than run. */
-static uint64_t checksum_of(const unsigned char *p, size_t n)
-{
-    uint64_t h = 1469598103934665603ull;
-    for (size_t i = 0; i < n; i++) h = (h ^ p[i]) * 1099511628211ull;
-    return h;
-}
-
-static size_t state_size(const instance *self)
-{
-    return sizeof(state_header) + fmu_model_state_size(self->model);
-}
-
-/* Why the bytes at h (n of them) are not a state of this FMU, or NULL. */
-static const char *state_problem(const instance *self, const state_header *h, size_t n)
-{
-    const fmu_model_info *info = fmu_model_info_get();
-    if (n < sizeof *h || memcmp(h->magic, state_magic, sizeof state_magic) != 0)
-        return "not a linknet FMU state";
-    if (h->byte_order != STATE_BYTE_ORDER) return "a state written on a machine of another byte order";
-    if (h->format != STATE_FORMAT) return "a state of another format version (another linknet FMU release)";
-    if (h->fingerprint != info->fingerprint)
-        return "a state of another FMU (its scene fingerprint differs: another scene, other options or another "
-               "build)";
-    if (h->size != state_size(self) || h->size != n) return "a state of the wrong size";
-    if (h->mode > MODE_TERMINATED) return "a state with an invalid mode";
-    return NULL;
-}
-
-/* The registry of the states this instance handed out and has not freed. A handle is live exactly when it is
-   listed: whether one is, is decided by comparing pointers, never by reading through the handle, so a made-up,
-   freed or foreign handle is refused without touching the memory it points to (a mark written into a state before
-   free() could not tell either: the compiler may drop that store, and the block may be reused or unmapped). */
-static size_t state_index(const instance *self, const void *handle)
-{
-    for (size_t i = 0; i < self->n_states; i++)
-        if ((const void *)self->states[i] == handle) return i;
-    return self->n_states;
-}
-
-static int is_live_state(const instance *self, const void *handle)
-{
-    return handle != NULL && state_index(self, handle) < self->n_states;
-}
-
-static int remember_state(instance *self, state_header *h)
-{
-    if (self->n_states == self->states_capacity) {
-        const size_t capacity = self->states_capacity ? 2 * self->states_capacity : 8;
-        state_header **grown = realloc(self->states, capacity * sizeof *grown);
-        if (grown == NULL) return 0;
-        self->states = grown;
-        self->states_capacity = capacity;
-    }
-    self->states[self->n_states++] = h;
-    return 1;
-}
-
-static void forget_state(instance *self, size_t i)
-{
-    self->states[i] = self->states[--self->n_states];
-}
-
-static void free_all_states(instance *self)
-{
-    for (size_t i = 0; i < self->n_states; i++) free(self->states[i]);
-    free(self->states);
-    self->states = NULL;
-    self->n_states = self->states_capacity = 0;
-}
-
 #define NOT_A_LIVE_STATE                                                                                         \
     "FMUstate is not a live state of this FMU instance (one it made with fmi2GetFMUstate or "                  \
     "fmi2DeSerializeFMUstate and has not freed): a made-up handle, one already freed, or another FMU's or "    \
@@ -522,17 +400,17 @@ static void free_all_states(instance *self)
     "and fmi2FreeInstance frees it if the host does not"
 
 /* A state handle given by the host by value: live in this instance, or NULL after logging why not. */
-static state_header *live_state(instance *self, const char *fn, fmi2FMUstate FMUstate)
+static fmu_state_header *live_state(instance *self, const char *fn, fmi2FMUstate FMUstate)
 {
     if (FMUstate == NULL) {
         refuse(self, fn, "FMUstate is NULL");
         return NULL;
     }
-    if (!is_live_state(self, FMUstate)) {
+    if (!fmu_state_is_live(&self->states, FMUstate)) {
         refuse(self, fn, NOT_A_LIVE_STATE);
         return NULL;
     }
-    return (state_header *)FMUstate;
+    return (fmu_state_header *)FMUstate;
 }
 
 /* The address of the host's state variable (fmi2GetFMUstate, fmi2FreeFMUstate, fmi2DeSerializeFMUstate): 1 when
@@ -547,7 +425,7 @@ static int state_variable(instance *self, const char *fn, const fmi2FMUstate *FM
         refuse(self, fn, "FMUstate is NULL (the address of the host's fmi2FMUstate variable is expected)");
         return 0;
     }
-    if (is_live_state(self, FMUstate)) {
+    if (fmu_state_is_live(&self->states, FMUstate)) {
         refuse(self, fn, HANDLE_FOR_ADDRESS, fn, fn);
         return 0;
     }
@@ -558,26 +436,18 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     ENTER("fmi2GetFMUstate");
     if (!state_variable(self, fn, FMUstate)) return fmi2Error;
-    state_header *h = NULL;
+    fmu_state_header *h = NULL;
     if (*FMUstate != NULL) {  /* a state of this instance to overwrite */
         if ((h = live_state(self, fn, *FMUstate)) == NULL) return fmi2Error;
     } else {
-        h = calloc(1, state_size(self));
-        if (h == NULL) return refuse(self, fn, "out of memory for a state of %zu bytes", state_size(self));
-        if (!remember_state(self, h)) {
+        h = calloc(1, fmu_state_size(self->model));
+        if (h == NULL) return refuse(self, fn, "out of memory for a state of %zu bytes", fmu_state_size(self->model));
+        if (!fmu_state_remember(&self->states, h)) {
             free(h);
             return refuse(self, fn, "out of memory for the list of this instance's states");
         }
     }
-    memcpy(h->magic, state_magic, sizeof state_magic);
-    h->format = STATE_FORMAT;
-    h->byte_order = STATE_BYTE_ORDER;
-    h->fingerprint = fmu_model_info_get()->fingerprint;
-    h->size = state_size(self);
-    h->mode = (uint32_t)self->mode;
-    h->reserved2 = 0;
-    h->checksum = 0;
-    fmu_model_state_save(self->model, (unsigned char *)(h + 1));
+    fmu_state_write(h, self->model, (uint32_t)self->mode);
     *FMUstate = h;
     return fmi2OK;
 }
@@ -585,7 +455,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
 {
     ENTER("fmi2SetFMUstate");
-    const state_header *h = live_state(self, fn, FMUstate);
+    const fmu_state_header *h = live_state(self, fn, FMUstate);
     if (h == NULL) return fmi2Error;
     const int result = fmu_model_state_restore(self->model, (const unsigned char *)(h + 1),
                                                (size_t)h->size - sizeof *h, self->msg);
@@ -599,10 +469,9 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
     ENTER("fmi2FreeFMUstate");
     if (!state_variable(self, fn, FMUstate)) return fmi2Error;
     if (*FMUstate == NULL) return fmi2OK;  /* nothing to free (FMI: the variable of a freed state holds NULL) */
-    const size_t i = state_index(self, *FMUstate);
-    if (i == self->n_states) return refuse(self, fn, NOT_A_LIVE_STATE);
-    free(self->states[i]);
-    forget_state(self, i);
+    const size_t i = fmu_state_index(&self->states, *FMUstate);
+    if (i == self->states.n) return refuse(self, fn, NOT_A_LIVE_STATE);
+    fmu_state_free_at(&self->states, i);
     *FMUstate = NULL;
     return fmi2OK;
 }
@@ -611,7 +480,7 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, si
 {
     ENTER("fmi2SerializedFMUstateSize");
     if (size == NULL) return refuse(self, fn, "size is NULL");
-    const state_header *h = live_state(self, fn, FMUstate);
+    const fmu_state_header *h = live_state(self, fn, FMUstate);
     if (h == NULL) return fmi2Error;
     *size = (size_t)h->size;
     return fmi2OK;
@@ -620,15 +489,11 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, si
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size)
 {
     ENTER("fmi2SerializeFMUstate");
-    const state_header *h = live_state(self, fn, FMUstate);
+    const fmu_state_header *h = live_state(self, fn, FMUstate);
     if (h == NULL) return fmi2Error;
     if (serializedState == NULL) return refuse(self, fn, "serializedState is NULL");
     if (size < h->size) return refuse(self, fn, "buffer of %zu bytes for a state of %zu", size, (size_t)h->size);
-    memcpy(serializedState, h, (size_t)h->size);
-    state_header copy;
-    memcpy(&copy, h, sizeof copy);
-    copy.checksum = checksum_of((const unsigned char *)(h + 1), (size_t)h->size - sizeof *h);
-    memcpy(serializedState, &copy, sizeof copy);
+    fmu_state_serialize(h, (unsigned char *)serializedState);
     return fmi2OK;
 }
 
@@ -638,16 +503,12 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     ENTER("fmi2DeSerializeFMUstate");
     if (!state_variable(self, fn, FMUstate)) return fmi2Error;
     if (serializedState == NULL) return refuse(self, fn, "serializedState is NULL");
-    state_header header;
-    memset(&header, 0, sizeof header);
-    memcpy(&header, serializedState, size < sizeof header ? size : sizeof header);
-    const char *problem = state_problem(self, &header, size);
+    const char *problem = fmu_state_serialized_problem(self->model, (const unsigned char *)serializedState, size,
+                                                       MODE_TERMINATED);
     if (problem) return refuse(self, fn, "refused: %s", problem);
-    if (header.checksum != checksum_of((const unsigned char *)serializedState + sizeof header, size - sizeof header))
-        return refuse(self, fn, "refused: the state's bytes are damaged (checksum mismatch)");
-    state_header *h = malloc(size);
+    fmu_state_header *h = malloc(size);
     if (h == NULL) return refuse(self, fn, "out of memory for a state of %zu bytes", size);
-    if (!remember_state(self, h)) {
+    if (!fmu_state_remember(&self->states, h)) {
         free(h);
         return refuse(self, fn, "out of memory for the list of this instance's states");
     }
@@ -703,19 +564,19 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     if (!isfinite(t) || fabs(t - t_fmu) > 1e-9 * fmax(1.0, fabs(t_fmu)))
         return refuse(self, fn, "currentCommunicationPoint t=%.17g differs from the FMU's time %.17g", t, t_fmu);
     if (!isfinite(t + h)) return refuse(self, fn, "t + h = %.17g is not finite", t + h);
-    if (is_discarded_step(self, t, h)) {
+    if (fmu_discard_is_repeat(&self->discard, self->model, t, h)) {
         /* the model is deterministic: from the same state with the same inputs the same step fails again */
         self->terminated = 1;
         logf_status(self, fmi2Discard, "%s: fmi2Terminated is true (fmi2LastSuccessfulTime = %.17g): " REPEATED_STEP
-                    " It failed with: %s", fn, t_fmu, t, h, self->discard_reason);
+                    " It failed with: %s", fn, t_fmu, t, h, self->discard.reason);
         return fmi2Discard;
     }
     const int result = fmu_model_do_step(self->model, t, h, self->msg);
     if (result != FMU_DISCARD && result != FMU_DISCARD_FINAL) {
-        self->discarded = 0;
+        self->discard.discarded = 0;
         return changed_by(self, report(self, fn, result));
     }
-    remember_discard(self, t, h);
+    fmu_discard_remember(&self->discard, self->model, t, h, self->msg);
     self->terminated = result == FMU_DISCARD_FINAL;
     if (!self->terminated) return report(self, fn, result);
     logf_status(self, fmi2Discard, "%s: %s; so fmi2Terminated is true (fmi2LastSuccessfulTime = %.17g)", fn, self->msg,
