@@ -38,7 +38,7 @@ import subprocess
 import sys
 import tempfile
 import uuid
-import xml.etree.ElementTree as ET
+from lxml import etree as ET  # fmpy's dependency: a large net's modelDescription written at C speed
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -569,8 +569,8 @@ def compile_binaries(sources_dir: Path, units: list[str], ident: str, folders: t
     cc = zig_cc()
     flags = CFLAGS + WARNINGS + ["-fPIC", "-I", str(sources_dir)]
     version = subprocess.run(cc[:-1] + ["version"], capture_output=True, text=True).stdout.strip()
-    content = hashlib.sha256()
-    for p in sorted(sources_dir.rglob("*")):
+    content = hashlib.sha256()  # what the compiler reads: not CMakeLists.txt, which names the scene's model
+    for p in sorted(sources_dir.rglob("*.[ch]")):
         if p.is_file() and p.name != SCENE_FILE:
             content.update(p.relative_to(sources_dir).as_posix().encode() + b"\0" + p.read_bytes())
     shared = [u for u in units if u != SCENE_FILE]
