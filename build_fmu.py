@@ -78,12 +78,8 @@ def postprocess_model_description(xml_bytes: bytes, declared_types: dict, output
     ([] = no dependency, i.e. no direct feedthrough).
     """
     from linknet_fmu.layout import TYPES
-    root = ET.fromstring(xml_bytes)
-    for node in root.iter():  # drop pythonfmu's pretty-print whitespace before re-indenting
-        if node.text is not None and not node.text.strip():
-            node.text = None
-        if node.tail is not None and not node.tail.strip():
-            node.tail = None
+    # pythonfmu's pretty-print whitespace dropped while parsing, before re-indenting
+    root = ET.fromstring(xml_bytes, ET.XMLParser(remove_blank_text=True))
     if description:
         root.set("description", description)
     variables = root.find("ModelVariables")
