@@ -424,6 +424,20 @@ def _mass_list(text: str) -> str:
 _mass_list.rule = "mass list"
 
 
+def _platform_list(text: str) -> str:
+    """--platforms: the native FMU's binaries, checked by the builder's own rule (native.build.platforms_from)."""
+    from native.build import NativeBuildError, platforms_from
+
+    try:
+        platforms_from(text)
+    except NativeBuildError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+_platform_list.rule = "platform list"
+
+
 def main(argv=None):
     from linknet_core.cli import _numbers_may_be_negative, _output, positive_number, readable_file, \
         relative_tolerance
@@ -452,7 +466,7 @@ def main(argv=None):
     p.add_argument("--comm-step", type=positive_number, help="DefaultExperiment stepSize (default 0.01)")
     p.add_argument("--native", action="store_true",
                    help="build the self-contained FMU on the native C core (no Python on the host; C sources inside)")
-    p.add_argument("--platforms", metavar="LIST",
+    p.add_argument("--platforms", metavar="LIST", type=_platform_list,
                    help="with --native: the binaries to build, comma-separated: linux64, win64, darwin64, aarch64-linux, "
                    "host (this machine's only) or all (default: $LINKNET_FMU_PLATFORMS, else all)")
     p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2,
