@@ -53,6 +53,7 @@ from linknet_fmu.layout import (ERROR_ESTIMATE_CATEGORY, ERROR_ESTIMATE_CATEGORY
 
 GLUE_FILES = ("fmi2Functions.c", "linknet_model.c", "fmi2_api.h", "fmu_model.h", "fmu_states.h", "lnfmu_scene.h")
 SCENE_FILE = "linknet_scene.c"
+PROGRESS_VARIABLES = 100_000  # a scene with this many FMU variables builds for a minute or more: progress lines
 STATE_FORMAT = 3  # keep equal to FMU_STATE_FORMAT in fmu_states.h (a part of the fingerprint)
 # as setup.py compiles the core for the library: the same code generation, so the same results
 CFLAGS = ["-std=c99", "-O3", "-fno-math-errno", "-ffp-contract=off"]
@@ -744,6 +745,12 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
         raise NativeBuildError(f"tolerance = {tolerance!r} must lie in [{low:g}, {high:g})")
     src = core_source_dir()
     import linknet_core as ln
+
+    def progress(stage: str) -> None:  # a large scene's build takes minutes: say how far it is
+        if not quiet and len(layout.reals) >= PROGRESS_VARIABLES:
+            print(f"build_fmu: {cfg['model_identifier']}: {stage} ({time.perf_counter() - started:.0f} s)",
+                  file=sys.stderr, flush=True)
+    progress(f"baking the scene ({len(layout.reals)} variables)")
     try:
         scene_c, facts = scene_source(scene, cfg, layout, src)
     except ln.LinknetError as e:  # a scene the library itself refuses (e.g. inconsistent initial velocities)
@@ -760,7 +767,9 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
                   f"#define LNFMU_FINGERPRINT UINT64_C(0x{finger:016x})\n")
         text = scene_c.replace('#include "fmu_model.h"', header + '#include "fmu_model.h"', 1)
         (sources / CORE_FOLDER / SCENE_FILE).write_text(text)
+        progress(f"compiling for {', '.join(folders)}")
         binaries = compile_binaries(sources, units, ident, folders, tmp / "fmu" / "binaries")
+        progress("writing the model description")
         raw = raw_model_description(cfg, layout, guid, units, start_values(scene, cfg, layout))
         inv_mass = scene.inv_mass
         md = postprocess(raw, {v.name: v.declared_type for v in layout.reals}, layout.dependencies(inv_mass),
@@ -777,6 +786,7 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
                     if p.is_file():
                         z.write(p, "sources/" + p.relative_to(sources).as_posix())
 
+        progress(f"packing {out}")
         try:
             atomic_write(out, pack)
         except WriteError as e:
