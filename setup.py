@@ -10,10 +10,12 @@ follow from that, both set here:
     compiled code, but for any Python 3 and no CPython ABI, rather than setuptools' `cp311-cp311-<platform>`.
 """
 import importlib.machinery
+import shutil
 from pathlib import Path
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
+from setuptools.command.build_py import build_py
 
 try:  # setuptools >= 70.1 carries bdist_wheel; before that it is the `wheel` package's
     from setuptools.command.bdist_wheel import bdist_wheel
@@ -57,7 +59,23 @@ class BuildNativeLibrary(build_ext):
         _remove_stale_libraries(Path(self.get_finalized_command("build_py").get_package_dir("linknet_core.native")))
 
 
-commands = {"build_ext": BuildNativeLibrary}
+class BuildPyWithFmuExport(build_py):
+    """The FMU export travels in the wheel: build_fmu.py and fmu_src/, which the design card keeps at the top of the
+    checkout, are copied into linknet_core/fmu_export/, where `linknet fmu` finds them in an installed package (an
+    editable install finds them in the checkout)."""
+
+    def run(self):
+        super().run()
+        if getattr(self, "editable_mode", False) or not Path("build_fmu.py").is_file():
+            return
+        target = Path(self.build_lib) / "linknet_core" / "fmu_export"
+        target.mkdir(parents=True, exist_ok=True)
+        shutil.copy2("build_fmu.py", target / "build_fmu.py")
+        shutil.copytree("fmu_src", target / "fmu_src", dirs_exist_ok=True,
+                        ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.o"))
+
+
+commands = {"build_ext": BuildNativeLibrary, "build_py": BuildPyWithFmuExport}
 if bdist_wheel is not None:
     class PlatformWheel(bdist_wheel):
         def finalize_options(self):

@@ -1,4 +1,4 @@
-"""The ``linknet`` command: simulate, analyze, check, ensemble, animate, view."""
+"""The ``linknet`` command: simulate, analyze, check, ensemble, animate, view, fmu."""
 from __future__ import annotations
 
 import argparse
@@ -198,6 +198,38 @@ def cmd_check(args) -> int:
     return int(checks.main(args))
 
 
+def _add_fmu(sub):
+    p = sub.add_parser("fmu", add_help=False, help="build a scene's FMU: build_fmu.py's options (linknet fmu --help)",
+                       description="build_fmu.py, from this installed package or the checkout")
+    p.add_argument("build_fmu_args", nargs=argparse.REMAINDER)
+
+
+def build_fmu_script() -> Path:
+    """build_fmu.py: in an installed package at linknet_core/fmu_export/ (setup.py puts it and fmu_src/ there), in a
+    checkout (an editable install) at the top, beside linknet_core/."""
+    here = Path(__file__).resolve().parent
+    for script in (here / "fmu_export" / "build_fmu.py", here.parent / "build_fmu.py"):
+        if script.is_file():
+            return script
+    raise LinknetError(f"build_fmu.py is neither in {here / 'fmu_export'} nor beside {here}: reinstall linknet")
+
+
+def cmd_fmu(args) -> int:
+    """`linknet fmu SCENE -o OUT.fmu [--native] ...`: the same code as build_fmu.py, run in this process."""
+    import importlib.util
+
+    script = build_fmu_script()
+    spec = importlib.util.spec_from_file_location("build_fmu", script)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("build_fmu", module)
+    spec.loader.exec_module(module)
+    program, sys.argv[0] = sys.argv[0], "linknet fmu"  # what its messages name
+    try:
+        return int(module.main(args.build_fmu_args) or 0)
+    finally:
+        sys.argv[0] = program
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="linknet", description="Networks of point masses joined by rigid links.")
     parser.add_argument("--version", action="version", version=f"linknet {__import__('linknet_core').__version__}")
@@ -208,16 +240,20 @@ def build_parser() -> argparse.ArgumentParser:
     _add_ensemble(sub)
     _add_animate(sub)
     _add_view(sub)
+    _add_fmu(sub)
     _numbers_may_be_negative(parser)
     one_line_errors(parser)
     return parser
 
 
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["fmu"]:  # every argument is build_fmu.py's, --help among them (argparse would take that one)
+        return cmd_fmu(argparse.Namespace(command="fmu", build_fmu_args=argv[1:]))
     parser = build_parser()
     args = parser.parse_args(argv)
     handlers = {"simulate": cmd_simulate, "analyze": cmd_analyze, "check": cmd_check, "animate": visual.cmd_animate,
-                "view": visual.cmd_view, "ensemble": ensemble_command.cmd_ensemble}
+                "view": visual.cmd_view, "ensemble": ensemble_command.cmd_ensemble, "fmu": cmd_fmu}
     try:
         return handlers[args.command](args)
     except WriteError as exc:  # an output that could not be written (a full disk): not the input's fault

@@ -11,6 +11,7 @@ from __future__ import annotations
 import email.parser
 import importlib.machinery
 import importlib.util
+import math
 import os
 import shlex
 import shutil
@@ -25,11 +26,12 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "linknet_core"
 LIBRARY = "linknet_core/native/_linknet" + importlib.machinery.EXTENSION_SUFFIXES[-1]
-BUILD_INPUTS = ["pyproject.toml", "setup.py", "MANIFEST.in", "README.md"]
+BUILD_INPUTS = ["pyproject.toml", "setup.py", "MANIFEST.in", "README.md", "build_fmu.py"]
 
 
 _PROBE = """
 import importlib.util
+import math
 try:
     import setuptools
 except ImportError:
@@ -71,8 +73,9 @@ def wheel(tmp_path_factory) -> Path:
     source.mkdir()
     for name in BUILD_INPUTS:
         shutil.copy2(ROOT / name, source / name)
-    shutil.copytree(PACKAGE, source / "linknet_core",
-                    ignore=shutil.ignore_patterns("__pycache__", "*.so", "*.pyd", "*.dylib", "*.o"))
+    for folder in (PACKAGE, ROOT / "fmu_src"):  # the package, and the FMU export setup.py puts into it
+        shutil.copytree(folder, source / folder.name,
+                        ignore=shutil.ignore_patterns("__pycache__", "*.so", "*.pyd", "*.dylib", "*.o"))
     proc = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
                            "-w", str(work / "dist"), str(source)], capture_output=True, text=True, timeout=600,
                           cwd=work)
@@ -130,3 +133,25 @@ def test_wheel_imports_and_simulates_from_its_own_files(wheel, tmp_path):
     module, library = proc.stdout.splitlines()[:2]
     assert Path(module).is_relative_to(unpacked) and Path(library).is_relative_to(unpacked), proc.stdout
     assert "chain_10" in proc.stdout
+
+
+def test_wheel_carries_the_fmu_export_and_linknet_fmu_builds_from_it(wheel, tmp_path):
+    """`linknet fmu` from the wheel's files alone, outside the checkout: build_fmu.py and fmu_src/ travel in
+    linknet_core/fmu_export/ (setup.py), and the FMU it builds simulates in fmpy."""
+    unpacked = tmp_path / "site"
+    with zipfile.ZipFile(wheel) as z:
+        names = set(z.namelist())
+        z.extractall(unpacked)
+    assert "linknet_core/fmu_export/build_fmu.py" in names
+    assert "linknet_core/fmu_export/fmu_src/native/fmi2Functions.c" in names
+    assert not {n for n in names if "fmu_export" in n and ("__pycache__" in n or n.endswith(".pyc"))}
+    out = tmp_path / "chain_10.fmu"
+    env = {**os.environ, "PYTHONPATH": str(unpacked), "LINKNET_FMU_PLATFORMS": "host"}
+    proc = subprocess.run([sys.executable, "-m", "linknet_core.cli", "fmu", str(ROOT / "models" / "chain_10.json"),
+                           "--native", "-o", str(out)], capture_output=True, text=True, timeout=600, cwd=tmp_path,
+                          env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stdout.startswith(f"built {out}"), proc.stdout
+    import fmpy
+    result = fmpy.simulate_fmu(str(out), stop_time=0.1)
+    assert len(result) > 2 and all(math.isfinite(v) for v in result["T[1]"])
