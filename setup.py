@@ -1,6 +1,6 @@
 """Builds the native core (linknet_core/native/src) into a shared library at install time, editable too.
 
-The library is plain C loaded with ctypes (linknet_core/native/library.py), not a Python extension module:
+The library is plain C loaded with ctypes (linknet_core/clib/library.py), not a Python extension module:
 it has no Python API in it, so the same sources serve the self-contained FMU. setuptools' extension machinery
 is used only to compile and link it with the platform's compiler and put it inside the package. Two things
 follow from that, both set here:

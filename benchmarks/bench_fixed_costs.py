@@ -209,7 +209,7 @@ def breakdown(repeats: int = 9, n: int = 200, log=print) -> dict:
       slope its cost per step. The 2-D and 3-D intercepts differ by entering and leaving the plane.
     """
     import linknet_core as ln
-    from linknet_core.native import library as lib
+    from linknet_core.clib import library as lib
 
     tree = Path(ln.__file__).resolve().parent.parent
     out = {}

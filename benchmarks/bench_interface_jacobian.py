@@ -47,7 +47,7 @@ def best_of(rounds: int, repeat: int, call) -> float:
 
 def measure(name: str, rounds: int) -> dict:
     from linknet_core.native import interface as native_interface
-    from linknet_core.native import library as lib
+    from linknet_core.clib import library as lib
 
     scene = ln.load_scene(os.path.join(os.getcwd(), "models", f"{name}.json"))
     sim = ln.Simulator(scene, error_estimate=False)

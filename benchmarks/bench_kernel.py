@@ -60,7 +60,7 @@ import numpy as np  # noqa: E402
 
 import linknet_core as ln
 from linknet_core.scene import builders
-from linknet_core.native import library as native_lib
+from linknet_core.clib import library as native_lib
 from linknet_core.native.model import NativeData, NativeModel
 from linknet_core.symbolic.codegen import compiler
 

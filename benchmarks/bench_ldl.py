@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from linknet_core.scene import builders
-from linknet_core.native.ldl import NativeLDL, vector_kernels
+from linknet_core.clib.ldl import NativeLDL, vector_kernels
 from linknet_core.scene.description import Scene, load_scene
 from linknet_core.structure.topology import analyse, link_pairs
 

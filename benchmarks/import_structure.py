@@ -3,8 +3,11 @@ included), the largest files and functions. python3 -m benchmarks.import_structu
 import ast, os, sys, collections
 base = sys.argv[1] if len(sys.argv) > 1 else "."
 root = os.path.join(base, "linknet_core")
-LAYERS = ["errors", "output", "version", "state", "clib", "tolerances", "scene", "structure", "dynamics",
-          "integrators", "native", "accuracy", "simulator", "symbolic", "ensemble", "options", "visual", "cli", "root"]
+# the data flow, leaves first: the tolerances and the C binding, errors and outputs, the description, its analysis,
+# the reference physics, the run's accuracy rules, the methods, the commands' argument types, the native fast path,
+# the driver, and what uses it (symbolic checks, ensembles, pictures, the command line)
+LAYERS = ["tolerances", "clib", "errors", "output", "version", "state", "scene", "structure", "dynamics", "accuracy",
+          "integrators", "options", "native", "simulator", "symbolic", "ensemble", "visual", "cli", "root"]
 mods = {}
 for dp, dn, fn in os.walk(root):
     for f in fn:

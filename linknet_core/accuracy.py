@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from linknet_core.native.library import lib as _core
+from linknet_core.clib.library import lib as _core
 
 _c_double_p = ctypes.POINTER(ctypes.c_double)
 

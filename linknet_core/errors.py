@@ -1,7 +1,7 @@
 """Errors raised by linknet. Every message names the offending mass, link or variable and the rule."""
 import ctypes
 
-from linknet_core.native.library import lib as _core
+from linknet_core.clib.library import lib as _core
 
 
 class LinknetError(ValueError):

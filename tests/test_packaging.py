@@ -122,7 +122,7 @@ def test_wheel_imports_and_simulates_from_its_own_files(wheel, tmp_path):
     unpacked = tmp_path / "site"
     with zipfile.ZipFile(wheel) as z:
         z.extractall(unpacked)
-    script = ("import linknet_core as ln, linknet_core.native.library as lib; "
+    script = ("import linknet_core as ln, linknet_core.clib.library as lib; "
               "print(ln.__file__); print(lib.lib._name); "
               f"r = ln.simulate({str(ROOT / 'models' / 'chain_10.json')!r}, t_end=0.05, error_estimate=False); "
               "print(r.summary())")

@@ -72,7 +72,7 @@ class NativeBuildError(RuntimeError):
 
 # ---------------------------------------------------------------------------- the core's sources
 def core_source_dir() -> Path:
-    import linknet_core.native.library as library  # where the package's native sources are
+    import linknet_core.clib.library as library  # where the package's native sources are
     return Path(library.SOURCE_DIR)
 
 
@@ -226,7 +226,7 @@ def _simulators(scene, cfg):
 def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
     """The generated C file (without its identity lines) and facts about the scene for the caller."""
     import linknet_core as ln
-    from linknet_core.native.ldl import package_library
+    from linknet_core.clib.ldl import package_library
     from linknet_core.scene.motion import PIECE_COLUMNS, SINE_COLUMNS
 
     sims = _simulators(scene, cfg)

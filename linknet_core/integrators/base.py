@@ -15,7 +15,7 @@ import numpy as np
 
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import SolverError, StepFailure, projection_failure
-from linknet_core.native.library import fixed_step_count, lib as _core
+from linknet_core.clib.library import fixed_step_count, lib as _core
 from linknet_core.state import State
 
 # A fixed step whose position stage (or implicit half kick) fails is taken again from its start as 2, 4, ...,

@@ -17,7 +17,7 @@ import numpy as np
 from linknet_core.dynamics.drive import call_motion, motion_note
 from linknet_core.errors import SolverError
 from linknet_core.integrators.base import Integrator, StepStats, step_count_problem
-from linknet_core.native import library as lib
+from linknet_core.clib import library as lib
 from linknet_core.native.model import NativeData, NativeModel, native_method
 
 _explain = lib.lib.ln_explain  # void ln_explain(model, method, data, status, t, t_target, max_steps, label, out, n)

@@ -12,7 +12,7 @@ import numpy as np
 
 from linknet_core.dynamics.interface_jacobian import InterfaceLinearization
 from linknet_core.errors import SolverError
-from linknet_core.native import library as lib
+from linknet_core.clib import library as lib
 
 Interface_p = ctypes.c_void_p
 _new = lib._declare("ln_interface_new", Interface_p, lib.Model_p)

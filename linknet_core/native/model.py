@@ -17,9 +17,9 @@ from linknet_core.dynamics.forces import ELEMENT_KINDS, has_velocity_dependent_f
 from linknet_core.structure.topology import analyse, kept_per_scene, link_pairs
 from linknet_core.tolerances import (DENSE_MIN_NORM_LIMIT, FLOOR_CAP_OVER_TOL, FLOOR_SAFETY, MAX_FACTOR, MIN_FACTOR,
                                      PIVOT_TOL, PLANE_TOL, RETRY_SINGULAR_RCOND, SAFETY, SINGULAR_RCOND)
-from linknet_core.native.ldl import package_library
-from linknet_core.native import library as lib
-from linknet_core.native.library import float_array, int_array, pointer
+from linknet_core.clib.ldl import package_library
+from linknet_core.clib import library as lib
+from linknet_core.clib.library import float_array, int_array, pointer
 from linknet_core.scene.description import require_force_kinds
 
 

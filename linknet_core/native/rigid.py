@@ -20,7 +20,7 @@ import numpy as np
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import SolverError
 from linknet_core.structure.bodies import BodyGeometry, BodyLayout, body_geometry, fit_bodies, freeze_initial_state
-from linknet_core.native import library as lib
+from linknet_core.clib import library as lib
 from linknet_core.native.integrator import NativeIntegrator
 from linknet_core.native.model import NativeModel
 

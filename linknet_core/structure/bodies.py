@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from linknet_core.native.library import graph_components
+from linknet_core.clib.library import graph_components
 from linknet_core.scene.description import Scene
 
 if TYPE_CHECKING:

@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from linknet_core.native.ldl import amd_ordering, zero_pivots
-from linknet_core.native.library import forest_depth, graph_components
+from linknet_core.clib.ldl import amd_ordering, zero_pivots
+from linknet_core.clib.library import forest_depth, graph_components
 from linknet_core.scene.description import Scene
 from linknet_core.tolerances import DENSE_RANK_LIMIT, PLANE_TOL, SINGULAR_RCOND
 

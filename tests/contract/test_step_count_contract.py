@@ -13,7 +13,7 @@ from contract_support import MODELS, ROOT, extract
 from fmu_harness import FMU_CLIENT_LIB, build_cached, run_client
 import linknet_core as ln
 from linknet_core.integrators.base import MAX_STEP_COUNT
-from linknet_core.native.library import fixed_step_count
+from linknet_core.clib.library import fixed_step_count
 
 DISCARD = 2
 PENDULUM = MODELS / "double_pendulum.json"

@@ -11,7 +11,7 @@ import pytest
 
 import linknet_core as ln
 from linknet_core.dynamics.equations import fastest_oscillation
-from linknet_core.native import library as lib
+from linknet_core.clib import library as lib
 from linknet_core.native.model import NativeModel
 from linknet_core.scene import builders
 from linknet_core.structure.topology import analyse

@@ -8,7 +8,7 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from linknet_core.native.library import forest_depth, graph_components
+from linknet_core.clib.library import forest_depth, graph_components
 
 
 def test_components_numbered_as_csgraph_numbers_them():

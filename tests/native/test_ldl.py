@@ -1,5 +1,5 @@
 """The native sparse LDL^T of the tension matrix A (25) (linknet_core/native/src/engine_ldl.c), called through
-linknet_core.native.ldl on the package's library, against dense numpy solves.
+linknet_core.clib.ldl on the package's library, against dense numpy solves.
 
 A's entries come pair by pair as the model hands them to the native core: for links l, l' sharing a free mass
 k, sign * (1/M_k) * (E_l . E_l') with E the unit vectors (8) (seed (18), (21)-(22), (25)).
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from linknet_core.scene import builders
-from linknet_core.native.ldl import NativeLDL, amd_ordering, vector_kernels, zero_pivots
+from linknet_core.clib.ldl import NativeLDL, amd_ordering, vector_kernels, zero_pivots
 from linknet_core.tolerances import PIVOT_TOL
 from linknet_core.scene.description import Scene, load_scene
 from linknet_core.structure.topology import _dense_rank, _rank_from_pivots, analyse, link_pairs

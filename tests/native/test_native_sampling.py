@@ -124,7 +124,7 @@ def test_diagnostics_filled_while_sampling_are_the_reference_diagnostics(shipped
 def test_the_energy_terms_struct_has_the_c_layout():
     import ctypes
 
-    from linknet_core.native import library
+    from linknet_core.clib import library
 
     assert ctypes.sizeof(library.EnergyTerms) == library.sizeof(3)
 

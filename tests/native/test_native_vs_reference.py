@@ -14,7 +14,7 @@ import pytest
 import linknet_core as ln
 from linknet_core.scene import builders
 from linknet_core.dynamics.tensions import reference_tensions
-from linknet_core.native import library
+from linknet_core.clib import library
 from scene_builders import parallelogram, rotated, rotation
 
 MODELS = Path(__file__).resolve().parents[2] / "models"

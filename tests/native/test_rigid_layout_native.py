@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import linknet_core as ln
-from linknet_core.native import library as lib
+from linknet_core.clib import library as lib
 from linknet_core.native.rigid import RigidModel
 from linknet_core.structure.bodies import body_geometry, fit_bodies, free_rigid_bodies, rotation_matrices
 

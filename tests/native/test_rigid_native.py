@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 import linknet_core as ln
 from linknet_core.scene import builders
 from linknet_core.integrators import METHODS
-from linknet_core.native import library as lib
+from linknet_core.clib import library as lib
 from linknet_core.native.rigid import NativeRigidIntegrator, RigidFunctions, RigidModel, body_states
 from linknet_core.structure.bodies import free_rigid_bodies
 from linknet_core.simulator.simulator import prepare_initial_state

@@ -9,7 +9,7 @@ import pytest
 
 import linknet_core as ln
 from linknet_core.dynamics.forces import ELEMENT_KINDS
-from linknet_core.native import library
+from linknet_core.clib import library
 from linknet_core.native import model as native_model
 from linknet_core.scene import builders
 from linknet_core.scene.description import FORCE_KINDS, ForceKindMissing, require_force_kinds

@@ -41,7 +41,7 @@ def declare(lib: ctypes.CDLL) -> ctypes.CDLL:
 
 def package_library() -> ctypes.CDLL:
     """The package's native library with the LDL^T functions declared."""
-    from linknet_core.native.library import lib
+    from linknet_core.clib.library import lib
 
     return declare(lib)
 

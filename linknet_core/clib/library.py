@@ -12,7 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-SOURCE_DIR = Path(__file__).resolve().parent / "src"
+# the compiled library and its sources live in linknet_core/native/ (setup.py builds them there)
+NATIVE_DIR = Path(__file__).resolve().parent.parent / "native"
+SOURCE_DIR = NATIVE_DIR / "src"
 
 ln_int = ctypes.c_int64
 c_double_p = ctypes.POINTER(ctypes.c_double)
@@ -109,7 +111,7 @@ class EnergyTerms(ctypes.Structure):
 
 
 def _library_path() -> Path:
-    here = Path(__file__).resolve().parent
+    here = NATIVE_DIR
     for suffix in importlib.machinery.EXTENSION_SUFFIXES:
         candidate = here / f"_linknet{suffix}"
         if candidate.exists():
