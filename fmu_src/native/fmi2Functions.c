@@ -542,11 +542,6 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
     return refuse(self, fn, "not provided (maxOutputDerivativeOrder is 0)");
 }
 
-#define REPEATED_STEP                                                                                            \
-    "the step from t=%.17g with h=%.17g was discarded before, from this same state with these same inputs, so it "\
-    "fails again the same way (not computed again); stop here, or set other inputs, restore another state or take " \
-    "a shorter step."
-
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {

@@ -884,11 +884,6 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance instance_, const fmi3Byte serial
 
 /* ---- co-simulation ------------------------------------------------------------------------------- */
 
-#define REPEATED_STEP                                                                                            \
-    "the step from t=%.17g with h=%.17g was discarded before, from this same state with these same inputs, so it "\
-    "fails again the same way (not computed again); stop here, or set other inputs, restore another state or take " \
-    "a shorter step."
-
 fmi3Status fmi3DoStep(fmi3Instance instance_, fmi3Float64 currentCommunicationPoint,
                       fmi3Float64 communicationStepSize, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                       fmi3Boolean *eventHandlingNeeded, fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn,

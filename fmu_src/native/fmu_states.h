@@ -4,8 +4,9 @@
  * freed. Also the memory of the last discarded step, by which a step asked again from the very state it failed from
  * is answered without being computed (the model is deterministic: it would fail the same way).
  *
- * Only FMI-independent rules live here: the glue (fmi3Functions.c) says the words, with its own function names, and
- * maps the results onto its status codes. Everything is static: each glue compiles its own copy, nothing is exported.
+ * Only FMI-independent rules live here, with the one text both glues log for a repeated step (REPEATED_STEP): each
+ * glue (fmi2Functions.c, fmi3Functions.c) says the other words, with its own function names, and maps the results onto
+ * its status codes. Everything is static: each glue compiles its own copy, nothing is exported.
  */
 #ifndef LINKNET_FMU_STATES_H
 #define LINKNET_FMU_STATES_H
@@ -154,6 +155,11 @@ static inline void fmu_state_free_all(fmu_state_registry *r)
 }
 
 /* ---- the last discarded step --------------------------------------------------------------------------------- */
+/* What a glue logs when the step asked is the one discarded last, from the same state (printf: t, h). */
+#define REPEATED_STEP                                                                                            \
+    "the step from t=%.17g with h=%.17g was discarded before, from this same state with these same inputs, so it "\
+    "fails again the same way (not computed again); stop here, or set other inputs, restore another state or take " \
+    "a shorter step."
 typedef struct fmu_discard_memory {
     int discarded;                      /* a step is remembered */
     double t, h;

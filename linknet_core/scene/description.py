@@ -89,8 +89,8 @@ class ForceKind:
 
 
 # Every kind of force element. A kind's position here is its code in the native core (enum ln_force_kind_code in
-# native/src/stages/forces.c; clib/library.py checks the core's kinds and codes against this table before the first
-# model with force elements is built), so a new kind is appended.
+# native/src/stages/forces.c; native/model.py checks the core's kinds and codes against this table when it
+# loads, before any native model is built), so a new kind is appended.
 FORCE_KINDS: tuple[ForceKind, ...] = (
     ForceKind("drag", 1, ("c",), 0, "-c U_k on its mass (viscous drag)"),
     ForceKind("spring", 2, ("k", "d0", "c"), 2,

@@ -1,4 +1,4 @@
-"""Scene rules that used to be silent: a JSON null name, a mass on a driven anchor, prescribed motions a fixed step
+"""Scene rules, each answered in words: a JSON null name, a mass on a driven anchor, prescribed motions a fixed step
 cannot follow (a waypoint closer than one step, a sine above the step's Nyquist rate) and the step failure such a
 motion causes in an adaptive method, named in the scene's terms; Scene.save written whole or not at all; and
 docs/scenes.md stating every field and rule the parser enforces."""

@@ -1,4 +1,4 @@
-"""The viewers answer what they used to pass over: a still's time outside the run, --at given to an animation, a
+"""What the viewers answer: a still's time outside the run, --at given to an animation, a
 run whose mass ran away (1e300 m) that makes every frame a dot, and positions beyond the float32 the HTML view
 stores. Each a one-line error (exit 2) or a note, naming the file, the time or the mass."""
 from __future__ import annotations

@@ -2,7 +2,7 @@
    input forces: F_base, zero on anchors) is summed once per advance by data.c; here the state-dependent
    force elements are added to it. The kinds are those of the one table linknet_core.scene.description.FORCE_KINDS
    (name, masses, parameters' meaning); a kind's code below is its position there. native/model.py checks the
-   names and codes (ln_force_kind_name) against that table before the first model with force elements is built, so
+   names and codes (ln_force_kind_name) against that table when it loads, before any native model is built, so
    a new kind is a row there, a code and a name here and a case in ln_scene_forces, or no such model is built. */
 #include <math.h>
 #include <string.h>
