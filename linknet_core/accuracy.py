@@ -38,6 +38,9 @@ _scene_size.argtypes = [ctypes.c_int64, _c_double_p]
 _position_gap = _core.ln_position_gap
 _position_gap.restype = ctypes.c_double
 _position_gap.argtypes = [ctypes.c_int64, _c_double_p, _c_double_p]
+_position_gaps = _core.ln_position_gaps
+_position_gaps.restype = None
+_position_gaps.argtypes = [ctypes.c_int64, ctypes.c_int64, _c_double_p, _c_double_p, _c_double_p]
 
 _accuracy_text = _core.ln_accuracy_text
 _accuracy_text.restype = None
@@ -104,6 +107,18 @@ def position_gap(Xa: np.ndarray, Xb: np.ndarray) -> float:
     Xa = np.ascontiguousarray(Xa, dtype=np.float64)
     Xb = np.ascontiguousarray(Xb, dtype=np.float64)
     return _position_gap(Xa.shape[0], Xa.ctypes.data_as(_c_double_p), Xb.ctypes.data_as(_c_double_p))
+
+
+def position_gaps(Xa: np.ndarray, Xb: np.ndarray) -> np.ndarray:
+    """position_gap of every pair of samples (n, K, 3), in one call (ln_position_gaps)."""
+    Xa = np.ascontiguousarray(Xa, dtype=np.float64)
+    Xb = np.ascontiguousarray(Xb, dtype=np.float64)
+    if Xa.shape != Xb.shape or Xa.ndim != 3:
+        raise ValueError(f"position_gaps: samples of shape {Xa.shape} and {Xb.shape}, expected two (n, K, 3)")
+    out = np.empty(Xa.shape[0])
+    _position_gaps(Xa.shape[0], Xa.shape[1], Xa.ctypes.data_as(_c_double_p), Xb.ctypes.data_as(_c_double_p),
+                   out.ctypes.data_as(_c_double_p))
+    return out
 
 
 def accuracy_text(name: str, t: float, estimate: float, goal: float, largest: float | None = None) -> str:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from linknet_core.accuracy import (accuracy_text, companion, default_method, error_goal, estimate_failure_text,
-                                   position_gap, scene_size, warn_accuracy)
+                                   position_gap, position_gaps, scene_size, warn_accuracy)
 from linknet_core.dynamics.drive import AnchorDrive, anchor_jump, check_step_follows_motions
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import SceneError, SolverError
@@ -848,7 +848,7 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None 
         raise SimulationInterrupted(result) from None
     else:
         shadow_X = shadow.X[::2]
-        result.error_estimate = np.array([settings.factor * position_gap(a, b) for a, b in zip(result.X, shadow_X)])
+        result.error_estimate = settings.factor * position_gaps(result.X, shadow_X)
         result.stats["companion_steps"] = shadow.stats.get("steps")
     note = result.accuracy_note()
     if note is not None:

@@ -55,6 +55,12 @@ LN_API double ln_position_gap(ln_int K, const double *Xa, const double *Xb)
     return worst;
 }
 
+LN_API void ln_position_gaps(ln_int n, ln_int K, const double *Xa, const double *Xb, double *out)
+{
+    for (ln_int i = 0; i < n; i++)
+        out[i] = ln_position_gap(K, Xa + 3 * K * i, Xb + 3 * K * i);
+}
+
 /* What a run is asked for, in metres of position: the goal its error estimate is held to (a warning where it is
    exceeded). Local error control keeps each step's error within rtol; over a run those errors add up and the
    motion amplifies them, and on the shipped scenes the global error ends 1-20 times rtol times the scene's size

@@ -373,6 +373,8 @@ LN_API void ln_estimate_failure_text(const char *name, const char *why, char *ou
 
 /* The largest distance |Xa_k - Xb_k| over K masses (K,3), m; NaN if a coordinate is not finite. */
 LN_API double ln_position_gap(ln_int K, const double *Xa, const double *Xb);
+/* ln_position_gap of n pairs of states (n, K, 3), one gap per pair, into out (n): a run's estimate at every sample. */
+LN_API void ln_position_gaps(ln_int n, ln_int K, const double *Xa, const double *Xb, double *out);
 
 /* The position error (m) a run is held to: 100 times max(rtol times the scene's size, atol); a
    fixed-step run (adaptive 0) is held to that of ln_default_rtol. */
