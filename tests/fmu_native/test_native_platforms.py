@@ -237,6 +237,7 @@ def wine(tmp_path_factory):
     persistent.wait(timeout=60)
 
 
+@pytest.mark.slow
 def test_win64_under_wine_equals_linux64_on_every_scene(fmu_root, tmp_path_factory, wine, linux64_runs):
     exe, env = wine
     host = _cross_host(tmp_path_factory, "x86_64-windows-gnu", "win64", [])
@@ -264,6 +265,7 @@ def qemu():
     return exe
 
 
+@pytest.mark.slow
 def test_aarch64_linux_under_qemu_equals_linux64_on_every_scene(fmu_root, tmp_path_factory, qemu, linux64_runs):
     host = _cross_host(tmp_path_factory, "aarch64-linux-gnu.2.17", "aarch64-linux", ["-ldl", "-lpthread", "-lm"])
 
@@ -314,6 +316,7 @@ def test_sources_build_with_the_plain_command(scene, fmu_root, host, bare_host, 
     assert _bare_run(bare_host, library, fmu) == _bare_run(bare_host, binary(fmu, "linux64"), fmu)  # libm needed
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("cmake") is None, reason="cmake not installed (apt-get install cmake)")
 def test_sources_build_with_their_cmakelists(fmu_root, host, no_python_env, tmp_path):
     fmu = fmu_of("net_10x10", fmu_root)
@@ -347,6 +350,7 @@ def _bare_run(bare_host: Path, library: Path, fmu: Built) -> str:
     return proc.stdout
 
 
+@pytest.mark.slow
 def test_fmpy_source_build_with_libm_named(fmu_root, host, bare_host, no_python_env, tmp_path):
     """fmpy's own source build (fmpy.build.build_platform_binary: CMake with fmpy's CMakeLists.txt over the
     <SourceFiles>, sources/ the include folder) compiles the sources as they are, into a binary that exports only the
