@@ -18,17 +18,19 @@ from linknet_core.dynamics.drive import AnchorDrive, anchor_jump, check_step_fol
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import SceneError, SolverError
 from linknet_core.dynamics.forces import kinetic_energy
-from linknet_core.integrators import make_integrator, method_settings, real_number
-from linknet_core.native.integrator import NativeIntegrator
-from linknet_core.native.model import native_model
-from linknet_core.native.rigid import NativeRigidIntegrator
-from linknet_core.simulator.specialisation import RIGID, STATIC, Specialisation, choose_specialisation
+from linknet_core.integrators import method_settings, real_number
+from linknet_core.simulator.backend import Backend
+from linknet_core.simulator.native_backend import NativeBackend
+from linknet_core.simulator.numpy_backend import NumpyBackend
+from linknet_core.simulator.specialisation import STATIC, Specialisation
 from linknet_core.structure.topology import kept_per_scene
 from linknet_core.scene.description import Scene, load_scene
 from linknet_core.state import State
 
 DEFAULT_LENGTH_TOL = 1e-6  # relative violation of (11) accepted in a scene's initial positions
-BACKENDS = ("auto", "native", "numpy")
+# the backends by name (linknet_core.simulator.backend): "auto" is the native core
+BACKEND_CLASSES: dict[str, type[Backend]] = {"native": NativeBackend, "numpy": NumpyBackend}
+BACKENDS = ("auto", *BACKEND_CLASSES)
 # Snapshots (get_state) name the simulator they come from: this format, the scene's fingerprint, the method and the
 # path (backend and specialisation), so set_state refuses another scene's or another path's snapshot rather than
 # projecting foreign positions onto this scene's lengths. Raise the number when a snapshot's content changes.
@@ -165,15 +167,10 @@ def _setup(scene: Scene, dyn: Dynamics, method, dt, rtol, atol, project_initial,
         X0, U0, report = _kept_initial_state(scene, dyn, project_initial, length_tol)
     else:
         X0, U0, report = prepare_initial_state(scene, dyn, project_positions=project_initial, length_tol=length_tol)
-    # one backend, chosen here before anything is built: the native core, or the numpy reference (asked for, or
-    # implied by a casadi right-hand side, which is a variant of the numpy Dynamics)
-    chosen = "numpy" if backend == "numpy" or dyn.rhs_kernel != "numpy" else "native"
-    if chosen == "numpy":
-        specialisation = choose_specialisation(scene, dyn, method, enabled=False)
-    else:
-        specialisation = choose_specialisation(scene, dyn, method, enabled=specialise, tolerances=(rtol, atol))
-        if specialisation.kind == STATIC:
-            U0 = np.zeros_like(U0)  # the only velocity (12) allows where nothing can move
+    # one backend, chosen here before anything is built: the one asked for, the native core by default, the numpy
+    # reference where the right-hand side is casadi's (a variant of the numpy Dynamics)
+    chosen = "numpy" if dyn.rhs_kernel != "numpy" else "native" if backend == "auto" else backend
+    specialisation, U0 = BACKEND_CLASSES[chosen].choose_specialisation(scene, dyn, method, specialise, rtol, atol, U0)
     X0.flags.writeable = U0.flags.writeable = False
     return method_cls, dt, rtol, atol, X0, U0, report, chosen, specialisation
 
@@ -200,18 +197,6 @@ def _within(a: np.ndarray, bound: float) -> bool:
     return float(v.dot(v)) <= bound * bound
 
 
-def _all_finite(*arrays: np.ndarray) -> bool:
-    """Whether every entry is finite and below ~1e154, in one dot product per array: a sum of squares is
-    non-finite iff an entry is non-finite or beyond ~1e154, which is no physical state or force either. For the
-    state after every advance and the input before it (every FMU doStep): ~0.8 us for X and U against ~2.3 us
-    for two isfinite passes."""
-    total = 0.0
-    for a in arrays:
-        v = a.ravel()
-        total += float(v.dot(v))
-    return math.isfinite(total)
-
-
 class Simulator:
     """One scene (a Scene, or the path of a scene file), one integrator, one state: the stepping interface.
 
@@ -230,6 +215,10 @@ class Simulator:
     the tolerances) is advanced alongside with the same inputs, and ``error_estimate`` holds the estimated largest
     position error (m) at the current time, ``error_goal`` what the run is held to, ``error_note()`` a warning's
     text where the estimate exceeds it. It about doubles the cost of an advance; False skips it.
+
+    ``backend`` names the backend (``BACKEND_CLASSES``; "auto": the native core), chosen once here: ``engine`` is
+    its object (linknet_core.simulator.backend.Backend), through which every advance, output, sample and
+    linearization goes; ``integrator`` its integrator (statistics, internals).
     """
 
     def __init__(self, scene: Scene | str | os.PathLike, method: str | None = None, dt: float | None = None,
@@ -259,30 +248,20 @@ class Simulator:
         method_cls, dt, rtol, atol, X0, U0, self.initial_report, self.backend, specialisation = setup
         self.specialisation = Specialisation(specialisation.kind, specialisation.reason, specialisation.bodies,
                                              list(specialisation.notes), specialisation.tolerances)  # its own notes
-        if self.backend == "numpy":
-            self.integrator = make_integrator(method, self.dyn, dt=dt, rtol=rtol, atol=atol)
-            if scene.motions:
-                self.integrator.drive = AnchorDrive(scene, t0)
-        elif self.specialisation.kind == RIGID:
-            self.integrator = NativeRigidIntegrator(self.dyn, self.specialisation.bodies, method_cls, X0, U0,
-                                                    dt=dt, rtol=rtol, atol=atol)
-            X0, U0 = self.integrator.initial_state
-            self.specialisation.notes.extend(self.integrator.notes)
-        else:
-            self.integrator = NativeIntegrator(native_model(scene, self.dyn.structure), method_cls, dt=dt,
-                                               rtol=rtol, atol=atol, static=self.specialisation.kind == STATIC, t0=t0)
+        # the backend object: everything that depends on how the state is stepped and evaluated
+        self.engine = BACKEND_CLASSES[self.backend].create(scene, self.dyn, method, method_cls, dt, rtol, atol, X0,
+                                                           U0, t0, self.specialisation)
+        self.integrator = self.engine.integrator
+        X0, U0 = self.engine.initial_state
+        self.specialisation.notes.extend(self.engine.notes)
         # the scene is autonomous (no force depends on t), so starting at t0 is the scene's motion shifted in time
         # (the initial arrays are never written into: every advance replaces the state's arrays, and the state
         # handed out is a copy)
         self._initial = State(t0, X0, U0)
-        internals = self.integrator.internals()
-        # the native point-mass integrator hands out internals of their own (copies of its data); others may share
-        self._initial_internals = internals if type(self.integrator) is NativeIntegrator else copy.deepcopy(internals)
         self.max_steps_per_call = max_steps_per_call
         self.state = self._initial.copy()
         self._reset_arrays = (self.state.X, self.state.U)  # the state's arrays as made from the initial state
-        if type(self.integrator) is NativeIntegrator:
-            self.integrator.hold(self.state)
+        self.engine.start(self.state)
         self.error_goal = error_goal(method_cls, rtol, atol, scene_size(X0))
         self.error_estimate = 0.0
         self._error_factor, self._companion_failure, self.companion = 1.0, None, None
@@ -317,7 +296,7 @@ class Simulator:
     @property
     def rhs_evaluations(self) -> int:
         """Right-hand sides (9) evaluated so far."""
-        return getattr(self.integrator, "rhs_evaluations", self.dyn.rhs_evaluations)
+        return self.engine.rhs_evaluations
 
     # ---- stepping ----------------------------------------------------------------------------
     def check_input(self, F_input) -> np.ndarray | None:
@@ -418,54 +397,26 @@ class Simulator:
         return None
 
     def _advance_run(self, t_next: float, F_input=None, anchors=None) -> None:
-        """Integrate the run (not its companion) to t_next with F_input held. ``anchors``: the input-driven anchors' motion from now on, (P, V,
-        A) held as P + V s + A s^2/2 (s from the current time), or a callable f(t) -> (P, V, A); None keeps the
-        last. A composition's inner stages may call it a little outside [t, t_next] (yoshida8: up to half a step). Where the anchors jump (a new V, or P), the velocities are projected onto (12) first: an inelastic
-        impulse, reported by ``anchor_report``. On success the state is finite; on any error the simulator is left
-        exactly as before the call (state, integrator internals and the anchors' held motion)."""
+        """Integrate the run (not its companion) to t_next with F_input held, on the backend chosen at construction
+        (``engine``). ``anchors``: the input-driven anchors' motion from now on, (P, V, A) held as
+        P + V s + A s^2/2 (s from the current time), or a callable f(t) -> (P, V, A); None keeps the last. A
+        composition's inner stages may call it a little outside [t, t_next] (yoshida8: up to half a step). Where
+        the anchors jump (a new V, or P), the velocities are projected onto (12) first: an inelastic impulse,
+        reported by ``anchor_report``. On success the state is finite; on any error the simulator is left exactly
+        as before the call (state, integrator internals and the anchors' held motion)."""
         F = self.check_input(F_input)
         hold = self.check_anchors(anchors)
         t_next = t_next if type(t_next) is float else _as_time(t_next, "the target time")
         state = self.state
-        t_before = state.t
-        if self.backend == "native":  # the native advance restores everything itself on failure
-            saved = self.integrator.internals() if hold is not None else None
-            try:
-                if hold is not None:
-                    self.integrator.set_anchors(t_before, hold)
-                self.integrator.advance(state, t_next, F, self.max_steps_per_call)
-            except SolverError as exc:
-                if saved is not None:
-                    self.integrator.set_internals(saved)
-                if F is None:
-                    raise
-                raise SolverError(f"{exc}{self._input_note(F)}") from None
-            return
-        if not math.isfinite(t_next) or not t_next > t_before:
-            raise SolverError(f"cannot advance from t = {t_before} to t = {t_next}: the target must be later "
+        if not math.isfinite(t_next) or not t_next > state.t:
+            raise SolverError(f"cannot advance from t = {state.t} to t = {t_next}: the target must be later "
                               "and finite")
-        # The integrators never write into the state's arrays, they replace them (tests/test_core_validation.py
-        # checks every path), so keeping references is the snapshot: copying cost ~1 us per call. Nor does a
-        # later call write into what internals() hands out.
-        X_before, U_before, internals = state.X, state.U, self.integrator.internals()
-        drive = self.integrator.drive
         try:
-            if drive is not None:
-                if hold is not None:
-                    drive.set_input(t_before, hold)
-                state.X, state.U, *drive.last_jump = anchor_jump(self.dyn, drive, t_before, state.X, state.U)
-                drive.jumps += drive.last_jump[1] > 0 or drive.last_jump[2] > 0
-            self.integrator.advance(state, t_next, F, self.max_steps_per_call)
-            if not _all_finite(state.X, state.U):
-                raise SolverError(f"the state became non-finite between t = {t_before} and t = {t_next} "
-                                  f"(largest |X| {np.abs(state.X).max()} m); reduce the step or tolerance")
-        except Exception as exc:
-            # leave the simulator where it was, so a caller can retry with other settings
-            state.t, state.X, state.U = t_before, X_before, U_before
-            self.integrator.set_internals(internals)
-            if isinstance(exc, SolverError) and F is not None:
-                raise SolverError(f"{exc}{self._input_note(F)}") from None
-            raise
+            self.engine.advance(state, t_next, F, hold, self.max_steps_per_call)
+        except SolverError as exc:
+            if F is None:
+                raise
+            raise SolverError(f"{exc}{self._input_note(F)}") from None
 
     def outputs(self, F_input=None, anchors=None) -> dict:
         """Positions, velocities, tensions (with direct feedthrough of F_input, since B of (26) contains F, and of
@@ -474,22 +425,10 @@ class Simulator:
         is kept); the driven anchors' rows are where their motion is at the current time."""
         F = self.check_input(F_input)
         hold = self.check_anchors(anchors)
-        X, U = self.state.X, self.state.U
-        t = self.state.t
-        if self.backend == "native":
-            saved = self.integrator.internals() if hold is not None else None
-            try:
-                if hold is not None:
-                    self.integrator.set_anchors(t, hold)
-                T, Freact = self.integrator.outputs(X, U, F)
-            finally:
-                if saved is not None:
-                    self.integrator.set_internals(saved)
-        else:
-            X_at, U_at, anchor_acc = self._with_anchors_now(t, X, U, hold)
-            T = self.dyn.tensions(X_at, U_at, F, anchor_acc=anchor_acc)
-            Freact = self.dyn.anchor_reactions(X_at, T)
-        out = {"t": t, "X": X.copy(), "U": U.copy(), "T": T, "Freact": Freact, "error_estimate": self.error_estimate}
+        state = self.state
+        T, Freact = self.engine.outputs(state, F, hold)
+        out = {"t": state.t, "X": state.X.copy(), "U": state.U.copy(), "T": T, "Freact": Freact,
+               "error_estimate": self.error_estimate}
         if self.scene.driven.any():
             out["impulse"] = self.anchor_report()["impulse"]
         return out
@@ -503,9 +442,9 @@ class Simulator:
         F = self.check_input(F_input)
         hold = self.check_anchors(anchors)
         t = self.state.t
-        drive = AnchorDrive(self.scene, self._initial.t)  # scene time 0 is the start time t0
-        if self.backend != "native":
-            drive.set_internals(self.integrator.drive.internals())
+        # a drive of its own (scene time 0 is the start time t0): the input-driven anchors follow ``hold``, the others
+        # their motions, so nothing of the run's own drive is needed
+        drive = AnchorDrive(self.scene, self._initial.t)
         drive.set_input(t, hold)
         X, U, impulse, _, _ = anchor_jump(self.dyn, drive, t, self.state.X, self.state.U)
         X_at, U_at, anchor_acc = drive.apply(t, X, U)
@@ -523,42 +462,7 @@ class Simulator:
         the native point-mass path, the numpy reference on the others (docs/interface_jacobians.md)."""
         F = self.check_input(F_input)
         hold = self.check_anchors(anchors)
-        X, U, t = self.state.X, self.state.U, self.state.t
-        if type(self.integrator) is NativeIntegrator:
-            from linknet_core.native.interface import NativeLinearization
-
-            integrator = self.integrator
-            saved = integrator.internals() if hold is not None else None
-            try:
-                if hold is not None:
-                    integrator.set_anchors(t, hold)
-                try:
-                    return NativeLinearization(integrator.model, integrator.data, X, U, F)
-                except SolverError:
-                    integrator._raise_motion_error()  # a callable's own failure, where it was one
-                    raise
-            finally:
-                if saved is not None:
-                    integrator.set_internals(saved)
-        from linknet_core.dynamics.interface_jacobian import ReferenceLinearization
-
-        X_at, U_at, anchor_acc = self._with_anchors_now(t, X, U, hold)
-        return ReferenceLinearization(self.dyn, X_at, U_at, F, anchor_acc)
-
-    def _with_anchors_now(self, t, X, U, hold):
-        """X, U with the driven anchors' rows where their motion (or the held input ``hold``) has them at t, and
-        their accelerations (None without driven anchors): the state the numpy reference evaluates outputs at, as
-        the native backend does; the drive's own internals are left as they were."""
-        drive = getattr(self.integrator, "drive", None)
-        if drive is None:
-            return X, U, None
-        saved = drive.internals()
-        try:
-            if hold is not None:
-                drive.set_input(t, hold)
-            return drive.apply(t, X, U)
-        finally:
-            drive.set_internals(saved)
+        return self.engine.linearization(self.state, F, hold)
 
     def interface_jacobian(self, F_input=None, anchors=None):
         """Every block of :meth:`interface_linearization` at the current state: an InterfaceJacobian, J["T", "F"],
@@ -578,34 +482,29 @@ class Simulator:
         on): for a run's last call when the simulator is reset before any further use (simulate)."""
         F = self.check_input(F_input)
         try:
-            self.integrator.sample(self.state, times, F, self.max_steps_per_call, X, U, T, diagnostics, advance_first,
-                                   update_state)
+            self.engine.sample(self.state, times, F, self.max_steps_per_call, X, U, T, diagnostics, advance_first,
+                               update_state)
         except SolverError as exc:
             if F is None:
                 raise
             raise SolverError(f"{exc}{self._input_note(F)}") from None
 
-    @functools.cached_property
+    @property
     def diagnostics_in_one_call(self) -> bool:
         """Whether ``sample`` can fill the samples' diagnostics too."""
-        return self.samples_in_one_call and self.integrator.diagnostics_in_c
+        return self.engine.diagnostics_in_one_call
 
-    @functools.cached_property
+    @property
     def samples_in_one_call(self) -> bool:
         """Whether ``sample`` is available: the native point-mass path (free rigid bodies and the numpy reference
         step from Python) of a scene without driven anchors (fixed at construction)."""
-        return type(self.integrator) is NativeIntegrator and not self.scene.motions  # one motion per driven anchor
+        return self.engine.samples_in_one_call
 
     def anchor_report(self) -> dict:
         """The driven anchors' jump at the start of the last advance: "impulse" (n_driven, 3), what the links gave
         each (N s); "jump_position" (m) and "jump_velocity" (m/s), the largest coordinate changes; "jumps", how
         many advances of the run began with one."""
-        if self.backend == "native":
-            return self.integrator.anchor_report()
-        drive = self.integrator.drive
-        impulse, jump_position, jump_velocity = drive.last_jump
-        return {"impulse": impulse.copy(), "jump_position": jump_position, "jump_velocity": jump_velocity,
-                "jumps": drive.jumps}
+        return self.engine.anchor_report()
 
     # ---- snapshots ---------------------------------------------------------------------------
     def get_state(self) -> dict:
@@ -658,10 +557,7 @@ class Simulator:
                 and state.t == initial.t):
             self.state = state = initial.copy()
             self._reset_arrays = (state.X, state.U)
-        if type(self.integrator) is NativeIntegrator:
-            self.integrator.reset()  # a new integrator's internals, which are those it had at construction
-        else:
-            self.integrator.set_internals(copy.deepcopy(self._initial_internals))
+        self.engine.reset()
         self.dyn.rhs_evaluations, self.dyn.floor_stops, self.dyn.floor_reached = self._initial_counts
         self.error_estimate, self._companion_failure = 0.0, None
         if self.companion is not None:
@@ -820,7 +716,7 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None 
         goal, static = sim.error_goal, sim.specialisation.kind == STATIC
         settings = companion(*validated)
     finally:
-        if pool_key is not None and type(sim.integrator) is NativeIntegrator:
+        if pool_key is not None and sim.engine.reusable:
             _hand_back(scene, pool_key, sim)
     result.error_goal = goal
     if not error_estimate:

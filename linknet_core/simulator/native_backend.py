@@ -1,0 +1,123 @@
+"""The native core as a backend: whole intervals in one call into C (linknet_core.native), on the point-mass path
+(static scenes included) or, for a scene of free rigid bodies, on the bodies' path."""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from linknet_core.errors import SolverError
+from linknet_core.native.integrator import NativeIntegrator
+from linknet_core.native.model import native_model
+from linknet_core.native.rigid import NativeRigidIntegrator
+from linknet_core.simulator.backend import Backend
+from linknet_core.simulator.specialisation import RIGID, STATIC, choose_specialisation
+
+
+class NativeBackend(Backend):
+    """The point-mass path: ln_advance, ln_evaluate, ln_sample and the core's interface Jacobians. The native
+    advance is all or nothing itself (the core puts its data back on failure); the anchors' hold set for an
+    advance or an evaluation is put back here."""
+
+    name = "native"
+    reusable = True
+
+    @classmethod
+    def choose_specialisation(cls, scene, dyn, method, specialise, rtol, atol, U0):
+        specialisation = choose_specialisation(scene, dyn, method, enabled=specialise, tolerances=(rtol, atol))
+        if specialisation.kind == STATIC:
+            U0 = np.zeros_like(U0)  # the only velocity (12) allows where nothing can move
+        return specialisation, U0
+
+    @classmethod
+    def create(cls, scene, dyn, method, method_cls, dt, rtol, atol, X0, U0, t0, specialisation) -> "NativeBackend":
+        if specialisation.kind == RIGID:
+            return NativeRigidBackend.create(scene, dyn, method, method_cls, dt, rtol, atol, X0, U0, t0,
+                                             specialisation)
+        integrator = NativeIntegrator(native_model(scene, dyn.structure), method_cls, dt=dt, rtol=rtol, atol=atol,
+                                      static=specialisation.kind == STATIC, t0=t0)
+        return cls(scene, dyn, integrator, (X0, U0))
+
+    def start(self, state) -> None:
+        # reset goes back to a new integrator's internals (NativeIntegrator.reset), which need no copy kept here
+        self.integrator.hold(state)
+
+    def reset(self) -> None:
+        self.integrator.reset()
+
+    @property
+    def rhs_evaluations(self) -> int:
+        return self.integrator.rhs_evaluations
+
+    @functools.cached_property
+    def samples_in_one_call(self) -> bool:
+        return not self.scene.motions  # one motion per driven anchor: those are followed from Python
+
+    @functools.cached_property
+    def diagnostics_in_one_call(self) -> bool:
+        return self.samples_in_one_call and self.integrator.diagnostics_in_c
+
+    def advance(self, state, t_next, F, hold, max_steps) -> None:
+        integrator = self.integrator
+        saved = integrator.internals() if hold is not None else None
+        try:
+            if hold is not None:
+                integrator.set_anchors(state.t, hold)
+            integrator.advance(state, t_next, F, max_steps)
+        except SolverError:
+            if saved is not None:
+                integrator.set_internals(saved)
+            raise
+
+    def outputs(self, state, F, hold):
+        integrator = self.integrator
+        saved = integrator.internals() if hold is not None else None
+        try:
+            if hold is not None:
+                integrator.set_anchors(state.t, hold)
+            return integrator.outputs(state.X, state.U, F)
+        finally:
+            if saved is not None:
+                integrator.set_internals(saved)
+
+    def anchor_report(self) -> dict:
+        return self.integrator.anchor_report()
+
+    def sample(self, state, times, F, max_steps, X, U, T, diagnostics, advance_first, update_state) -> None:
+        self.integrator.sample(state, times, F, max_steps, X, U, T, diagnostics, advance_first, update_state)
+
+    def linearization(self, state, F, hold):
+        from linknet_core.native.interface import NativeLinearization
+
+        integrator = self.integrator
+        saved = integrator.internals() if hold is not None else None
+        try:
+            if hold is not None:
+                integrator.set_anchors(state.t, hold)
+            try:
+                return NativeLinearization(integrator.model, integrator.data, state.X, state.U, F)
+            except SolverError:
+                integrator._raise_motion_error()  # a callable's own failure, where it was one
+                raise
+        finally:
+            if saved is not None:
+                integrator.set_internals(saved)
+
+
+class NativeRigidBackend(NativeBackend):
+    """The free rigid bodies' path: ln_advance moves the body states (NativeRigidIntegrator). The bodies start from
+    the state they were frozen in (projected onto the link lengths if it had to be); a reset restores the body
+    states of the start; the outputs' linearization is the numpy reference's (the core's interface Jacobians are
+    of the point-mass path); no samples in one call."""
+
+    reusable = False
+    samples_in_one_call = False
+    diagnostics_in_one_call = False
+    start = Backend.start
+    reset = Backend.reset
+    linearization = Backend.linearization
+
+    @classmethod
+    def create(cls, scene, dyn, method, method_cls, dt, rtol, atol, X0, U0, t0, specialisation):
+        integrator = NativeRigidIntegrator(dyn, specialisation.bodies, method_cls, X0, U0, dt=dt, rtol=rtol, atol=atol)
+        return cls(scene, dyn, integrator, integrator.initial_state, list(integrator.notes))

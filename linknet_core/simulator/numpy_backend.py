@@ -1,0 +1,69 @@
+"""The numpy reference as a backend: linknet_core.integrators on dynamics.Dynamics (or its casadi right-hand side),
+stepped from Python, with the driven anchors' jump done here before each advance."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from linknet_core.dynamics.drive import AnchorDrive, anchor_jump
+from linknet_core.errors import SolverError
+from linknet_core.integrators import make_integrator
+from linknet_core.simulator.backend import Backend
+
+
+def all_finite(*arrays: np.ndarray) -> bool:
+    """Whether every entry is finite and below ~1e154, in one dot product per array: a sum of squares is
+    non-finite iff an entry is non-finite or beyond ~1e154, which is no physical state or force either. For the
+    state after every advance: ~0.8 us for X and U against ~2.3 us for two isfinite passes."""
+    total = 0.0
+    for a in arrays:
+        v = a.ravel()
+        total += float(v.dot(v))
+    return math.isfinite(total)
+
+
+class NumpyBackend(Backend):
+    name = "numpy"
+
+    @classmethod
+    def create(cls, scene, dyn, method, method_cls, dt, rtol, atol, X0, U0, t0, specialisation) -> "NumpyBackend":
+        integrator = make_integrator(method, dyn, dt=dt, rtol=rtol, atol=atol)
+        if scene.motions:
+            integrator.drive = AnchorDrive(scene, t0)
+        backend = cls(scene, dyn, integrator, (X0, U0))
+        backend.drive = integrator.drive
+        return backend
+
+    def advance(self, state, t_next, F, hold, max_steps) -> None:
+        t_before = state.t
+        # The integrators never write into the state's arrays, they replace them (tests/core/test_core_validation.py
+        # checks every path), so keeping references is the snapshot: copying cost ~1 us per call. Nor does a
+        # later call write into what internals() hands out.
+        X_before, U_before, internals = state.X, state.U, self.integrator.internals()
+        drive = self.drive
+        try:
+            if drive is not None:
+                if hold is not None:
+                    drive.set_input(t_before, hold)
+                state.X, state.U, *drive.last_jump = anchor_jump(self.dyn, drive, t_before, state.X, state.U)
+                drive.jumps += drive.last_jump[1] > 0 or drive.last_jump[2] > 0
+            self.integrator.advance(state, t_next, F, max_steps)
+            if not all_finite(state.X, state.U):
+                raise SolverError(f"the state became non-finite between t = {t_before} and t = {t_next} "
+                                  f"(largest |X| {np.abs(state.X).max()} m); reduce the step or tolerance")
+        except Exception:
+            # leave the simulator where it was, so a caller can retry with other settings
+            state.t, state.X, state.U = t_before, X_before, U_before
+            self.integrator.set_internals(internals)
+            raise
+
+    def outputs(self, state, F, hold):
+        X_at, U_at, anchor_acc = self.anchors_now(state.t, state.X, state.U, hold)
+        T = self.dyn.tensions(X_at, U_at, F, anchor_acc=anchor_acc)
+        return T, self.dyn.anchor_reactions(X_at, T)
+
+    def anchor_report(self) -> dict:
+        impulse, jump_position, jump_velocity = self.drive.last_jump
+        return {"impulse": impulse.copy(), "jump_position": jump_position, "jump_velocity": jump_velocity,
+                "jumps": self.drive.jumps}
