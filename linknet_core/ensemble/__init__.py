@@ -14,6 +14,7 @@ import math
 import tempfile
 import time
 import uuid
+from dataclasses import replace
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -52,7 +53,9 @@ def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, met
     tip: the mass (1-based number or name) whose final position is reported; default the last free mass.
     project_initial: project initial positions onto the link lengths; default: yes when R or X0 is varied
         (a member's lengths would otherwise contradict the scene's positions), else the scene's option.
-    out: netCDF file to write (members stream into it as they finish); None keeps the study in memory.
+    out: netCDF file to write (members stream into it as they finish; with trajectories, those are in shard
+        files in the folder beside it, ``NAME.shards``, which the file joins: keep the two together); None
+        keeps the study in memory.
     client: None (a LocalCluster, ``workers`` processes, default one per core), a scheduler address, or a
         ``distributed.Client``. members_per_task: fixed batch size (default: adaptive).
     connect_timeout: seconds (default 10) to reach a scheduler address and see its Dask handshake; an address
@@ -69,7 +72,7 @@ def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, met
     from linknet_core.ensemble.engine import Engine, run_study
     from linknet_core.ensemble.members import OUTPUTS, StudySpec
     from linknet_core.ensemble.report import ProgressBar
-    from linknet_core.ensemble.store import StudyFile
+    from linknet_core.ensemble.store import StudyFile, remove_study
 
     base, fmu_bytes, fmu_config, source = load_source(scene, fmu)
     plan = make_plan(base, vary, samples)
@@ -118,6 +121,7 @@ def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, met
             sink = StudyFile(path, spec, plan, base)
         except OSError as exc:
             raise LinknetError(f"cannot write {path}: {exc}") from None
+        spec = replace(spec, shards=sink.shard_folder)  # where the workers write the members' trajectories
         final = None
         try:
             final = run_study(engine, spec, plan, sink, on_progress, members_per_task)
@@ -131,12 +135,15 @@ def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, met
                              else final.first_result_seconds + final.started - started, workers=final.workers,
                              failed=final.failed, retried=final.retried, tasks=final.tasks,
                              member_cpu_seconds=final.member_cpu_seconds,
-                             client_write_cpu_seconds=final.write_cpu_seconds, complete=1)
+                             client_write_cpu_seconds=final.write_cpu_seconds,
+                             worker_write_cpu_seconds=final.worker_write_cpu_seconds, complete=1)
             else:  # interrupted: the members written so far stay readable, marked as such
                 facts["complete"] = 0
-            sink.close(facts)
-            if final is None and keep_in_memory:
-                path.unlink(missing_ok=True)
+            try:
+                sink.close(facts)
+            finally:
+                if final is None and keep_in_memory:
+                    remove_study(path)
     return _open(path, keep_in_memory)
 
 
@@ -160,12 +167,13 @@ def _open(path: Path, keep_in_memory: bool):
 
     from linknet_core.accuracy import warn_accuracy
     from linknet_core.ensemble.report import accuracy_note
+    from linknet_core.ensemble.store import remove_study
 
     ds = xr.open_dataset(path, engine="h5netcdf")
     if keep_in_memory:
         ds.load()
         ds.close()
-        path.unlink(missing_ok=True)
+        remove_study(path)
     note = accuracy_note(ds)
     if note:
         warn_accuracy(f"{ds.attrs.get('scene_name')}: {note}")

@@ -10,8 +10,11 @@
   scheduler and worker) stays about TASK_OVERHEAD_SHARE of the work, and never so large that the last batches
   leave workers idle.
 * Results are fetched as they finish and handed to the sink (the study file) at once, then released, so the
-  cluster never holds more than the batches in flight. A fetch that fails (a connection fault) is tried
-  again, and after FETCH_ATTEMPTS the batch runs again: a study never waits on a result that cannot come.
+  cluster never holds more than the batches in flight. A batch's trajectories are not in its result where its
+  worker wrote them into the study's shard folder (members.run_batch): the result is its quantities of
+  interest, status and errors, ~100 bytes a member. A fetch that fails (a connection fault) is tried again, and
+  after FETCH_ATTEMPTS the batch runs again: a study never waits on a result that cannot come. A sink whose
+  write fails (a full disk) goes on in its rescue file, and the study with it.
 * When a worker dies, the scheduler reruns the batches it was running and any finished result not yet
   fetched from it (the "remove-worker" event names those tasks; this module listens to it): those members
   are the study's retried members. A batch whose workers keep dying (``KilledWorker``) is split into single
@@ -32,22 +35,23 @@ from concurrent.futures import CancelledError
 from dataclasses import dataclass, field
 
 from linknet_core.errors import LinknetError
+from linknet_core.output import WriteError
 from linknet_core.scene import Scene
 from linknet_core.ensemble.members import StudyPayload, StudySpec, error_text, output_values, run_batch
 from linknet_core.ensemble.parameters import Plan
 
 # CPU time Dask spends on one task of a study, whatever its size: 3.5-5 ms in the client and scheduler (submit, the
-# scheduler's transitions, the result's fetch and release, the batch's writes into the file) and 2-2.5 ms in the
+# scheduler's transitions, the result's fetch and release, the batch's record in the file) and 2-2.5 ms in the
 # worker (benchmarks/bench_ensemble.py's per-task figures k_c, k_w: studies of trivial members, one per task, on
-# this project's 2-core machine)
+# this project's 2-core machine; a shard file adds ~1.3 ms on the worker)
 TASK_OVERHEAD_SECONDS = 0.006
 TASK_OVERHEAD_SHARE = 0.01  # a task holds about 1 / this times its overhead in work
 TASK_SECONDS = TASK_OVERHEAD_SECONDS / TASK_OVERHEAD_SHARE  # target work per task once the member time is known
 # The client's and scheduler's part, ~5 ms per task, is kept to about a fifth of their core: at most this many
 # tasks per second, so on a large cluster tasks grow to threads / MAX_TASKS_PER_SECOND seconds of work
 MAX_TASKS_PER_SECOND = 40
-# a batch's outputs stay below this: a finished batch is held whole by its worker until fetched, and by the
-# client until written
+# a batch's outputs stay below this: a batch is held whole by its worker until written into its shard (or fetched,
+# and then by the client until written)
 MAX_TASK_BYTES = 64 << 20
 WORKER_WAIT_SECONDS = 60.0  # how long a study waits for the first worker of an existing cluster
 CONNECT_TIMEOUT = 10.0  # seconds to connect to a scheduler address and see its Dask handshake (connect_timeout=)
@@ -68,7 +72,8 @@ class Progress:
     started: float = field(default_factory=time.perf_counter)
     first_result_seconds: float | None = None
     member_cpu_seconds: float = 0.0  # CPU time of the members' own runs, summed over the workers
-    write_cpu_seconds: float = 0.0  # CPU time of this thread writing the results into the study file
+    write_cpu_seconds: float = 0.0  # CPU time of this thread writing the results into the study file and shards
+    worker_write_cpu_seconds: float = 0.0  # CPU time of the workers writing their shards
 
     @property
     def elapsed(self) -> float:
@@ -396,9 +401,18 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
             in_flight[key] = (first, count)
         ac.add(future)
 
+    def deliver(batch: dict) -> None:
+        """Hand a batch to the sink. A failed write raises once, and the sink goes on in its rescue file: the study
+        goes on with it (the sink's close says where its members are), unless the rescue failed too."""
+        try:
+            sink.write(batch)
+        except WriteError:
+            if not sink.continues():
+                raise
+
     def record_failure(first: int, count: int, message: str) -> None:
-        sink.write({"first": first, "count": count, "outputs": {}, "error": [message] * count,
-                    "run_seconds": [math.nan] * count, "worker": ""})
+        deliver({"first": first, "count": count, "outputs": {}, "error": [message] * count,
+                 "run_seconds": [math.nan] * count, "worker": ""})
         progress.failed += count
 
     client.subscribe_topic("all", on_event)
@@ -415,9 +429,10 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
             future.release()
             if result is not None:
                 cpu = time.thread_time()
-                sink.write(result)
+                deliver(result)
                 progress.write_cpu_seconds += time.thread_time() - cpu
                 progress.member_cpu_seconds += float(sum(result["cpu_seconds"]))
+                progress.worker_write_cpu_seconds += result.get("write_cpu_seconds", 0.0)
                 sizer.record([s for s, e in zip(result["run_seconds"], result["error"]) if not e])
                 progress.failed += sum(1 for e in result["error"] if e)
                 progress.done += count

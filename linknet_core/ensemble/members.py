@@ -3,9 +3,10 @@
 A study reaches the workers once, as a worker plugin (:class:`StudyPayload`): the scene, the settings and
 the FMU's bytes, if any. Dask gives a plugin to every worker of the cluster, including workers that start
 later (a nanny restarting a killed one), so tasks carry only member indices and values, and nothing a task
-needs can be lost with a worker. Each task runs a batch of consecutive members and returns their outputs as
-one numpy array per output (member first), filled in place; a member that fails is recorded with its error
-(its rows stay NaN) and the batch goes on.
+needs can be lost with a worker. Each task runs a batch of consecutive members into one numpy array per output
+(member first), filled in place; a member that fails is recorded with its error (its rows stay NaN) and the
+batch goes on. Where the worker sees the study's shard folder, it writes the batch there as a shard
+(shards.py) and returns the quantities of interest only; otherwise it returns the trajectories too.
 
 A library member is one ``ln.simulate`` call, the very call a serial loop over the members makes: its outputs
 and its error estimate are bit-identical to that loop's, sampled in the native core (not output by output from
@@ -34,8 +35,10 @@ from linknet_core.integrators import METHODS
 from linknet_core.scene import Scene
 from linknet_core.simulator import simulate
 from linknet_core.ensemble.parameters import Parameter, member_forces, member_scene
+from linknet_core.ensemble.shards import sees_folder, write_shard
+from linknet_core.output import WriteError
 
-OUTPUTS = ("X", "U", "T", "Freact")  # what a study can keep per member and time
+OUTPUTS = ("X", "U", "T", "Freact")  # what a study can keep per member and time: its trajectories
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,7 @@ class StudySpec:
     outputs: tuple[str, ...]
     tip: int  # 0-based mass whose final position is a quantity of interest
     fmu: bytes | None = None
+    shards: str | None = None  # the study's shard folder (absolute), where workers that see it write trajectories
 
     def solver(self, setting: dict) -> tuple[str | None, float | None, float | None]:
         """(method, dt, rtol) of a member: its own integrator, step, tolerance if varied, else the study's.
@@ -103,6 +107,9 @@ class StudyRuntime:
         self.spec = spec
         self.base_scene = Scene.from_dict(spec.scene, source=spec.scene.get("name", "scene"))
         self.fmu = FmuRunner(spec.fmu, spec.study_id) if spec.fmu is not None else None
+        # looked for once per worker: a worker on a machine without the client's storage returns its trajectories
+        self.shard_folder = spec.shards if any(name in OUTPUTS for name in spec.outputs) and \
+            sees_folder(spec.shards, spec.study_id) else None
         scene, n = self.base_scene, spec.times.size
         shapes = {"X": (n, scene.K, 3), "U": (n, scene.K, 3), "T": (n, scene.L),
                   "Freact": (n, scene.fixed_indices.size, 3)}
@@ -171,7 +178,9 @@ def quantities_of_interest(T: np.ndarray, X: np.ndarray, tip: int) -> dict:
 
 def run_batch(study_id: str, first: int, settings: list[dict]) -> dict:
     """Members first .. first + len(settings) - 1: one numpy array per output, member first (NaN where a member
-    failed), each member's error ('' if none), its wall and CPU time, and this worker's address.
+    failed), each member's error ('' if none), its wall and CPU time, and this worker's address. Where this
+    worker sees the study's shard folder, the batch is written there as a shard (``shard``: its path) and the
+    trajectories are left out of the result; where that write fails, they stay in it and ``shard_error`` says why.
 
     The members' AccuracyWarnings are not raised here: each member's estimate and goal are in the study, which
     warns once, on the client, of the members beyond their goal."""
@@ -197,8 +206,18 @@ def run_batch(study_id: str, first: int, settings: list[dict]) -> dict:
                 for name, value in member.items():
                     outputs[name][i] = value
             seconds[i], cpu_seconds[i] = time.perf_counter() - start, time.thread_time() - cpu_start
-    return {"first": first, "count": count, "outputs": outputs, "error": errors, "run_seconds": seconds,
-            "cpu_seconds": cpu_seconds, "worker": get_worker().address}
+    result = {"first": first, "count": count, "outputs": outputs, "error": errors, "run_seconds": seconds,
+              "cpu_seconds": cpu_seconds, "worker": get_worker().address}
+    if runtime.shard_folder is not None:
+        cpu_start = time.thread_time()
+        try:
+            result["shard"] = str(write_shard(runtime.shard_folder, study_id, result, OUTPUTS))
+        except WriteError as exc:  # the client writes it (and says so if it cannot either)
+            result["shard_error"] = str(exc)
+        else:
+            result["outputs"] = {name: values for name, values in outputs.items() if name not in OUTPUTS}
+        result["write_cpu_seconds"] = time.thread_time() - cpu_start
+    return result
 
 
 # ---- FMU members ------------------------------------------------------------------------------------

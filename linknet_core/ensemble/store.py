@@ -1,21 +1,33 @@
-"""The study file: netCDF-4 (HDF5), one slab of members at a time as they finish.
+"""The study file: netCDF-4 (HDF5), its members' trajectories in shard files beside it, joined when it closes.
 
 Every variable is laid out in full when the study starts (member is a fixed dimension, unfinished entries
-read as NaN and their status as "not run"), so a study larger than memory streams to disk, a file opened
-while the study runs or after it stopped is a valid dataset, and the members' order in the file never
-depends on the order they finished in. Chunks hold one member each, so writing a member touches only its
-own chunks.
+read as NaN and their status as "not run"), so a file opened while the study runs or after it stopped is a valid
+dataset, and the members' order in the file never depends on the order they finished in.
+
+The trajectories (X, U, T, Freact) are written by the workers that ran the members, a shard file per task in the
+folder beside the study file (shards.py); the client writes only what is small: each member's status, error,
+run time, worker and quantities of interest, ~100 bytes, and keeps which members are in which shard. When the
+study closes, each trajectory variable becomes an HDF5 virtual dataset that maps every task's members to its
+shard: the file reads as one dataset (xarray, h5py, netCDF-4 through HDF5 1.10 or later) as long as the folder
+stays beside it, and members of no shard (failed, not run) read as NaN. A batch whose worker did not write its
+shard (a worker that does not see the folder, a failed write) brings its trajectories to the client, which writes
+the shard itself.
 
 h5netcdf lays the file out (dimensions, coordinates, attributes: the netCDF conventions); the members are
 then written into those variables through h5py, which h5netcdf itself calls: under the profiler, in a
 1000-member study, a write through h5netcdf took 2.0 ms per call, through h5py 0.55 ms.
+
+A write that fails (a full disk) does not stop the study: the study goes on in a rescue file of the same layout in
+the temporary folder (``$TMPDIR``), which takes every member finished so far (their small part from memory, their
+trajectories from the shards already written) and those still to come, and the study ends with a WriteError
+naming both files.
 """
 from __future__ import annotations
 
 import json
 import os
-import re
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -24,6 +36,8 @@ from linknet_core.version import __version__
 from linknet_core.scene import Scene
 from linknet_core.ensemble.members import OUTPUTS, StudySpec, output_values
 from linknet_core.ensemble.parameters import Plan
+from linknet_core.ensemble.shards import (abandon as _abandon, folder_for, h5_reason as _h5_reason, prepare_folder,
+                                          remove_folder, remove_unlisted, silence as _silence, write_shard)
 
 _AXES = np.array(["x", "y", "z"])
 
@@ -44,76 +58,59 @@ _QOI_META = {
     "error_goal": ((), "m", "the position error the member's run is held to (linknet_core.accuracy; NaN for FMU "
                             "members, whose FMU logs a crossing itself)"),
 }
-FLUSH_SECONDS = 2.0  # at most this much finished work is only in memory should the client process die
-# Members per chunk of the quantities of interest. One member per chunk, as a trajectory has, would cost the client
+# at most this much of the members' small part (status, quantities of interest) is only in memory should the client
+# process die; their trajectories are on disk in the shards as soon as each task ends
+FLUSH_SECONDS = 2.0
+# Members per chunk of the quantities of interest. One member per chunk would cost the client
 # ~1.3 us per member and variable in HDF5's chunk handling and give the chunk index an entry per 8 bytes; a
 # batch's slab touches one or two chunks of this size, which HDF5's chunk cache holds
 MEMBERS_PER_CHUNK = 4096
-_QOI_KEYS = frozenset(_QOI_META)
-
-
-def _h5_reason(exc: BaseException) -> str:
-    """What an h5py/HDF5 failure comes down to, in one line: 'No space left on device (errno 28)' where HDF5's
-    text names the system error (its messages span lines and carry buffer addresses)."""
-    text = str(exc)
-    match = re.search(r"errno = (\d+), error message = '([^']*)'", text)
-    return f"{match.group(2)} (errno {match.group(1)})" if match else failure_reason(exc)
-
-
-def _abandon(h5file) -> None:
-    """Close an h5py file whose writes failed without writing anything more to it. HDF5 closing a file it cannot
-    write (a full disk) fails, and its objects' deallocation later crashed the process (SIGSEGV at exit): its
-    descriptor is pointed at /dev/null first, so the close succeeds and what reached the disk stays as it was."""
-    if h5file is None:
-        return
-    _silence(h5file)
-    try:
-        h5file.close()
-    except Exception:
-        pass
-
-
-def _silence(h5file) -> None:
-    """Point the file's descriptor at /dev/null: HDF5 writes nothing more to the disk, and its writes succeed."""
-    try:
-        fd = h5file.id.get_vfd_handle()
-        null = os.open(os.devnull, os.O_RDWR)
-        try:
-            os.dup2(null, fd)
-        finally:
-            os.close(null)
-    except Exception:  # no descriptor (closed already, another driver): close as it is
-        pass
 
 
 class StudyFile:
-    """Creates the file, writes batches of members, records retries, and closes it with the study's facts."""
+    """Creates the file and its shard folder, takes finished batches, records retries, and closes it with the
+    study's facts, the trajectories joined."""
 
-    def __init__(self, path, spec: StudySpec, plan: Plan, scene: Scene):
+    def __init__(self, path, spec: StudySpec, plan: Plan, scene: Scene, rescue: bool = False):
         import h5py
 
         self.path = str(path)
         self._string = h5py.string_dtype()
         self._setup = (spec, plan, scene)  # to lay out a rescue file like this one
-        self._held: list = []  # batches written since the last flush that reached the disk, whole
-        self._flushed: list = []  # batches on disk: their quantities of interest, status and errors only
+        self._study_id = spec.study_id
+        self._trajectories = [name for name in OUTPUTS if name in spec.outputs]
+        # absolute: the workers are told this folder, and their shards' paths come back in its terms
+        self.shard_folder = str(folder_for(os.path.abspath(self.path))) if self._trajectories else None
+        # every batch taken: its small part (quantities of interest, status, errors) and the path of its shard
+        self._records: list[dict] = []
+        self._held: dict | None = None  # a batch whose trajectories are in no shard yet: the one being written
+        self._retried: list[int] = []
         self._failure: WriteError | None = None
-        self._is_rescue = False
+        self._failed_shard: str | None = None  # the shard whose write failed, if that was the failure
+        self._is_rescue = rescue
+        self._rescue: StudyFile | None = None  # where the study goes on after this file failed
+        self._lost: WriteError | None = None  # the rescue failed too
+        self._taken = 0  # members handed to write, in this file or its rescue
+        self.client_shard_reason: str | None = None  # why the first batch whose shard the client wrote came back whole
         self.h5 = None
         problem = self._room_problem(spec, plan, scene)
         if problem:
             raise WriteError(self.path, problem)
+        if self.shard_folder:
+            prepare_folder(Path(self.shard_folder), spec.study_id)
         try:
             self._layout(spec, plan, scene)
             self.h5 = h5py.File(self.path, "r+")
             self._variables = {name: self.h5[name] for name in  # looked up once: a lookup costs ~0.1 ms
-                               [*spec.outputs, *_QOI_META, "status", "error", "worker", "run_seconds", "retried"]}
+                               [*_QOI_META, "status", "error", "worker", "run_seconds", "retried"]}
         except Exception as exc:  # nothing computed yet: no half file left
             _abandon(self.h5)
             try:
                 os.unlink(self.path)
             except OSError:
                 pass
+            if self.shard_folder:
+                remove_folder(Path(self.shard_folder))
             raise WriteError(self.path, _h5_reason(exc)) from None
         self._last_flush = time.monotonic()
 
@@ -190,7 +187,8 @@ class StudyFile:
     def _data(self, f, name, meta, dims, coordinates, integer=False):
         shape_dims, unit, long_name = meta
         all_dims = ("member",) + shape_dims
-        # a member's trajectory (time first) is its own chunk; per-member quantities go many members to a chunk
+        # a trajectory variable holds nothing until the file closes and it becomes the join of the shards (never
+        # allocated, it reads as NaN meanwhile); per-member quantities go many members to a chunk
         members = 1 if "time" in shape_dims else min(dims["member"], MEMBERS_PER_CHUNK)
         chunks = tuple([members] + [dims[d] or 1 for d in shape_dims])
         # integers get no _FillValue: xarray would read every 0 (no link, not run) as missing
@@ -211,35 +209,57 @@ class StudyFile:
         return var
 
     def write(self, batch: dict) -> None:
-        """One finished batch (members.run_batch's result): consecutive members, written as one slab. Held in
-        memory until a flush has put it on the disk; a write or flush that fails (a full disk) raises WriteError,
-        and ``close`` then keeps what the file could not take in a rescue file."""
+        """One finished batch (members.run_batch's result): consecutive members. Its small part goes into the
+        file as one slab; trajectories that came with it (its worker did not write its shard) are written as its
+        shard here. A write or flush that fails (a full disk) raises WriteError once; the batches that follow go
+        to the rescue file (``continues`` says whether the study can go on)."""
         if self._failure is not None:
-            raise self._failure
-        self._held.append(batch)
+            if self._is_rescue:
+                raise self._failure
+            self._taken += batch["count"]
+            return self._rescue_write(batch)
+        self._taken += batch["count"]
+        written_by_client = bool(batch.get("written_by_client"))
         try:
-            rows = slice(batch["first"], batch["first"] + batch["count"])
-            variables = self._variables
-            for name, values in batch["outputs"].items():
-                variables[name][rows] = values
-            errors = batch["error"]
-            variables["status"][rows] = np.array(["failed" if e else "ok" for e in errors], dtype=object)
-            variables["error"][rows] = np.array(errors, dtype=object)
-            variables["worker"][rows] = np.array([batch["worker"]] * batch["count"], dtype=object)
-            variables["run_seconds"][rows] = batch["run_seconds"]
+            if any(name in OUTPUTS for name in batch["outputs"]):  # the client writes this batch's shard
+                self._held = batch
+                if self.client_shard_reason is None:
+                    self.client_shard_reason = batch.get("shard_error") or "its worker does not see the folder"
+                try:
+                    shard = write_shard(self.shard_folder, self._study_id, batch, OUTPUTS)
+                except WriteError as exc:
+                    self._failed_shard = exc.path
+                    raise
+                batch = {**batch, "shard": str(shard),
+                         "outputs": {k: v for k, v in batch["outputs"].items() if k not in OUTPUTS}}
+                self._held = None
+                written_by_client = True
+            record = {key: batch[key] for key in ("first", "count", "outputs", "error", "run_seconds", "worker")}
+            record.update(shard=batch.get("shard"), written_by_client=written_by_client)
+            self._records.append(record)
+            self._record(record)
             now = time.monotonic()
             if now - self._last_flush > FLUSH_SECONDS:
                 self.h5.flush()
-                self._flushed_now()
                 self._last_flush = now
         except Exception as exc:
             raise self._fail(exc) from None
 
-    def _flushed_now(self) -> None:
-        """The held batches reached the disk: keep only their small part (what a damaged file would lose)."""
-        for batch in self._held:
-            self._flushed.append({**batch, "outputs": {k: v for k, v in batch["outputs"].items() if k in _QOI_KEYS}})
-        self._held = []
+    def _record(self, batch: dict) -> None:
+        rows = slice(batch["first"], batch["first"] + batch["count"])
+        variables = self._variables
+        for name, values in batch["outputs"].items():
+            variables[name][rows] = values
+        errors = batch["error"]
+        variables["status"][rows] = np.array(["failed" if e else "ok" for e in errors], dtype=object)
+        variables["error"][rows] = np.array(errors, dtype=object)
+        variables["worker"][rows] = np.array([batch["worker"]] * batch["count"], dtype=object)
+        variables["run_seconds"][rows] = batch["run_seconds"]
+
+    def continues(self) -> bool:
+        """Whether the study can go on after a failed write: its members go to the rescue file, unless that failed
+        too."""
+        return not self._is_rescue and self._lost is None
 
     def _fail(self, exc: BaseException) -> WriteError:
         """The file cannot be written: abandon it (nothing more is written to it) and remember why."""
@@ -248,115 +268,141 @@ class StudyFile:
         self._variables = {}
         _abandon(self.h5)
         self.h5 = None
-        self._failure = WriteError(self.path, _h5_reason(exc))
+        reason = exc.reason if isinstance(exc, WriteError) else _h5_reason(exc)
+        self._failure = WriteError(self.path, reason)
         return self._failure
 
+    def _rescue_write(self, batch: dict) -> None:
+        if self._lost is not None:
+            raise self._lost
+        if self._rescue is None:
+            self._start_rescue()
+        try:
+            self._rescue.write(batch)
+        except WriteError as again:
+            raise self._lose(again) from None
+
+    def _start_rescue(self) -> None:
+        """Lay out the rescue file and give it every member taken so far (their shards stay where they are)."""
+        try:
+            rescue = StudyFile(rescue_path(self.path), *self._setup, rescue=True)
+        except WriteError as again:
+            raise self._lose(again) from None
+        self._rescue = rescue
+        try:
+            for record in self._records:
+                rescue.write(record)
+            if self._held is not None:
+                rescue.write(self._held)
+                self._held = None
+        except WriteError as again:
+            raise self._lose(again) from None
+
+    def _lose(self, again: WriteError) -> WriteError:
+        """The rescue file cannot be written either: remove it, and say what is lost and what stays."""
+        if self._rescue is not None:
+            self._rescue._fail(again)
+            remove_study(self._rescue.path)
+            self._rescue = None
+        shards = f", but for the trajectories in the shard files of {self.shard_folder}" if self.shard_folder else ""
+        self._lost = WriteError(self.path, self._failure.reason,
+                                detail=f"{self._taken} finished member(s) could not be kept in the temporary folder "
+                                       f"either ({again.reason}) and are lost{shards}")
+        return self._lost
+
     def mark_retried(self, members) -> None:
-        members = sorted(members)
-        if members and self._failure is None:
-            try:
-                self._variables["retried"][members] = np.ones(len(members), dtype="i1")
-            except Exception as exc:
-                raise self._fail(exc) from None
+        """The members that ran again after their worker died (written when the file closes)."""
+        self._retried = sorted(members)
 
     def close(self, attrs: dict) -> None:
-        """Close the streaming writes, then write the study's facts as netCDF global attributes (None values
-        are left out). If the file could not be written (now or before), the members it may lack are written to a
-        rescue file in the temporary folder, and a WriteError says which members are readable where."""
+        """Join the trajectories (virtual datasets over the shards), remove what no member needs from the shard
+        folder, and write the study's facts as netCDF global attributes (None values are left out). If the file
+        could not be written (now or before), the study's members are in the rescue file, and a WriteError says
+        where."""
         import h5netcdf
 
         attrs = {"title": "linknet ensemble", "linknet_version": __version__, **attrs}
+        if self._trajectories:  # who wrote the trajectories (all by the client: the workers do not see the folder)
+            by_client = sum(r["count"] for r in self._records if r["shard"] and r["written_by_client"])
+            attrs["members_written_by_workers"] = sum(r["count"] for r in self._records if r["shard"]) - by_client
+            attrs["members_written_by_client"] = by_client
+            if attrs.get("client_shard_reason") is None:
+                attrs["client_shard_reason"] = self.client_shard_reason if by_client else None
         if self._failure is None:
             try:
+                if self._retried:
+                    self._variables["retried"][self._retried] = np.ones(len(self._retried), dtype="i1")
+                self._join()
                 self.h5.flush()  # a full disk fails here, with every object still open, not inside close
                 self._variables = {}
                 self.h5.close()
                 self.h5 = None
-                self._flushed_now()
                 with h5netcdf.File(self.path, "a") as f:
                     for key, value in attrs.items():
                         if value is None:
                             continue
                         f.attrs[key] = json.dumps(value) if isinstance(value, (dict, list, tuple)) else value
+                if self.shard_folder:
+                    remove_unlisted(self.shard_folder, [r["shard"] for r in self._records if r["shard"]])
                 return
             except Exception as exc:
                 self._fail(exc)
         if self._is_rescue:  # a rescue file that cannot be written either: the caller says what is lost
             raise self._failure
-        self._rescue({**attrs, "complete": 0})
-
-    def _readable_members(self) -> int | None:
-        """How many members the abandoned file shows as run (ok or failed), or None if it cannot be read as a
-        dataset (xarray opens every variable's metadata; the per-member variables are read whole)."""
-        import xarray as xr
-
+        if self._lost is not None:
+            raise self._lost
+        count = self._taken
+        if not count:
+            raise WriteError(self.path, self._failure.reason, detail="no member had finished")
+        if self._rescue is None:
+            self._start_rescue()
+        rescue = self._rescue
         try:
-            with xr.open_dataset(self.path, engine="h5netcdf") as ds:
-                for name in (*_QOI_META, "status", "error"):
-                    ds[name].load()
-                return int(np.sum(ds["status"].values != "not run"))
-        except Exception:
-            return None
+            rescue.mark_retried(self._retried)
+            rescue.close({**attrs, "complete": 0, "rescued_from": self.path})
+        except WriteError as again:
+            raise self._lose(again) from None
+        failed = f" (writing {self._failed_shard})" if self._failed_shard else ""
+        shards = f" whose trajectories are in the shard files of {self.shard_folder} and {rescue.shard_folder}" \
+            if self.shard_folder else ""
+        raise WriteError(self.path, self._failure.reason + failed,
+                         detail=f"the study went on in the temporary folder: its {count} finished member(s) are in "
+                                f"{rescue.path}, a study file of the same layout (xarray.open_dataset){shards}")
 
-    def _salvage(self, batches: list) -> list:
-        """The batches on the disk of a file that cannot be read back as a whole, with the outputs (X, U, T,
-        Freact) that can still be read from it (HDF5 on a full disk damages the metadata it was writing: the
-        string heap, a dataset's header; the others stay readable)."""
+    def _join(self) -> None:
+        """Each trajectory variable becomes a virtual dataset: every recorded batch's members mapped to its shard
+        (by a path relative to this file for the shards beside it, so the file and its folder can move together),
+        NaN where no shard holds a member. The variable's attributes and dimension scales carry over."""
         import h5py
 
-        try:
-            f = h5py.File(self.path, "r")
-        except Exception:
-            return batches
-        salvaged = []
-        with f:
-            for batch in batches:
-                rows = slice(batch["first"], batch["first"] + batch["count"])
-                outputs = dict(batch["outputs"])
-                ran = np.array([not e for e in batch["error"]])
-                for name in self._setup[0].outputs:
-                    try:
-                        values = f[name][rows]
-                    except Exception:
-                        continue
-                    if np.isfinite(values[ran]).all():  # a chunk that never reached the disk reads as NaN
-                        outputs[name] = values
-                salvaged.append({**batch, "outputs": outputs})
-        return salvaged
+        entries = [(r["first"], r["count"], r["shard"]) for r in self._records if r["shard"]]
+        if not entries:
+            return
+        own = Path(self.shard_folder)
+        for name in self._trajectories:
+            old = self.h5[name]
+            shape = old.shape
+            layout = h5py.VirtualLayout(shape=shape, dtype=old.dtype)
+            for first, count, shard in entries:
+                shard = Path(shard)
+                source = f"{own.name}/{shard.name}" if shard.parent == own else str(shard)
+                layout[first:first + count] = h5py.VirtualSource(source, name, shape=(count, *shape[1:]))
+            attrs = {key: value for key, value in old.attrs.items() if key != "DIMENSION_LIST"}
+            scales = [old.dims[axis][0] for axis in range(old.ndim)]
+            for axis, scale in enumerate(scales):
+                old.dims[axis].detach_scale(scale)
+            del self.h5[name]
+            joined = self.h5.create_virtual_dataset(name, layout, fillvalue=np.nan)
+            for key, value in attrs.items():
+                joined.attrs[key] = value
+            for axis, scale in enumerate(scales):
+                joined.dims[axis].attach_scale(scale)
 
-    def _rescue(self, attrs: dict) -> None:
-        failure = self._failure
-        on_disk = sum(b["count"] for b in self._flushed)
-        readable = self._readable_members()
-        intact = readable is not None and readable >= on_disk
-        keep = self._held if intact else self._salvage(self._flushed) + self._held  # a damaged file: all held
-        count = sum(b["count"] for b in keep)
-        if intact:
-            where = f"the {readable} members written before are readable in it" if readable else \
-                "it holds no finished member"
-        else:
-            where = "the failed write damaged it: it cannot be opened as a dataset"
-        if not count:
-            raise WriteError(self.path, failure.reason, detail=f"{where}; no other member had finished") from None
-        rescue = rescue_path(self.path)
-        try:
-            sink = StudyFile(rescue, *self._setup)
-            sink._is_rescue = True
-            for batch in keep:
-                sink.write(batch)
-            sink.close({**attrs, "rescued_from": self.path})
-        except WriteError as again:
-            try:
-                os.unlink(rescue)
-            except OSError:
-                pass
-            raise WriteError(self.path, failure.reason,
-                             detail=f"{where}; {count} more finished member(s) could not be kept in the temporary "
-                                    f"folder either ({again.reason}) and are lost") from None
-        outputs = self._setup[0].outputs
-        partial = 0 if intact else sum(b["count"] for b in keep if any(o not in b["outputs"] for o in outputs))
-        quantities = f" ({partial} of them with their quantities of interest, status and errors only)" if partial \
-            else ""
-        raise WriteError(self.path, failure.reason,
-                         detail=f"{where}; {count} finished member(s){quantities} are in {rescue}, a study file "
-                                "of the same layout (xarray.open_dataset)") from None
+
+def remove_study(path) -> None:
+    """Remove a study file and its shard folder (a study kept in memory, once loaded; a rescue that failed)."""
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+    remove_folder(folder_for(path))

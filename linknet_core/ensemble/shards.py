@@ -1,0 +1,192 @@
+"""A study's shard files: each task's members, written by the worker that ran them, beside the study file.
+
+A study with trajectories (X, U, T, Freact) keeps them in a folder beside its file (``study.nc`` ->
+``study.shards/``), one HDF5 file per task (``members-FIRST-COUNT.STUDY.h5``): the worker that ran the task's members
+writes them there itself, so the trajectories never pass through the client, whose one process would otherwise
+receive and write every member's bytes (the ceiling of a large cluster: docs/ensemble.md, Scale). The study file
+joins the shards (HDF5 virtual datasets, store.py), so it reads as one dataset.
+
+A shard holds everything its task returned: the trajectories (member first, one dataset each), the quantities
+of interest, each member's error, run time and CPU time, and the worker's address, so a shard read alone
+(:func:`read_shard`) is the task's whole result. It is written under a temporary name and renamed when complete:
+a file named ``members-*.h5`` is never half written, whatever happens to its worker, and a task run again
+(after its worker died) renames an identical file over it.
+
+Workers write shards only where they see the folder the client made: the folder holds a marker naming the
+study, which a worker looks for before its first task. A worker that does not see it (another machine without the
+storage shared) or whose write fails (a full disk) returns its members' trajectories to the client as a task's
+result, and the client writes the shard.
+"""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import uuid
+from pathlib import Path
+
+import numpy as np
+
+from linknet_core.output import WriteError, failure_reason
+
+MARKER = "linknet-study"  # file in a shard folder naming its study (its id)
+SHARD_PREFIX = "members-"
+SHARD_SUFFIX = ".h5"
+
+
+def folder_for(path) -> Path:
+    """The shard folder of the study file at ``path``: study.nc -> study.shards beside it."""
+    path = Path(path)
+    return path.with_name(path.stem + ".shards")
+
+
+def shard_name(study_id: str, first: int, count: int) -> str:
+    """A task's shard: its members, and its study (an earlier study's task still running on a cluster, after the
+    folder was made anew for another study at the same place, cannot write over this study's shard)."""
+    return f"{SHARD_PREFIX}{first:09d}-{count}.{study_id[:12]}{SHARD_SUFFIX}"
+
+
+def prepare_folder(folder: Path, study_id: str) -> None:
+    """Make the shard folder of a new study (an earlier study's at the same place is removed with its file, as
+    the study file is overwritten) and put the marker in it. A folder of that name that is not a study's shard
+    folder is refused, never removed."""
+    folder = Path(folder)
+    if folder.exists() or folder.is_symlink():
+        if not folder.is_dir() or folder.is_symlink() or not (folder / MARKER).is_file():
+            raise WriteError(folder, "it exists and is not a linknet study's shard folder (a study keeps its "
+                                     "members' trajectories in a folder of that name beside its file): move it, "
+                                     "or write the study elsewhere", detail="it was left as it is")
+        shutil.rmtree(folder)
+    try:
+        folder.mkdir()
+        (folder / MARKER).write_text(study_id)
+    except OSError as exc:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise WriteError(folder, failure_reason(exc)) from None
+
+
+def remove_folder(folder: Path) -> None:
+    """Remove a shard folder (a study kept in memory, once loaded); only a study's, with its marker."""
+    folder = Path(folder)
+    if (folder / MARKER).is_file():
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def sees_folder(folder: str | None, study_id: str) -> bool:
+    """Whether this process sees the study's shard folder (the marker naming this study is in it)."""
+    if not folder:
+        return False
+    try:
+        return (Path(folder) / MARKER).read_text() == study_id
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
+def h5_reason(exc: BaseException) -> str:
+    """What an h5py/HDF5 failure comes down to, in one line: 'No space left on device (errno 28)' where HDF5's
+    text names the system error (its messages span lines and carry buffer addresses)."""
+    text = str(exc)
+    match = re.search(r"errno = (\d+), error message = '([^']*)'", text)
+    return f"{match.group(2)} (errno {match.group(1)})" if match else failure_reason(exc)
+
+
+def abandon(h5file) -> None:
+    """Close an h5py file whose writes failed without writing anything more to it. HDF5 closing a file it cannot
+    write (a full disk) fails, and its objects' deallocation later crashed the process (SIGSEGV at exit): its
+    descriptor is pointed at /dev/null first, so the close succeeds and what reached the disk stays as it was."""
+    if h5file is None:
+        return
+    silence(h5file)
+    try:
+        h5file.close()
+    except Exception:
+        pass
+
+
+def silence(h5file) -> None:
+    """Point the file's descriptor at /dev/null: HDF5 writes nothing more to the disk, and its writes succeed."""
+    try:
+        fd = h5file.id.get_vfd_handle()
+        null = os.open(os.devnull, os.O_RDWR)
+        try:
+            os.dup2(null, fd)
+        finally:
+            os.close(null)
+    except Exception:  # no descriptor (closed already, another driver): close as it is
+        pass
+
+
+def write_shard(folder, study_id: str, batch: dict, trajectories) -> Path:
+    """Write one task's result (``members.run_batch``'s, its outputs whole) as a shard in ``folder``: a temporary
+    file, renamed to its name when complete. Returns the shard's path; a failure (a full disk, the folder gone)
+    raises WriteError naming the shard, and leaves no file behind."""
+    import h5py
+
+    path = Path(folder) / shard_name(study_id, batch["first"], batch["count"])
+    temporary = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+    f = None
+    try:
+        f = h5py.File(temporary, "w")
+        f.attrs["first"], f.attrs["count"] = batch["first"], batch["count"]
+        f.attrs["worker"] = batch["worker"]
+        f.attrs["trajectories"] = " ".join(name for name in trajectories if name in batch["outputs"])
+        for name, values in batch["outputs"].items():
+            f.create_dataset(name, data=values)  # contiguous: one write of the whole array
+        f.create_dataset("error", data=np.array(batch["error"], dtype=object), dtype=h5py.string_dtype())
+        f.create_dataset("run_seconds", data=np.asarray(batch["run_seconds"], dtype=float))
+        if "cpu_seconds" in batch:
+            f.create_dataset("cpu_seconds", data=np.asarray(batch["cpu_seconds"], dtype=float))
+        f.flush()  # a full disk fails here, with the file still open, not inside close
+        f.close()
+        f = None
+        os.replace(temporary, path)
+    except Exception as exc:
+        abandon(f)
+        try:
+            os.unlink(temporary)
+        except OSError:
+            pass
+        raise WriteError(path, h5_reason(exc)) from None
+    return path
+
+
+def read_shard(path) -> dict:
+    """A shard read back: the task's result as ``members.run_batch`` returned it (outputs whole), with ``shard``
+    its path."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        names = [name for name in f if name not in ("error", "run_seconds", "cpu_seconds")]
+        batch = {"first": int(f.attrs["first"]), "count": int(f.attrs["count"]),
+                 "outputs": {name: f[name][()] for name in names},
+                 "error": [e.decode() if isinstance(e, bytes) else str(e) for e in f["error"][()]],
+                 "run_seconds": f["run_seconds"][()], "worker": str(f.attrs["worker"]), "shard": str(path)}
+        if "cpu_seconds" in f:
+            batch["cpu_seconds"] = f["cpu_seconds"][()]
+    return batch
+
+
+def shard_files(folder) -> list[Path]:
+    """The complete shards in a folder (temporary files left by a task that did not finish are not shards)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    return sorted(p for p in folder.iterdir() if p.name.startswith(SHARD_PREFIX) and p.name.endswith(SHARD_SUFFIX))
+
+
+def remove_unlisted(folder, keep) -> int:
+    """Remove from a shard folder every file but the marker and the shards in ``keep`` (paths): shards of tasks
+    whose results the study did not take (a batch that finished on a worker that then died, and ran again split
+    into single members) and temporary files of tasks that never finished. Returns how many were removed."""
+    folder = Path(folder)
+    keep = {Path(p).name for p in keep}
+    removed = 0
+    for entry in folder.iterdir() if folder.is_dir() else ():
+        if entry.name == MARKER or entry.name in keep:
+            continue
+        try:
+            entry.unlink()
+            removed += 1
+        except OSError:  # a folder someone put there, a file already gone
+            pass
+    return removed
