@@ -22,9 +22,16 @@ from linknet_core.output import atomic_write
 from linknet_core.scene.motion import AnchorMotion, parse_motion
 
 _MASS_KEYS = {"name", "mass", "position", "velocity", "fixed", "driven", "motion", "force", "drag", "quadratic_drag"}
-_LINK_KEYS = {"a", "b", "length", "name"}
+_LINK_KEYS = {"a", "b", "length", "name", "kind", "restitution"}
 _SPRING_KEYS = {"a", "b", "stiffness", "rest_length", "damping", "name"}
-_SCENE_KEYS = {"name", "description", "gravity", "masses", "links", "springs", "options"}
+_SCENE_KEYS = {"name", "description", "gravity", "masses", "links", "springs", "options", "ground"}
+# "kind" of a link: a rod holds its length both ways (the seed's (11)); a rope only keeps |X_k2 - X_k1| <= R_l, with
+# T_l >= 0, and goes slack (linknet_core.dynamics.unilateral)
+LINK_KINDS = ("rod", "rope")
+_GROUND_KEYS = {"point", "normal", "restitution", "friction"}
+# A free mass may start on the ground but not below it: at most this fraction of the scene's size (the largest
+# coordinate, at least 1 m) under the plane is taken for round-off of a position given on a tilted plane
+GROUND_START_TOL = 1e-12
 # "options": key -> what its value must be (each is a JSON boolean)
 _OPTION_KEYS = {"project_initial_positions": "a JSON boolean (true or false)",
                 "run_loaded_blocked_flexes": "a JSON boolean (true or false)"}
@@ -143,6 +150,23 @@ class ForceElements:
 
 
 @dataclass(frozen=True)
+class Ground:
+    """A plane the free masses cannot pass: n . (X_k - point) >= 0, with ``normal`` n a unit vector pointing to the
+    side the masses are on. Contact is unilateral and impulsive (linknet_core.dynamics.unilateral): an impact
+    reverses ``restitution`` times the normal approach velocity (Newton's law; 0: perfectly inelastic); ``friction``
+    is Coulomb's coefficient mu (0: frictionless)."""
+
+    point: np.ndarray  # (3,) a point of the plane, m
+    normal: np.ndarray  # (3,) unit normal, towards the masses
+    restitution: float = 0.0
+    friction: float = 0.0
+
+    def gaps(self, X: np.ndarray) -> np.ndarray:
+        """n . (X_k - point) of every mass (X (..., K, 3)): the height above the plane, m."""
+        return (X - self.point) @ self.normal
+
+
+@dataclass(frozen=True)
 class Scene:
     """Immutable description of a network of point masses joined by rigid links."""
 
@@ -165,10 +189,23 @@ class Scene:
     options: dict = field(default_factory=dict)
     driven: np.ndarray | None = None  # (K,) bool: anchors whose motion is prescribed (a subset of fixed)
     motions: tuple[AnchorMotion, ...] = ()  # one per driven anchor, in driven_indices order
+    rope: np.ndarray | None = None  # (L,) bool: the link is a rope (pulls, never pushes; goes slack), else a rod
+    restitution: np.ndarray | None = None  # (L,) Newton's restitution of a rope coming taut (0 on rods)
+    ground: Ground | None = None  # the plane the free masses land on, if any
 
     def __post_init__(self):
         if self.driven is None:
             object.__setattr__(self, "driven", _frozen_bool(np.zeros(self.K, bool)))
+        if self.rope is None:
+            object.__setattr__(self, "rope", _frozen_bool(np.zeros(self.L, bool)))
+        if self.restitution is None:
+            object.__setattr__(self, "restitution", _frozen(np.zeros(self.L)))
+
+    @property
+    def unilateral(self) -> bool:
+        """Whether the scene has ropes or a ground: constraints that act one way only and switch on and off (the
+        numpy reference's event-driven path, linknet_core.dynamics.unilateral)."""
+        return bool(self.rope.any()) or self.ground is not None
 
     # ---- derived, read-only views -------------------------------------------------------------
     @cached_property
@@ -283,6 +320,10 @@ class Scene:
             {"a": int(self.k1[l]) + 1, "b": int(self.k2[l]) + 1, "length": float(self.length[l])}
             for l in range(self.L)
         ]
+        for l in np.flatnonzero(self.rope):
+            links[l]["kind"] = "rope"
+            if self.restitution[l] != 0:
+                links[l]["restitution"] = float(self.restitution[l])
         out: dict[str, Any] = {"name": self.name}
         if self.description:
             out["description"] = self.description
@@ -299,6 +340,10 @@ class Scene:
             ]
         if self.options:
             out["options"] = dict(self.options)
+        if self.ground is not None:
+            g = self.ground
+            out["ground"] = {"point": g.point.tolist(), "normal": g.normal.tolist(), "restitution": g.restitution,
+                             "friction": g.friction}
         return out
 
     def save(self, path: str | Path) -> None:
@@ -552,6 +597,8 @@ def _parse_scene(data: dict, source: str) -> Scene:
     k1 = np.empty(L, np.int64)
     k2 = np.empty(L, np.int64)
     length = np.empty(L)
+    rope = np.zeros(L, bool)
+    restitution = np.zeros(L)
     link_names: list[str] = []
     seen_pairs: dict[tuple[int, int], int] = {}
     for l, entry in enumerate(links):
@@ -577,6 +624,15 @@ def _parse_scene(data: dict, source: str) -> Scene:
                                  "(initial distance) would be zero")
             length[l] = distance
         link_names.append(_text(entry.get("name", ABSENT), f"{label} name", source, f"l{l + 1}"))
+        kind = entry.get("kind", "rod")
+        if kind not in LINK_KINDS:
+            raise SceneError(f"{source}: {label} kind must be one of {', '.join(map(repr, LINK_KINDS))}, got {kind!r}")
+        rope[l] = kind == "rope"
+        if "restitution" in entry:
+            if not rope[l]:
+                raise SceneError(f"{source}: {label} is a rod, which never goes slack: \"restitution\" applies to "
+                                 "ropes only (\"kind\": \"rope\")")
+            restitution[l] = _fraction(entry["restitution"], f"{label} restitution", source)
 
     springs_data = data.get("springs", [])
     if not isinstance(springs_data, list):
@@ -606,6 +662,7 @@ def _parse_scene(data: dict, source: str) -> Scene:
     options = {key: _boolean(value, f"options {key!r}", source) for key, value in options.items()}
     if not np.any(~fixed):
         raise SceneError(f"{source}: every mass is anchored; there is nothing to simulate")
+    ground = _parse_ground(data["ground"], names, X0, fixed, source) if "ground" in data else None
 
     return Scene(
         name=_text(data.get("name", ABSENT), "the scene's name", source, "scene"),
@@ -628,4 +685,42 @@ def _parse_scene(data: dict, source: str) -> Scene:
         options=dict(options),
         driven=_frozen_bool(driven),
         motions=tuple(motions),
+        rope=_frozen_bool(rope),
+        restitution=_frozen(restitution),
+        ground=ground,
     )
+
+
+def _fraction(value, what: str, source: str) -> float:
+    """A coefficient of restitution: a number in [0, 1] (1 reverses the whole approach velocity, 0 none of it)."""
+    x = _number(value, what, source)
+    if not 0.0 <= x <= 1.0:
+        raise SceneError(f"{source}: {what} must lie in [0, 1] (the share of the approach velocity an impact "
+                         f"reverses), got {value!r}")
+    return x
+
+
+def _parse_ground(entry, names, X0, fixed, source) -> Ground:
+    """The "ground" section: a plane through "point" with "normal" towards the masses; no free mass may start below
+    it (beyond round-off, GROUND_START_TOL)."""
+    if not isinstance(entry, dict):
+        raise SceneError(f"{source}: 'ground' must be an object with \"point\" and \"normal\", got {entry!r}")
+    _check_keys(entry, _GROUND_KEYS, "'ground'", source)
+    point = _vector(entry.get("point"), "ground point", source)
+    normal = _vector(entry.get("normal"), "ground normal", source)
+    size = float(np.linalg.norm(normal))
+    if not size > 0:
+        raise SceneError(f"{source}: ground normal must be a non-zero vector (the plane's normal, towards the "
+                         f"masses), got {entry.get('normal')!r}")
+    normal = normal / size
+    restitution = _fraction(entry.get("restitution", 0.0), "ground restitution", source)
+    friction = _number(entry.get("friction", 0.0), "ground friction", source, nonnegative=True)
+    gaps = (X0 - point) @ normal
+    scale = max(1.0, float(np.abs(X0).max()), float(np.abs(point).max()))
+    below = np.flatnonzero(~fixed & (gaps < -GROUND_START_TOL * scale))
+    if below.size:
+        k = int(below[np.argmin(gaps[below])])
+        raise SceneError(f'{source}: mass {k + 1} ("{names[k]}") starts {-gaps[k]:.6g} m below the ground (the plane '
+                         f"through {point.tolist()} with normal {normal.tolist()}); free masses must start on or "
+                         "above it")
+    return Ground(_frozen(point), _frozen(normal), restitution, friction)
