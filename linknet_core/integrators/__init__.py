@@ -89,8 +89,13 @@ def method_settings(method: str, dt=None, rtol=None, atol=None):
 
 def make_integrator(method: str, dynamics, dt=None, rtol=None, atol=None) -> Integrator:
     """The numpy reference integrator ``method`` for one scene's dynamics (the native core runs the same
-    methods: linknet_core.native)."""
+    methods: linknet_core.native); for a scene with ropes or a ground (``dynamics`` its UnilateralDynamics) its
+    event-driven variant (linknet_core.integrators.events)."""
     cls, dt, rtol, atol = method_settings(method, dt, rtol, atol)
+    if getattr(dynamics.scene, "unilateral", False):  # ropes, a ground: the method, stopping at every event
+        from linknet_core.integrators.events import event_driven
+
+        cls = event_driven(cls)
     if cls.adaptive:
         return cls(dynamics, rtol=rtol, atol=atol)
     return cls(dynamics, dt=dt)

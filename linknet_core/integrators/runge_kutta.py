@@ -140,6 +140,11 @@ class ProjectedRungeKutta(Integrator):
             X, U = self.step(X, U, h, F_input, t + i * h)
         return X, U
 
+    def _event_in_step(self, X, U, t, k0, X_new, U_new, t_new, acc_new, F_input):
+        """An event within the accepted step from (X, U) at t to (X_new, U_new) at t_new, or None: where it ends the
+        step (X, U, t) after the event's impulse (integrators.events; scenes of rods have none)."""
+        return None
+
     # ---- driver ------------------------------------------------------------------------------
     def advance(self, state, t_target, F_input, max_steps):
         """From the state towards t_target with error control; leaves the next step size in self.h."""
@@ -175,6 +180,10 @@ class ProjectedRungeKutta(Integrator):
                     raise SolverError(explain_step_failure(dyn, failure, t_start, t_target, F_input,
                                                            self.drive)) from None
                 U_new = dyn.project_velocities(X_new, U_new)  # onto (12)
+                event = self._event_in_step(X, U, t, k0, X_new, U_new, t_new, KU[-1], F_input)
+                if event is not None:  # ropes, a ground: the step ends at an event, past its impulse, in a new mode
+                    X_new, U_new, t_new = event
+                    dyn = self.dyn
                 t = t_new
                 X, U = X_new, U_new
                 factor = MAX_FACTOR if err == 0 else min(MAX_FACTOR, SAFETY * err ** exponent)

@@ -1,0 +1,706 @@
+"""Ropes that go slack and a ground the masses land on: unilateral constraints, with the seed's links as equalities.
+
+A rope l keeps its ends within its length: the gap g_l = R_l - |X_k2 - X_k1| >= 0, and its tension T_l >= 0 (it pulls,
+never pushes). A ground (a plane through p with unit normal n) keeps every free mass on its side: g_k = n . (X_k - p)
+>= 0, with a normal force lambda_k >= 0. While such a constraint is *active* it is a link of the seed: a taut rope is
+exactly a rod in (9), (11)-(13) and (25)-(26); a contact is a link from the mass to a virtual anchor straight above
+it (see ``ModeDynamics``). Which ones are active is the *mode*; between events the integrators follow one mode as
+a network of rods, with every tool of the rod path (the tension solvers, the minimum-norm tensions (31) where the
+active set is redundant, the projections onto (11)-(12)).
+
+Which unilateral constraints carry force is a complementarity problem (Moreau 1966, Lotstedt 1982; Pfeiffer and
+Glocker, Multibody Dynamics with Unilateral Contacts, 1996, ch. 5-7). With C the constraint Jacobian (a rope's row
+is the seed's +E_l at k1, -E_l at k2, so C U = dg/dt), W = C M^-1 C^T (A of (25)) and B of (26), the accelerations
+give d2g/dt2 = W lambda - B. At a state where some unilateral constraints touch (g = 0) with dg/dt = 0:
+
+    rods:               (W lambda - B)_i = 0                                   (25)-(26), equalities
+    touching ropes,
+    contacts:           lambda_i >= 0,  w_i = (W lambda - B)_i >= 0,  lambda_i w_i = 0
+
+a mixed linear complementarity problem (LCP) on the unilateral subset (Cottle, Pang and Stone, The Linear
+Complementarity Problem, 1992, sec. 1.2 and 4.2). ``solve_mixed_lcp`` solves it exactly by principal pivoting
+(Murty's least-index rule, 1974, "Note on a Bard-type scheme for solving the complementarity problem": finite for
+a P-matrix from any start, so it is warm-started from the last mode), each basis being the rods' equations (25) with
+the chosen unilateral rows as equalities; degenerate (singular) cases fall back to enumerating the active sets.
+
+Impacts: when a slack rope reaches its length or a mass the ground, the velocities jump. The impulse Lambda solves
+the same LCP one level down (Moreau's impact law with Newton's restitution on the normal, for a rope the radial,
+velocity): Lambda_i >= 0, xi_i = dg/dt_i+ + e_i min(dg/dt_i-, 0) >= 0, Lambda_i xi_i = 0, with M dU = C^T Lambda.
+Perfectly inelastic (e = 0) it is the projection of the velocities onto the active set in the mass metric, the very
+projection of the driven anchors' jumps (Dynamics.project_velocities); with a common e it is U- + (1 + e) (P U- -
+U-): the approach velocity reversed e times.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from linknet_core.dynamics.equations import Dynamics
+from linknet_core.errors import ConsistencyError, SceneError, SolverError
+from linknet_core.scene.description import Scene
+from linknet_core.tolerances import SINGULAR_RCOND
+
+# A unilateral constraint touches (it may carry force, and an acceleration LCP takes it) when its gap is at most
+# TOUCH_TOL of its length scale (a rope's length; the contact scale for the ground) and it does not separate faster
+# than TOUCH_TOL of the scene's velocity scale: far above the round-off of states the projections put on (11)-(12)
+# (~1e-15), far below any gap a step opens.
+TOUCH_TOL = 1e-9
+# A slack constraint is crossed (an event) when its gap is below -CROSS_TOL of its scale: above the round-off of
+# computing the gap, so that a rope that has just gone slack (gap 0, rate 0) is not found taut again at round-off.
+CROSS_TOL = 1e-12
+# An active constraint goes slack (an event) when its force falls below -FORCE_TOL of the largest force the
+# mode's links carry at that state (round-off of the tension solve is ~1e-15 of it).
+FORCE_TOL = 1e-10
+# The LCP's conditions hold to LCP_TOL of the problem's scale (|B| for w, |B| / max diag W for lambda).
+LCP_TOL = 1e-11
+# Murty's rule pivots at most this many times per unilateral row before the active sets are enumerated (a degenerate
+# problem can cycle); enumeration takes at most 2^ENUMERATION_LIMIT sets.
+PIVOTS_PER_ROW = 4
+ENUMERATION_LIMIT = 16
+# An impact whose rebound would lift the constraint by less than REST_HEIGHT of its scale under the scene's
+# acceleration scale is perfectly inelastic: a ball bouncing with e < 1 comes to rest after finitely many events
+# instead of infinitely many in finite time.
+REST_HEIGHT = 1e-9
+
+
+class Event(NamedTuple):
+    """What happened at a time t of a run: ``kind`` 'taut' (a slack rope reached its length: an impulse), 'slack'
+    (a taut rope's tension fell to 0: it leaves, no impulse), 'contact' (a mass reached the ground: an impulse) or
+    'release' (the ground's force on a mass fell to 0); ``index`` the 0-based link (taut, slack) or mass (contact,
+    release); ``impulse`` N s: what the rope or the ground gave (>= 0; 0 for slack and release)."""
+
+    t: float
+    kind: str
+    index: int
+    impulse: float
+
+
+def native_refusal(scene: Scene) -> str | None:
+    """Why the native core cannot run ``scene`` (its first rope link, or its ground), or None where it can."""
+    ropes = np.flatnonzero(scene.rope)
+    if ropes.size:
+        what = f"{scene.link_label(int(ropes[0]))} is a rope"
+        if ropes.size > 1:
+            what += f" (and {ropes.size - 1} more link{'s' if ropes.size > 2 else ''})"
+    elif scene.ground is not None:
+        what = "it has a ground"
+    else:
+        return None
+    return (f"{scene.name}: {what}, and the native core does not take ropes or a ground yet; the numpy reference "
+            "runs it (backend=\"auto\" or \"numpy\", or a scene without them)")
+
+
+def numpy_only(scene: Scene, backend: str) -> bool:
+    """Whether ``scene`` must run on the numpy reference (it has ropes or a ground); a backend of 'native' for such a
+    scene is refused with native_refusal's words."""
+    if not scene.unilateral:
+        return False
+    if backend == "native":
+        raise SolverError(native_refusal(scene))
+    return True
+
+
+def scene_dynamics(scene: Scene, rhs_kernel: str = "numpy") -> Dynamics:
+    """The Dynamics a simulation of ``scene`` runs on: UnilateralDynamics for a scene with ropes or a ground."""
+    if not scene.unilateral:
+        return Dynamics(scene, rhs_kernel=rhs_kernel)
+    if rhs_kernel != "numpy":
+        raise SolverError(f"rhs_kernel={rhs_kernel!r} does not take ropes or a ground (its generated kernel is of rods "
+                          "only); use rhs_kernel='numpy'")
+    return UnilateralDynamics(scene)
+
+
+def slack_links(scene: Scene, T: np.ndarray) -> np.ndarray:
+    """(L,) bool: the ropes that carry no tension at a state whose tensions (from UnilateralDynamics.tensions) are
+    T: those the complementarity problem leaves out (their T is exactly 0). Rods are never slack."""
+    return scene.rope & (np.asarray(T) == 0.0)
+
+
+# ---------------------------------------------------------------------------------------------------- the LCP
+def solve_mixed_lcp(W: np.ndarray, b: np.ndarray, unilateral: np.ndarray, start: np.ndarray | None = None,
+                    release: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """lambda with (W lambda - b)_i = 0 on the rows that are not ``unilateral`` (the rods' equations) and, on the
+    unilateral rows, lambda_i >= 0, w_i = (W lambda - b)_i >= 0, lambda_i w_i = 0; W symmetric positive
+    semi-definite (W = C M^-1 C^T). Returns (lambda, active): ``active`` the rows solved as equalities (every rod,
+    and the unilateral rows in the final basis).
+
+    Murty's least-index principal pivoting (Cottle-Pang-Stone sec. 4.2, the "simple principal pivoting method" with
+    Murty's rule): in a basis (a set of unilateral rows taken as equalities, lambda = 0 on the others) the rods and
+    the basis rows are solved, minimum-norm where singular (31); the lowest-numbered row that breaks its sign
+    condition (lambda_i < 0 in the basis, w_i < 0 outside) is flipped. For a positive definite Schur complement on
+    the unilateral rows (independent constraints) this ends after finitely many pivots from any start, so it starts
+    from ``start`` (the last mode). ``release``: rows that leave the basis unless their lambda is clearly positive
+    (a rope whose tension has just fallen to 0). A degenerate problem that cycles has its active sets enumerated
+    (at most 2^ENUMERATION_LIMIT)."""
+    W = np.asarray(W, float)
+    b = np.asarray(b, float)
+    unilateral = np.asarray(unilateral, bool)
+    m = b.size
+    uni = np.flatnonzero(unilateral)
+    active = ~unilateral
+    if start is not None:
+        active[uni] = np.asarray(start, bool)[uni]
+    release = np.zeros(m, bool) if release is None else np.asarray(release, bool)
+    b_scale = max(float(np.abs(b).max()) if m else 0.0, np.finfo(float).tiny)
+    diag = max(float(np.abs(np.diagonal(W)).max()) if m else 0.0, np.finfo(float).tiny)
+    tol_w, tol_l = LCP_TOL * b_scale, LCP_TOL * b_scale / diag
+
+    def violations(lam, w, basis):
+        low = np.where(release, tol_l, -tol_l)
+        bad_l = basis & unilateral & (lam < low)
+        bad_w = ~basis & unilateral & (w < -tol_w)
+        return bad_l | bad_w
+
+    for _ in range(PIVOTS_PER_ROW * uni.size + 1):
+        lam = _basis_solution(W, b, active)
+        bad = violations(lam, W @ lam - b, active)
+        if not bad.any():
+            return lam, active
+        i = int(np.flatnonzero(bad)[0])
+        active[i] = not active[i]
+    if uni.size > ENUMERATION_LIMIT:
+        raise SolverError(f"the complementarity problem of {uni.size} touching ropes and contacts did not settle "
+                          f"after {PIVOTS_PER_ROW * uni.size} pivots (a degenerate configuration), and is too large "
+                          f"to enumerate (more than {ENUMERATION_LIMIT} rows)")
+    best = None
+    for chosen in itertools.product((False, True), repeat=uni.size):
+        basis = ~unilateral
+        basis[uni] = chosen
+        lam = _basis_solution(W, b, basis)
+        w = W @ lam - b
+        worst = max(float(np.max(np.maximum(-lam[uni] * basis[uni], 0.0), initial=0.0)) / tol_l,
+                    float(np.max(np.maximum(-w[uni] * ~basis[uni], 0.0), initial=0.0)) / tol_w)
+        if best is None or worst < best[0]:
+            best = (worst, lam, basis)
+    if best[0] > 1.0 / LCP_TOL:  # off by more than the problem's own scale: no solution
+        raise SolverError(f"the complementarity problem of {uni.size} touching ropes and contacts has no solution "
+                          "(the constraints contradict each other, as a rope shorter than a rod beside it would)")
+    return best[1], best[2]
+
+
+def _basis_solution(W, b, basis):
+    """lambda of one basis: W_SS lambda_S = b_S on the basis rows S, minimum-norm where W_SS is singular (the seed's
+    (31): the self-stresses of redundant rows take no share), lambda = 0 elsewhere."""
+    lam = np.zeros(b.size)
+    rows = np.flatnonzero(basis)
+    if rows.size:
+        lam[rows] = np.linalg.lstsq(W[np.ix_(rows, rows)], b[rows], rcond=SINGULAR_RCOND)[0]
+    return lam
+
+
+# ------------------------------------------------------------------------------------------- one mode's dynamics
+@dataclass(frozen=True)
+class _ModeScene(Scene):
+    """The scene of one mode: the rods and the active ropes as links, and each active contact as a link from its
+    mass to a virtual anchor appended after the scene's masses. ``labels`` names each link in the scene's words."""
+
+    labels: tuple = ()
+
+    def link_label(self, l: int) -> str:
+        return self.labels[l]
+
+
+class ModeDynamics:
+    """One mode (which ropes are taut, which masses touch the ground) as a network of rods: what the integrators
+    take as their ``dyn`` between events.
+
+    A contact of mass k is a link of length R_c from k to a virtual anchor Q placed straight above it, Q = X_k +
+    (R_c - g_k) n, whose velocity is the mass's tangential velocity: its direction E is then n (the plane's normal),
+    its row of C is n at k, the term |U_k - V_Q|^2 / R_c of (26) is (n . U_k)^2 / R_c, zero on the ground, and its gap
+    R_c - |X_k - Q| is g_k: the plane's constraint exactly at the velocity and acceleration levels, and its tension
+    the ground's normal force. Every call re-places Q from the state it is given. The position projection moves the
+    masses onto |X_k - Q| = R_c, a sphere that touches the plane under Q; a mass that the links move sideways by tau
+    within one projection ends tau^2 / (2 R_c) off the plane, so the projection is repeated with Q re-placed until the
+    gaps are within the tolerance (twice at most, in practice)."""
+
+    def __init__(self, parent: "UnilateralDynamics", active: np.ndarray, X: np.ndarray, U: np.ndarray):
+        scene = parent.scene
+        self.parent = parent
+        self.scene = scene
+        self.active = np.array(active, bool)
+        self.K = scene.K
+        self._inv_mass3 = parent._inv_mass3
+        n_ropes = parent.rope_links.size
+        self.links = np.concatenate([parent.rod_links, parent.rope_links[self.active[:n_ropes]]])
+        self.contact_masses = parent.contact_masses[self.active[n_ropes:]]
+        # the aug row of every unilateral constraint (-1 where inactive), and the constraint of every aug row
+        self.row_of = np.full(parent.n_unilateral, -1, np.int64)
+        on = np.flatnonzero(self.active)
+        self.row_of[on] = parent.rod_links.size + np.arange(on.size)
+        self.constraint_of_row = np.concatenate([np.full(parent.rod_links.size, -1, np.int64), on])
+        self.inner = Dynamics(self._mode_scene(X, U))
+
+    def _mode_scene(self, X, U) -> _ModeScene:
+        scene, parent = self.scene, self.parent
+        n_c = self.contact_masses.size
+        K = self.K
+        pad_bool = np.zeros(n_c, bool)
+        labels = tuple(scene.link_label(int(l)) for l in self.links) + tuple(
+            f"the ground contact of {scene.mass_label(int(k))}" for k in self.contact_masses)
+        return _ModeScene(
+            name=scene.name, description=scene.description,
+            mass_names=scene.mass_names + tuple(f"ground above {scene.mass_names[k]}" for k in self.contact_masses),
+            mass=_frozen(np.concatenate([scene.mass, np.full(n_c, math.inf)])),
+            fixed=_frozen(np.concatenate([scene.fixed, np.ones(n_c, bool)]), bool),
+            k1=_frozen(np.concatenate([scene.k1[self.links], self.contact_masses]), np.int64),
+            k2=_frozen(np.concatenate([scene.k2[self.links], K + np.arange(n_c)]), np.int64),
+            length=_frozen(np.concatenate([scene.length[self.links], np.full(n_c, parent.contact_length)])),
+            link_names=tuple(scene.link_names[l] for l in self.links) + tuple(f"ground{k + 1}" for k in
+                                                                              self.contact_masses),
+            gravity=scene.gravity, force=_frozen(self._pad_zero(scene.force)),
+            drag=_frozen(np.concatenate([scene.drag, np.zeros(n_c)])),
+            quadratic_drag=_frozen(np.concatenate([scene.quadratic_drag, np.zeros(n_c)])),
+            springs=scene.springs, X0=_frozen(self.pad(X)), U0=_frozen(self.pad_velocity(X, U)),
+            options=dict(scene.options), driven=_frozen(np.concatenate([scene.driven, pad_bool]), bool),
+            motions=scene.motions, labels=labels)
+
+    # ---- the virtual anchors of the contacts --------------------------------------------------------------
+    def _pad_zero(self, A):
+        if self.contact_masses.size == 0 or A is None:
+            return A
+        return np.concatenate([A, np.zeros((self.contact_masses.size, 3))])
+
+    def pad(self, X):
+        """X with each contact's virtual anchor straight above its mass, at R_c from the plane."""
+        if self.contact_masses.size == 0:
+            return X
+        ground = self.scene.ground
+        Xc = X[self.contact_masses]
+        gap = ground.gaps(Xc)
+        return np.concatenate([X, Xc + (self.parent.contact_length - gap)[:, None] * ground.normal])
+
+    def pad_velocity(self, X, V):
+        """A velocity field V (or any field on the masses) with each virtual anchor moving as its mass does along
+        the plane: its row of C (12) is then n . V_k."""
+        if self.contact_masses.size == 0:
+            return V
+        n = self.scene.ground.normal
+        Vc = V[self.contact_masses]
+        return np.concatenate([V, Vc - (Vc @ n)[:, None] * n])
+
+    def _unpad(self, A):
+        return A if self.contact_masses.size == 0 else A[:self.K]
+
+    # ---- what the integrators call ------------------------------------------------------------------------
+    @property
+    def exact_newton_projections(self) -> int:
+        return self.inner.exact_newton_projections
+
+    @property
+    def floor_stops(self) -> int:
+        return self.parent.floor_stops
+
+    @property
+    def floor_reached(self) -> float:
+        return self.parent.floor_reached
+
+    @property
+    def rhs_kernel(self) -> str:
+        return "numpy"
+
+    def forces(self, X, U, F_input=None):
+        return self.parent.forces(X, U, F_input)
+
+    def accelerations(self, X, U, F_input=None, anchor_acc=None):
+        """(dU/dt of (9) on the scene's masses, the mode's tensions in its row order)."""
+        self.parent.rhs_evaluations += 1
+        acc, T = self.inner.accelerations(self.pad(X), self.pad_velocity(X, U), self._pad_zero(F_input),
+                                          self._pad_zero(anchor_acc))
+        return self._unpad(acc), T
+
+    def tensions(self, X, U, F_input=None, anchor_acc=None) -> np.ndarray:
+        """The mode's tensions (25)-(26), rods and active ropes and contacts, in its row order (minimum-norm (31)
+        where the mode is redundant)."""
+        return self.inner.tensions(self.pad(X), self.pad_velocity(X, U), self._pad_zero(F_input),
+                                   anchor_acc=self._pad_zero(anchor_acc))
+
+    def project_velocities(self, X, U):
+        """The closest velocities in the mass metric with every active constraint's rate (12) zero:
+        Dynamics.project_velocities of the mode."""
+        return self._unpad(self.inner.project_velocities(self.pad(X), self.pad_velocity(X, U)))
+
+    def project_positions(self, X, tol=1e-14, max_iter=50, direction_at=None, step=None):
+        """Dynamics.project_positions of the mode (onto (11) of its rods and taut ropes and onto the ground of its
+        contacts), repeated with the contacts' anchors re-placed until every contact's gap is within the tolerance.
+        Returns (X, iterations)."""
+        inner, parent = self.inner, self.parent
+        X0 = None if direction_at is None else self.pad(direction_at)
+        if step is not None and self.contact_masses.size:
+            dt, fraction, U, F_input = step
+            step = (dt, fraction, self.pad_velocity(direction_at, U), self._pad_zero(F_input))
+        stops, reached = inner.floor_stops, inner.floor_reached
+        total = 0
+        Xc = X
+        for _ in range(4):
+            Xa, used = inner.project_positions(self.pad(Xc), tol=tol, max_iter=max_iter, direction_at=X0, step=step)
+            Xc, total = self._unpad(Xa), total + used
+            if self.contact_masses.size == 0 or np.all(np.abs(self.scene.ground.gaps(Xc[self.contact_masses]))
+                                                       <= tol * parent.contact_length
+                                                       + 8 * np.finfo(float).eps * np.abs(Xc).max()):
+                break
+        parent.floor_stops += inner.floor_stops - stops
+        parent.floor_reached = max(parent.floor_reached, inner.floor_reached if inner.floor_stops > stops else 0.0)
+        return Xc, total
+
+    def near_self_stress_load(self, X, U, F_input=None, anchor_acc=None) -> str:
+        return self.inner.near_self_stress_load(self.pad(X), self.pad_velocity(X, U), self._pad_zero(F_input),
+                                                self._pad_zero(anchor_acc))
+
+    def link_impulse_velocities(self, X, lam_rows):
+        """M^-1 C^T Lambda on the scene's masses for impulses Lambda in the mode's row order: the velocity change
+        they make ((9) integrated over the impulse)."""
+        Xa = self.pad(X)
+        return self._unpad(self.inner.link_forces(Xa, lam_rows)) * self._inv_mass3
+
+    def unilateral_forces(self, T_rows) -> np.ndarray:
+        """(n_unilateral,): each active rope's tension and contact's normal force from the mode's tensions T_rows;
+        0 on the inactive ones."""
+        out = np.zeros(self.parent.n_unilateral)
+        on = self.row_of >= 0
+        out[on] = T_rows[self.row_of[on]]
+        return out
+
+
+def _frozen(a, dtype=float):
+    out = np.array(a, dtype=dtype, copy=True)
+    out.setflags(write=False)
+    return out
+
+
+# ------------------------------------------------------------------------------------- the scene's dynamics
+class UnilateralDynamics(Dynamics):
+    """The Dynamics of a scene with ropes or a ground: the seed's rods plus unilateral constraints, numbered
+    u = 0 .. n_unilateral - 1, the ropes first (link order), then a contact per free mass (mass order) when there is
+    a ground. As a Dynamics of the whole scene (every link a rod) it supplies the forces, energies and reactions;
+    ``tensions`` solves the acceleration LCP at the state (a pure function of it: ropes that are slack there get T =
+    0); ``mode`` gives the rods of one mode (ModeDynamics), which the event-driven integrators follow between
+    events."""
+
+    def __init__(self, scene: Scene):
+        super().__init__(scene)
+        self.rope_links = np.flatnonzero(scene.rope)
+        self.rod_links = np.flatnonzero(~scene.rope)
+        ground = scene.ground
+        self.contact_masses = scene.free_indices if ground is not None else np.zeros(0, np.int64)
+        self.n_unilateral = self.rope_links.size + self.contact_masses.size
+        self.is_rope = np.concatenate([np.ones(self.rope_links.size, bool), np.zeros(self.contact_masses.size, bool)])
+        self.index = np.concatenate([self.rope_links, self.contact_masses])  # the link or mass of each constraint
+        extent = float(np.ptp(scene.X0, axis=0).max()) if scene.K > 1 else 0.0
+        self.size = max(extent, float(scene.length.max()) if scene.L else 0.0, 1e-3)
+        # the virtual link length of a contact (any positive length is exact; this keeps its coordinates at the
+        # scene's scale)
+        self.contact_length = self.size
+        self.scale = np.concatenate([scene.length[self.rope_links], np.full(self.contact_masses.size, self.size)])
+        self.restitution = np.concatenate([scene.restitution[self.rope_links],
+                                           np.full(self.contact_masses.size, ground.restitution if ground else 0.0)])
+        if ground is not None and ground.friction > 0:
+            raise SolverError(f"{scene.name}: the ground's friction is {ground.friction:g}, and Coulomb friction is not "
+                              "implemented yet: the ground is frictionless (give \"friction\": 0)")
+        self._modes: dict = {}
+
+    # ---- the constraints' gaps and rates -----------------------------------------------------------------
+    def gaps(self, X) -> np.ndarray:
+        """g_u of every unilateral constraint (m): R_l - |X_k2 - X_k1| of a rope, computed as (R^2 - |d|^2) / (R + |d|)
+        (no cancellation at g ~ 0); n . (X_k - p) of a contact."""
+        scene = self.scene
+        l = self.rope_links
+        d = X[scene.k2[l]] - X[scene.k1[l]]
+        dd = np.einsum("ij,ij->i", d, d)
+        R = scene.length[l]
+        rope = (R * R - dd) / (R + np.sqrt(dd))
+        if self.contact_masses.size == 0:
+            return rope
+        return np.concatenate([rope, scene.ground.gaps(X[self.contact_masses])])
+
+    def gap_rates(self, X, U) -> np.ndarray:
+        """dg_u/dt (m/s): -(d . dU) / |d| of a rope, n . U_k of a contact."""
+        scene = self.scene
+        l = self.rope_links
+        d = X[scene.k2[l]] - X[scene.k1[l]]
+        dU = U[scene.k2[l]] - U[scene.k1[l]]
+        rope = -np.einsum("ij,ij->i", d, dU) / np.sqrt(np.einsum("ij,ij->i", d, d))
+        if self.contact_masses.size == 0:
+            return rope
+        return np.concatenate([rope, U[self.contact_masses] @ self.scene.ground.normal])
+
+    def gap_polynomial(self, coefficients, u: int) -> np.ndarray:
+        """A polynomial in theta (coefficients, lowest degree first) with the sign of constraint u's gap along the
+        positions c0 + c1 theta + c2 theta^2 + c3 theta^3 (``coefficients``: four (K,3) arrays): n . (X_k - p) of a
+        contact (cubic); R_l^2 - |X_k2 - X_k1|^2 of a rope (sextic)."""
+        scene = self.scene
+        k = self.index[u]
+        if not self.is_rope[u]:
+            p = np.array([c[k] @ scene.ground.normal for c in coefficients])
+            p[0] -= scene.ground.point @ scene.ground.normal
+            return p
+        D = [c[scene.k2[k]] - c[scene.k1[k]] for c in coefficients]
+        p = np.zeros(7)
+        for i in range(4):
+            for j in range(4):
+                p[i + j] -= D[i] @ D[j]
+        p[0] += scene.length[k] ** 2
+        return p
+
+    def velocity_scale(self, U) -> float:
+        """A speed to measure rates against: the fastest free mass, or what gravity gives over the scene's size."""
+        free = U[self.scene.free_indices]
+        fastest = float(np.sqrt(np.einsum("ij,ij->i", free, free).max())) if free.size else 0.0
+        return max(fastest, math.sqrt(float(np.linalg.norm(self.scene.gravity)) * self.size), 1e-300)
+
+    def touching(self, X, U=None) -> np.ndarray:
+        """The unilateral constraints at contact: gap within TOUCH_TOL of their scale, and (given U) not separating
+        faster than TOUCH_TOL of the velocity scale."""
+        near = np.abs(self.gaps(X)) <= TOUCH_TOL * self.scale
+        if U is None:
+            return near
+        return near & (self.gap_rates(X, U) <= TOUCH_TOL * self.velocity_scale(U))
+
+    def label(self, u: int) -> str:
+        """A unilateral constraint in the scene's words."""
+        if self.is_rope[u]:
+            return f"rope {self.scene.link_label(int(self.index[u]))}"
+        return f"the ground contact of {self.scene.mass_label(int(self.index[u]))}"
+
+    # ---- modes -------------------------------------------------------------------------------------------
+    def mode(self, active: np.ndarray, X: np.ndarray | None = None, U: np.ndarray | None = None) -> ModeDynamics:
+        """The ModeDynamics of the unilateral constraints ``active`` (bool, n_unilateral), made once per set (its
+        structure analysed at the state X, U it is first asked at)."""
+        active = np.asarray(active, bool)
+        key = active.tobytes()
+        kept = self._modes.get(key)
+        if kept is None:
+            X = self.scene.X0 if X is None else X
+            U = self.scene.U0 if U is None else U
+            kept = self._modes[key] = ModeDynamics(self, active, X, U)
+        return kept
+
+    def select_mode(self, X, U, F_input=None, anchor_acc=None, candidates=None, start=None, release=None):
+        """The active set at (X, U): the acceleration LCP on the ``candidates`` (default: those touching with no
+        separating rate), warm-started from ``start`` (default: every candidate, so that a degenerate problem, force
+        and gap acceleration both zero, keeps them taut); ``release``: constraints whose force has just fallen to 0
+        (they stay only with a clearly positive force). Returns (active, the multipliers of the candidates' mode in
+        its row order, that mode)."""
+        candidates = self.touching(X, U) if candidates is None else np.asarray(candidates, bool)
+        start = candidates if start is None else start
+        md = self.mode(candidates, X, U)
+        Xa, Ua = md.pad(X), md.pad_velocity(X, U)
+        inner = md.inner
+        F = inner.forces(Xa, Ua, md._pad_zero(F_input))
+        W = inner.tension_matrix(Xa).toarray()
+        B = inner.tension_rhs(Xa, Ua, F, md._pad_zero(anchor_acc))
+        rows_uni = md.constraint_of_row >= 0
+        start_rows = np.zeros(B.size, bool)
+        release_rows = np.zeros(B.size, bool)
+        if start is not None:
+            start_rows[rows_uni] = np.asarray(start, bool)[md.constraint_of_row[rows_uni]]
+        if release is not None:
+            release_rows[rows_uni] = np.asarray(release, bool)[md.constraint_of_row[rows_uni]]
+        lam, basis = solve_mixed_lcp(W, B, rows_uni, start_rows, release_rows)
+        active = np.zeros(self.n_unilateral, bool)
+        active[md.constraint_of_row[basis & rows_uni]] = True
+        return active, lam, md
+
+    def rest_speed(self, U) -> float:
+        """Below this rebound speed an impact is perfectly inelastic (REST_HEIGHT): the speed a fall of REST_HEIGHT
+        of the scene's size reaches under its acceleration scale (gravity, or the velocity scale over the size)."""
+        acceleration = max(float(np.linalg.norm(self.scene.gravity)), self.velocity_scale(U) ** 2 / self.size)
+        return math.sqrt(2.0 * acceleration * REST_HEIGHT * self.size)
+
+    def impact(self, X, U, touching, inelastic: bool = False):
+        """The impulse at a state where the unilateral constraints ``touching`` are at contact: Moreau's impact law
+        with Newton's restitution as an LCP on them (the module's docstring). Returns (U after, impulses
+        (n_unilateral,) N s, the constraints that took an impulse). The velocities are Dynamics.project_velocities
+        of the impulse's active set (and U- + (1 + e)(P U- - U-) with a restitution e), the driven anchors' jump
+        projection; only where different restitutions meet at one instant are they U- + M^-1 C^T Lambda of the
+        LCP's impulses. ``inelastic``: e = 0 for all (the initial state)."""
+        md = self.mode(touching, X, U)
+        Xa, Ua = md.pad(X), md.pad_velocity(X, U)
+        inner = md.inner
+        W = inner.tension_matrix(Xa).toarray()
+        rates = inner.constraint_rows(Xa, Ua)  # C U: each row's dg/dt (scaled by |d|/R off the manifold)
+        rows_uni = md.constraint_of_row >= 0
+        e = np.zeros(rates.size)
+        if not inelastic:
+            e[rows_uni] = self.restitution[md.constraint_of_row[rows_uni]]
+        e[e * np.maximum(-rates, 0.0) < self.rest_speed(U)] = 0.0
+        q = rates + e * np.minimum(rates, 0.0)  # xi = W Lambda + q
+        lam, basis = solve_mixed_lcp(W, -q, rows_uni, rows_uni & (rates < 0))
+        impulses = md.unilateral_forces(lam)
+        took = impulses > 0
+        sub = basis & rows_uni
+        active = np.zeros(self.n_unilateral, bool)
+        active[md.constraint_of_row[sub]] = True
+        approaching = basis & (rates < 0) & rows_uni
+        separating = basis & (rates > TOUCH_TOL * self.velocity_scale(U))
+        common = np.unique(e[approaching])
+        if common.size <= 1 and not separating.any():
+            e0 = float(common[0]) if common.size else 0.0
+            projected = self.mode(active, X, U).project_velocities(X, U)
+            U_after = projected if e0 == 0.0 else U + (1.0 + e0) * (projected - U)
+        else:
+            U_after = U + md.link_impulse_velocities(X, lam)
+        return U_after, impulses, took
+
+    # ---- the pure functions of the state (outputs, diagnostics) ------------------------------------------------
+    def resolve(self, X, U, F_input=None, anchor_acc=None):
+        """(T (L,) of every link, normal force (K,) of the ground on every mass) at (X, U): the acceleration LCP on
+        the touching constraints, then the tensions of its mode (25)-(26) by the rod path's solver."""
+        active, _, _ = self.select_mode(X, U, F_input, anchor_acc)
+        md = self.mode(active, X, U)
+        T_rows = md.tensions(X, U, F_input, anchor_acc)
+        T = np.zeros(self.scene.L)
+        T[md.links] = T_rows[:md.links.size]
+        normal = np.zeros(self.scene.K)
+        forces = md.unilateral_forces(T_rows)
+        normal[self.contact_masses] = forces[self.rope_links.size:]
+        return T, normal
+
+    def tensions(self, X, U, F_input=None, F=None, E=None, anchor_acc=None) -> np.ndarray:
+        """Every link's tension at (X, U): rods and taut ropes from (25)-(26) of the mode the LCP chooses there,
+        slack ropes 0."""
+        return self.resolve(X, U, F_input, anchor_acc)[0]
+
+    def accelerations(self, X, U, F_input=None, anchor_acc=None):
+        active, _, _ = self.select_mode(X, U, F_input, anchor_acc)
+        acc, _ = self.mode(active, X, U).accelerations(X, U, F_input, anchor_acc)
+        return acc, self.tensions(X, U, F_input, anchor_acc=anchor_acc)
+
+    def constraint_residual(self, X):
+        """The largest relative violation: a rod's | |d|/R - 1 |, a rope's stretch max(0, |d|/R - 1), a mass's depth
+        below the ground over the scene's size. X (n,K,3): n values."""
+        scene = self.scene
+        d = X[..., scene.k2, :] - X[..., scene.k1, :]
+        rel = np.sqrt(np.einsum("...ij,...ij->...i", d, d)) / scene.length - 1.0
+        rel = np.where(scene.rope, np.maximum(rel, 0.0), np.abs(rel))
+        worst = rel.max(axis=-1) if scene.L else np.zeros(X.shape[:-2])
+        if scene.ground is not None:
+            depth = np.maximum(-scene.ground.gaps(X[..., self.contact_masses, :]), 0.0) / self.size
+            worst = np.maximum(worst, depth.max(axis=-1))
+        return float(worst) if X.ndim == 2 else worst
+
+    def velocity_residual(self, X, U):
+        """The largest violation of (12), m/s: a rod's |E . (U_k2 - U_k1)|; a rope at its length (within TOUCH_TOL)
+        stretching, max(0, -dg/dt); a mass on the ground moving into it."""
+        scene = self.scene
+        d = X[..., scene.k2, :] - X[..., scene.k1, :]
+        dist = np.sqrt(np.einsum("...ij,...ij->...i", d, d))
+        rate = np.einsum("...ij,...ij->...i", d, U[..., scene.k2, :] - U[..., scene.k1, :]) / dist  # d|d|/dt
+        at_length = dist >= scene.length * (1.0 - TOUCH_TOL)
+        viol = np.where(scene.rope, np.where(at_length, np.maximum(rate, 0.0), 0.0),
+                        np.abs(rate * dist / scene.length))
+        worst = viol.max(axis=-1) if scene.L else np.zeros(X.shape[:-2])
+        if scene.ground is not None:
+            k = self.contact_masses
+            gap = scene.ground.gaps(X[..., k, :])
+            into = np.maximum(-(U[..., k, :] @ scene.ground.normal), 0.0)
+            worst = np.maximum(worst, np.where(gap <= TOUCH_TOL * self.size, into, 0.0).max(axis=-1))
+        return float(worst) if X.ndim == 2 else worst
+
+    # ---- the initial state -------------------------------------------------------------------------------------
+    def initial_state(self, project_positions: bool | None = None, length_tol: float = 1e-6):
+        """The scene's initial state made consistent, as simulator.prepare_initial_state does for rods: rods within
+        length_tol of their lengths, ropes not longer than theirs (else refused, or projected where asked); the
+        ropes at their length and the masses on the ground take the impulse of an impact (their approach velocities
+        removed, as (12) removes a rod's); hypothesis (35) is checked on the mode that results. Returns (X, U,
+        report)."""
+        scene = self.scene
+        if project_positions is None:
+            project_positions = bool(scene.options.get("project_initial_positions", False))
+        if scene.input_driven_indices.size:
+            k = int(scene.input_driven_indices[0])
+            raise SolverError(f"{scene.name}: {scene.mass_label(k)} is driven by inputs, and input-driven anchors do "
+                              "not yet run with ropes or a ground (their jumps are projections onto rods only); give "
+                              "it a motion in the scene (velocity, sine, waypoints)")
+        X, U = np.array(scene.X0), np.array(scene.U0)
+        anchor_acc = None
+        if scene.driven.any():
+            P, V, A = scene.anchor_motion(0.0)
+            X[scene.driven_indices], U[scene.driven_indices] = P, V
+            anchor_acc = np.zeros_like(X)
+            anchor_acc[scene.driven_indices] = A
+        d = X[scene.k2] - X[scene.k1]
+        rel = np.sqrt(np.einsum("ij,ij->i", d, d)) / scene.length - 1.0
+        off = np.where(scene.rope, np.maximum(rel, 0.0), np.abs(rel))
+        worst = float(off.max()) if scene.L else 0.0
+        projected = False
+        if worst > length_tol:
+            l = int(np.argmax(off))
+            if not project_positions:
+                what = "is stretched beyond its length" if scene.rope[l] else "violates its length"
+                raise SceneError(
+                    f"{scene.name}: initial positions: {scene.link_label(l)} {what} (distance "
+                    f"{np.linalg.norm(d[l]):.6g} m vs length {scene.length[l]:.6g} m, {worst:.3g} relative; tolerance "
+                    f"{length_tol:g}; a rope may be shorter than its length, never longer). Fix the positions or the "
+                    "lengths, or opt in to projecting them (--project-initial, or \"options\": "
+                    "{\"project_initial_positions\": true})")
+            stretched = np.zeros(self.n_unilateral, bool)
+            stretched[:self.rope_links.size] = rel[self.rope_links] > 0
+            try:
+                X, _ = self.mode(stretched, X, U).project_positions(X, tol=1e-14, max_iter=200)
+            except SolverError as exc:
+                raise SceneError(f"{scene.name}: the initial positions cannot be projected onto the link lengths: "
+                                 f"{exc}") from None
+            projected = True
+        # the ropes at their length and the masses on the ground take an inelastic impulse, the rods' rates (12) go
+        # to zero with it (the impact LCP's equalities): one projection
+        U_new, _, _ = self.impact(X, U, self.touching(X), inelastic=True)
+        correction = np.linalg.norm(U_new - U, axis=1)
+        worst_mass = int(np.argmax(correction)) if correction.size else -1
+        dv = float(correction.max()) if correction.size else 0.0
+        if dv <= 1e-14 * max(1.0, float(np.abs(U).max())):
+            dv, worst_mass = 0.0, -1
+        active, _, md = self.select_mode(X, U_new, None, anchor_acc)
+        md = self.mode(active, X, U_new)
+        try:
+            md.inner.check_consistent_velocities(md.pad(X), md.pad_velocity(X, U_new),
+                                                 anchor_acc=md._pad_zero(anchor_acc))
+        except ConsistencyError as exc:
+            raise ConsistencyError(f"{scene.name}: with the ropes and contacts that are taut at the start: {exc}") \
+                from None
+        return X, U_new, UnilateralReport(worst, projected, dv, worst_mass, int(active[:self.rope_links.size].sum()),
+                                          self.rope_links.size, int(active[self.rope_links.size:].sum()))
+
+
+@dataclass
+class UnilateralReport:
+    """What was done to the initial state of a scene with ropes or a ground (the InitialReport of rods, and the
+    ropes and contacts it starts with)."""
+
+    worst_length_error: float
+    positions_projected: bool
+    velocity_correction: float
+    velocity_correction_mass: int
+    taut_ropes: int
+    ropes: int
+    contacts: int
+
+    def lines(self, scene: Scene) -> list[str]:
+        out = []
+        if self.positions_projected:
+            out.append(f"initial positions projected onto the link lengths (worst error was "
+                       f"{self.worst_length_error:.3g} relative)")
+        if self.velocity_correction > 0:
+            out.append(f"initial velocities: the approach along taut ropes, the ground and (12) removed (an inelastic "
+                       f"impulse): largest correction {self.velocity_correction:.3g} m/s at "
+                       f"{scene.mass_label(self.velocity_correction_mass)}")
+        what = []
+        if self.ropes:
+            what.append(f"{self.taut_ropes} of {self.ropes} ropes taut at the start")
+        if scene.ground is not None:
+            what.append(f"{self.contacts} masses on the ground")
+        out.append("ropes and ground: the numpy reference runs this scene, event by event (the native core does not "
+                   "take ropes or a ground yet); " + ", ".join(what))
+        return out
+
+
+def event_counts(events) -> dict:
+    """How many events of each kind a run had."""
+    counts = {"taut": 0, "slack": 0, "contact": 0, "release": 0}
+    for event in events:
+        counts[event.kind] += 1
+    return counts
+

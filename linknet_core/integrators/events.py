@@ -1,0 +1,389 @@
+"""Events of ropes and a ground: every integrator, stepping one mode at a time and stopping at each event.
+
+Between events a scene with ropes or a ground is a network of rods (linknet_core.dynamics.unilateral.ModeDynamics:
+the rods, the taut ropes, the masses on the ground), which every method integrates as it integrates any scene. An
+event ends a mode:
+
+* **taut** / **contact**: a slack rope reaches its length, a free mass the ground (its gap g crosses 0 from above);
+* **slack** / **release**: a taut rope's tension, the ground's force on a mass, falls through 0.
+
+Each step is checked after it is taken: the gaps of the slack constraints along the step's dense interpolant (the
+cubic Hermite of X from X and U at both ends: exact for a ballistic flight, O(h^4) otherwise), and the forces of the
+active ones at its end. The first event is located there by a bracketing root find (Illinois' regula falsi) and the
+step is taken again from its start to the event, by the method's own step; a gap event's time is then made exact by
+Newton's method on that step's length (the gap and its rate at its end), so that the event lies on the method's
+own trajectory, not on the interpolant. At the event the impulse is applied and the next mode chosen
+(UnilateralDynamics.impact, select_mode), and the integration restarts from there:
+
+* the adaptive methods (dopri5, dop853) end the step at the event and go on with their step-size controller;
+* the fixed-step methods (rattle and its compositions) finish the step from the event in the new mode, so that
+  their steps stay where they are: a step holds the event at its located time, every other step is the method's.
+"""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from linknet_core.dynamics.unilateral import CROSS_TOL, FORCE_TOL, TOUCH_TOL, Event
+from linknet_core.errors import SolverError, StepFailure
+
+# Points of the dense interpolant at which each step's slack gaps are looked at (beside its end): a rope that comes
+# taut and slack again within one step is found where the interpolant dips below zero at one of them.
+GAP_SAMPLES = 8
+# More events than this within one step (or one adaptive step attempt) means a chatter the rest rule did not stop
+MAX_EVENTS_PER_STEP = 200
+# Newton's iterations on a gap event's time (quadratic convergence from the interpolant's O(h^4) root)
+GAP_NEWTON_ITERATIONS = 4
+
+
+def hermite(y0, d0, y1, d1, h, theta):
+    """The cubic Hermite interpolant at theta in [0, 1] of a step of length h from (y0, d0) to (y1, d1)."""
+    t2 = theta * theta
+    t3 = t2 * theta
+    return ((2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + theta) * h * d0 + (3 * t2 - 2 * t3) * y1
+            + (t3 - t2) * h * d1)
+
+
+def hermite_coefficients(y0, d0, y1, d1, h):
+    """(c0, c1, c2, c3): the cubic Hermite interpolant of a step as c0 + c1 theta + c2 theta^2 + c3 theta^3."""
+    return (y0, h * d0, 3 * (y1 - y0) - h * (2 * d0 + d1), 2 * (y0 - y1) + h * (d0 + d1))
+
+
+def first_falling_root(p) -> float | None:
+    """The first theta in [0, 1] where the polynomial p (coefficients, lowest degree first) crosses zero downwards
+    (p' < 0 there: a gap closing), None if there is none; roots of p by its companion matrix (numpy.roots), each
+    polished by Newton's method on p."""
+    p = np.trim_zeros(np.asarray(p, float), "b")
+    if p.size < 2:
+        return None
+    dp = np.arange(1, p.size) * p[1:]
+    scale = float(np.abs(p).max())
+    best = None
+    for r in np.roots(p[::-1]):
+        if abs(r.imag) > 1e-6 * max(1.0, abs(r.real)) or not -1e-9 <= r.real <= 1.0 + 1e-9:
+            continue
+        x = float(r.real)
+        for _ in range(3):
+            slope = np.polyval(dp[::-1], x)
+            if slope == 0:
+                break
+            x -= np.polyval(p[::-1], x) / slope
+        x = min(max(x, 0.0), 1.0)
+        if np.polyval(dp[::-1], x) < -1e-12 * scale and (best is None or x < best):
+            best = x
+    return best
+
+
+def bracketed_root(f, lo, hi, f_lo, f_hi, xtol=4e-16, guess=None):
+    """(lo, hi): the bracket of a sign change of f, f(lo) >= 0 > f(hi), shrunk to xtol (relative) by the Illinois
+    variant of regula falsi, with a bisection wherever three iterations did not halve it; ``guess``: the first point
+    tried."""
+    last = 0
+    widths = [hi - lo] * 3
+    m = guess
+    for _ in range(200):
+        if hi - lo <= xtol * max(1.0, abs(lo), abs(hi)):
+            break
+        if m is None:
+            m = (lo * f_hi - hi * f_lo) / (f_hi - f_lo) if f_hi != f_lo else 0.5 * (lo + hi)
+            if hi - lo > 0.5 * widths[0]:
+                m = 0.5 * (lo + hi)
+        if not lo < m < hi:
+            m = 0.5 * (lo + hi)
+            if not lo < m < hi:
+                break
+        fm = f(m)
+        if fm >= 0:
+            lo, f_lo = m, fm
+            if last == 1:
+                f_hi *= 0.5
+            last = 1
+        else:
+            hi, f_hi = m, fm
+            if last == -1:
+                f_lo *= 0.5
+            last = -1
+        widths = widths[1:] + [hi - lo]
+        m = None
+    return lo, hi
+
+
+class EventHandling:
+    """What the event-driven variants of every method share: the mode, the events so far, detection, location and
+    the event itself. ``self.dyn`` is the current mode's ModeDynamics; ``self.unilateral`` the scene's
+    UnilateralDynamics."""
+
+    events_enabled = True
+
+    def _init_events(self, unilateral):
+        self.unilateral = unilateral
+        self.mode = None  # chosen from the state at the first advance
+        self.events: list[Event] = []
+
+    def internals(self) -> dict:
+        out = super().internals()
+        out["mode"] = None if self.mode is None else self.mode.copy()
+        out["events"] = list(self.events)
+        return out
+
+    def set_internals(self, data: dict) -> None:
+        super().set_internals(data)
+        self.events = list(data.get("events", []))
+        mode = data.get("mode")
+        if mode is None:
+            self.mode, self.dyn = None, self.unilateral
+        else:
+            self._set_mode(mode)
+
+    def projection_floor(self):
+        return int(self.unilateral.floor_stops), float(self.unilateral.floor_reached)
+
+    @property
+    def rhs_evaluations(self) -> int:
+        return self.unilateral.rhs_evaluations
+
+    # ---- the mode ---------------------------------------------------------------------------------------
+    def _set_mode(self, active, X=None, U=None):
+        self.mode = np.array(active, bool)
+        self.dyn = self.unilateral.mode(self.mode, X, U)
+
+    def _at(self, t, X, U):
+        """(X, U, anchor accelerations) with the driven anchors where their motion is at t."""
+        if self.drive is None:
+            return X, U, None
+        return self.drive.apply(t, X, U)
+
+    def _ensure_mode(self, X, U, t, F_input):
+        if self.mode is None:
+            Xd, Ud, acc = self._at(t, X, U)
+            candidates = self.unilateral.touching(Xd, Ud)
+            active, _, _ = self.unilateral.select_mode(Xd, Ud, F_input, acc, candidates, start=candidates)
+            self._set_mode(active, X, U)
+
+    def slack_links(self) -> np.ndarray:
+        """(L,) bool: the ropes of the scene that are slack in the current mode."""
+        uni = self.unilateral
+        out = np.zeros(uni.scene.L, bool)
+        if self.mode is not None:
+            n = uni.rope_links.size
+            out[uni.rope_links] = ~self.mode[:n]
+        return out
+
+    # ---- detection and location -------------------------------------------------------------------------------
+    def _forces_at(self, t, X, U, F_input):
+        """The active unilateral constraints' forces (n_unilateral,) and the largest |force| of the mode's rows."""
+        Xd, Ud, acc = self._at(t, X, U)
+        T = self.dyn.tensions(Xd, Ud, F_input, acc)
+        return self.dyn.unilateral_forces(T), float(np.abs(T).max()) if T.size else 0.0
+
+    def _first_event(self, X0, U0, t0, X1, U1, t1, F_input):
+        """The first event within the step from (X0, U0) at t0 to (X1, U1) at t1, or None: (theta in [0, 1], kind
+        'gap' or 'force', constraint u)."""
+        uni = self.unilateral
+        h = t1 - t0
+        mode = self.mode
+        found = None
+        inactive = ~mode
+        if inactive.any():
+            # the slack constraints that the interpolant takes below the ground or past their length at one of the
+            # sample points, then each one's first crossing on it: a root of the gap's polynomial in theta (the
+            # Hermite of X is cubic, a rope's |d|^2 sextic), exact on a ballistic flight however many bounces the
+            # step spans, the first one where the gap falls (a rebound starting at round-off below 0 rises first)
+            tol = CROSS_TOL * np.maximum(uni.scale, np.abs(X1).max())
+            lowest = uni.gaps(X1)
+            for j in range(1, GAP_SAMPLES):
+                lowest = np.minimum(lowest, uni.gaps(hermite(X0, U0, X1, U1, h, j / GAP_SAMPLES)))
+            coefficients = hermite_coefficients(X0, U0, X1, U1, h)
+            for u in np.flatnonzero(inactive & (lowest < -tol)):
+                root = first_falling_root(uni.gap_polynomial(coefficients, int(u)))
+                if root is None:  # a gap that leaves zero tangentially (a double root): where it passes -tol
+                    def below(th, u=u):
+                        return float(uni.gaps(hermite(X0, U0, X1, U1, h, th))[u] + tol[u])
+                    root = bracketed_root(below, 0.0, 1.0, below(0.0), below(1.0))[1] if below(0.0) >= 0 else 0.0
+                if found is None or root < found[0]:
+                    found = (root, "gap", int(u))
+        if mode.any():
+            forces, scale = self._forces_at(t1, X1, U1, F_input)
+            dropped = np.flatnonzero(mode & (forces < -FORCE_TOL * scale))
+            if dropped.size:
+                A0, A1 = self._acceleration_at(t0, X0, U0, F_input), self._acceleration_at(t1, X1, U1, F_input)
+                for u in dropped:
+                    def force(th, u=u):
+                        Xh = hermite(X0, U0, X1, U1, h, th)
+                        Uh = hermite(U0, A0, U1, A1, h, th)
+                        return float(self._forces_at(t0 + th * h, Xh, Uh, F_input)[0][u])
+                    f0 = force(0.0)
+                    # the order of the events only: the time itself is found on the method's steps (_to_force_root)
+                    root = 0.0 if f0 < 0 else bracketed_root(force, 0.0, 1.0, f0, float(forces[u]), xtol=1e-6)[1]
+                    if found is None or root < found[0]:
+                        found = (root, "force", int(u))
+        return found
+
+    def _acceleration_at(self, t, X, U, F_input):
+        Xd, Ud, acc = self._at(t, X, U)
+        return self.dyn.accelerations(Xd, Ud, F_input, acc)[0]
+
+    def _locate(self, step, X0, U0, t0, h_max, X1, U1, F_input, found):
+        """The state at the event ``found`` (theta, kind, u) on the method's own trajectory: (X, U, h), h the step
+        from t0 to it."""
+        theta, kind, u = found
+        if kind == "gap":
+            return self._to_gap_root(step, X0, U0, t0, h_max, u, theta)
+        return self._to_force_root(step, X0, U0, t0, h_max, X1, U1, F_input, u, theta)
+
+    def _to_force_root(self, step, X0, U0, t0, h_max, X1, U1, F_input, u, theta):
+        """The method's own step from t0 to just past the zero of constraint u's force (the interpolant's root
+        theta the first guess), by the bracketing root find on the step's length: the event's state has the force
+        at or just below zero. Returns (X, U, h)."""
+        kept = {}
+
+        def force(h):
+            kept[h] = step(h)
+            return float(self._forces_at(t0 + h, *kept[h], F_input)[0][u])
+        f0 = float(self._forces_at(t0, X0, U0, F_input)[0][u])
+        f1 = float(self._forces_at(t0 + h_max, X1, U1, F_input)[0][u])
+        if not f0 >= 0:
+            return X0, U0, 0.0
+        kept[h_max] = (X1, U1)
+        _, h = bracketed_root(force, 0.0, h_max, f0, f1, xtol=1e-13, guess=theta * h_max)
+        Xe, Ue = kept[h] if h in kept else step(h)
+        return Xe, Ue, h
+
+    def _to_gap_root(self, step, X0, U0, t0, h_max, u, theta):
+        """The method's own step from t0 to a gap event located on the interpolant at theta, its length corrected
+        by Newton's method until the gap of constraint u at its end is zero to round-off. Returns (X, U, h)."""
+        uni = self.unilateral
+        h = theta * h_max
+        Xe, Ue = step(h) if h > 0 else (X0, U0)
+        for _ in range(GAP_NEWTON_ITERATIONS):
+            g = float(uni.gaps(Xe)[u])
+            rate = float(uni.gap_rates(Xe, Ue)[u])
+            if abs(g) <= 4 * np.finfo(float).eps * max(uni.scale[u], float(np.abs(Xe).max())) or not rate < 0:
+                break
+            h_new = min(max(h - g / rate, 0.0), h_max)
+            if h_new == h:
+                break
+            h = h_new
+            Xe, Ue = step(h) if h > 0 else (X0, U0)
+        return Xe, Ue, h
+
+    # ---- the event -------------------------------------------------------------------------------------------
+    def _apply_event(self, X, U, t, F_input, kind, trigger):
+        """At an event at t (state X, U of the old mode): positions onto the touching constraints, the impact's
+        impulse, the next mode; the events recorded. Returns (X, U)."""
+        uni = self.unilateral
+        touching = self.mode | uni.touching(X)
+        touching[trigger] |= kind == "gap"
+        X, _ = uni.mode(touching, X, U).project_positions(X, tol=1e-14)
+        U_after, impulses, took = uni.impact(X, U, touching)
+        Xd, Ud, acc = self._at(t, X, U_after)
+        rates = uni.gap_rates(Xd, Ud)
+        candidates = touching & (rates <= TOUCH_TOL * uni.velocity_scale(Ud))
+        release = np.zeros(uni.n_unilateral, bool)
+        if kind == "force":
+            release[trigger] = True
+        # every candidate starts taut: where the LCP is degenerate (a force and a gap acceleration both zero, a rope
+        # at its length at rest), taut is kept, and a force that then turns negative is a slack event at once
+        active, _, _ = uni.select_mode(Xd, Ud, F_input, acc, candidates, start=candidates, release=release)
+        if kind == "force" and active[trigger] and not (active != self.mode).any():
+            active[trigger] = False  # its force is at zero to round-off and falling: it leaves
+        md = uni.mode(active, X, U_after)
+        U_after = md.project_velocities(X, U_after)
+        for u in np.flatnonzero((took | active) & ~self.mode):
+            self.events.append(Event(float(t), "taut" if uni.is_rope[u] else "contact", int(uni.index[u]),
+                                     float(impulses[u])))
+        for u in np.flatnonzero(self.mode & ~active):
+            self.events.append(Event(float(t), "slack" if uni.is_rope[u] else "release", int(uni.index[u]), 0.0))
+        self._set_mode(active, X, U_after)
+        return X, U_after
+
+    def _zeno(self, t):
+        return SolverError(f"more than {MAX_EVENTS_PER_STEP} rope or ground events within one step at t = {t:g} "
+                           "(a chatter of impacts): reduce the step or the tolerance, or the restitution")
+
+
+class FixedStepEvents(EventHandling):
+    """The event-driven variant of a fixed-step method: a step that holds an event is taken to the event, the
+    impulse applied and the step finished in the new mode; every other step is the method's."""
+
+    def advance(self, state, t_target, F_input, max_steps):
+        self._ensure_mode(state.X, state.U, state.t, F_input)
+        super().advance(state, t_target, F_input, max_steps)
+
+    def _advance_steps(self, X, U, n, h, F_input, t=0.0, t_target=None):
+        for i in range(n):
+            end = t_target if i == n - 1 and t_target is not None else t + (i + 1) * h
+            X, U = self._step_with_events(X, U, t + i * h, end, F_input)
+        return X, U
+
+    def _plain_step(self, X, U, t0, t1, F_input):
+        h = t1 - t0
+        try:
+            return self.step(X, U, h, F_input, t0, t1)
+        except StepFailure as failure:
+            return self._split_step(X, U, h, F_input, t0, t1, failure)
+
+    def _step_with_events(self, X, U, t0, t1, F_input):
+        for _ in range(MAX_EVENTS_PER_STEP):
+            X1, U1 = self._plain_step(X, U, t0, t1, F_input)
+            if not self.events_enabled:
+                return X1, U1
+            found = self._first_event(X, U, t0, X1, U1, t1, F_input)
+            if found is None:
+                return X1, U1
+            _, kind, u = found
+            h_max = t1 - t0
+
+            def step(h, X=X, U=U, t0=t0):
+                return self._plain_step(X, U, t0, t0 + h, F_input)
+            Xe, Ue, h_e = self._locate(step, X, U, t0, h_max, X1, U1, F_input, found)
+            t_e = t1 if h_e >= h_max else t0 + h_e
+            X, U = self._apply_event(Xe, Ue, t_e, F_input, kind, u)
+            if t_e >= t1:
+                return X, U
+            t0 = t_e
+        raise self._zeno(t0)
+
+
+class AdaptiveEvents(EventHandling):
+    """The event-driven variant of an embedded Runge-Kutta method: an accepted step that holds an event ends at it
+    (ProjectedRungeKutta.advance asks _event_in_step after every accepted step)."""
+
+    def advance(self, state, t_target, F_input, max_steps):
+        self._ensure_mode(state.X, state.U, state.t, F_input)
+        self._events_this_step = 0
+        super().advance(state, t_target, F_input, max_steps)
+
+    def _event_in_step(self, X, U, t, k0, X_new, U_new, t_new, acc_new, F_input):
+        if not self.events_enabled:
+            return None
+        found = self._first_event(X, U, t, X_new, U_new, t_new, F_input)
+        if found is None:
+            self._events_this_step = 0
+            return None
+        self._events_this_step += 1
+        if self._events_this_step > MAX_EVENTS_PER_STEP:
+            raise self._zeno(t)
+        _, kind, u = found
+        h_max = t_new - t
+
+        def step(h):
+            return self.step(X, U, h, F_input, t, t + h)
+        Xe, Ue, h_e = self._locate(step, X, U, t, h_max, X_new, U_new, F_input, found)
+        t_e = t_new if h_e >= h_max else t + h_e
+        Xe, Ue = self._apply_event(Xe, Ue, t_e, F_input, kind, u)
+        return Xe, Ue, t_e
+
+
+@functools.lru_cache(maxsize=None)
+def event_driven(cls):
+    """The event-driven variant of integrator class ``cls`` (same name, order and settings)."""
+    base = AdaptiveEvents if cls.adaptive else FixedStepEvents
+
+    def __init__(self, dynamics, *args, **kwargs):
+        cls.__init__(self, dynamics, *args, **kwargs)
+        self._init_events(dynamics)
+
+    return type(cls.__name__, (base, cls), {"__init__": __init__, "__doc__": cls.__doc__,
+                                             "__module__": cls.__module__})
