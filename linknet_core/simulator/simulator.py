@@ -16,6 +16,7 @@ from linknet_core.accuracy import (accuracy_text, companion, default_method, err
                                    position_gap, position_gaps, scene_size, warn_accuracy)
 from linknet_core.dynamics.drive import AnchorDrive, anchor_jump, check_step_follows_motions
 from linknet_core.dynamics.equations import Dynamics
+from linknet_core.dynamics.unilateral import event_counts, numpy_only, scene_dynamics, slack_links
 from linknet_core.errors import SceneError, SolverError
 from linknet_core.dynamics.forces import kinetic_energy
 from linknet_core.integrators import method_settings, real_number
@@ -78,7 +79,12 @@ def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: boo
     * velocities are projected onto (12) and the correction is reported;
     * hypothesis (35) is checked: velocities that admit no consistent accelerations are refused; so are velocities
       or loads along a flex held only at second order (Dynamics.check_no_loaded_blocked_flex).
+
+    A scene with ropes or a ground has its own rules (UnilateralDynamics.initial_state: ropes no longer than their
+    length, and an inelastic impulse where they are at it).
     """
+    if scene.unilateral:
+        return dyn.initial_state(project_positions=project_positions, length_tol=length_tol)
     if project_positions is None:
         project_positions = bool(scene.options.get("project_initial_positions", False))
     X, U = np.array(scene.X0), np.array(scene.U0)
@@ -168,8 +174,10 @@ def _setup(scene: Scene, dyn: Dynamics, method, dt, rtol, atol, project_initial,
     else:
         X0, U0, report = prepare_initial_state(scene, dyn, project_positions=project_initial, length_tol=length_tol)
     # one backend, chosen here before anything is built: the one asked for, the native core by default, the numpy
-    # reference where the right-hand side is casadi's (a variant of the numpy Dynamics)
-    chosen = "numpy" if dyn.rhs_kernel != "numpy" else "native" if backend == "auto" else backend
+    # reference where the right-hand side is casadi's (a variant of the numpy Dynamics) or the scene has ropes or a
+    # ground (which the native core does not take yet: backend="native" is refused there)
+    chosen = "numpy" if dyn.rhs_kernel != "numpy" or numpy_only(scene, backend) else \
+        "native" if backend == "auto" else backend
     specialisation, U0 = BACKEND_CLASSES[chosen].choose_specialisation(scene, dyn, method, specialise, rtol, atol, U0)
     X0.flags.writeable = U0.flags.writeable = False
     return method_cls, dt, rtol, atol, X0, U0, report, chosen, specialisation
@@ -234,7 +242,7 @@ class Simulator:
         if backend not in BACKENDS:
             raise SolverError(f"backend must be one of {', '.join(map(repr, BACKENDS))}, got {backend!r}")
         self.scene = scene
-        self.dyn = dynamics or Dynamics(scene, rhs_kernel=rhs_kernel)
+        self.dyn = dynamics or scene_dynamics(scene, rhs_kernel=rhs_kernel)
         self.method = method
         settings = None if dynamics is not None else _settings_key(method, dt, rtol, atol, project_initial, length_tol,
                                                                    backend, rhs_kernel, specialise)
@@ -431,6 +439,8 @@ class Simulator:
                "error_estimate": self.error_estimate}
         if self.scene.driven.any():
             out["impulse"] = self.anchor_report()["impulse"]
+        if self.scene.unilateral:
+            out["slack"] = slack_links(self.scene, T)
         return out
 
     def outputs_after_jump(self, F_input, anchors) -> dict:
@@ -566,7 +576,8 @@ class Simulator:
     def summary(self) -> str:
         """Scene, method and the specialisation chosen for it (and why)."""
         lines = [f"{self.scene.name}: K={self.scene.K} masses, L={self.scene.L} links, method {self.method}, "
-                 f"solver {self.dyn.structure.kind}, backend {self.backend}",
+                 f"solver {self.dyn.structure.kind}, backend {self.backend}"
+                 + (" (ropes, ground: the native core does not take them yet)" if self.scene.unilateral else ""),
                  f"  specialisation: {self.specialisation.text()}"]
         if self.scene.driven.any():
             lines.append("  driven anchors: " + ", ".join(
@@ -593,6 +604,10 @@ class Result:
     error_estimate: np.ndarray | None = None
     error_goal: float = math.nan
     error_failure: str | None = None
+    # scenes with ropes or a ground (linknet_core.dynamics.unilateral), None otherwise: which links are slack ropes at
+    # each sample (n, L), and the run's events in time order (Event: t, kind, index, impulse)
+    slack: np.ndarray | None = None
+    events: list | None = None
 
     @property
     def max_error_estimate(self) -> float:
@@ -654,6 +669,8 @@ class Result:
                 + (f"  {s['floor_stops']} position projections stopped at the round-off floor the conditioning "
                    f"allows, above the tolerance (largest residual there {s['floor_reached']:.3g} relative)\n"
                    if s.get("floor_stops") else "")
+                + ("  events: " + ", ".join(f"{n} {kind}" for kind, n in event_counts(self.events).items()) + "\n"
+                   if self.events is not None else "")
                 + self._accuracy_line()
                 + f"  final energy drift = {self.energy_drift:.3e} (relative), max constraint residual = "
                 f"{float(self.residual.max()):.3e} (relative), max velocity residual = "
@@ -820,6 +837,7 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
     X = np.empty((n, K, 3))
     U = np.empty((n, K, 3))
     T = np.empty((n, L))
+    slack = np.empty((n, L), bool) if scene.unilateral else None
     in_one_call = not callable(forces) and sim.samples_in_one_call
     # the samples' diagnostics from the native core as it samples, where it can: one row per quantity (energy,
     # residual of (11), of (12), kinetic energy), as the result holds them
@@ -873,6 +891,8 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
             else:
                 out = sim.outputs(force_at(times[min(i, n - 2)]))
             X[i], U[i], T[i] = out["X"], out["U"], out["T"]
+            if slack is not None:
+                slack[i] = out["slack"]
             done = i + 1
             now = time.perf_counter()
             if show and (not auto or now - start > 1.0) and (now - last_print > 0.2 or i == n - 1):
@@ -887,15 +907,23 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
         stats = _run_stats(sim, method, dt, rtol, scene, wall)
         stats["interrupted"] = True
         part = slice(0, done)
-        raise SimulationInterrupted(Result(scene, method, times[part], X[part], U[part], T[part],
-                                           *_diagnostics(sim, X[part], U[part],
-                                                         None if diagnostics is None else diagnostics[:, part]),
-                                           stats)) from None
+        raise SimulationInterrupted(_with_events(sim, slack, part, Result(
+            scene, method, times[part], X[part], U[part], T[part],
+            *_diagnostics(sim, X[part], U[part], None if diagnostics is None else diagnostics[:, part]),
+            stats))) from None
     wall = time.perf_counter() - start
     if drawn:
         sys.stderr.write("\n")
     stats = _run_stats(sim, method, dt, rtol, scene, wall)
-    return Result(scene, method, times, X, U, T, *_diagnostics(sim, X, U, diagnostics), stats)
+    return _with_events(sim, slack, slice(None), Result(scene, method, times, X, U, T,
+                                                        *_diagnostics(sim, X, U, diagnostics), stats))
+
+
+def _with_events(sim, slack, part, result: Result) -> Result:
+    """The result with the slack ropes of its samples and the run's events, for a scene with ropes or a ground."""
+    if slack is not None:
+        result.slack, result.events = slack[part], list(sim.integrator.events)
+    return result
 
 
 def _forces_value(value, K: int, t=None) -> np.ndarray:
