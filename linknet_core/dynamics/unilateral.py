@@ -90,8 +90,8 @@ def native_refusal(scene: Scene) -> str | None:
         what = "it has a ground"
     else:
         return None
-    return (f"{scene.name}: {what}, and the native core does not take ropes or a ground yet; the numpy reference "
-            "runs it (backend=\"auto\" or \"numpy\", or a scene without them)")
+    return (f"{scene.name}: {what}, and the native core (backend=\"native\", the native FMU) does not take ropes or a "
+            "ground yet; the numpy reference runs it (backend=\"auto\" or \"numpy\", and the pythonfmu FMU)")
 
 
 def numpy_only(scene: Scene, backend: str) -> bool:
@@ -389,8 +389,9 @@ class UnilateralDynamics(Dynamics):
         self.n_unilateral = self.rope_links.size + self.contact_masses.size
         self.is_rope = np.concatenate([np.ones(self.rope_links.size, bool), np.zeros(self.contact_masses.size, bool)])
         self.index = np.concatenate([self.rope_links, self.contact_masses])  # the link or mass of each constraint
+        # the scene's length scale (its extent or longest link, at least 1 m: a single mass on the ground has none)
         extent = float(np.ptp(scene.X0, axis=0).max()) if scene.K > 1 else 0.0
-        self.size = max(extent, float(scene.length.max()) if scene.L else 0.0, 1e-3)
+        self.size = max(extent, float(scene.length.max()) if scene.L else 0.0, 1.0)
         # the virtual link length of a contact (any positive length is exact; this keeps its coordinates at the
         # scene's scale)
         self.contact_length = self.size

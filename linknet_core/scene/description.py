@@ -149,7 +149,7 @@ class ForceElements:
         return self.masses[rows], self.parameters[rows]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Ground:
     """A plane the free masses cannot pass: n . (X_k - point) >= 0, with ``normal`` n a unit vector pointing to the
     side the masses are on. Contact is unilateral and impulsive (linknet_core.dynamics.unilateral): an impact

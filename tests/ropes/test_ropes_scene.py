@@ -1,0 +1,179 @@
+"""The scene format of ropes and a ground, its rules and their words; the backend choice (the numpy reference, the
+native core refused naming the rope or the ground); the results' slack flags and events; the shipped rope scenes
+through the CLI."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rope_references import G
+
+import linknet_core as ln
+from linknet_core.scene import description
+
+ROOT = Path(__file__).resolve().parents[2]
+ROPE_MODELS = sorted((ROOT / "models" / "ropes").glob("*.json"))
+
+
+def data(**changes) -> dict:
+    base = {"name": "s", "gravity": [0, 0, -G],
+            "masses": [{"name": "pivot", "position": [0, 0, 0], "fixed": True},
+                       {"name": "bob", "position": [0, 0, -0.5], "mass": 1.0}],
+            "links": [{"a": 1, "b": 2, "length": 1.0, "kind": "rope"}]}
+    base.update(changes)
+    return base
+
+
+@pytest.mark.parametrize("link,words", [
+    ({"a": 1, "b": 2, "kind": "chain"}, "link 1 (pivot-bob) kind must be one of 'rod', 'rope', got 'chain'"),
+    ({"a": 1, "b": 2, "kind": None}, "link 1 (pivot-bob) kind must be one of"),
+    ({"a": 1, "b": 2, "restitution": 0.5}, "link 1 (pivot-bob) is a rod, which never goes slack: \"restitution\" "
+                                           "applies to ropes only"),
+    ({"a": 1, "b": 2, "kind": "rope", "restitution": 1.5}, "link 1 (pivot-bob) restitution must lie in [0, 1]"),
+    ({"a": 1, "b": 2, "kind": "rope", "restitution": -0.1}, "link 1 (pivot-bob) restitution must lie in [0, 1]"),
+    ({"a": 1, "b": 2, "kind": "rope", "restitution": "0.5"}, "link 1 (pivot-bob) restitution must be a number"),
+    ({"a": 1, "b": 2, "kind": "rope", "length": 0.0}, "link 1 (pivot-bob) length must be positive"),
+    ({"a": 1, "b": 2, "kind": "rope", "length": -1.0}, "link 1 (pivot-bob) length must be positive"),
+])
+def test_a_bad_rope_is_refused_naming_the_link_and_the_rule(link, words):
+    with pytest.raises(ln.SceneError) as err:
+        ln.Scene.from_dict(data(links=[link]))
+    assert words in str(err.value)
+
+
+@pytest.mark.parametrize("ground,words", [
+    ({"point": [0, 0, -1], "normal": [0, 0, 0]}, "ground normal must be a non-zero vector"),
+    ({"point": [0, 0, -1]}, "ground normal is missing"),
+    ({"normal": [0, 0, 1]}, "ground point is missing"),
+    ({"point": [0, 0, -1], "normal": [0, 0, 1], "restitution": 2}, "ground restitution must lie in [0, 1]"),
+    ({"point": [0, 0, -1], "normal": [0, 0, 1], "friction": -0.2}, "ground friction must not be negative"),
+    ({"point": [0, 0, -1], "normal": [0, 0, 1], "stiffness": 1e6}, "'ground' has unknown field(s) ['stiffness']"),
+    ({"point": [0, 0, 0], "normal": [0, 0, 1]}, 'mass 2 ("bob") starts 0.5 m below the ground'),
+    ({"point": [0, 0, -0.8], "normal": [0, 0, -3]}, 'mass 2 ("bob") starts 0.3 m below the ground'),
+    ([0, 0, 1], "'ground' must be an object"),
+])
+def test_a_bad_ground_is_refused_naming_the_field_and_the_rule(ground, words):
+    with pytest.raises(ln.SceneError) as err:
+        ln.Scene.from_dict(data(ground=ground))
+    assert words in str(err.value)
+
+
+def test_a_mass_on_the_ground_and_an_anchor_below_it_are_allowed_and_the_fields_round_trip():
+    scene = ln.Scene.from_dict(data(
+        masses=[{"name": "pivot", "position": [0, 0, -3], "fixed": True},
+                {"name": "bob", "position": [0, 0, -1], "mass": 1.0}],
+        links=[{"a": 1, "b": 2, "length": 2.5, "kind": "rope", "restitution": 0.25}, ],
+        ground={"point": [0, 0, -1], "normal": [0, 0, 2], "restitution": 0.5}))
+    assert list(scene.rope) == [True] and list(scene.restitution) == [0.25]
+    assert np.allclose(scene.ground.normal, [0, 0, 1]) and scene.ground.restitution == 0.5
+    again = ln.Scene.from_dict(scene.to_dict())
+    assert list(again.rope) == [True] and list(again.restitution) == [0.25]
+    assert np.array_equal(again.ground.point, scene.ground.point) and np.array_equal(again.ground.normal,
+                                                                                      scene.ground.normal)
+    assert (again.ground.restitution, again.ground.friction) == (0.5, 0.0)
+    assert again.fingerprint == scene.fingerprint
+    rod = ln.Scene.from_dict(data(links=[{"a": 1, "b": 2, "length": 1.0}]))
+    assert not rod.unilateral and rod.fingerprint != ln.Scene.from_dict(data()).fingerprint
+
+
+def test_docs_state_the_rope_and_ground_fields():
+    text = (ROOT / "docs" / "scenes.md").read_text()
+    for key in description._GROUND_KEYS | {"kind", "restitution", "ground"}:
+        assert f"`{key}`" in text, key
+    for kind in description.LINK_KINDS:
+        assert f'`"{kind}"`' in text, kind
+    for rule in ("a free mass starting below the ground", "a zero normal is refused", "refused on a rod"):
+        assert rule in text.replace("**", "").lower(), rule
+
+
+def test_a_rope_longer_than_its_length_at_the_start_is_refused_or_projected():
+    stretched = data(masses=[{"name": "pivot", "position": [0, 0, 0], "fixed": True},
+                             {"name": "bob", "position": [0, 0, -1.2], "mass": 1.0}])
+    with pytest.raises(ln.SceneError) as err:
+        ln.Simulator(ln.Scene.from_dict(stretched), "rattle", dt=1e-3)
+    assert "link 1 (pivot-bob) is stretched beyond its length (distance 1.2 m vs length 1 m" in str(err.value)
+    sim = ln.Simulator(ln.Scene.from_dict(stretched), "rattle", dt=1e-3, project_initial=True)
+    assert np.linalg.norm(sim.state.X[1]) == pytest.approx(1.0, rel=1e-14)
+
+
+def test_a_rope_at_its_length_moving_outwards_at_the_start_takes_an_inelastic_impulse_reported():
+    sim = ln.Simulator(ln.Scene.from_dict(data(masses=[
+        {"name": "pivot", "position": [0, 0, 0], "fixed": True},
+        {"name": "bob", "position": [0, 0, -1.0], "mass": 1.0, "velocity": [1.0, 0, -2.0]}])), "dop853")
+    assert np.allclose(sim.state.U[1], [1.0, 0, 0])
+    assert any("largest correction 2 m/s" in line for line in sim.initial_report.lines(sim.scene))
+
+
+@pytest.mark.parametrize("scene_data,named", [
+    (data(links=[{"a": 1, "b": 2, "length": 1.0}, ], masses=data()["masses"] + [
+        {"name": "c", "position": [0, 0, -0.9], "mass": 1.0}]) | {"links": [
+            {"a": 1, "b": 2, "length": 0.5}, {"a": 2, "b": 3, "length": 0.6, "kind": "rope"},
+            {"a": 1, "b": 3, "length": 1.0, "kind": "rope"}]}, "link 2 (bob-c) is a rope (and 1 more link)"),
+    (data(links=[{"a": 1, "b": 2, "length": 0.5}], ground={"point": [0, 0, -2], "normal": [0, 0, 1]}),
+     "s: it has a ground"),
+])
+def test_the_native_backend_refuses_a_scene_with_ropes_or_a_ground_naming_the_first_and_auto_takes_the_numpy_path(
+        scene_data, named):
+    scene = ln.Scene.from_dict(scene_data)
+    with pytest.raises(ln.SolverError) as err:
+        ln.Simulator(scene, "dop853", backend="native")
+    assert named in str(err.value) and "the native core" in str(err.value) and "does not take ropes or a ground" \
+        in str(err.value)
+    sim = ln.Simulator(scene, "dop853")
+    assert sim.backend == "numpy"
+    assert "backend numpy (ropes, ground: the native core does not take them yet)" in sim.summary()
+
+
+def test_coulomb_friction_is_refused_until_it_is_implemented():
+    scene = ln.Scene.from_dict(data(ground={"point": [0, 0, -2], "normal": [0, 0, 1], "friction": 0.3}))
+    with pytest.raises(ln.SolverError) as err:
+        ln.Simulator(scene, "dop853")
+    assert "friction is 0.3" in str(err.value) and "Coulomb friction is not implemented yet" in str(err.value)
+
+
+def test_input_driven_anchors_are_refused_with_ropes():
+    scene = ln.Scene.from_dict(data(masses=[{"name": "hook", "position": [0, 0, 0], "driven": True},
+                                            {"name": "bob", "position": [0, 0, -0.5], "mass": 1.0}]))
+    with pytest.raises(ln.SolverError) as err:
+        ln.Simulator(scene, "dop853")
+    assert 'mass 1 ("hook") is driven by inputs' in str(err.value)
+
+
+def test_a_run_reports_slack_ropes_per_sample_and_its_events_and_a_snapshot_restores_the_mode():
+    scene = ln.Scene.from_dict(data(masses=[{"name": "pivot", "position": [0, 0, 0], "fixed": True},
+                                            {"name": "bob", "position": [0.3, 0, -0.4], "mass": 1.0,
+                                             "velocity": [1.5, 0, 3.0]}]))
+    run = ln.simulate(scene, 1.0, "rattle", dt=1e-3, n_out=11, error_estimate=False)
+    assert run.slack.shape == (11, 1) and run.slack.dtype == bool
+    assert run.slack[:5, 0].all() and not run.slack[5:, 0].any()  # taut from 0.465 s
+    assert [(e.kind, e.index) for e in run.events] == [("taut", 0)]
+    assert "events: 1 taut, 0 slack, 0 contact, 0 release" in run.summary()
+    sim = ln.Simulator(scene, "rattle", dt=1e-3, error_estimate=False)
+    sim.advance(0.4)
+    snapshot = sim.get_state()
+    sim.advance(0.6)
+    first = (sim.state.X.copy(), list(sim.integrator.events))
+    sim.set_state(snapshot)
+    assert sim.integrator.events == []
+    sim.advance(0.6)
+    assert np.array_equal(sim.state.X, first[0]) and sim.integrator.events == first[1]
+    sim.reset()
+    assert sim.integrator.events == [] and sim.outputs()["slack"][0]
+
+
+@pytest.mark.parametrize("path", ROPE_MODELS, ids=[p.stem for p in ROPE_MODELS])
+def test_the_shipped_rope_scenes_run_through_the_cli_and_count_their_events(path, tmp_path):
+    out = tmp_path / "run.npz"
+    proc = subprocess.run([sys.executable, "-m", "linknet_core.cli", "simulate", str(path), "--t-end", "3",
+                           "--no-progress", "--n-out", "31", "--no-error-estimate", "--out", str(out)],
+                          capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert "the native core does not take ropes or a ground yet" in proc.stdout
+    counts = dict((kind, int(n)) for n, kind in
+                  (part.split() for part in proc.stdout.split("events: ")[1].splitlines()[0].split(", ")))
+    assert counts["taut"] >= 1 and counts["slack"] >= 1
+    assert json.loads(path.read_text())["links"][0]["kind"] == "rope"
