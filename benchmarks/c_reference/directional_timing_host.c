@@ -15,49 +15,17 @@
  * seconds, with the last derivatives (they must be finite: the timed calls did the work).
  *
  * Exit codes: 0 ok, 2 usage, 3 load error, 4 an FMI call failed. Compiled and run by
- * benchmarks/bench_fmu_directional.py (cc -O2 ... -ldl).
+ * benchmarks/bench_fmu_directional.py (cc -O2 ... -ldl). Loading, callbacks and the status check are
+ * tests/c_host/fmi2_host_api.h's, as every C host's.
  */
 #define _POSIX_C_SOURCE 199309L
-#include <dlfcn.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
-typedef void *fmi2Component;
-typedef void *fmi2ComponentEnvironment;
-typedef void *fmi2FMUstate;
-typedef unsigned int fmi2ValueReference;
-typedef double fmi2Real;
-typedef int fmi2Boolean;
-typedef const char *fmi2String;
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
-typedef struct {
-    void (*logger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
-    void *(*allocateMemory)(size_t, size_t);
-    void (*freeMemory)(void *);
-    void (*stepFinished)(fmi2ComponentEnvironment, fmi2Status);
-    fmi2ComponentEnvironment componentEnvironment;
-} fmi2CallbackFunctions;
-
-typedef fmi2Component (*Instantiate_t)(fmi2String, fmi2Type, fmi2String, fmi2String,
-                                       const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
-typedef fmi2Status (*SetupExperiment_t)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
-typedef fmi2Status (*Simple_t)(fmi2Component);
-typedef fmi2Status (*DoStep_t)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
-typedef fmi2Status (*GetFMUstate_t)(fmi2Component, fmi2FMUstate *);
-typedef fmi2Status (*SetFMUstate_t)(fmi2Component, fmi2FMUstate);
-typedef fmi2Status (*Directional_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2ValueReference[],
-                                    size_t, const fmi2Real[], fmi2Real[]);
-
-static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
-                   fmi2String message, ...)
-{
-    (void)env, (void)category;
-    if (status > fmi2OK) fprintf(stderr, "[%s] %d %s\n", name, (int)status, message);
-}
+#include "../../tests/c_host/fmi2_host_api.h"
 
 static double now(void)
 {
@@ -66,24 +34,7 @@ static double now(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-static void *sym(void *lib, const char *name)
-{
-    void *f = dlsym(lib, name);
-    if (!f) {
-        fprintf(stderr, "missing symbol %s\n", name);
-        exit(3);
-    }
-    return f;
-}
-
-#define CHECK(call)                                                                  \
-    do {                                                                             \
-        fmi2Status s_ = (call);                                                      \
-        if (s_ > fmi2Warning) {                                                      \
-            fprintf(stderr, "%s failed with status %d\n", #call, (int)s_);           \
-            return 4;                                                                \
-        }                                                                            \
-    } while (0)
+#define CHECK(call) FMI2_HOST_CHECK(call, 4)
 
 int main(int argc, char **argv)
 {
@@ -102,51 +53,35 @@ int main(int argc, char **argv)
     for (size_t j = 0; j < n_unknown; j++) unknown[j] = (fmi2ValueReference)strtoul(argv[8 + j], NULL, 10);
     const fmi2Real seed = 1.0;
 
-    char path[4096], uri[4096];
-    snprintf(path, sizeof path, "%s/binaries/linux64/%s.so", dir, id);
-    snprintf(uri, sizeof uri, "file://%s/resources", dir);
-    void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-    if (!lib) {
-        fprintf(stderr, "dlopen failed: %s\n", dlerror());
-        return 3;
-    }
-    Instantiate_t instantiate = (Instantiate_t)sym(lib, "fmi2Instantiate");
-    SetupExperiment_t setup = (SetupExperiment_t)sym(lib, "fmi2SetupExperiment");
-    Simple_t enter = (Simple_t)sym(lib, "fmi2EnterInitializationMode");
-    Simple_t exit_init = (Simple_t)sym(lib, "fmi2ExitInitializationMode");
-    DoStep_t do_step = (DoStep_t)sym(lib, "fmi2DoStep");
-    GetFMUstate_t get_state = (GetFMUstate_t)sym(lib, "fmi2GetFMUstate");
-    SetFMUstate_t set_state = (SetFMUstate_t)sym(lib, "fmi2SetFMUstate");
-    Directional_t directional = (Directional_t)sym(lib, "fmi2GetDirectionalDerivative");
-
-    fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
-    fmi2Component c = instantiate("directional_timing_host", fmi2CoSimulation, guid, uri, &cb, 0, 0);
+    fmi2_host fmu;
+    fmi2_host_open(&fmu, dir, id);
+    fmi2Component c = fmi2_host_instantiate(&fmu, "directional_timing_host", guid, fmi2False);
     if (!c) {
         fprintf(stderr, "fmi2Instantiate failed\n");
         return 4;
     }
-    CHECK(setup(c, 0, 0.0, 0.0, 0, 0.0));
-    CHECK(enter(c));
-    CHECK(exit_init(c));
+    CHECK(fmu.SetupExperiment(c, 0, 0.0, 0.0, 0, 0.0));
+    CHECK(fmu.EnterInitializationMode(c));
+    CHECK(fmu.ExitInitializationMode(c));
     fmi2FMUstate initial = NULL;
-    CHECK(get_state(c, &initial));
+    CHECK(fmu.GetFMUstate(c, &initial));
 
     double best[3] = {INFINITY, INFINITY, INFINITY};
     for (long r = 0; r <= rounds; r++) {  /* round 0 untimed: the first calls load and warm up */
-        CHECK(set_state(c, initial));
+        CHECK(fmu.SetFMUstate(c, initial));
         double t = 0.0;
         const double t0 = now();
-        for (long i = 0; i < N; i++, t += h) CHECK(do_step(c, t, h, 1));
+        for (long i = 0; i < N; i++, t += h) CHECK(fmu.DoStep(c, t, h, 1));
         const double dostep = (now() - t0) / (double)N;
-        CHECK(set_state(c, initial));
+        CHECK(fmu.SetFMUstate(c, initial));
         t = 0.0;
         double first = 0.0, next = 0.0;
         for (long i = 0; i < N; i++, t += h) {
-            CHECK(do_step(c, t, h, 1));
+            CHECK(fmu.DoStep(c, t, h, 1));
             const double a = now();
-            CHECK(directional(c, unknown, n_unknown, &known, 1, &seed, derivative));
+            CHECK(fmu.GetDirectionalDerivative(c, unknown, n_unknown, &known, 1, &seed, derivative));
             const double b = now();
-            CHECK(directional(c, unknown, n_unknown, &known, 1, &seed, derivative));
+            CHECK(fmu.GetDirectionalDerivative(c, unknown, n_unknown, &known, 1, &seed, derivative));
             next += now() - b;
             first += b - a;
         }

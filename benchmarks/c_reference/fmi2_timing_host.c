@@ -2,7 +2,7 @@
  *
  * Measures what an FMU costs per communication step when a C master drives it (as every FMI
  * toolchain does), so the FMU's own overhead can be told apart from a Python host's marshalling.
- * Loading follows tests/c_host/fmi2_host.c (that file belongs to the tests and is left alone).
+ * Loading, callbacks and the status check are tests/c_host/fmi2_host_api.h's, as every C host's.
  *
  *   fmi2_timing_host FMU_DIR MODEL_ID GUID H N_STEPS REPEATS in:VR=VALUE [in:VR=VALUE ...] [out:VR ...]
  *
@@ -30,41 +30,13 @@
  */
 #define _POSIX_C_SOURCE 199309L
 #include <dlfcn.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
 
-typedef void *fmi2Component;
-typedef void *fmi2ComponentEnvironment;
-typedef void *fmi2FMUstate;
-typedef unsigned int fmi2ValueReference;
-typedef double fmi2Real;
-typedef int fmi2Boolean;
-typedef const char *fmi2String;
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
-typedef struct {
-    void (*logger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
-    void *(*allocateMemory)(size_t, size_t);
-    void (*freeMemory)(void *);
-    void (*stepFinished)(fmi2ComponentEnvironment, fmi2Status);
-    fmi2ComponentEnvironment componentEnvironment;
-} fmi2CallbackFunctions;
-
-typedef fmi2Component (*Instantiate_t)(fmi2String, fmi2Type, fmi2String, fmi2String,
-                                       const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
-typedef fmi2Status (*SetupExperiment_t)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
-typedef fmi2Status (*Simple_t)(fmi2Component);
-typedef void (*FreeInstance_t)(fmi2Component);
-typedef fmi2Status (*GetReal_t)(fmi2Component, const fmi2ValueReference *, size_t, fmi2Real *);
-typedef fmi2Status (*SetReal_t)(fmi2Component, const fmi2ValueReference *, size_t, const fmi2Real *);
-typedef fmi2Status (*DoStep_t)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
-typedef fmi2Status (*GetFMUstate_t)(fmi2Component, fmi2FMUstate *);
-typedef fmi2Status (*SetFMUstate_t)(fmi2Component, fmi2FMUstate);
-typedef fmi2Status (*FreeFMUstate_t)(fmi2Component, fmi2FMUstate *);
+#include "../../tests/c_host/fmi2_host_api.h"
 
 #define MAX_VARS 4096
 #define MAX_REPEATS 1000
@@ -96,12 +68,9 @@ static struct {
     void *thread_state;
 } py;
 
+static fmi2_host fmu;
 static struct {
     fmi2Component c;
-    SetReal_t set_real;
-    GetReal_t get_real;
-    DoStep_t do_step;
-    SetFMUstate_t set_state;
     fmi2FMUstate initial;
     fmi2ValueReference in_vr[MAX_VARS];
     fmi2Real in_val[MAX_VARS];
@@ -110,47 +79,34 @@ static struct {
     long n_steps;
 } host;
 
-static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
-                   fmi2String category, fmi2String message, ...) {
-    (void)env;
-    fprintf(stderr, "[%s] status %d %s: %s\n", instance, (int)status, category ? category : "", message);
-}
-
-static void *sym(void *lib, const char *name) {
-    void *f = dlsym(lib, name);
-    if (!f) { fprintf(stderr, "missing symbol %s\n", name); exit(3); }
-    return f;
-}
-
 static double now(void) {
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-#define CHECK(call) do { fmi2Status s_ = (call); if (s_ > fmi2Warning) { \
-    fprintf(stderr, "%s failed with status %d\n", #call, (int)s_); return -1.0; } } while (0)
+#define CHECK(call) FMI2_HOST_CHECK(call, -1.0)
 
 static double timed_span(int variant) {
-    CHECK(host.set_state(host.c, host.initial));  /* back to t = 0, outside the timed span */
-    if (variant == DOSTEP) CHECK(host.set_real(host.c, host.in_vr, host.n_in, host.in_val));
+    CHECK(fmu.SetFMUstate(host.c, host.initial));  /* back to t = 0, outside the timed span */
+    if (variant == DOSTEP) CHECK(fmu.SetReal(host.c, host.in_vr, host.n_in, host.in_val));
     double t = 0.0, t0 = now();
     switch (variant) {
     case SETREAL_DOSTEP:
         for (long n = 0; n < host.n_steps; n++) {
-            CHECK(host.set_real(host.c, host.in_vr, host.n_in, host.in_val));
-            CHECK(host.do_step(host.c, t, host.h, 1));
+            CHECK(fmu.SetReal(host.c, host.in_vr, host.n_in, host.in_val));
+            CHECK(fmu.DoStep(host.c, t, host.h, 1));
             t += host.h;  /* accumulated like a Python master's t += h: the same time points as bench_fmu's */
         }
         break;
     case DOSTEP:
         for (long n = 0; n < host.n_steps; n++) {
-            CHECK(host.do_step(host.c, t, host.h, 1));
+            CHECK(fmu.DoStep(host.c, t, host.h, 1));
             t += host.h;
         }
         break;
     case SETREAL:
-        for (long n = 0; n < host.n_steps; n++) CHECK(host.set_real(host.c, host.in_vr, host.n_in, host.in_val));
+        for (long n = 0; n < host.n_steps; n++) CHECK(fmu.SetReal(host.c, host.in_vr, host.n_in, host.in_val));
         break;
     }
     return (now() - t0) / (double)host.n_steps;
@@ -206,34 +162,15 @@ int main(int argc, char **argv) {
     }
     if (host.n_in == 0) { fprintf(stderr, "at least one in:VR=VALUE is needed\n"); return 2; }
 
-    char path[4096], uri[4096];
-    snprintf(path, sizeof path, "%s/binaries/linux64/%s.so", dir, id);
-    snprintf(uri, sizeof uri, "file://%s/resources", dir);
-    void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-    if (!lib) { fprintf(stderr, "dlopen failed: %s\n", dlerror()); return 3; }
-
-    Instantiate_t instantiate = (Instantiate_t)sym(lib, "fmi2Instantiate");
-    SetupExperiment_t setup = (SetupExperiment_t)sym(lib, "fmi2SetupExperiment");
-    Simple_t enter = (Simple_t)sym(lib, "fmi2EnterInitializationMode");
-    Simple_t exit_init = (Simple_t)sym(lib, "fmi2ExitInitializationMode");
-    Simple_t terminate = (Simple_t)sym(lib, "fmi2Terminate");
-    FreeInstance_t free_instance = (FreeInstance_t)sym(lib, "fmi2FreeInstance");
-    GetFMUstate_t get_state = (GetFMUstate_t)sym(lib, "fmi2GetFMUstate");
-    FreeFMUstate_t free_state = (FreeFMUstate_t)sym(lib, "fmi2FreeFMUstate");
-    host.get_real = (GetReal_t)sym(lib, "fmi2GetReal");
-    host.set_real = (SetReal_t)sym(lib, "fmi2SetReal");
-    host.do_step = (DoStep_t)sym(lib, "fmi2DoStep");
-    host.set_state = (SetFMUstate_t)sym(lib, "fmi2SetFMUstate");
-
-    fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
-    host.c = instantiate("c_timing_host", fmi2CoSimulation, guid, uri, &cb, 0, 1);
+    fmi2_host_open(&fmu, dir, id);
+    host.c = fmi2_host_instantiate(&fmu, "c_timing_host", guid, fmi2True);
     if (!host.c) { fprintf(stderr, "fmi2Instantiate failed\n"); return 4; }
     /* libpython comes with pythonfmu's binary, which the FMU's front layer (<id>.so) loads at fmi2Instantiate as
        <id>_pythonfmu.so beside it: its symbols are reached through that binary, else through the FMU's own */
     char inner_path[4200];
     snprintf(inner_path, sizeof inner_path, "%s/binaries/linux64/%s_pythonfmu.so", dir, id);
     void *python_lib = dlopen(inner_path, RTLD_NOW | RTLD_NOLOAD);
-    if (!python_lib) python_lib = lib;
+    if (!python_lib) python_lib = fmu.library;
     py.ensure = (GILStateEnsure_t)dlsym(python_lib, "PyGILState_Ensure");
     py.release = (GILStateRelease_t)dlsym(python_lib, "PyGILState_Release");
     py.save = (SaveThread_t)dlsym(python_lib, "PyEval_SaveThread");
@@ -243,12 +180,11 @@ int main(int argc, char **argv) {
         py.ensure = NULL;
     }
 #undef CHECK
-#define CHECK(call) do { fmi2Status s_ = (call); if (s_ > fmi2Warning) { \
-    fprintf(stderr, "%s failed with status %d\n", #call, (int)s_); return 4; } } while (0)
-    CHECK(setup(host.c, 0, 0.0, 0.0, 0, 0.0));
-    CHECK(enter(host.c));
-    CHECK(exit_init(host.c));
-    CHECK(get_state(host.c, &host.initial));  /* t = 0, inputs at their start values */
+#define CHECK(call) FMI2_HOST_CHECK(call, 4)
+    CHECK(fmu.SetupExperiment(host.c, 0, 0.0, 0.0, 0, 0.0));
+    CHECK(fmu.EnterInitializationMode(host.c));
+    CHECK(fmu.ExitInitializationMode(host.c));
+    CHECK(fmu.GetFMUstate(host.c, &host.initial));  /* t = 0, inputs at their start values */
 
     int n_measured = py.ensure ? N_VARIANTS : SETREAL_DOSTEP_KEPT;
     static double samples[N_VARIANTS][MAX_REPEATS];
@@ -263,7 +199,7 @@ int main(int argc, char **argv) {
             samples[v][r] = s;
             if (r == 0 || s < best[v]) best[v] = s;
             if (v % SETREAL_DOSTEP_KEPT != SETREAL && n_out)  /* the state at the span's end (read outside it) */
-                CHECK(host.get_real(host.c, out_vr, n_out, out_after[v]));
+                CHECK(fmu.GetReal(host.c, out_vr, n_out, out_after[v]));
         }
     }
 
@@ -287,9 +223,9 @@ int main(int argc, char **argv) {
     }
     printf("}\n");
     fflush(stdout);
-    CHECK(free_state(host.c, &host.initial));
-    CHECK(terminate(host.c));
-    free_instance(host.c);
+    CHECK(fmu.FreeFMUstate(host.c, &host.initial));
+    CHECK(fmu.Terminate(host.c));
+    fmu.FreeInstance(host.c);
     /* pythonfmu 0.7.0 may corrupt the heap while finalizing Python at exit (docs/fmu.md):
        every result is flushed above, so leave without running library destructors. */
     _exit(0);

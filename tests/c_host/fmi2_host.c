@@ -6,53 +6,17 @@
  *   fmi2_host FMU_DIR MODEL_ID GUID T_END H [in:VR=VALUE ...] [out:VR ...]
  *
  * Exit codes: 0 ok, 2 usage, 3 load error, 4 an FMI call failed (status printed).
- * Used by tests/test_fmu_c_host.py, which compiles it with the system C compiler.
+ * Used by tests/fmu/test_fmu_c_host.py, which compiles it with the system C compiler. The loading, callbacks and
+ * status check are fmi2_host_api.h's, shared with the benchmarks' C hosts.
  */
-#include <dlfcn.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
 
-typedef void *fmi2Component;
-typedef void *fmi2ComponentEnvironment;
-typedef unsigned int fmi2ValueReference;
-typedef double fmi2Real;
-typedef int fmi2Boolean;
-typedef const char *fmi2String;
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
-typedef struct {
-    void (*logger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
-    void *(*allocateMemory)(size_t, size_t);
-    void (*freeMemory)(void *);
-    void (*stepFinished)(fmi2ComponentEnvironment, fmi2Status);
-    fmi2ComponentEnvironment componentEnvironment;
-} fmi2CallbackFunctions;
+#include "fmi2_host_api.h"
 
-typedef fmi2Component (*Instantiate_t)(fmi2String, fmi2Type, fmi2String, fmi2String,
-                                       const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
-typedef fmi2Status (*SetupExperiment_t)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
-typedef fmi2Status (*Simple_t)(fmi2Component);
-typedef void (*FreeInstance_t)(fmi2Component);
-typedef fmi2Status (*GetSetReal_t)(fmi2Component, const fmi2ValueReference *, size_t, fmi2Real *);
-typedef fmi2Status (*DoStep_t)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
-
-static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
-                   fmi2String category, fmi2String message, ...) {
-    (void)env;
-    fprintf(stderr, "[%s] status %d %s: %s\n", instance, (int)status, category ? category : "", message);
-}
-
-static void *sym(void *lib, const char *name) {
-    void *f = dlsym(lib, name);
-    if (!f) { fprintf(stderr, "missing symbol %s\n", name); exit(3); }
-    return f;
-}
-
-#define CHECK(call) do { fmi2Status s_ = (call); if (s_ > fmi2Warning) { \
-    fprintf(stderr, "%s failed with status %d\n", #call, (int)s_); return 4; } } while (0)
+#define CHECK(call) FMI2_HOST_CHECK(call, 4)
 
 int main(int argc, char **argv) {
     if (argc < 6) {
@@ -76,42 +40,27 @@ int main(int argc, char **argv) {
             return 2;
         }
     }
-    char path[4096], uri[4096];
-    snprintf(path, sizeof path, "%s/binaries/linux64/%s.so", dir, id);
-    snprintf(uri, sizeof uri, "file://%s/resources", dir);
-    void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-    if (!lib) { fprintf(stderr, "dlopen failed: %s\n", dlerror()); return 3; }
-
-    Instantiate_t instantiate = (Instantiate_t)sym(lib, "fmi2Instantiate");
-    SetupExperiment_t setup = (SetupExperiment_t)sym(lib, "fmi2SetupExperiment");
-    Simple_t enter = (Simple_t)sym(lib, "fmi2EnterInitializationMode");
-    Simple_t exit_init = (Simple_t)sym(lib, "fmi2ExitInitializationMode");
-    Simple_t terminate = (Simple_t)sym(lib, "fmi2Terminate");
-    FreeInstance_t free_instance = (FreeInstance_t)sym(lib, "fmi2FreeInstance");
-    GetSetReal_t get_real = (GetSetReal_t)sym(lib, "fmi2GetReal");
-    GetSetReal_t set_real = (GetSetReal_t)sym(lib, "fmi2SetReal");
-    DoStep_t do_step = (DoStep_t)sym(lib, "fmi2DoStep");
-
-    fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
-    fmi2Component c = instantiate("c_host", fmi2CoSimulation, guid, uri, &cb, 0, 1);
+    fmi2_host fmu;
+    fmi2_host_open(&fmu, dir, id);
+    fmi2Component c = fmi2_host_instantiate(&fmu, "c_host", guid, fmi2True);
     if (!c) { fprintf(stderr, "fmi2Instantiate failed\n"); return 4; }
-    CHECK(setup(c, 0, 0.0, 0.0, 1, t_end));
-    CHECK(enter(c));
-    if (n_in) CHECK(set_real(c, in_vr, n_in, in_val));
-    CHECK(exit_init(c));
+    CHECK(fmu.SetupExperiment(c, 0, 0.0, 0.0, 1, t_end));
+    CHECK(fmu.EnterInitializationMode(c));
+    if (n_in) CHECK(fmu.SetReal(c, in_vr, n_in, in_val));
+    CHECK(fmu.ExitInitializationMode(c));
 
     long n_steps = (long)(t_end / h + 0.5);
     for (long n = 0; n <= n_steps; n++) {
         double t = n * h;
-        if (n_out) CHECK(get_real(c, out_vr, n_out, out_val));
+        if (n_out) CHECK(fmu.GetReal(c, out_vr, n_out, out_val));
         printf("%.17g", t);
         for (size_t j = 0; j < n_out; j++) printf(",%.17g", out_val[j]);
         printf("\n");
-        if (n < n_steps) CHECK(do_step(c, t, h, 1));
+        if (n < n_steps) CHECK(fmu.DoStep(c, t, h, 1));
     }
     fflush(stdout);
-    CHECK(terminate(c));
-    free_instance(c);
+    CHECK(fmu.Terminate(c));
+    fmu.FreeInstance(c);
     /* pythonfmu 0.7.0 may corrupt the heap while finalizing Python at exit (docs/fmu.md):
        every result is flushed above, so leave without running library destructors. */
     _exit(0);
