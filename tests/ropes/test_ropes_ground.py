@@ -117,3 +117,35 @@ def test_a_pendulum_swinging_into_the_ground_lands_slides_and_is_jerked_off_it_b
     assert np.allclose(run.U[sliding, 1], [-0.8 * v0, 0, 0], rtol=0, atol=1e-9)
     assert run.slack[sliding, 0].all() and not run.slack[(run.t > t_taut) & (run.t < t_again), 0].any()
     assert run.residual.max() < 1e-13
+
+
+def test_a_rope_chain_falling_onto_the_ground_lands_mass_by_mass_and_loads_it_with_three_times_the_resting_weight():
+    # N masses of lambda a on ropes of a, hanging straight up from a height a, released: they fall freely (the ropes
+    # at their length with no tension), each lands inelastically at t_k = sqrt(2 k a / g) with the impulse m v_k and
+    # its rope to the next goes slack. The falling-chain law (a flexible chain falling onto a table): the force on
+    # the table is the weight of the part at rest plus the momentum flux lambda v^2 = 2 lambda g y, 3 lambda g y in
+    # all; the discrete chain's force, averaged over a few landings, tends to it as a / y
+    N, a, lam = 20, 0.05, 1.0
+    m = lam * a
+    scene = ln.Scene.from_dict({"name": "falling_chain", "gravity": [0, 0, -G],
+                                "masses": [{"name": f"c{k}", "position": [0, 0, a * (k + 1)], "mass": m}
+                                           for k in range(N)],
+                                "links": [{"a": k + 1, "b": k + 2, "kind": "rope"} for k in range(N - 1)],
+                                "ground": {"point": [0, 0, 0], "normal": [0, 0, 1]}})
+    run = ln.simulate(scene, 0.5, "dop853", rtol=1e-10, n_out=11, error_estimate=False)
+    contacts = [e for e in run.events if e.kind == "contact"]
+    assert [e.index for e in contacts] == list(range(N))
+    assert [e.index for e in run.events if e.kind == "slack"] == list(range(N - 1))
+    k = np.arange(1, N + 1)
+    t = np.array([e.t for e in contacts])
+    J = np.array([e.impulse for e in contacts])
+    assert np.abs(t - np.sqrt(2 * k * a / G)).max() < 1e-14
+    assert np.abs(J - m * np.sqrt(2 * G * k * a)).max() < 1e-14
+    ratios = []
+    for first in range(5, N - 5, 3):  # windows of five landings
+        w0, w1 = t[first], t[first + 5]
+        delivered = J[first + 1:first + 6].sum() + sum(m * G * (w1 - max(tk, w0)) for tk in t if tk < w1)
+        y = 0.5 * G * (0.5 * (w0 + w1)) ** 2  # the length at rest in the continuum at the window's middle
+        ratios.append(delivered / (w1 - w0) / (lam * G * y))
+    assert all(2.99 < r < 3.03 for r in ratios), ratios
+    assert all(abs(b - 3) < abs(a_ - 3) for a_, b in zip(ratios, ratios[1:]))  # closer to 3 as y grows
