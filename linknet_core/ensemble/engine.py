@@ -424,8 +424,13 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
             submit(ac)
         for future in ac:
             with lock:
-                first, count = in_flight.pop(future.key)
+                first, count = in_flight[future.key]
             result, failure = _fetch(future)
+            # off the batches in flight only now: a result lost with its worker after the task finished (not yet
+            # fetched) is fetched once the scheduler has run the task again, and the worker's removal, which says
+            # so, may come while the fetch waits
+            with lock:
+                del in_flight[future.key]
             future.release()
             if result is not None:
                 cpu = time.thread_time()

@@ -1,12 +1,15 @@
 """Faults: a member whose values make an invalid scene, or whose run fails, is recorded with its error while
 the others complete; a worker killed mid-study costs only the retries of its members."""
+import logging
 import os
+import re
 import signal
 
+import h5py
 import numpy as np
 
 import linknet_core as ln
-from linknet_core.ensemble import summary
+from linknet_core.ensemble import shards, summary
 
 from .ensemble_support import MODELS, assert_member_equals, serial_run
 
@@ -30,10 +33,13 @@ def test_invalid_member_and_failed_run_are_recorded_the_others_complete(local_cl
     assert "members 2-3: invalid scene" in text and "member 1 (M[11]=1, F[11,3]=1e+200)" in text
 
 
-def test_killed_worker_costs_only_its_members_retries(process_client):
+def test_killed_worker_costs_only_its_members_retries(process_client, tmp_path, caplog):
     """SIGKILL one of the two `dask worker` processes after the third result: its members in flight run again
     on a worker that lives (its nanny starts a new one), every member still equals its serial run, results
-    finished before the kill are kept, and the study names the retried members."""
+    finished before the kill are kept, and the study names the retried members, those whose finished result
+    was lost with the worker before the study fetched it included (Dask's client says it reschedules them). The
+    shard folder holds one whole shard per member, each in the file once: no half shard of the killed task, no
+    member twice."""
     scene = ln.load_scene(MODELS / "chain_10.json")
     dt, t_end = 1e-5, 0.6  # ~0.3 s per member: the kill lands while both workers run members
     pids = process_client.run(os.getpid)  # worker address -> process id
@@ -47,8 +53,10 @@ def test_killed_worker_costs_only_its_members_retries(process_client):
                 os.kill(pids[busy[0]], signal.SIGKILL)
 
     masses = np.linspace(0.5, 2.0, 12)
-    ds = ln.ensemble(scene, vary={"M[11]": masses}, t_end=t_end, n_out=N_OUT, dt=dt, client=process_client,
-                     members_per_task=1, progress=kill_after_third_result)
+    out = tmp_path / "killed.nc"
+    with caplog.at_level(logging.WARNING, logger="distributed.client"):
+        ds = ln.ensemble(scene, vary={"M[11]": masses}, t_end=t_end, n_out=N_OUT, dt=dt, client=process_client,
+                         members_per_task=1, progress=kill_after_third_result, out=out)
     assert killed, "the study ended before the kill"
     assert list(ds["status"].values) == ["ok"] * 12, list(ds["error"].values)
     retried = np.flatnonzero(ds["retried"].values)
@@ -58,8 +66,17 @@ def test_killed_worker_costs_only_its_members_retries(process_client):
     assert killed["address"] not in set(workers[retried])  # reruns happened on living workers
     kept = [m for m in range(12) if workers[m] == killed["address"]]  # finished before the kill: not rerun
     assert not set(kept) & set(retried)
+    # tasks (one member each) whose finished result died with the worker: run again, so retried
+    lost = [int(first) for record in caplog.records if "rescheduling" in record.getMessage()
+            for first in re.findall(r"linknet-ensemble-\w+-(\d+)-1", record.getMessage())]
+    assert set(lost) <= set(retried), (lost, retried)
     for m in range(12):
         assert_member_equals(ds, m, serial_run(scene, {"M[11]": masses[m]}, t_end, N_OUT, dt=dt))
+    with h5py.File(out, "r") as f:
+        sources = sorted((m.vspace.get_select_bounds()[0][0], m.file_name) for m in f["X"].virtual_sources())
+    assert [first for first, _ in sources] == list(range(12))  # one task per member, each mapped once
+    names = sorted(p.name for p in (tmp_path / "killed.shards").iterdir())
+    assert names == sorted([shards.MARKER] + [os.path.basename(source) for _, source in sources])
     process_client.wait_for_workers(2, timeout=60)  # the nanny restarted the killed worker
 
 

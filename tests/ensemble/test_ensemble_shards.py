@@ -1,0 +1,190 @@
+"""The members' trajectories in shard files: written by the workers beside the study file, joined by it (HDF5
+virtual datasets) so that it reads as one dataset; written by the client where a worker cannot; never half a
+shard, never a member in two; a write that fails does not lose a member."""
+import os
+import shutil
+
+import h5py
+import numpy as np
+import pytest
+import xarray as xr
+
+import linknet_core as ln
+from linknet_core.ensemble import members, shards
+from linknet_core.output import WriteError
+
+from .ensemble_support import MODELS, assert_member_equals, serial_run
+
+T_END, N_OUT = 0.3, 16
+MASSES = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0]
+
+
+@pytest.fixture(scope="module")
+def threads_client():
+    """A LocalCluster whose single worker is a thread of this process: what a test changes in the ensemble's
+    modules here, the worker sees."""
+    from distributed import Client, LocalCluster
+
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address="127.0.0.1:0")
+    client = Client(cluster)
+    yield client
+    client.close()
+    cluster.close()
+
+
+def _mapped_members(path, name: str) -> list[tuple[int, int, str]]:
+    """(first, count, shard file) of each piece of the joined variable ``name``, in member order."""
+    pieces = []
+    with h5py.File(path, "r") as f:
+        assert f[name].is_virtual
+        for mapping in f[name].virtual_sources():
+            start, end = mapping.vspace.get_select_bounds()
+            pieces.append((start[0], end[0] - start[0] + 1, mapping.file_name))
+    return sorted(pieces)
+
+
+def test_workers_write_shards_the_file_joins_them_and_moves_with_its_folder(local_client, tmp_path):
+    scene = ln.load_scene(MODELS / "chain_10.json")
+    out = tmp_path / "study.nc"
+    ds = ln.ensemble(scene, vary={"M[11]": MASSES}, t_end=T_END, n_out=N_OUT, client=local_client, out=out,
+                     outputs=["X", "U", "T", "Freact"])
+    assert ds.attrs["members_written_by_workers"] == len(MASSES) and ds.attrs["members_written_by_client"] == 0
+    folder = tmp_path / "study.shards"
+    files = sorted(p.name for p in folder.iterdir())
+    # the marker and one shard per task, nothing else (no temporary file)
+    assert files[0] == shards.MARKER and len(files) == 1 + int(ds.attrs["tasks"])
+    assert all(name.startswith("members-") and name.endswith(".h5") for name in files[1:])
+    for name in ("X", "U", "T", "Freact"):  # every member in exactly one shard, mapped by a relative path
+        pieces = _mapped_members(out, name)
+        assert [first for first, _, _ in pieces] == list(np.cumsum([0] + [c for _, c, _ in pieces[:-1]]))
+        assert sum(count for _, count, _ in pieces) == len(MASSES)
+        assert all(source.startswith("study.shards/") for _, _, source in pieces)
+    ds.close()
+    # the file and its folder moved together elsewhere read the same members, each its serial run bit for bit
+    moved = tmp_path / "elsewhere"
+    moved.mkdir()
+    shutil.move(str(out), moved / "study.nc")
+    shutil.move(str(folder), moved / "study.shards")
+    with xr.open_dataset(moved / "study.nc", engine="h5netcdf") as again:
+        for m, mass in enumerate(MASSES):
+            assert_member_equals(again, m, serial_run(scene, {"M[11]": mass}, T_END, N_OUT))
+        assert np.isfinite(again["Freact"].values).all()
+
+
+def test_workers_that_do_not_see_the_folder_send_the_trajectories_to_the_client(threads_client, tmp_path,
+                                                                                monkeypatch):
+    """A worker on a machine without the client's storage (here: told it does not see the folder) returns its
+    members' trajectories and the client writes their shards: the same study, bit for bit."""
+    monkeypatch.setattr(members, "sees_folder", lambda folder, study_id: False)
+    scene = ln.load_scene(MODELS / "chain_10.json")
+    ds = ln.ensemble(scene, vary={"M[11]": MASSES[:3]}, t_end=T_END, n_out=N_OUT, client=threads_client,
+                     out=tmp_path / "s.nc")
+    assert ds.attrs["members_written_by_client"] == 3 and ds.attrs["members_written_by_workers"] == 0
+    assert ds.attrs["client_shard_reason"] == "its worker does not see the folder"
+    for m, mass in enumerate(MASSES[:3]):
+        assert_member_equals(ds, m, serial_run(scene, {"M[11]": mass}, T_END, N_OUT))
+
+
+def test_a_worker_whose_shard_write_fails_sends_its_members_to_the_client(threads_client, tmp_path, monkeypatch):
+    def refuse(folder, study_id, batch, trajectories):
+        raise WriteError(os.path.join(folder, "x.h5"), "No space left on device (errno 28)")
+
+    monkeypatch.setattr(members, "write_shard", refuse)  # the workers' write; the client's is store's
+    scene = ln.load_scene(MODELS / "chain_10.json")
+    ds = ln.ensemble(scene, vary={"M[11]": MASSES[:2]}, t_end=T_END, n_out=N_OUT, client=threads_client,
+                     out=tmp_path / "s.nc")
+    assert ds.attrs["members_written_by_client"] == 2
+    assert "No space left on device (errno 28)" in ds.attrs["client_shard_reason"]
+    for m, mass in enumerate(MASSES[:2]):
+        assert_member_equals(ds, m, serial_run(scene, {"M[11]": mass}, T_END, N_OUT))
+
+
+def test_a_folder_of_the_shards_name_that_is_not_a_studys_is_refused_and_kept(local_client, tmp_path):
+    mine = tmp_path / "study.shards"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine")
+    with pytest.raises(ln.LinknetError, match=r"study\.shards: it exists and is not a linknet study's shard "
+                                              r"folder.*\(it was left as it is\)"):
+        ln.ensemble(MODELS / "chain_10.json", vary={"M[11]": [1.0]}, t_end=0.1, out=tmp_path / "study.nc",
+                    client=local_client)
+    assert (mine / "notes.txt").read_text() == "mine" and not (tmp_path / "study.nc").exists()
+
+
+def _study(tmp_path, outputs=("X", "T")):
+    from linknet_core.ensemble.members import StudySpec
+    from linknet_core.ensemble.parameters import make_plan
+
+    scene = ln.load_scene(MODELS / "double_pendulum.json")
+    plan = make_plan(scene, {"M[2]": [1.0, 2.0, 3.0, 4.0]}, None)
+    spec = StudySpec(study_id="0123456789abcdef", scene=scene.to_dict(), parameters=plan.parameters,
+                     times=np.linspace(0, 0.1, 3), method="rattle", dt=1e-3, rtol=None, atol=None,
+                     project_initial=None, outputs=outputs, tip=2)
+    return spec, plan, scene
+
+
+def _batch(first, count, seed):
+    """A batch as a worker returns it when the client is to write its shard: arbitrary numbers, each member's."""
+    rng = np.random.default_rng(seed)
+    return {"first": first, "count": count, "worker": "tcp://w:1", "error": [""] * count,
+            "run_seconds": rng.random(count),
+            "outputs": {"X": rng.random((count, 3, 3, 3)), "T": rng.random((count, 3, 2)),
+                        "max_tension": rng.random(count)}}
+
+
+def test_a_failed_write_goes_on_in_the_rescue_file_with_every_member(tmp_path, monkeypatch):
+    """The second batch's shard cannot be written (a full disk): that write says so once, the study goes on in a
+    rescue file in the temporary folder, and that file holds all four members: the first from the shard beside
+    the study file, the second and third from its own shards, each member's numbers as they were given."""
+    from linknet_core.ensemble import store
+
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))
+    monkeypatch.setattr("tempfile.tempdir", None)
+    (tmp_path / "tmp").mkdir()
+    sink = store.StudyFile(tmp_path / "s.nc", *_study(tmp_path))
+    batches = [_batch(0, 1, 1), _batch(1, 2, 2), _batch(3, 1, 3)]
+    sink.write(batches[0])
+    real_write = store.write_shard
+    calls = []
+
+    def full_once(folder, study_id, batch, trajectories):
+        calls.append(folder)
+        if len(calls) == 1:
+            raise WriteError(os.path.join(folder, "members-x.h5"), "No space left on device (errno 28)")
+        return real_write(folder, study_id, batch, trajectories)
+
+    monkeypatch.setattr(store, "write_shard", full_once)
+    with pytest.raises(WriteError, match=r"s\.nc: No space left on device \(errno 28\)"):
+        sink.write(batches[1])
+    assert sink.continues()
+    sink.write(batches[2])
+    with pytest.raises(WriteError, match=r"the study went on in the temporary folder: its 4 finished member\(s\) "
+                                         r"are in .*linknet-rescued-s-") as caught:
+        sink.close({})
+    rescued = str(caught.value).split(" are in ")[1].split(",")[0]
+    with xr.open_dataset(rescued, engine="h5netcdf") as ds:
+        assert list(ds["status"].values) == ["ok"] * 4 and ds.attrs["complete"] == 0
+        for batch in batches:
+            rows = slice(batch["first"], batch["first"] + batch["count"])
+            for name in ("X", "T", "max_tension"):
+                np.testing.assert_array_equal(ds[name].values[rows], batch["outputs"][name])
+
+
+def test_a_shard_is_whole_or_absent(tmp_path, monkeypatch):
+    """A shard write that fails part way (the disk fills inside HDF5) leaves no file, neither the shard nor its
+    temporary; one that succeeds reads back as the batch it was."""
+    folder = tmp_path / "s.shards"
+    shards.prepare_folder(folder, "study")
+    batch = _batch(5, 2, 7)
+    path = shards.write_shard(folder, "study", batch, members.OUTPUTS)
+    back = shards.read_shard(path)
+    assert (back["first"], back["count"], back["error"]) == (5, 2, ["", ""])
+    for name, values in batch["outputs"].items():
+        np.testing.assert_array_equal(back["outputs"][name], values)
+
+    def full(self, *args, **kwargs):
+        raise RuntimeError("file write failed: errno = 28, error message = 'No space left on device'")
+
+    monkeypatch.setattr(h5py.Group, "create_dataset", full)
+    with pytest.raises(WriteError, match=r"members-000000009-1\.study\.h5: No space left on device \(errno 28\)"):
+        shards.write_shard(folder, "study", _batch(9, 1, 8), members.OUTPUTS)
+    assert sorted(p.name for p in folder.iterdir()) == sorted([shards.MARKER, path.name])
