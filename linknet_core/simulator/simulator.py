@@ -31,7 +31,6 @@ from linknet_core.state import State
 DEFAULT_LENGTH_TOL = 1e-6  # relative violation of (11) accepted in a scene's initial positions
 # the backends by name (linknet_core.simulator.backend): "auto" is the native core
 BACKEND_CLASSES: dict[str, type[Backend]] = {"native": NativeBackend, "numpy": NumpyBackend}
-BACKENDS = ("auto", *BACKEND_CLASSES)
 # Snapshots (get_state) name the simulator they come from: this format, the scene's fingerprint, the method and the
 # path (backend and specialisation), so set_state refuses another scene's or another path's snapshot rather than
 # projecting foreign positions onto this scene's lengths. Raise the number when a snapshot's content changes.
@@ -239,8 +238,9 @@ class Simulator:
         t0 = t0 if type(t0) is float else _as_time(t0, "the start time t0")
         if not math.isfinite(t0):
             raise SolverError(f"the start time t0 must be finite, got {t0!r}")
-        if backend not in BACKENDS:
-            raise SolverError(f"backend must be one of {', '.join(map(repr, BACKENDS))}, got {backend!r}")
+        names = ("auto", *BACKEND_CLASSES)
+        if backend not in names:  # a tuple: an unhashable value is refused too
+            raise SolverError(f"backend must be one of {', '.join(map(repr, names))}, got {backend!r}")
         self.scene = scene
         self.dyn = dynamics or scene_dynamics(scene, rhs_kernel=rhs_kernel)
         self.method = method
