@@ -654,11 +654,12 @@ class UnilateralDynamics(Dynamics):
         dv = float(correction.max()) if correction.size else 0.0
         if dv <= 1e-14 * max(1.0, float(np.abs(U).max())):
             dv, worst_mass = 0.0, -1
-        active, _, md = self.select_mode(X, U_new, None, anchor_acc)
+        active, _, _ = self.select_mode(X, U_new, None, anchor_acc)
         md = self.mode(active, X, U_new)
+        Xa, Ua = md.pad(X), md.pad_velocity(X, U_new)
         try:
-            md.inner.check_consistent_velocities(md.pad(X), md.pad_velocity(X, U_new),
-                                                 anchor_acc=md._pad_zero(anchor_acc))
+            md.inner.check_consistent_velocities(Xa, Ua, anchor_acc=md._pad_zero(anchor_acc))
+            md.inner.check_no_loaded_blocked_flex(Xa, Ua)
         except ConsistencyError as exc:
             raise ConsistencyError(f"{scene.name}: with the ropes and contacts that are taut at the start: {exc}") \
                 from None

@@ -33,6 +33,8 @@ from linknet_core.errors import SolverError, StepFailure
 GAP_SAMPLES = 8
 # More events than this within one step (or one adaptive step attempt) means a chatter the rest rule did not stop
 MAX_EVENTS_PER_STEP = 200
+# A part of a fixed step shorter than this fraction of dt is taken by a Taylor step (FixedStepEvents._plain_step)
+SHORT_STEP = 1e-3
 # Newton's iterations on a gap event's time (quadratic convergence from the interpolant's O(h^4) root)
 GAP_NEWTON_ITERATIONS = 4
 
@@ -77,18 +79,19 @@ def first_falling_root(p) -> float | None:
 
 def bracketed_root(f, lo, hi, f_lo, f_hi, xtol=4e-16, guess=None):
     """(lo, hi): the bracket of a sign change of f, f(lo) >= 0 > f(hi), shrunk to xtol (relative) by the Illinois
-    variant of regula falsi, with a bisection wherever three iterations did not halve it; ``guess``: the first point
-    tried."""
+    variant of regula falsi, with a bisection wherever the last three iterations did not halve it; ``guess``: the
+    first point tried."""
     last = 0
-    widths = [hi - lo] * 3
+    widths = []  # the bracket's width after each iteration
     m = guess
     for _ in range(200):
         if hi - lo <= xtol * max(1.0, abs(lo), abs(hi)):
             break
         if m is None:
-            m = (lo * f_hi - hi * f_lo) / (f_hi - f_lo) if f_hi != f_lo else 0.5 * (lo + hi)
-            if hi - lo > 0.5 * widths[0]:
+            if len(widths) >= 3 and hi - lo > 0.5 * widths[-3]:
                 m = 0.5 * (lo + hi)
+            else:
+                m = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
         if not lo < m < hi:
             m = 0.5 * (lo + hi)
             if not lo < m < hi:
@@ -96,7 +99,7 @@ def bracketed_root(f, lo, hi, f_lo, f_hi, xtol=4e-16, guess=None):
         fm = f(m)
         if fm >= 0:
             lo, f_lo = m, fm
-            if last == 1:
+            if last == 1:  # the same end moved twice: halve the other's value (Illinois)
                 f_hi *= 0.5
             last = 1
         else:
@@ -104,7 +107,7 @@ def bracketed_root(f, lo, hi, f_lo, f_hi, xtol=4e-16, guess=None):
             if last == -1:
                 f_lo *= 0.5
             last = -1
-        widths = widths[1:] + [hi - lo]
+        widths.append(hi - lo)
         m = None
     return lo, hi
 
@@ -113,8 +116,6 @@ class EventHandling:
     """What the event-driven variants of every method share: the mode, the events so far, detection, location and
     the event itself. ``self.dyn`` is the current mode's ModeDynamics; ``self.unilateral`` the scene's
     UnilateralDynamics."""
-
-    events_enabled = True
 
     def _init_events(self, unilateral):
         self.unilateral = unilateral
@@ -160,15 +161,6 @@ class EventHandling:
             candidates = self.unilateral.touching(Xd, Ud)
             active, _, _ = self.unilateral.select_mode(Xd, Ud, F_input, acc, candidates, start=candidates)
             self._set_mode(active, X, U)
-
-    def slack_links(self) -> np.ndarray:
-        """(L,) bool: the ropes of the scene that are slack in the current mode."""
-        uni = self.unilateral
-        out = np.zeros(uni.scene.L, bool)
-        if self.mode is not None:
-            n = uni.rope_links.size
-            out[uni.rope_links] = ~self.mode[:n]
-        return out
 
     # ---- detection and location -------------------------------------------------------------------------------
     def _forces_at(self, t, X, U, F_input):
@@ -318,7 +310,19 @@ class FixedStepEvents(EventHandling):
         return X, U
 
     def _plain_step(self, X, U, t0, t1, F_input):
+        """The method's step from t0 to t1 (split where its position stage fails), or, for a part of a step shorter
+        than SHORT_STEP of dt (the rest of a step after an event just before its end, a step to an event just after
+        its start), the second-order Taylor step X + h U + h^2 A / 2, U + h A projected onto the mode: RATTLE's
+        velocity takes its position stage's correction over h, whose round-off a very short step would magnify, and
+        the Taylor step's own error, h^3 times the jerk, is below round-off there."""
         h = t1 - t0
+        if h < SHORT_STEP * self.dt:
+            A = self._acceleration_at(t0, X, U, F_input)
+            X1, U1 = X + h * U + (0.5 * h * h) * A, U + h * A
+            if self.drive is not None:
+                X1, U1, _ = self.drive.apply(t1, X1, U1)
+            X1, _ = self.dyn.project_positions(X1, tol=1e-14)
+            return X1, self.dyn.project_velocities(X1, U1)
         try:
             return self.step(X, U, h, F_input, t0, t1)
         except StepFailure as failure:
@@ -327,8 +331,6 @@ class FixedStepEvents(EventHandling):
     def _step_with_events(self, X, U, t0, t1, F_input):
         for _ in range(MAX_EVENTS_PER_STEP):
             X1, U1 = self._plain_step(X, U, t0, t1, F_input)
-            if not self.events_enabled:
-                return X1, U1
             found = self._first_event(X, U, t0, X1, U1, t1, F_input)
             if found is None:
                 return X1, U1
@@ -356,8 +358,6 @@ class AdaptiveEvents(EventHandling):
         super().advance(state, t_target, F_input, max_steps)
 
     def _event_in_step(self, X, U, t, k0, X_new, U_new, t_new, acc_new, F_input):
-        if not self.events_enabled:
-            return None
         found = self._first_event(X, U, t, X_new, U_new, t_new, F_input)
         if found is None:
             self._events_this_step = 0
