@@ -699,6 +699,14 @@ class UnilateralReport:
         return out
 
 
+def event_arrays(events) -> dict:
+    """The events as arrays for a run's .npz: event_t (s), event_kind, event_index (1-based: the link of taut and
+    slack, the mass of contact and release, as the files number them) and event_impulse (N s)."""
+    return {"event_t": np.array([e.t for e in events], float), "event_kind": np.array([e.kind for e in events], str),
+            "event_index": np.array([e.index + 1 for e in events], np.int64),
+            "event_impulse": np.array([e.impulse for e in events], float)}
+
+
 def event_counts(events) -> dict:
     """How many events of each kind a run had."""
     counts = {"taut": 0, "slack": 0, "contact": 0, "release": 0}

@@ -16,7 +16,7 @@ from linknet_core.accuracy import (accuracy_text, companion, default_method, err
                                    position_gap, position_gaps, scene_size, warn_accuracy)
 from linknet_core.dynamics.drive import AnchorDrive, anchor_jump, check_step_follows_motions
 from linknet_core.dynamics.equations import Dynamics
-from linknet_core.dynamics.unilateral import event_counts, numpy_only, scene_dynamics, slack_links
+from linknet_core.dynamics.unilateral import event_arrays, event_counts, numpy_only, scene_dynamics, slack_links
 from linknet_core.errors import SceneError, SolverError
 from linknet_core.dynamics.forces import kinetic_energy
 from linknet_core.integrators import method_settings, real_number
@@ -653,7 +653,8 @@ class Result:
         atomic_write(path, lambda tmp: np.savez_compressed(
             tmp, t=self.t, X=self.X, U=self.U, T=self.T, energy=self.energy, residual=self.residual,
             velocity_residual=self.velocity_residual, mass_names=np.array(self.scene.mass_names),
-            k1=self.scene.k1 + 1, k2=self.scene.k2 + 1, fixed=self.scene.fixed, method=self.method))
+            k1=self.scene.k1 + 1, k2=self.scene.k2 + 1, fixed=self.scene.fixed, method=self.method,
+            **({} if self.slack is None else dict(slack=self.slack, **event_arrays(self.events)))))
 
     def summary(self) -> str:
         s = self.stats

@@ -177,3 +177,7 @@ def test_the_shipped_rope_scenes_run_through_the_cli_and_count_their_events(path
                   (part.split() for part in proc.stdout.split("events: ")[1].splitlines()[0].split(", ")))
     assert counts["taut"] >= 1 and counts["slack"] >= 1
     assert json.loads(path.read_text())["links"][0]["kind"] == "rope"
+    saved = np.load(out)
+    assert saved["slack"].shape == (31, 1) and saved["slack"].dtype == bool
+    assert len(saved["event_t"]) == sum(counts.values()) and set(saved["event_kind"]) <= set(counts)
+    assert np.all(saved["event_index"] == 1)  # the hoist rope, or the rope, of each scene (1-based, as k1, k2)
