@@ -270,8 +270,11 @@ class EventHandling:
         X, _ = uni.mode(touching, X, U).project_positions(X, tol=1e-14)
         U_after, impulses, took = uni.impact(X, U, touching)
         Xd, Ud, acc = self._at(t, X, U_after)
+        # the touching constraints that do not separate, or separate slower than the rest speed (an inelastic
+        # collapse: neighbouring ropes jerking each other slack in turn, the speeds shrinking by a factor per turn,
+        # would take infinitely many events); those the LCP keeps have their rates set to zero by the projection below
         rates = uni.gap_rates(Xd, Ud)
-        candidates = touching & (rates <= TOUCH_TOL * uni.velocity_scale(Ud))
+        candidates = touching & (rates <= max(TOUCH_TOL * uni.velocity_scale(Ud), uni.rest_speed(Ud)))
         release = np.zeros(uni.n_unilateral, bool)
         if kind == "force":
             release[trigger] = True
