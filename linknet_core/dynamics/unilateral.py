@@ -20,8 +20,9 @@ give d2g/dt2 = W lambda - B. At a state where some unilateral constraints touch 
 a mixed linear complementarity problem (LCP) on the unilateral subset (Cottle, Pang and Stone, The Linear
 Complementarity Problem, 1992, sec. 1.2 and 4.2). ``solve_mixed_lcp`` solves it exactly by principal pivoting
 (Murty's least-index rule, 1974, "Note on a Bard-type scheme for solving the complementarity problem": finite for
-a P-matrix from any start, so it is warm-started from the last mode), each basis being the rods' equations (25) with
-the chosen unilateral rows as equalities; degenerate (singular) cases fall back to enumerating the active sets.
+a P-matrix from any start), each basis being the rods' equations (25) with the chosen unilateral rows as equalities;
+it starts from every touching constraint taut (the last mode's taut ones among them), so that a degenerate row (force
+and gap acceleration both zero) stays taut; a problem that still cycles has its active sets enumerated.
 
 Impacts: when a slack rope reaches its length or a mass the ground, the velocities jump. The impulse Lambda solves
 the same LCP one level down (Moreau's impact law with Newton's restitution on the normal, for a rope the radial,
@@ -132,8 +133,9 @@ def solve_mixed_lcp(W: np.ndarray, b: np.ndarray, unilateral: np.ndarray, start:
     Murty's rule): in a basis (a set of unilateral rows taken as equalities, lambda = 0 on the others) the rods and
     the basis rows are solved, minimum-norm where singular (31); the lowest-numbered row that breaks its sign
     condition (lambda_i < 0 in the basis, w_i < 0 outside) is flipped. For a positive definite Schur complement on
-    the unilateral rows (independent constraints) this ends after finitely many pivots from any start, so it starts
-    from ``start`` (the last mode). ``release``: rows that leave the basis unless their lambda is clearly positive
+    the unilateral rows (independent constraints) this ends after finitely many pivots from any start; it starts
+    from ``start`` (the callers give every touching constraint taut, the last mode's among them). ``release``: rows
+    that leave the basis unless their lambda is clearly positive
     (a rope whose tension has just fallen to 0). A degenerate problem that cycles has its active sets enumerated
     (at most 2^ENUMERATION_LIMIT)."""
     W = np.asarray(W, float)
@@ -274,8 +276,9 @@ class ModeDynamics:
         return np.concatenate([X, Xc + (self.parent.contact_length - gap)[:, None] * ground.normal])
 
     def pad_velocity(self, X, V):
-        """A velocity field V (or any field on the masses) with each virtual anchor moving as its mass does along
-        the plane: its row of C (12) is then n . V_k."""
+        """A velocity field V (or any field on the masses) at positions X with each virtual anchor moving as its mass
+        does along the plane: its row of C (12) is then n . V_k (the plane's normal is the same everywhere, so X does
+        not enter)."""
         if self.contact_masses.size == 0:
             return V
         n = self.scene.ground.normal
@@ -399,8 +402,8 @@ class UnilateralDynamics(Dynamics):
         self.restitution = np.concatenate([scene.restitution[self.rope_links],
                                            np.full(self.contact_masses.size, ground.restitution if ground else 0.0)])
         if ground is not None and ground.friction > 0:
-            raise SolverError(f"{scene.name}: the ground's friction is {ground.friction:g}, and Coulomb friction is not "
-                              "implemented yet: the ground is frictionless (give \"friction\": 0)")
+            raise SolverError(f"{scene.name}: the ground's friction is {ground.friction:g}, and Coulomb friction is "
+                              "not implemented yet: the ground is frictionless (give \"friction\": 0)")
         self._modes: dict = {}
 
     # ---- the constraints' gaps and rates -----------------------------------------------------------------

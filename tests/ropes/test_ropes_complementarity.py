@@ -1,8 +1,8 @@
 """The ropes' complementarity problem against brute force: at states of a rope net where every rope is at its length
 (random velocities along the links and random loads) and at the samples of a run of a net that falls into its ropes,
 the tensions and accelerations linknet gives satisfy T >= 0, gap >= 0, T gap = 0 and, at the acceleration level,
-d2gap/dt2 >= 0 with T d2gap/dt2 = 0, and equal the one active set that enumerating all 2^n (found from the seed's (25)-(26)
-written again here, a dense solve per set) allows."""
+d2gap/dt2 >= 0 with T d2gap/dt2 = 0, and equal the one active set that enumerating all 2^n allows (from the seed's
+(25)-(26) written again here, a dense solve per set)."""
 from __future__ import annotations
 
 import itertools
