@@ -12,7 +12,8 @@ import pytest
 from rope_references import G
 
 import linknet_core as ln
-from linknet_core.dynamics.unilateral import UnilateralDynamics, solve_mixed_lcp
+from linknet_core.dynamics.complementarity import solve_mixed_lcp
+from linknet_core.dynamics.unilateral import UnilateralDynamics
 
 
 def net_scene(slack_factor=1.0, velocity=None, ropes_between=True) -> ln.Scene:
