@@ -20,9 +20,10 @@ give d2g/dt2 = W lambda - B. At a state where some unilateral constraints touch 
 a mixed linear complementarity problem (LCP) on the unilateral subset (Cottle, Pang and Stone, The Linear
 Complementarity Problem, 1992, sec. 1.2 and 4.2). ``solve_mixed_lcp`` solves it exactly by principal pivoting
 (Murty's least-index rule, 1974, "Note on a Bard-type scheme for solving the complementarity problem": finite for
-a P-matrix from any start; linknet_core.dynamics.complementarity), each basis being the rods' equations (25) with the chosen unilateral rows as equalities;
-it starts from every touching constraint taut (the last mode's taut ones among them), so that a degenerate row (force
-and gap acceleration both zero) stays taut; a problem that still cycles has its active sets enumerated.
+a P-matrix from any start; linknet_core.dynamics.complementarity), each basis being the rods' equations (25) with
+the chosen unilateral rows as equalities; it starts from every touching constraint taut (the last mode's taut ones
+among them), so that a degenerate row (force and gap acceleration both zero) stays taut; a problem that still
+cycles has its active sets enumerated.
 
 Impacts: when a slack rope reaches its length or a mass the ground, the velocities jump. The impulse Lambda solves
 the same LCP one level down (Moreau's impact law with Newton's restitution on the normal, for a rope the radial,
@@ -157,28 +158,43 @@ class ModeDynamics:
         self.inner = Dynamics(self._mode_scene(X, U))
 
     def _mode_scene(self, X, U) -> _ModeScene:
+        """The scene with the mode's links (the rods, the active ropes, a link per contact) and a virtual anchor per
+        contact appended to the masses. Every per-mass field of Scene is padded as the anchors need it (an anchor:
+        infinite mass, fixed, not driven, at its place above its mass) or with zeros (no force, no drag: whatever
+        per-mass field Scene has); the per-link fields are taken at the mode's links (named here: a new per-link
+        field of Scene is added to them); the ropes' fields are left to their defaults (a mode's links are rods)."""
+        import dataclasses
+
         scene, parent = self.scene, self.parent
         n_c = self.contact_masses.size
         K = self.K
-        pad_bool = np.zeros(n_c, bool)
+        own = {"mass": np.concatenate([scene.mass, np.full(n_c, math.inf)]),
+               "fixed": np.concatenate([scene.fixed, np.ones(n_c, bool)]),
+               "driven": np.concatenate([scene.driven, np.zeros(n_c, bool)]),
+               "X0": self.pad(X), "U0": self.pad_velocity(X, U),
+               "mass_names": scene.mass_names + tuple(f"ground above {scene.mass_names[k]}"
+                                                      for k in self.contact_masses),
+               "k1": np.concatenate([scene.k1[self.links], self.contact_masses]),
+               "k2": np.concatenate([scene.k2[self.links], K + np.arange(n_c)]),
+               "length": np.concatenate([scene.length[self.links], np.full(n_c, parent.contact_length)]),
+               "link_names": tuple(scene.link_names[l] for l in self.links) + tuple(
+                   f"ground{k + 1}" for k in self.contact_masses),
+               "rope": None, "restitution": None, "ground": None}
+        fields = {}
+        for field in dataclasses.fields(Scene):
+            value = getattr(scene, field.name)
+            if field.name in own:
+                value = own[field.name]
+            elif isinstance(value, np.ndarray) and value.shape[:1] == (K,):  # a per-mass field (the per-link ones
+                value = np.concatenate([value, np.zeros((n_c,) + value.shape[1:], value.dtype)])  # are in ``own``)
+            elif isinstance(value, dict):
+                value = dict(value)
+            if isinstance(value, np.ndarray):
+                value = _frozen(value, value.dtype)
+            fields[field.name] = value
         labels = tuple(scene.link_label(int(l)) for l in self.links) + tuple(
             f"the ground contact of {scene.mass_label(int(k))}" for k in self.contact_masses)
-        return _ModeScene(
-            name=scene.name, description=scene.description,
-            mass_names=scene.mass_names + tuple(f"ground above {scene.mass_names[k]}" for k in self.contact_masses),
-            mass=_frozen(np.concatenate([scene.mass, np.full(n_c, math.inf)])),
-            fixed=_frozen(np.concatenate([scene.fixed, np.ones(n_c, bool)]), bool),
-            k1=_frozen(np.concatenate([scene.k1[self.links], self.contact_masses]), np.int64),
-            k2=_frozen(np.concatenate([scene.k2[self.links], K + np.arange(n_c)]), np.int64),
-            length=_frozen(np.concatenate([scene.length[self.links], np.full(n_c, parent.contact_length)])),
-            link_names=tuple(scene.link_names[l] for l in self.links) + tuple(f"ground{k + 1}" for k in
-                                                                              self.contact_masses),
-            gravity=scene.gravity, force=_frozen(self._pad_zero(scene.force)),
-            drag=_frozen(np.concatenate([scene.drag, np.zeros(n_c)])),
-            quadratic_drag=_frozen(np.concatenate([scene.quadratic_drag, np.zeros(n_c)])),
-            springs=scene.springs, X0=_frozen(self.pad(X)), U0=_frozen(self.pad_velocity(X, U)),
-            options=dict(scene.options), driven=_frozen(np.concatenate([scene.driven, pad_bool]), bool),
-            motions=scene.motions, labels=labels)
+        return _ModeScene(labels=labels, **fields)
 
     # ---- the virtual anchors of the contacts --------------------------------------------------------------
     def _pad_zero(self, A):
