@@ -179,7 +179,7 @@ class ModeDynamics:
                "length": np.concatenate([scene.length[self.links], np.full(n_c, parent.contact_length)]),
                "link_names": tuple(scene.link_names[l] for l in self.links) + tuple(
                    f"ground{k + 1}" for k in self.contact_masses),
-               "rope": None, "restitution": None, "ground": None}
+               "rope": None, "restitution": None, "ground": None, "gravity": scene.gravity}
         fields = {}
         for field in dataclasses.fields(Scene):
             value = getattr(scene, field.name)

@@ -58,6 +58,22 @@ def test_a_dropped_mass_bounces_at_the_closed_form_times_and_heights_then_rests(
     assert run.residual.max() < 1e-14 and run.velocity_residual.max() < 1e-12
 
 
+def test_three_masses_dropped_from_three_heights_bounce_each_at_its_own_closed_form_times():
+    heights, e = (1.0, 0.6, 0.3), 0.5
+    scene = ln.Scene.from_dict({"name": "balls", "gravity": [0, 0, -G],
+                                "masses": [{"name": f"b{i}", "position": [i, 0, h], "mass": 1.0 + i}
+                                           for i, h in enumerate(heights)],
+                                "ground": {"point": [0, 0, 0], "normal": [0, 0, 1], "restitution": e}})
+    run = ln.simulate(scene, 1.0, "dop853", rtol=1e-10, n_out=11, error_estimate=False)
+    for i, h in enumerate(heights):
+        mine = [ev for ev in run.events if ev.index == i]
+        expected = [b for b in bounces(h, e, 12) if b[0] < 1.0]
+        assert len(mine) >= 2
+        for event, (t, v) in zip(mine, expected):
+            assert event.kind == "contact" and event.t == pytest.approx(t, abs=1e-12)
+            assert event.impulse == pytest.approx((1.0 + i) * (1 + e) * v, rel=1e-10)
+
+
 @pytest.mark.parametrize("method,kw", [("dop853", {"rtol": 1e-10}), ("rattle", {"dt": 1e-2})])
 def test_a_mass_slides_down_a_tilted_frictionless_ground_at_g_sin_alpha(method, kw):
     alpha = 0.3
