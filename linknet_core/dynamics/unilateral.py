@@ -65,8 +65,11 @@ REST_HEIGHT = 1e-9
 class Event(NamedTuple):
     """What happened at a time t of a run: ``kind`` 'taut' (a slack rope reached its length: an impulse), 'slack'
     (a taut rope's tension fell to 0: it leaves, no impulse), 'contact' (a mass reached the ground: an impulse) or
-    'release' (the ground's force on a mass fell to 0); ``index`` the 0-based link (taut, slack) or mass (contact,
-    release); ``impulse`` N s: what the rope or the ground gave (>= 0; 0 for slack and release)."""
+    'release' (the ground's force on a mass fell to 0), 'stick' (a mass sliding on the ground stopped and friction
+    holds it) or 'slip' (the force holding a stuck mass reached mu times the normal force: it slides); ``index`` the
+    0-based link (taut, slack) or mass (contact, release, stick, slip); ``impulse`` N s: what the rope or the ground
+    gave (>= 0; the normal impulse of a contact; the tangential one that stopped a stick; 0 for slack, release and
+    slip)."""
 
     t: float
     kind: str
@@ -87,6 +90,17 @@ def native_refusal(scene: Scene) -> str | None:
         return None
     return (f"{scene.name}: {what}, and the native core (backend=\"native\", the native FMU) does not take ropes or a "
             "ground yet; the numpy reference runs it (backend=\"auto\" or \"numpy\", and the pythonfmu FMU)")
+
+
+def linearization_refusal(scene: Scene) -> str:
+    """Why the outputs' linearization (Simulator.interface_linearization, the FMUs' directional derivatives) is not
+    given for a scene with ropes or a ground: it is the rods' (25)-(26), which holds only within one mode and has
+    no derivative where a rope goes slack or a mass leaves the ground."""
+    what = (f"{scene.link_label(int(np.flatnonzero(scene.rope)[0]))} is a rope" if scene.rope.any()
+            else "it has a ground")
+    return (f"{scene.name}: {what}, and the outputs' linearization (interface_linearization, directional "
+            "derivatives) is that of rods only: it would treat every rope as a rod and ignore the ground, whose "
+            "forces switch on and off at the events; it is not given for ropes or a ground")
 
 
 def numpy_only(scene: Scene, backend: str) -> bool:
@@ -140,7 +154,8 @@ class ModeDynamics:
     within one projection ends tau^2 / (2 R_c) off the plane, so the projection is repeated with Q re-placed until the
     gaps are within the tolerance (twice at most, in practice)."""
 
-    def __init__(self, parent: "UnilateralDynamics", active: np.ndarray, X: np.ndarray, U: np.ndarray):
+    def __init__(self, parent: "UnilateralDynamics", active: np.ndarray, X: np.ndarray, U: np.ndarray,
+                 stuck: np.ndarray | None = None):
         scene = parent.scene
         self.parent = parent
         self.scene = scene
@@ -149,12 +164,24 @@ class ModeDynamics:
         self._inv_mass3 = parent._inv_mass3
         n_ropes = parent.rope_links.size
         self.links = np.concatenate([parent.rod_links, parent.rope_links[self.active[:n_ropes]]])
-        self.contact_masses = parent.contact_masses[self.active[n_ropes:]]
-        # the aug row of every unilateral constraint (-1 where inactive), and the constraint of every aug row
+        on_ground = self.active[n_ropes:]
+        self.contact_masses = parent.contact_masses[on_ground]
+        # Coulomb friction: the contacts (numbered as parent.contact_masses) that stick, held in place along the
+        # plane by two links each to virtual anchors at rest, and those that slide, loaded by -mu N d
+        stuck = np.zeros(on_ground.size, bool) if stuck is None else np.asarray(stuck, bool) & on_ground
+        self.stuck = stuck
+        self.stuck_masses = parent.contact_masses[stuck]
+        self.sliding = np.flatnonzero(on_ground & ~stuck) if parent.friction > 0 else np.zeros(0, np.int64)
+        self.n_virtual = self.contact_masses.size + 2 * self.stuck_masses.size
+        # the aug row of every unilateral constraint (-1 where inactive), and the constraint of every aug row (the
+        # stuck contacts' tangential rows, last, are equalities: -1)
         self.row_of = np.full(parent.n_unilateral, -1, np.int64)
         on = np.flatnonzero(self.active)
         self.row_of[on] = parent.rod_links.size + np.arange(on.size)
-        self.constraint_of_row = np.concatenate([np.full(parent.rod_links.size, -1, np.int64), on])
+        self.constraint_of_row = np.concatenate([np.full(parent.rod_links.size, -1, np.int64), on,
+                                                 np.full(2 * self.stuck_masses.size, -1, np.int64)])
+        self.grip_rows = parent.rod_links.size + on.size + np.arange(2 * self.stuck_masses.size).reshape(-1, 2)
+        self.sliding_rows = self.row_of[n_ropes + self.sliding]
         self.inner = Dynamics(self._mode_scene(X, U))
 
     def _mode_scene(self, X, U) -> _ModeScene:
@@ -166,19 +193,22 @@ class ModeDynamics:
         import dataclasses
 
         scene, parent = self.scene, self.parent
-        n_c = self.contact_masses.size
+        n_c = self.n_virtual
         K = self.K
+        gripped = np.repeat(self.stuck_masses, 2)
         own = {"mass": np.concatenate([scene.mass, np.full(n_c, math.inf)]),
                "fixed": np.concatenate([scene.fixed, np.ones(n_c, bool)]),
                "driven": np.concatenate([scene.driven, np.zeros(n_c, bool)]),
                "X0": self.pad(X), "U0": self.pad_velocity(X, U),
                "mass_names": scene.mass_names + tuple(f"ground above {scene.mass_names[k]}"
-                                                      for k in self.contact_masses),
-               "k1": np.concatenate([scene.k1[self.links], self.contact_masses]),
+                                                      for k in self.contact_masses) + tuple(
+                   f"ground grip {i % 2 + 1} of {scene.mass_names[k]}" for i, k in enumerate(gripped)),
+               "k1": np.concatenate([scene.k1[self.links], self.contact_masses, gripped]),
                "k2": np.concatenate([scene.k2[self.links], K + np.arange(n_c)]),
                "length": np.concatenate([scene.length[self.links], np.full(n_c, parent.contact_length)]),
                "link_names": tuple(scene.link_names[l] for l in self.links) + tuple(
-                   f"ground{k + 1}" for k in self.contact_masses),
+                   f"ground{k + 1}" for k in self.contact_masses) + tuple(
+                   f"grip{i % 2 + 1}_{k + 1}" for i, k in enumerate(gripped)),
                "rope": None, "restitution": None, "ground": None, "gravity": scene.gravity}
         fields = {}
         for field in dataclasses.fields(Scene):
@@ -193,36 +223,42 @@ class ModeDynamics:
                 value = _frozen(value, value.dtype)
             fields[field.name] = value
         labels = tuple(scene.link_label(int(l)) for l in self.links) + tuple(
-            f"the ground contact of {scene.mass_label(int(k))}" for k in self.contact_masses)
+            f"the ground contact of {scene.mass_label(int(k))}" for k in self.contact_masses) + tuple(
+            f"the ground's friction grip on {scene.mass_label(int(k))}" for k in gripped)
         return _ModeScene(labels=labels, **fields)
 
     # ---- the virtual anchors of the contacts --------------------------------------------------------------
     def _pad_zero(self, A):
-        if self.contact_masses.size == 0 or A is None:
+        if self.n_virtual == 0 or A is None:
             return A
-        return np.concatenate([A, np.zeros((self.contact_masses.size, 3))])
+        return np.concatenate([A, np.zeros((self.n_virtual, 3))])
 
-    def pad(self, X):
-        """X with each contact's virtual anchor straight above its mass, at R_c from the plane."""
-        if self.contact_masses.size == 0:
+    def pad(self, X, grips_at=None):
+        """X with each contact's virtual anchor straight above its mass, at R_c from the plane, and each stuck
+        contact's two grip anchors beside it along the plane's tangents t_1, t_2, at R_c (beside its place in
+        ``grips_at`` where given: a position projection then holds the mass where the step began)."""
+        if self.n_virtual == 0:
             return X
         ground = self.scene.ground
         Xc = X[self.contact_masses]
         gap = ground.gaps(Xc)
-        return np.concatenate([X, Xc + (self.parent.contact_length - gap)[:, None] * ground.normal])
+        R = self.parent.contact_length
+        held = X if grips_at is None else grips_at
+        grips = (held[self.stuck_masses][:, None, :] + R * self.parent.tangents[None, :, :]).reshape(-1, 3)
+        return np.concatenate([X, Xc + (R - gap)[:, None] * ground.normal, grips])
 
     def pad_velocity(self, X, V):
-        """A velocity field V (or any field on the masses) at positions X with each virtual anchor moving as its mass
-        does along the plane: its row of C (12) is then n . V_k (the plane's normal is the same everywhere, so X does
-        not enter)."""
-        if self.contact_masses.size == 0:
+        """A velocity field V (or any field on the masses) at positions X with each virtual anchor above a mass
+        moving as its mass does along the plane: its row of C (12) is then n . V_k (the plane's normal is the same
+        everywhere, so X does not enter); the grip anchors are at rest, so their rows are t_i . V_k."""
+        if self.n_virtual == 0:
             return V
         n = self.scene.ground.normal
         Vc = V[self.contact_masses]
-        return np.concatenate([V, Vc - (Vc @ n)[:, None] * n])
+        return np.concatenate([V, Vc - (Vc @ n)[:, None] * n, np.zeros((2 * self.stuck_masses.size, 3))])
 
     def _unpad(self, A):
-        return A if self.contact_masses.size == 0 else A[:self.K]
+        return A if self.n_virtual == 0 else A[:self.K]
 
     # ---- what the integrators call ------------------------------------------------------------------------
     @property
@@ -242,20 +278,73 @@ class ModeDynamics:
         return "numpy"
 
     def forces(self, X, U, F_input=None):
-        return self.parent.forces(X, U, F_input)
+        """The external forces on the masses (F_input included) and the sliding contacts' friction: what the
+        integrators that take the constraint forces from projections (RATTLE) kick with."""
+        F = self.parent.forces(X, U, F_input)
+        if self.sliding.size:
+            F = F + self.friction(X, U, F_input)
+        return F
+
+    def _with_friction(self, X, U, F_input, anchor_acc):
+        """F_input with the sliding contacts' friction added (the mode's own load)."""
+        if not self.sliding.size:
+            return F_input
+        friction = self.friction(X, U, F_input, anchor_acc)
+        return friction if F_input is None else F_input + friction
+
+    def friction(self, X, U, F_input=None, anchor_acc=None, directions=None) -> np.ndarray:
+        """(K,3): Coulomb's sliding friction -mu N_c d_c on each sliding contact's mass, d_c its slip direction
+        (UnilateralDynamics.slip_directions) and N_c its normal force. The friction loads the masses, so N depends
+        on it: with B(F) of (26) affine in the forces, W N = B(F + sum_c -mu N_c d_c at k_c) is the linear system
+        (W - D) N = B(F), D's column c being B's response to the unit load -mu d_c at k_c (B at zero velocity, where
+        (26) is linear in the load). It is not symmetric; it is solved directly (least squares, minimum-norm where
+        the mode is redundant, as (31)). For a mass alone on the ground D = 0 (its friction is tangential, its
+        normal row sees only its own normal load)."""
+        W, B, directions = self.normal_system(X, U, F_input, anchor_acc, directions)
+        N = np.linalg.lstsq(W, B, rcond=None)[0][self.sliding_rows]
+        out = np.zeros((self.K, 3))
+        np.add.at(out, self.parent.contact_masses[self.sliding], -self.parent.friction * N[:, None] * directions)
+        return out
+
+    def normal_system(self, X, U, F_input=None, anchor_acc=None, directions=None):
+        """(W - D, B(F), slip directions (n_sliding, 3)): the mode's (25)-(26) with the sliding contacts' friction
+        carried into the matrix (``friction``); W and B of (25)-(26) where nothing slides."""
+        parent, inner = self.parent, self.inner
+        Xa, Ua = self.pad(X), self.pad_velocity(X, U)
+        F = inner.forces(Xa, Ua, self._pad_zero(F_input))
+        W = inner.tension_matrix(Xa).toarray()
+        B = inner.tension_rhs(Xa, Ua, F, self._pad_zero(anchor_acc))
+        if not self.sliding.size:
+            return W, B, np.zeros((0, 3))
+        if directions is None:
+            directions = parent.slip_directions(X, U, self, F_input, anchor_acc)
+        still = np.zeros_like(Ua)
+        for row, k, d in zip(self.sliding_rows, parent.contact_masses[self.sliding], directions):
+            load = np.zeros_like(F)
+            load[k] = -parent.friction * d
+            W[:, row] -= inner.tension_rhs(Xa, still, load)
+        return W, B, directions
 
     def accelerations(self, X, U, F_input=None, anchor_acc=None):
         """(dU/dt of (9) on the scene's masses, the mode's tensions in its row order)."""
         self.parent.rhs_evaluations += 1
+        F_input = self._with_friction(X, U, F_input, anchor_acc)
         acc, T = self.inner.accelerations(self.pad(X), self.pad_velocity(X, U), self._pad_zero(F_input),
                                           self._pad_zero(anchor_acc))
         return self._unpad(acc), T
 
     def tensions(self, X, U, F_input=None, anchor_acc=None) -> np.ndarray:
-        """The mode's tensions (25)-(26), rods and active ropes and contacts, in its row order (minimum-norm (31)
-        where the mode is redundant)."""
+        """The mode's tensions (25)-(26), rods and active ropes and contacts and the stuck contacts' grips, in its
+        row order (minimum-norm (31) where the mode is redundant), with the sliding contacts' friction as a load."""
+        F_input = self._with_friction(X, U, F_input, anchor_acc)
         return self.inner.tensions(self.pad(X), self.pad_velocity(X, U), self._pad_zero(F_input),
                                    anchor_acc=self._pad_zero(anchor_acc))
+
+    def grip_forces(self, T_rows) -> np.ndarray:
+        """(n_stuck, 3): the tangential force the ground holds each stuck contact's mass with, T_1 t_1 + T_2 t_2 of
+        its grip rows (a grip link pulls its mass towards its anchor, along +t_i)."""
+        T = T_rows[self.grip_rows]
+        return T @ self.parent.tangents if T.size else np.zeros((0, 3))
 
     def project_velocities(self, X, U):
         """The closest velocities in the mass metric with every active constraint's rate (12) zero:
@@ -268,14 +357,14 @@ class ModeDynamics:
         Returns (X, iterations)."""
         inner, parent = self.inner, self.parent
         X0 = None if direction_at is None else self.pad(direction_at)
-        if step is not None and self.contact_masses.size:
+        if step is not None and self.n_virtual:
             dt, fraction, U, F_input = step
             step = (dt, fraction, self.pad_velocity(direction_at, U), self._pad_zero(F_input))
         stops, reached = inner.floor_stops, inner.floor_reached
         total = 0
         Xc = X
         for _ in range(4):
-            Xa, used = inner.project_positions(self.pad(Xc), tol=tol, max_iter=max_iter, direction_at=X0, step=step)
+            Xa, used = inner.project_positions(self.pad(Xc, direction_at), tol=tol, max_iter=max_iter, direction_at=X0, step=step)
             Xc, total = self._unpad(Xa), total + used
             if self.contact_masses.size == 0 or np.all(np.abs(self.scene.ground.gaps(Xc[self.contact_masses]))
                                                        <= tol * parent.contact_length
@@ -302,6 +391,14 @@ class ModeDynamics:
         on = self.row_of >= 0
         out[on] = T_rows[self.row_of[on]]
         return out
+
+
+def _tangents(normal) -> np.ndarray:
+    """(2, 3): two orthonormal vectors perpendicular to the unit vector ``normal``."""
+    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    t1 = np.cross(normal, helper)
+    t1 /= np.linalg.norm(t1)
+    return np.array([t1, np.cross(normal, t1)])
 
 
 def _frozen(a, dtype=float):
@@ -337,9 +434,13 @@ class UnilateralDynamics(Dynamics):
         self.scale = np.concatenate([scene.length[self.rope_links], np.full(self.contact_masses.size, self.size)])
         self.restitution = np.concatenate([scene.restitution[self.rope_links],
                                            np.full(self.contact_masses.size, ground.restitution if ground else 0.0)])
-        if ground is not None and ground.friction > 0:
-            raise SolverError(f"{scene.name}: the ground's friction is {ground.friction:g}, and Coulomb friction is "
-                              "not implemented yet: the ground is frictionless (give \"friction\": 0)")
+        # Coulomb's friction coefficient of the ground, and an orthonormal pair of tangents of its plane (the grips
+        # of a stuck contact pull along them)
+        self.friction = float(ground.friction) if ground is not None else 0.0
+        self.tangents = _tangents(ground.normal) if ground is not None else np.zeros((2, 3))
+        # each contact's slip direction at the start of the step being taken (zero: none): a sliding contact's
+        # friction keeps it while its velocity along it has not fallen to zero (the stop is an event, 'stick')
+        self.slip_reference = np.zeros((self.contact_masses.size, 3))
         self._modes: dict = {}
 
     # ---- the constraints' gaps and rates -----------------------------------------------------------------
@@ -406,32 +507,142 @@ class UnilateralDynamics(Dynamics):
         return f"the ground contact of {self.scene.mass_label(int(self.index[u]))}"
 
     # ---- modes -------------------------------------------------------------------------------------------
-    def mode(self, active: np.ndarray, X: np.ndarray | None = None, U: np.ndarray | None = None) -> ModeDynamics:
-        """The ModeDynamics of the unilateral constraints ``active`` (bool, n_unilateral), made once per set (its
-        structure analysed at the state X, U it is first asked at)."""
+    def mode(self, active: np.ndarray, X: np.ndarray | None = None, U: np.ndarray | None = None,
+             stuck: np.ndarray | None = None) -> ModeDynamics:
+        """The ModeDynamics of the unilateral constraints ``active`` (bool, n_unilateral) with the contacts
+        ``stuck`` (bool, one per contact; default none) held by friction, made once per pair of sets (its structure
+        analysed at the state X, U it is first asked at)."""
         active = np.asarray(active, bool)
-        key = active.tobytes()
+        n_ropes = self.rope_links.size
+        stuck = (np.zeros(self.contact_masses.size, bool) if stuck is None or self.friction == 0
+                 else np.asarray(stuck, bool) & active[n_ropes:])
+        key = active.tobytes() + stuck.tobytes()
         kept = self._modes.get(key)
         if kept is None:
             X = self.scene.X0 if X is None else X
             U = self.scene.U0 if U is None else U
-            kept = self._modes[key] = ModeDynamics(self, active, X, U)
+            kept = self._modes[key] = ModeDynamics(self, active, X, U, stuck)
         return kept
 
-    def select_mode(self, X, U, F_input=None, anchor_acc=None, candidates=None, start=None, release=None):
+    # ---- Coulomb friction ----------------------------------------------------------------------------------
+    def tangential_velocities(self, U) -> np.ndarray:
+        """(n_contacts, 3): each contact mass's velocity along the plane."""
+        n = self.scene.ground.normal
+        Vc = U[self.contact_masses]
+        return Vc - (Vc @ n)[:, None] * n
+
+    def slip_directions(self, X, U, md: ModeDynamics, F_input=None, anchor_acc=None) -> np.ndarray:
+        """(n_sliding, 3): the unit direction each of md's sliding contacts slips in, which its friction opposes:
+        its tangential velocity's, while that is above TOUCH_TOL of the velocity scale and not against the step's
+        reference (slip_reference); else the reference (the slip went through zero within the step: the stop is
+        an event, and up to it the friction keeps its direction); else, a contact starting to slip from rest, the
+        direction of its mass's tangential acceleration without this friction (for a mass alone on the ground the
+        direction it slips in; for masses coupled by links an approximation at the first instant of the slip)."""
+        c = md.sliding
+        v = self.tangential_velocities(U)[c]
+        speed = np.linalg.norm(v, axis=1)
+        ref = self.slip_reference[c]
+        out = np.array(ref)
+        moving = (speed > TOUCH_TOL * self.velocity_scale(U)) & (np.einsum("ij,ij->i", v, ref) >= 0)
+        out[moving] = v[moving] / speed[moving, None]
+        unknown = ~moving & (np.linalg.norm(ref, axis=1) == 0)
+        if unknown.any():
+            Xa, Ua = md.pad(X), md.pad_velocity(X, U)
+            acc = md._unpad(md.inner.accelerations(Xa, Ua, md._pad_zero(F_input), md._pad_zero(anchor_acc))[0])
+            n = self.scene.ground.normal
+            for j in np.flatnonzero(unknown):
+                a = acc[self.contact_masses[c[j]]]
+                a = a - (a @ n) * n
+                size = np.linalg.norm(a)
+                out[j] = a / size if size > 0 else 0.0
+        return out
+
+    def set_slip_reference(self, X, U, md: ModeDynamics, F_input=None, anchor_acc=None) -> None:
+        """The sliding contacts' slip directions at the start of a step become the step's reference (the others'
+        are cleared)."""
+        ref = np.zeros_like(self.slip_reference)
+        if md.sliding.size:
+            ref[md.sliding] = self.slip_directions(X, U, md, F_input, anchor_acc)
+        self.slip_reference = ref
+
+    def stick_margins(self, md: ModeDynamics, T_rows) -> np.ndarray:
+        """(n_contacts,): mu N - |F_t| of each of md's stuck contacts (N its normal force, F_t the grip's force),
+        >= 0 while the ground can hold it; +inf on the others."""
+        out = np.full(self.contact_masses.size, np.inf)
+        if md.stuck_masses.size:
+            N = md.unilateral_forces(T_rows)[self.rope_links.size:][md.stuck]
+            out[md.stuck] = self.friction * N - np.linalg.norm(md.grip_forces(T_rows), axis=1)
+        return out
+
+    def choose_stuck(self, X, U, active, candidates, F_input=None, anchor_acc=None) -> np.ndarray:
+        """Which of the ``candidates`` (contacts, bool) the ground holds in the mode ``active``: all of them stuck,
+        then the one whose tangential force is furthest beyond mu N let slip, until every stuck one is within the
+        friction cone |F_t| <= mu N (to FORCE_TOL of the largest force)."""
+        stuck = np.asarray(candidates, bool) & np.asarray(active, bool)[self.rope_links.size:]
+        if self.friction == 0:
+            return np.zeros_like(stuck)
+        while stuck.any():
+            md = self.mode(active, X, U, stuck)
+            T = md.tensions(X, U, F_input, anchor_acc)
+            margins = self.stick_margins(md, T)
+            worst = int(np.argmin(margins))
+            if margins[worst] >= -FORCE_TOL * float(np.abs(T).max()):
+                break
+            stuck[worst] = False
+        return stuck
+
+    def resting(self, U) -> np.ndarray:
+        """(n_contacts,) bool: the contacts whose masses do not slip (tangential speed within TOUCH_TOL of the
+        velocity scale): those that may stick."""
+        if self.friction == 0:
+            return np.zeros(self.contact_masses.size, bool)
+        speed = np.linalg.norm(self.tangential_velocities(U), axis=1)
+        return speed <= TOUCH_TOL * self.velocity_scale(U)
+
+    def friction_impulse(self, X, U, normal_impulses, active, stuck):
+        """Coulomb's law at an impact, one level down from the forces: each contact that took a normal impulse
+        P_n is given the tangential impulse P_t that stops its slip (the velocities projected onto the mode with it
+        stuck, as a stuck contact's grips hold it) where |P_t| <= mu P_n; else mu P_n against the slip (along that
+        P_t), and the velocities then projected onto the mode without its grip. Returns (U, the contacts that stick,
+        |P_t| (n_contacts,)). The normal impulse is the frictionless impact's (Newton's restitution): exact for a
+        mass alone on the ground; for masses coupled by links the tangential impulse does not feed back into the
+        normal one."""
+        n_ropes = self.rope_links.size
+        hit = (np.asarray(normal_impulses)[n_ropes:] > 0) & np.asarray(active, bool)[n_ropes:]
+        P_abs = np.zeros(self.contact_masses.size)
+        if self.friction == 0 or not hit.any():
+            return U, np.asarray(stuck, bool) & ~hit, P_abs
+        trial = np.asarray(stuck, bool) | hit
+        md = self.mode(active, X, U, trial)
+        Xa, Ua = md.pad(X), md.pad_velocity(X, U)
+        rates = md.inner.constraint_rows(Xa, Ua)
+        multipliers = np.linalg.lstsq(md.inner.tension_matrix(Xa).toarray(), rates, rcond=None)[0]
+        P_t = np.zeros((self.contact_masses.size, 3))
+        P_t[md.stuck] = -md.grip_forces(multipliers)  # the impulse -C^T mu of the projection, on the grips' rows
+        P_abs = np.linalg.norm(P_t, axis=1)
+        P_n = np.asarray(normal_impulses)[n_ropes:]
+        over = hit & (P_abs > self.friction * P_n)
+        if not over.any():
+            return md.project_velocities(X, U), trial, np.where(hit, P_abs, 0.0)
+        U = np.array(U, float)
+        capped = self.friction * P_n[over] / P_abs[over]
+        U[self.contact_masses[over]] += (capped[:, None] * P_t[over]) * self._inv_mass3[self.contact_masses[over]]
+        P_abs[over] = self.friction * P_n[over]
+        stuck = trial & ~over
+        return self.mode(active, X, U, stuck).project_velocities(X, U), stuck, np.where(hit, P_abs, 0.0)
+
+    def select_mode(self, X, U, F_input=None, anchor_acc=None, candidates=None, start=None, release=None,
+                    stuck=None):
         """The active set at (X, U): the acceleration LCP on the ``candidates`` (default: those touching with no
         separating rate), warm-started from ``start`` (default: every candidate, so that a degenerate problem, force
         and gap acceleration both zero, keeps them taut); ``release``: constraints whose force has just fallen to 0
-        (they stay only with a clearly positive force). Returns (active, the multipliers of the candidates' mode in
-        its row order, that mode)."""
+        (they stay only with a clearly positive force); ``stuck``: the contacts friction holds (their grips are
+        equalities of the LCP; the other contacts' sliding friction is in its matrix, which is then not symmetric:
+        normal_system). Returns (active, the multipliers of the candidates' mode in its row order, that mode)."""
         candidates = self.touching(X, U) if candidates is None else np.asarray(candidates, bool)
         start = candidates if start is None else start
-        md = self.mode(candidates, X, U)
-        Xa, Ua = md.pad(X), md.pad_velocity(X, U)
-        inner = md.inner
-        F = inner.forces(Xa, Ua, md._pad_zero(F_input))
-        W = inner.tension_matrix(Xa).toarray()
-        B = inner.tension_rhs(Xa, Ua, F, md._pad_zero(anchor_acc))
+        md = self.mode(candidates, X, U, stuck)
+        W, B, _ = md.normal_system(X, U, F_input, anchor_acc)
         rows_uni = md.constraint_of_row >= 0
         start_rows = np.zeros(B.size, bool)
         release_rows = np.zeros(B.size, bool)
@@ -489,8 +700,7 @@ class UnilateralDynamics(Dynamics):
     def resolve(self, X, U, F_input=None, anchor_acc=None):
         """(T (L,) of every link, normal force (K,) of the ground on every mass) at (X, U): the acceleration LCP on
         the touching constraints, then the tensions of its mode (25)-(26) by the rod path's solver."""
-        active, _, _ = self.select_mode(X, U, F_input, anchor_acc)
-        md = self.mode(active, X, U)
+        md = self.state_mode(X, U, F_input, anchor_acc)
         T_rows = md.tensions(X, U, F_input, anchor_acc)
         T = np.zeros(self.scene.L)
         T[md.links] = T_rows[:md.links.size]
@@ -499,14 +709,33 @@ class UnilateralDynamics(Dynamics):
         normal[self.contact_masses] = forces[self.rope_links.size:]
         return T, normal
 
+    def ground_forces(self, X, U, F_input=None, anchor_acc=None):
+        """(normal (K,), tangential (K,3)): the ground's force on every mass at (X, U), its normal force and its
+        friction (a stuck mass's grip, a sliding one's -mu N d), in the mode state_mode chooses there."""
+        md = self.state_mode(X, U, F_input, anchor_acc)
+        T_rows = md.tensions(X, U, F_input, anchor_acc)
+        normal = np.zeros(self.scene.K)
+        normal[self.contact_masses] = md.unilateral_forces(T_rows)[self.rope_links.size:]
+        tangential = np.zeros((self.scene.K, 3))
+        tangential[md.stuck_masses] = md.grip_forces(T_rows)
+        if md.sliding.size:
+            tangential += md.friction(X, U, F_input, anchor_acc)
+        return normal, tangential
+
     def tensions(self, X, U, F_input=None, F=None, E=None, anchor_acc=None) -> np.ndarray:
         """Every link's tension at (X, U): rods and taut ropes from (25)-(26) of the mode the LCP chooses there,
         slack ropes 0."""
         return self.resolve(X, U, F_input, anchor_acc)[0]
 
+    def state_mode(self, X, U, F_input=None, anchor_acc=None) -> ModeDynamics:
+        """The mode at (X, U) as a pure function of the state: the acceleration LCP on the touching constraints,
+        with the resting contacts that friction can hold stuck (choose_stuck)."""
+        resting = self.resting(U)
+        active, _, _ = self.select_mode(X, U, F_input, anchor_acc, stuck=resting)
+        return self.mode(active, X, U, self.choose_stuck(X, U, active, resting, F_input, anchor_acc))
+
     def accelerations(self, X, U, F_input=None, anchor_acc=None):
-        active, _, _ = self.select_mode(X, U, F_input, anchor_acc)
-        acc, _ = self.mode(active, X, U).accelerations(X, U, F_input, anchor_acc)
+        acc, _ = self.state_mode(X, U, F_input, anchor_acc).accelerations(X, U, F_input, anchor_acc)
         return acc, self.tensions(X, U, F_input, anchor_acc=anchor_acc)
 
     def constraint_residual(self, X):
@@ -648,7 +877,7 @@ def event_arrays(events) -> dict:
 
 def event_counts(events) -> dict:
     """How many events of each kind a run had."""
-    counts = {"taut": 0, "slack": 0, "contact": 0, "release": 0}
+    counts = {"taut": 0, "slack": 0, "contact": 0, "release": 0, "stick": 0, "slip": 0}
     for event in events:
         counts[event.kind] += 1
     return counts

@@ -120,22 +120,27 @@ class EventHandling:
     def _init_events(self, unilateral):
         self.unilateral = unilateral
         self.mode = None  # chosen from the state at the first advance
+        self.stuck = None  # the contacts friction holds (one per contact)
         self.events: list[Event] = []
 
     def internals(self) -> dict:
         out = super().internals()
         out["mode"] = None if self.mode is None else self.mode.copy()
+        out["stuck"] = None if self.stuck is None else self.stuck.copy()
+        out["slip_reference"] = self.unilateral.slip_reference.copy()
         out["events"] = list(self.events)
         return out
 
     def set_internals(self, data: dict) -> None:
         super().set_internals(data)
         self.events = list(data.get("events", []))
+        if data.get("slip_reference") is not None:
+            self.unilateral.slip_reference = np.array(data["slip_reference"])
         mode = data.get("mode")
         if mode is None:
-            self.mode, self.dyn = None, self.unilateral
+            self.mode, self.stuck, self.dyn = None, None, self.unilateral
         else:
-            self._set_mode(mode)
+            self._set_mode(mode, stuck=data.get("stuck"))
 
     def projection_floor(self):
         return int(self.unilateral.floor_stops), float(self.unilateral.floor_reached)
@@ -145,9 +150,16 @@ class EventHandling:
         return self.unilateral.rhs_evaluations
 
     # ---- the mode ---------------------------------------------------------------------------------------
-    def _set_mode(self, active, X=None, U=None):
+    def _set_mode(self, active, X=None, U=None, stuck=None):
         self.mode = np.array(active, bool)
-        self.dyn = self.unilateral.mode(self.mode, X, U)
+        self.dyn = self.unilateral.mode(self.mode, X, U, stuck)
+        self.stuck = self.dyn.stuck.copy()
+
+    def _slip_reference(self, t, X, U, F_input):
+        """The sliding contacts' slip directions at the start of a step: the step's reference (friction)."""
+        if self.unilateral.friction > 0 and self.dyn.sliding.size:
+            Xd, Ud, acc = self._at(t, X, U)
+            self.unilateral.set_slip_reference(Xd, Ud, self.dyn, F_input, acc)
 
     def _at(self, t, X, U):
         """(X, U, anchor accelerations) with the driven anchors where their motion is at t."""
@@ -158,16 +170,35 @@ class EventHandling:
     def _ensure_mode(self, X, U, t, F_input):
         if self.mode is None:
             Xd, Ud, acc = self._at(t, X, U)
-            candidates = self.unilateral.touching(Xd, Ud)
-            active, _, _ = self.unilateral.select_mode(Xd, Ud, F_input, acc, candidates, start=candidates)
-            self._set_mode(active, X, U)
+            uni = self.unilateral
+            candidates = uni.touching(Xd, Ud)
+            resting = uni.resting(Ud)
+            active, _, _ = uni.select_mode(Xd, Ud, F_input, acc, candidates, start=candidates, stuck=resting)
+            self._set_mode(active, X, U, uni.choose_stuck(Xd, Ud, active, resting, F_input, acc))
+            uni.slip_reference[:] = 0.0
+            self._slip_reference(t, X, U, F_input)
 
     # ---- detection and location -------------------------------------------------------------------------------
     def _forces_at(self, t, X, U, F_input):
-        """The active unilateral constraints' forces (n_unilateral,) and the largest |force| of the mode's rows."""
+        """(values, tolerances, watched): what must stay >= 0 in the mode, and how far below 0 each may go before
+        it is an event: the active unilateral constraints' forces (n_unilateral, FORCE_TOL of the largest |force| of
+        the mode's rows); with friction, then one per contact: a stuck one's margin mu N - |F_t| (the same
+        tolerance), a sliding one's velocity along the step's slip reference (TOUCH_TOL of the velocity scale)."""
+        uni, dyn = self.unilateral, self.dyn
         Xd, Ud, acc = self._at(t, X, U)
-        T = self.dyn.tensions(Xd, Ud, F_input, acc)
-        return self.dyn.unilateral_forces(T), float(np.abs(T).max()) if T.size else 0.0
+        T = dyn.tensions(Xd, Ud, F_input, acc)
+        scale = float(np.abs(T).max()) if T.size else 0.0
+        values = dyn.unilateral_forces(T)
+        if uni.friction == 0:
+            return values, np.full(values.size, FORCE_TOL * scale), self.mode
+        sliding = np.zeros(uni.contact_masses.size, bool)
+        sliding[dyn.sliding] = True
+        slip = np.einsum("ij,ij->i", uni.tangential_velocities(Ud), uni.slip_reference)
+        friction = np.where(dyn.stuck, uni.stick_margins(dyn, T), slip)
+        friction_tol = np.where(dyn.stuck, FORCE_TOL * scale, TOUCH_TOL * uni.velocity_scale(Ud))
+        return (np.concatenate([values, friction]), np.concatenate([np.full(values.size, FORCE_TOL * scale),
+                                                                    friction_tol]),
+                np.concatenate([self.mode, dyn.stuck | sliding]))
 
     def _first_event(self, X0, U0, t0, X1, U1, t1, F_input):
         """The first event within the step from (X0, U0) at t0 to (X1, U1) at t1, or None: (theta in [0, 1], kind
@@ -196,8 +227,8 @@ class EventHandling:
                 if found is None or root < found[0]:
                     found = (root, "gap", int(u))
         if mode.any():
-            forces, scale = self._forces_at(t1, X1, U1, F_input)
-            dropped = np.flatnonzero(mode & (forces < -FORCE_TOL * scale))
+            forces, tol, watched = self._forces_at(t1, X1, U1, F_input)
+            dropped = np.flatnonzero(watched & (forces < -tol))
             if dropped.size:
                 A0, A1 = self._acceleration_at(t0, X0, U0, F_input), self._acceleration_at(t1, X1, U1, F_input)
                 for u in dropped:
@@ -265,8 +296,14 @@ class EventHandling:
         """At an event at t (state X, U of the old mode): positions onto the touching constraints, the impact's
         impulse, the next mode; the events recorded. Returns (X, U)."""
         uni = self.unilateral
+        n_uni, n_ropes = uni.n_unilateral, uni.rope_links.size
+        # a trigger past the unilateral constraints is a contact's friction: its stick margin (stuck -> slip) or its
+        # slip speed (sliding -> a stop, where it sticks if the ground can hold it)
+        friction_contact = trigger - n_uni if kind == "force" and trigger >= n_uni else None
         touching = self.mode | uni.touching(X)
-        touching[trigger] |= kind == "gap"
+        if kind == "gap":
+            touching[trigger] = True
+        stuck_before = self.stuck
         X, _ = uni.mode(touching, X, U).project_positions(X, tol=1e-14)
         U_after, impulses, took = uni.impact(X, U, touching)
         Xd, Ud, acc = self._at(t, X, U_after)
@@ -276,21 +313,45 @@ class EventHandling:
         rates = uni.gap_rates(Xd, Ud)
         candidates = touching & (rates <= max(TOUCH_TOL * uni.velocity_scale(Ud), uni.rest_speed(Ud)))
         release = np.zeros(uni.n_unilateral, bool)
-        if kind == "force":
+        if kind == "force" and friction_contact is None:
             release[trigger] = True
+        # the contacts that may stick: those stuck before, those at rest along the plane, one whose slip stopped;
+        # not one whose stick margin fell through zero
+        may_stick = stuck_before | uni.resting(Ud)
+        if friction_contact is not None:
+            may_stick[friction_contact] = not stuck_before[friction_contact]
         # every candidate starts taut: where the LCP is degenerate (a force and a gap acceleration both zero, a rope
         # at its length at rest), taut is kept, and a force that then turns negative is a slack event at once
-        active, _, _ = uni.select_mode(Xd, Ud, F_input, acc, candidates, start=candidates, release=release)
-        if kind == "force" and active[trigger] and not (active != self.mode).any():
+        active, _, _ = uni.select_mode(Xd, Ud, F_input, acc, candidates, start=candidates, release=release,
+                                       stuck=may_stick)
+        if (kind == "force" and friction_contact is None and active[trigger]
+                and not (active != self.mode).any()):
             active[trigger] = False  # its force is at zero to round-off and falling: it leaves
-        md = uni.mode(active, X, U_after)
+        stuck, tangential = stuck_before, np.zeros(uni.contact_masses.size)
+        if uni.friction > 0:
+            # Coulomb's law at the impact, then which contacts the ground holds
+            U_after, stuck, tangential = uni.friction_impulse(X, U_after, impulses, active, stuck_before & may_stick)
+            Xd, Ud, acc = self._at(t, X, U_after)
+            stuck = uni.choose_stuck(Xd, Ud, active, stuck | may_stick, F_input, acc)
+        md = uni.mode(active, X, U_after, stuck)
+        U_before_grip = U_after
         U_after = md.project_velocities(X, U_after)
         for u in np.flatnonzero((took | active) & ~self.mode):
             self.events.append(Event(float(t), "taut" if uni.is_rope[u] else "contact", int(uni.index[u]),
                                      float(impulses[u])))
         for u in np.flatnonzero(self.mode & ~active):
             self.events.append(Event(float(t), "slack" if uni.is_rope[u] else "release", int(uni.index[u]), 0.0))
-        self._set_mode(active, X, U_after)
+        if uni.friction > 0:
+            on_before, on_after = self.mode[n_ropes:], active[n_ropes:]
+            grip = np.linalg.norm(U_after - U_before_grip, axis=1)[uni.contact_masses] / uni._inv_mass3[
+                uni.contact_masses, 0]
+            for c in np.flatnonzero(on_before & on_after & (md.stuck != stuck_before)):
+                self.events.append(Event(float(t), "stick" if md.stuck[c] else "slip", int(uni.contact_masses[c]),
+                                         float(tangential[c] + grip[c]) if md.stuck[c] else 0.0))
+        self._set_mode(active, X, U_after, stuck)
+        if uni.friction > 0:
+            uni.slip_reference[:] = 0.0  # from the velocities after the event, or the accelerations where at rest
+            self._slip_reference(t, X, U_after, F_input)
         return X, U_after
 
     def _zeno(self, t):
@@ -333,6 +394,7 @@ class FixedStepEvents(EventHandling):
 
     def _step_with_events(self, X, U, t0, t1, F_input):
         for _ in range(MAX_EVENTS_PER_STEP):
+            self._slip_reference(t0, X, U, F_input)
             X1, U1 = self._plain_step(X, U, t0, t1, F_input)
             found = self._first_event(X, U, t0, X1, U1, t1, F_input)
             if found is None:
@@ -364,6 +426,7 @@ class AdaptiveEvents(EventHandling):
         found = self._first_event(X, U, t, X_new, U_new, t_new, F_input)
         if found is None:
             self._events_this_step = 0
+            self._slip_reference(t_new, X_new, U_new, F_input)  # the next step's
             return None
         self._events_this_step += 1
         if self._events_this_step > MAX_EVENTS_PER_STEP:

@@ -128,11 +128,15 @@ def test_the_native_backend_refuses_a_scene_with_ropes_or_a_ground_naming_the_fi
     assert "backend numpy (ropes, ground: the native core does not take them yet)" in sim.summary()
 
 
-def test_coulomb_friction_is_refused_until_it_is_implemented():
-    scene = ln.Scene.from_dict(data(ground={"point": [0, 0, -2], "normal": [0, 0, 1], "friction": 0.3}))
+def test_the_outputs_linearization_is_refused_for_ropes_and_a_ground_naming_the_rope():
+    # it is the rods' (25)-(26): it would treat the rope as a rod and has no derivative across the events
+    sim = ln.Simulator(ln.Scene.from_dict(data()), "dop853")
     with pytest.raises(ln.SolverError) as err:
-        ln.Simulator(scene, "dop853")
-    assert "friction is 0.3" in str(err.value) and "Coulomb friction is not implemented yet" in str(err.value)
+        sim.interface_linearization()
+    assert "is a rope" in str(err.value) and "linearization" in str(err.value) and "rods only" in str(err.value)
+    grounded = ln.Scene.from_dict(data(links=[], ground={"point": [0, 0, -2], "normal": [0, 0, 1]}))
+    with pytest.raises(ln.SolverError, match="it has a ground"):
+        ln.Simulator(grounded, "dop853").interface_linearization()
 
 
 def test_input_driven_anchors_are_refused_with_ropes():
