@@ -41,7 +41,9 @@ from pythonfmu.enums import Fmi2Status
 
 from linknet_fmu import anchor_jumps, thread_state
 from linknet_fmu.layout import (DERIVATIVE_ORDER_GIVEN, DERIVATIVE_VR_BASE, ERROR_ESTIMATE_CATEGORY,
-                                 ERROR_ESTIMATE_CATEGORY_DESCRIPTION, ESTIMATE_ERROR_DESCRIPTION, Layout)
+                                 ERROR_ESTIMATE_CATEGORY_DESCRIPTION, ESTIMATE_ERROR_DESCRIPTION, EVENT_CATEGORY,
+                                 EVENT_CATEGORY_DESCRIPTION, Layout)
+from linknet_fmu.rope_events import event_impulses, event_message
 from linknet_fmu.parameters import parameter_problem
 
 CONFIG_FILE = "linknet_fmu.json"
@@ -169,6 +171,8 @@ class LinknetNetwork(Fmi2Slave):
         # an instance copy (the class's dict is pythonfmu's, shared by every slave of the process)
         self.log_categories = dict(self.log_categories)
         self.log_categories[ERROR_ESTIMATE_CATEGORY] = ERROR_ESTIMATE_CATEGORY_DESCRIPTION
+        if self._scene0.unilateral:
+            self.log_categories[EVENT_CATEGORY] = EVENT_CATEGORY_DESCRIPTION
         self._t0 = 0.0                 # fmi2SetupExperiment's startTime: the scene's initial state is given there
         self._identity = hashlib.sha256(json.dumps(
             [STATE_FORMAT, self._scene0.fingerprint, cfg["model_identifier"], cfg.get("inputs"), cfg.get("outputs")]
@@ -222,6 +226,8 @@ class LinknetNetwork(Fmi2Slave):
         self._shortest_link = anchor_jumps.shortest_links(scene.k1, scene.k2, scene.length,
                                                           self._layout.anchor_inputs)
         self._outputs_stale = self._linearization_stale = True
+        self._real[self._layout.Jrope_vr] = 0.0
+        self._real[self._layout.Jground_vr] = 0.0
 
     def _mark_anchor_inputs(self, vrs):
         """Note which anchors' P, V, A the value references `vrs` (an int array of inputs) set."""
@@ -261,6 +267,8 @@ class LinknetNetwork(Fmi2Slave):
             self._real[lay.Freact_vr] = Freact
             if lay.driven_indices.size:
                 self._real[lay.Jreact_vr] = out["impulse"]
+            if lay.slack_vr.size:
+                self._real[lay.slack_vr] = out["slack"][lay.rope_links]
         except Exception as e:  # never let an exception reach pythonfmu (fmi2Fatal)
             self._real[lay.T_vr] = np.nan
             self._real[lay.Freact_vr] = np.nan
@@ -680,6 +688,7 @@ class LinknetNetwork(Fmi2Slave):
             # h > 0 but below half an ulp of t: t + h == t in floating point, nothing to integrate
             return True
         jump = self._position_jump()
+        events_before = len(self._sim.integrator.events) if self._scene.unilateral else 0
         try:
             # Simulator.advance leaves the state at t when it raises (the step can be retried
             # after fmi2SetFMUstate or with other inputs) and guarantees a finite state when it returns
@@ -693,6 +702,13 @@ class LinknetNetwork(Fmi2Slave):
             return False
         if jump is not None:
             self._say_position_jump(t, *jump)
+        if self._scene.unilateral:  # the step's rope and ground events: their impulses, one message each
+            events = self._sim.integrator.events[events_before:]
+            lay = self._layout
+            self._real[lay.Jrope_vr], self._real[lay.Jground_vr] = event_impulses(events, lay.rope_links,
+                                                                                  lay.ground_masses)
+            for event in events:
+                self.log(event_message(event, self._scene), Fmi2Status.ok, EVENT_CATEGORY)
         self._anchors_set = False
         self._p_set[:] = False
         self._va_vr[:] = -1

@@ -4,9 +4,15 @@ One `Layout` per FMU instance (never module-global: several scenes' FMUs share o
 interpreter and one sys.modules). Real variables get value references 0..n_real-1 in the
 order of `self.reals`; the one String parameter (`integrator`) comes last.
 Names are Modelica-style, 1-based: F[k,i], P[k,i], V[k,i], A[k,i], X[k,i], U[k,i], T[l], Freact[k,i],
-Jreact[k,i], error_estimate, M[k], R[l], g[i], tolerance, step; then the String parameter integrator (value reference
+Jreact[k,i], error_estimate, slack[l], Jrope[l], Jground[k], M[k], R[l], g[i], tolerance, step; then the String parameter integrator (value reference
 n_real) and the Boolean parameter estimate_error (n_real + 1). P, V, A (the motion of an anchor driven by inputs) and Jreact (the impulse on a
-driven anchor) exist only for scenes with driven anchors, so a scene without them keeps its value references.
+driven anchor) exist only for scenes with driven anchors, so a scene without them keeps its value references; slack
+and Jrope (per rope link, l its link number) only for scenes with ropes, Jground (per free mass) only for scenes with a
+ground.
+
+slack[l] is a Real of value 0 or 1, not a Boolean: the FMU's outputs are one Real vector (value references 0..n_real-1,
+read by one fmi2GetReal), and its modelDescription writer and fmi2GetBoolean know the one Boolean parameter only;
+a 0/1 Real keeps slack beside T, its tension, in the same call and the same dependency table.
 """
 from __future__ import annotations
 
@@ -30,6 +36,10 @@ DERIVATIVE_ORDER_GIVEN = (1 << 31) // DERIVATIVE_VR_BASE - 1
 ESTIMATE_ERROR_DESCRIPTION = ("estimate the run's global error with a companion run (output error_estimate; about "
                               "2 to 2.5 times the work of a step); false: no companion, error_estimate is NaN")
 ERROR_ESTIMATE_CATEGORY = "logErrorEstimate"  # = LINKNET_NOTE_CATEGORY of fmu_src/native/fmi2_api.h
+# The log category of the rope and ground events (one message per event: time, kind, link or mass, impulse)
+EVENT_CATEGORY = "logEvents"
+EVENT_CATEGORY_DESCRIPTION = ("A rope or ground event within a doStep: its time, kind (taut, slack, contact, release, "
+                              "stick, slip), link or mass and impulse (N s), logged with fmi2OK status")
 ERROR_ESTIMATE_CATEGORY_DESCRIPTION = (
     "The error estimate exceeded the run's goal (or its companion run failed): logged with fmi2Warning status once "
     "per crossing; the doStep still returns fmi2OK (its result is computed as asked).")
@@ -95,6 +105,8 @@ class Layout:
     output_masses: np.ndarray
     driven_indices: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     anchor_inputs: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    rope_links: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    ground_masses: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     reals: list = field(default_factory=list)
 
     @classmethod
@@ -115,7 +127,9 @@ class Layout:
                   k1=np.asarray(scene.k1, dtype=int), k2=np.asarray(scene.k2, dtype=int),
                   input_masses=inp, output_masses=out,
                   driven_indices=np.asarray(scene.driven_indices, dtype=int),
-                  anchor_inputs=np.asarray(scene.input_driven_indices, dtype=int))
+                  anchor_inputs=np.asarray(scene.input_driven_indices, dtype=int),
+                  rope_links=np.flatnonzero(scene.rope),
+                  ground_masses=free if scene.ground is not None else np.zeros(0, dtype=int))
         lay._build()
         return lay
 
@@ -170,6 +184,18 @@ class Layout:
             "estimated largest position error of any mass at the current time (a companion run of the same scene with "
             "half the step, or a tenth of the tolerances, never re-synchronised: the run's global error); NaN when "
             "the estimate is switched off (estimate_error = false), +inf when the companion run failed")
+        self.slack_vr = np.array([self._add(f"slack[{l + 1}]", "output", "continuous", "calculated", "Tolerance",
+                                            f"1 where rope link {l + 1} (masses {self.k1[l] + 1}-{self.k2[l] + 1}) is "
+                                            "slack (carries no tension: T is 0), 0 where it is taut")
+                                  for l in self.rope_links], dtype=int)
+        self.Jrope_vr = np.array([self._add(f"Jrope[{l + 1}]", "output", "continuous", "calculated", "Impulse",
+                                            f"impulse of rope link {l + 1} coming taut (a jerk) within the last "
+                                            "communication step, summed over its events; 0 if none")
+                                  for l in self.rope_links], dtype=int)
+        self.Jground_vr = np.array([self._add(f"Jground[{k + 1}]", "output", "continuous", "calculated", "Impulse",
+                                              f"normal impulse of the ground on {self._mass_label(k)} landing within "
+                                              "the last communication step, summed over its events; 0 if none")
+                                    for k in self.ground_masses], dtype=int)
         self.M_vr = np.array([self._add(f"M[{k + 1}]", "parameter", "fixed", "exact", "Mass",
                                         f"mass of {self._mass_label(k)} (> 0)")
                               for k in self.free_indices], dtype=int)
@@ -264,10 +290,12 @@ class Layout:
         inputs_of_comp = {c: list(names) for c, names in inputs_of_comp.items()}
         deps = {}
         for row in np.concatenate([self.X_vr.ravel(), self.U_vr.ravel(), self.Jreact_vr.ravel(),
-                                   [self.error_estimate_vr]]):
+                                   [self.error_estimate_vr], self.Jrope_vr, self.Jground_vr]):
             deps[self.reals[row].name] = []
         for l in range(self.L):
             deps[self.reals[self.T_vr[l]].name] = inputs_of_comp[comp[l]]
+        for l, vr in zip(self.rope_links, self.slack_vr):  # slack where its tension, T, would turn negative
+            deps[self.reals[vr].name] = inputs_of_comp[comp[l]]
         for k, row, groups in self._anchor_groups(comp):
             names = _union(inputs_of_comp[c] for c in groups)
             for vr in row:
@@ -308,6 +336,8 @@ class Layout:
             if c not in of_comp:
                 of_comp[c] = running[self.reals[self.T_vr[l]].name] + list(params_of_comp[c]) + g_names
             deps[self.reals[self.T_vr[l]].name] = of_comp[c]
+        for l, vr in zip(self.rope_links, self.slack_vr):
+            deps[self.reals[vr].name] = of_comp[comp[l]]
         for k, row, groups in self._anchor_groups(comp):
             names = _union([running[self.reals[row[0]].name]] + [list(params_of_comp[c]) for c in groups]
                            + [g_names])
