@@ -103,6 +103,39 @@ def linearization_refusal(scene: Scene) -> str:
             "forces switch on and off at the events; it is not given for ropes or a ground")
 
 
+def describe(scene: Scene) -> list[str]:
+    """What ``linknet analyze`` says of a scene's ropes and ground: how many ropes and which are slack at the start
+    (shorter than their length, or not pulled: the acceleration LCP there), the ground's plane, restitution and
+    friction and the masses on it at the start, and the path that runs them."""
+    dyn = UnilateralDynamics(scene)
+    X, U = np.array(scene.X0), np.array(scene.U0)
+    lines = []
+    try:
+        T, normal = dyn.resolve(X, U)
+        slack = [scene.link_label(int(l)) for l in dyn.rope_links if T[l] == 0.0]
+    except Exception as exc:  # an inconsistent initial state: said, not raised (analyze describes any scene)
+        slack, normal = None, None
+        lines.append(f"ropes and ground: the initial state's forces cannot be computed ({exc})")
+    if dyn.rope_links.size:
+        lines.append(f"ropes: {dyn.rope_links.size} of {scene.L} links are ropes (pull only; restitution "
+                     f"{', '.join(f'{e:g}' for e in np.unique(scene.restitution[dyn.rope_links]))})")
+        if slack is not None:
+            shown = ", ".join(slack[:8]) + (f" and {len(slack) - 8} more" if len(slack) > 8 else "")
+            lines.append(f"slack at the start: {len(slack)}" + (f" ({shown})" if slack else ""))
+    ground = scene.ground
+    if ground is not None:
+        lines.append(f"ground: the plane through {np.round(ground.point, 6).tolist()} with normal "
+                     f"{np.round(ground.normal, 6).tolist()}, restitution {ground.restitution:g}, friction "
+                     f"{ground.friction:g}" + (" (frictionless)" if ground.friction == 0 else " (Coulomb)"))
+        if normal is not None:
+            on = [scene.mass_label(int(k)) for k in dyn.contact_masses[dyn.touching(X)[dyn.rope_links.size:]]]
+            shown = ", ".join(on[:8]) + (f" and {len(on) - 8} more" if len(on) > 8 else "")
+            lines.append(f"masses on the ground at the start: {len(on)}" + (f" ({shown})" if on else ""))
+    lines.append("path: the numpy reference, event by event (linknet_core.dynamics.unilateral; the native core does "
+                 "not take ropes or a ground yet)")
+    return lines
+
+
 def numpy_only(scene: Scene, backend: str) -> bool:
     """Whether ``scene`` must run on the numpy reference (it has ropes or a ground); a backend of 'native' for such a
     scene is refused with native_refusal's words."""

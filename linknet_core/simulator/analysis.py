@@ -82,7 +82,12 @@ class RigidityReport:
         native_path = native.describe()
         if self.specialisation.kind != "none":
             native_path += f" (not used: the {self.specialisation.kind} specialisation stands in)"
-        lines.append(f"native path (RATTLE, compositions, Runge-Kutta): {native_path}")
+        if s.unilateral:  # ropes or a ground: the numpy reference runs the scene
+            from linknet_core.dynamics.unilateral import describe
+
+            lines += describe(s)
+        else:
+            lines.append(f"native path (RATTLE, compositions, Runge-Kutta): {native_path}")
         if self.blocked_flexes is None:
             lines.append("second-order rigidity: not checked (no self-stress, or above the check's size limit)")
         elif not self.blocked_flexes:

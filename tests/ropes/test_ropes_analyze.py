@@ -1,0 +1,27 @@
+"""linknet analyze of a scene with ropes and a ground: the ropes and which are slack at the start, the ground and the
+masses on it, and the numpy reference as the path that runs it."""
+from __future__ import annotations
+
+import linknet_core as ln
+from linknet_core.simulator.analysis import analyze_scene
+
+
+def test_analyze_describes_the_ropes_the_ground_and_the_reference_path():
+    # a taut hanging rope (pulled by the weight), a rope shorter than its length (slack), a mass on the ground
+    scene = ln.Scene.from_dict({"name": "yard", "gravity": [0, 0, -9.81],
+                                "masses": [{"name": "hook", "position": [0, 0, 3], "fixed": True},
+                                           {"name": "load", "position": [0, 0, 2], "mass": 1.0},
+                                           {"name": "loose", "position": [1, 0, 2.5], "mass": 1.0},
+                                           {"name": "crate", "position": [3, 0, 0], "mass": 2.0}],
+                                "links": [{"a": "hook", "b": "load", "length": 1.0, "kind": "rope"},
+                                          {"a": "hook", "b": "loose", "length": 2.0, "kind": "rope",
+                                           "restitution": 0.5}],
+                                "ground": {"point": [0, 0, 0], "normal": [0, 0, 1], "restitution": 0.2,
+                                           "friction": 0.4}})
+    text = analyze_scene(scene).text()
+    assert "ropes: 2 of 2 links are ropes (pull only; restitution 0, 0.5)" in text
+    assert 'slack at the start: 1 (link 2 (hook-loose))' in text
+    assert ("ground: the plane through [0.0, 0.0, 0.0] with normal [0.0, 0.0, 1.0], restitution 0.2, friction 0.4 "
+            "(Coulomb)") in text
+    assert 'masses on the ground at the start: 1 (mass 4 ("crate"))' in text
+    assert "path: the numpy reference" in text and "native path" not in text
