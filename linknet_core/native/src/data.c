@@ -9,6 +9,7 @@
 #include "drive.h"
 #include "ldl.h"
 #include "linknet.h"
+#include "ln_math.h"
 #include "minnorm.h"
 #include "rigid.h"
 
@@ -119,12 +120,12 @@ LN_API const ln_int ln_max_step_count = (ln_int)1 << 53;
 
 ln_int ln_fixed_step_count(double span, double dt)
 {
-    const double ratio = span / dt, nearest = round(ratio);
+    const double ratio = span / dt, nearest = ln_round(ratio);
     /* more than the limit, or not a number (dt = 0, an infinite span): more than any advance may take. Converted
        to ln_int such a ratio would be undefined (INT64_MIN on x86-64: a run of 0 steps reported as done) */
     if (!(ratio <= (double)ln_max_step_count)) return ln_max_step_count + 1;
     /* a whole number of steps up to round-off in t (which grows with t) is that number, not one more */
-    const double n = fabs(ratio - nearest) <= 1e-9 * fmax(ratio, 1.0) ? nearest : ceil(ratio);
+    const double n = fabs(ratio - nearest) <= 1e-9 * ln_fmax(ratio, 1.0) ? nearest : ln_ceil(ratio);
     return n < 1.0 ? 1 : (ln_int)n;
 }
 

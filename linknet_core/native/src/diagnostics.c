@@ -9,6 +9,7 @@
 #include <math.h>
 
 #include "linknet.h"
+#include "ln_math.h"
 
 /* One sample's terms of a sum, by index: what numpy forms as an array and then sums. */
 typedef struct sum_terms {
@@ -81,7 +82,7 @@ static double spring_term(const sum_terms *s, ln_int i)
 {
     const ln_int a = s->e->spring_mass[2 * i], b = s->e->spring_mass[2 * i + 1];
     const double d[3] = {s->X[3 * b] - s->X[3 * a], s->X[3 * b + 1] - s->X[3 * a + 1], s->X[3 * b + 2] - s->X[3 * a + 2]};
-    const double stretch = sqrt(dot3(d, d)) - s->e->spring_param[2 * i + 1];
+    const double stretch = ln_sqrt(dot3(d, d)) - s->e->spring_param[2 * i + 1];
     return s->e->spring_param[2 * i] * (stretch * stretch);
 }
 
@@ -103,7 +104,7 @@ void ln_sample_diagnostics(const ln_model *m, const ln_energy_terms *e, const do
         const ln_int a = m->k1[l], b = m->k2[l];
         double d[3], w[3];
         for (int c = 0; c < 3; c++) d[c] = X[3 * b + c] - X[3 * a + c];
-        const double rel = fabs(sqrt(dot3(d, d)) / m->R[l] - 1.0);
+        const double rel = fabs(ln_sqrt(dot3(d, d)) / m->R[l] - 1.0);
         for (int c = 0; c < 3; c++) {
             d[c] = d[c] / m->R[l];  /* E_l of (8) */
             w[c] = U[3 * a + c] - U[3 * b + c];

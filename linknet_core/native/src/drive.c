@@ -17,6 +17,7 @@
 
 #include "drive.h"
 #include "linknet.h"
+#include "ln_math.h"
 
 enum ln_motion_kind { LN_MOTION_INPUT = 0, LN_MOTION_PIECEWISE = 1, LN_MOTION_SINE = 2 };
 
@@ -45,8 +46,8 @@ static void sine(const ln_model *m, ln_int a, double tau, double *P, double *V, 
 {
     const double *q = m->sine + 12 * a, *origin = q, *amplitude = q + 3, *omega = q + 6, *phase = q + 9;
     for (int e = 0; e < 3; e++) {
-        const double angle = omega[e] * tau + phase[e], sn = sin(angle), cs = cos(angle);
-        P[e] = origin[e] + amplitude[e] * (sn - sin(phase[e]));
+        const double angle = omega[e] * tau + phase[e], sn = ln_sin(angle), cs = ln_cos(angle);
+        P[e] = origin[e] + amplitude[e] * (sn - ln_sin(phase[e]));
         V[e] = amplitude[e] * omega[e] * cs;
         A[e] = -amplitude[e] * omega[e] * omega[e] * sn;
     }
@@ -117,8 +118,8 @@ int ln_drive_jump(const ln_model *m, const ln_method *meth, ln_data *d)
     for (ln_int a = 0; a < n; a++) {
         const ln_int k = m->driven_idx[a];
         for (int e = 0; e < 3; e++) {
-            jump_x = fmax(jump_x, fabs(P[3 * a + e] - X[3 * k + e]));
-            jump_u = fmax(jump_u, fabs(V[3 * a + e] - U[3 * k + e]));
+            jump_x = ln_fmax(jump_x, fabs(P[3 * a + e] - X[3 * k + e]));
+            jump_u = ln_fmax(jump_u, fabs(V[3 * a + e] - U[3 * k + e]));
             d->impulse[3 * a + e] = 0.0;
         }
     }

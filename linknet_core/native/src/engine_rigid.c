@@ -34,6 +34,7 @@
 #include <string.h>
 
 #include "linknet.h"
+#include "ln_math.h"
 #include "rigid.h"
 
 #define FN(name) name##_3d  /* the rigid path is 3-D: the point-mass stages it shares are the 3-D ones */
@@ -115,7 +116,7 @@ static void loads(const ln_model *m, const double *Y, const double *X, const dou
 /* q <- q (x) (cos(angle/2), sin(angle/2) u) for a unit body axis u: R <- R Rot(u, angle). */
 static void rotate_right(double *q, double u0, double u1, double u2, double angle)
 {
-    const double ch = cos(0.5 * angle), sh = sin(0.5 * angle);
+    const double ch = ln_cos(0.5 * angle), sh = ln_sin(0.5 * angle);
     const double p1 = sh * u0, p2 = sh * u1, p3 = sh * u2;
     const double w = q[0], x = q[1], y = q[2], z = q[3];
     q[0] = w * ch - x * p1 - y * p2 - z * p3;
@@ -129,7 +130,7 @@ static void axis_flow(double *q, double *Pi, int i, double angle)
 {
     rotate_right(q, i == 0 ? 1.0 : 0.0, i == 1 ? 1.0 : 0.0, i == 2 ? 1.0 : 0.0, angle);
     const int j = (i + 1) % 3, k = (i + 2) % 3;
-    const double c = cos(angle), s = sin(angle), pj = Pi[j], pk = Pi[k];
+    const double c = ln_cos(angle), s = ln_sin(angle), pj = Pi[j], pk = Pi[k];
     Pi[j] = c * pj + s * pk;
     Pi[k] = -s * pj + c * pk;
 }
@@ -137,7 +138,7 @@ static void axis_flow(double *q, double *Pi, int i, double angle)
 /* Exact flow of |Pi|^2/(2 I): a rotation about Pi (fixed in both frames) by t |Pi| / I. */
 static void about_momentum(double *q, const double *Pi, double t, double inertia)
 {
-    const double p = sqrt(Pi[0] * Pi[0] + Pi[1] * Pi[1] + Pi[2] * Pi[2]);
+    const double p = ln_sqrt(Pi[0] * Pi[0] + Pi[1] * Pi[1] + Pi[2] * Pi[2]);
     if (p > 0.0) rotate_right(q, Pi[0] / p, Pi[1] / p, Pi[2] / p, t * p / inertia);
 }
 
@@ -159,7 +160,7 @@ static void free_rotation(const struct ln_rigid_model *rm, double *Y, double t)
             axis_flow(q, Pi, 1, 0.5 * t * Pi[1] / I[1]);
             axis_flow(q, Pi, 0, 0.5 * t * Pi[0] / I[0]);
         }
-        const double norm = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        const double norm = ln_sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
         for (int e = 0; e < 4; e++) q[e] /= norm;
     }
 }
@@ -459,8 +460,8 @@ static double starting_step(const ln_model *m, const ln_method *meth, ln_data *d
             d0 += (X[i] / sx) * (X[i] / sx) + (U[i] / su) * (U[i] / su);
             d1 += (U[i] / sx) * (U[i] / sx) + (MU0[i] / su) * (MU0[i] / su);
         }
-    d0 = sqrt(d0 / n);
-    d1 = sqrt(d1 / n);
+    d0 = ln_sqrt(d0 / n);
+    d1 = ln_sqrt(d1 / n);
     const double h0 = ln_trial_step(d0, d1, span);
     const ln_int size = NY * m->rigid->n_bodies;
     for (ln_int i = 0; i < size; i++) rd->Ys[i] = Y[i] + h0 * dY[i];
@@ -475,7 +476,7 @@ static double starting_step(const ln_model *m, const ln_method *meth, ln_data *d
             const double dx = (U1[i] - U[i]) / sx, du = (acc1[i] - MU0[i]) / su;
             d2 += dx * dx + du * du;
         }
-    d2 = sqrt(d2 / n) / h0;
+    d2 = ln_sqrt(d2 / n) / h0;
     return ln_starting_step(meth, h0, d1, d2, span);
 }
 
@@ -549,7 +550,7 @@ static int rk_steps(const ln_model *m, const ln_method *meth, ln_data *d, double
         double *Ks = KY + s * size;
         for (ln_int b = 0; b < B; b++) {
             double *q = Yn + NY * b + COL_Q, *dq = Ks + NY * b + COL_Q;
-            const double norm = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+            const double norm = ln_sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
             for (int i = 0; i < 4; i++) {
                 q[i] /= norm;
                 dq[i] /= norm;
@@ -666,8 +667,8 @@ static void eigh3(const double *A_in, double *w, double *V)
                 const double apq = A[3 * p + q];
                 if (apq == 0.0) continue;
                 const double theta = (A[3 * q + q] - A[3 * p + p]) / (2.0 * apq);
-                const double t = (theta >= 0.0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
-                const double c = 1.0 / sqrt(t * t + 1.0), sn = t * c;
+                const double t = (theta >= 0.0 ? 1.0 : -1.0) / (fabs(theta) + ln_sqrt(theta * theta + 1.0));
+                const double c = 1.0 / ln_sqrt(t * t + 1.0), sn = t * c;
                 for (int k = 0; k < 3; k++) {
                     const double akp = A[3 * k + p], akq = A[3 * k + q];
                     A[3 * k + p] = c * akp - sn * akq;
@@ -709,7 +710,7 @@ static void quaternion_of(const double *R, double *q)
     for (int i = 1; i < 4; i++)
         if (terms[i] > terms[branch]) branch = i;
     const double arg[4] = {t, d0 - d1 - d2, d1 - d0 - d2, d2 - d0 - d1};
-    const double s = 2.0 * sqrt(fmax(1.0 + arg[branch], 0.0));
+    const double s = 2.0 * ln_sqrt(ln_fmax(1.0 + arg[branch], 0.0));
     const double a = R[7] - R[5], b = R[2] - R[6], c = R[3] - R[1];
     const double e = R[1] + R[3], f = R[2] + R[6], g = R[5] + R[7];
     switch (branch) {
@@ -718,7 +719,7 @@ static void quaternion_of(const double *R, double *q)
     case 2: q[0] = b / s; q[1] = e / s; q[2] = s / 4; q[3] = g / s; break;
     default: q[0] = c / s; q[1] = f / s; q[2] = g / s; q[3] = s / 4; break;
     }
-    const double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    const double n = ln_sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
     for (int i = 0; i < 4; i++) q[i] /= n;
 }
 

@@ -21,6 +21,7 @@
 
    The estimate is the largest distance |X_k - X_companion,k| over the masses, in metres, times that factor. */
 #include "linknet.h"
+#include "ln_math.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -33,11 +34,11 @@ LN_API double ln_companion_settings(int adaptive, int order, double dt, double r
 {
     if (adaptive) {
         *dt_companion = 0.0;
-        *rtol_companion = fmax(rtol * companion_rtol_ratio, ln_rtol_min);
+        *rtol_companion = ln_fmax(rtol * companion_rtol_ratio, ln_rtol_min);
         *atol_companion = atol * companion_rtol_ratio;
         return 1.0;
     }
-    const double gain = ldexp(1.0, order);  /* 2^p */
+    const double gain = ln_pow2(order);  /* 2^p */
     *dt_companion = 0.5 * dt;
     *rtol_companion = *atol_companion = 0.0;
     return gain / (gain - 1.0);
@@ -48,7 +49,7 @@ LN_API double ln_position_gap(ln_int K, const double *Xa, const double *Xb)
     double worst = 0.0;
     for (ln_int k = 0; k < K; k++) {
         const double dx = Xa[3 * k] - Xb[3 * k], dy = Xa[3 * k + 1] - Xb[3 * k + 1], dz = Xa[3 * k + 2] - Xb[3 * k + 2];
-        const double d = sqrt(dx * dx + dy * dy + dz * dz);
+        const double d = ln_sqrt(dx * dx + dy * dy + dz * dz);
         if (!(d <= worst))  /* NaN too: a non-finite gap is the answer */
             worst = d;
     }
@@ -73,7 +74,7 @@ LN_API double ln_error_goal(int adaptive, double rtol, double atol, double size)
 {
     if (!adaptive)
         rtol = atol = ln_default_rtol;
-    return goal_per_rtol * fmax(rtol * size, atol);
+    return goal_per_rtol * ln_fmax(rtol * size, atol);
 }
 
 LN_API double ln_scene_size(ln_int K, const double *X)
@@ -82,8 +83,8 @@ LN_API double ln_scene_size(ln_int K, const double *X)
     for (int i = 0; i < 3; i++) {
         double lo = INFINITY, hi = -INFINITY;
         for (ln_int k = 0; k < K; k++) {
-            lo = fmin(lo, X[3 * k + i]);
-            hi = fmax(hi, X[3 * k + i]);
+            lo = ln_fmin(lo, X[3 * k + i]);
+            hi = ln_fmax(hi, X[3 * k + i]);
         }
         if (hi - lo > size)
             size = hi - lo;

@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "linknet.h"
+#include "ln_math.h"
 
 /* A residual that stalled within this factor of the floor its last Newton step allowed stalled at that floor. */
 LN_API const double ln_near_floor = 4.0;
@@ -68,7 +69,7 @@ double ln_fastest_oscillation(const ln_model *m, const double *T)
         if (!(per_mass <= worst)) worst = per_mass;  /* a NaN is kept */
     }
     free(sum);
-    return isfinite(worst) ? sqrt(worst) : 0.0;
+    return isfinite(worst) ? ln_sqrt(worst) : 0.0;
 }
 
 void ln_projection_failure(const char *where, double reached, double before, double floor, double dt,
@@ -132,7 +133,7 @@ void ln_explain(const ln_model *m, const ln_method *meth, const ln_data *d, int 
         double dt = 0.0, stage_fraction = 1.0, omega = 0.0;
         if (meth->kind == LN_COMPOSITION) {  /* the core left the tensions at the start of the step that failed */
             stage_fraction = 0.0;
-            for (ln_int i = 0; i < meth->n_gammas; i++) stage_fraction = fmax(stage_fraction, fabs(meth->gammas[i]));
+            for (ln_int i = 0; i < meth->n_gammas; i++) stage_fraction = ln_fmax(stage_fraction, fabs(meth->gammas[i]));
             dt = meth->dt;
             omega = ln_fastest_oscillation(m, d->T);
         }

@@ -22,6 +22,7 @@
 #include "drive.h"
 #include "interface_jacobian.h"
 #include "linknet.h"
+#include "ln_math.h"
 
 #define FN(name) name##_3d
 #include "stages.h"
@@ -161,7 +162,7 @@ static void element_derivatives(const ln_model *m, const ln_interface *J, const 
             for (int e = 0; e < 3; e++) dF[3 * a + e] -= p[0] * dU[3 * a + e];
         } else if (kind == J->quadratic_drag) {
             const double *u = U + 3 * a, *du = dU + 3 * a;
-            const double speed = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+            const double speed = ln_sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
             const double along = speed > 0.0 ? (u[0] * du[0] + u[1] * du[1] + u[2] * du[2]) / speed : 0.0;
             for (int e = 0; e < 3; e++) dF[3 * a + e] -= p[0] * (speed * du[e] + along * u[e]);
         } else if (kind == J->spring) {
@@ -173,7 +174,7 @@ static void element_derivatives(const ln_model *m, const ln_interface *J, const 
                 ddu[e] = dU[3 * b + e] - dU[3 * a + e];
                 sq += d[e] * d[e];
             }
-            const double dist = sqrt(sq);
+            const double dist = ln_sqrt(sq);
             if (dist == 0.0) continue;  /* coincident ends: no force, no derivative */
             double n[3], dn[3], n_dd = 0.0;
             for (int e = 0; e < 3; e++) {

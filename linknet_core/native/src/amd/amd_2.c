@@ -14,6 +14,7 @@
  */
 
 #include "amd_internal.h"
+#include "../ln_math.h" /* linknet: ln_sqrt, the sqrt instruction even where errno is kept (no libm) */
 
 /* ========================================================================= */
 /* === clear_flag ========================================================== */
@@ -600,7 +601,7 @@ void AMD_2
     }
     else
     {
-	dense = alpha * sqrt ((double) n) ;
+	dense = alpha * ln_sqrt ((double) n) ;
     }
     dense = MAX (16, dense) ;
     dense = MIN (n,  dense) ;

@@ -9,6 +9,7 @@
 
 #include "../dim.h"
 #include "../linknet.h"
+#include "../ln_math.h"
 #include "../stages.h"
 
 #ifndef LINKNET_FORCE_KINDS
@@ -53,7 +54,7 @@ void FN(ln_scene_forces)(const ln_model *m, const double *X, const double *U, co
                 const double dx = X[b * DIM + e] - X[a * DIM + e];
                 sq += dx * dx;
             }
-            const double dist = sqrt(sq);
+            const double dist = ln_sqrt(sq);
             if (dist == 0.0) break;  /* coincident ends: no direction to pull along */
             const double inv = 1.0 / dist;
             double rate = 0.0;
@@ -70,7 +71,7 @@ void FN(ln_scene_forces)(const ln_model *m, const double *X, const double *U, co
         case LN_FORCE_QUADRATIC_DRAG: {
             double speed = 0.0;
             for (int e = 0; e < DIM; e++) speed += U[a * DIM + e] * U[a * DIM + e];
-            const double c = p[0] * sqrt(speed);
+            const double c = p[0] * ln_sqrt(speed);
             for (int e = 0; e < DIM; e++) F[a * DIM + e] -= c * U[a * DIM + e];
             break;
         }

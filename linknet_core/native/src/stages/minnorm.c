@@ -58,6 +58,7 @@
 
 #include "../dim.h"
 #include "../linknet.h"
+#include "../ln_math.h"
 #include "../minnorm.h"
 #include "../stages.h"
 
@@ -216,7 +217,7 @@ static ln_int mn_cholesky(ln_int n, double *a, ln_int lda, double *diag, ln_int 
                 double td = diag[k]; diag[k] = diag[piv]; diag[piv] = td;
                 ln_int tp = perm[k]; perm[k] = perm[piv]; perm[piv] = tp;
             }
-            const double rkk = sqrt(diag[k]);
+            const double rkk = ln_sqrt(diag[k]);
             double *row = a + k * lda;
             /* the updates by this panel's earlier rows, not yet applied to the trailing matrix */
             mn_rows_update(n - k - 1, row + k + 1, a + k0 * lda + k, lda, a + k0 * lda + k + 1, lda, k - k0);
@@ -469,7 +470,7 @@ void FN(ln_minnorm_solve)(const ln_model *m, ln_data *d, const double *b, double
         p[i] = b[i];
     }
     double rr = mn_dot(L, r, r);
-    const double bnorm = sqrt(rr);
+    const double bnorm = ln_sqrt(rr);
     w->iterations = 0;
     w->residual = 0.0;
     w->stop = MN_STOP_CONVERGED;
@@ -502,7 +503,7 @@ void FN(ln_minnorm_solve)(const ln_model *m, ln_data *d, const double *b, double
             r[i] -= alpha * q[i];
             rr_new += r[i] * r[i];
         }
-        const double res = sqrt(rr_new);
+        const double res = ln_sqrt(rr_new);
         if (res < best) {
             best = res;
             it_best = it;

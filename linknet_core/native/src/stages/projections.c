@@ -19,6 +19,7 @@
 
 #include "../dim.h"
 #include "../linknet.h"
+#include "../ln_math.h"
 #include "../stages.h"
 
 LN_SCALAR_LOOPS_BEGIN
@@ -41,21 +42,14 @@ static inline double length_residual(const ln_model *m, const double *Xc, ln_int
     return (sq - m->R[l] * m->R[l]) * (0.5 * m->inv_R[l]);
 }
 
-/* The larger of a size (never NaN) and |x|: fmax(size, |x|) without a call into libm (a NaN x leaves size). */
-static inline double grow_size(double size, double x)
-{
-    const double v = fabs(x);
-    return v > size ? v : size;
-}
-
 LN_ALWAYS_INLINE void residual_floor(const ln_model *m, const double *Xc, double tol, double *inv_scale)
 {
     for (ln_int l = 0; l < m->L; l++) {
         const ln_int a = m->k1[l], b = m->k2[l];
         double size_a = 0.0, size_b = 0.0;
         for (int e = 0; e < DIM; e++) {
-            size_a = grow_size(size_a, Xc[a * DIM + e]);
-            size_b = grow_size(size_b, Xc[b * DIM + e]);
+            size_a = ln_fmax(size_a, fabs(Xc[a * DIM + e]));
+            size_b = ln_fmax(size_b, fabs(Xc[b * DIM + e]));
         }
         inv_scale[l] = 1.0 / (m->R[l] * tol + 8.0 * EPS * (size_a + size_b));
     }
@@ -211,7 +205,7 @@ static int newton_solve(const ln_model *m, ln_data *d, const double *Xc, const d
         mu[l] = 0.0;
         beta0 += phi[l] * phi[l];
     }
-    beta0 = sqrt(beta0);
+    beta0 = ln_sqrt(beta0);
     if (beta0 == 0.0) return LN_OK;
     for (int restart = 0; restart < KRYLOV_RESTARTS; restart++) {
         /* r = phi - J mu */
@@ -221,7 +215,7 @@ static int newton_solve(const ln_model *m, ln_data *d, const double *Xc, const d
             V[l] = phi[l] - w[l];
             beta += V[l] * V[l];
         }
-        beta = sqrt(beta);
+        beta = ln_sqrt(beta);
         if (beta <= KRYLOV_RTOL * beta0) return LN_OK;
         for (ln_int l = 0; l < L; l++) V[l] /= beta;
         for (ln_int i = 0; i <= n; i++) g[i] = 0.0;
@@ -238,7 +232,7 @@ static int newton_solve(const ln_model *m, ln_data *d, const double *Xc, const d
             }
             double h = 0.0;
             for (ln_int l = 0; l < L; l++) h += w[l] * w[l];
-            h = sqrt(h);
+            h = ln_sqrt(h);
             H[(j + 1) * n + j] = h;
             if (h > 0.0)
                 for (ln_int l = 0; l < L; l++) V[(j + 1) * L + l] = w[l] / h;
@@ -247,7 +241,7 @@ static int newton_solve(const ln_model *m, ln_data *d, const double *Xc, const d
                 H[i * n + j] = cs[i] * a + sn[i] * b;
                 H[(i + 1) * n + j] = -sn[i] * a + cs[i] * b;
             }
-            const double a = H[j * n + j], b = H[(j + 1) * n + j], r = hypot(a, b);
+            const double a = H[j * n + j], b = H[(j + 1) * n + j], r = ln_hypot(a, b);
             cs[j] = r > 0.0 ? a / r : 1.0;
             sn[j] = r > 0.0 ? b / r : 0.0;
             H[j * n + j] = r;
@@ -263,7 +257,7 @@ static int newton_solve(const ln_model *m, ln_data *d, const double *Xc, const d
            along the self-stresses is out of its range) the Krylov space meets J's null space and a pivot of H
            falls to round-off: that direction is dropped, the least-squares step of the rest kept. */
         double pivot_max = 0.0;
-        for (ln_int i = 0; i < j; i++) pivot_max = fmax(pivot_max, fabs(H[i * n + i]));
+        for (ln_int i = 0; i < j; i++) pivot_max = ln_fmax(pivot_max, fabs(H[i * n + i]));
         for (ln_int i = j - 1; i >= 0; i--) {
             double s = g[i];
             for (ln_int k = i + 1; k < j; k++) s -= H[i * n + k] * y[k];
@@ -285,7 +279,7 @@ static double at_floor(const ln_model *m, const double *phi, const double *inv_s
     double reached = 0.0;
     for (ln_int l = 0; l < m->L; l++) {
         if (fabs(phi[l]) > 1.0 / inv_scale[l] + m->floor_safety * fabs(r[l])) return -1.0;
-        reached = fmax(reached, fabs(phi[l]) * m->inv_R[l]);
+        reached = ln_fmax(reached, fabs(phi[l]) * m->inv_R[l]);
     }
     return reached;
 }
@@ -302,7 +296,7 @@ static int newton_step(const ln_model *m, ln_data *d, double *Xc, const double *
     double floor = 0.0;
     for (ln_int l = 0; l < m->L; l++) {
         r[l] = phi[l] - r[l];
-        floor = fmax(floor, (1.0 / inv_scale[l] + m->floor_safety * fabs(r[l])) * m->inv_R[l]);
+        floor = ln_fmax(floor, (1.0 / inv_scale[l] + m->floor_safety * fabs(r[l])) * m->inv_R[l]);
     }
     d->fail_floor = floor;
     double step = 1.0;
@@ -318,7 +312,7 @@ static int newton_step(const ln_model *m, ln_data *d, double *Xc, const double *
         const double reached = at_floor(m, phi, inv_scale, r);
         if (reached >= 0.0) {
             d->floor_stops++;
-            d->floor_reached = fmax(d->floor_reached, reached);
+            d->floor_reached = ln_fmax(d->floor_reached, reached);
             return 1;
         }
     }

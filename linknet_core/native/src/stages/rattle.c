@@ -17,6 +17,7 @@
 #include "../dim.h"
 #include "../drive.h"
 #include "../linknet.h"
+#include "../ln_math.h"
 #include "../stages.h"
 
 LN_SCALAR_LOOPS_BEGIN
@@ -118,14 +119,14 @@ LN_ALWAYS_INLINE int composition_step(const ln_model *m, const ln_method *meth, 
                     for (int e = 0; e < DIM; e++) {
                         const ln_int i = k * DIM + e;
                         U_iterate[i] = Uh[i] + 0.5 * hs * inv_m[k] * d->F[i];
-                        size = fmax(size, fabs(U[i]));
+                        size = ln_fmax(size, fabs(U[i]));
                     }
                 if (m->n_driven && (status = ln_drive_rows(m, d, stage_end, NULL, U_iterate, NULL, DIM)) != LN_OK)
                     return status;
                 if ((status = FN(ln_project_velocities)(m, d, X, U_iterate, E1)) != LN_OK) return status;
                 double change = 0.0;
                 for (ln_int i = 0; i < K * DIM; i++) {
-                    change = fmax(change, fabs(U_iterate[i] - U[i]));
+                    change = ln_fmax(change, fabs(U_iterate[i] - U[i]));
                     U[i] = U_iterate[i];
                 }
                 converged = change <= 4e-16 * size || change == 0.0;

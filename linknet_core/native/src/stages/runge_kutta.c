@@ -12,6 +12,7 @@
 #include "../dim.h"
 #include "../drive.h"
 #include "../linknet.h"
+#include "../ln_math.h"
 #include "../stages.h"
 
 /* Up to this many coordinates a stage's point is summed coordinate by coordinate, above it block by block (measured:
@@ -85,7 +86,7 @@ double FN(ln_rk_error_norm)(const ln_model *m, const ln_method *meth, const doub
             const ln_int k = m->free_idx[f];
             for (int e = 0; e < DIM; e++) {
                 const ln_int i = k * DIM + e;
-                const double scale = meth->atol + meth->rtol * fmax(fabs(Y0[i]), fabs(Y1[i]));
+                const double scale = meth->atol + meth->rtol * ln_fmax(fabs(Y0[i]), fabs(Y1[i]));
                 if (meth->error_norm == LN_RMS_ERROR) {
                     const double err = h * weighted(meth->E1, n_weights, KY, size, i) / scale;
                     s1 += err * err;
@@ -98,9 +99,9 @@ double FN(ln_rk_error_norm)(const ln_model *m, const ln_method *meth, const doub
             }
         }
     }
-    if (meth->error_norm == LN_RMS_ERROR) return sqrt(s1 / n);
+    if (meth->error_norm == LN_RMS_ERROR) return ln_sqrt(s1 / n);
     if (s1 == 0.0 && s2 == 0.0) return 0.0;
-    return fabs(h) * s1 / sqrt((s1 + 0.01 * s2) * n);
+    return fabs(h) * s1 / ln_sqrt((s1 + 0.01 * s2) * n);
 }
 
 /* Hairer-Wanner's starting step (as scipy's select_initial_step), from f at (X, U) and at
@@ -117,8 +118,8 @@ static int starting_step(const ln_model *m, const ln_method *meth, ln_data *d, c
             d0 += (X[i] / sx) * (X[i] / sx) + (U[i] / su) * (U[i] / su);
             d1 += (U[i] / sx) * (U[i] / sx) + (acc0[i] / su) * (acc0[i] / su);
         }
-    d0 = sqrt(d0 / n);
-    d1 = sqrt(d1 / n);
+    d0 = ln_sqrt(d0 / n);
+    d1 = ln_sqrt(d1 / n);
     const double h0 = ln_trial_step(d0, d1, span);
     const ln_int size = m->K * DIM;
     for (ln_int i = 0; i < size; i++) {
@@ -138,7 +139,7 @@ static int starting_step(const ln_model *m, const ln_method *meth, ln_data *d, c
             const double dx = (d->Us[i] - U[i]) / sx, du = (d->acc1[i] - acc0[i]) / su;
             d2 += dx * dx + du * du;
         }
-    d2 = sqrt(d2 / n) / h0;
+    d2 = ln_sqrt(d2 / n) / h0;
     *h_out = ln_starting_step(meth, h0, d1, d2, span);
     return LN_OK;
 }
