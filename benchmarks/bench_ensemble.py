@@ -2,7 +2,8 @@
 (measures; asserts only the members' correctness).
 
 Study: chain_10 (models/chain_10.json), 1000 members varying the tip mass M[11] and gravity g[3] (a 40 x 25
-grid), t_end = 2 s, RATTLE at dt = 1e-3 s, 201 outputs of X, U, T per member streamed into a netCDF file.
+grid), t_end = 2 s, RATTLE at dt = 1e-3 s, 201 outputs of X, U, T per member, written by the workers as shard files
+beside the study's netCDF file, which joins them (linknet_core/ensemble/shards.py, store.py).
 
 1. Throughput, in one run: the serial loop (each member's scene from ``with_parameters``, then ``ln.simulate``,
    in this process) and the study on a LocalCluster of each ``--workers`` count, as ln.ensemble starts one
@@ -17,11 +18,15 @@ grid), t_end = 2 s, RATTLE at dt = 1e-3 s, 201 outputs of X, U, T per member str
    workers' and the client's CPU time per member), is what the machine would give without them.
 2. Per-member CPU breakdown, in this process (thread CPU time, medians of interleaved repeats over members of
    the grid): scene build, structure analysis, Simulator construction, the integration with its companion,
-   a worker's bookkeeping, the serialisation of a batch's results, the client's write into the file.
+   a worker's bookkeeping, its shard write, the serialisation of a batch's result, the client's record of it;
+   and what the client pays for a batch whose trajectories come to it (a worker that does not see the folder):
+   their serialisation and the client's shard write.
 3. Costs by cause, on the 2-worker cluster: idle (CPU time per second of an idle cluster); per study and per
    task (studies of 2 and of 200 trivial members, one per task); per member beyond its run (studies of 2000
    short members in batches of 200, with X, U, T and with the quantities of interest only). With them, each
-   study's CPU time per member is split by cause.
+   study's CPU time per member is split by cause ("of it file writes": the client's, from the study's
+   client_write_cpu_seconds; the workers' shard writes are part of their per-member figure, and said apart from
+   worker_write_cpu_seconds).
 4. Projection to 16 and 100 workers from these figures (the model is printed with them; docs/ensemble.md).
 
     python -m benchmarks.bench_ensemble [--workers 1,2] [--members 1000] [--rounds 5] [--out build/bench_ensemble.json]
@@ -148,7 +153,9 @@ def timed_study(client, processes, vary, t_end, n_out, out, outputs=OUTPUTS, mem
                "members_per_s": n / meter.wall, "tasks": int(ds.attrs["tasks"]),
                "first_result_s": float(ds.attrs["first_result_seconds"]), "workers_cpu_s": meter.workers,
                "member_cpu_s": float(ds.attrs["member_cpu_seconds"]), "client_main_cpu_s": meter.main,
-               "client_other_cpu_s": meter.others, "client_write_cpu_s": float(ds.attrs["client_write_cpu_seconds"])}
+               "client_other_cpu_s": meter.others, "client_write_cpu_s": float(ds.attrs["client_write_cpu_seconds"]),
+               "worker_write_cpu_s": float(ds.attrs.get("worker_write_cpu_seconds", 0.0)),
+               "client_written_members": int(ds.attrs.get("members_written_by_client", 0))}
     ds.close()
     if figures["ok"] != n:
         raise RuntimeError(f"{n - figures['ok']} members of the benchmark's study failed")
@@ -165,7 +172,8 @@ def decompose(row: dict, idle: dict, costs: dict) -> dict:
              "workers_idle": idle["workers"] * wall / n, "workers_task": costs["workers_task_s"] * tasks / n,
              "workers_study": costs["workers_study_s"] / n,
              "client_idle": idle["client"] * wall / n, "client_task": costs["client_task_s"] * tasks / n,
-             "client_study": costs["client_study_s"] / n, "client_write": row["client_write_cpu_s"] / n}
+             "client_study": costs["client_study_s"] / n, "client_write": row["client_write_cpu_s"] / n,
+             "workers_write": row.get("worker_write_cpu_s", 0.0) / n}
     parts["workers_total"] = row["workers_cpu_s"] / n
     parts["client_total"] = client / n
     parts["workers_member"] = parts["workers_total"] - parts["member"] - parts["workers_idle"] - \
@@ -191,8 +199,10 @@ def member_breakdown(scene, vary, t_end, n_out, batch: int, samples: int = 30) -
     parts interleaved member by member."""
     from distributed.protocol import dumps, loads, to_serialize
 
-    from linknet_core.ensemble.members import StudyRuntime, StudySpec, quantities_of_interest
+    from linknet_core.ensemble.members import OUTPUTS as TRAJECTORIES, StudyRuntime, StudySpec, \
+        quantities_of_interest
     from linknet_core.ensemble.parameters import member_scene
+    from linknet_core.ensemble.shards import prepare_folder, write_shard
     from linknet_core.ensemble.store import StudyFile
     from linknet_core.structure.topology import analyse
 
@@ -245,19 +255,34 @@ def member_breakdown(scene, vary, t_end, n_out, batch: int, samples: int = 30) -
                "run_seconds": np.zeros(batch), "cpu_seconds": np.zeros(batch), "worker": "tcp://127.0.0.1:1"}
     for name in payload["outputs"]:
         payload["outputs"][name][...] = 1.0
-    frames = dumps({"data": to_serialize(payload)})
-    out["batch_bytes_member"] = sum(len(memoryview(f).cast("B")) for f in frames) / batch
-    out["serialise_s"] = median_cpu(lambda i: dumps({"data": to_serialize(payload)}), 50) / batch
-    out["deserialise_s"] = median_cpu(lambda i: loads(frames), 50) / batch
+    # what a worker returns once it wrote the batch's shard: the quantities of interest, errors, times
+    sharded = {**payload, "outputs": {k: v for k, v in payload["outputs"].items() if k not in TRAJECTORIES},
+               "shard": "members.h5"}
+    for label, result in (("", payload), ("sharded_", sharded)):
+        frames = dumps({"data": to_serialize(result)})
+        out[f"{label}batch_bytes_member"] = sum(len(memoryview(f).cast("B")) for f in frames) / batch
+        out[f"{label}serialise_s"] = median_cpu(lambda i: dumps({"data": to_serialize(result)}), 50) / batch
+        out[f"{label}deserialise_s"] = median_cpu(lambda i: loads(frames), 50) / batch
+    rounds = plan.n_members // batch
     with tempfile.TemporaryDirectory() as folder:
-        sink = StudyFile(Path(folder) / "w.nc", spec, plan, scene)
-        rounds = plan.n_members // batch
+        shard_folder = Path(folder) / "worker.shards"
+        prepare_folder(shard_folder, "bench")
+        out["worker_shard_write_s"] = median_cpu(
+            lambda i: write_shard(shard_folder, "bench", {**payload, "first": (i % rounds) * batch}, TRAJECTORIES),
+            max(rounds, 20)) / batch
+        single = {**payload, "count": 1, "outputs": {k: v[:1] for k, v in payload["outputs"].items()},
+                  "error": [""], "run_seconds": np.zeros(1), "cpu_seconds": np.zeros(1)}
+        out["shard_task_s"] = median_cpu(lambda i: write_shard(shard_folder, "bench", {**single, "first": i},
+                                                               TRAJECTORIES), 50)
+    for label, result in (("client_record_s", sharded), ("client_write_s", payload)):
+        with tempfile.TemporaryDirectory() as folder:
+            sink = StudyFile(Path(folder) / "w.nc", spec, plan, scene)
 
-        def write(i):
-            sink.write({**payload, "first": (i % rounds) * batch})
+            def write(i):
+                sink.write({**result, "first": (i % rounds) * batch})
 
-        out["client_write_s"] = median_cpu(write, max(rounds, 20)) / batch
-        sink.close({})
+            out[label] = median_cpu(write, max(rounds, 20)) / batch
+            sink.close({})
     out["batch"] = batch
     return out
 
@@ -316,10 +341,14 @@ def fixed_and_task_costs(client, processes, folder, idle: dict, repeats: int = 3
     return out
 
 
+MEMBERS_PER_TASK_MEASURED = 200  # per_member_costs' batches
+
+
 def per_member_costs(client, processes, folder, idle: dict, costs: dict, outputs, members: int = 2000,
-                     per_task: int = 200, repeats: int = 3) -> dict:
-    """CPU time per member beyond its own run, per study, per task and idle: on the workers (d: Dask sending
-    the member's results) and in the client and scheduler (c: receiving them, writing them into the file). From
+                     per_task: int = MEMBERS_PER_TASK_MEASURED, repeats: int = 3) -> dict:
+    """CPU time per member beyond its own run, per study, per task and idle: on the workers (d: writing the
+    member's shard, Dask sending the rest of its result) and in the client and scheduler (c: receiving it,
+    recording it in the file). From
     a study of short members (t_end 0.2 s: one step per output interval, the same 201 outputs) in batches of
     ``per_task``: the per-member part is a large share of its CPU time there, and the study is over before the
     machine's load moves much. Medians of ``repeats``."""
@@ -394,8 +423,11 @@ def quick(args) -> int:
                     raise AssertionError(f"member {m}: {name} differs from its serial ln.simulate run")
             if ds["error_estimate"].values[m] != reference.max_error_estimate:
                 raise AssertionError(f"member {m}: its error estimate differs from its serial run's")
+    if ds.attrs["members_written_by_workers"] != ds.sizes["member"]:
+        raise AssertionError(f"the worker wrote the trajectories of {ds.attrs['members_written_by_workers']} of "
+                             f"{ds.sizes['member']} members (their shards), the client the others")
     print(f"bench_ensemble --quick: {ds.sizes['member']} members on 1 worker, each bit-identical to its serial "
-          "ln.simulate run")
+          "ln.simulate run, their trajectories written by the worker")
     return 0
 
 
@@ -462,6 +494,9 @@ def main(argv=None) -> int:
                 client.close()
                 cluster.close()
     results["rounds"] = rounds
+    streamed = sum(r.get("client_written_members", 0) for rows in rounds.values() for r in rows)
+    if streamed:  # the workers did not see the study's folder (they would on a LocalCluster): said, not hidden
+        print(f"note: the client wrote the trajectories of {streamed} members (their workers did not)", file=sys.stderr)
     typical = rounds[f"workers_{sizes[-1]}"][-1]
     batch = max(1, round(typical["members"] / max(typical["tasks"], 1)))
     results["breakdown"] = member_breakdown(scene, vary, T_END, N_OUT, batch=batch)
@@ -527,16 +562,16 @@ def report(results: dict, sizes: list[int], qoi_size: int) -> None:
     print()
     print("CPU time per member in the studies, by cause (ms; medians over rounds; idle, per task and per study from the "
           "separate measurements below, per member the rest):")
-    print("| | workers, all | members' runs | Dask per member | per task | idle | per study | client and scheduler, "
-          "all | per member | of it file writes | per task | idle | per study |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| | workers, all | members' runs | per member (Dask, shard writes) | of it shard writes | per task | idle | "
+          "per study | client and scheduler, all | per member | of it file writes | per task | idle | per study |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     results["decomposed"] = {}
     for name in names:
         parts = [decompose(r, idle[size_of[name]], costs) for r in rounds[name]]
         med = {key: float(np.median([p[key] for p in parts])) for key in parts[0]}
         results["decomposed"][name] = med
         print(f"| {name} | " + " | ".join(f"{med[key] * ms:.3f}" for key in (
-            "workers_total", "member", "workers_member", "workers_task", "workers_idle", "workers_study",
+            "workers_total", "member", "workers_member", "workers_write", "workers_task", "workers_idle", "workers_study",
             "client_total", "client_member", "client_write", "client_task", "client_idle", "client_study")) + " |")
     b = results["breakdown"]
     print()
@@ -551,10 +586,16 @@ def report(results: dict, sizes: list[int], qoi_size: int) -> None:
             ("  Simulator construction, run and companion, beyond the analysis", b["simulators_s"]),
             ("  integration with its companion, and the error estimate (pooled Simulators)", b["integration_s"]),
             ("worker bookkeeping (quantities of interest, copy into the batch)", b["worker_bookkeeping_s"]),
-            (f"serialise a batch's results (Dask's protocol; {b['batch']} members, "
-             f"{b['batch_bytes_member'] / 1e3:.0f} kB each)", b["serialise_s"]),
-            ("deserialise them on the client", b["deserialise_s"]),
-            (f"client's write into the study file (batches of {b['batch']})", b["client_write_s"])]
+            (f"worker's shard write (batches of {b['batch']}; {b['shard_task_s'] * ms:.2f} ms for a 1-member shard)",
+             b["worker_shard_write_s"]),
+            (f"serialise a batch's result, its shard written (Dask's protocol; "
+             f"{b['sharded_batch_bytes_member']:.0f} bytes per member)", b["sharded_serialise_s"]),
+            ("deserialise it on the client", b["sharded_deserialise_s"]),
+            (f"client's record of it in the study file (batches of {b['batch']})", b["client_record_s"]),
+            (f"where the worker does not write the shard: serialise the batch's result with its trajectories "
+             f"({b['batch_bytes_member'] / 1e3:.0f} kB per member)", b["serialise_s"]),
+            ("  deserialise it on the client", b["deserialise_s"]),
+            (f"  client's shard write and record (batches of {b['batch']})", b["client_write_s"])]
     for label, seconds in rows:
         print(f"| {label} | {seconds * ms:.3f} |")
     print()
@@ -581,16 +622,21 @@ def report(results: dict, sizes: list[int], qoi_size: int) -> None:
               f"{label}: d = {v['workers_member_s'] * ms:.3f} ms on the workers, c = {v['client_member_s'] * ms:.3f} ms in "
               "client and scheduler" for label, v in (("X, U, T", results["member_costs"]["outputs"]),
                                                       ("quantities of interest only", results["member_costs"]["qoi_only"]))))
-    for label, name, outputs in (("X, U, T streamed", "outputs", OUTPUTS),
+    for label, name, outputs in (("X, U, T written by the workers (shards)", "outputs", OUTPUTS),
                                  ("quantities of interest only", "qoi_only", ())):
         per_member = results["member_costs"][name]
         d, c = max(per_member["workers_member_s"], 0.0), max(per_member["client_member_s"], 0.0)
+        # a shard file's fixed cost is per task: taken off d (measured at 200 members per task), added to k_w
+        shard_task = b["shard_task_s"] if outputs else 0.0
+        d = max(d - shard_task / MEMBERS_PER_TASK_MEASURED, 0.0)
         member_bytes = 8 * N_OUT * sum({"X": 33, "U": 33, "T": 10}[o] for o in outputs) + 100
-        rows_p = projection(s_alone, m, d, c, costs, model, member_bytes)
+        rows_p = projection(s_alone, m, d, c, {**costs, "workers_task_s": costs["workers_task_s"] + shard_task},
+                            model, member_bytes)
         results["projection"][name] = rows_p
         print()
         print(f"Projection, {label}: s = {s_alone * ms:.3f} ms, m = {m * ms:.3f} ms, d = {d * ms:.3f} ms, "
-              f"c = {c * ms:.3f} ms, k_w = {costs['workers_task_s'] * ms:.2f} ms, k_c = "
+              f"c = {c * ms:.3f} ms, k_w = {(costs['workers_task_s'] + shard_task) * ms:.2f} ms"
+              + (f" (of it the shard file {shard_task * ms:.2f})" if shard_task else "") + ", k_c = "
               f"{costs['client_task_s'] * ms:.2f} ms, i_w = {model['worker'] * 100:.1f} %, i_c(N) = "
               f"{model['a'] * 100:.2f} % + {model['b'] * 100:.3f} % per heartbeat per second")
         print("| workers | members per task | i_c | workers' rate | client's rate | members/s | against N x serial "

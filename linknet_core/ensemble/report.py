@@ -93,6 +93,10 @@ def summary(ds) -> str:
              f'  engine: {ds.attrs.get("engine")}; {ds.attrs.get("wall_seconds", float("nan")):.2f} s wall and '
              f'first result after {ds.attrs.get("first_result_seconds", float("nan")):.2f} s (engine start included), '
              f'{ds.attrs.get("members_per_second", float("nan")):.1f} members/s once running', ""]
+    by_client = int(ds.attrs.get("members_written_by_client", 0))
+    if by_client:  # a cluster whose workers do not see the study's folder: all trajectories through one process
+        lines.insert(2, f"  trajectories: the client wrote those of {by_client} member(s), not their workers "
+                        f"({ds.attrs.get('client_shard_reason')}); workers that see the study's folder write their own")
     note = accuracy_note(ds)
     if note:
         lines.insert(2, f"  WARNING: {note}")

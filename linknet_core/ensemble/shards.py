@@ -19,6 +19,7 @@ result, and the client writes the shard.
 """
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -119,28 +120,47 @@ def silence(h5file) -> None:
 def write_shard(folder, study_id: str, batch: dict, trajectories) -> Path:
     """Write one task's result (``members.run_batch``'s, its outputs whole) as a shard in ``folder``: a temporary
     file, renamed to its name when complete. Returns the shard's path; a failure (a full disk, the folder gone)
-    raises WriteError naming the shard, and leaves no file behind."""
+    raises WriteError naming the shard, and leaves no file behind.
+
+    The trajectories are a dataset each (contiguous: one write of the whole array, and what the study file's
+    virtual datasets map); everything else per member is one table (a dataset of a compound type) and the errors
+    a dataset only where a member failed: each dataset costs ~0.07 ms of CPU time to create, the file ~0.15 ms."""
     import h5py
 
     path = Path(folder) / shard_name(study_id, batch["first"], batch["count"])
     temporary = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+    kept = [name for name in batch["outputs"] if name in trajectories]
+    columns = {name: np.asarray(values) for name, values in batch["outputs"].items() if name not in trajectories}
+    columns.update((name, np.asarray(batch[name], dtype=float)) for name in ("run_seconds", "cpu_seconds")
+                   if name in batch)
+    table = np.empty(batch["count"], dtype=[(name, values.dtype, values.shape[1:])
+                                            for name, values in columns.items()])
+    for name, values in columns.items():
+        table[name] = values
+    contents = [(name, np.asarray(batch["outputs"][name]), None) for name in kept] + [("members", table, None)]
+    if any(batch["error"]):
+        contents.append(("error", np.array(batch["error"], dtype=object), h5py.string_dtype()))
     f = None
+    # every dataset is created before any is written, and held until the file is closed or abandoned: an object
+    # released while its file fails to write flushes into the failure, and HDF5 prints that release's error
+    datasets = []
     try:
         f = h5py.File(temporary, "w")
-        f.attrs["first"], f.attrs["count"] = batch["first"], batch["count"]
-        f.attrs["worker"] = batch["worker"]
-        f.attrs["trajectories"] = " ".join(name for name in trajectories if name in batch["outputs"])
-        for name, values in batch["outputs"].items():
-            f.create_dataset(name, data=values)  # contiguous: one write of the whole array
-        f.create_dataset("error", data=np.array(batch["error"], dtype=object), dtype=h5py.string_dtype())
-        f.create_dataset("run_seconds", data=np.asarray(batch["run_seconds"], dtype=float))
-        if "cpu_seconds" in batch:
-            f.create_dataset("cpu_seconds", data=np.asarray(batch["cpu_seconds"], dtype=float))
+        f.attrs["batch"] = json.dumps({"first": int(batch["first"]), "count": int(batch["count"]),
+                                       "worker": batch["worker"], "trajectories": kept})
+        datasets = [(f.create_dataset(name, shape=values.shape, dtype=dtype or values.dtype), values)
+                    for name, values, dtype in contents]
+        for dataset, values in datasets:
+            dataset[...] = values
         f.flush()  # a full disk fails here, with the file still open, not inside close
+        datasets = []
         f.close()
         f = None
         os.replace(temporary, path)
     except Exception as exc:
+        if f is not None:
+            silence(f)
+        datasets = []
         abandon(f)
         try:
             os.unlink(temporary)
@@ -156,13 +176,17 @@ def read_shard(path) -> dict:
     import h5py
 
     with h5py.File(path, "r") as f:
-        names = [name for name in f if name not in ("error", "run_seconds", "cpu_seconds")]
-        batch = {"first": int(f.attrs["first"]), "count": int(f.attrs["count"]),
-                 "outputs": {name: f[name][()] for name in names},
-                 "error": [e.decode() if isinstance(e, bytes) else str(e) for e in f["error"][()]],
-                 "run_seconds": f["run_seconds"][()], "worker": str(f.attrs["worker"]), "shard": str(path)}
-        if "cpu_seconds" in f:
-            batch["cpu_seconds"] = f["cpu_seconds"][()]
+        facts = json.loads(f.attrs["batch"])
+        table = f["members"][()]
+        errors = [e.decode() if isinstance(e, bytes) else str(e) for e in f["error"][()]] if "error" in f else \
+            [""] * facts["count"]
+        outputs = {name: f[name][()] for name in facts["trajectories"]}
+    columns = {name: table[name] for name in table.dtype.names}
+    batch = {"first": facts["first"], "count": facts["count"], "worker": facts["worker"], "error": errors,
+             "run_seconds": columns.pop("run_seconds"), "shard": str(path)}
+    if "cpu_seconds" in columns:
+        batch["cpu_seconds"] = columns.pop("cpu_seconds")
+    batch["outputs"] = {**outputs, **columns}
     return batch
 
 

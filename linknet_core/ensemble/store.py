@@ -376,7 +376,7 @@ class StudyFile:
         import h5py
 
         entries = [(r["first"], r["count"], r["shard"]) for r in self._records if r["shard"]]
-        if not entries:
+        if not self._trajectories or not entries:
             return
         own = Path(self.shard_folder)
         for name in self._trajectories:

@@ -10,7 +10,7 @@ import pytest
 import xarray as xr
 
 import linknet_core as ln
-from linknet_core.ensemble import members, shards
+from linknet_core.ensemble import members, shards, summary
 from linknet_core.output import WriteError
 
 from .ensemble_support import MODELS, assert_member_equals, serial_run
@@ -81,6 +81,7 @@ def test_workers_that_do_not_see_the_folder_send_the_trajectories_to_the_client(
                      out=tmp_path / "s.nc")
     assert ds.attrs["members_written_by_client"] == 3 and ds.attrs["members_written_by_workers"] == 0
     assert ds.attrs["client_shard_reason"] == "its worker does not see the folder"
+    assert "trajectories: the client wrote those of 3 member(s), not their workers" in summary(ds)
     for m, mass in enumerate(MASSES[:3]):
         assert_member_equals(ds, m, serial_run(scene, {"M[11]": mass}, T_END, N_OUT))
 
@@ -188,3 +189,38 @@ def test_a_shard_is_whole_or_absent(tmp_path, monkeypatch):
     with pytest.raises(WriteError, match=r"members-000000009-1\.study\.h5: No space left on device \(errno 28\)"):
         shards.write_shard(folder, "study", _batch(9, 1, 8), members.OUTPUTS)
     assert sorted(p.name for p in folder.iterdir()) == sorted([shards.MARKER, path.name])
+
+
+CLIENT_KILLED_AFTER = 4  # results
+
+
+def test_a_client_killed_mid_study_leaves_whole_readable_shards(process_cluster, tmp_path):
+    """The process running the study dies (SIGKILL) after a few results: the workers' shards already in the folder
+    are whole, each holding its task's members exactly as their serial runs (nothing computed is lost with the
+    client), and no half-written file bears a shard's name."""
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "s.nc"
+    masses = np.linspace(0.5, 2.0, 12)
+    script = (
+        "import os, signal, numpy as np, linknet_core as ln\n"
+        "def die(progress):\n"
+        f"    if progress.done >= {CLIENT_KILLED_AFTER}:\n"
+        "        os.kill(os.getpid(), signal.SIGKILL)\n"
+        f"ln.ensemble({str(MODELS / 'chain_10.json')!r}, vary={{'M[11]': np.linspace(0.5, 2.0, 12)}}, t_end={T_END},"
+        f" n_out={N_OUT}, dt=1e-5, client={process_cluster!r}, members_per_task=1, out={str(out)!r},"
+        " progress=die)\n")
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert run.returncode == -signal.SIGKILL, run.stderr
+    found = shards.shard_files(tmp_path / "s.shards")
+    assert len(found) >= CLIENT_KILLED_AFTER
+    scene = ln.load_scene(MODELS / "chain_10.json")
+    for path in found:
+        batch = shards.read_shard(path)
+        assert batch["count"] == 1 and batch["error"] == [""]
+        reference = serial_run(scene, {"M[11]": masses[batch["first"]]}, T_END, N_OUT, dt=1e-5)
+        for name in ("X", "U", "T"):
+            np.testing.assert_array_equal(batch["outputs"][name][0], getattr(reference, name))
+        assert batch["outputs"]["error_estimate"][0] == reference.max_error_estimate
