@@ -14,6 +14,12 @@ arbitrary velocities). Random input forces on every free mass.
 The numeric side is anything with the ``Dynamics`` methods used here (``forces``, ``tension_matrix``,
 ``tension_rhs``, ``tensions``, ``accelerations``, ``link_forces``, optionally
 ``check_consistent_velocities``), so the checker itself can be tested with a deliberately wrong assembly.
+
+A scene with ropes or a ground (``run_unilateral_checks``): the checks above on its taut system (every rope a rod of
+the seed, the masses on the ground at the start as links to virtual anchors: the mode the scene runs in with all of
+them active, ``taut_mode``), and at the states of a run the complementarity conditions (T >= 0, gap >= 0, T gap = 0;
+for the touching ropes and contacts the same at the acceleration level) with the LCP's solution against an
+enumeration of the active sets from the seed's (9), (25)-(26) written again here (``_check_unilateral``).
 """
 
 from __future__ import annotations
@@ -31,7 +37,8 @@ from linknet_core.scene.description import FORCE_KINDS
 from linknet_core.tolerances import SINGULAR_RCOND
 from linknet_core.symbolic.derivation import SymbolicTensionSystem, sign_pattern
 
-__all__ = ["CheckResult", "Sample", "run_checks", "add_arguments", "main", "sample_states", "taut_string_scene"]
+__all__ = ["CheckResult", "Sample", "run_checks", "add_arguments", "main", "sample_states", "taut_string_scene",
+           "run_unilateral_checks", "taut_mode", "unilateral_states"]
 
 # tolerances, relative to the scale of the compared quantity (round-off is ~1e-16 relative)
 RTOL_EXACT = 1e-11       # same formula, different arithmetic order
@@ -1402,6 +1409,303 @@ def _check_kernel(scene, dyn, states):
 
 
 # ------------------------------------------------------------------------------------------------
+# ropes and a ground: the taut system, and the complementarity conditions along a run
+# ------------------------------------------------------------------------------------------------
+
+UNILATERAL_RUN_TIME = 2.0  # s: the run the complementarity checks sample
+UNILATERAL_STATES = 41     # output states of that run, evenly spaced, every one checked
+UNILATERAL_RTOL = 1e-9     # the run's tolerance (dop853)
+# A rope or contact touches (its acceleration-level conditions apply) when its gap is within TOUCH_RTOL of its
+# length scale and it separates no faster than TOUCH_RTOL of the velocity scale: the run's states are projected to
+# ~1e-15, and a step opens gaps far above this.
+TOUCH_RTOL = 1e-9
+# T >= 0, gap >= 0, d2gap/dt2 >= 0 and the products' zeros hold to this, relative to the state's force, length and
+# acceleration scales: the LCP's conditions hold to 1e-11 of its scale (complementarity.LCP_TOL), and the run's
+# positions sit on their constraints to its tolerance.
+RTOL_COMPLEMENTARITY = 1e-9
+# Enumerating the active sets of more touching ropes and contacts than this (2^n dense solves per state) is skipped.
+ENUMERATION_MAX = 12
+
+
+def taut_mode(scene):
+    """(mode scene, its Dynamics, what it is in words): the mode of ``scene`` with every rope taut (a rod of the
+    seed) and every free mass that touches the ground at the start in contact (a link to a virtual anchor straight
+    above it): the system (25)-(26) that today's checks take, built by the path that runs the scene
+    (UnilateralDynamics.mode)."""
+    from linknet_core.dynamics.unilateral import UnilateralDynamics
+
+    uni = UnilateralDynamics(scene)
+    X, U = np.array(scene.X0, float), np.array(scene.U0, float)
+    active = np.zeros(uni.n_unilateral, bool)
+    active[:uni.rope_links.size] = True
+    active[uni.rope_links.size:] = uni.touching(X)[uni.rope_links.size:]
+    md = uni.mode(active, X, U)
+    n_contacts = int(active[uni.rope_links.size:].sum())
+    words = (f"the taut system: every rope taut as a rod ({uni.rope_links.size} of {scene.L} links are ropes)"
+             + (f", {n_contacts} mass(es) on the ground at the start as links to virtual anchors above them"
+                if scene.ground is not None else ""))
+    return md.inner.scene, md.inner, words
+
+
+def unilateral_states(scene, t_end=None, n=UNILATERAL_STATES):
+    """[(t, X, U, anchor_acc)]: the states of a run of ``scene`` (dop853, rtol UNILATERAL_RTOL) at n even times to
+    t_end (default UNILATERAL_RUN_TIME), the driven anchors' accelerations from
+    their motions at each time; and the run (its events)."""
+    from linknet_core.simulator.simulator import simulate
+
+    t_end = UNILATERAL_RUN_TIME if t_end is None else t_end
+    run = simulate(scene, t_end, "dop853", rtol=UNILATERAL_RTOL, n_out=n, error_estimate=False, progress=False)
+    states = []
+    for t, X, U in zip(run.t, run.X, run.U):
+        Aa = None
+        if scene.driven.any():
+            _, _, A = scene.anchor_motion(float(t))
+            Aa = np.zeros((scene.K, 3))
+            Aa[scene.driven_indices] = A
+        states.append((float(t), np.array(X), np.array(U), Aa))
+    return states, run
+
+
+def _seed_rows(scene, X, U, F, anchor_acc, links, contacts):
+    """The seed's (25)-(26) written again for a set of constraints: C (rows: +E_l at k1 and -E_l at k2 with E_l =
+    (X_k2 - X_k1) / R_l for each link of ``links``; the ground's normal n at k for each mass of ``contacts``), W = C
+    M^-1 C^T, B with W lambda - B the constraints' second time derivatives at zero gap rate (a link's |dU|^2 / R +
+    E . (a_k2 - a_k1), a contact's -n . a_k, a = F / M on free masses, the motion's acceleration on driven anchors),
+    and M^-1 as a (K,) vector. C lambda's forces pull a rope's ends together and push a mass off the ground."""
+    K = scene.K
+    inv_mass = np.where(scene.fixed | scene.driven, 0.0, 1.0 / np.where(scene.fixed | scene.driven, 1.0, scene.mass))
+    a = F * inv_mass[:, None]
+    if anchor_acc is not None:
+        a = a + np.where((scene.driven)[:, None], anchor_acc, 0.0)
+    rows = len(links) + len(contacts)
+    C = np.zeros((rows, 3 * K))
+    B = np.zeros(rows)
+    for i, l in enumerate(links):
+        k1, k2, R = int(scene.k1[l]), int(scene.k2[l]), float(scene.length[l])
+        E = (X[k2] - X[k1]) / R
+        C[i, 3 * k1:3 * k1 + 3], C[i, 3 * k2:3 * k2 + 3] = E, -E
+        dU = U[k2] - U[k1]
+        B[i] = dU @ dU / R + E @ (a[k2] - a[k1])
+    for j, k in enumerate(contacts):
+        n = scene.ground.normal
+        C[len(links) + j, 3 * k:3 * k + 3] = n
+        B[len(links) + j] = -n @ a[k]
+    W = (C * np.repeat(inv_mass, 3)) @ C.T
+    return C, W, B, inv_mass, a
+
+
+def _enumerate_active_sets(W, B, n_rods, tol_lam, tol_w):
+    """Every active set S of the unilateral rows (those after the first n_rods, the rods always in) for which the
+    rods' and S's equations W_SS lambda_S = B_S (minimum norm where singular, (31)) give lambda_S >= 0 and W lambda -
+    B >= 0 on the other unilateral rows: [(S as a bool array over the unilateral rows, lambda)]."""
+    import itertools
+
+    m = B.size - n_rods
+    found = []
+    for chosen in itertools.product((False, True), repeat=m):
+        chosen = np.array(chosen, bool)
+        rows = np.concatenate([np.arange(n_rods), n_rods + np.flatnonzero(chosen)]).astype(int)
+        lam = np.zeros(B.size)
+        if rows.size:
+            lam[rows] = np.linalg.lstsq(W[np.ix_(rows, rows)], B[rows], rcond=RTOL_NULL)[0]
+        w = W @ lam - B
+        if np.abs(w[rows]).max(initial=0.0) > tol_w:  # the chosen equations themselves inconsistent
+            continue
+        if np.all(lam[n_rods:][chosen] >= -tol_lam) and np.all(w[n_rods:][~chosen] >= -tol_w):
+            found.append((chosen, lam))
+    return found
+
+
+class _Worst:
+    """The largest violation of one condition over the states, with what broke it (in the scene's words)."""
+
+    def __init__(self):
+        self.value, self.where = 0.0, ""
+
+    def add(self, value, where):
+        if value > self.value:
+            self.value, self.where = float(value), where
+
+
+def _gap_second_derivatives(d, dU, dA):
+    """d2/dt2 of R - |d| for a link vector d(t) with rates dU and dA: -(|dU|^2 + d . dA) / |d| + (d . dU)^2 /
+    |d|^3."""
+    r = np.sqrt(np.einsum("ij,ij->i", d, d))
+    return (-(np.einsum("ij,ij->i", dU, dU) + np.einsum("ij,ij->i", d, dA)) / r
+            + np.einsum("ij,ij->i", d, dU) ** 2 / r ** 3)
+
+
+def _check_unilateral(scene, sym, states, dynamics=None):
+    """The complementarity conditions at ``states`` (unilateral_states) and the LCP against enumeration.
+
+    At every state, with linknet's tensions and normal forces (UnilateralDynamics.resolve: the acceleration LCP,
+    then the chosen mode's (25)-(26)) and accelerations, and gaps computed here from the positions (a rope's R -
+    |X_k2 - X_k1|, a mass's height n . (X_k - p)):
+      position level, every rope and contact: T >= 0, gap >= 0, T gap = 0;
+      acceleration level, those that touch (gap and its rate zero): T >= 0, d2gap/dt2 >= 0 (from linknet's
+      accelerations, differentiated here), T d2gap/dt2 = 0.
+    And the LCP (UnilateralDynamics.select_mode's multipliers) and linknet's accelerations against every active
+    set of the touching constraints that satisfies the conditions, from the seed's (9) and (25)-(26) written again
+    here (_seed_rows), the external forces from the symbolic model: the accelerations are unique (W is positive
+    semidefinite), and so are the multipliers where the active rows are independent. Skipped at states with more
+    than ENUMERATION_MAX touching constraints, and where a touching contact has Coulomb friction (its friction
+    enters the LCP's matrix, which the frictionless enumeration here does not model)."""
+    from linknet_core.dynamics.unilateral import UnilateralDynamics
+
+    uni = dynamics if dynamics is not None else UnilateralDynamics(scene)
+    Ffn = sym.forces_function()
+    ropes = np.flatnonzero(scene.rope)
+    rods = np.flatnonzero(~scene.rope)
+    contacts = uni.contact_masses
+    ground = scene.ground
+    size = uni.size
+    scale_len = np.concatenate([scene.length[ropes], np.full(contacts.size, size)])
+    names = [f"rope {scene.link_label(int(l))}" for l in ropes] + \
+            [f"the ground contact of {scene.mass_label(int(k))}" for k in contacts]
+    pos = {c: _Worst() for c in ("T >= 0", "gap >= 0", "T gap = 0")}
+    acc = {c: _Worst() for c in ("T >= 0", "d2gap/dt2 >= 0", "T d2gap/dt2 = 0")}
+    lcp = {c: _Worst() for c in ("LCP multiplier >= 0", "LCP multipliers = enumeration", "tensions = enumeration",
+                                 "accelerations = enumeration", "one solution")}
+    n_touching = n_enumerated = n_enumerated_touching = 0
+    skipped = {}
+    slack_seen = taut_seen = 0
+    for t, X, U, Aa in states:
+        at = f"t = {t:.6g} s"
+        T, normal = uni.resolve(X, U, None, Aa)
+        A, _ = uni.accelerations(X, U, None, Aa)
+        F = sym.forces(Ffn, X, U, np.zeros_like(X))
+        force = np.concatenate([T[ropes], normal[contacts]])
+        d = X[scene.k2[ropes]] - X[scene.k1[ropes]]
+        dU = U[scene.k2[ropes]] - U[scene.k1[ropes]]
+        dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+        gap = np.concatenate([scene.length[ropes] - dist,
+                              ground.gaps(X[contacts]) if ground is not None else np.zeros(0)])
+        rate = np.concatenate([-np.einsum("ij,ij->i", d, dU) / dist,
+                               U[contacts] @ ground.normal if ground is not None else np.zeros(0)])
+        g2 = np.concatenate([_gap_second_derivatives(d, dU, A[scene.k2[ropes]] - A[scene.k1[ropes]]),
+                             A[contacts] @ ground.normal if ground is not None else np.zeros(0)])
+        f_scale = max(float(np.abs(np.concatenate([T, normal])).max(initial=0.0)),
+                      float(np.abs(F).max(initial=0.0)), 1e-300)
+        free = ~(scene.fixed | scene.driven)
+        v_scale = max(float(np.abs(U[free]).max(initial=0.0)),
+                      math.sqrt(float(np.linalg.norm(scene.gravity)) * size), 1e-300)
+        a_scale = max(float(np.abs(A).max(initial=0.0)), float(np.linalg.norm(scene.gravity)),
+                      v_scale ** 2 / size, 1e-300)
+        slack_seen += int(np.sum(force == 0))
+        taut_seen += int(np.sum(force > 0))
+        for u in range(force.size):
+            pos["T >= 0"].add(-force[u] / f_scale, f"{names[u]} at {at}: force {force[u]:.6g} N")
+            pos["gap >= 0"].add(-gap[u] / scale_len[u], f"{names[u]} at {at}: gap {gap[u]:.6g} m")
+            pos["T gap = 0"].add(abs(force[u] * gap[u]) / (f_scale * scale_len[u]),
+                                 f"{names[u]} at {at}: force {force[u]:.6g} N, gap {gap[u]:.6g} m")
+        touching = (np.abs(gap) <= TOUCH_RTOL * scale_len) & (rate <= TOUCH_RTOL * v_scale)
+        n_touching += int(touching.sum())
+        for u in np.flatnonzero(touching):
+            acc["T >= 0"].add(-force[u] / f_scale, f"{names[u]} at {at}: force {force[u]:.6g} N")
+            acc["d2gap/dt2 >= 0"].add(-g2[u] / a_scale, f"{names[u]} at {at}: d2gap/dt2 {g2[u]:.6g} m/s^2")
+            acc["T d2gap/dt2 = 0"].add(abs(force[u] * g2[u]) / (f_scale * a_scale),
+                                       f"{names[u]} at {at}: force {force[u]:.6g} N, d2gap/dt2 {g2[u]:.6g} m/s^2")
+        # the LCP's own multipliers on the touching constraints, and brute force
+        cand = np.flatnonzero(touching)
+        if cand.size > ENUMERATION_MAX:
+            skipped["size"] = (skipped.get("size", (0,))[0] + 1,
+                               f"more touching ropes and contacts than ENUMERATION_MAX = {ENUMERATION_MAX} (2^n dense "
+                               f"solves; {cand.size} at {at})")
+            continue
+        n_ropes = ropes.size
+        if uni.friction > 0 and (cand >= n_ropes).any():
+            skipped["friction"] = (skipped.get("friction", (0,))[0] + 1,
+                                   f"a touching contact with Coulomb friction (mu {uni.friction:g}), which enters the "
+                                   f"LCP's matrix and the frictionless enumeration here does not model (last at {at})")
+            continue
+        candidates = np.zeros(uni.n_unilateral, bool)
+        candidates[cand] = True
+        _, lam_rows, md = uni.select_mode(X, U, None, Aa, candidates=candidates)
+        lam_lcp = md.unilateral_forces(lam_rows)
+        for u in cand:
+            lcp["LCP multiplier >= 0"].add(-lam_lcp[u] / f_scale,
+                                           f"{names[u]} at {at}: the LCP's multiplier {lam_lcp[u]:.6g} N")
+        links = np.concatenate([rods, ropes[cand[cand < n_ropes]]]).astype(int)
+        cmasses = contacts[cand[cand >= n_ropes] - n_ropes]
+        C, W, B, inv_mass, a_free = _seed_rows(scene, X, U, F, Aa, links, cmasses)
+        b_scale = max(float(np.abs(B).max(initial=0.0)), a_scale)
+        diag = max(float(np.abs(np.diagonal(W)).max(initial=0.0)), 1e-300)
+        found = _enumerate_active_sets(W, B, rods.size, RTOL_COMPLEMENTARITY * b_scale / diag,
+                                       RTOL_COMPLEMENTARITY * b_scale)
+        n_enumerated += 1
+        n_enumerated_touching += bool(cand.size)
+        if not found:
+            lcp["one solution"].add(1.0, f"at {at}: no active set of the {cand.size} touching constraint(s) "
+                                         "satisfies the conditions")
+            continue
+        acc_b = [(a_free + (inv_mass[:, None] * (C.T @ lam).reshape(-1, 3))) for _, lam in found]
+        spread = max(float(np.abs(x - acc_b[0]).max(initial=0.0)) for x in acc_b) / a_scale
+        lcp["one solution"].add(spread, f"at {at}: {len(found)} active sets with accelerations {spread:.3g} apart")
+        worst_acc = float(np.abs((A - acc_b[0])[free]).max(initial=0.0)) / a_scale
+        lcp["accelerations = enumeration"].add(worst_acc, f"at {at}: accelerations differ by {worst_acc:.3g} of "
+                                                          f"{a_scale:.3g} m/s^2")
+        chosen, lam_b = found[0]
+        rows = np.concatenate([np.arange(rods.size), rods.size + np.flatnonzero(chosen)]).astype(int)
+        sub = W[np.ix_(rows, rows)]
+        eig = np.linalg.eigvalsh(sub) if rows.size else np.ones(1)
+        if len(found) == 1 and eig.min(initial=1.0) > RTOL_NULL * max(eig.max(initial=0.0), 1e-300):
+            # independent active rows: the multipliers are unique, compare them one by one
+            labels = [scene.link_label(int(l)) for l in rods] + [names[u] for u in cand]
+            mine = np.concatenate([T[rods], force[cand]])
+            theirs = np.concatenate([lam_b[:rods.size], lam_b[rods.size:]])
+            lcp_own = np.concatenate([lam_rows[:rods.size], lam_lcp[cand]])
+            for i, label in enumerate(labels):
+                lcp["tensions = enumeration"].add(abs(mine[i] - theirs[i]) / f_scale,
+                                                  f"{label} at {at}: {mine[i]:.6g} N, enumeration {theirs[i]:.6g} N")
+                lcp["LCP multipliers = enumeration"].add(
+                    abs(lcp_own[i] - theirs[i]) / f_scale,
+                    f"{label} at {at}: the LCP's {lcp_own[i]:.6g} N, enumeration {theirs[i]:.6g} N")
+    tol = RTOL_COMPLEMENTARITY
+    results = []
+
+    def result(name, table, detail):
+        worst = max(w.value for w in table.values())
+        broken = "".join(f"; BROKEN: {c} at {w.where}" for c, w in table.items() if w.value > tol)
+        results.append(CheckResult(name, worst <= tol, worst, tol, detail + broken))
+
+    result("ropes, ground: T >= 0, gap >= 0, T gap = 0", pos,
+           f"{len(states)} states along the run, {len(names)} rope(s) and contact(s): " + ", ".join(
+               f"{c} {w.value:.1e}" for c, w in pos.items()) + f" (relative to the force and length scales); "
+           f"{taut_seen} taut and {slack_seen} slack or off the ground")
+    if n_touching:
+        result("touching: T >= 0, d2gap/dt2 >= 0, T d2gap/dt2 = 0", acc,
+               f"{n_touching} touching rope(s)/contact(s) over the states: " + ", ".join(
+                   f"{c} {w.value:.1e}" for c, w in acc.items())
+               + " (d2gap/dt2 from linknet's accelerations; relative to the force and acceleration scales)")
+    else:
+        results.append(CheckResult("touching: T >= 0, d2gap/dt2 >= 0, T d2gap/dt2 = 0", True, 0.0, tol,
+                                   "no rope or contact touched at the sampled states", skipped=True))
+    why = "; ".join(f"enumeration skipped at {count} state(s): {reason}" for count, reason in skipped.values())
+    if n_enumerated:
+        result("LCP = enumeration of the active sets", lcp,
+               f"{n_enumerated} state(s) ({n_enumerated_touching} with touching ropes or contacts), every active set "
+               "of those from (9), (25)-(26) written again: " + ", ".join(f"{c} {w.value:.1e}" for c, w in lcp.items()) + (f"; {why}" if why
+                                                                                             else ""))
+    else:
+        results.append(CheckResult("LCP = enumeration of the active sets", True, 0.0, tol,
+                                   why or "no rope or contact touched at the sampled states", skipped=True))
+    return results
+
+
+def run_unilateral_checks(scene, samples=5, seed=0, kernel=False, native=True, states=None):
+    """The checks of a scene with ropes or a ground: today's checks (run_checks) on its taut system (taut_mode), and
+    the complementarity conditions and the LCP against enumeration at the states of a run (unilateral_states, or
+    ``states``). Returns (taut system in words, the taut checks, the complementarity checks, the run's states)."""
+    mode_scene, mode_dyn, words = taut_mode(scene)
+    with single_threaded_blas():
+        taut = _run_checks(mode_scene, samples, seed, mode_dyn, None, None, kernel, native)
+        if states is None:
+            states, _ = unilateral_states(scene)
+        comp = _check_unilateral(scene, SymbolicTensionSystem(scene), states)
+    return words, taut, comp, states
+
+
+# ------------------------------------------------------------------------------------------------
 # command line
 # ------------------------------------------------------------------------------------------------
 
@@ -1477,9 +1781,21 @@ def main(args) -> int:
         n_fixed = int(np.count_nonzero(np.asarray(scene.inv_mass) == 0))
         print(f"{path}: K={scene.K} masses ({n_fixed} anchored), L={scene.L} links; {args.samples} states on and "
               f"{args.samples} off the manifold, seed {args.seed}")
-        results = run_checks(scene, samples=args.samples, seed=args.seed, kernel=getattr(args, "kernel", False))
-        for r in results:
-            print(r.line())
+        if scene.unilateral:
+            words, taut, comp, states = run_unilateral_checks(scene, samples=args.samples, seed=args.seed,
+                                                              kernel=getattr(args, "kernel", False))
+            print(f"{words}:")
+            for r in taut:
+                print(r.line())
+            print(f"the complementarity conditions at {len(states)} states of a dop853 run (rtol "
+                  f"{UNILATERAL_RTOL:g}) to {states[-1][0]:g} s:")
+            for r in comp:
+                print(r.line())
+            results = taut + comp
+        else:
+            results = run_checks(scene, samples=args.samples, seed=args.seed, kernel=getattr(args, "kernel", False))
+            for r in results:
+                print(r.line())
         bad = sum(not r.passed for r in results)
         failed += bad
         print(f"{'all checks passed' if not bad else f'{bad} check(s) FAILED'} in "
