@@ -3,8 +3,10 @@
 
 Every picture draws the network itself: masses as points, anchored masses marked, links as segments
 coloured by their tension T on a diverging colour scale centred on T = 0 (T > 0 tension, red; T < 0
-compression, blue), with a time stamp and a colour bar. Links are one collection (one LineCollection,
-one plotly trace), so a 100 x 100 net draws as fast as the renderer can fill its 19800 segments.
+compression, blue), with a time stamp and a colour bar. Ropes that are slack at a sample are drawn dashed, and a
+ground plane is drawn (its trace in a flat view whose plane holds its normal, a translucent patch in 3-D). Links
+are one collection (one LineCollection, one plotly trace; two where ropes are slack), so a 100 x 100 net draws as
+fast as the renderer can fill its 19800 segments.
 
 Used by ``linknet animate``, ``linknet view``, ``linknet simulate --animate`` and the demo. matplotlib
 and plotly are imported only when a picture is drawn, so the CLI starts fast.
@@ -49,6 +51,13 @@ STILL_SUFFIX = ".png"
 # a frame box this many times the network's own size gets a note: the network is a dot in it
 SCALE_NOTE_RATIO = 1e3
 PROGRESS_EVERY = 5.0  # seconds between the progress lines of a long animation write
+SLACK_DASHES = (0, (3.0, 2.0))  # a slack rope's line style (matplotlib's offset, on-off pattern in line widths)
+GROUND_COLOUR = "#8c6d46"  # the ground's trace and patch: earth brown, apart from the tension scale's colours
+GROUND_ALPHA = 0.25  # the 3-D ground patch's opacity: the masses below it stay visible
+# a flat view holds the ground's normal (and draws its trace) when the normal's part along the dropped axis is below
+# this; a ground further from the masses than GROUND_REACH times the frame's size is left outside the frame
+EDGE_ON_TOL = 1e-9
+GROUND_REACH = 2.0
 
 
 @dataclass(frozen=True)
@@ -64,6 +73,8 @@ class Motion:
     fixed: np.ndarray  # (K,) bool: anchored masses
     mass_names: tuple[str, ...]
     notes: tuple[str, ...] = ()  # what the reader had to assume, printed by the CLI
+    slack: np.ndarray | None = None  # (n, L) bool: the ropes slack at each sample (drawn dashed); None: no ropes
+    ground: tuple[np.ndarray, np.ndarray] | None = None  # (point, unit normal) of the ground plane, or None
 
     def __post_init__(self):
         n = self.t.shape[0] if self.t.ndim == 1 else -1
@@ -77,6 +88,15 @@ class Motion:
             raise LinknetError(f"{self.title}: a link end is not one of the {K} masses")
         if np.any(np.diff(self.t) <= 0):
             raise LinknetError(f"{self.title}: sample times are not increasing")
+        if self.slack is not None and np.shape(self.slack) != (n, L):
+            raise LinknetError(f"{self.title}: slack flags of shape {np.shape(self.slack)}, expected (n, L) = "
+                               f"({n}, {L})")
+        if self.ground is not None:
+            point, normal = (np.asarray(v, float) for v in self.ground)
+            if point.shape != (3,) or normal.shape != (3,) or not np.isfinite(np.r_[point, normal]).all() \
+                    or not abs(float(np.linalg.norm(normal)) - 1.0) <= 1e-9:
+                raise LinknetError(f"{self.title}: the ground is a point and a unit normal, finite 3-vectors (got "
+                                   f"point {point.tolist()}, normal {normal.tolist()})")
         for name, values in (("positions X", self.X), ("tensions T", self.T)):
             bad = np.flatnonzero(~np.isfinite(values.reshape(n, -1)).all(axis=1))
             if bad.size:
@@ -92,15 +112,20 @@ class Motion:
         return self.k1.shape[0]
 
     @classmethod
-    def from_arrays(cls, scene, t, X, T, title: str | None = None) -> "Motion":
-        """A run given as arrays (for example read back from an FMU) of ``scene``."""
+    def from_arrays(cls, scene, t, X, T, title: str | None = None, slack=None) -> "Motion":
+        """A run given as arrays (for example read back from an FMU) of ``scene``; ``slack`` (n, L) the ropes'
+        slack flags (an FMU's slack[l] outputs), the ground from the scene."""
+        ground = getattr(scene, "ground", None)
         return cls(title=title or scene.name, t=np.asarray(t, float), X=np.asarray(X, float),
                    T=np.asarray(T, float).reshape(len(t), scene.L), k1=np.asarray(scene.k1),
-                   k2=np.asarray(scene.k2), fixed=np.asarray(scene.fixed, bool), mass_names=tuple(scene.mass_names))
+                   k2=np.asarray(scene.k2), fixed=np.asarray(scene.fixed, bool), mass_names=tuple(scene.mass_names),
+                   slack=None if slack is None else np.asarray(slack, bool).reshape(len(t), scene.L),
+                   ground=None if ground is None else (np.array(ground.point, float), np.array(ground.normal, float)))
 
     @classmethod
     def from_result(cls, res) -> "Motion":
-        return cls.from_arrays(res.scene, res.t, res.X, res.T, title=f"{res.scene.name}, {res.method}")
+        return cls.from_arrays(res.scene, res.t, res.X, res.T, title=f"{res.scene.name}, {res.method}",
+                               slack=getattr(res, "slack", None))
 
     @classmethod
     def from_npz(cls, path) -> "Motion":
@@ -137,10 +162,15 @@ class Motion:
             notes = (f"{path.name} does not say which masses are anchored (written before linknet saved "
                      "'fixed'): anchored masses are drawn as free ones",)
         method = str(arrays["method"]) if "method" in arrays else ""
+        slack = arrays["slack"].astype(bool) if "slack" in arrays else None
+        ground = None
+        if "ground_point" in arrays and "ground_normal" in arrays:
+            ground = (arrays["ground_point"].astype(float), arrays["ground_normal"].astype(float))
         try:
             return cls(title=f"{path.stem}, {method}" if method else path.stem, t=arrays["t"].astype(float),
                        X=arrays["X"].astype(float), T=arrays["T"].astype(float), k1=arrays["k1"].astype(int) - 1,
-                       k2=arrays["k2"].astype(int) - 1, fixed=fixed, mass_names=names, notes=notes)
+                       k2=arrays["k2"].astype(int) - 1, fixed=fixed, mass_names=names, notes=notes, slack=slack,
+                       ground=ground)
         except LinknetError as exc:  # the arrays do not fit together
             raise LinknetError(f"{path}: {exc}") from None
         except (TypeError, ValueError) as exc:  # arrays of the wrong kind
@@ -202,9 +232,16 @@ class Motion:
 
     def bounds(self, view: str) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper corner of a box holding every mass at every sample, with a margin, so that the
-        axes stay still while the network moves."""
+        axes stay still while the network moves. A ground within GROUND_REACH times the box's size is brought
+        into it (the foot of the perpendicular from the box's centre), so that the masses land on a drawn plane."""
         low, high = self.X.reshape(-1, 3).min(axis=0), self.X.reshape(-1, 3).max(axis=0)
         shown = list(PLANES.get(view, (0, 1, 2)))
+        if self.ground is not None:
+            point, normal = self.ground
+            centre = 0.5 * (low + high)
+            foot = centre - float(normal @ (centre - point)) * normal
+            if np.linalg.norm(foot - centre) <= GROUND_REACH * max(float(np.max(high[shown] - low[shown])), 1e-9):
+                low, high = np.minimum(low, foot), np.maximum(high, foot)
         size = max(float(np.max(high[shown] - low[shown])), 1e-9)
         margin = 0.06 * size
         return low - margin, high + margin
@@ -304,6 +341,7 @@ class NetworkFigure:
                                         linewidths=width, zorder=2, capstyle="round")
         ax.add_collection(self.links)
         self.ax = ax
+        self.ground_artist, self.ground_note = self._draw_ground(low, high)
         nothing = ([], [], []) if self.view == "3d" else ([], [])
         (self.free_marks,) = ax.plot(*nothing, ls="none", marker="o", ms=mass_size, color="0.15", zorder=3,
                                      label="mass")
@@ -319,6 +357,15 @@ class NetworkFigure:
         self.stamp = ax.set_title("\n", loc="left", fontsize=9, family="monospace")
         handles = [marks for marks, shown in ((self.free_marks, _shows_free_masses(motion)),
                                               (self.anchor_marks, anchored.any())) if shown]
+        if motion.slack is not None and motion.slack.any():
+            from matplotlib.lines import Line2D
+
+            handles.append(Line2D([], [], color="0.4", lw=1.5, ls=SLACK_DASHES, label="slack rope"))
+        if self.ground_artist is not None:
+            handles.append(self.ground_artist)
+        if self.ground_note:
+            (ax.text2D if self.view == "3d" else ax.text)(0.01, 0.01, self.ground_note, transform=ax.transAxes,
+                                                          fontsize=7, color=GROUND_COLOUR)
         self.fig.legend(handles=handles, loc="outside lower center", fontsize=8, frameon=False, ncols=len(handles))
         # the time stamp's decimals tell the frames shown apart (frame_times; default every sample)
         self._time_format = _time_format(motion.t if frame_times is None else frame_times)
@@ -326,6 +373,35 @@ class NetworkFigure:
         # constrained layout engine would otherwise measure every text again for each frame, half of its cost
         self.fig.draw_without_rendering()
         self.fig.set_layout_engine("none")
+
+    def _draw_ground(self, low, high):
+        """The ground of the motion, if any: in a flat view whose plane holds the ground's normal, its trace (a line
+        across the axes' box); in 3-D a translucent patch, the plane within the box; otherwise nothing. Returns
+        (the artist or None, a note for the picture or ""); ``ground_corners`` holds what it draws (the patch's
+        corners, (m, 3), or the trace's ends in the view's coordinates, (2, 2))."""
+        self.ground_corners = None
+        if self.motion.ground is None:
+            return None, ""
+        point, normal = self.motion.ground
+        where = f"ground: the plane through {np.round(point, 4).tolist()} with normal {np.round(normal, 4).tolist()}"
+        if self.view == "3d":
+            polygon = ground_polygon(point, normal, low, high)
+            if polygon is None:
+                return None, where + ", outside the frame"
+            from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+            self.ground_corners = polygon
+            patch = Poly3DCollection([polygon], facecolors=GROUND_COLOUR, edgecolors=GROUND_COLOUR, alpha=GROUND_ALPHA,
+                                     linewidths=0.8, zorder=1, label="ground")
+            self.ax.add_collection3d(patch)
+            return patch, ""
+        a, b = PLANES[self.view]
+        trace = ground_trace(point, normal, low, high, a, b)
+        if isinstance(trace, str):
+            return None, f"{where}: {trace}"
+        self.ground_corners = trace
+        (line,) = self.ax.plot(trace[:, 0], trace[:, 1], color=GROUND_COLOUR, lw=2.0, zorder=1, label="ground")
+        return line, ""
 
     def show(self, i: int) -> None:
         """Draw sample i of the motion."""
@@ -342,10 +418,63 @@ class NetworkFigure:
             self.free_marks.set_data(X[self._free, a], X[self._free, b])
             self.anchor_marks.set_data(X[self._anchored, a], X[self._anchored, b])
         self.links.set_array(T)
+        if motion.slack is not None:
+            self.links.set_linestyles([SLACK_DASHES if slack else "solid" for slack in motion.slack[i]])
         stamp = f"t = {self._time_format.format(motion.t[i])} s"
         if T.size:
             stamp += f"\nT from {T.min():.4g} to {T.max():.4g} N"
         self.stamp.set_text(stamp)
+
+
+def ground_trace(point, normal, low, high, a: int, b: int):
+    """The ground's trace in the flat view of coordinates (a, b) within the box [low, high]: (2, 2) the ends of the
+    segment {x : n . (x - p) = 0} across the box's (a, b) rectangle, where the view's plane holds the normal (its part
+    along the dropped axis within EDGE_ON_TOL); else, or where the trace misses the rectangle, why it is not drawn."""
+    dropped = ({0, 1, 2} - {a, b}).pop()
+    n2 = np.array([normal[a], normal[b]], float)
+    if abs(float(normal[dropped])) > EDGE_ON_TOL or not np.linalg.norm(n2) > 0:
+        return (f"not drawn: the {AXIS_NAMES[a]}{AXIS_NAMES[b]} view does not hold its normal (the plane is "
+                "not seen edge-on)")
+    n2 = n2 / np.linalg.norm(n2)
+    base = np.array([point[a], point[b]], float)
+    direction = np.array([-n2[1], n2[0]])
+    # the parameters s where base + s direction is inside the rectangle (Liang-Barsky clipping)
+    s_low, s_high = -np.inf, np.inf
+    for j, (lo, hi) in enumerate(((low[a], high[a]), (low[b], high[b]))):
+        if abs(direction[j]) <= 1e-15:
+            if not lo <= base[j] <= hi:
+                return "not drawn: it lies outside the frame"
+            continue
+        s1, s2 = sorted(((lo - base[j]) / direction[j], (hi - base[j]) / direction[j]))
+        s_low, s_high = max(s_low, s1), min(s_high, s2)
+    if not s_low < s_high:
+        return "not drawn: it lies outside the frame"
+    return np.array([base + s_low * direction, base + s_high * direction])
+
+
+def ground_polygon(point, normal, low, high):
+    """(m, 3) the corners, in order around it, of the ground plane n . (x - p) = 0 within the box [low, high]: where
+    the plane crosses the box's 12 edges; None where it misses the box."""
+    corners = np.array([[(low, high)[i][0], (low, high)[j][1], (low, high)[k][2]]
+                        for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
+    height = (corners - point) @ normal
+    crossings = list(corners[height == 0.0])
+    for u in range(8):
+        for v in range(u + 1, 8):
+            hu, hv = height[u], height[v]
+            if bin(u ^ v).count("1") == 1 and ((hu < 0.0 < hv) or (hv < 0.0 < hu)):  # an edge the plane crosses
+                crossings.append(corners[u] + hu / (hu - hv) * (corners[v] - corners[u]))
+    if len(crossings) < 3:
+        return None
+    points = np.unique(np.round(np.array(crossings), 12), axis=0)
+    if len(points) < 3:
+        return None
+    centre = points.mean(axis=0)
+    t1 = points[0] - centre
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(normal, t1)
+    angles = np.arctan2((points - centre) @ t2, (points - centre) @ t1)
+    return points[np.argsort(angles)]
 
 
 @validated("picture size WxH")
@@ -489,8 +618,10 @@ def build_html_figure(motion: Motion, *, view: str = "auto", max_frames: int | N
                       tension_range: float | None = None, elev: float = DEFAULT_ELEV, azim: float = DEFAULT_AZIM):
     """The plotly figure of the HTML view: trace 0 the links (one line trace, coloured per vertex by T, a gap
     between links; hovering a link shows its number, its masses and T), trace 1 the free masses, trace 2 the
-    anchored ones; one frame per shown sample, a time slider and play / pause buttons.
-    Returns (figure, frame indices)."""
+    anchored ones; with a ground trace 3, the plane within the view's box (translucent, still); with ropes
+    (motion.slack) a last trace, the slack ropes, dashed (trace 0 then holds the others: a plotly line has one dash
+    pattern, so each frame splits the links between the two traces); one frame per shown sample, a time slider and
+    play / pause buttons. Returns (figure, frame indices)."""
     import plotly.graph_objects as go
 
     view = motion.resolve_view(view)
@@ -506,21 +637,30 @@ def build_html_figure(motion: Motion, *, view: str = "auto", max_frames: int | N
     # default zoom, where the disc hides the gap
     shortening = _link_shortening(motion, mass_px / 2) if masses_shown else 0.0
 
-    def link_vertices(i):  # (3L, 3) float32: near k1 end, near k2 end, a NaN gap, per link
+    def link_vertices(i, shown=None):  # (3L, 3) float32: near k1 end, near k2 end, a NaN gap, per link
         X = motion.X[i]
         along = X[motion.k2] - X[motion.k1]
         vertices = np.full((L, 3, 3), np.nan, np.float32)
         vertices[:, 0], vertices[:, 1] = X[motion.k1] + shortening * along, X[motion.k2] - shortening * along
+        if shown is not None:  # the other links' vertices NaN: not drawn in this trace
+            vertices[~shown] = np.nan
         return vertices.reshape(-1, 3)
 
+    ropes = motion.slack is not None
+
+    def line_trace(i, shown=None):
+        vertices = link_vertices(i, shown)
+        return go.Scatter3d(x=vertices[:, 0], y=vertices[:, 1], z=vertices[:, 2],
+                            line=dict(color=np.repeat(motion.T[i].astype(np.float32), 3)))
+
     def moving_traces(i):
-        X, vertices = motion.X[i].astype(np.float32), link_vertices(i)
-        return [go.Scatter3d(x=vertices[:, 0], y=vertices[:, 1], z=vertices[:, 2],
-                             line=dict(color=np.repeat(motion.T[i].astype(np.float32), 3))),
-                go.Scatter3d(x=X[free, 0], y=X[free, 1], z=X[free, 2])]
+        X = motion.X[i].astype(np.float32)
+        out = [line_trace(i, ~motion.slack[i] if ropes else None),
+               go.Scatter3d(x=X[free, 0], y=X[free, 1], z=X[free, 2])]
+        return out + [line_trace(i, motion.slack[i])] if ropes else out
 
     first = int(frames[0])
-    links, masses = moving_traces(first)
+    links, masses, *slack_links = moving_traces(first)
     # every vertex of a link carries the link's number and its masses: the hover label of whichever is nearest
     link_ends = np.repeat(np.stack([np.arange(1, L + 1), motion.k1 + 1, motion.k2 + 1], axis=1), 3, axis=0)
     links.update(mode="lines", name="links", customdata=link_ends,
@@ -539,9 +679,25 @@ def build_html_figure(motion: Motion, *, view: str = "auto", max_frames: int | N
                            marker=dict(size=max(1.6 * mass_px, 7.0), color="black", symbol="square"),
                            text=[f"mass {k + 1} ({motion.mass_names[k]}), anchored" for k in np.flatnonzero(anchored)],
                            hovertemplate="%{text}<br>(%{x:.4g}, %{y:.4g}, %{z:.4g}) m<extra></extra>")
+    for slack in slack_links:  # the slack ropes: the links' colours and hover, dashed, one legend entry of their own
+        slack.update(mode="lines", name="slack ropes", customdata=link_ends,
+                     line=dict(width=max(2.0, 2 * _line_width(L)), dash="dash", **scale),
+                     hovertemplate="link %{customdata[0]} (masses %{customdata[1]}-%{customdata[2]}), slack"
+                                   "<br>T = %{line.color:.5g} N<extra></extra>")
+    still = [anchors]
+    low, high = motion.bounds("3d")
+    if motion.ground is not None:
+        polygon = ground_polygon(*motion.ground, low, high)
+        if polygon is not None:
+            # a fan of triangles from the first corner (the polygon is convex: a plane's section of a box)
+            fan = np.arange(1, len(polygon) - 1)
+            still.append(go.Mesh3d(x=polygon[:, 0], y=polygon[:, 1], z=polygon[:, 2], i=np.zeros_like(fan), j=fan,
+                                   k=fan + 1, color=GROUND_COLOUR, opacity=GROUND_ALPHA, name="ground",
+                                   showlegend=True, hoverinfo="name"))
     time_format = _time_format(motion.t[frames])
     labels = [time_format.format(motion.t[i]) for i in frames]
-    figure_frames = [go.Frame(name=str(i), data=moving_traces(int(i)), traces=[0, 1]) for i in frames]
+    moving = [0, 1] + ([2 + len(still)] if ropes else [])  # the traces each frame replaces
+    figure_frames = [go.Frame(name=str(i), data=moving_traces(int(i)), traces=moving) for i in frames]
     animate = dict(mode="immediate", frame=dict(duration=0, redraw=True), transition=dict(duration=0))
     slider = dict(active=0, x=0.13, len=0.85, y=0.02, pad=dict(t=30, b=10),
                   currentvalue=dict(prefix="t = ", suffix=" s", font=dict(size=14)),
@@ -553,7 +709,6 @@ def build_html_figure(motion: Motion, *, view: str = "auto", max_frames: int | N
                               args=[None, dict(frame=dict(duration=1000.0 / fps, redraw=True), fromcurrent=True,
                                                transition=dict(duration=0))]),
                          dict(label="Pause", method="animate", args=[[None], animate])])
-    low, high = motion.bounds("3d")
     aspect = np.maximum((high - low) / float(np.max(high - low)), 0.02)  # equal scale: the network keeps its shape
     axes = {f"{c}axis": dict(range=[float(low[j]), float(high[j])], autorange=False, title=dict(text=f"{c}, m"))
             for j, c in enumerate(AXIS_NAMES)}
@@ -570,7 +725,7 @@ def build_html_figure(motion: Motion, *, view: str = "auto", max_frames: int | N
         legend=dict(x=0.01, y=0.92),
         scene=dict(aspectmode="manual", aspectratio=dict(zip("xyz", aspect.tolist())),
                    camera=_camera(view, elev, azim), **axes))
-    return go.Figure(data=[links, masses, anchors], layout=layout, frames=figure_frames), frames
+    return go.Figure(data=[links, masses] + still + slack_links, layout=layout, frames=figure_frames), frames
 
 
 def write_html(motion: Motion, path, **options) -> Written:

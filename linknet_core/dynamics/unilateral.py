@@ -900,12 +900,16 @@ class UnilateralReport:
         return out
 
 
-def event_arrays(events) -> dict:
+def event_arrays(events, ground=None) -> dict:
     """The events as arrays for a run's .npz: event_t (s), event_kind, event_index (1-based: the link of taut and
-    slack, the mass of contact and release, as the files number them) and event_impulse (N s)."""
-    return {"event_t": np.array([e.t for e in events], float), "event_kind": np.array([e.kind for e in events], str),
-            "event_index": np.array([e.index + 1 for e in events], np.int64),
-            "event_impulse": np.array([e.impulse for e in events], float)}
+    slack, the mass of contact and release, as the files number them) and event_impulse (N s); with the scene's
+    ``ground`` also ground_point and ground_normal (what the pictures draw it from)."""
+    out = {"event_t": np.array([e.t for e in events], float), "event_kind": np.array([e.kind for e in events], str),
+           "event_index": np.array([e.index + 1 for e in events], np.int64),
+           "event_impulse": np.array([e.impulse for e in events], float)}
+    if ground is not None:
+        out.update(ground_point=np.array(ground.point, float), ground_normal=np.array(ground.normal, float))
+    return out
 
 
 def event_counts(events) -> dict:
