@@ -82,6 +82,7 @@ def cmd_simulate(args) -> int:
     from linknet_core.accuracy import DEFAULT_STEP, AccuracyWarning, default_method
     from linknet_core.integrators import METHODS
     from linknet_core.scene.description import load_scene
+    from linknet_core.simulator.settings import RunSettings
     from linknet_core.simulator.simulator import SimulationInterrupted, simulate
 
     scene = load_scene(args.scene)
@@ -89,13 +90,15 @@ def cmd_simulate(args) -> int:
     dt = args.dt
     if dt is None and not METHODS[method].adaptive:
         dt = DEFAULT_STEP
+    settings = RunSettings(method=method, dt=dt, rtol=args.rtol, atol=args.atol,
+                           project_initial=args.project_initial or None, rhs_kernel=args.rhs_kernel,
+                           error_estimate=not args.no_error_estimate)
     interrupted = False
     try:
         with warnings.catch_warnings(record=True) as caught:  # said once, below the summary, in the CLI's words
             warnings.simplefilter("always", AccuracyWarning)
-            res = simulate(scene, args.t_end, method=method, dt=dt, rtol=args.rtol, atol=args.atol, n_out=args.n_out,
-                           progress=False if args.no_progress else None, project_initial=args.project_initial or None,
-                           rhs_kernel=args.rhs_kernel, error_estimate=not args.no_error_estimate)
+            res = simulate(scene, args.t_end, n_out=args.n_out, progress=False if args.no_progress else None,
+                           settings=settings)
     except SimulationInterrupted as stop:  # Ctrl-C: keep what was computed
         res, interrupted = stop.result, True
     if res.stats.get("initial"):

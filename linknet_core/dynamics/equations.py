@@ -30,6 +30,14 @@ NEAR_SELF_STRESS_LOAD = 1e-3
 DENSE_DIAGNOSIS_LIMIT = 2500
 
 
+def rhs_kernel_problem(rhs_kernel) -> str | None:
+    """Why ``rhs_kernel`` names no right-hand side kernel of (9) (None if it names one): "numpy", or "casadi" (the
+    generated kernel, linknet_core.symbolic.codegen)."""
+    if rhs_kernel in ("numpy", "casadi"):
+        return None
+    return f"rhs_kernel must be 'numpy' or 'casadi', got {rhs_kernel!r}"
+
+
 def fastest_oscillation(scene: Scene, T: np.ndarray) -> float:
     """An estimate of the fastest oscillation (rad/s) of the free masses at link tensions T: a mass M_k held by
     links under tension swings across them like a bead on a string, at omega_k^2 = sum over its links of
@@ -61,8 +69,9 @@ class Dynamics:
         self.floor_stops = 0  # position projections that stopped at their round-off floor above the tolerance
         self.floor_reached = 0.0  # the largest relative residual at which one stopped there
         self.last_floor = 0.0  # the relative floor of the last Newton step taken (diagnostics of a failure)
-        if rhs_kernel not in ("numpy", "casadi"):
-            raise SolverError(f"rhs_kernel must be 'numpy' or 'casadi', got {rhs_kernel!r}")
+        problem = rhs_kernel_problem(rhs_kernel)
+        if problem:
+            raise SolverError(problem)
         self._compiled_rhs = None
         if rhs_kernel == "casadi" and scene.driven.any():
             raise SolverError("rhs_kernel='casadi' does not take driven anchors (its generated kernel has no anchor "

@@ -2,7 +2,8 @@
 the FMU uses, whole runs, and the rigidity report of ``linknet analyze``."""
 from linknet_core.simulator.simulator import (InitialReport, Result, SimulationInterrupted, Simulator,
                                              prepare_initial_state, simulate)
+from linknet_core.simulator.settings import RunSettings
 from linknet_core.simulator.specialisation import Specialisation, choose_specialisation
 
-__all__ = ["Simulator", "simulate", "Result", "SimulationInterrupted", "InitialReport", "prepare_initial_state", "Specialisation",
+__all__ = ["Simulator", "simulate", "RunSettings", "Result", "SimulationInterrupted", "InitialReport", "prepare_initial_state", "Specialisation",
            "choose_specialisation"]

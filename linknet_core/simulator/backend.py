@@ -1,7 +1,8 @@
 """The one interface between the Simulator and a backend: what a backend provides, and what the backends share.
 
-A backend is chosen once per Simulator, by name (``Simulator(backend=)``; the names are ``simulator.BACKEND_CLASSES``),
-and built once by its class's :meth:`Backend.create`. The Simulator then calls only this interface: it validates
+A backend is chosen once per Simulator, by name (``Simulator(backend=)``, a field of the run's settings: the names are
+``simulator.settings.BACKEND_CLASSES``), and built once by its class's :meth:`Backend.create` from the run's
+settings (``simulator.settings.RunSettings``, one object). The Simulator then calls only this interface: it validates
 the arguments (input forces, the anchors' motion, the target time), adds the input forces' note to a failure, keeps
 the snapshots' identity and the error estimate's companion; everything that depends on how the state is stepped
 and evaluated lives in the backend's own module:
@@ -10,11 +11,12 @@ and evaluated lives in the backend's own module:
 * ``simulator.native_backend``: the native core, on the point-mass path (static scenes included) or on the free
   rigid bodies' path.
 
-A new backend is a subclass in a module of its own and its name in ``simulator.BACKEND_CLASSES``.
+A new backend is a subclass in a module of its own and its name in ``simulator.settings.BACKEND_CLASSES``.
 """
 from __future__ import annotations
 
 import copy
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,6 +25,9 @@ from linknet_core.errors import SolverError
 from linknet_core.scene.description import Scene
 from linknet_core.simulator.specialisation import Specialisation, choose_specialisation
 from linknet_core.state import State
+
+if TYPE_CHECKING:
+    from linknet_core.simulator.settings import RunSettings
 
 
 class Backend:
@@ -49,18 +54,18 @@ class Backend:
         self._initial_internals = None
 
     @classmethod
-    def choose_specialisation(cls, scene: Scene, dyn: Dynamics, method: str, specialise: bool, rtol, atol,
-                       U0: np.ndarray) -> tuple[Specialisation, np.ndarray]:
-        """The path this backend takes for ``scene`` (linknet_core.simulator.specialisation) and the initial
-        velocities on it: decided once per scene and settings, before anything is built. The reference takes the
-        point-mass path always."""
-        return choose_specialisation(scene, dyn, method, enabled=False), U0
+    def choose_specialisation(cls, scene: Scene, dyn: Dynamics, settings: "RunSettings",
+                              U0: np.ndarray) -> tuple[Specialisation, np.ndarray]:
+        """The path this backend takes for ``scene`` (linknet_core.simulator.specialisation) with ``settings`` and
+        the initial velocities on it: decided once per scene and settings, before anything is built. The reference
+        takes the point-mass path always."""
+        return choose_specialisation(scene, dyn, settings.stepping.method, enabled=False), U0
 
     @classmethod
-    def create(cls, scene: Scene, dyn: Dynamics, method: str, method_cls, dt, rtol, atol, X0: np.ndarray,
-               U0: np.ndarray, t0: float, specialisation: Specialisation) -> "Backend":
-        """The backend of one Simulator: its integrator for ``method`` (``method_cls`` with the validated dt, rtol,
-        atol) on ``specialisation``'s path, starting at (t0, X0, U0)."""
+    def create(cls, scene: Scene, dyn: Dynamics, settings: "RunSettings", X0: np.ndarray, U0: np.ndarray, t0: float,
+               specialisation: Specialisation) -> "Backend":
+        """The backend of one Simulator: its integrator for ``settings.stepping`` (the method, its class and the
+        validated dt, rtol, atol) on ``specialisation``'s path, starting at (t0, X0, U0)."""
         raise NotImplementedError
 
     # ---- the run's start and reset --------------------------------------------------------------
@@ -103,7 +108,10 @@ class Backend:
         """The outputs' linearization at ``state`` (Simulator.interface_linearization), here by the numpy
         reference at the state the outputs are evaluated at."""
         from linknet_core.dynamics.interface_jacobian import ReferenceLinearization
+        from linknet_core.dynamics.unilateral import linearization_refusal
 
+        if self.scene.unilateral:
+            raise SolverError(linearization_refusal(self.scene))
         X_at, U_at, anchor_acc = self.anchors_now(state.t, state.X, state.U, hold)
         return ReferenceLinearization(self.dyn, X_at, U_at, F, anchor_acc)
 

@@ -23,19 +23,22 @@ class NativeBackend(Backend):
     reusable = True
 
     @classmethod
-    def choose_specialisation(cls, scene, dyn, method, specialise, rtol, atol, U0):
-        specialisation = choose_specialisation(scene, dyn, method, enabled=specialise, tolerances=(rtol, atol))
+    def choose_specialisation(cls, scene, dyn, settings, U0):
+        stepping = settings.stepping
+        specialisation = choose_specialisation(scene, dyn, stepping.method, enabled=settings.specialise,
+                                               tolerances=(stepping.rtol, stepping.atol))
         if specialisation.kind == STATIC:
             U0 = np.zeros_like(U0)  # the only velocity (12) allows where nothing can move
         return specialisation, U0
 
     @classmethod
-    def create(cls, scene, dyn, method, method_cls, dt, rtol, atol, X0, U0, t0, specialisation) -> "NativeBackend":
+    def create(cls, scene, dyn, settings, X0, U0, t0, specialisation) -> "NativeBackend":
         if specialisation.kind == RIGID:
-            return NativeRigidBackend.create(scene, dyn, method, method_cls, dt, rtol, atol, X0, U0, t0,
-                                             specialisation)
-        integrator = NativeIntegrator(native_model(scene, dyn.structure), method_cls, dt=dt, rtol=rtol, atol=atol,
-                                      static=specialisation.kind == STATIC, t0=t0)
+            return NativeRigidBackend.create(scene, dyn, settings, X0, U0, t0, specialisation)
+        stepping = settings.stepping
+        integrator = NativeIntegrator(native_model(scene, dyn.structure), stepping.cls, dt=stepping.dt,
+                                      rtol=stepping.rtol, atol=stepping.atol, static=specialisation.kind == STATIC,
+                                      t0=t0)
         return cls(scene, dyn, integrator, (X0, U0))
 
     def start(self, state) -> None:
@@ -118,6 +121,8 @@ class NativeRigidBackend(NativeBackend):
     linearization = Backend.linearization
 
     @classmethod
-    def create(cls, scene, dyn, method, method_cls, dt, rtol, atol, X0, U0, t0, specialisation):
-        integrator = NativeRigidIntegrator(dyn, specialisation.bodies, method_cls, X0, U0, dt=dt, rtol=rtol, atol=atol)
+    def create(cls, scene, dyn, settings, X0, U0, t0, specialisation):
+        stepping = settings.stepping
+        integrator = NativeRigidIntegrator(dyn, specialisation.bodies, stepping.cls, X0, U0, dt=stepping.dt,
+                                           rtol=stepping.rtol, atol=stepping.atol)
         return cls(scene, dyn, integrator, integrator.initial_state, list(integrator.notes))

@@ -27,8 +27,9 @@ class NumpyBackend(Backend):
     name = "numpy"
 
     @classmethod
-    def create(cls, scene, dyn, method, method_cls, dt, rtol, atol, X0, U0, t0, specialisation) -> "NumpyBackend":
-        integrator = make_integrator(method, dyn, dt=dt, rtol=rtol, atol=atol)
+    def create(cls, scene, dyn, settings, X0, U0, t0, specialisation) -> "NumpyBackend":
+        stepping = settings.stepping
+        integrator = make_integrator(stepping.method, dyn, dt=stepping.dt, rtol=stepping.rtol, atol=stepping.atol)
         if scene.motions:
             integrator.drive = AnchorDrive(scene, t0)
         backend = cls(scene, dyn, integrator, (X0, U0))

@@ -12,25 +12,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from linknet_core.accuracy import (accuracy_text, companion, default_method, error_goal, estimate_failure_text,
+from linknet_core.accuracy import (accuracy_text, companion, error_goal, estimate_failure_text,
                                    position_gap, position_gaps, scene_size, warn_accuracy)
 from linknet_core.dynamics.drive import AnchorDrive, anchor_jump, check_step_follows_motions
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.dynamics.unilateral import event_arrays, event_counts, numpy_only, scene_dynamics, slack_links
 from linknet_core.errors import SceneError, SolverError
 from linknet_core.dynamics.forces import kinetic_energy
-from linknet_core.integrators import method_settings, real_number
-from linknet_core.simulator.backend import Backend
-from linknet_core.simulator.native_backend import NativeBackend
-from linknet_core.simulator.numpy_backend import NumpyBackend
+from linknet_core.integrators import real_number
+from linknet_core.simulator.settings import BACKEND_CLASSES, DEFAULT_LENGTH_TOL, RunSettings, run_settings
 from linknet_core.simulator.specialisation import STATIC, Specialisation
 from linknet_core.structure.topology import kept_per_scene
 from linknet_core.scene.description import Scene, load_scene
 from linknet_core.state import State
 
-DEFAULT_LENGTH_TOL = 1e-6  # relative violation of (11) accepted in a scene's initial positions
-# the backends by name (linknet_core.simulator.backend): "auto" is the native core
-BACKEND_CLASSES: dict[str, type[Backend]] = {"native": NativeBackend, "numpy": NumpyBackend}
 # Snapshots (get_state) name the simulator they come from: this format, the scene's fingerprint, the method and the
 # path (backend and specialisation), so set_state refuses another scene's or another path's snapshot rather than
 # projecting foreign positions onto this scene's lengths. Raise the number when a snapshot's content changes.
@@ -147,39 +142,27 @@ def as_scene(scene) -> Scene:
                       f"{type(scene).__name__} {text if len(text) <= 80 else text[:77] + '...'}")
 
 
-def _settings_key(method, dt, rtol, atol, project_initial, length_tol, backend, rhs_kernel, specialise):
-    """What a Simulator's set-up depends on beyond its scene, as a key of what is kept per scene object (each value
-    with its type, so that True and 1 or 1e-3 and numpy's 1e-3 are told apart), or None when a value cannot be a key
-    (the set-up is then made afresh)."""
-    key = ("simulator set-up", method, backend, rhs_kernel, type(dt), dt, type(rtol), rtol, type(atol), atol,
-           type(project_initial), project_initial, type(length_tol), length_tol, type(specialise), specialise)
-    try:
-        hash(key)
-    except TypeError:
-        return None
-    return key
-
-
-def _setup(scene: Scene, dyn: Dynamics, method, dt, rtol, atol, project_initial, length_tol, backend, specialise,
-           own_dynamics: bool):
-    """What a Simulator's settings decide for its scene before anything is built: the method's class and validated
-    settings, the initial state (read-only arrays) and its report, the backend and the specialisation. Nothing in it
-    refers to the scene (it is kept per scene object)."""
-    method_cls, dt, rtol, atol = method_settings(method, dt, rtol, atol)
-    if not method_cls.adaptive:
-        check_step_follows_motions(scene, dt)
+def _setup(scene: Scene, dyn: Dynamics, settings: RunSettings, own_dynamics: bool):
+    """What a Simulator's settings decide for its scene before anything is built: the initial state (read-only
+    arrays) and its report, the backend and the specialisation. Nothing in it refers to the scene (it is kept per
+    scene object and ``settings.setup_key``)."""
+    stepping = settings.stepping
+    if not stepping.cls.adaptive:
+        check_step_follows_motions(scene, stepping.dt)
     if own_dynamics:
-        X0, U0, report = _kept_initial_state(scene, dyn, project_initial, length_tol)
+        X0, U0, report = _kept_initial_state(scene, dyn, settings.project_initial, settings.length_tol)
     else:
-        X0, U0, report = prepare_initial_state(scene, dyn, project_positions=project_initial, length_tol=length_tol)
+        X0, U0, report = prepare_initial_state(scene, dyn, project_positions=settings.project_initial,
+                                               length_tol=settings.length_tol)
     # one backend, chosen here before anything is built: the one asked for, the native core by default, the numpy
     # reference where the right-hand side is casadi's (a variant of the numpy Dynamics) or the scene has ropes or a
     # ground (which the native core does not take yet: backend="native" is refused there)
+    backend = settings.backend
     chosen = "numpy" if dyn.rhs_kernel != "numpy" or numpy_only(scene, backend) else \
         "native" if backend == "auto" else backend
-    specialisation, U0 = BACKEND_CLASSES[chosen].choose_specialisation(scene, dyn, method, specialise, rtol, atol, U0)
+    specialisation, U0 = BACKEND_CLASSES[chosen].choose_specialisation(scene, dyn, settings, U0)
     X0.flags.writeable = U0.flags.writeable = False
-    return method_cls, dt, rtol, atol, X0, U0, report, chosen, specialisation
+    return X0, U0, report, chosen, specialisation
 
 
 def _as_time(value, what: str) -> float:
@@ -210,6 +193,15 @@ class Simulator:
     ``advance(t_next, F_input)`` integrates from the current time to ``t_next`` with the input forces
     held constant (zero-order hold), which is exactly what an FMI co-simulation step does.
 
+    The run's settings are one object, ``settings`` (linknet_core.RunSettings, validated once when made; every
+    refusal names the setting and its rule), given as ``settings=``, as keywords (``method``, ``dt``, ``rtol``,
+    ``atol``, ``project_initial``, ``length_tol``, ``max_steps_per_call``, ``backend``, ``rhs_kernel``,
+    ``specialise``, ``error_estimate``: its fields), or both: a keyword that is not None replaces that field of
+    ``settings=`` (the result is validated as a whole: ``dt=`` beside settings of an error-controlled method is
+    refused as it would be alone). A keyword left at None leaves the field as ``settings=`` has it, or at
+    RunSettings' default. ``dynamics`` (a Dynamics of the scene to run on) and ``t0`` (the start time) are not
+    settings.
+
     ``method``: with neither a method nor a step, the error-controlled default (linknet_core.accuracy:
     DEFAULT_METHOD at rtol DEFAULT_RTOL); with a step dt and no method, RATTLE.
 
@@ -230,35 +222,31 @@ class Simulator:
 
     def __init__(self, scene: Scene | str | os.PathLike, method: str | None = None, dt: float | None = None,
                  rtol: float | None = None, atol: float | None = None, *, project_initial: bool | None = None,
-                 length_tol: float = DEFAULT_LENGTH_TOL, max_steps_per_call: int = 100_000_000,
-                 dynamics: Dynamics | None = None, backend: str = "auto", rhs_kernel: str = "numpy",
-                 specialise: bool = True, t0: float = 0.0, error_estimate: bool = True):
+                 length_tol: float | None = None, max_steps_per_call: int | None = None,
+                 dynamics: Dynamics | None = None, backend: str | None = None, rhs_kernel: str | None = None,
+                 specialise: bool | None = None, t0: float = 0.0, error_estimate: bool | None = None,
+                 settings: RunSettings | None = None):
         scene = as_scene(scene)
-        method = default_method(method, dt)
         t0 = t0 if type(t0) is float else _as_time(t0, "the start time t0")
         if not math.isfinite(t0):
             raise SolverError(f"the start time t0 must be finite, got {t0!r}")
-        names = ("auto", *BACKEND_CLASSES)
-        if backend not in names:  # a tuple: an unhashable value is refused too
-            raise SolverError(f"backend must be one of {', '.join(map(repr, names))}, got {backend!r}")
-        self.scene = scene
-        self.dyn = dynamics or scene_dynamics(scene, rhs_kernel=rhs_kernel)
-        self.method = method
-        settings = None if dynamics is not None else _settings_key(method, dt, rtol, atol, project_initial, length_tol,
-                                                                   backend, rhs_kernel, specialise)
-        if settings is None:
-            setup = _setup(scene, self.dyn, method, dt, rtol, atol, project_initial, length_tol, backend, specialise,
-                           dynamics is None)
+        settings = run_settings(settings, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial,
+                                length_tol=length_tol, max_steps_per_call=max_steps_per_call, backend=backend,
+                                rhs_kernel=rhs_kernel, specialise=specialise, error_estimate=error_estimate)
+        stepping = settings.stepping
+        self.scene, self.settings = scene, settings
+        self.dyn = dynamics or scene_dynamics(scene, rhs_kernel=settings.rhs_kernel)
+        self.method = stepping.method
+        if dynamics is not None:
+            setup = _setup(scene, self.dyn, settings, False)
         else:  # what these settings decide for this scene, decided once per scene object
-            setup = kept_per_scene(scene, settings, lambda s: _setup(s, self.dyn, method, dt, rtol, atol,
-                                                                    project_initial, length_tol, backend, specialise,
-                                                                    True))
-        method_cls, dt, rtol, atol, X0, U0, self.initial_report, self.backend, specialisation = setup
+            setup = kept_per_scene(scene, ("simulator set-up", settings.setup_key),
+                                   lambda s: _setup(s, self.dyn, settings, True))
+        X0, U0, self.initial_report, self.backend, specialisation = setup
         self.specialisation = Specialisation(specialisation.kind, specialisation.reason, specialisation.bodies,
                                              list(specialisation.notes), specialisation.tolerances)  # its own notes
         # the backend object: everything that depends on how the state is stepped and evaluated
-        self.engine = BACKEND_CLASSES[self.backend].create(scene, self.dyn, method, method_cls, dt, rtol, atol, X0,
-                                                           U0, t0, self.specialisation)
+        self.engine = BACKEND_CLASSES[self.backend].create(scene, self.dyn, settings, X0, U0, t0, self.specialisation)
         self.integrator = self.engine.integrator
         X0, U0 = self.engine.initial_state
         self.specialisation.notes.extend(self.engine.notes)
@@ -266,20 +254,17 @@ class Simulator:
         # (the initial arrays are never written into: every advance replaces the state's arrays, and the state
         # handed out is a copy)
         self._initial = State(t0, X0, U0)
-        self.max_steps_per_call = max_steps_per_call
+        self.max_steps_per_call = settings.max_steps_per_call  # may be changed between advances
         self.state = self._initial.copy()
         self._reset_arrays = (self.state.X, self.state.U)  # the state's arrays as made from the initial state
         self.engine.start(self.state)
-        self.error_goal = error_goal(method_cls, rtol, atol, scene_size(X0))
+        self.error_goal = error_goal(stepping.cls, stepping.rtol, stepping.atol, scene_size(X0))
         self.error_estimate = 0.0
         self._error_factor, self._companion_failure, self.companion = 1.0, None, None
-        if error_estimate and self.specialisation.kind != STATIC:  # nothing moves in a static scene: no error
-            settings = companion(method_cls, dt, rtol, atol)
-            self._error_factor = settings.factor
-            self.companion = Simulator(scene, method, dt=settings.dt, rtol=settings.rtol, atol=settings.atol,
-                                       project_initial=project_initial, length_tol=length_tol,
-                                       max_steps_per_call=max_steps_per_call, backend=backend, rhs_kernel=rhs_kernel,
-                                       specialise=specialise, t0=t0, error_estimate=False)
+        if settings.error_estimate and self.specialisation.kind != STATIC:  # nothing moves in a static scene
+            shadow = companion(stepping.cls, stepping.dt, stepping.rtol, stepping.atol)
+            self._error_factor = shadow.factor
+            self.companion = Simulator(scene, t0=t0, settings=_companion_settings(settings, shadow))
         # what the Dynamics counts (the numpy reference's right-hand sides and projection floor), as reset finds it
         self._initial_counts = (self.dyn.rhs_evaluations, getattr(self.dyn, "floor_stops", 0),
                                 getattr(self.dyn, "floor_reached", 0.0))
@@ -683,9 +668,9 @@ class Result:
 def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None = None, dt: float | None = None,
              rtol: float | None = None, atol: float | None = None, n_out: int | None = None,
              output_dt: float | None = None, forces=None, progress: bool | None = None,
-             project_initial: bool | None = None, backend: str = "auto", rhs_kernel: str = "numpy",
-             specialise: bool = True, motions: dict | None = None, anchors=None,
-             error_estimate: bool = True) -> Result:
+             project_initial: bool | None = None, backend: str | None = None, rhs_kernel: str | None = None,
+             specialise: bool | None = None, motions: dict | None = None, anchors=None,
+             error_estimate: bool | None = None, *, settings: RunSettings | None = None) -> Result:
     """Simulate ``scene`` (a Scene, or the path of a scene file) from t = 0 to ``t_end``.
 
     ``forces``: None, a (K,3) array held constant, or a callable ``f(t) -> (K,3)`` evaluated at each
@@ -702,9 +687,13 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None 
     or a tenth of the tolerances) over the same outputs, with the same inputs (a ``forces`` callable is called by
     both runs), and ``Result.error_estimate`` holds the estimated position error of every sample; an estimate beyond
     the run's goal is reported by an AccuracyWarning and in the summary. False skips the companion.
+
+    The run's settings: ``settings=`` (linknet_core.RunSettings, which also holds ``length_tol`` and
+    ``max_steps_per_call``) and/or the keywords that are its fields (``method``, ``dt``, ``rtol``, ``atol``,
+    ``project_initial``, ``backend``, ``rhs_kernel``, ``specialise``, ``error_estimate``), a keyword that is not
+    None replacing that field, as for :class:`Simulator`.
     """
     scene = as_scene(scene)
-    method = default_method(method, dt)
     t_end_value = t_end if type(t_end) is float else real_number(t_end)
     if t_end_value is None or not (math.isfinite(t_end_value) and t_end_value > 0):
         raise SolverError(f"t_end must be a positive finite time, got {t_end!r}")
@@ -717,31 +706,35 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None 
         if output_dt_value is None or not (math.isfinite(output_dt_value) and output_dt_value > 0):
             raise SolverError(f"output_dt must be a positive finite time, got {output_dt!r}")
         output_dt = output_dt_value
+    settings = run_settings(settings, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial,
+                            backend=backend, rhs_kernel=rhs_kernel, specialise=specialise,
+                            error_estimate=error_estimate)
+    stepping = settings.stepping  # the run's stats name the settings used, defaults too
     if motions:
         scene = scene.with_motions(motions)
+    # the error estimate's companion is a run of its own below, so that it samples in C too: the run's Simulator
+    # has none
+    run = settings.with_changes(error_estimate=False) if settings.error_estimate else settings
     # a Simulator of an earlier run of this scene object and these settings, reset, or a new one; handed back to
     # the scene's pool when the run ends, however it ends
-    pool_key = None if motions else _settings_key(method, dt, rtol, atol, project_initial, DEFAULT_LENGTH_TOL,
-                                                  backend, rhs_kernel, specialise)
+    pool_key = None if motions else run
     sim = _take_pooled(scene, pool_key)
-    if sim is None:  # the error estimate's companion is a run of its own below, so that it samples in C too
-        sim = Simulator(scene, method=method, dt=dt, rtol=rtol, atol=atol, project_initial=project_initial,
-                        backend=backend, rhs_kernel=rhs_kernel, specialise=specialise, error_estimate=False)
+    if sim is None:
+        sim = Simulator(scene, settings=run)
     try:
-        validated = method_settings(method, dt, rtol, atol)  # the run's stats name the settings used, defaults too
-        result = _run(sim, scene, t_end, method, validated[1], validated[2], n_out, output_dt, forces, progress,
-                      anchors)
+        result = _run(sim, scene, t_end, stepping.method, stepping.dt, stepping.rtol, n_out, output_dt, forces,
+                      progress, anchors)
         goal, static = sim.error_goal, sim.specialisation.kind == STATIC
-        settings = companion(*validated)
     finally:
         if pool_key is not None and sim.engine.reusable:
             _hand_back(scene, pool_key, sim)
     result.error_goal = goal
-    if not error_estimate:
+    if not settings.error_estimate:
         return result
     if static:  # nothing moves: no error
         result.error_estimate = np.zeros(result.t.size)
         return result
+    shadow_settings = companion(stepping.cls, stepping.dt, stepping.rtol, stepping.atol)
     # the companion samples every output interval's midpoint too (ln_companion_advance); the midpoints of linspace's
     # times are those of twice as many, exactly
     n_shadow = 2 * result.t.size - 1
@@ -750,24 +743,29 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None 
         shadow_forces = lambda t: forces(float(result.t[min(int(np.searchsorted(result.t, t, "right")) - 1,  # noqa
                                                              result.t.size - 1)]))
     try:
-        shadow = simulate(scene, t_end, method, dt=settings.dt, rtol=settings.rtol, atol=settings.atol,
-                          n_out=n_shadow, forces=shadow_forces, progress=False, project_initial=project_initial,
-                          backend=backend, rhs_kernel=rhs_kernel, specialise=specialise, motions=motions,
-                          anchors=anchors, error_estimate=False)
+        shadow = simulate(scene, t_end, n_out=n_shadow, forces=shadow_forces, progress=False, motions=motions,
+                          anchors=anchors, settings=_companion_settings(run, shadow_settings))
     except SolverError as exc:
         result.error_estimate = np.full(result.t.size, math.inf)
         result.error_estimate[0] = 0.0
-        result.error_failure = f"({_companion_words(settings)}): {exc}"
+        result.error_failure = f"({_companion_words(shadow_settings)}): {exc}"
     except KeyboardInterrupt:  # the run itself is complete: hand it over, without an estimate
         raise SimulationInterrupted(result) from None
     else:
         shadow_X = shadow.X[::2]
-        result.error_estimate = settings.factor * position_gaps(result.X, shadow_X)
+        result.error_estimate = shadow_settings.factor * position_gaps(result.X, shadow_X)
         result.stats["companion_steps"] = shadow.stats.get("steps")
     note = result.accuracy_note()
     if note is not None:
         warn_accuracy(note)
     return result
+
+
+def _companion_settings(settings: RunSettings, shadow) -> RunSettings:
+    """The settings of the companion run that estimates the error of a run of ``settings``: its method, with the
+    companion's step or tolerances (``shadow``, linknet_core.accuracy.companion), and no companion of its own."""
+    return settings.with_changes(method=settings.stepping.method, dt=shadow.dt, rtol=shadow.rtol, atol=shadow.atol,
+                                 error_estimate=False)
 
 
 def _companion_words(settings) -> str:
