@@ -25,6 +25,11 @@ def all_finite(*arrays: np.ndarray) -> bool:
 
 class NumpyBackend(Backend):
     name = "numpy"
+    # a reset (Backend.reset: the integrator's internals, the drive's hold and the events' mode as at the start;
+    # Simulator.reset: the state and the Dynamics' counters) leaves nothing of the last run that the next one reads:
+    # the Dynamics keeps only the factorisation of A at the last configuration it factored, a function of that
+    # configuration alone. What the pool saves: docs/architecture.md
+    reusable = True
 
     @classmethod
     def create(cls, scene, dyn, settings, X0, U0, t0, specialisation) -> "NumpyBackend":
