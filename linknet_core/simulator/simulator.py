@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from linknet_core.accuracy import (accuracy_text, companion, error_goal, estimate_failure_text,
+from linknet_core.accuracy import (accuracy_text, error_goal, estimate_failure_text,
                                    position_gap, position_gaps, scene_size, warn_accuracy)
 from linknet_core.dynamics.drive import AnchorDrive, anchor_jump, check_step_follows_motions
 from linknet_core.dynamics.equations import Dynamics
@@ -262,9 +262,9 @@ class Simulator:
         self.error_estimate = 0.0
         self._error_factor, self._companion_failure, self.companion = 1.0, None, None
         if settings.error_estimate and self.specialisation.kind != STATIC:  # nothing moves in a static scene
-            shadow = companion(stepping.cls, stepping.dt, stepping.rtol, stepping.atol)
-            self._error_factor = shadow.factor
-            self.companion = Simulator(scene, t0=t0, settings=_companion_settings(settings, shadow))
+            rule, companion_settings = settings.companion
+            self._error_factor = rule.factor
+            self.companion = Simulator(scene, t0=t0, settings=companion_settings)
         # what the Dynamics counts (the numpy reference's right-hand sides and projection floor), as reset finds it
         self._initial_counts = (self.dyn.rhs_evaluations, getattr(self.dyn, "floor_stops", 0),
                                 getattr(self.dyn, "floor_reached", 0.0))
@@ -734,7 +734,7 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None 
     if static:  # nothing moves: no error
         result.error_estimate = np.zeros(result.t.size)
         return result
-    shadow_settings = companion(stepping.cls, stepping.dt, stepping.rtol, stepping.atol)
+    shadow_settings, shadow_run = settings.companion
     # the companion samples every output interval's midpoint too (ln_companion_advance); the midpoints of linspace's
     # times are those of twice as many, exactly
     n_shadow = 2 * result.t.size - 1
@@ -744,7 +744,7 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None 
                                                              result.t.size - 1)]))
     try:
         shadow = simulate(scene, t_end, n_out=n_shadow, forces=shadow_forces, progress=False, motions=motions,
-                          anchors=anchors, settings=_companion_settings(run, shadow_settings))
+                          anchors=anchors, settings=shadow_run)
     except SolverError as exc:
         result.error_estimate = np.full(result.t.size, math.inf)
         result.error_estimate[0] = 0.0
@@ -759,13 +759,6 @@ def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None 
     if note is not None:
         warn_accuracy(note)
     return result
-
-
-def _companion_settings(settings: RunSettings, shadow) -> RunSettings:
-    """The settings of the companion run that estimates the error of a run of ``settings``: its method, with the
-    companion's step or tolerances (``shadow``, linknet_core.accuracy.companion), and no companion of its own."""
-    return settings.with_changes(method=settings.stepping.method, dt=shadow.dt, rtol=shadow.rtol, atol=shadow.atol,
-                                 error_estimate=False)
 
 
 def _companion_words(settings) -> str:

@@ -123,3 +123,22 @@ def test_equal_settings_are_equal_whatever_numeric_types_they_came_as():
     assert ln.RunSettings(dt=1e-3) != ln.RunSettings(dt=2e-3)
     with pytest.raises(dataclasses.FrozenInstanceError):
         plain.dt = 2e-3
+
+
+def test_keywords_of_another_type_are_judged_again_not_taken_from_earlier_settings(models_dir):
+    """Settings made from keywords are made once per set of keywords: True and 1 are told apart there, so 1 is still
+    refused after True was taken."""
+    scene = ln.load_scene(models_dir / "double_pendulum.json")
+    assert ln.Simulator(scene, dt=1e-3, specialise=True, error_estimate=False).settings.specialise is True
+    with pytest.raises(SolverError, match="specialise must be True or False, got 1"):
+        ln.Simulator(scene, dt=1e-3, specialise=1, error_estimate=False)
+
+
+def test_the_companion_is_the_same_settings_at_half_the_step_or_a_tenth_of_the_tolerances():
+    rule, fixed = ln.RunSettings(dt=1e-3, backend="numpy", length_tol=1e-5).companion
+    assert (fixed.stepping.method, fixed.dt, fixed.backend, fixed.length_tol) == ("rattle", 5e-4, "numpy", 1e-5)
+    assert fixed.error_estimate is False and rule.dt == 5e-4
+    _, adaptive = ln.RunSettings(method="dop853", rtol=1e-8, atol=1e-6).companion
+    assert (adaptive.method, adaptive.rtol, adaptive.atol, adaptive.dt) == ("dop853", 1e-9, 1e-7, None)
+    with pytest.raises(TypeError, match="RunSettings has no field 'step'"):
+        ln.RunSettings().with_changes(step=1e-3)
