@@ -22,8 +22,9 @@ beside the study's netCDF file, which joins them (linknet_core/ensemble/shards.p
    and what the client pays for a batch whose trajectories come to it (a worker that does not see the folder):
    their serialisation and the client's shard write.
 3. Costs by cause, on the 2-worker cluster: idle (CPU time per second of an idle cluster); per study and per
-   task (studies of 2 and of 200 trivial members, one per task); per member beyond its run (studies of 2000
-   short members in batches of 200, with X, U, T and with the quantities of interest only). With them, each
+   task (studies of 2 and of 200 trivial members, one per task, with the quantities of interest only and with
+   X, U, T: a shard per task); per member beyond its run (studies of 2000 short members in batches of 200, with
+   X, U, T and with the quantities of interest only, each less the per-task costs of its kind). With them, each
    study's CPU time per member is split by cause ("of it file writes": the client's, from the study's
    client_write_cpu_seconds; the workers' shard writes are part of their per-member figure, and said apart from
    worker_write_cpu_seconds).
@@ -310,27 +311,28 @@ def idle_costs(client, processes, seconds: float = 4.0) -> dict:
     return {"client": (meter.main + meter.others) / meter.wall, "workers": meter.workers / meter.wall}
 
 
-def trivial_study(client, processes, folder, members: int, idle: dict) -> dict:
-    """A study of ``members`` trivial members (one step, quantities of interest only), one per task: its CPU
-    time beyond the idle cluster's and, on the workers, beyond the members' own runs."""
+def trivial_study(client, processes, folder, members: int, idle: dict, outputs=()) -> dict:
+    """A study of ``members`` trivial members (one step, two output times; ``outputs`` kept), one per task: its
+    CPU time beyond the idle cluster's and, on the workers, beyond the members' own runs."""
     with CpuMeter(processes) as meter:
-        ds = ln.ensemble(SCENE, vary={"M[11]": np.linspace(0.1, 0.5, members)}, t_end=DT, dt=DT, n_out=2, outputs=(),
-                         client=client, out=Path(folder) / "trivial.nc", members_per_task=1)
+        ds = ln.ensemble(SCENE, vary={"M[11]": np.linspace(0.1, 0.5, members)}, t_end=DT, dt=DT, n_out=2,
+                         outputs=outputs, client=client, out=Path(folder) / "trivial.nc", members_per_task=1)
     tasks, member_cpu = int(ds.attrs["tasks"]), float(ds.attrs["member_cpu_seconds"])
     ds.close()
     return {"tasks": tasks, "client": meter.main + meter.others - idle["client"] * meter.wall,
             "workers": meter.workers - member_cpu - idle["workers"] * meter.wall, "wall": meter.wall}
 
 
-def fixed_and_task_costs(client, processes, folder, idle: dict, repeats: int = 3) -> dict:
+def fixed_and_task_costs(client, processes, folder, idle: dict, outputs=(), repeats: int = 3) -> dict:
     """What a study costs whatever its size (F: the file's layout, the plugin on every worker, the dataset opened
-    at the end) and per task (k: submit, scheduling, the result's fetch and release, the batch's writes), in the
-    client and scheduler and in the workers: from studies of 2 and of 200 trivial members, one per task
-    (F + 2 k and F + 200 k), medians of ``repeats``."""
+    at the end; with trajectories, their shard folder and the join) and per task (k: submit, scheduling, the
+    result's fetch and release, the batch's record; with trajectories, the worker's shard file), in the client and
+    scheduler and in the workers: from studies of 2 and of 200 trivial members, one per task (F + 2 k and
+    F + 200 k), keeping ``outputs``, medians of ``repeats``."""
     small, large = [], []
     for _ in range(repeats):
-        small.append(trivial_study(client, processes, folder, 2, idle))
-        large.append(trivial_study(client, processes, folder, 200, idle))
+        small.append(trivial_study(client, processes, folder, 2, idle, outputs))
+        large.append(trivial_study(client, processes, folder, 200, idle, outputs))
     out = {}
     for side in ("client", "workers"):
         a = float(np.median([r[side] for r in small]))
@@ -341,11 +343,8 @@ def fixed_and_task_costs(client, processes, folder, idle: dict, repeats: int = 3
     return out
 
 
-MEMBERS_PER_TASK_MEASURED = 200  # per_member_costs' batches
-
-
 def per_member_costs(client, processes, folder, idle: dict, costs: dict, outputs, members: int = 2000,
-                     per_task: int = MEMBERS_PER_TASK_MEASURED, repeats: int = 3) -> dict:
+                     per_task: int = 200, repeats: int = 5) -> dict:
     """CPU time per member beyond its own run, per study, per task and idle: on the workers (d: writing the
     member's shard, Dask sending the rest of its result) and in the client and scheduler (c: receiving it,
     recording it in the file). From
@@ -359,14 +358,33 @@ def per_member_costs(client, processes, folder, idle: dict, costs: dict, outputs
             ds = ln.ensemble(SCENE, vary=vary, t_end=0.2, dt=DT, n_out=N_OUT, outputs=outputs, client=client,
                              out=Path(folder) / "short.nc", members_per_task=per_task)
         tasks, member_cpu = int(ds.attrs["tasks"]), float(ds.attrs["member_cpu_seconds"])
+        shard_cpu = float(ds.attrs.get("worker_write_cpu_seconds", 0.0))
         ds.close()
         client_cpu = meter.main + meter.others - idle["client"] * meter.wall - costs["client_study_s"] - \
             costs["client_task_s"] * tasks
         workers_cpu = meter.workers - member_cpu - idle["workers"] * meter.wall - costs["workers_study_s"] - \
             costs["workers_task_s"] * tasks
-        figures.append((client_cpu / members, workers_cpu / members))
-    c, d = np.median(figures, axis=0)
-    return {"client_member_s": float(c), "workers_member_s": float(d)}
+        figures.append((client_cpu / members, workers_cpu / members, shard_cpu / members))
+    c, d, shard = np.median(figures, axis=0)
+    return {"client_member_s": float(c), "workers_member_s": float(d), "workers_shard_s": float(shard)}
+
+
+def client_all_in(client, processes, folder, members: int = 4000, per_task: int = 500, repeats: int = 3) -> dict:
+    """The client's and scheduler's CPU time per member with nothing taken off but the idle cluster's, in studies
+    shaped like a 100-worker one's (short members, ``per_task`` to a task), with X, U, T and with the quantities of
+    interest only: a check of c + k_c / B that does not rest on the per-task and per-study calibrations (it
+    includes them, over this many members). Medians of ``repeats``."""
+    vary = {"M[11]": np.linspace(0.05, 0.5, members)}
+    rows: dict = {}
+    for _ in range(repeats):
+        for name, outputs in (("outputs", OUTPUTS), ("qoi_only", ())):
+            with CpuMeter(processes) as meter:
+                ds = ln.ensemble(SCENE, vary=vary, t_end=0.2, dt=DT, n_out=N_OUT, outputs=outputs, client=client,
+                                 out=Path(folder) / "allin.nc", members_per_task=per_task)
+            ds.close()
+            rows.setdefault(name, []).append(((meter.main + meter.others) / members, members / meter.wall))
+    return {name: {"client_s": float(np.median([r[0] for r in v])), "members_per_s": float(np.median([r[1] for r in v])),
+                   "members": members, "per_task": per_task} for name, v in rows.items()}
 
 
 # ---- projection ----------------------------------------------------------------------------------------
@@ -438,6 +456,9 @@ def main(argv=None) -> int:
     p.add_argument("--members", type=int, default=1000)
     p.add_argument("--rounds", type=int, default=5, help="rounds of serial loop and studies, interleaved")
     p.add_argument("--members-per-task", type=int, default=None, help="fixed batch size (default: the study's)")
+    p.add_argument("--client-check", action="store_true",
+                   help="also the client's CPU time per member with only the idle cluster's taken off, in studies of "
+                        "4000 short members, 500 to a task (as at 100 workers)")
     p.add_argument("--out", default=str(ROOT / "build" / "bench_ensemble.json"))
     args = p.parse_args(argv)
     if args.quick:
@@ -480,12 +501,17 @@ def main(argv=None) -> int:
                       + ", ".join(f"{n} worker(s) {rounds[f'workers_{n}'][-1]['members_per_s']:.1f}/s" for n in sizes),
                       file=sys.stderr)
             results["idle"] = {n: idle_costs(client, processes[n]) for n, (_, client) in clusters.items()}
+            # per study and per task, with the quantities of interest only (as before) and with X, U, T (shards)
             results["costs"] = fixed_and_task_costs(clusters[qoi_size][1], processes[qoi_size], folder,
                                                     results["idle"][qoi_size])
+            results["costs_outputs"] = fixed_and_task_costs(clusters[qoi_size][1], processes[qoi_size], folder,
+                                                            results["idle"][qoi_size], OUTPUTS)
+            if args.client_check:
+                results["client_all_in"] = client_all_in(clusters[qoi_size][1], processes[qoi_size], folder)
             results["member_costs"] = {
                 name: per_member_costs(clusters[qoi_size][1], processes[qoi_size], folder, results["idle"][qoi_size],
-                                       results["costs"], outputs)
-                for name, outputs in (("outputs", OUTPUTS), ("qoi_only", ()))}
+                                       results[key], outputs)
+                for name, key, outputs in (("outputs", "costs_outputs", OUTPUTS), ("qoi_only", "costs", ()))}
     finally:
         # the last started first: each LocalCluster restores, when it closes, the log level it found when it
         # started, so closing the first one first would let the others' shutdown messages through
@@ -567,7 +593,9 @@ def report(results: dict, sizes: list[int], qoi_size: int) -> None:
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     results["decomposed"] = {}
     for name in names:
-        parts = [decompose(r, idle[size_of[name]], costs) for r in rounds[name]]
+        # each study's per-task and per-study costs measured with its own outputs
+        kind_costs = costs if name == "workers_qoi_only" else results.get("costs_outputs", costs)
+        parts = [decompose(r, idle[size_of[name]], kind_costs) for r in rounds[name]]
         med = {key: float(np.median([p[key] for p in parts])) for key in parts[0]}
         results["decomposed"][name] = med
         print(f"| {name} | " + " | ".join(f"{med[key] * ms:.3f}" for key in (
@@ -599,11 +627,15 @@ def report(results: dict, sizes: list[int], qoi_size: int) -> None:
     for label, seconds in rows:
         print(f"| {label} | {seconds * ms:.3f} |")
     print()
-    print(f"Per task (studies of trivial members, one per task, {qoi_size} workers): k_c = "
-          f"{costs['client_task_s'] * ms:.2f} ms CPU in client and scheduler, k_w = {costs['workers_task_s'] * ms:.2f} "
-          f"ms in the workers ({costs['wall_task_s'] * ms:.2f} ms wall per task). Per study: "
-          f"{costs['client_study_s'] * ms:.0f} ms in client and scheduler, {costs['workers_study_s'] * ms:.0f} ms in "
-          "the workers. Idle cluster, CPU time per second: " + ", ".join(
+    costs_outputs = results.get("costs_outputs", costs)
+    print(f"Per task (studies of trivial members, one per task, {qoi_size} workers), quantities of interest only: "
+          f"k_c = {costs['client_task_s'] * ms:.2f} ms CPU in client and scheduler, k_w = "
+          f"{costs['workers_task_s'] * ms:.2f} ms in the workers ({costs['wall_task_s'] * ms:.2f} ms wall per task); "
+          f"with X, U, T (a shard per task): k_c = {costs_outputs['client_task_s'] * ms:.2f} ms, k_w = "
+          f"{costs_outputs['workers_task_s'] * ms:.2f} ms ({costs_outputs['wall_task_s'] * ms:.2f} ms wall). Per study: "
+          f"{costs['client_study_s'] * ms:.0f} / {costs_outputs['client_study_s'] * ms:.0f} ms in client and scheduler, "
+          f"{costs['workers_study_s'] * ms:.0f} / {costs_outputs['workers_study_s'] * ms:.0f} ms in the workers. Idle "
+          "cluster, CPU time per second: " + ", ".join(
               f"{n} worker(s): {v['client'] * ms:.1f} ms client and scheduler, {v['workers'] * ms:.1f} ms workers"
               for n, v in idle.items()))
     cold = results["cold"]
@@ -617,27 +649,33 @@ def report(results: dict, sizes: list[int], qoi_size: int) -> None:
     m, s_alone = b["worker_member_s"], b["serial_s"]
     results["projection"] = {}
     print()
-    print("Per member beyond its run (studies of 2000 members of 0.2 s, the same outputs, 200 per task; per study, "
-          "per task and idle taken off): " + "; ".join(
-              f"{label}: d = {v['workers_member_s'] * ms:.3f} ms on the workers, c = {v['client_member_s'] * ms:.3f} ms in "
+    print("Per member beyond its run (studies of 2000 members of 0.2 s, the same outputs, 200 per task, 5 repeats; "
+          "per study, per task (each with the same outputs) and idle taken off): " + "; ".join(
+              f"{label}: d = {v['workers_member_s'] * ms:.3f} ms on the workers (of it shard writes "
+              f"{v.get('workers_shard_s', 0.0) * ms:.3f}), c = {v['client_member_s'] * ms:.3f} ms in "
               "client and scheduler" for label, v in (("X, U, T", results["member_costs"]["outputs"]),
                                                       ("quantities of interest only", results["member_costs"]["qoi_only"]))))
-    for label, name, outputs in (("X, U, T written by the workers (shards)", "outputs", OUTPUTS),
-                                 ("quantities of interest only", "qoi_only", ())):
+    if "client_all_in" in results:
+        idle_client = idle[qoi_size]["client"]
+        print()
+        print("Check (--client-check): the client's and scheduler's CPU time per member, studies of 4000 members of "
+              "0.2 s in tasks of 500, per study and per task included: " + "; ".join(
+                  f"{label}: {v['client_s'] * ms:.3f} ms, of which the idle cluster's {idle_client / v['members_per_s'] * ms:.3f} "
+                  f"({v['members_per_s']:.0f} members/s), the rest {(v['client_s'] - idle_client / v['members_per_s']) * ms:.3f}"
+                  for label, v in (("X, U, T", results["client_all_in"]["outputs"]),
+                                   ("quantities of interest only", results["client_all_in"]["qoi_only"]))))
+    for label, name, outputs, kind_costs in (
+            ("X, U, T written by the workers (shards)", "outputs", OUTPUTS, costs_outputs),
+            ("quantities of interest only", "qoi_only", (), costs)):
         per_member = results["member_costs"][name]
         d, c = max(per_member["workers_member_s"], 0.0), max(per_member["client_member_s"], 0.0)
-        # a shard file's fixed cost is per task: taken off d (measured at 200 members per task), added to k_w
-        shard_task = b["shard_task_s"] if outputs else 0.0
-        d = max(d - shard_task / MEMBERS_PER_TASK_MEASURED, 0.0)
         member_bytes = 8 * N_OUT * sum({"X": 33, "U": 33, "T": 10}[o] for o in outputs) + 100
-        rows_p = projection(s_alone, m, d, c, {**costs, "workers_task_s": costs["workers_task_s"] + shard_task},
-                            model, member_bytes)
+        rows_p = projection(s_alone, m, d, c, kind_costs, model, member_bytes)
         results["projection"][name] = rows_p
         print()
         print(f"Projection, {label}: s = {s_alone * ms:.3f} ms, m = {m * ms:.3f} ms, d = {d * ms:.3f} ms, "
-              f"c = {c * ms:.3f} ms, k_w = {(costs['workers_task_s'] + shard_task) * ms:.2f} ms"
-              + (f" (of it the shard file {shard_task * ms:.2f})" if shard_task else "") + ", k_c = "
-              f"{costs['client_task_s'] * ms:.2f} ms, i_w = {model['worker'] * 100:.1f} %, i_c(N) = "
+              f"c = {c * ms:.3f} ms, k_w = {kind_costs['workers_task_s'] * ms:.2f} ms, k_c = "
+              f"{kind_costs['client_task_s'] * ms:.2f} ms, i_w = {model['worker'] * 100:.1f} %, i_c(N) = "
               f"{model['a'] * 100:.2f} % + {model['b'] * 100:.3f} % per heartbeat per second")
         print("| workers | members per task | i_c | workers' rate | client's rate | members/s | against N x serial "
               "| bound by |")
