@@ -6,14 +6,15 @@ grid), t_end = 2 s, RATTLE at dt = 1e-3 s, 201 outputs of X, U, T per member, wr
 beside the study's netCDF file, which joins them (linknet_core/ensemble/shards.py, store.py).
 
 1. Throughput, in one run: the serial loop (each member's scene from ``with_parameters``, then ``ln.simulate``,
-   in this process) and the study on a LocalCluster of each ``--workers`` count, as ln.ensemble starts one
-   (engine.local_cluster; started and warmed outside the timed span), and on the 2-worker one keeping the
-   quantities of interest only, interleaved round by round (``--rounds``). A round's ratio is the serial loop's
-   time per member over the study's, both from that round, so the machine's load (other jobs on shared cores)
-   moves both alike; the table gives the median over rounds and the range. Beside wall time, every study's CPU
-   time: the worker processes with their nannies, the members' own runs (as the workers measured them), this
-   process's main thread (the study loop, the file writes) and its other threads (the LocalCluster's scheduler,
-   the client's communication). CPU time grows far less than wall time when other jobs share the cores: the
+   in this process, over ``--serial-members`` members spread over the grid: its figure is a time per member) and
+   the study on a cluster of each ``--workers`` count only, as ln.ensemble starts one (engine.local_cluster: the
+   scheduler in a process of its own; started and warmed outside the timed span), and on the 2-worker one (or the
+   largest) keeping the quantities of interest only, interleaved round by round (``--rounds``). A round's ratio
+   is the serial loop's time per member over the study's, both from that round, so the machine's load (other
+   jobs on shared cores) moves both alike; the table gives the median over rounds and the range. Beside wall
+   time, every study's CPU time: the worker processes, the members' own runs (as the workers measured them), the
+   scheduler's process, this process's main thread (the study loop, the file writes) and its other threads (the
+   client's communication; a LocalCluster's scheduler, where the cluster is one). CPU time grows far less than wall time when other jobs share the cores: the
    CPU-time ratio, min(N / w, 1 / c, cores / (w + c)) times the serial loop's CPU time per member (w, c: the
    workers' and the client's CPU time per member), is what the machine would give without them.
 2. Per-member CPU breakdown, in this process (thread CPU time, medians of interleaved repeats over members of
@@ -28,9 +29,17 @@ beside the study's netCDF file, which joins them (linknet_core/ensemble/shards.p
    study's CPU time per member is split by cause ("of it file writes": the client's, from the study's
    client_write_cpu_seconds; the workers' shard writes are part of their per-member figure, and said apart from
    worker_write_cpu_seconds).
-4. Projection to 16 and 100 workers from these figures (the model is printed with them; docs/ensemble.md).
+4. Projection to 16 and 100 workers from these figures, and the same model against the run's own studies (wall
+   time predicted from their figures against measured; the model is printed with them; docs/ensemble.md).
+   ``--explain RUN.json`` prints that fit for an earlier run's JSON and stops.
 
-    python -m benchmarks.bench_ensemble [--workers 1,2] [--members 1000] [--rounds 5] [--out build/bench_ensemble.json]
+The wall time of each phase (cold start, the clusters' start, the rounds by kind, each calibration) is said on
+stderr as it ends and printed at the end.
+
+    python -m benchmarks.bench_ensemble [--workers 1,2] [--members 1000] [--serial-members N] [--rounds 5]
+                                        [--out build/bench_ensemble.json]
+    python -m benchmarks.bench_ensemble --workers 8,16 --members 4000 --serial-members 500 --rounds 2
+    python -m benchmarks.bench_ensemble --explain build/bench_ensemble.json
     python -m benchmarks.bench_ensemble --quick    # CI: 16 short members on 1 worker, checked against serial runs
 
 --quick is a smoke test of correctness only (each member bit-identical to its serial ln.simulate run); it times
@@ -40,6 +49,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import tempfile
@@ -81,8 +91,7 @@ def serial_member(scene, mass: float, gravity: float, t_end: float, n_out: int):
     return ln.simulate(member, t_end, dt=DT, n_out=n_out)
 
 
-def serial_loop(scene, vary: dict, t_end: float, n_out: int) -> dict:
-    settings = member_settings(vary)
+def serial_loop(scene, settings: list[tuple[float, float]], t_end: float, n_out: int) -> dict:
     wall, cpu = time.perf_counter(), time.thread_time()
     for mass, gravity in settings:
         serial_member(scene, mass, gravity, t_end, n_out)
@@ -127,26 +136,53 @@ def other_threads_cpu() -> float:
     return total
 
 
-class CpuMeter:
-    """CPU time over a span: the cluster's processes, this main thread, this process's other threads. Threads
-    that end inside the span (none do in a study) would be missed."""
+def scheduler_processes(client) -> list:
+    """The scheduler's process, where it is not this one (ln.ensemble's own cluster runs it in a process of its
+    own; a LocalCluster runs it here, where the other threads' CPU time holds it)."""
+    import psutil
 
-    def __init__(self, processes):
+    pid = client.run_on_scheduler(os.getpid)
+    return [] if pid == os.getpid() else [psutil.Process(pid)]
+
+
+class CpuMeter:
+    """CPU time over a span: the cluster's worker processes (with nannies of their own), the scheduler's process
+    (``scheduler``, where it has one), this main thread, this process's other threads. Threads that end inside the
+    span (none do in a study) would be missed."""
+
+    def __init__(self, processes, scheduler=()):
         self.processes = processes
+        self.scheduler_processes = list(scheduler)
+
+    def _now(self):
+        return (processes_cpu(self.processes), processes_cpu(self.scheduler_processes), time.thread_time(),
+                other_threads_cpu(), time.perf_counter())
 
     def __enter__(self):
-        self._start = (processes_cpu(self.processes), time.thread_time(), other_threads_cpu(), time.perf_counter())
+        self._start = self._now()
         return self
 
     def __exit__(self, *exc):
-        end = (processes_cpu(self.processes), time.thread_time(), other_threads_cpu(), time.perf_counter())
-        self.workers, self.main, self.others, self.wall = (b - a for a, b in zip(self._start, end))
+        end = self._now()
+        self.workers, self.scheduler, self.main, self.others, self.wall = (b - a for a, b in zip(self._start, end))
+
+    @property
+    def client_process(self) -> float:
+        """This process: the study's loop and file writes (main thread), the client's communication (and a
+        LocalCluster's scheduler) on its event loop."""
+        return self.main + self.others
+
+    @property
+    def client(self) -> float:
+        """Client and scheduler, wherever the scheduler runs."""
+        return self.main + self.others + self.scheduler
 
 
-def timed_study(client, processes, vary, t_end, n_out, out, outputs=OUTPUTS, members_per_task=None) -> dict:
+def timed_study(client, processes, vary, t_end, n_out, out, outputs=OUTPUTS, members_per_task=None,
+                scheduler=()) -> dict:
     """One study on an existing cluster: its wall time, and CPU time of the workers (with their nannies), of the
     members' own runs (as the workers measured them), of this main thread and of this process's other threads."""
-    with CpuMeter(processes) as meter:
+    with CpuMeter(processes, scheduler) as meter:
         ds = ln.ensemble(SCENE, vary=vary, t_end=t_end, dt=DT, n_out=n_out, client=client, out=out,
                          outputs=outputs, members_per_task=members_per_task)
     n = int(ds.sizes["member"])
@@ -154,7 +190,8 @@ def timed_study(client, processes, vary, t_end, n_out, out, outputs=OUTPUTS, mem
                "members_per_s": n / meter.wall, "tasks": int(ds.attrs["tasks"]),
                "first_result_s": float(ds.attrs["first_result_seconds"]), "workers_cpu_s": meter.workers,
                "member_cpu_s": float(ds.attrs["member_cpu_seconds"]), "client_main_cpu_s": meter.main,
-               "client_other_cpu_s": meter.others, "client_write_cpu_s": float(ds.attrs["client_write_cpu_seconds"]),
+               "client_other_cpu_s": meter.others, "scheduler_cpu_s": meter.scheduler,
+               "client_write_cpu_s": float(ds.attrs["client_write_cpu_seconds"]),
                "worker_write_cpu_s": float(ds.attrs.get("worker_write_cpu_seconds", 0.0)),
                "client_written_members": int(ds.attrs.get("members_written_by_client", 0))}
     ds.close()
@@ -168,7 +205,7 @@ def decompose(row: dict, idle: dict, costs: dict) -> dict:
     wall time, from the separate measurements) on the workers and in the client and scheduler; the rest is per
     member (Dask sending and receiving the results, the client writing them)."""
     n, wall, tasks = row["members"], row["wall_s"], row["tasks"]
-    client = row["client_main_cpu_s"] + row["client_other_cpu_s"]
+    client = row["client_main_cpu_s"] + row["client_other_cpu_s"] + row.get("scheduler_cpu_s", 0.0)
     parts = {"member": row["member_cpu_s"] / n,
              "workers_idle": idle["workers"] * wall / n, "workers_task": costs["workers_task_s"] * tasks / n,
              "workers_study": costs["workers_study_s"] / n,
@@ -302,28 +339,33 @@ def cold_start(folder) -> dict:
     return figures
 
 
-def idle_costs(client, processes, seconds: float = 4.0) -> dict:
-    """CPU time per second of wall time of an idle cluster: this process (client and scheduler: heartbeats,
-    health checks) and the workers with their nannies."""
+def idle_costs(client, processes, seconds: float = 4.0, scheduler=()) -> dict:
+    """CPU time per second of wall time of an idle cluster: client and scheduler (heartbeats, health checks), of
+    it this process's and the scheduler's process's, and the workers with their nannies."""
     time.sleep(0.5)
-    with CpuMeter(processes) as meter:
+    with CpuMeter(processes, scheduler) as meter:
         time.sleep(seconds)
-    return {"client": (meter.main + meter.others) / meter.wall, "workers": meter.workers / meter.wall}
+    return {"client": meter.client / meter.wall, "client_process": meter.client_process / meter.wall,
+            "client_others": meter.others / meter.wall, "scheduler": meter.scheduler / meter.wall,
+            "workers": meter.workers / meter.wall}
 
 
-def trivial_study(client, processes, folder, members: int, idle: dict, outputs=()) -> dict:
+def trivial_study(client, processes, folder, members: int, idle: dict, outputs=(), scheduler=()) -> dict:
     """A study of ``members`` trivial members (one step, two output times; ``outputs`` kept), one per task: its
     CPU time beyond the idle cluster's and, on the workers, beyond the members' own runs."""
-    with CpuMeter(processes) as meter:
+    with CpuMeter(processes, scheduler) as meter:
         ds = ln.ensemble(SCENE, vary={"M[11]": np.linspace(0.1, 0.5, members)}, t_end=DT, dt=DT, n_out=2,
                          outputs=outputs, client=client, out=Path(folder) / "trivial.nc", members_per_task=1)
     tasks, member_cpu = int(ds.attrs["tasks"]), float(ds.attrs["member_cpu_seconds"])
     ds.close()
-    return {"tasks": tasks, "client": meter.main + meter.others - idle["client"] * meter.wall,
+    return {"tasks": tasks, "client": meter.client - idle["client"] * meter.wall,
+            "client_process": meter.client_process - idle.get("client_process", idle["client"]) * meter.wall,
+            "scheduler": meter.scheduler - idle.get("scheduler", 0.0) * meter.wall,
+            "client_others": meter.others - idle.get("client_others", 0.0) * meter.wall,
             "workers": meter.workers - member_cpu - idle["workers"] * meter.wall, "wall": meter.wall}
 
 
-def fixed_and_task_costs(client, processes, folder, idle: dict, outputs=(), repeats: int = 3) -> dict:
+def fixed_and_task_costs(client, processes, folder, idle: dict, outputs=(), repeats: int = 3, scheduler=()) -> dict:
     """What a study costs whatever its size (F: the file's layout, the plugin on every worker, the dataset opened
     at the end; with trajectories, their shard folder and the join) and per task (k: submit, scheduling, the
     result's fetch and release, the batch's record; with trajectories, the worker's shard file), in the client and
@@ -331,10 +373,10 @@ def fixed_and_task_costs(client, processes, folder, idle: dict, outputs=(), repe
     F + 200 k), keeping ``outputs``, medians of ``repeats``."""
     small, large = [], []
     for _ in range(repeats):
-        small.append(trivial_study(client, processes, folder, 2, idle, outputs))
-        large.append(trivial_study(client, processes, folder, 200, idle, outputs))
+        small.append(trivial_study(client, processes, folder, 2, idle, outputs, scheduler))
+        large.append(trivial_study(client, processes, folder, 200, idle, outputs, scheduler))
     out = {}
-    for side in ("client", "workers"):
+    for side in ("client", "client_process", "client_others", "scheduler", "workers"):
         a = float(np.median([r[side] for r in small]))
         b = float(np.median([r[side] for r in large]))
         task = (b - a) / (large[0]["tasks"] - small[0]["tasks"])
@@ -344,7 +386,7 @@ def fixed_and_task_costs(client, processes, folder, idle: dict, outputs=(), repe
 
 
 def per_member_costs(client, processes, folder, idle: dict, costs: dict, outputs, members: int = 2000,
-                     per_task: int = 200, repeats: int = 5) -> dict:
+                     per_task: int = 200, repeats: int = 5, scheduler=()) -> dict:
     """CPU time per member beyond its own run, per study, per task and idle: on the workers (d: writing the
     member's shard, Dask sending the rest of its result) and in the client and scheduler (c: receiving it,
     recording it in the file). From
@@ -354,13 +396,13 @@ def per_member_costs(client, processes, folder, idle: dict, costs: dict, outputs
     vary = {"M[11]": np.linspace(0.05, 0.5, members)}
     figures = []
     for _ in range(repeats):
-        with CpuMeter(processes) as meter:
+        with CpuMeter(processes, scheduler) as meter:
             ds = ln.ensemble(SCENE, vary=vary, t_end=0.2, dt=DT, n_out=N_OUT, outputs=outputs, client=client,
                              out=Path(folder) / "short.nc", members_per_task=per_task)
         tasks, member_cpu = int(ds.attrs["tasks"]), float(ds.attrs["member_cpu_seconds"])
         shard_cpu = float(ds.attrs.get("worker_write_cpu_seconds", 0.0))
         ds.close()
-        client_cpu = meter.main + meter.others - idle["client"] * meter.wall - costs["client_study_s"] - \
+        client_cpu = meter.client - idle["client"] * meter.wall - costs["client_study_s"] - \
             costs["client_task_s"] * tasks
         workers_cpu = meter.workers - member_cpu - idle["workers"] * meter.wall - costs["workers_study_s"] - \
             costs["workers_task_s"] * tasks
@@ -369,7 +411,8 @@ def per_member_costs(client, processes, folder, idle: dict, costs: dict, outputs
     return {"client_member_s": float(c), "workers_member_s": float(d), "workers_shard_s": float(shard)}
 
 
-def client_all_in(client, processes, folder, members: int = 4000, per_task: int = 500, repeats: int = 3) -> dict:
+def client_all_in(client, processes, folder, members: int = 4000, per_task: int = 500, repeats: int = 3,
+                  scheduler=()) -> dict:
     """The client's and scheduler's CPU time per member with nothing taken off but the idle cluster's, in studies
     shaped like a 100-worker one's (short members, ``per_task`` to a task), with X, U, T and with the quantities of
     interest only: a check of c + k_c / B that does not rest on the per-task and per-study calibrations (it
@@ -378,11 +421,11 @@ def client_all_in(client, processes, folder, members: int = 4000, per_task: int 
     rows: dict = {}
     for _ in range(repeats):
         for name, outputs in (("outputs", OUTPUTS), ("qoi_only", ())):
-            with CpuMeter(processes) as meter:
+            with CpuMeter(processes, scheduler) as meter:
                 ds = ln.ensemble(SCENE, vary=vary, t_end=0.2, dt=DT, n_out=N_OUT, outputs=outputs, client=client,
                                  out=Path(folder) / "allin.nc", members_per_task=per_task)
             ds.close()
-            rows.setdefault(name, []).append(((meter.main + meter.others) / members, members / meter.wall))
+            rows.setdefault(name, []).append((meter.client / members, members / meter.wall))
     return {name: {"client_s": float(np.median([r[0] for r in v])), "members_per_s": float(np.median([r[1] for r in v])),
                    "members": members, "per_task": per_task} for name, v in rows.items()}
 
@@ -395,32 +438,105 @@ def heartbeats_per_second(workers: int) -> float:
     return workers / heartbeat_interval(workers)
 
 
+GIL_HANDOFFS_PER_TASK = 2  # the study's thread waits on the event loop for a task's result, and for its submit
+
+
+def client_turnaround(client_task: float, client_member: float, idle_client: float, batch: float,
+                      loop_busy: float) -> float:
+    """Wall time the client's process takes to turn one task over (fetch its result, record it, submit the next):
+    its CPU time per task and per member, slowed by the share of its core its idle upkeep takes, and the GIL's
+    hand-offs between the study's thread and the event-loop thread (GIL_HANDOFFS_PER_TASK): a thread that wants
+    the GIL while the other runs Python waits ``sys.getswitchinterval()`` (5 ms) before it may take it, so each
+    hand-off costs that times ``loop_busy``, the share of the time the event-loop thread runs (a LocalCluster's
+    scheduler runs there: then it is busy most of the time)."""
+    handoffs = GIL_HANDOFFS_PER_TASK * sys.getswitchinterval() * min(max(loop_busy, 0.0), 1.0)
+    return (client_task + batch * client_member) / max(1.0 - idle_client, 1e-3) + handoffs
+
+
 def projection(s: float, m: float, worker_member: float, client_member: float, costs: dict, idle: dict,
                member_bytes: int) -> dict:
-    """Members per second on N single-threaded workers with a core each, the client and scheduler sharing one
-    more core (as a LocalCluster's do):
+    """Members per second on N single-threaded workers with a core each; the client's process and the scheduler's
+    each on a core of their own (ln.ensemble's local cluster), or sharing one and its GIL (a LocalCluster's):
 
-        rate(N) = min(N (1 - i_w) / (m + d + k_w / B),  (1 - i_c(N)) / (c + k_c / B))
+        rate(N) = min( N (1 - i_w) / (m + d + k_w / B),         the workers
+                       B / ((k_c + B c) / (1 - i_c) + h),        the client's process, one task at a time
+                       B (1 - i_s) / k_s )                       the scheduler's process
 
-    m: a member's own CPU time on a worker; d: Dask's on the worker per member (its results' sending);
-    c: the client's per member (receiving and writing its results); k_w, k_c: per task, on the worker and in
-    the client and scheduler; B(N): the members per task the study chooses on N threads (engine._BatchSizer,
-    without the last batches' shrinking); i_w: the share of a worker's core its idle costs take (heartbeats,
-    health checks), i_c(N) = a + b h(N) the client's and scheduler's, h(N) the heartbeats per second Dask asks
-    of N workers. Against N times the serial loop's rate 1 / s."""
+    m: a member's own CPU time on a worker; d: the worker's per member beyond it (its result, its shard write);
+    c: the client's per member (receiving and recording its result); k_w, k_c, k_s: per task, on the worker, in
+    the client's process and in the scheduler's (with the scheduler in the client's process, k_c holds its part
+    and there is no third bound); i_w, i_c, i_s: the share of a core the idle worker, client process and scheduler
+    take; h: the GIL's switch interval (client_turnaround); B(N): the members per task the study chooses on N
+    threads (engine._BatchSizer, without the first single-member tasks and the last shrinking ones). Against N
+    times the serial loop's rate 1 / s."""
     from linknet_core.ensemble.engine import MAX_TASK_BYTES, MAX_TASKS_PER_SECOND, TASK_SECONDS
 
+    separate = "scheduler_task_s" in costs and idle.get("separate_scheduler", False)
+    k_c = costs["client_process_task_s"] if separate else costs["client_task_s"]
     rows = {}
     for n in PROJECTED_WORKERS:
         batch = max(1, min(int(max(TASK_SECONDS, n / MAX_TASKS_PER_SECOND) / m), MAX_TASK_BYTES // member_bytes))
-        idle_client = idle["a"] + idle["b"] * heartbeats_per_second(n)
+        idle_client = idle["client_process"] if separate else idle["a"] + idle["b"] * heartbeats_per_second(n)
         workers_rate = n * (1 - idle["worker"]) / (m + worker_member + costs["workers_task_s"] / batch)
-        client_rate = max(1 - idle_client, 0.0) / (client_member + costs["client_task_s"] / batch)
-        rate = min(workers_rate, client_rate)
+        # the event loop's share of the time at the workers' pace (an upper bound on the tasks per second)
+        loop_busy = idle.get("client_others", 0.0) + workers_rate / batch * costs.get("client_others_task_s", 0.0)
+        client_rate = batch / client_turnaround(k_c, client_member, idle_client, batch, loop_busy)
+        scheduler_rate = batch * (1 - idle["scheduler"]) / max(costs["scheduler_task_s"], 1e-9) if separate else math.inf
+        rate = min(workers_rate, client_rate, scheduler_rate)
+        bound = {workers_rate: "workers", client_rate: "the client's process", scheduler_rate: "the scheduler"}[rate]
         rows[n] = {"members_per_task": batch, "idle_client": idle_client, "workers_rate": workers_rate,
-                   "client_rate": client_rate, "rate": rate, "ratio": rate * s / n,
-                   "bound_by": "workers" if workers_rate <= client_rate else "client and scheduler"}
+                   "client_rate": client_rate, "scheduler_rate": scheduler_rate, "rate": rate, "ratio": rate * s / n,
+                   "bound_by": bound}
     return rows
+
+
+def explain(results: dict) -> dict:
+    """The model against each study of a run: its wall time predicted from the run's own figures,
+
+        wall = t_first + max( W / N,  tasks x t_c,  tasks x k_s / (1 - i_s) )
+
+    W: the workers' CPU time in the study (the members' runs as they ran there, with what each worker paid per
+    member and per task), t_c: client_turnaround (the per-task and per-member costs and the idle share from the
+    run's calibrations, B the study's members per task), the scheduler's bound where it has a process of its own,
+    t_first: the study's time to its first result (its start); the event loop's share of the time in
+    client_turnaround is the study's own (its other threads' CPU time over its wall time). Printed and returned per cluster size: medians over
+    rounds of the measured and predicted wall times and of the ratios against the serial loop they give."""
+    rounds, idle = results["rounds"], results["idle"]
+    costs = results.get("costs_outputs", results["costs"])
+    c = max(results["member_costs"]["outputs"]["client_member_s"], 0.0)
+    serial = rounds["serial"]
+    out = {}
+    print("Model against the run's studies (wall time per study, s; ratio against the serial loop, from the same round):")
+    print("| workers | tasks | B | W / N | tasks x t_c | tasks x t_s | first result | wall, predicted | wall, measured "
+          "| ratio, predicted | ratio, measured | bound |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for n in results["workers"]:
+        rows = rounds[f"workers_{n}"]
+        figures = []
+        for row, base in zip(rows, serial):
+            idle_n = idle[str(n)] if str(n) in idle else idle[n]
+            separate = row.get("scheduler_cpu_s", 0.0) > 0 and "client_process_task_s" in costs
+            batch = row["members"] / row["tasks"]
+            loop_busy = row["client_other_cpu_s"] / row["wall_s"]  # the event-loop thread's share, in this study
+            if separate:
+                t_c = client_turnaround(costs["client_process_task_s"], c, idle_n["client_process"], batch, loop_busy)
+                t_s = costs["scheduler_task_s"] / max(1 - idle_n["scheduler"], 1e-3)
+            else:  # the scheduler on the client's GIL: its part is in the client's figures
+                t_c, t_s = client_turnaround(costs["client_task_s"], c, idle_n["client"], batch, loop_busy), 0.0
+            bounds = {"workers": row["workers_cpu_s"] / n, "client": row["tasks"] * t_c, "scheduler": row["tasks"] * t_s}
+            predicted = row["first_result_s"] + max(bounds.values())
+            per_member = base["wall_s"] / base["members"]
+            figures.append({"B": batch, **bounds, "first": row["first_result_s"], "predicted": predicted,
+                            "measured": row["wall_s"], "ratio_predicted": per_member * row["members"] / predicted,
+                            "ratio_measured": per_member * row["members"] / row["wall_s"],
+                            "bound": max(bounds, key=bounds.get), "tasks": row["tasks"]})
+        med = {key: float(np.median([f[key] for f in figures])) for key in figures[0] if key != "bound"}
+        med["bound"] = max({"workers", "client", "scheduler"}, key=lambda k: sum(f["bound"] == k for f in figures))
+        out[n] = med
+        print(f"| {n} | {med['tasks']:.0f} | {med['B']:.1f} | {med['workers']:.2f} | {med['client']:.2f} | "
+              f"{med['scheduler']:.2f} | {med['first']:.2f} | {med['predicted']:.2f} | {med['measured']:.2f} | "
+              f"{med['ratio_predicted']:.2f} | {med['ratio_measured']:.2f} | {med['bound']} |")
+    return out
 
 
 # ---- the run -------------------------------------------------------------------------------------------
@@ -449,85 +565,147 @@ def quick(args) -> int:
     return 0
 
 
+class Phases:
+    """Wall time of each phase of the run, said on stderr as each ends and kept for the report."""
+
+    def __init__(self):
+        self.seconds: dict[str, float] = {}
+        self._start = time.perf_counter()
+
+    def __call__(self, name: str):
+        phases = self
+
+        class _Phase:
+            def __enter__(self):
+                self.start = time.perf_counter()
+
+            def __exit__(self, *exc):
+                spent = time.perf_counter() - self.start
+                phases.seconds[name] = phases.seconds.get(name, 0.0) + spent
+                print(f"  [{name}: {spent:.1f} s, {time.perf_counter() - phases._start:.0f} s so far]", file=sys.stderr)
+
+        return _Phase()
+
+
+def serial_subset(vary: dict, members: int) -> list[tuple[float, float]]:
+    """``members`` members of the grid, evenly spread over it (the serial loop's baseline on fewer members than the
+    studies: its figure is a time per member)."""
+    settings = member_settings(vary)
+    if members >= len(settings):
+        return settings
+    return [settings[int(i)] for i in np.linspace(0, len(settings) - 1, members).round()]
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true", help="CI smoke test: correctness of a short study only")
-    p.add_argument("--workers", default="1,2", help="comma-separated LocalCluster sizes (default 1,2)")
+    p.add_argument("--workers", default="1,2", help="comma-separated cluster sizes (default 1,2): only these start")
     p.add_argument("--members", type=int, default=1000)
+    p.add_argument("--serial-members", type=int, default=None,
+                   help="members of the serial loop's baseline in each round, spread over the grid (default: the "
+                        "studies' members, at most 1000); its figure is a time per member")
     p.add_argument("--rounds", type=int, default=5, help="rounds of serial loop and studies, interleaved")
     p.add_argument("--members-per-task", type=int, default=None, help="fixed batch size (default: the study's)")
     p.add_argument("--client-check", action="store_true",
                    help="also the client's CPU time per member with only the idle cluster's taken off, in studies of "
                         "4000 short members, 500 to a task (as at 100 workers)")
+    p.add_argument("--explain", metavar="JSON", default=None,
+                   help="print the model's fit to the studies of an earlier run's JSON (wall time predicted against "
+                        "measured, per study) and stop")
     p.add_argument("--out", default=str(ROOT / "build" / "bench_ensemble.json"))
     args = p.parse_args(argv)
     if args.quick:
         return quick(args)
+    if args.explain:
+        explain(json.loads(Path(args.explain).read_text()))
+        return 0
     try:
         sizes = sorted({int(w) for w in args.workers.split(",") if w.strip()})
     except ValueError:
         p.error(f"--workers must be comma-separated whole numbers, got {args.workers!r}")
     if not sizes or min(sizes) < 1:
         p.error("--workers needs at least one size, each at least 1")
+    if args.serial_members is not None and args.serial_members < 1:
+        p.error("--serial-members must be at least 1")
     warnings.simplefilter("ignore", AccuracyWarning)  # the serial loop's; a study warns once, on the client
+    phase = Phases()
     scene = ln.load_scene(SCENE)
     vary = study_grid(args.members)
+    n_members = len(member_settings(vary))
+    serial_settings = serial_subset(vary, args.serial_members or min(n_members, 1000))
     results: dict = {"scene": "chain_10", "t_end": T_END, "dt": DT, "n_out": N_OUT,
-                     "members": len(member_settings(vary)), "cores": os.cpu_count(), "workers": sizes,
-                     "load_before": os.getloadavg()[0], "python": sys.version.split()[0]}
+                     "members": n_members, "serial_members": len(serial_settings), "cores": os.cpu_count(),
+                     "workers": sizes, "load_before": os.getloadavg()[0], "python": sys.version.split()[0]}
     qoi_size = 2 if 2 in sizes else sizes[-1]
-    with tempfile.TemporaryDirectory() as folder:  # first: no worker process of another measurement around yet
+    with phase("cold start"), tempfile.TemporaryDirectory() as folder:  # first: no other worker process around yet
         results["cold"] = cold_start(folder)
     clusters = {}
     try:
-        for n in sizes:
-            clusters[n] = local_cluster(n)
-        processes = {n: cluster_processes(client) for n, (_, client) in clusters.items()}
+        with phase("clusters start"):
+            for n in sizes:
+                clusters[n] = local_cluster(n)
+            processes = {n: cluster_processes(client) for n, (_, client) in clusters.items()}
+            schedulers = {n: scheduler_processes(client) for n, (_, client) in clusters.items()}
         rounds: dict[str, list] = {"serial": [], **{f"workers_{n}": [] for n in sizes}, "workers_qoi_only": []}
+        qoi = (clusters[qoi_size][1], processes[qoi_size])
         with tempfile.TemporaryDirectory() as folder:
-            for n, (_, client) in clusters.items():  # warm: imports, the study's code on every worker
-                ln.ensemble(SCENE, vary={"M[11]": [0.1, 0.2, 0.3, 0.4]}, t_end=0.05, dt=DT, n_out=11, client=client,
-                            out=Path(folder) / "warm.nc").close()
+            with phase("warm"):
+                for n, (_, client) in clusters.items():  # imports, the study's code on every worker
+                    ln.ensemble(SCENE, vary={"M[11]": [0.1, 0.2, 0.3, 0.4]}, t_end=0.05, dt=DT, n_out=11,
+                                client=client, out=Path(folder) / "warm.nc").close()
             for r in range(args.rounds):
-                rounds["serial"].append(serial_loop(scene, vary, T_END, N_OUT))
+                with phase("serial loops"):
+                    rounds["serial"].append(serial_loop(scene, serial_settings, T_END, N_OUT))
                 for n, (_, client) in clusters.items():
-                    rounds[f"workers_{n}"].append(timed_study(client, processes[n], vary, T_END, N_OUT,
-                                                              Path(folder) / "s.nc",
-                                                              members_per_task=args.members_per_task))
-                rounds["workers_qoi_only"].append(timed_study(clusters[qoi_size][1], processes[qoi_size], vary, T_END,
-                                                              N_OUT, Path(folder) / "q.nc", outputs=(),
-                                                              members_per_task=args.members_per_task))
+                    with phase(f"studies, {n} worker(s)"):
+                        rounds[f"workers_{n}"].append(timed_study(client, processes[n], vary, T_END, N_OUT,
+                                                                  Path(folder) / "s.nc",
+                                                                  members_per_task=args.members_per_task,
+                                                                  scheduler=schedulers[n]))
+                with phase(f"studies, {qoi_size} worker(s), quantities of interest only"):
+                    rounds["workers_qoi_only"].append(timed_study(*qoi, vary, T_END, N_OUT, Path(folder) / "q.nc",
+                                                                  outputs=(), members_per_task=args.members_per_task,
+                                                                  scheduler=schedulers[qoi_size]))
                 print(f"  round {r + 1}/{args.rounds}: serial {rounds['serial'][-1]['members_per_s']:.1f}/s, "
                       + ", ".join(f"{n} worker(s) {rounds[f'workers_{n}'][-1]['members_per_s']:.1f}/s" for n in sizes),
                       file=sys.stderr)
-            results["idle"] = {n: idle_costs(client, processes[n]) for n, (_, client) in clusters.items()}
-            # per study and per task, with the quantities of interest only (as before) and with X, U, T (shards)
-            results["costs"] = fixed_and_task_costs(clusters[qoi_size][1], processes[qoi_size], folder,
-                                                    results["idle"][qoi_size])
-            results["costs_outputs"] = fixed_and_task_costs(clusters[qoi_size][1], processes[qoi_size], folder,
-                                                            results["idle"][qoi_size], OUTPUTS)
+            with phase("idle clusters"):
+                results["idle"] = {n: idle_costs(client, processes[n], scheduler=schedulers[n])
+                                   for n, (_, client) in clusters.items()}
+            idle_qoi, scheduler_qoi = results["idle"][qoi_size], schedulers[qoi_size]
+            with phase("per-task and per-study costs"):
+                # with the quantities of interest only, and with X, U, T (a shard per task)
+                results["costs"] = fixed_and_task_costs(*qoi, folder, idle_qoi, scheduler=scheduler_qoi)
+                results["costs_outputs"] = fixed_and_task_costs(*qoi, folder, idle_qoi, OUTPUTS, scheduler=scheduler_qoi)
             if args.client_check:
-                results["client_all_in"] = client_all_in(clusters[qoi_size][1], processes[qoi_size], folder)
-            results["member_costs"] = {
-                name: per_member_costs(clusters[qoi_size][1], processes[qoi_size], folder, results["idle"][qoi_size],
-                                       results[key], outputs)
-                for name, key, outputs in (("outputs", "costs_outputs", OUTPUTS), ("qoi_only", "costs", ()))}
+                with phase("client check"):
+                    results["client_all_in"] = client_all_in(*qoi, folder, scheduler=scheduler_qoi)
+            with phase("per-member costs"):
+                results["member_costs"] = {
+                    name: per_member_costs(*qoi, folder, idle_qoi, results[key], outputs, scheduler=scheduler_qoi)
+                    for name, key, outputs in (("outputs", "costs_outputs", OUTPUTS), ("qoi_only", "costs", ()))}
     finally:
-        # the last started first: each LocalCluster restores, when it closes, the log level it found when it
-        # started, so closing the first one first would let the others' shutdown messages through
-        for cluster, client in reversed(clusters.values()):
-            with quiet_shutdown(client):
-                client.close()
-                cluster.close()
+        with phase("clusters close"):
+            # the last started first: each cluster restores, when it closes, the log level it found when it started,
+            # so closing the first one first would let the others' shutdown messages through
+            for cluster, client in reversed(clusters.values()):
+                with quiet_shutdown(client):
+                    client.close()
+                    cluster.close()
     results["rounds"] = rounds
     streamed = sum(r.get("client_written_members", 0) for rows in rounds.values() for r in rows)
-    if streamed:  # the workers did not see the study's folder (they would on a LocalCluster): said, not hidden
+    if streamed:  # the workers did not see the study's folder (they would on a local cluster): said, not hidden
         print(f"note: the client wrote the trajectories of {streamed} members (their workers did not)", file=sys.stderr)
     typical = rounds[f"workers_{sizes[-1]}"][-1]
     batch = max(1, round(typical["members"] / max(typical["tasks"], 1)))
-    results["breakdown"] = member_breakdown(scene, vary, T_END, N_OUT, batch=batch)
+    with phase("in-process breakdown"):
+        results["breakdown"] = member_breakdown(scene, vary, T_END, N_OUT, batch=batch)
     results["load_after"] = os.getloadavg()[0]
+    results["phases_s"] = phase.seconds
     report(results, sizes, qoi_size)
+    print()
+    print("Wall time of each phase: " + ", ".join(f"{name} {seconds:.1f} s" for name, seconds in phase.seconds.items())
+          + f"; {time.perf_counter() - phase._start:.0f} s in all")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(results, indent=1) + "\n")
     print(f"wrote {args.out}")
@@ -550,7 +728,13 @@ def _idle_model(idle: dict) -> dict:
         b = values[0] / hb[0]  # one size: all of it taken as per heartbeat (the pessimistic reading)
     a = max(values[0] - b * hb[0], 0.0)
     worker = float(np.mean([idle[n]["workers"] / n for n in sizes]))
-    return {"a": a, "b": b, "worker": worker}
+    # the client's process and the scheduler's apart, where the scheduler has a process of its own: the largest
+    # share measured over the sizes
+    separate = all(idle[n].get("scheduler", 0.0) > 0 for n in sizes)
+    return {"a": a, "b": b, "worker": worker, "separate_scheduler": separate,
+            "client_process": max(idle[n].get("client_process", idle[n]["client"]) for n in sizes),
+            "scheduler": max(idle[n].get("scheduler", 0.0) for n in sizes),
+            "client_others": max(idle[n].get("client_others", 0.0) for n in sizes)}
 
 
 def report(results: dict, sizes: list[int], qoi_size: int) -> None:
@@ -560,7 +744,8 @@ def report(results: dict, sizes: list[int], qoi_size: int) -> None:
     s = _median(serial, "cpu_member_s")
     names = [f"workers_{n}" for n in sizes] + ["workers_qoi_only"]
     size_of = {**{f"workers_{n}": n for n in sizes}, "workers_qoi_only": qoi_size}
-    print(f"chain_10, {results['members']} members, t_end {T_END:g} s, rattle dt {DT:g}, {N_OUT} outputs of X, U, T; "
+    print(f"chain_10, {results['members']} members (the serial loop {results.get('serial_members', results['members'])} "
+          f"of them), t_end {T_END:g} s, rattle dt {DT:g}, {N_OUT} outputs of X, U, T; "
           f"{results['cores']} cores, load average {results['load_before']:.1f} -> {results['load_after']:.1f}; "
           f"{len(serial)} rounds, interleaved")
     print()
@@ -576,8 +761,9 @@ def report(results: dict, sizes: list[int], qoi_size: int) -> None:
         ratios = [a["wall_s"] / a["members"] / (b["wall_s"] / b["members"]) for a, b in zip(serial, rows)]
         worker = _median(rows, "workers_cpu_s") / rows[0]["members"]
         client = float(np.median([r["client_main_cpu_s"] + r["client_other_cpu_s"] for r in rows])) / rows[0]["members"]
-        # each worker and the client a core of their own, or all of them sharing the cores there are
-        cpu_ratio = min(n / worker, 1 / client, cores / (worker + client)) * s
+        scheduler = float(np.median([r.get("scheduler_cpu_s", 0.0) for r in rows])) / rows[0]["members"]
+        # each worker, the client's process and the scheduler's a core of their own, or all sharing the cores
+        cpu_ratio = min(n / worker, 1 / client, 1 / max(scheduler, 1e-12), cores / (worker + client + scheduler)) * s
         label = f"{n} worker(s)" if name != "workers_qoi_only" else f"{n} workers, quantities of interest only"
         results["ratios"][name] = {"wall_median": float(np.median(ratios)), "wall_min": min(ratios),
                                    "wall_max": max(ratios), "cpu": cpu_ratio}
@@ -677,12 +863,20 @@ def report(results: dict, sizes: list[int], qoi_size: int) -> None:
               f"c = {c * ms:.3f} ms, k_w = {kind_costs['workers_task_s'] * ms:.2f} ms, k_c = "
               f"{kind_costs['client_task_s'] * ms:.2f} ms, i_w = {model['worker'] * 100:.1f} %, i_c(N) = "
               f"{model['a'] * 100:.2f} % + {model['b'] * 100:.3f} % per heartbeat per second")
-        print("| workers | members per task | i_c | workers' rate | client's rate | members/s | against N x serial "
-              "| bound by |")
-        print("|---|---|---|---|---|---|---|---|")
+        if model["separate_scheduler"]:
+            print(f"  the scheduler in its own process: k_c = {kind_costs['client_process_task_s'] * ms:.2f} ms in the "
+                  f"client's process, k_s = {kind_costs['scheduler_task_s'] * ms:.2f} ms in the scheduler's; i_c = "
+                  f"{model['client_process'] * 100:.1f} %, i_s = {model['scheduler'] * 100:.1f} %; h = "
+                  f"{sys.getswitchinterval() * ms:.0f} ms")
+        print("| workers | members per task | i_c | workers' rate | client's rate | scheduler's rate | members/s "
+              "| against N x serial | bound by |")
+        print("|---|---|---|---|---|---|---|---|---|")
         for n, row in rows_p.items():
             print(f"| {n} | {row['members_per_task']} | {row['idle_client'] * 100:.1f} % | {row['workers_rate']:.0f}/s | "
-                  f"{row['client_rate']:.0f}/s | {row['rate']:.0f} | {row['ratio']:.2f} | {row['bound_by']} |")
+                  f"{row['client_rate']:.0f}/s | {row['scheduler_rate']:.0f}/s | {row['rate']:.0f} | {row['ratio']:.2f} | "
+                  f"{row['bound_by']} |")
+    print()
+    results["explained"] = explain(results)
 
 
 if __name__ == "__main__":

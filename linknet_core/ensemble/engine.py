@@ -23,6 +23,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import math
 import os
@@ -53,6 +54,9 @@ MAX_TASKS_PER_SECOND = 40
 # a batch's outputs stay below this: a batch is held whole by its worker until written into its shard (or fetched,
 # and then by the client until written)
 MAX_TASK_BYTES = 64 << 20
+# the last tasks of a study hold at least this share of a full task's work: TASK_SECONDS / 4 leaves a worker
+# idle at most ~0.15 s at the end, and keeps Dask's cost per task below 4 % of the work
+TAIL_TASK_SHARE = 0.25
 WORKER_WAIT_SECONDS = 60.0  # how long a study waits for the first worker of an existing cluster
 CONNECT_TIMEOUT = 10.0  # seconds to connect to a scheduler address and see its Dask handshake (connect_timeout=)
 SCHEDULER_PORT = 8786  # Dask's default scheduler port (its dashboard's HTTP server: 8787)
@@ -100,20 +104,92 @@ LOCAL_CLUSTER_CONFIG = {
 
 
 def local_cluster(workers: int):
-    """The LocalCluster a study starts, and a client of it: ``workers`` single-threaded worker processes on
-    127.0.0.1 (the solver holds the GIL in its Python layers, so threads in one process would queue), Dask's log
-    messages below ERROR silenced, LOCAL_CLUSTER_CONFIG set (the nannies pass it to their workers)."""
+    """The local cluster a study starts, and a client of it: its scheduler in a process of its own
+    (scheduler_process.py: a LocalCluster's runs in this process, where it shares the GIL with the client's
+    fetches, writes and submits), and ``workers`` single-threaded worker processes on 127.0.0.1 (the solver holds
+    the GIL in its Python layers, so threads in one process would queue), each under a nanny in this process that
+    restarts it if it dies, as a LocalCluster's; Dask's log messages below ERROR silenced, LOCAL_CLUSTER_CONFIG set
+    (the nannies pass it to their workers, the scheduler process is given it)."""
     import dask
-    from distributed import Client, LocalCluster
+    from distributed import Client, Nanny, SpecCluster
+    from distributed.worker_memory import parse_memory_limit
 
     with dask.config.set(LOCAL_CLUSTER_CONFIG):
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+        worker = {"cls": Nanny, "options": {
+            "host": "127.0.0.1", "nthreads": 1, "dashboard": False, "silence_logs": logging.ERROR,
+            "memory_limit": parse_memory_limit("auto", 1, workers, logger=logging.getLogger("distributed"))}}
+        cluster = SpecCluster(workers={i: worker for i in range(workers)}, worker=worker,
+                              scheduler={"cls": scheduler_process_class(), "options": {"config": LOCAL_CLUSTER_CONFIG}},
+                              silence_logs=logging.ERROR, name="linknet-study")
         try:
             return cluster, Client(cluster)
         except BaseException:
             cluster.close()
             raise
+
+
+@functools.lru_cache(maxsize=None)
+def scheduler_process_class():
+    """The SpecCluster scheduler class of a study's local cluster (made when first asked for: it subclasses a Dask
+    class, and importing this module does not import distributed)."""
+    from distributed.deploy.spec import ProcessInterface
+
+    class SchedulerProcess(ProcessInterface):
+        """A Dask scheduler in a child process (``python -m linknet_core.ensemble.scheduler_process``), as a
+        SpecCluster's scheduler: started with the given Dask settings, its address read from its first line of
+        output; closed by closing its stdin (it also exits if this process ends). Its child finds linknet as this
+        process does (this process's import path is its PYTHONPATH): Dask's scheduler unpickles the tasks it is
+        sent, whose function is linknet's."""
+
+        def __init__(self, config: dict | None = None, start_timeout: float = 60.0):
+            self.config = dict(config or {})
+            self.start_timeout = start_timeout
+            self.process = None
+            super().__init__()
+
+        async def start(self) -> None:
+            import asyncio
+            import json
+            import sys
+
+            env = dict(os.environ)
+            env["PYTHONPATH"] = os.pathsep.join([p for p in sys.path if p] +
+                                                ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
+            self.process = await asyncio.create_subprocess_exec(
+                sys.executable, "-m", "linknet_core.ensemble.scheduler_process", json.dumps(self.config),
+                stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE, env=env)
+            try:
+                line = await asyncio.wait_for(self.process.stdout.readline(), self.start_timeout)
+            except asyncio.TimeoutError:
+                line = b""
+            address = line.decode(errors="replace").strip()
+            if not address.startswith("tcp://"):
+                await self._stop()
+                raise RuntimeError(f"the study's Dask scheduler process did not start (exit code "
+                                   f"{self.process.returncode}, output {line[:200]!r})")
+            self.address = address
+            await super().start()
+
+        async def _stop(self) -> None:
+            import asyncio
+
+            process = self.process
+            if process is None:
+                return
+            if process.returncode is None:
+                process.stdin.close()
+                try:
+                    await asyncio.wait_for(process.wait(), 10.0)
+                except asyncio.TimeoutError:
+                    process.kill()
+                    await process.wait()
+            self.process = None
+
+        async def close(self) -> None:
+            await self._stop()
+            await super().close()
+
+    return SchedulerProcess
 
 
 _DASK_LOGGERS = ("distributed", "tornado")
@@ -127,10 +203,11 @@ def quiet_shutdown(client):
     here."""
     loggers = [logging.getLogger(name) for name in _DASK_LOGGERS]
     levels = [logger.level for logger in loggers]
-    try:
-        client.run(_silence_dask_logs)
-    except Exception:  # a worker already gone: nothing of it to silence
-        pass
+    for silence in (client.run, client.run_on_scheduler):  # the workers; the scheduler, in its own process
+        try:
+            silence(_silence_dask_logs)
+        except Exception:  # a worker or scheduler already gone: nothing of it to silence
+            pass
     _silence_dask_logs()
     try:
         yield
@@ -162,7 +239,7 @@ class Engine:
                                    "starts each worker by importing the main script again, so a script must call "
                                    "ln.ensemble under `if __name__ == \"__main__\":`") from None
             self._owns_client = True
-            self.description = f"LocalCluster on 127.0.0.1, {n} worker process(es)"
+            self.description = f"local cluster on 127.0.0.1: a scheduler process and {n} worker process(es)"
             return
         if workers is not None:
             raise LinknetError("workers= sets the size of the embedded LocalCluster; an existing cluster "
@@ -320,13 +397,17 @@ def _bytes_text(n: int) -> str:
 
 class _BatchSizer:
     """Members per task: 1 until a member time is known, then about TASK_SECONDS of work (longer on clusters
-    with more than TASK_SECONDS * MAX_TASKS_PER_SECOND threads), at most MAX_TASK_BYTES of outputs, capped so
-    that the remaining members still make two tasks per worker thread (no idle workers at the end). ``fixed``
-    (members_per_task=) overrides it."""
+    with more than TASK_SECONDS * MAX_TASKS_PER_SECOND threads), at most MAX_TASK_BYTES of outputs. Near the end,
+    when the remaining members no longer fill a task per worker thread, a task takes the remaining members over
+    the threads (so the last wave ends about together on every worker), but never less than
+    TAIL_TASK_SHARE of the full task's work, so that the end of a study does not break into tasks whose Dask cost
+    approaches their work; nor more than a quarter of the study's members per thread (``total``), so that a study
+    smaller than a wave of full tasks still spreads over every thread. ``fixed`` (members_per_task=) overrides it."""
 
-    def __init__(self, fixed: int | None, member_bytes: int = 0):
+    def __init__(self, fixed: int | None, member_bytes: int = 0, total: int | None = None):
         self.fixed = fixed
         self.member_bytes = member_bytes
+        self.total = total
         self._seconds = 0.0
         self._members = 0
 
@@ -342,7 +423,11 @@ class _BatchSizer:
         per_member = max(self._seconds / self._members, 1e-6)
         task_seconds = max(TASK_SECONDS, threads / MAX_TASKS_PER_SECOND)
         largest = MAX_TASK_BYTES // self.member_bytes if self.member_bytes else remaining
-        return max(1, min(int(task_seconds / per_member), largest, math.ceil(remaining / (2 * threads))))
+        full = max(1, min(int(task_seconds / per_member), largest))
+        smallest = max(1, int(TAIL_TASK_SHARE * full))
+        if self.total is not None:
+            smallest = max(1, min(smallest, self.total // (4 * threads)))
+        return max(1, min(full, max(smallest, math.ceil(remaining / threads)), remaining))
 
 
 def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=None,
@@ -364,7 +449,7 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
     progress = Progress(total=plan.n_members, workers=threads)
     # a batch's outputs in bytes, per member: 8 per number kept, ~100 for its quantities of interest and status
     member_bytes = 8 * output_values(Scene.from_dict(spec.scene), spec.outputs, spec.times.size) + 100
-    sizer = _BatchSizer(members_per_task, member_bytes)
+    sizer = _BatchSizer(members_per_task, member_bytes, plan.n_members)
     lock = threading.Lock()  # the event handler runs on the client's event-loop thread
     in_flight: dict[str, tuple[int, int]] = {}  # task key -> (first member, count)
     retried: set[int] = set()

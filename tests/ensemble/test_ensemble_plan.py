@@ -100,8 +100,10 @@ def test_study_options_are_checked_before_anything_runs():
 def test_batch_size_follows_member_time_output_size_and_the_end_of_the_study():
     """Members per task: one until a member's time is known; then TASK_SECONDS of work; on a cluster of more
     threads than TASK_SECONDS * MAX_TASKS_PER_SECOND, threads / MAX_TASKS_PER_SECOND seconds; never more outputs
-    than MAX_TASK_BYTES; and near the end, at most the remaining members over two tasks per thread."""
-    from linknet_core.ensemble.engine import MAX_TASK_BYTES, MAX_TASKS_PER_SECOND, TASK_SECONDS, _BatchSizer
+    than MAX_TASK_BYTES; near the end, the remaining members over the threads, but not below TAIL_TASK_SHARE of a
+    full task, unless the whole study is too small to give every thread four tasks that size."""
+    from linknet_core.ensemble.engine import MAX_TASK_BYTES, MAX_TASKS_PER_SECOND, TAIL_TASK_SHARE, TASK_SECONDS, \
+        _BatchSizer
 
     chain_member_bytes = 8 * 201 * (33 + 33 + 10) + 100  # chain_10 with X, U, T at 201 times
     sizer = _BatchSizer(None, chain_member_bytes)
@@ -114,5 +116,13 @@ def test_batch_size_follows_member_time_output_size_and_the_end_of_the_study():
     quantities_only = _BatchSizer(None, 100)
     quantities_only.record([0.005])
     assert quantities_only.size(remaining=10**9, threads=int(many)) == int(many / MAX_TASKS_PER_SECOND / 0.005)
-    assert sizer.size(remaining=10, threads=2) == 3  # ceil(10 / 4): the last members spread over both threads
+    full = int(TASK_SECONDS / 0.005)
+    assert sizer.size(remaining=full, threads=2) == full // 2  # the last members spread over both threads
+    floor = int(TAIL_TASK_SHARE * full)
+    assert sizer.size(remaining=floor, threads=2) == floor  # not below the floor: one task takes them
+    assert sizer.size(remaining=floor // 2, threads=2) == floor // 2  # never more than remain
+    small = _BatchSizer(None, chain_member_bytes, total=40)  # 40 members on 2 threads: tasks of 40 // 8 = 5 at least
+    small.record([0.005])
+    assert small.size(remaining=30, threads=2) == 15
+    assert small.size(remaining=6, threads=2) == 5
     assert _BatchSizer(7, chain_member_bytes).size(remaining=10_000, threads=2) == 7  # members_per_task=7

@@ -27,7 +27,7 @@ def test_default_engine_local_cluster_streams_a_grid_to_netcdf(tmp_path):
     out = tmp_path / "study.nc"
     ds = ln.ensemble(MODELS / "chain_10.json", vary={"M[11]": [0.5, 2.0], "g[3]": [-9.81, -1.62]},
                      t_end=T_END, n_out=N_OUT, out=out, workers=2)
-    assert "LocalCluster" in ds.attrs["engine"] and ds.attrs["complete"] == 1
+    assert "local cluster" in ds.attrs["engine"] and ds.attrs["complete"] == 1
     assert dict(ds.sizes) == {"member": 4, "time": N_OUT, "mass": 11, "axis": 3, "link": 10, "anchor": 1}
     assert ds["X"].dims == ("member", "time", "mass", "axis") and ds["T"].dims == ("member", "time", "link")
     np.testing.assert_array_equal(ds["M[11]"].values, [0.5, 0.5, 2.0, 2.0])
@@ -101,3 +101,20 @@ def test_spring_and_drag_constants(local_client):
                      t_end=T_END, n_out=N_OUT, client=local_client)
     _check_against_serial(ds, scene)
     assert np.ptp(ds["tip_final"].values[:, 0]) > 0.01  # the constants mattered
+
+
+def test_default_engine_runs_its_scheduler_in_a_process_of_its_own_and_ends_it():
+    """The study's own cluster: the scheduler is another process than the client's (they do not share a GIL),
+    its workers are processes of their own, and closing the engine ends the scheduler's process."""
+    import os
+
+    import psutil
+
+    from linknet_core.ensemble.engine import Engine
+
+    with Engine(workers=2) as engine:
+        scheduler_pid = engine.client.run_on_scheduler(os.getpid)
+        worker_pids = set(engine.client.run(os.getpid).values())
+        assert scheduler_pid != os.getpid() and os.getpid() not in worker_pids and len(worker_pids) == 2
+        assert engine.threads() == 2
+    assert not psutil.pid_exists(scheduler_pid) or psutil.Process(scheduler_pid).status() == psutil.STATUS_ZOMBIE
