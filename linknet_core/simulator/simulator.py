@@ -639,7 +639,7 @@ class Result:
             tmp, t=self.t, X=self.X, U=self.U, T=self.T, energy=self.energy, residual=self.residual,
             velocity_residual=self.velocity_residual, mass_names=np.array(self.scene.mass_names),
             k1=self.scene.k1 + 1, k2=self.scene.k2 + 1, fixed=self.scene.fixed, method=self.method,
-            **({} if self.slack is None else dict(slack=self.slack, **event_arrays(self.events)))))
+            **({} if self.slack is None else dict(slack=self.slack, **event_arrays(self.events, self.scene.ground)))))
 
     def summary(self) -> str:
         s = self.stats
