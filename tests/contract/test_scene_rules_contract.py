@@ -130,7 +130,7 @@ def test_docs_state_every_scene_field_and_the_link_rules():
     text = (ROOT / "docs" / "scenes.md").read_text()
     plain = text.replace("**", "").lower()
     for keys in (description._SCENE_KEYS, description._MASS_KEYS, description._LINK_KEYS, description._SPRING_KEYS,
-                 description._OPTION_KEYS):
+                 description._OPTION_KEYS, description._GROUND_KEYS):
         for key in keys:
             assert f"`{key}`" in text, key
     for rule in ("at most one link may join a pair", "joins two anchored masses", "joins mass",
