@@ -23,10 +23,23 @@ from linknet_core.clib.library import float_array, int_array, pointer
 from linknet_core.scene.description import require_force_kinds
 
 
+_interface_kind_name = lib._declare("ln_interface_kind_name", ctypes.c_char_p, lib.ln_int)
+
+
+def interface_kind_names() -> list[str]:
+    """The force element kinds the core's interface Jacobians differentiate (src/interface_jacobian.c)."""
+    names = []
+    while (name := _interface_kind_name(len(names))) is not None:
+        names.append(name.decode())
+    return names
+
+
 def check_core_force_kinds() -> None:
-    """The core's force element kinds (stages/forces.c) are those of the scene's FORCE_KINDS, with its codes, or
-    ForceKindMissing names the kind: checked when this module loads, before any native model is built."""
+    """The core's force element kinds (stages/forces.c, with the scene's codes) and those its interface Jacobians
+    differentiate (interface_jacobian.c) are the scene's FORCE_KINDS, or ForceKindMissing names the kind and the
+    file: checked when this module loads, before any native model is built, so that neither skips a kind."""
     require_force_kinds(lib.force_kind_names(), "the native core (native/src/stages/forces.c)", by_code=True)
+    require_force_kinds(interface_kind_names(), "the native interface Jacobians (native/src/interface_jacobian.c)")
 
 
 check_core_force_kinds()

@@ -35,6 +35,7 @@ def test_every_kind_of_the_table_is_known_to_numpy_native_and_casadi():
         assert library.force_kind(name.encode()) == code
         assert library.force_kind_name(code).decode() == name
     assert library.force_kind_name(len(TABLE)) is None and library.force_kind(b"no such kind") == -1
+    assert sorted(native_model.interface_kind_names()) == sorted(TABLE)  # the native interface Jacobians' kinds
 
 
 def test_a_path_that_lacks_a_kind_is_stopped_naming_the_kind():
@@ -51,6 +52,14 @@ def test_the_native_check_reads_the_cores_own_kinds(monkeypatch):
     real = library.force_kind_name
     monkeypatch.setattr(library, "force_kind_name", lambda code: None if code >= len(TABLE) - 1 else real(code))
     with pytest.raises(ForceKindMissing, match=f"native core .*no formula for force element kind '{TABLE[-1]}'"):
+        native_model.check_core_force_kinds()
+
+
+def test_the_native_check_reads_the_interface_jacobians_own_kinds(monkeypatch):
+    """A core whose interface_jacobian.c has no derivative for a kind (here the spring) is refused when the native
+    path loads, naming the file, rather than its linearizations coming out NaN."""
+    monkeypatch.setattr(native_model, "interface_kind_names", lambda: [name for name in TABLE if name != "spring"])
+    with pytest.raises(ForceKindMissing, match="interface_jacobian.c.*no formula for force element kind 'spring'"):
         native_model.check_core_force_kinds()
 
 

@@ -150,6 +150,14 @@ int ln_interface_prepare(const ln_model *m, ln_interface *J, const ln_data *sour
     return LN_OK;
 }
 
+/* The kinds element_derivatives differentiates (each has its branch there). */
+static const char *const derivative_kinds[] = {"drag", "quadratic_drag", "spring"};
+
+const char *ln_interface_kind_name(ln_int i)
+{
+    return i >= 0 && i < (ln_int)(sizeof derivative_kinds / sizeof derivative_kinds[0]) ? derivative_kinds[i] : NULL;
+}
+
 /* The force elements' derivative along (dX, dU) added into dF (the formulas of stages/forces.c differentiated; the
    numpy reference's ELEMENT_DERIVATIVES). */
 static void element_derivatives(const ln_model *m, const ln_interface *J, const double *X, const double *U,

@@ -32,6 +32,11 @@ LN_API int ln_interface_prepare(const ln_model *m, ln_interface *J, const ln_dat
 LN_API int ln_interface_directional(const ln_model *m, ln_interface *J, const double *dF, const double *dP,
                                     const double *dV, const double *dA, double *dT, double *dFreact, double *dacc);
 
+/* The force element kinds whose derivatives element_derivatives writes, by name: i = 0, 1, ... until NULL.
+   linknet_core/native/interface.py checks them against the scene's FORCE_KINDS when it loads, so that a kind the
+   core gains without a derivative here stops the first linearization instead of giving NaN. */
+LN_API const char *ln_interface_kind_name(ln_int i);
+
 /* Whether the last preparation found A singular (minimum-norm tensions: the pseudo-inverse's derivative). */
 LN_API int ln_interface_singular(const ln_interface *J);
 
