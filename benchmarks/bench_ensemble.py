@@ -493,12 +493,13 @@ def projection(s: float, m: float, worker_member: float, client_member: float, c
 def explain(results: dict) -> dict:
     """The model against each study of a run: its wall time predicted from the run's own figures,
 
-        wall = t_first + max( W / N,  tasks x t_c,  tasks x k_s / (1 - i_s) )
+        wall = t_first + max( W / N,  tasks x t_c,  tasks x k_s / (1 - i_s),  (W + C) / cores )
 
     W: the workers' CPU time in the study (the members' runs as they ran there, with what each worker paid per
     member and per task), t_c: client_turnaround (the per-task and per-member costs and the idle share from the
     run's calibrations, B the study's members per task), the scheduler's bound where it has a process of its own,
-    t_first: the study's time to its first result (its start); the event loop's share of the time in
+    t_first: the study's time to its first result (its start); C: the client's and scheduler's CPU time in the
+    study, so that the last bound is the machine's cores shared by all (other jobs' load is not in it); the event loop's share of the time in
     client_turnaround is the study's own (its other threads' CPU time over its wall time). Printed and returned per cluster size: medians over
     rounds of the measured and predicted wall times and of the ratios against the serial loop they give."""
     rounds, idle = results["rounds"], results["idle"]
@@ -507,9 +508,9 @@ def explain(results: dict) -> dict:
     serial = rounds["serial"]
     out = {}
     print("Model against the run's studies (wall time per study, s; ratio against the serial loop, from the same round):")
-    print("| workers | tasks | B | W / N | tasks x t_c | tasks x t_s | first result | wall, predicted | wall, measured "
-          "| ratio, predicted | ratio, measured | bound |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| workers | tasks | B | W / N | tasks x t_c | tasks x t_s | (W + C) / cores | first result | wall, predicted "
+          "| wall, measured | ratio, predicted | ratio, measured | bound |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for n in results["workers"]:
         rows = rounds[f"workers_{n}"]
         figures = []
@@ -523,7 +524,10 @@ def explain(results: dict) -> dict:
                 t_s = costs["scheduler_task_s"] / max(1 - idle_n["scheduler"], 1e-3)
             else:  # the scheduler on the client's GIL: its part is in the client's figures
                 t_c, t_s = client_turnaround(costs["client_task_s"], c, idle_n["client"], batch, loop_busy), 0.0
-            bounds = {"workers": row["workers_cpu_s"] / n, "client": row["tasks"] * t_c, "scheduler": row["tasks"] * t_s}
+            everything = row["workers_cpu_s"] + row["client_main_cpu_s"] + row["client_other_cpu_s"] + \
+                row.get("scheduler_cpu_s", 0.0)
+            bounds = {"workers": row["workers_cpu_s"] / n, "client": row["tasks"] * t_c, "scheduler": row["tasks"] * t_s,
+                      "cores": everything / (results.get("cores") or 1)}
             predicted = row["first_result_s"] + max(bounds.values())
             per_member = base["wall_s"] / base["members"]
             figures.append({"B": batch, **bounds, "first": row["first_result_s"], "predicted": predicted,
@@ -531,10 +535,10 @@ def explain(results: dict) -> dict:
                             "ratio_measured": per_member * row["members"] / row["wall_s"],
                             "bound": max(bounds, key=bounds.get), "tasks": row["tasks"]})
         med = {key: float(np.median([f[key] for f in figures])) for key in figures[0] if key != "bound"}
-        med["bound"] = max({"workers", "client", "scheduler"}, key=lambda k: sum(f["bound"] == k for f in figures))
+        med["bound"] = max(("workers", "client", "scheduler", "cores"), key=lambda k: sum(f["bound"] == k for f in figures))
         out[n] = med
         print(f"| {n} | {med['tasks']:.0f} | {med['B']:.1f} | {med['workers']:.2f} | {med['client']:.2f} | "
-              f"{med['scheduler']:.2f} | {med['first']:.2f} | {med['predicted']:.2f} | {med['measured']:.2f} | "
+              f"{med['scheduler']:.2f} | {med['cores']:.2f} | {med['first']:.2f} | {med['predicted']:.2f} | {med['measured']:.2f} | "
               f"{med['ratio_predicted']:.2f} | {med['ratio_measured']:.2f} | {med['bound']} |")
     return out
 

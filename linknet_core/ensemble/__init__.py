@@ -2,7 +2,7 @@
 
     import linknet_core as ln
     study = ln.ensemble("models/chain_10.json", vary={"M[11]": [0.5, 1, 2], "R[1..10]": [0.09, 0.1, 0.11]},
-                        t_end=2, out="study.nc")          # 9 members, a LocalCluster with one worker per core
+                        t_end=2, out="study.nc")          # 9 members, a local cluster with one worker per core
     study.max_tension                                       # xarray: (member), coordinates M[11], R[1..10]
 
 Docs: docs/ensemble.md. Only numpy is imported with this package; Dask, xarray, h5netcdf and fmpy are
@@ -56,8 +56,8 @@ def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, met
     out: netCDF file to write (members stream into it as they finish; with trajectories, those are in shard
         files in the folder beside it, ``NAME.shards``, which the file joins: keep the two together); None
         keeps the study in memory.
-    client: None (a LocalCluster, ``workers`` processes, default one per core), a scheduler address, or a
-        ``distributed.Client``. members_per_task: fixed batch size (default: adaptive).
+    client: None (a local cluster: ``workers`` processes, default one per core, and the scheduler's own), a
+        scheduler address, or a ``distributed.Client``. members_per_task: fixed batch size (default: adaptive).
     connect_timeout: seconds (default 10) to reach a scheduler address and see its Dask handshake; an address
         where none answers (refused, unreachable, an HTTP server such as the dashboard's port, a server that
         never answers) raises LinknetError naming the address and what was found there.
@@ -155,7 +155,7 @@ def _connect_timeout(seconds, client) -> dict:
     if not isinstance(client, str):
         raise LinknetError("connect_timeout (--connect-timeout) bounds the connection to a scheduler address "
                            "(client='tcp://HOST:PORT', --scheduler); "
-                           + ("the LocalCluster is started here" if client is None else "this client is connected"))
+                           + ("the local cluster is started here" if client is None else "this client is connected"))
     if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not (math.isfinite(seconds)
                                                                                   and seconds > 0):
         raise LinknetError(f"connect_timeout must be a positive finite number of seconds, got {seconds!r}")

@@ -91,12 +91,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "is varied)")
     p.add_argument("--out", type=_output((".nc",), "the study (a netCDF file)"), help="netCDF file the members stream into (read it with xarray.open_dataset)")
     p.add_argument("--scheduler", metavar="ADDR", type=scheduler_address, help="run on an existing Dask cluster (tcp://host:8786) instead "
-                                                       "of a LocalCluster")
+                                                       "of a local cluster")
     p.add_argument("--connect-timeout", metavar="SECONDS", type=positive_number, default=None,
                    help="seconds to reach the --scheduler and see its Dask handshake (default 10); an address where "
                         "no scheduler answers (refused, unreachable, the dashboard's HTTP port, a silent server) is "
                         "one line saying what was found there")
-    p.add_argument("--workers", type=count, help="worker processes of the LocalCluster (default one per core)")
+    p.add_argument("--workers", type=count, help="worker processes of the local cluster (default one per core)")
     p.add_argument("--members-per-task", type=count, help="fixed batch size (default: sized from the member time)")
     p.add_argument("--plot", metavar="PNG", type=_output((".png",), "the plot"), help="draw the quantities of interest against the varied parameters")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
