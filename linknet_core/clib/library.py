@@ -1,14 +1,17 @@
 """The native core's shared library (built from src/ at install time) and its structs, as ctypes sees them.
 
-The struct layouts mirror src/linknet.h field for field; tests/native checks the sizes against the C
-compiler's (``ln_sizeof``). Everything here is declaration: what the model and data mean, and how they are
-filled, is in :mod:`linknet_core.native.model`.
+ln_model, ln_method and struct ln_rigid_model are built from the library's table of their fields (src/ln_model_fields.h
+lists them once) and checked offset by offset against the compiler's; ln_data's part and ln_energy_terms mirror
+src/linknet.h field for field, and tests/native checks their sizes against the C compiler's (``ln_sizeof``).
+Everything here is declaration: what the model and data mean, and how they are filled, is in
+:mod:`linknet_core.native.model`.
 """
 from __future__ import annotations
 
 import ctypes
 import importlib.machinery
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -30,52 +33,6 @@ LEFT_PLANE, IMPLICIT_KICK_FAILED, BAD_ARGUMENT, NO_MEMORY, DRIVE_FAILED = 6, 7, 
 SOLVER_NONE, SOLVER_CHAIN, SOLVER_LDL, SOLVER_MIN_NORM = 0, 1, 2, 3
 COMPOSITION, RUNGE_KUTTA, STATIC = 0, 1, 2
 RMS_ERROR, HAIRER_ERROR = 0, 1
-
-
-class Model(ctypes.Structure):
-    _fields_ = [
-        ("K", ln_int), ("L", ln_int),
-        ("k1", ln_int_p), ("k2", ln_int_p),
-        ("R", c_double_p), ("inv_R", c_double_p),
-        ("inv_m", c_double_p),
-        ("n_free", ln_int), ("free_idx", ln_int_p),
-        ("n_fixed", ln_int), ("fixed_idx", ln_int_p),
-        ("is_fixed", c_uint8_p),
-        ("F_scene", c_double_p),
-        ("n_elements", ln_int), ("element_kind", ln_int_p), ("element_mass", ln_int_p),
-        ("element_param", c_double_p),
-        ("velocity_dependent", ctypes.c_int),
-        ("solver", ctypes.c_int),
-        ("n_pairs", ln_int), ("pair_first", ln_int_p), ("pair_second", ln_int_p), ("pair_weight", c_double_p),
-        ("pair_mass", ln_int_p), ("pair_sign", c_double_p),
-        ("chain_order", ln_int_p), ("chain_diag_weight", c_double_p), ("chain_off_weight", c_double_p),
-        ("ldl", ctypes.c_void_p),
-        ("pivot_tol", ctypes.c_double), ("rank_tol", ctypes.c_double),
-        ("dense_min_norm_limit", ln_int),
-        ("planar", ctypes.c_int),
-        ("plane_P", ctypes.c_double * 6), ("plane_o", ctypes.c_double * 3), ("plane_n", ctypes.c_double * 3),
-        ("plane_length", ctypes.c_double), ("plane_tol", ctypes.c_double),
-        ("rigid", ctypes.c_void_p),
-        ("n_driven", ln_int), ("driven_idx", ln_int_p), ("motion_kind", ln_int_p), ("motion_pieces", ln_int_p),
-        ("piece", c_double_p), ("sine", c_double_p), ("accel_weight", c_double_p),
-        ("floor_safety", ctypes.c_double), ("floor_cap", ctypes.c_double),
-        ("retry_rank_tol", ctypes.c_double),
-    ]
-
-
-class Method(ctypes.Structure):
-    _fields_ = [
-        ("kind", ctypes.c_int),
-        ("dt", ctypes.c_double),
-        ("n_gammas", ln_int), ("gammas", c_double_p),
-        ("n_stages", ln_int), ("AB", c_double_p), ("C", c_double_p), ("E1", c_double_p), ("E2", c_double_p),
-        ("error_norm", ctypes.c_int),
-        ("exponent", ctypes.c_double),
-        ("safety", ctypes.c_double), ("min_factor", ctypes.c_double), ("max_factor", ctypes.c_double),
-        ("rtol", ctypes.c_double), ("atol", ctypes.c_double),
-        ("position_tol", ctypes.c_double),
-        ("max_projection_iter", ln_int),
-    ]
 
 
 class Data(ctypes.Structure):
@@ -129,6 +86,73 @@ def _declare(name, restype, *argtypes):
     function.argtypes = list(argtypes)
     return function
 
+
+# ---- the constant structs, mirrored from the library's own table of their fields (src/ln_model_fields.h lists them;
+# model_fields.c expands the lists into the table): nothing here repeats a field, and every offset is checked against
+# the compiler's
+_struct_fields = _declare("ln_struct_fields", ln_int, ctypes.c_int)
+_struct_size = _declare("ln_struct_size", ctypes.c_size_t, ctypes.c_int)
+_struct_field = _declare("ln_struct_field", ctypes.c_char_p, ctypes.c_int, ln_int, ctypes.POINTER(ctypes.c_int),
+                         ctypes.c_char_p, ctypes.POINTER(ln_int), ctypes.POINTER(ctypes.c_size_t),
+                         ctypes.POINTER(ctypes.c_size_t))
+struct_field_count = _declare("ln_struct_field_count", ln_int, ctypes.c_int, ln_int, ctypes.c_void_p, ctypes.c_void_p)
+MODEL_STRUCT, METHOD_STRUCT, RIGID_MODEL_STRUCT = 0, 1, 2  # enum ln_struct
+FIELD_SCALAR, FIELD_ARRAY, FIELD_FIXED, FIELD_OPAQUE = 0, 1, 2, 3  # enum ln_field_kind
+# LN_FIELD_CODE of a type: the character Python's struct module (and numpy) give the same type
+CTYPES_OF_CODE = {"q": ln_int, "i": ctypes.c_int, "d": ctypes.c_double, "B": ctypes.c_uint8}
+
+
+class StructField(NamedTuple):
+    """One field of a core struct, as the library's table gives it."""
+
+    name: str
+    kind: int       # FIELD_SCALAR, FIELD_ARRAY, FIELD_FIXED, FIELD_OPAQUE
+    code: str       # its type's code (CTYPES_OF_CODE); "" for an opaque pointer
+    fixed: int      # FIELD_FIXED: entries
+    offset: int
+    size: int       # bytes of one entry
+
+
+def struct_fields(which: int) -> list[StructField]:
+    """The fields of a core struct (MODEL_STRUCT, METHOD_STRUCT, RIGID_MODEL_STRUCT) in declaration order."""
+    out = []
+    kind, code, fixed, offset, size = ctypes.c_int(), ctypes.create_string_buffer(1), ln_int(), ctypes.c_size_t(), \
+        ctypes.c_size_t()
+    for i in range(_struct_fields(which)):
+        name = _struct_field(which, i, kind, code, fixed, offset, size)
+        out.append(StructField(name.decode(), kind.value, code.raw.rstrip(b"\0").decode(), fixed.value, offset.value,
+                               size.value))
+    return out
+
+
+def _mirror(which: int, class_name: str, doc: str) -> type:
+    """The ctypes Structure of a core struct, from the library's table; refused (ImportError) where ctypes would lay
+    out a field elsewhere than the compiler did."""
+    fields = []
+    for f in struct_fields(which):
+        if f.kind == FIELD_OPAQUE:
+            fields.append((f.name, ctypes.c_void_p))
+        elif f.kind == FIELD_ARRAY:
+            fields.append((f.name, ctypes.POINTER(CTYPES_OF_CODE[f.code])))
+        elif f.kind == FIELD_FIXED:
+            fields.append((f.name, CTYPES_OF_CODE[f.code] * f.fixed))
+        else:
+            fields.append((f.name, CTYPES_OF_CODE[f.code]))
+    mirror = type(class_name, (ctypes.Structure,), {"_fields_": fields, "__doc__": doc})
+    for f in struct_fields(which):
+        if getattr(mirror, f.name).offset != f.offset:
+            raise ImportError(f"linknet's native core: ctypes lays out {class_name}.{f.name} at byte "
+                              f"{getattr(mirror, f.name).offset}, the C compiler at {f.offset}")
+    if ctypes.sizeof(mirror) != _struct_size(which):
+        raise ImportError(f"linknet's native core: ctypes makes {class_name} {ctypes.sizeof(mirror)} bytes long, the C "
+                          f"compiler {_struct_size(which)}")
+    return mirror
+
+
+Model = _mirror(MODEL_STRUCT, "Model", "ln_model (src/ln_model_fields.h: LN_MODEL_FIELDS).")
+Method = _mirror(METHOD_STRUCT, "Method", "ln_method (src/ln_model_fields.h: LN_METHOD_FIELDS).")
+RigidModel = _mirror(RIGID_MODEL_STRUCT, "RigidModel", "struct ln_rigid_model (src/ln_model_fields.h: "
+                     "LN_RIGID_MODEL_FIELDS).")
 
 Model_p, Method_p, Data_p = ctypes.POINTER(Model), ctypes.POINTER(Method), ctypes.POINTER(Data)
 data_new = _declare("ln_data_new", Data_p, Model_p, ln_int)

@@ -22,6 +22,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "ln_model_fields.h"
+
 /* No fused multiply-add: every a*b+c of the core is rounded twice, as the platforms without FMA do, so that one
    source gives one arithmetic wherever it is compiled. Every build passes -ffp-contract=off as well; clang and MSVC
    also obey the pragma (clang contracts by default), GCC's ISO C modes (-std=c99) do not contract. */
@@ -89,84 +91,14 @@ struct ln_minnorm_work;     /* stages/minnorm.c: minimum-norm solves (minnorm.h)
 struct ln_ldl_symbolic;     /* engine_ldl.c: sparse LDL^T of A, analysed once (ldl.h) */
 struct ln_ldl_numeric;
 
+/* The model: its fields are listed in ln_model_fields.h (LN_MODEL_FIELDS), with what each means. */
 typedef struct ln_model {
-    ln_int K, L;
-    const ln_int *k1, *k2;          /* (L) the masses joined by link l (5), 0-based */
-    const double *R, *inv_R;        /* (L) R_l (6) and 1/R_l */
-    const double *inv_m;            /* (K) 1/M_k; 0 on anchored masses */
-    ln_int n_free;
-    const ln_int *free_idx;         /* (n_free) */
-    ln_int n_fixed;
-    const ln_int *fixed_idx;        /* (n_fixed) */
-    const uint8_t *is_fixed;        /* (K) */
-
-    /* F_k of (9): the part fixed over a run, and the state-dependent force elements (stages/forces.c names
-       the kinds and gives each its formula and the meaning of its parameters) */
-    const double *F_scene;          /* (K,3) M_k g + constant forces; zero on anchors */
-    ln_int n_elements;
-    const ln_int *element_kind;     /* (n_elements) ln_force_kind of the kind's name */
-    const ln_int *element_mass;     /* (n_elements, 2) the masses it acts on, -1 where unused */
-    const double *element_param;    /* (n_elements, LN_FORCE_PARAMETERS) */
-    int velocity_dependent;         /* an element depends on U: RATTLE's second half kick is implicit */
-
-    /* the tension system (25) */
-    int solver;                     /* enum ln_solver */
-    ln_int n_pairs;                 /* pairs of links coupled in A (diagonal pairs included) */
-    const ln_int *pair_first, *pair_second;
-    const double *pair_weight;      /* S(l,l')/M(l,l') of (21)-(22), 1/M of one end on the diagonal (18) */
-    const ln_int *pair_mass;        /* the free mass the two links of each pair share (the M of pair_weight) */
-    const double *pair_sign;        /* S(l,l') of (21) of each pair; +1 on the diagonal */
-    const ln_int *chain_order;      /* (L) chains: links in path order */
-    const double *chain_diag_weight, *chain_off_weight;    /* (L) chains, in path order */
-    const struct ln_ldl_symbolic *ldl;  /* LN_SOLVER_LDL (NULL for the others) */
-    double pivot_tol;               /* a pivot below pivot_tol times its diagonal entry: A is singular */
-    double rank_tol;                /* minimum-norm solves: pivots below rank_tol times the largest are zero */
-    ln_int dense_min_norm_limit;    /* links; above it minimum-norm solves are iterative */
-
-    /* planar scenes: the plane's orthonormal in-plane basis P (3x2, row-major), a point o, the unit
-       normal n, the scene's size (scale of the in-plane test) and the round-off tolerance of that test */
-    int planar;
-    double plane_P[6], plane_o[3], plane_n[3], plane_length, plane_tol;
-
-    const struct ln_rigid_model *rigid;     /* free rigid bodies, or NULL */
-
-    /* driven anchors (drive.c): anchored masses (1/M = 0, in fixed_idx) whose motion P_a(t) is prescribed. Their
-       rows of X and U hold P_a and V_a; in B of (26) a_k = accel_weight[k] F_k, which is F_k/M_k on a free mass
-       and, with weight 1, the anchor's acceleration A_a on a driven anchor, whose row of the base force holds it.
-       Scenes with driven anchors run in 3-D. */
-    ln_int n_driven;
-    const ln_int *driven_idx;       /* (n_driven) their masses */
-    const ln_int *motion_kind;      /* (n_driven) enum ln_motion_kind (drive.c) */
-    const ln_int *motion_pieces;    /* (n_driven + 1) offsets of each piecewise-cubic motion's rows in piece */
-    const double *piece;            /* (rows, 14): start, base, then c0..c3 of each axis in powers of tau - base */
-    const double *sine;             /* (n_driven, 12): origin, amplitude, angular frequency, phase (3 each) */
-    const double *accel_weight;     /* (K) 1/M_k; 1 on driven anchors (the same array as inv_m without them) */
-
-    /* the position projection's stopping rule (stages/projections.c): a residual within the round-off floor plus
-       floor_safety times what the Newton step leaves by construction is at the floor the conditioning allows, but
-       never above floor_cap times the convergence scale (linknet_core.dynamics.equations: FLOOR_SAFETY,
-       FLOOR_CAP_OVER_TOL) */
-    double floor_safety, floor_cap;
-    /* a position projection's Gauss-Newton that would fail is retried once with its minimum-norm solves cutting at
-       retry_rank_tol instead of rank_tol (linknet_core.structure.RETRY_SINGULAR_RCOND); 0: no retry */
-    double retry_rank_tol;
+    LN_DECLARE_FIELDS(LN_MODEL_FIELDS)
 } ln_model;
 
+/* A method: its fields are listed in ln_model_fields.h (LN_METHOD_FIELDS). */
 typedef struct ln_method {
-    int kind;                       /* enum ln_method_kind */
-    double dt;                      /* fixed-step methods: the longest step */
-    ln_int n_gammas;                /* compositions: step fractions (RATTLE: one, 1.0) */
-    const double *gammas;
-    ln_int n_stages;                /* Runge-Kutta: s */
-    const double *AB;               /* ((s+1) x s) the tableau's A with the weights b as row s */
-    const double *C;                /* (s) the nodes c_i: stage i is at t + c_i h (driven anchors' motion) */
-    const double *E1, *E2;          /* (s+1) error weights (E2 zero for a single estimate) */
-    int error_norm;                 /* enum ln_error_norm */
-    double exponent;                /* step-size controller exponent, -1/(order of the estimate + 1) */
-    double safety, min_factor, max_factor;
-    double rtol, atol;
-    double position_tol;            /* relative tolerance of the position projection onto (11) */
-    ln_int max_projection_iter;
+    LN_DECLARE_FIELDS(LN_METHOD_FIELDS)
 } ln_method;
 
 typedef struct ln_data {
@@ -341,6 +273,22 @@ LN_API int ln_step_count_problem(double t, double t_target, double dt, ln_int ma
 /* sizeof(ln_model), sizeof(ln_method), the part of ln_data the Python binding mirrors and sizeof(ln_energy_terms)
    (which = 0, 1, 2, 3): the binding checks its struct layouts against these. */
 LN_API size_t ln_sizeof(int which);
+
+/* model_fields.c: the fields of the structs ln_model_fields.h lists, as the Python binding builds its mirrors from
+   them and the native FMU's build writes the structs as data. `which` is an enum ln_struct. */
+enum ln_struct { LN_MODEL_STRUCT = 0, LN_METHOD_STRUCT = 1, LN_RIGID_MODEL_STRUCT = 2 };
+enum ln_field_kind { LN_FIELD_SCALAR = 0, LN_FIELD_ARRAY = 1, LN_FIELD_FIXED = 2, LN_FIELD_OPAQUE = 3 };
+/* Fields of the struct (-1: no such struct) and its size. */
+LN_API ln_int ln_struct_fields(int which);
+LN_API size_t ln_struct_size(int which);
+/* Field i in list order: its name (NULL past the last field), and into the others (any may be NULL) its kind
+   (enum ln_field_kind), type code (LN_FIELD_CODE: 'q', 'i', 'd', 'B'; 0 for OPAQUE), entries of a FIXED field,
+   offset in the struct and size of one entry. */
+LN_API const char *ln_struct_field(int which, ln_int i, int *kind, char *code, ln_int *fixed, size_t *offset,
+                                   size_t *size);
+/* The entries of field i of the struct at s (which belongs to the model m; for ln_model, m is s): 1 for a scalar,
+   n for FIXED, the list's count for an ARRAY (0 where its pointer is NULL), 0 for OPAQUE; -1 for no such field. */
+LN_API ln_int ln_struct_field_count(int which, ln_int i, const void *s, const ln_model *m);
 
 /* The code of a force element kind named as in linknet_core.scene.description.FORCE_KINDS (stages/forces.c), or -1;
    the name of a code, or NULL past the last kind (the binding checks the kinds against FORCE_KINDS with it). */

@@ -26,16 +26,10 @@ enum ln_top {
 
 #define LN_RIGID_STATE 13           /* numbers per body: c, v, q, Pi */
 
-/* Fixed for a run. Laid out for ctypes: linknet_core/native/rigid.py mirrors it field for field. */
+/* Fixed for a run: its fields are listed in ln_model_fields.h (LN_RIGID_MODEL_FIELDS). linknet_core/native/rigid.py
+   mirrors it for ctypes, and its size is checked against ln_rigid_model_size. */
 struct ln_rigid_model {
-    ln_int n_bodies;                /* B */
-    const ln_int *body_of;          /* (K) body of each mass; -1 for a mass of no body (an anchor joined by no
-                                       link, which holds only springs) */
-    const double *r;                /* (K,3) body-frame position of each mass relative to its body's centre of
-                                       mass (zero off the bodies) */
-    const double *inertia;          /* (B,3) principal moments I_1, I_2, I_3 (a symmetric top's first two equal) */
-    const double *body_mass;        /* (B) */
-    const ln_int *kind;             /* (B) enum ln_top */
+    LN_DECLARE_FIELDS(LN_RIGID_MODEL_FIELDS)
 };
 
 /* Owned by ln_data; the body states and what a whole-interval advance needs, allocated once. */
