@@ -24,6 +24,7 @@ See docs/fmu.md.
 from __future__ import annotations
 
 import argparse
+import gc
 import io
 import os
 import json
@@ -71,81 +72,149 @@ def _type_definitions(types_used):
 def postprocess_model_description(xml_bytes: bytes, declared_types: dict, output_deps: dict,
                                   initial_deps: dict, default_experiment: dict,
                                   description: str | None = None) -> bytes:
-    """Add units, types, DefaultExperiment and a truthful ModelStructure.
+    """Add units, types, DefaultExperiment and a truthful ModelStructure to a modelDescription.xml (pythonfmu's):
+    finish_model_description of its header and its variables.
 
     declared_types: Real variable name -> declaredType (key of linknet_fmu.layout.TYPES)
     output_deps / initial_deps: output name -> list of variable names it depends on
     ([] = no dependency, i.e. no direct feedthrough).
     """
-    from linknet_fmu.layout import TYPES
     # pythonfmu's pretty-print whitespace dropped while parsing, before re-indenting
     root = ET.fromstring(xml_bytes, ET.XMLParser(remove_blank_text=True))
+    variables = root.find("ModelVariables")
+    records = []
+    for sv in variables.iterchildren("ScalarVariable"):
+        (value,) = list(sv)
+        records.append((dict(sv.attrib), value.tag, dict(value.attrib)))
+    root.remove(variables)
+    return finish_model_description(root, records, declared_types, output_deps, initial_deps, default_experiment,
+                                    description)
+
+
+_ESCAPED = re.compile(r'[&<>"\n\r\t]')
+
+
+_ESCAPES = (("&", "&amp;"), ("<", "&lt;"), (">", "&gt;"), ('"', "&quot;"), ("\n", "&#10;"), ("\r", "&#13;"),
+            ("\t", "&#9;"))  # & first: the others bring their own
+
+
+def _attribute(text: str) -> str:
+    """An XML attribute value, escaped as libxml2 writes it (a pass over the text for each character it holds)."""
+    if not _ESCAPED.search(text):
+        return text
+    for char, entity in _ESCAPES:
+        if char in text:
+            text = text.replace(char, entity)
+    return text
+
+
+def _scalar_variables(variables: list, declared_types: dict) -> list[str]:
+    """The ScalarVariable elements of ModelVariables, as lxml indents and writes them. Every attribute value is
+    escaped in one pass over all of them, and each run of variables alike (the same attributes, type element and
+    declared type: all positions, all tensions, ...) is written by one format of its template repeated."""
+    from linknet_fmu.layout import TYPES
+    values = [v for attrs, _, value in variables for v in (*attrs.values(), *value.values())]
+    joined = "\0".join(values)
+    if joined.count("\0") != len(values) - 1:
+        raise ValueError("a variable's attribute value holds a NUL character, which XML cannot hold")
+    escaped = _attribute(joined).split("\0") if values else []
+    typed = {t: f' declaredType="{_attribute(t)}" unit="{_attribute(TYPES[t][1])}"'
+             for t in set(declared_types.values())}
+    kinds = [(tuple(attrs), tag, tuple(value), declared_types[attrs["name"]] if tag == "Real" else None)
+             for attrs, tag, value in variables]
+    out, at, start = [], 0, 0
+    for end in range(1, len(kinds) + 1):
+        if end < len(kinds) and kinds[end] == kinds[start]:
+            continue
+        keys, tag, value_keys, declared = kinds[start]
+        template = ("    <ScalarVariable" + "".join(f' {k}="{{}}"' for k in keys) + ">\n      <" + tag
+                    + "".join(f' {k}="{{}}"' for k in value_keys) + (typed[declared] if declared else "")
+                    + "/>\n    </ScalarVariable>")
+        n = (len(keys) + len(value_keys)) * (end - start)
+        out.append("\n".join([template] * (end - start)).format(*escaped[at:at + n]))
+        at, start = at + n, end
+    return out
+
+
+def finish_model_description(root, variables: list, declared_types: dict, output_deps: dict, initial_deps: dict,
+                             default_experiment: dict, description: str | None = None) -> bytes:
+    """The modelDescription.xml of a header ``root`` (fmiModelDescription with CoSimulation, LogCategories, ...; no
+    ModelVariables) and its variables, each (ScalarVariable's attributes, the type element's tag, its attributes),
+    in value-reference order: units, types and DefaultExperiment added, every Real given its declaredType and unit,
+    and a truthful ModelStructure. The header goes through lxml; the variables and the structure, millions of lines
+    for a large net, are written as text: the bytes lxml writes, many times faster."""
+    from linknet_fmu.layout import TYPES
     if description:
         root.set("description", description)
-    variables = root.find("ModelVariables")
+    index = {attrs["name"]: i for i, (attrs, _, _) in enumerate(variables, start=1)}  # 1-based, in ModelVariables
+
+    def causality(name):
+        return variables[index[name] - 1][0].get("causality") if name in index else None
+
     # A linknet network FMU (either kind) answers fmi2GetDirectionalDerivative: its variables (linknet_fmu.layout)
     # always hold the output error_estimate and the Boolean parameter estimate_error. The component FMUs (cart, ...)
     # do not answer it, and a master asks every FMU that declares it (cart_chain_implicit.FmuSlave).
-    causality = {sv.get("name"): sv.get("causality") for sv in variables.findall("ScalarVariable")}
-    if causality.get("error_estimate") == "output" and causality.get("estimate_error") == "parameter":
+    if causality("error_estimate") == "output" and causality("estimate_error") == "parameter":
         root.find("CoSimulation").set("providesDirectionalDerivative", "true")
-    index = {}  # name -> 1-based index in ModelVariables
-    for i, sv in enumerate(variables.findall("ScalarVariable"), start=1):
-        name = sv.get("name")
-        index[name] = i
-        real = sv.find("Real")
-        if real is not None:
-            dtype = declared_types[name]
-            real.set("declaredType", dtype)
-            real.set("unit", TYPES[dtype][1])
     types_used = set(declared_types.values())
     units_used = {TYPES[t][1] for t in types_used}
 
-    # rebuild the header elements in schema order
-    for tag in ("UnitDefinitions", "TypeDefinitions", "DefaultExperiment", "ModelStructure"):
+    # rebuild the header elements in schema order, with a place for ModelVariables and ModelStructure
+    for tag in ("UnitDefinitions", "TypeDefinitions", "DefaultExperiment", "ModelStructure", "ModelVariables"):
         for node in root.findall(tag):
             root.remove(node)
-    children = list(root)
-    pos = [c.tag for c in children].index("CoSimulation") + 1
+    pos = [c.tag for c in root].index("CoSimulation") + 1
     root.insert(pos, _unit_definitions(units_used))
     root.insert(pos + 1, _type_definitions(types_used))
-    pos = [c.tag for c in root].index("ModelVariables")
-    root.insert(pos, ET.Element("DefaultExperiment", {k: repr(float(v)) for k, v in default_experiment.items()}))
+    root.append(ET.Element("DefaultExperiment", {k: repr(float(v)) for k, v in default_experiment.items()}))
+    root.append(ET.Element("ModelVariables"))
+    root.append(ET.Element("ModelStructure"))
+    ET.indent(root, space="  ")
+    head = ET.tostring(root, encoding="unicode")
 
-    structure = ET.SubElement(root, "ModelStructure")
-    inputs = {sv.get("name") for sv in variables.findall("ScalarVariable") if sv.get("causality") == "input"}
+    lines = ["  <ModelVariables>", *_scalar_variables(variables, declared_types), "  </ModelVariables>"]
+    inputs = {attrs["name"] for attrs, _, _ in variables if attrs.get("causality") == "input"}
+    outputs = [attrs["name"] for attrs, _, _ in variables if attrs.get("causality") == "output"]
+    listed: dict = {}  # id of a dependency list -> its attributes (the lists are shared between the links of a group)
 
-    def unknown(parent, name, deps, everything, abridged):
-        """One Unknown. In an ``abridged`` section a list that holds ``everything`` is written as the standard's
-        default, no dependencies attribute ("depends on all knowns"): a connected net's tensions depend on every
-        input, and listing them for every link would make the file L x inputs long (1.1 GB for a 3,000-link
+    def unknowns(names, deps_of, everything, abridged) -> None:
+        """The Unknowns of names. In an ``abridged`` section a list that holds ``everything`` is written as the
+        standard's default, no dependencies attribute ("depends on all knowns"): a connected net's tensions depend on
+        every input, and listing them for every link would make the file L x inputs long (1.1 GB for a 3,000-link
         chain). Smaller files keep every list (fmpy reads a missing attribute as no dependency)."""
-        if abridged and everything and len(deps) == len(everything):  # drawn from everything, without repeats
-            ET.SubElement(parent, "Unknown", {"index": str(index[name])})
-            return
-        attrs = {"index": str(index[name]), "dependencies": " ".join(str(index[d]) for d in deps)}
-        if deps:
-            attrs["dependenciesKind"] = " ".join("dependent" for _ in deps)
-        ET.SubElement(parent, "Unknown", attrs)
+        for name in names:
+            deps = deps_of[name]
+            if abridged and everything and len(deps) == len(everything):  # drawn from everything, without repeats
+                lines.append(f'      <Unknown index="{index[name]}"/>')
+                continue
+            text = listed.get(id(deps))
+            if text is None:
+                text = f' dependencies="{" ".join([str(index[d]) for d in deps])}"'
+                if deps:
+                    text += f' dependenciesKind="{" ".join(["dependent"] * len(deps))}"'
+                listed[id(deps)] = text
+            lines.append(f'      <Unknown index="{index[name]}"{text}/>')
 
     def union(lists) -> set:  # the lists are shared between the links of a group: each counted once
         return set().union(*{id(d): d for d in lists}.values())
 
-    outputs = [sv.get("name") for sv in variables.findall("ScalarVariable") if sv.get("causality") == "output"]
     if outputs:
-        node = ET.SubElement(structure, "Outputs")
+        lines.append("  <ModelStructure>\n    <Outputs>")
         abridged = sum(len(output_deps[name]) + len(initial_deps[name]) for name in outputs) > MAX_LISTED_DEPENDENCIES
-        for name in outputs:  # at a communication point the knowns are the inputs: exact
-            unknown(node, name, output_deps[name], inputs, abridged)
+        unknowns(outputs, output_deps, inputs, abridged)  # at a communication point the knowns are the inputs: exact
         # in Initialization Mode the knowns are the inputs and every parameter; a list holding all of them that any
         # initial unknown depends on is written as "all knowns", which adds only parameters no output depends on
         # at the start (the integrator's settings): a superset, safe for a master's ordering
         initial_knowns = union(initial_deps[name] for name in outputs)
-        node = ET.SubElement(structure, "InitialUnknowns")
-        for name in sorted(outputs, key=index.get):  # InitialUnknowns must be sorted by index
-            unknown(node, name, initial_deps[name], initial_knowns, abridged)
-    ET.indent(root, space="  ")
-    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode").encode() + b"\n"
+        lines.append("    </Outputs>\n    <InitialUnknowns>")
+        unknowns(sorted(outputs, key=index.get), initial_deps, initial_knowns, abridged)  # sorted by index
+        lines.append("    </InitialUnknowns>\n  </ModelStructure>")
+    else:
+        lines.append("  <ModelStructure/>")
+    before, after = head.split("  <ModelVariables/>\n  <ModelStructure/>")
+    body = "\n".join(lines).encode()  # the variables and the structure: hundreds of MB for a large net, held once
+    del lines
+    return b"".join([b'<?xml version="1.0" encoding="UTF-8"?>\n', before.encode(), body, after.encode(), b"\n"])
 
 
 # ---------------------------------------------------------------------------- libpython
@@ -283,6 +352,21 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
     """The FMU of a scene file. integrator None: the scene file's "fmu" section's, else the library's default
     (linknet_core.accuracy.default_method: dop853 at rtol `tolerance`, default 1e-8, or RATTLE when a step is given);
     error_estimate None: the section's, else True (the companion run of the output error_estimate)."""
+    # A large scene's build holds millions of objects (its variables, their XML) for its whole length: the cyclic
+    # garbage collector's full passes would walk them all again and again and find nothing to free (a fifth of a
+    # 100,000-link chain's build). Reference counting frees as usual; the collector runs again afterwards.
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        return _build_scene_fmu(scene_path, out, integrator, step, tolerance, inputs, outputs, stop_time, comm_step,
+                                link_python, quiet, native, error_estimate, platforms, fmi_version)
+    finally:
+        if collecting:
+            gc.enable()
+
+
+def _build_scene_fmu(scene_path, out, integrator, step, tolerance, inputs, outputs, stop_time, comm_step, link_python,
+                     quiet, native, error_estimate, platforms, fmi_version) -> Path:
     import linknet_core as ln
     from linknet_core.accuracy import DEFAULT_RTOL, default_method
     from linknet_fmu.layout import Layout
@@ -355,7 +439,7 @@ def build_scene_fmu(scene_path, out=None, integrator=None, step=None, tolerance=
             if fmi_version == 3:  # the same model behind the FMI 3.0 glue, with array variables
                 from native.build_fmi3 import build_fmi3_fmu
                 return build_fmi3_fmu(scene, cfg, layout, out, experiment, quiet=quiet, platforms=platforms)
-            return build_native_fmu(scene, cfg, layout, out, experiment, postprocess_model_description, quiet=quiet,
+            return build_native_fmu(scene, cfg, layout, out, experiment, finish_model_description, quiet=quiet,
                                     platforms=platforms)
         except NativeBuildError as e:
             raise SystemExit(f"build_fmu: {e}")

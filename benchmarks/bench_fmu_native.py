@@ -175,8 +175,8 @@ def main(argv=None) -> int:
         inputs = native.inputs()
         one = inputs[-1]
         for label, step in (("1 step", 1e-3), ("10 steps", 1e-4)):
-            one_in = run([exe, N, 1e-3, R, step, one])
-            all_in = run([exe, N, 1e-3, R, step] + inputs) if inputs else one_in
+            one_in = run([exe, native.dir.resolve() / "resources", N, 1e-3, R, step, one])
+            all_in = run([exe, native.dir.resolve() / "resources", N, 1e-3, R, step] + inputs) if inputs else one_in
             r[f"glue {label}"] = dict(
                 core_advance_ns=one_in["core_advance"], fmu_dostep_ns=one_in["fmu_dostep"],
                 core_one_input_ns=one_in["core_advance_one_input"],

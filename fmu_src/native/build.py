@@ -1,24 +1,30 @@
 """Build the self-contained FMI 2.0 Co-Simulation FMU of a scene on the native C core (`build_fmu.py --native`).
 
-The FMU holds no Python. Its binaries (PLATFORMS: linux64, win64, darwin64, aarch64-linux; --platforms chooses) are
-compiled here with Zig's C compiler (PyPI's ziglang) from sources/, as a tool would compile them:
+The FMU holds no Python. It is made of three parts:
 
-* the native core, linknet_core/native/src, copied as it is into sources/linknet/ (every .c file that no other .c
-  file includes is a translation unit, so the DIM-generic stages come in through dim2.c/dim3.c and AMD through its
-  amd_l*.c wrappers);
-* the FMI glue, fmu_src/native/fmi2Functions.c (scene-independent, FMI only) and linknet_model.c (the core as
-  the glue's model, fmu_model.h), with fmi2_api.h, fmu_model.h, lnfmu_scene.h, beside the core;
-* one generated file, linknet_scene.c: the scene as constant data. The ln_model and every integrator's
-  ln_method are read field by field from the structs linknet_core's own Simulator hands the core for this
-  scene (the ctypes mirrors in linknet_core.native), so the FMU at its default parameters runs the library's
-  arithmetic bit for bit. Plus what a changed mass, length or gravity needs, the initial state and internals,
-  and the variable table of fmu_src/linknet_fmu/layout.py (the same Layout the pythonfmu FMU uses);
-* at the top of sources/, one two-line file per translation unit (linknet_fmu_unit.h, then the unit: only the fmi2
-  functions leave the binary, however it is built) and a CMakeLists.txt.
+* sources/: the same for every scene. The native core, linknet_core/native/src, copied as it is into
+  sources/linknet/ (every .c file that no other .c file includes is a translation unit, so the DIM-generic stages
+  come in through dim2.c/dim3.c and AMD through its amd_l*.c wrappers); the FMI glue beside it, fmu_src/native's
+  fmi2Functions.c (FMI only), linknet_model.c (the core as the glue's model, fmu_model.h), lnfmu_scene.c (the
+  scene read from the resource) and fmu_resource.c (the resource file read and checked), with their headers; at the
+  top, one two-line file per translation unit (linknet_fmu_unit.h, then the unit: only the fmi2 functions leave the
+  binary, however it is built) and a CMakeLists.txt.
+* binaries/ (PLATFORMS: linux64, win64, darwin64, aarch64-linux; --platforms chooses): compiled from sources/ with
+  Zig's C compiler (PyPI's ziglang), as a tool would compile them. Since the sources are the same for every scene,
+  so are the binaries: each platform's binary is built once per content of the sources, compiler and flags and then
+  taken from a per-user cache (LINKNET_FMU_CACHE, default ~/.cache/linknet/native-fmu), so that a further scene
+  compiles nothing.
+* resources/linknet_scene.bin: the scene as data (fmu_resource.h gives the format), read when the FMU is
+  instantiated. The ln_model and every integrator's ln_method are written field by field from the structs
+  linknet_core's own Simulator hands the core for this scene (the core's lists of their fields, ln_model_fields.h,
+  through the library's table of them), so the FMU at its default parameters runs the library's arithmetic bit for
+  bit; then what a changed mass, length or gravity needs, the initial state and internals, and the variable table of
+  fmu_src/linknet_fmu/layout.py (the same Layout the pythonfmu FMU uses), as lnfmu_scene.h lists them.
 
 The top-level .c files are the <SourceFiles>, so `cc -shared -fPIC sources/*.c -lm` builds the binary on any
-platform. The modelDescription.xml goes through build_fmu.postprocess_model_description, as the pythonfmu FMU's
-does: the two agree on variables, units, types, DefaultExperiment and ModelStructure.
+platform, and that binary reads the same resource. The modelDescription.xml is written by
+build_fmu.finish_model_description, as the pythonfmu FMU's is: the two agree on variables, units, types,
+DefaultExperiment and ModelStructure.
 """
 from __future__ import annotations
 
@@ -27,7 +33,6 @@ import datetime
 import hashlib
 import importlib
 import importlib.util
-import inspect
 import math
 import os
 import platform
@@ -38,8 +43,9 @@ import subprocess
 import sys
 import tempfile
 import uuid
-from lxml import etree as ET  # fmpy's dependency: a large net's modelDescription written at C speed
 import zipfile
+import zlib
+from lxml import etree as ET  # fmpy's dependency: a large net's modelDescription written at C speed
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,10 +57,9 @@ if str(HERE.parent) not in sys.path:  # fmu_src: the layout both FMU kinds share
 from linknet_fmu.layout import (ERROR_ESTIMATE_CATEGORY, ERROR_ESTIMATE_CATEGORY_DESCRIPTION,  # noqa: E402
                                 ESTIMATE_ERROR_DESCRIPTION)
 
-GLUE_FILES = ("fmi2Functions.c", "linknet_model.c", "fmi2_api.h", "fmu_model.h", "fmu_states.h", "lnfmu_scene.h")
-SCENE_FILE = "linknet_scene.c"
-PROGRESS_VARIABLES = 100_000  # a scene with this many FMU variables builds for a minute or more: progress lines
-STATE_FORMAT = 3  # keep equal to FMU_STATE_FORMAT in fmu_states.h (a part of the fingerprint)
+GLUE_FILES = ("fmi2Functions.c", "linknet_model.c", "lnfmu_scene.c", "fmu_resource.c", "fmi2_api.h", "fmu_model.h",
+              "fmu_states.h", "lnfmu_scene.h", "fmu_resource.h")
+PROGRESS_VARIABLES = 100_000  # a scene with this many FMU variables builds for many seconds: progress lines
 # as setup.py compiles the core for the library: the same code generation, so the same results
 CFLAGS = ["-std=c99", "-O3", "-fno-math-errno", "-ffp-contract=off"]
 WARNINGS = ["-Wall", "-Wextra"]
@@ -87,119 +92,135 @@ def translation_units(src: Path) -> list[str]:
     return [p.relative_to(src).as_posix() for p in files if p.resolve() not in included]
 
 
-def force_parameters(src: Path) -> int:
-    m = re.search(r"#define\s+LN_FORCE_PARAMETERS\s+(\d+)", (src / "linknet.h").read_text())
+# ---------------------------------------------------------------------------- what the C side defines, read from it
+def _header_value(path: Path, pattern: str, what: str) -> list:
+    """Every match of pattern in a header, or NativeBuildError naming what build.py looked for."""
+    found = re.findall(pattern, path.read_text(), re.M)
+    if not found:
+        raise NativeBuildError(f"{path.name} no longer defines {what}: teach fmu_src/native/build.py")
+    return found
+
+
+def _macro_body(text: str, name: str) -> str:
+    """The body of a multi-line #define (its continuation lines joined), comments removed."""
+    m = re.search(rf"^#define\s+{name}\b\(.*?\)(.*?[^\\])$", text, re.M | re.S)
     if not m:
-        raise NativeBuildError("linknet.h no longer defines LN_FORCE_PARAMETERS: teach fmu_src/native/build.py")
-    return int(m.group(1))
+        raise NativeBuildError(f"no list {name}: teach fmu_src/native/build.py")
+    return re.sub(r"/\*.*?\*/", " ", m.group(1).replace("\\\n", " "), flags=re.S)
 
 
-# ---------------------------------------------------------------------------- C literals
-def c_double(x: float) -> str:
-    x = float(x)
-    if math.isnan(x):
-        return "NAN"
-    if math.isinf(x):
-        return "INFINITY" if x > 0 else "-INFINITY"
-    return x.hex()  # exact: C99 hexadecimal floating constants
+def resource_format() -> tuple[str, int]:
+    """The resource file's name and format version, as fmu_resource.h defines them (its reader's)."""
+    header = HERE / "fmu_resource.h"
+    name = _header_value(header, r'^#define\s+FMU_RESOURCE_FILE\s+"([^"]+)"', "FMU_RESOURCE_FILE")[0]
+    version = int(_header_value(header, r"^#define\s+FMU_RESOURCE_FORMAT\s+(\d+)", "FMU_RESOURCE_FORMAT")[0])
+    return name, version
 
 
-def c_string(s: str) -> str:
+def state_format() -> int:
+    """FMU_STATE_FORMAT of fmu_states.h: a part of the FMU's fingerprint, so that states of other formats are
+    refused."""
+    return int(_header_value(HERE / "fmu_states.h", r"^#define\s+FMU_STATE_FORMAT\s+(\d+)u?", "FMU_STATE_FORMAT")[0])
+
+
+def variable_kinds() -> dict[str, int]:
+    """enum lnfmu_kind of lnfmu_scene.h: a Real variable's kind by its name there (F, FREACT, G, ERROR_ESTIMATE)."""
+    text = (HERE / "lnfmu_scene.h").read_text()
+    m = re.search(r"enum\s+lnfmu_kind\s*\{(.*?)\};", text, re.S)
+    if not m:
+        raise NativeBuildError("lnfmu_scene.h no longer has enum lnfmu_kind: teach fmu_src/native/build.py")
+    return {name: int(value) for name, value in re.findall(r"LNFMU_(\w+)\s*=\s*(\d+)", m.group(1))}
+
+
+def field_codes() -> dict[str, str]:
+    """LN_FIELD_CODE of each C type of the lists (ln_model_fields.h): 'q' for ln_int, ..."""
+    found = _header_value(core_source_dir() / "ln_model_fields.h", r"^#define\s+LN_FIELD_CODE_(\w+)\s+'(.)'",
+                          "LN_FIELD_CODE")
+    return dict(found)
+
+
+def scene_fields() -> list[tuple[str, str, str]]:
+    """(kind, C type, name) of each entry of LNFMU_SCENE_FIELDS (lnfmu_scene.h), in order; kind SCALAR, ARRAY,
+    OPTIONAL, FIXED, TEXT or TEXTS (type "char" for the texts)."""
+    body = _macro_body((HERE / "lnfmu_scene.h").read_text(), "LNFMU_SCENE_FIELDS")
     out = []
-    for ch in s.encode("utf-8"):
-        c = chr(ch)
-        if c in '"\\':
-            out.append("\\" + c)
-        elif 32 <= ch < 127 and c != "?":  # '?' escaped against trigraphs
-            out.append(c)
-        else:
-            out.append(f"\\{ch:03o}")
-    return '"' + "".join(out) + '"'
+    for kind, args in re.findall(r"\b(SCALAR|ARRAY|OPTIONAL|FIXED|TEXTS|TEXT)\s*\(([^()]*(?:\([^()]*\)[^()]*)*)\)",
+                                 body):
+        parts = [p.strip() for p in args.split(",")]
+        out.append((kind, "char", parts[0]) if kind.startswith("TEXT") else (kind, parts[0], parts[1]))
+    return out
 
 
-class CWriter:
-    """Static const arrays and the initializers that point to them."""
+# ---------------------------------------------------------------------------- the resource file
+class Resource:
+    """The FMU's resource file (fmu_resource.h describes the format): named arrays, each of one type code."""
+
+    HEADER, ENTRY, NAME = 48, 64, 40
+    SIZES = {"q": 8, "i": 4, "d": 8, "B": 1, "Q": 8, "c": 1}
 
     def __init__(self):
-        self.lines: list[str] = []
-        self._n = 0
+        self.entries: dict[str, tuple[str, int, bytes]] = {}  # name -> (code, count, data)
 
-    def array(self, ctype: str, values, fmt, hint: str) -> str:
-        values = list(values)
-        if not values:
-            return "NULL"
-        self._n += 1
-        name = f"{hint}_{self._n}"
-        body = []
-        row = []
-        for i, v in enumerate(values):
-            row.append(fmt(v))
-            if len(row) == 8 or i == len(values) - 1:
-                body.append("    " + ", ".join(row) + ",")
-                row = []
-        self.lines.append(f"static const {ctype} {name}[{len(values)}] = {{\n" + "\n".join(body) + "\n};")
-        return name
+    def add(self, name: str, code: str, values) -> None:
+        if name in self.entries:
+            raise NativeBuildError(f"the resource's entry {name} is written twice")
+        if len(name.encode()) >= self.NAME:
+            raise NativeBuildError(f"the resource's entry name {name!r} is too long ({self.NAME - 1} bytes at most)")
+        array = np.ascontiguousarray(values, dtype=np.dtype(code).newbyteorder("<")).ravel()
+        self.entries[name] = (code, array.size, array.tobytes())
 
-    def doubles(self, values, hint="d") -> str:
-        return self.array("double", np.asarray(values, np.float64).ravel(), c_double, hint)
+    def texts(self, name: str, items) -> None:
+        """A list of texts, each ending with a NUL (a text with a NUL inside it is refused)."""
+        encoded = [str(s).encode() for s in items]
+        if any(b"\0" in s for s in encoded):
+            raise NativeBuildError(f"the resource's entry {name}: a text holds a NUL character")
+        data = b"".join(s + b"\0" for s in encoded)
+        self.entries[name] = ("c", len(data), data)
 
-    def ints(self, values, hint="i") -> str:
-        return self.array("ln_int", np.asarray(values, np.int64).ravel(), lambda v: str(int(v)), hint)
-
-    def bytes_(self, values, hint="b") -> str:
-        return self.array("uint8_t", np.asarray(values, np.uint8).ravel(), lambda v: str(int(v)), hint)
-
-    def strings(self, values, hint="s") -> str:
-        return self.array("char *const", values, c_string, hint)
-
-
-def _pointer_values(ptr, n: int, ctype):
-    if not ptr or n == 0:
-        return None
-    return np.ctypeslib.as_array(ctypes.cast(ptr, ctypes.POINTER(ctype)), (n,)).copy()
-
-
-def struct_initializer(w: CWriter, struct, lengths: dict, skip: set, hint: str) -> str:
-    """A C designated initializer of a ctypes mirror of a core struct, field by field. Pointer fields need a
-    known length (``lengths``: field -> number of entries, from the struct's own counts) or are set at
-    instantiation (``skip``); a field of a kind not known here stops the build, so that a field the core adds
-    cannot be silently dropped."""
-    parts = []
-    for name, ctype in type(struct)._fields_:
-        value = getattr(struct, name)
-        if name in skip:
-            continue
-        if ctype in (ctypes.c_int64, ctypes.c_int, ctypes.c_int32, ctypes.c_uint8):
-            parts.append(f".{name} = {int(value)}")
-        elif ctype is ctypes.c_double:
-            parts.append(f".{name} = {c_double(value)}")
-        elif isinstance(ctype, type) and issubclass(ctype, ctypes.Array):
-            if ctype._type_ is not ctypes.c_double:
-                raise NativeBuildError(f"{type(struct).__name__}.{name}: array of {ctype._type_} not handled")
-            parts.append(f".{name} = {{{', '.join(c_double(v) for v in value)}}}")
-        elif isinstance(ctype, type) and issubclass(ctype, ctypes._Pointer):
-            if name not in lengths:
-                raise NativeBuildError(f"{type(struct).__name__}.{name}: a pointer field fmu_src/native/build.py does "
-                                       "not know the length of (the core's struct changed: teach build.py)")
-            target = ctype._type_
-            values = _pointer_values(value, int(lengths[name]), target)
-            if values is None:
+    def struct(self, prefix: str, which: int, value, model=None) -> None:
+        """Every field of a core struct (ctypes mirror ``value``; ``model``: the ln_model it belongs to) as
+        "<prefix>.<field>", from the library's table of the struct's fields: a pointer field's entries are as many
+        as the core's list says (ln_struct_field_count), none where it is NULL; an opaque pointer is not data."""
+        from linknet_core.clib import library
+        address = ctypes.addressof(value)
+        model_address = ctypes.addressof(model if model is not None else value)
+        for i, f in enumerate(library.struct_fields(which)):
+            name = f"{prefix}.{f.name}"
+            if f.kind == library.FIELD_OPAQUE:
                 continue
-            if target is ctypes.c_double:
-                ref = w.doubles(values, f"{hint}_{name}")
-            elif target is ctypes.c_int64:
-                ref = w.ints(values, f"{hint}_{name}")
-            elif target is ctypes.c_uint8:
-                ref = w.bytes_(values, f"{hint}_{name}")
+            if f.kind == library.FIELD_ARRAY:
+                count = library.struct_field_count(which, i, address, model_address)
+                pointer = ctypes.cast(getattr(value, f.name), ctypes.c_void_p).value
+                data = ctypes.string_at(pointer, count * f.size) if pointer and count > 0 else b""
+                self.entries[name] = (f.code, len(data) // f.size, data)
+            elif f.kind == library.FIELD_FIXED:
+                self.add(name, f.code, list(getattr(value, f.name)))
             else:
-                raise NativeBuildError(f"{type(struct).__name__}.{name}: pointer to {target} not handled")
-            parts.append(f".{name} = {ref}")
-        elif ctype is ctypes.c_void_p:
-            raise NativeBuildError(f"{type(struct).__name__}.{name}: an opaque pointer fmu_src/native/build.py does "
-                                   "not know how to rebuild (the core's struct changed: teach build.py)")
-        else:
-            raise NativeBuildError(f"{type(struct).__name__}.{name}: field type {ctype} not handled")
-    return "{\n    " + ",\n    ".join(parts) + "\n}"
+                self.add(name, f.code, [getattr(value, f.name)])
+
+    def digest(self, *prefix: bytes) -> bytes:
+        """16 bytes of the prefix and every entry (name, type, data) in order."""
+        h = hashlib.blake2b(digest_size=16)
+        for p in prefix:
+            h.update(p)
+        for name, (code, count, data) in self.entries.items():
+            h.update(f"{name}\0{code}\0{count}\0".encode())
+            h.update(data)
+        return h.digest()
+
+    def to_bytes(self) -> bytes:
+        _, version = resource_format()
+        table, parts = [], []
+        offset = self.HEADER + self.ENTRY * len(self.entries)
+        for name, (code, count, data) in self.entries.items():
+            table.append(struct.pack("<40sIIQQ", name.encode(), ord(code), self.SIZES[code], count, offset))
+            pad = -len(data) % 8
+            parts.append(data + b"\0" * pad)
+            offset += len(data) + pad
+        body = b"".join(table + parts)
+        head = struct.pack("<8sIIQIIIIQ", b"LNKSCENE", version, 0x01020304, self.HEADER + len(body),
+                           len(self.entries), self.ENTRY, zlib.crc32(body), 0, 0)
+        return head + body
 
 
 # ---------------------------------------------------------------------------- the scene as data
@@ -217,17 +238,71 @@ def _simulators(scene, cfg):
     dyn = None
     for name in [cfg["integrator"]] + [n for n in cfg["integrators"] if n != cfg["integrator"]]:
         kwargs = dict(rtol=cfg["tolerance"]) if ln.METHODS[name].adaptive else dict(dt=cfg["step"])
-        # the baked model and methods are the run's; the companion's are made from them in C (linknet_model.c)
+        # the scene data's model and methods are the run's; the companion's are made from them in C (linknet_model.c)
         sims[name] = ln.Simulator(scene, method=name, dynamics=dyn, error_estimate=False, **kwargs)
         dyn = sims[name].dyn
     return sims
 
 
-def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
-    """The generated C file (without its identity lines) and facts about the scene for the caller."""
+def _pointer_values(ptr, n: int, ctype):
+    if not ptr or n == 0:
+        return None
+    return np.ctypeslib.as_array(ctypes.cast(ptr, ctypes.POINTER(ctype)), (n,)).copy()
+
+
+def variable_table(layout, model) -> tuple[np.ndarray, np.ndarray]:
+    """(kind, index) of every Real variable by value reference (enum lnfmu_kind of lnfmu_scene.h: what the variable
+    is, and its index into the model's arrays)."""
+    kinds = variable_kinds()
+    n_fixed, n_driven = int(model.n_fixed), int(model.n_driven)
+    kind = np.full(layout.n_real, -1, np.int32)
+    index = np.full(layout.n_real, -1, np.int64)
+    row_of = {}  # mass -> its row among the anchors (fixed_idx) and among the driven anchors (driven_idx)
+    for name, ptr, n in (("fixed", model.fixed_idx, n_fixed), ("driven", model.driven_idx, n_driven)):
+        rows = np.full(int(model.K), -1, np.int64)
+        values = _pointer_values(ptr, n, ctypes.c_int64)
+        if values is not None:
+            rows[values] = np.arange(n)
+        row_of[name] = rows
+    axis = np.arange(3)
+
+    def put(name, vrs, idx):
+        vrs = np.asarray(vrs, np.int64)
+        if vrs.size:
+            kind[vrs.ravel()] = kinds[name]
+            index[vrs.ravel()] = np.broadcast_to(np.asarray(idx, np.int64), vrs.shape).ravel()
+
+    def per_axis(rows):
+        return 3 * np.asarray(rows, np.int64).reshape(-1, 1) + axis
+
+    put("F", layout.F_vr, per_axis(layout.input_masses))
+    put("X", layout.X_vr, per_axis(layout.output_masses))
+    put("U", layout.U_vr, per_axis(layout.output_masses))
+    put("FREACT", layout.Freact_vr, per_axis(row_of["fixed"][np.asarray(layout.fixed_indices, np.int64)]))
+    # P, V, A, Jreact of a driven anchor: its row in the model's driven_idx (the data's drive_P, ..., impulse)
+    anchors = per_axis(row_of["driven"][np.asarray(layout.anchor_inputs, np.int64)])
+    put("P", layout.P_vr, anchors)
+    put("V", layout.V_vr, anchors)
+    put("A", layout.A_vr, anchors)
+    put("JREACT", layout.Jreact_vr, per_axis(row_of["driven"][np.asarray(layout.driven_indices, np.int64)]))
+    put("T", layout.T_vr, np.arange(len(layout.T_vr)))
+    put("M", layout.M_vr, layout.free_indices)
+    put("R", layout.R_vr, np.arange(len(layout.R_vr)))
+    put("G", layout.g_vr, axis[:len(layout.g_vr)])
+    put("ERROR_ESTIMATE", [layout.error_estimate_vr], [0])
+    put("TOLERANCE", [layout.tolerance_vr], [0])
+    put("STEP", [layout.step_vr], [0])
+    if (kind < 0).any() or (index < 0).any():
+        raise NativeBuildError("the layout's Real variables are not all mapped: teach fmu_src/native/build.py")
+    return kind, index
+
+
+def scene_resource(scene, cfg, layout) -> tuple[Resource, dict]:
+    """The scene's resource (without its identity, scene.guid and scene.fingerprint: build_native_fmu adds them) and
+    facts about the scene for the caller."""
     import linknet_core as ln
+    from linknet_core.clib import library
     from linknet_core.clib.ldl import package_library
-    from linknet_core.scene.motion import PIECE_COLUMNS, SINE_COLUMNS
 
     sims = _simulators(scene, cfg)
     sim = sims[cfg["integrator"]]
@@ -236,161 +311,87 @@ def scene_source(scene, cfg, layout, src: Path) -> tuple[str, dict]:
     spec = {"none": 0, "static": 1, "rigid": 2}.get(kind)
     if spec is None:
         raise NativeBuildError(f"unknown specialisation {kind!r} of the Simulator: teach fmu_src/native/build.py")
+    if sim.state.t != 0.0:
+        raise NativeBuildError("the Simulator does not start at t = 0")
     model = integ.model.struct
     K, L = int(model.K), int(model.L)
-    n_pairs, n_el, n_fixed, n_free = int(model.n_pairs), int(model.n_elements), int(model.n_fixed), int(model.n_free)
-    n_driven = int(model.n_driven)
-    pieces = _pointer_values(model.motion_pieces, n_driven + 1, ctypes.c_int64) if n_driven else None
-    P = force_parameters(src)
-    model_lengths = {"k1": L, "k2": L, "R": L, "inv_R": L, "inv_m": K, "free_idx": n_free, "fixed_idx": n_fixed,
-                     "is_fixed": K, "F_scene": 3 * K, "element_kind": n_el, "element_mass": 2 * n_el,
-                     "element_param": P * n_el, "pair_first": n_pairs, "pair_second": n_pairs,
-                     "pair_weight": n_pairs, "pair_mass": n_pairs, "pair_sign": n_pairs, "chain_order": L,
-                     "chain_diag_weight": L, "chain_off_weight": L,
-                     "driven_idx": n_driven, "motion_kind": n_driven, "motion_pieces": n_driven + 1,
-                     "piece": PIECE_COLUMNS * int(pieces[-1]) if n_driven else 0, "sine": SINE_COLUMNS * n_driven,
-                     "accel_weight": K}
-    w = CWriter()
-    model_init = struct_initializer(w, model, model_lengths, {"ldl", "rigid"}, "model")
-
-    # the elimination order the sparse LDL^T was analysed in (rebuilt at instantiation with ln_ldl_analyse)
-    ordering = "NULL"
+    values = dict(model_identifier=cfg["model_identifier"], scene_name=str(scene.name), K=K, L=L,
+                  mass_names=list(scene.mass_names), mass=scene.mass, length=scene.length, gravity=scene.gravity,
+                  force=scene.force, X0=scene.X0, U0=scene.U0,
+                  project_initial=int(bool(scene.options.get("project_initial_positions", False))),
+                  length_tol=sim.settings.length_tol)  # the run's own rule for the initial lengths
+    values["tolerance_min"], values["tolerance_max"] = library_tolerance_range()
+    values["max_force"] = float(getattr(importlib.import_module(ln.Simulator.__module__), "MAX_FORCE", 0.0))
+    # the elimination order the sparse LDL^T was analysed in (analysed again at instantiation with ln_ldl_analyse)
+    values["ldl_ordering"] = []
     if model.ldl:
         order = np.zeros(L, np.int64)
         package_library().ln_ldl_get_ordering(model.ldl, order.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)))
-        ordering = w.ints(order, "ldl_ordering")
-
-    rigid_ref, Y0_ref, n_bodies = "NULL", "NULL", 0
+        values["ldl_ordering"] = order
+    values["specialisation"] = spec
+    values["n_bodies"], values["Y0"] = 0, []
+    resource = Resource()
+    rigid = None
     if spec == 2:
-        rstruct = integ.rigid.struct
-        n_bodies = int(rstruct.n_bodies)
-        rigid_init = struct_initializer(w, rstruct, {"body_of": K, "r": 3 * K, "inertia": 3 * n_bodies,
-                                                     "body_mass": n_bodies, "kind": n_bodies}, set(), "rigid")
-        w.lines.append(f"static const struct ln_rigid_model rigid = {rigid_init};")
-        rigid_ref = "&rigid"
-        Y0_ref = w.doubles(integ.body_states(), "Y0")
-
+        rigid = integ.rigid.struct
+        values["n_bodies"], values["Y0"] = int(rigid.n_bodies), integ.body_states()
     internals = integ.internals()["native"]
-    methods = []
-    for name in cfg["integrators"]:
-        s = sims[name]
-        mstruct = s.integrator.method.struct
-        ns = int(mstruct.n_stages)
-        init = struct_initializer(w, mstruct, {"gammas": int(mstruct.n_gammas), "AB": (ns + 1) * ns, "C": ns,
-                                               "E1": ns + 1, "E2": ns + 1}, set(), f"method_{name}")
-        adaptive = int(bool(ln.METHODS[name].adaptive))
-        methods.append(f"{{{c_string(name)}, {adaptive}, {int(ln.METHODS[name].order)}, {init}}}")
-    kinds = {"F": 0, "X": 1, "U": 2, "T": 3, "Freact": 4, "M": 5, "R": 6, "g": 7, "P": 10, "V": 11, "A": 12,
-             "Jreact": 13, "error_estimate": 14}  # enum lnfmu_kind
-    var_rows = {}
-    fixed_idx = _pointer_values(model.fixed_idx, n_fixed, ctypes.c_int64)
-    fixed_row = {int(k): j for j, k in enumerate([] if fixed_idx is None else fixed_idx)}
-    for vrs, masses, kind_name in ((layout.F_vr, layout.input_masses, "F"), (layout.X_vr, layout.output_masses, "X"),
-                                   (layout.U_vr, layout.output_masses, "U")):
-        for row, k in zip(vrs, masses):
-            for i, vr in enumerate(row):
-                var_rows[int(vr)] = (kinds[kind_name], 3 * int(k) + i)
-    for row, k in zip(layout.Freact_vr, layout.fixed_indices):
-        for i, vr in enumerate(row):
-            var_rows[int(vr)] = (kinds["Freact"], 3 * fixed_row[int(k)] + i)
-    # P, V, A, Jreact of a driven anchor: its row in the model's driven_idx (the data's drive_P, ..., impulse)
-    driven_idx = _pointer_values(model.driven_idx, n_driven, ctypes.c_int64)
-    driven_row = {int(k): j for j, k in enumerate([] if driven_idx is None else driven_idx)}
-    for kind_name, vrs, masses in (("P", layout.P_vr, layout.anchor_inputs), ("V", layout.V_vr, layout.anchor_inputs),
-                                   ("A", layout.A_vr, layout.anchor_inputs),
-                                   ("Jreact", layout.Jreact_vr, layout.driven_indices)):
-        for row, k in zip(vrs, masses):
-            for i, vr in enumerate(row):
-                var_rows[int(vr)] = (kinds[kind_name], 3 * driven_row[int(k)] + i)
-    for l, vr in enumerate(layout.T_vr):
-        var_rows[int(vr)] = (kinds["T"], l)
-    for vr, k in zip(layout.M_vr, layout.free_indices):
-        var_rows[int(vr)] = (kinds["M"], int(k))
-    for l, vr in enumerate(layout.R_vr):
-        var_rows[int(vr)] = (kinds["R"], l)
-    for i, vr in enumerate(layout.g_vr):
-        var_rows[int(vr)] = (kinds["g"], i)
-    var_rows[int(layout.error_estimate_vr)] = (kinds["error_estimate"], 0)
-    var_rows[int(layout.tolerance_vr)] = (8, 0)
-    var_rows[int(layout.step_vr)] = (9, 0)
-    if sorted(var_rows) != list(range(layout.n_real)):
-        raise NativeBuildError("the layout's Real variables are not all mapped: teach fmu_src/native/build.py")
-    variables = ",\n".join(f"    {{{c_string(layout.reals[vr].name)}, {var_rows[vr][0]}, {var_rows[vr][1]}}}"
-                           for vr in range(layout.n_real))
-
-    length_tol = inspect.signature(ln.Simulator).parameters["length_tol"].default
-    tolerance_min, tolerance_max = library_tolerance_range()
-    max_force = float(getattr(importlib.import_module(ln.Simulator.__module__), "MAX_FORCE", 0.0))
-    out = [
-        f"/* {scene.name}: {K} masses, {L} links, solver {'none chain ldl min-norm'.split()[int(model.solver)]}, "
-        f"specialisation {kind}. Generated by fmu_src/native/build.py: data only, no code. */",
-        "#include <math.h>",
-        "#include <stddef.h>",
-        "#include <stdint.h>",
-        "",
-        '#include "fmu_model.h"',
-        '#include "lnfmu_scene.h"',
-        "",
-    ]
-    names = w.strings(scene.mass_names, "mass_names") if K else "NULL"
-    scene_mass = w.doubles(scene.mass, "scene_mass") if K else "NULL"
-    scene_length = w.doubles(scene.length, "scene_length") if L else "NULL"
-    scene_force = w.doubles(scene.force, "scene_force") if K else "NULL"
-    X0 = w.doubles(scene.X0, "scene_X0") if K else "NULL"
-    U0 = w.doubles(scene.U0, "scene_U0") if K else "NULL"
-    X_init = w.doubles(sim.state.X, "X_init") if K else "NULL"
-    U_init = w.doubles(sim.state.U, "U_init") if K else "NULL"
-    if sim.state.t != 0.0:
-        raise NativeBuildError("the Simulator does not start at t = 0")
-    w.lines.append(f"static const ln_model model = {model_init};")
-    w.lines.append("static const lnfmu_method methods[] = {\n" + ",\n".join(methods) + "\n};")
-    w.lines.append("static const lnfmu_variable variables[] = {\n" + variables + "\n};")
-    out += w.lines
-    project = bool(scene.options.get("project_initial_positions", False))
-    scene_init = f"""const lnfmu_scene lnfmu_scene_data = {{
-    .model_identifier = {c_string(cfg['model_identifier'])},
-    .scene_name = {c_string(str(scene.name))},
-    .guid = LNFMU_GUID,
-    .fingerprint = LNFMU_FINGERPRINT,
-    .K = {K}, .L = {L},
-    .mass_names = {names},
-    .mass = {scene_mass},
-    .length = {scene_length},
-    .gravity = {{{', '.join(c_double(g) for g in scene.gravity)}}},
-    .force = {scene_force},
-    .X0 = {X0}, .U0 = {U0},
-    .project_initial = {int(project)},
-    .length_tol = {c_double(length_tol)},
-    .tolerance_min = {c_double(tolerance_min)}, .tolerance_max = {c_double(tolerance_max)},
-    .max_force = {c_double(max_force)},
-    .model = &model,
-    .ldl_ordering = {ordering},
-    .specialisation = {spec},
-    .rigid = {rigid_ref},
-    .Y0 = {Y0_ref},
-    .X_init = {X_init}, .U_init = {U_init},
-    .h_next_init = {c_double(internals.h_next)},
-    .planar_init = {int(internals.planar)},
-    .max_steps = {int(sim.max_steps_per_call)},
-    .n_methods = {len(methods)},
-    .methods = methods,
-    .default_method = {cfg['integrators'].index(cfg['integrator'])},
-    .default_step = {c_double(cfg['step'])},
-    .default_tolerance = {c_double(cfg['tolerance'])},
-    .default_estimate = {int(bool(cfg.get('error_estimate', True)))},
-    .n_real = {layout.n_real},
-    .variables = variables,
-}};
-
-const fmu_model_info lnfmu_info = {{
-    {c_string(cfg['model_identifier'])}, LNFMU_GUID, LNFMU_FINGERPRINT, {layout.n_real}, 1, 1
-}};
-"""
-    out.append(scene_init)
-    facts = dict(specialisation=kind, solver=int(model.solver), K=K, L=L, bodies=n_bodies,
+    values.update(X_init=sim.state.X, U_init=sim.state.U, h_next_init=internals.h_next,
+                  planar_init=int(internals.planar), max_steps=int(sim.max_steps_per_call))
+    names = list(cfg["integrators"])
+    values.update(n_methods=len(names), method_names=names,
+                  method_adaptive=[int(bool(ln.METHODS[n].adaptive)) for n in names],
+                  method_order=[int(ln.METHODS[n].order) for n in names],
+                  default_method=names.index(cfg["integrator"]), default_step=cfg["step"],
+                  default_tolerance=cfg["tolerance"], default_estimate=int(bool(cfg.get("error_estimate", True))))
+    values["variable_kind"], values["variable_index"] = variable_table(layout, model)
+    values.update(n_real=layout.n_real, variable_names=[v.name for v in layout.reals])
+    unknown = sorted(name for name, value in values.items() if value is None)
+    if unknown:  # the library no longer says it where build.py asks
+        raise NativeBuildError(f"the scene's resource: no value for {', '.join(unknown)}: teach fmu_src/native/build.py")
+    identity = {"guid", "fingerprint"}  # added by build_native_fmu, from the digest of everything else
+    codes = field_codes()
+    listed = scene_fields()
+    missing = {name for _, _, name in listed} - identity - set(values)
+    unknown = set(values) - {name for _, _, name in listed}
+    if missing or unknown:
+        raise NativeBuildError(f"the scene's resource and lnfmu_scene.h's LNFMU_SCENE_FIELDS disagree (not written: "
+                               f"{sorted(missing)}, not listed: {sorted(unknown)}): teach fmu_src/native/build.py")
+    for kind_, ctype, name in listed:
+        if name in identity:
+            continue
+        if kind_ == "TEXT":
+            resource.texts(f"scene.{name}", [values[name]])
+        elif kind_ == "TEXTS":
+            resource.texts(f"scene.{name}", values[name])
+        else:
+            resource.add(f"scene.{name}", codes[ctype], values[name])
+    resource.struct("model", library.MODEL_STRUCT, model)
+    if rigid is not None:
+        resource.struct("rigid", library.RIGID_MODEL_STRUCT, rigid, model)
+    for i, name in enumerate(names):
+        resource.struct(f"method{i}", library.METHOD_STRUCT, sims[name].integrator.method.struct, model)
+    facts = dict(specialisation=kind, solver=int(model.solver), K=K, L=L, bodies=int(values["n_bodies"]),
                  planar=bool(model.planar))
-    return "\n".join(out), facts
+    return resource, facts
 
+
+def with_identity(resource: Resource, sources_digest: bytes) -> tuple[bytes, str]:
+    """The resource file with its identity (scene.guid, scene.fingerprint) and the GUID: 16 bytes of the state
+    format, the sources and the scene's data, so another scene, other options, another FMI version or other sources
+    give another GUID (and FMU states that the others refuse)."""
+    digest = resource.digest(f"linknet native FMU state format {state_format()}\n".encode(), sources_digest)
+    guid = "{" + str(uuid.UUID(bytes=digest)) + "}"
+    identity = Resource()
+    identity.texts("scene.guid", [guid])
+    identity.add("scene.fingerprint", "Q", [int.from_bytes(digest[:8], "little")])
+    ordered = Resource()  # the identity where lnfmu_scene.h lists it: the reader finds entries by name, a reader of
+    listed = [f"scene.{name}" for _, _, name in scene_fields()]  # the file by eye reads them in the list's order
+    for name in listed + [n for n in resource.entries if n not in listed]:
+        source = identity if name in identity.entries else resource
+        if name in source.entries:
+            ordered.entries[name] = source.entries[name]
+    return ordered.to_bytes(), guid
 
 # ---------------------------------------------------------------------------- modelDescription.xml
 def _start(value: float) -> str:
@@ -399,9 +400,10 @@ def _start(value: float) -> str:
     return text if float(text) == value else f"{value:.17g}"
 
 
-def raw_model_description(cfg, layout, guid: str, sources: list[str], start_values: dict) -> bytes:
-    """ModelVariables as the pythonfmu FMU writes them (same names, order, value references, attributes);
-    build_fmu.postprocess_model_description then adds units, types, DefaultExperiment and ModelStructure."""
+def model_description_parts(cfg, layout, guid: str, sources: list[str], start_values: dict) -> tuple:
+    """The modelDescription's header (an lxml fmiModelDescription with CoSimulation and LogCategories) and its
+    variables as build_fmu.finish_model_description takes them: the pythonfmu FMU's variables (same names, order,
+    value references, attributes), to which it adds units, types, DefaultExperiment and ModelStructure."""
     now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     root = ET.Element("fmiModelDescription", dict(
         fmiVersion="2.0", modelName=cfg["model_identifier"], guid=guid,
@@ -421,28 +423,22 @@ def raw_model_description(cfg, layout, guid: str, sources: list[str], start_valu
     cats = ET.SubElement(root, "LogCategories")
     for name, text in LOG_CATEGORIES:
         ET.SubElement(cats, "Category", name=name, description=text)
-    variables = ET.SubElement(root, "ModelVariables")
+    variables = []
     for v in layout.reals:
         attrs = dict(name=v.name, valueReference=str(v.vr), description=v.description, causality=v.causality,
                      variability=v.variability)
         if v.initial:
             attrs["initial"] = v.initial
-        sv = ET.SubElement(variables, "ScalarVariable", attrs)
-        real = {}
-        if v.causality in ("input", "parameter"):
-            real["start"] = _start(start_values[v.vr])
-        ET.SubElement(sv, "Real", real)
-    sv = ET.SubElement(variables, "ScalarVariable", dict(
-        name="integrator", valueReference=str(layout.integrator_vr),
-        description="integration method: " + ", ".join(cfg["integrators"]), causality="parameter",
-        variability="fixed", initial="exact"))
-    ET.SubElement(sv, "String", start=cfg["integrator"])
-    sv = ET.SubElement(variables, "ScalarVariable", dict(
-        name="estimate_error", valueReference=str(layout.estimate_error_vr), description=ESTIMATE_ERROR_DESCRIPTION,
-        causality="parameter", variability="fixed", initial="exact"))
-    ET.SubElement(sv, "Boolean", start="true" if cfg.get("error_estimate", True) else "false")
-    ET.SubElement(root, "ModelStructure")
-    return ET.tostring(root, encoding="UTF-8")
+        given = v.causality in ("input", "parameter")
+        variables.append((attrs, "Real", {"start": _start(start_values[v.vr])} if given else {}))
+    variables.append((dict(name="integrator", valueReference=str(layout.integrator_vr),
+                           description="integration method: " + ", ".join(cfg["integrators"]), causality="parameter",
+                           variability="fixed", initial="exact"), "String", {"start": cfg["integrator"]}))
+    estimate = "true" if cfg.get("error_estimate", True) else "false"
+    variables.append((dict(name="estimate_error", valueReference=str(layout.estimate_error_vr),
+                           description=ESTIMATE_ERROR_DESCRIPTION, causality="parameter", variability="fixed",
+                           initial="exact"), "Boolean", {"start": estimate}))
+    return root, variables
 
 
 def start_values(scene, cfg, layout) -> dict:
@@ -557,60 +553,84 @@ def _link_options(target: str, ident: str) -> list[str]:
     return ["-s"]  # windows: only the dllexport'ed fmi2 functions are exported
 
 
+def sources_digest(sources_dir: Path) -> bytes:
+    """What the compiler reads: every .c and .h file under sources/ (not CMakeLists.txt, which names the model)."""
+    content = hashlib.sha256()
+    for p in sorted(sources_dir.rglob("*.[ch]")):
+        if p.is_file():
+            content.update(p.relative_to(sources_dir).as_posix().encode() + b"\0" + p.read_bytes())
+    return content.digest()
+
+
+_zig_versions: dict = {}
+
+
+def _zig_version(cc: list[str]) -> str:
+    key = tuple(cc)
+    if key not in _zig_versions:
+        _zig_versions[key] = subprocess.run(cc[:-1] + ["version"], capture_output=True, text=True).stdout.strip()
+    return _zig_versions[key]
+
+
+def _store(made: Path, store: Path) -> Path:
+    """made moved into the cache folder store (a rename: a concurrent build never sees half a file)."""
+    store.mkdir(parents=True, exist_ok=True)
+    os.replace(made, store / made.name)
+    return store / made.name
+
+
 def compile_binaries(sources_dir: Path, units: list[str], ident: str, folders: tuple[str, ...], out_dir: Path,
                      cache: bool = True) -> dict[str, Path]:
     """binaries/<folder>/<ident><suffix> of every platform in ``folders``, each from the FMU's sources/ alone, as a
     tool compiles them (the <SourceFiles>, sources/ the only include folder); returns folder -> binary.
 
-    The objects of everything but the scene's data are the same for every scene of one checkout: they are kept in a
-    per-user cache (LINKNET_FMU_CACHE, default ~/.cache/linknet/native-fmu), keyed by the compiler, the target, the
-    flags and the content of every source file, so that building a further scene compiles one file per target."""
+    The sources are the same for every scene, so the binaries are too: each target's objects and its linked binary
+    (which carries the model identifier in its name) are kept in a per-user cache (LINKNET_FMU_CACHE, default
+    ~/.cache/linknet/native-fmu), keyed by the compiler, the target, the flags and the content of every source file,
+    so that a further scene compiles nothing, and links nothing if its model identifier was built before."""
     from concurrent.futures import ThreadPoolExecutor
 
     cc = zig_cc()
     flags = CFLAGS + WARNINGS + ["-fPIC", "-I", str(sources_dir)]
-    version = subprocess.run(cc[:-1] + ["version"], capture_output=True, text=True).stdout.strip()
-    content = hashlib.sha256()  # what the compiler reads: not CMakeLists.txt, which names the scene's model
-    for p in sorted(sources_dir.rglob("*.[ch]")):
-        if p.is_file() and p.name != SCENE_FILE:
-            content.update(p.relative_to(sources_dir).as_posix().encode() + b"\0" + p.read_bytes())
-    shared = [u for u in units if u != SCENE_FILE]
+    digest = sources_digest(sources_dir)
     targets = [t for folder in folders for t in PLATFORMS[folder].targets]
+    suffix = {t: PLATFORMS[f].suffix for f in folders for t in PLATFORMS[f].targets}
     with tempfile.TemporaryDirectory(prefix="linknet_objects_") as tmp:
         tmp = Path(tmp)
-        objects, jobs, fresh = {}, [], []
+        stores, linked, jobs, fresh = {}, {}, [], []
         for target in targets:
-            key = hashlib.sha256("\0".join(["zig cc", version, target] + flags[:-2]).encode()
-                                 + content.digest()).hexdigest()[:32]
-            store = _cache_dir() / key if cache else tmp / "objects" / target
+            key = hashlib.sha256("\0".join(["zig cc", _zig_version(cc), target] + flags[:-2]).encode()
+                                 + digest).hexdigest()[:32]
+            stores[target] = _cache_dir() / key if cache else tmp / "objects" / target
+            binary = stores[target] / "linked" / f"{ident}{suffix[target]}"
+            if binary.exists():
+                linked[target] = binary
+                continue
             work = tmp / "new" / target
             work.mkdir(parents=True)
             for u in units:
                 name = u.replace("/", "__") + ".o"
-                cached = u != SCENE_FILE
-                objects[target, u] = (store if cached else work) / name
-                if not objects[target, u].exists():
+                if not (stores[target] / name).exists():
                     jobs.append(([*cc, "-target", target, *flags, "-c", str(sources_dir / u), "-o", str(work / name)],
                                  work))
-                    if cached:
-                        fresh.append((work / name, store))
+                    fresh.append((work / name, stores[target]))
         with ThreadPoolExecutor(max_workers=os.cpu_count() or 2) as pool:
             list(pool.map(lambda job: _run_compiler(*job), jobs))
-        for made, store in fresh:  # rename is atomic: a concurrent build never sees half an object
-            store.mkdir(parents=True, exist_ok=True)
-            os.replace(made, store / made.name)
+        for made, store in fresh:
+            _store(made, store)
 
         def link(target: str) -> Path:
-            folder = next(f for f in folders if target in PLATFORMS[f].targets)
-            binary = tmp / "linked" / target / f"{ident}{PLATFORMS[folder].suffix}"
-            binary.parent.mkdir(parents=True)  # its own folder: the Windows link leaves an import library beside it
-            _run_compiler([*cc, "-target", target, "-shared", "-o", str(binary)]
-                          + [str(objects[target, u]) for u in shared + [SCENE_FILE] if (target, u) in objects]
-                          + _link_options(target, ident), binary.parent)
-            return binary
+            work = tmp / "linked" / target  # its own folder: the Windows link leaves an import library beside it
+            work.mkdir(parents=True)
+            binary = work / f"{ident}{suffix[target]}"
+            objects = [str(stores[target] / (u.replace("/", "__") + ".o")) for u in units]
+            _run_compiler([*cc, "-target", target, "-shared", "-o", str(binary)] + objects
+                          + _link_options(target, ident), work)
+            return _store(binary, stores[target] / "linked")
 
         with ThreadPoolExecutor(max_workers=os.cpu_count() or 2) as pool:
-            linked = dict(zip(targets, pool.map(link, targets)))
+            linked.update(zip([t for t in targets if t not in linked],
+                              pool.map(link, [t for t in targets if t not in linked])))
         built = {}
         for folder in folders:
             spec = PLATFORMS[folder]
@@ -650,7 +670,7 @@ def universal_mach_o(slices: list[bytes]) -> bytes:
 
 
 # ---------------------------------------------------------------------------- sources/
-CORE_FOLDER = "linknet"  # sources/linknet/: the core's tree as it is, the FMI glue and the scene's data
+CORE_FOLDER = "linknet"  # sources/linknet/: the core's tree as it is and the FMI glue
 UNIT_HEADER = "linknet_fmu_unit.h"  # included first by every translation unit (fmu_src/native/linknet_fmu_unit.h)
 
 
@@ -658,17 +678,16 @@ def _system_headers(text: str) -> set[str]:
     return set(re.findall(r"^\s*#\s*include\s*<([^>]+)>", text, re.M))
 
 
-def stage_sources(scene_c: str, dest: Path, ident: str) -> list[str]:
-    """sources/: the core's src tree as it is, the glue and the generated scene in sources/linknet/; at the top, one
-    two-line wrapper per translation unit (UNIT_HEADER, then the unit), the unit header and a CMakeLists.txt.
-    Returns the files to compile, the wrappers: sources/*.c."""
+def stage_sources(dest: Path, ident: str) -> list[str]:
+    """sources/: the core's src tree as it is and the glue in sources/linknet/; at the top, one two-line wrapper per
+    translation unit (UNIT_HEADER, then the unit), the unit header and a CMakeLists.txt. The same for every scene
+    (CMakeLists.txt names the model identifier). Returns the files to compile, the wrappers: sources/*.c."""
     inner = dest / CORE_FOLDER
     shutil.copytree(core_source_dir(), inner, ignore=shutil.ignore_patterns("__pycache__", "*.o", "*.so"))
     for name in GLUE_FILES:
         if (inner / name).exists():
             raise NativeBuildError(f"the core's sources now have a file named {name}, as the FMU glue does: rename one")
         shutil.copy2(HERE / name, inner / name)
-    (inner / SCENE_FILE).write_text(scene_c)
     shutil.copy2(HERE / UNIT_HEADER, dest / UNIT_HEADER)
     allowed = _system_headers((HERE / UNIT_HEADER).read_text())
     for p in sorted(inner.rglob("*.[ch]")):
@@ -695,7 +714,8 @@ def cmake_lists(ident: str, units: list[str]) -> str:
     files = "\n".join(f"  {u}" for u in units)
     return f"""# The FMU's binary from its sources, as the binaries/ in this FMU were built (fmu_src/native/build.py):
 #   cmake -S sources -B build -DCMAKE_BUILD_TYPE=Release && cmake --build build --config Release
-# gives build/{ident}.so (.dll, .dylib), for binaries/<platform>/ of the unzipped FMU.
+# gives build/{ident}.so (.dll, .dylib), for binaries/<platform>/ of the unzipped FMU; it reads the scene from the
+# FMU's resources/ when it is instantiated.
 # cc -shared -fPIC -std=c99 -O2 -ffp-contract=off sources/*.c -lm -o {ident}.so does the same by hand.
 cmake_minimum_required(VERSION 3.10)
 project({ident} C)
@@ -716,81 +736,88 @@ endif()
 """
 
 
-def fingerprint(sources_dir: Path, scene_c: str) -> bytes:
-    """16 bytes identifying this FMU's build: every source file and the scene data (and the state format)."""
-    h = hashlib.blake2b(digest_size=16)
-    h.update(f"linknet native FMU state format {STATE_FORMAT}\n".encode())
-    for p in sorted(sources_dir.rglob("*")):
-        if p.is_file() and p.name != SCENE_FILE:
-            h.update(p.relative_to(sources_dir).as_posix().encode() + b"\0" + p.read_bytes())
-    h.update(scene_c.encode())
-    return h.digest()
+def check_settings(cfg: dict) -> None:
+    """The FMU's own rules for its parameters step and tolerance (linknet_model.c), before anything is built."""
+    step, tolerance = float(cfg["step"]), float(cfg["tolerance"])
+    if not (math.isfinite(step) and step > 0):
+        raise NativeBuildError(f"step = {step!r} must be finite and > 0 (seconds)")
+    low, high = library_tolerance_range()
+    if not (low <= tolerance < high):
+        raise NativeBuildError(f"tolerance = {tolerance!r} must lie in [{low:g}, {high:g})")
+
+
+def bake(scene, cfg, layout, progress=lambda stage: None) -> tuple[Resource, dict]:
+    """scene_resource, a scene the library itself refuses (e.g. inconsistent initial velocities) answered with a
+    NativeBuildError naming the scene."""
+    import linknet_core as ln
+    progress(f"baking the scene ({len(layout.reals)} variables)")
+    try:
+        return scene_resource(scene, cfg, layout)
+    except ln.LinknetError as e:
+        raise NativeBuildError(f"{scene.name}: {e}") from None
+
+
+def pack(out: Path, files: dict) -> None:
+    """The FMU at ``out``: its files (name in the archive -> bytes or a Path) written whole and renamed into place,
+    so a failed build leaves no half FMU behind. The scene's resource, the largest file, is stored with the fastest
+    compression."""
+    from linknet_core.output import WriteError, atomic_write
+
+    def write(target):
+        with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
+            for name, data in files.items():
+                level = 1 if name.startswith("resources/") else None
+                if isinstance(data, Path):
+                    z.write(data, name, compresslevel=level)
+                else:
+                    z.writestr(name, data, compresslevel=level)
+
+    try:
+        atomic_write(out, write)
+    except WriteError as e:
+        raise NativeBuildError(str(e)) from None
+
+
+def sources_files(sources: Path) -> dict:
+    return {"sources/" + p.relative_to(sources).as_posix(): p for p in sorted(sources.rglob("*")) if p.is_file()}
 
 
 def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, postprocess, quiet: bool = False,
                      platforms=None) -> Path:
     """Write the native FMU of ``scene`` to ``out``. ``cfg``, ``layout`` and ``experiment`` are build_fmu.py's
     (identifier, description, integrators and defaults; the variables; DefaultExperiment); ``postprocess`` is
-    build_fmu.postprocess_model_description; ``platforms`` the binaries to build (platforms_from: None is
+    build_fmu.finish_model_description; ``platforms`` the binaries to build (platforms_from: None is
     $LINKNET_FMU_PLATFORMS, else all)."""
     import time
     started = time.perf_counter()
     out = Path(out)
     folders = platforms_from(platforms)
-    step, tolerance = float(cfg["step"]), float(cfg["tolerance"])
-    if not (math.isfinite(step) and step > 0):  # the FMU's own rules for its parameters (linknet_model.c)
-        raise NativeBuildError(f"step = {step!r} must be finite and > 0 (seconds)")
-    low, high = library_tolerance_range()
-    if not (low <= tolerance < high):
-        raise NativeBuildError(f"tolerance = {tolerance!r} must lie in [{low:g}, {high:g})")
-    src = core_source_dir()
-    import linknet_core as ln
+    check_settings(cfg)
 
-    def progress(stage: str) -> None:  # a large scene's build takes minutes: say how far it is
+    def progress(stage: str) -> None:  # a large scene's build takes a while: say how far it is
         if not quiet and len(layout.reals) >= PROGRESS_VARIABLES:
             print(f"build_fmu: {cfg['model_identifier']}: {stage} ({time.perf_counter() - started:.0f} s)",
                   file=sys.stderr, flush=True)
-    progress(f"baking the scene ({len(layout.reals)} variables)")
-    try:
-        scene_c, facts = scene_source(scene, cfg, layout, src)
-    except ln.LinknetError as e:  # a scene the library itself refuses (e.g. inconsistent initial velocities)
-        raise NativeBuildError(f"{scene.name}: {e}") from None
+    resource, facts = bake(scene, cfg, layout, progress)
     ident = cfg["model_identifier"]
+    resource_name, _ = resource_format()
     with tempfile.TemporaryDirectory(prefix="linknet_native_fmu_") as tmp:
         tmp = Path(tmp)
         sources = tmp / "fmu" / "sources"
-        units = stage_sources("", sources, ident)
-        digest = fingerprint(sources, scene_c)
-        guid = "{" + str(uuid.UUID(bytes=digest)) + "}"
-        finger = int.from_bytes(digest[:8], "little")
-        header = (f"#define LNFMU_GUID {c_string(guid)}\n"
-                  f"#define LNFMU_FINGERPRINT UINT64_C(0x{finger:016x})\n")
-        text = scene_c.replace('#include "fmu_model.h"', header + '#include "fmu_model.h"', 1)
-        (sources / CORE_FOLDER / SCENE_FILE).write_text(text)
+        units = stage_sources(sources, ident)
+        data, guid = with_identity(resource, sources_digest(sources))
         progress(f"compiling for {', '.join(folders)}")
         binaries = compile_binaries(sources, units, ident, folders, tmp / "fmu" / "binaries")
         progress("writing the model description")
-        raw = raw_model_description(cfg, layout, guid, units, start_values(scene, cfg, layout))
+        header, variables = model_description_parts(cfg, layout, guid, units, start_values(scene, cfg, layout))
         inv_mass = scene.inv_mass
-        md = postprocess(raw, {v.name: v.declared_type for v in layout.reals}, layout.dependencies(inv_mass),
-                         layout.initial_dependencies(inv_mass), experiment, cfg["description"])
-        (tmp / "fmu" / "modelDescription.xml").write_bytes(md)
-        from linknet_core.output import WriteError, atomic_write
-
-        def pack(target):  # written whole, then renamed into place: a failed build leaves no half FMU behind
-            with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
-                z.write(tmp / "fmu" / "modelDescription.xml", "modelDescription.xml")
-                for folder, binary in binaries.items():
-                    z.write(binary, f"binaries/{folder}/{binary.name}")
-                for p in sorted(sources.rglob("*")):
-                    if p.is_file():
-                        z.write(p, "sources/" + p.relative_to(sources).as_posix())
-
+        md = postprocess(header, variables, {v.name: v.declared_type for v in layout.reals},
+                         layout.dependencies(inv_mass), layout.initial_dependencies(inv_mass), experiment,
+                         cfg["description"])
         progress(f"packing {out}")
-        try:
-            atomic_write(out, pack)
-        except WriteError as e:
-            raise NativeBuildError(str(e)) from None
+        pack(out, {"modelDescription.xml": md,
+                   **{f"binaries/{folder}/{binary.name}": binary for folder, binary in binaries.items()},
+                   **sources_files(sources), f"resources/{resource_name}": data})
     if not quiet:
         size = out.stat().st_size
         print(f"built {out} (native model {ident}: {sum(v.causality == 'input' for v in layout.reals)} inputs, "

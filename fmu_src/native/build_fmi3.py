@@ -1,12 +1,13 @@
 """Build the FMI 3.0 Co-Simulation FMU of a scene on the native C core (`build_fmu.py --native --fmi-version 3`).
 
-The same model as the FMI 2.0 native FMU (fmu_src/native/build.py): the scene baked as data by build.scene_source,
-the core and linknet_model.c through fmu_model.h, compiled and cached by build.compile_binaries, with the FMI 3.0 glue
-(fmi3Functions.c, the standard's headers in fmi3/) in place of the FMI 2.0 one. What differs is the variables: the
-Layout's scalars (fmu_src/linknet_fmu/layout.py, the one both FMI 2.0 FMUs use) grouped into FMI 3 array variables,
+The same model as the FMI 2.0 native FMU (fmu_src/native/build.py): the scene as data in resources/ by
+build.scene_resource, the core and linknet_model.c through fmu_model.h, compiled once and cached by
+build.compile_binaries, with the FMI 3.0 glue (fmi3Functions.c, the standard's headers in fmi3/) in place of the FMI 2.0
+one. What differs is the variables: the Layout's scalars (fmu_src/linknet_fmu/layout.py, the one both FMI 2.0 FMUs
+use) grouped into FMI 3 array variables,
 X and U [masses with outputs,3], T [L], Freact [anchored,3], F [masses with inputs,3], P, V, A [input-driven
 anchors,3], Jreact [driven,3], M [free], R [L], g [3], with <Dimension> elements; a table of them
-(fmi3_variables.h) is appended to the scene's data.
+(fmi3_variables.h) is added to the scene's resource.
 
     python3 fmu_src/native/build_fmi3.py models/chain_10.json -o chain_10_fmi3.fmu [--platforms host]
     python3 -m fmu_src.native.build_fmi3 models/chain_10.json -o chain_10_fmi3.fmu
@@ -19,14 +20,11 @@ from __future__ import annotations
 import argparse
 import datetime
 import inspect
-import math
 import shutil
 import struct
 import sys
 import tempfile
-import uuid
 import xml.etree.ElementTree as ET
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -138,15 +136,14 @@ def fmi3_variables(layout, cfg) -> list[Variable]:
     return out
 
 
-def variable_table_c(variables) -> str:
-    """fmi3_variables.h's table for the scene's file: data only."""
-    kinds = {"time": "FMI3_TIME", "Float64": "FMI3_FLOAT64", "String": "FMI3_STRING", "Boolean": "FMI3_BOOLEAN"}
-    rows = ",\n".join(f"    {{{build.c_string(v.name)}, {kinds[v.kind]}, {v.first or 0}, {v.count}}}"
-                      for v in variables)
-    return ("\n/* The FMI 3.0 variables over the model's (fmi3_variables.h), by fmu_src/native/build_fmi3.py. */\n"
-            '#include "fmi3_variables.h"\n'
-            f"const fmi3_variable lnfmi3_variables[] = {{\n{rows}\n}};\n"
-            f"const unsigned lnfmi3_n_variables = {len(variables)};\n")
+def add_variable_table(resource, variables) -> None:
+    """fmi3_variables.h's table into the scene's resource (the entries fmi3.*, read by fmi3Functions.c)."""
+    kinds = {"time": 0, "Float64": 1, "String": 2, "Boolean": 3}  # enum fmi3_variable_kind
+    resource.add("fmi3.n_variables", "q", [len(variables)])
+    resource.texts("fmi3.names", [v.name for v in variables])
+    resource.add("fmi3.kind", "i", [kinds[v.kind] for v in variables])
+    resource.add("fmi3.first", "q", [v.first or 0 for v in variables])
+    resource.add("fmi3.count", "q", [v.count for v in variables])
 
 
 # ---------------------------------------------------------------------------- modelDescription.xml
@@ -242,9 +239,9 @@ def build_description(ident: str, units: list[str]) -> bytes:
 
 
 # ---------------------------------------------------------------------------- sources/ and binaries/
-def stage_fmi3_sources(scene_c: str, dest: Path, ident: str) -> list[str]:
+def stage_fmi3_sources(dest: Path, ident: str) -> list[str]:
     """sources/ as build.stage_sources lays it out, with the FMI 3 glue in place of fmi2Functions.c; the units."""
-    units = build.stage_sources(scene_c, dest, ident)
+    units = build.stage_sources(dest, ident)
     inner = dest / build.CORE_FOLDER
     for name in FMI2_ONLY:
         (inner / name).unlink()
@@ -309,54 +306,27 @@ def build_fmi3_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, quiet:
     """Write the FMI 3.0 native FMU of ``scene`` to ``out``; the arguments are build.build_native_fmu's (without the
     FMI 2.0 model description's postprocess); ``platforms`` as fmi3_platforms takes them."""
     import time
-
-    import linknet_core as ln
-    from linknet_core.output import WriteError, atomic_write
     started = time.perf_counter()
     out = Path(out)
     folders = fmi3_platforms(platforms)
-    step, tolerance = float(cfg["step"]), float(cfg["tolerance"])
-    if not (math.isfinite(step) and step > 0):  # the FMU's own rules for its parameters (linknet_model.c)
-        raise NativeBuildError(f"step = {step!r} must be finite and > 0 (seconds)")
-    low, high = build.library_tolerance_range()
-    if not (low <= tolerance < high):
-        raise NativeBuildError(f"tolerance = {tolerance!r} must lie in [{low:g}, {high:g})")
-    try:
-        scene_c, facts = build.scene_source(scene, cfg, layout, build.core_source_dir())
-    except ln.LinknetError as e:
-        raise NativeBuildError(f"{scene.name}: {e}") from None
+    build.check_settings(cfg)
+    resource, facts = build.bake(scene, cfg, layout)
     variables = fmi3_variables(layout, cfg)
-    scene_c += variable_table_c(variables)
+    add_variable_table(resource, variables)
     ident = cfg["model_identifier"]
+    resource_name, _ = build.resource_format()
     with tempfile.TemporaryDirectory(prefix="linknet_fmi3_fmu_") as tmp:
         tmp = Path(tmp)
         sources = tmp / "fmu" / "sources"
-        units = stage_fmi3_sources("", sources, ident)
-        digest = build.fingerprint(sources, scene_c)  # the sources differ from FMI 2.0's: another GUID and states
-        guid = "{" + str(uuid.UUID(bytes=digest)) + "}"
-        finger = int.from_bytes(digest[:8], "little")
-        header = (f"#define LNFMU_GUID {build.c_string(guid)}\n"
-                  f"#define LNFMU_FINGERPRINT UINT64_C(0x{finger:016x})\n")
-        text = scene_c.replace('#include "fmu_model.h"', header + '#include "fmu_model.h"', 1)
-        (sources / build.CORE_FOLDER / build.SCENE_FILE).write_text(text)
+        units = stage_fmi3_sources(sources, ident)
         (sources / "buildDescription.xml").write_bytes(build_description(ident, units))
+        # the sources differ from FMI 2.0's: another GUID, and states the FMI 2.0 FMU refuses
+        data, guid = build.with_identity(resource, build.sources_digest(sources))
         binaries = fmi3_binaries(build.compile_binaries(sources, units, ident, folders, tmp / "binaries"))
         md = model_description(cfg, layout, variables, guid, build.start_values(scene, cfg, layout), experiment,
                                scene.inv_mass)
-
-        def pack(target):  # written whole, then renamed into place: a failed build leaves no half FMU behind
-            with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
-                z.writestr("modelDescription.xml", md)
-                for name, data in sorted(binaries.items()):
-                    z.writestr(f"binaries/{name}", data)
-                for p in sorted(sources.rglob("*")):
-                    if p.is_file():
-                        z.write(p, "sources/" + p.relative_to(sources).as_posix())
-
-        try:
-            atomic_write(out, pack)
-        except WriteError as e:
-            raise NativeBuildError(str(e)) from None
+        build.pack(out, {"modelDescription.xml": md, **{f"binaries/{n}": d for n, d in sorted(binaries.items())},
+                         **build.sources_files(sources), f"resources/{resource_name}": data})
     if not quiet:
         arrays = ", ".join(f"{v.name} {list(v.shape)}" for v in variables if v.shape)
         print(f"built {out} (FMI 3.0 native model {ident}: arrays {arrays}; {facts['specialisation']} specialisation; "

@@ -1,6 +1,6 @@
 /* FMI 2.0 Co-Simulation glue, written once for every linknet scene and ignorant of the physics: it drives
- * the model of fmu_model.h (linknet_model.c with a scene's baked data) the way the Modelica Reference-FMUs'
- * fmi2Functions.c drives each model.c.
+ * the model of fmu_model.h (linknet_model.c with a scene's data from the FMU's resources) the way the Modelica
+ * Reference-FMUs' fmi2Functions.c drives each model.c.
  *
  * Contract (docs: fmu_src/native/README.md):
  * - no call ever returns fmi2Fatal or brings the process down: a bad argument, a bad value or a call out of
@@ -48,6 +48,7 @@ typedef struct instance {
     fmi2ComponentEnvironment environment;
     int logging_on;
     int mode;
+    fmu_resource *resource;             /* the scene's data (fmu_resource.h): the model points into it */
     fmu_model *model;
     char msg[FMU_MESSAGE];              /* the model's reason for a refusal */
     char line[2 * FMU_MESSAGE + 256];   /* the logged message, format characters escaped */
@@ -178,50 +179,70 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
     return fmi2OK;
 }
 
+/* The scene's resource (fmu_resource.h) in the folder FMI names and a model of it, or NULL with the reason logged as
+   the probe instance's. */
+static fmu_model *load_model(instance *probe, const char *location, fmu_resource **resource)
+{
+    char folder[4096];
+    *resource = NULL;
+    if (fmu_resource_folder_of_uri(location, folder, sizeof folder, probe->msg, sizeof probe->msg) != 0
+        || (*resource = fmu_resource_load(folder, probe->msg, sizeof probe->msg)) == NULL) {
+        logf_status(probe, fmi2Error, "fmi2Instantiate: %s", probe->msg);
+        return NULL;
+    }
+    fmu_model *model = fmu_model_new(*resource, probe->msg);
+    if (model == NULL) {
+        logf_status(probe, fmi2Error, "fmi2Instantiate: %s", probe->msg);
+        fmu_resource_free(*resource);
+        *resource = NULL;
+    }
+    return model;
+}
+
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn)
 {
-    (void)fmuResourceLocation;  /* everything the FMU needs is compiled in */
     (void)visible;
-    const fmu_model_info *info = fmu_model_info_get();
-    instance probe;  /* for messages before the instance exists */
-    memset(&probe, 0, sizeof probe);
-    probe.name = (char *)(instanceName ? instanceName : info->model_identifier);
-    probe.logger = functions ? functions->logger : NULL;
-    probe.environment = functions ? functions->componentEnvironment : NULL;
+    instance *probe = calloc(1, sizeof *probe);  /* for messages before the instance exists; the instance, if it is */
+    if (probe == NULL) return NULL;  /* no memory to say so with */
+    probe->name = (char *)(instanceName ? instanceName : "(unnamed instance)");
+    probe->logger = functions ? functions->logger : NULL;
+    probe->environment = functions ? functions->componentEnvironment : NULL;
+    fmu_resource *resource;
+    fmu_model *model = load_model(probe, fmuResourceLocation, &resource);
+    if (model == NULL) {
+        free(probe);
+        return NULL;
+    }
+    const fmu_model_info *info = fmu_model_info_get(model);
+    const char *refusal = NULL;
     if (fmuType != fmi2CoSimulation) {
-        logf_status(&probe, fmi2Error, "fmi2Instantiate: %s is a Co-Simulation FMU only (fmuType %d requested)",
+        logf_status(probe, fmi2Error, "fmi2Instantiate: %s is a Co-Simulation FMU only (fmuType %d requested)",
                     info->model_identifier, (int)fmuType);
-        return NULL;
-    }
-    if (fmuGUID == NULL || strcmp(fmuGUID, info->guid) != 0) {
-        logf_status(&probe, fmi2Error, "fmi2Instantiate: GUID \"%s\" is not this FMU's (%s): the "
-                    "modelDescription.xml and the binary come from different builds",
+        refusal = "type";
+    } else if (fmuGUID == NULL || strcmp(fmuGUID, info->guid) != 0) {
+        logf_status(probe, fmi2Error, "fmi2Instantiate: GUID \"%s\" is not this FMU's (%s): the "
+                    "modelDescription.xml and the resources come from different builds",
                     fmuGUID ? fmuGUID : "(null)", info->guid);
-        return NULL;
+        refusal = "guid";
     }
-    instance *self = calloc(1, sizeof *self);
+    instance *self = probe;
     const char *name = instanceName ? instanceName : info->model_identifier;
-    char *copy = self ? malloc(strlen(name) + 1) : NULL;
+    char *copy = refusal ? NULL : malloc(strlen(name) + 1);
     if (copy == NULL) {
-        free(self);
-        logf_status(&probe, fmi2Error, "fmi2Instantiate: out of memory");
+        if (!refusal) logf_status(probe, fmi2Error, "fmi2Instantiate: out of memory");
+        fmu_model_free(model);
+        fmu_resource_free(resource);
+        free(probe);
         return NULL;
     }
     strcpy(copy, name);
     self->name = copy;
-    self->logger = probe.logger;
-    self->environment = probe.environment;
     self->logging_on = loggingOn != fmi2False;
     self->mode = MODE_INSTANTIATED;
-    self->model = fmu_model_new(self->msg);
-    if (self->model == NULL) {
-        logf_status(self, fmi2Error, "fmi2Instantiate: %s", self->msg);
-        free(self->name);
-        free(self);
-        return NULL;
-    }
+    self->resource = resource;
+    self->model = model;
     self->magic = INSTANCE_MAGIC;
     return self;
 }
@@ -234,6 +255,7 @@ void fmi2FreeInstance(fmi2Component c)
     fmu_state_free_all(&self->states);  /* the states the host did not free: they belong to the instance */
     fmu_discard_free(&self->discard);
     fmu_model_free(self->model);
+    fmu_resource_free(self->resource);  /* after the model, which points into it */
     free(self->name);
     free(self);
 }
@@ -555,8 +577,8 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     const double t = currentCommunicationPoint, h = communicationStepSize;
     if (!(isfinite(h) && h > 0.0))
         return refuse(self, fn, "communication step size h=%.17g must be finite and > 0", h);
-    const double t_fmu = fmu_model_time(self->model);
-    if (!isfinite(t) || fabs(t - t_fmu) > 1e-9 * fmax(1.0, fabs(t_fmu)))
+    const double t_fmu = fmu_model_time(self->model), scale = fabs(t_fmu) > 1.0 ? fabs(t_fmu) : 1.0;  /* no libm */
+    if (!isfinite(t) || fabs(t - t_fmu) > 1e-9 * scale)
         return refuse(self, fn, "currentCommunicationPoint t=%.17g differs from the FMU's time %.17g", t, t_fmu);
     if (!isfinite(t + h)) return refuse(self, fn, "t + h = %.17g is not finite", t + h);
     if (fmu_discard_is_repeat(&self->discard, self->model, t, h)) {

@@ -1,6 +1,6 @@
 /* FMI 3.0 Co-Simulation glue, written once for every linknet scene and ignorant of the physics: it drives the same
- * model as the FMI 2.0 glue (fmu_model.h, linknet_model.c with a scene's baked data) the way the Modelica
- * Reference-FMUs' fmi3Functions.c drives each model.c, with the FMI 2.0 glue's rules (fmi2Functions.c):
+ * model as the FMI 2.0 glue (fmu_model.h, linknet_model.c with a scene's data from the FMU's resources) the way the
+ * Modelica Reference-FMUs' fmi3Functions.c drives each model.c, with the FMI 2.0 glue's rules (fmi2Functions.c):
  *
  * - no call ever returns fmi3Fatal or brings the process down: a bad argument, a bad value or a call out of order
  *   returns fmi3Error with a logged message and changes nothing, so the instance stays usable; a step the solver
@@ -45,7 +45,11 @@ typedef struct instance {
     fmi3InstanceEnvironment environment;
     int logging_on;
     int mode;
+    fmu_resource *resource;             /* the scene's data (fmu_resource.h): the model and the variables point into
+                                           it */
     fmu_model *model;
+    fmi3_variable *variables;           /* (n_variables) the FMI 3 variables, by value reference (fmi3_variables.h) */
+    unsigned n_variables;
     char msg[FMU_MESSAGE];              /* the model's reason for a refusal */
     fmu_state_registry states;          /* the FMU states this instance handed out and has not freed */
     fmu_discard_memory discard;         /* the last discarded step and the state it was discarded from */
@@ -170,12 +174,12 @@ static int expand(instance *self, const char *fn, const char *what, const fmi3Va
 {
     size_t total = 0;
     for (size_t i = 0; i < nvr; i++) {
-        if (vr[i] >= lnfmi3_n_variables) {
+        if (vr[i] >= self->n_variables) {
             refuse(self, fn, "%s[%zu] = %u is not a value reference of this FMU (0 .. %u)", what, i, (unsigned)vr[i],
-                   lnfmi3_n_variables - 1);
+                   self->n_variables - 1);
             return 0;
         }
-        const fmi3_variable *v = &lnfmi3_variables[vr[i]];
+        const fmi3_variable *v = &self->variables[vr[i]];
         if (!(kinds & (1u << v->kind))) {
             refuse(self, fn, "%s[%zu] = %u is %s, a variable of type %s", what, i, (unsigned)vr[i], v->name,
                    kind_names[v->kind]);
@@ -199,7 +203,7 @@ static int expand(instance *self, const char *fn, const char *what, const fmi3Va
     }
     size_t j = offset;
     for (size_t i = 0; i < nvr; i++) {
-        const fmi3_variable *v = &lnfmi3_variables[vr[i]];
+        const fmi3_variable *v = &self->variables[vr[i]];
         for (unsigned e = 0; e < v->count; e++) self->scratch[j++] = v->first + e;
     }
     return 1;
@@ -217,7 +221,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance_, const fmi3ValueReference vr[],
     /* variable by variable, time among them; each read leaves the model as it was (outputs are evaluated lazily) */
     size_t j = 0;
     for (size_t i = 0; i < nvr; i++) {
-        const fmi3_variable *v = &lnfmi3_variables[vr[i]];
+        const fmi3_variable *v = &self->variables[vr[i]];
         if (v->kind == FMI3_TIME) {
             values[j++] = fmu_model_time(self->model);
             continue;
@@ -237,7 +241,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance_, const fmi3ValueReference vr[],
     if (!mode_allows(self, fn, IN(MODE_INSTANTIATED) | IN(MODE_INITIALIZATION) | IN(MODE_STEPPING))) return fmi3Error;
     if (!vr_arguments(self, fn, vr, nvr, values, nValues)) return fmi3Error;
     for (size_t i = 0; i < nvr; i++)
-        if (vr[i] < lnfmi3_n_variables && lnfmi3_variables[vr[i]].kind == FMI3_TIME)
+        if (vr[i] < self->n_variables && self->variables[vr[i]].kind == FMI3_TIME)
             return refuse(self, fn, "valueReferences[%zu] = %u is time, the independent variable: it is not set "
                           "(doStep advances it)", i, (unsigned)vr[i]);
     if (!expand(self, fn, "valueReferences", vr, nvr, KIND(FMI3_FLOAT64), nValues, "nValues", 0)) return fmi3Error;
@@ -304,11 +308,11 @@ static fmi3Status no_such_type(instance *self, const char *fn, const char *type,
 {
     if (nvr == 0) return fmi3OK;
     if (vr == NULL) return refuse(self, fn, "valueReferences is NULL with nValueReferences = %zu", nvr);
-    if (vr[0] >= lnfmi3_n_variables)
+    if (vr[0] >= self->n_variables)
         return refuse(self, fn, "valueReferences[0] = %u is not a value reference of this FMU", (unsigned)vr[0]);
     return refuse(self, fn, "valueReferences[0] = %u is %s, a variable of type %s, not %s (this FMU has Float64, "
-                  "String and Boolean variables only)", (unsigned)vr[0], lnfmi3_variables[vr[0]].name,
-                  kind_names[lnfmi3_variables[vr[0]].kind], type);
+                  "String and Boolean variables only)", (unsigned)vr[0], self->variables[vr[0]].name,
+                  kind_names[self->variables[vr[0]].kind], type);
 }
 
 #define NO_SUCH_TYPE(Type, ctype)                                                                                  \
@@ -398,6 +402,61 @@ static void say_before_instance(const char *name, fmi3InstanceEnvironment enviro
     emit_in(&probe, fmi3Error, category_of(fmi3Error), text);
 }
 
+/* The FMI 3 variables of the resource's "fmi3.*" entries (written by fmu_src/native/build_fmi3.py) over the model's
+   value references, each checked against them, into *table (allocated here); 0, or -1 with the reason in msg. */
+static int load_variables(const fmu_resource *r, const fmu_model_info *info, fmi3_variable **table, unsigned *n,
+                          char *msg)
+{
+    int64_t count;
+    const char **names = NULL;
+    const void *kinds = NULL, *firsts = NULL, *counts = NULL;
+    *table = NULL;
+    if (fmu_resource_scalar(r, "fmi3.n_variables", 'q', sizeof count, &count, msg, FMU_MESSAGE) != 0) return -1;
+    if (count < 1 || count > (int64_t)info->n_real + 3) {
+        snprintf(msg, FMU_MESSAGE, "the scene's resource %s: fmi3.n_variables = %lld does not fit the model's %u "
+                 "Real variables", fmu_resource_path(r), (long long)count, info->n_real);
+        return -1;
+    }
+    if (fmu_resource_texts(r, "fmi3.names", count, &names, msg, FMU_MESSAGE) != 0
+        || fmu_resource_array(r, "fmi3.kind", 'i', sizeof(int32_t), count, 0, &kinds, msg, FMU_MESSAGE) != 0
+        || fmu_resource_array(r, "fmi3.first", 'q', sizeof(int64_t), count, 0, &firsts, msg, FMU_MESSAGE) != 0
+        || fmu_resource_array(r, "fmi3.count", 'q', sizeof(int64_t), count, 0, &counts, msg, FMU_MESSAGE) != 0) {
+        free(names);
+        return -1;
+    }
+    *table = calloc((size_t)count, sizeof **table);
+    if (*table == NULL) {
+        free(names);
+        snprintf(msg, FMU_MESSAGE, "out of memory");
+        return -1;
+    }
+    const int64_t n_real = info->n_real;
+    for (int64_t v = 0; v < count; v++) {
+        const int32_t kind = ((const int32_t *)kinds)[v];
+        const int64_t first = ((const int64_t *)firsts)[v], elements = ((const int64_t *)counts)[v];
+        /* each kind over the model's value references: Float64s among the Reals, the String and the Boolean after */
+        const int fits = (kind == FMI3_TIME && elements == 1)
+                         || (kind == FMI3_FLOAT64 && first >= 0 && elements >= 1 && elements <= n_real - first)
+                         || (kind == FMI3_STRING && first == n_real && elements == 1)
+                         || (kind == FMI3_BOOLEAN && first == n_real + 1 && elements == 1);
+        if (!fits) {
+            snprintf(msg, FMU_MESSAGE, "the scene's resource %s: FMI 3 variable %lld (%s) does not fit the model's "
+                     "variables", fmu_resource_path(r), (long long)v, names[v]);
+            free(names);
+            free(*table);
+            *table = NULL;
+            return -1;
+        }
+        (*table)[v].name = names[v];
+        (*table)[v].kind = (unsigned)kind;
+        (*table)[v].first = (unsigned)(kind == FMI3_TIME ? 0 : first);
+        (*table)[v].count = (unsigned)elements;
+    }
+    free(names);  /* the texts themselves stay in the resource */
+    *n = (unsigned)count;
+    return 0;
+}
+
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
                                          fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
@@ -406,33 +465,49 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3InstanceEnvironment instanceEnvironment, fmi3LogMessageCallback logMessage,
                                          fmi3IntermediateUpdateCallback intermediateUpdate)
 {
-    (void)resourcePath;  /* everything the FMU needs is compiled in */
     (void)visible, (void)requiredIntermediateVariables, (void)intermediateUpdate;
     (void)earlyReturnAllowed;  /* a step is never returned from early: allowed or not, nothing changes */
-    const fmu_model_info *info = fmu_model_info_get();
-    const char *name = instanceName ? instanceName : info->model_identifier;
-    if (instantiationToken == NULL || strcmp(instantiationToken, info->guid) != 0) {
-        say_before_instance(name, instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: instantiationToken "
-                            "\"%s\" is not this FMU's (%s): the modelDescription.xml and the binary come from "
-                            "different builds", instantiationToken ? instantiationToken : "(null)", info->guid);
-        return NULL;
-    }
-    if (eventModeUsed) {
-        say_before_instance(name, instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: eventModeUsed is "
-                            "true, but %s has no event mode (hasEventMode=\"false\")", info->model_identifier);
-        return NULL;
-    }
-    if (nRequiredIntermediateVariables > 0) {
-        say_before_instance(name, instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: %zu intermediate "
-                            "variables required, but %s provides no intermediate update",
-                            nRequiredIntermediateVariables, info->model_identifier);
-        return NULL;
-    }
+    const char *fn = "fmi3InstantiateCoSimulation";
     instance *self = calloc(1, sizeof *self);
-    char *copy = self ? malloc(strlen(name) + 1) : NULL;
+    if (self == NULL) {
+        say_before_instance(instanceName ? instanceName : "(unnamed instance)", instanceEnvironment, logMessage,
+                            "%s: out of memory", fn);
+        return NULL;
+    }
+    /* the scene: FMI 3.0's resourcePath is the resources folder's path itself (with a trailing separator) */
+    if (resourcePath == NULL || resourcePath[0] == '\0')
+        snprintf(self->msg, sizeof self->msg, "resourcePath is %s: this FMU reads its scene from resources/"
+                 FMU_RESOURCE_FILE " and needs the path of the unzipped FMU's resources folder",
+                 resourcePath ? "empty" : "NULL");
+    else if ((self->resource = fmu_resource_load(resourcePath, self->msg, sizeof self->msg)) != NULL
+             && (self->model = fmu_model_new(self->resource, self->msg)) != NULL)
+        load_variables(self->resource, fmu_model_info_get(self->model), &self->variables, &self->n_variables,
+                       self->msg);
+    const fmu_model_info *info = self->model ? fmu_model_info_get(self->model) : NULL;
+    const char *name = instanceName ? instanceName : info ? info->model_identifier : "(unnamed instance)";
+    int refused = 1;
+    if (self->variables == NULL)
+        say_before_instance(name, instanceEnvironment, logMessage, "%s: %s", fn, self->msg);
+    else if (instantiationToken == NULL || strcmp(instantiationToken, info->guid) != 0)
+        say_before_instance(name, instanceEnvironment, logMessage, "%s: instantiationToken \"%s\" is not this FMU's "
+                            "(%s): the modelDescription.xml and the resources come from different builds", fn,
+                            instantiationToken ? instantiationToken : "(null)", info->guid);
+    else if (eventModeUsed)
+        say_before_instance(name, instanceEnvironment, logMessage, "%s: eventModeUsed is true, but %s has no event "
+                            "mode (hasEventMode=\"false\")", fn, info->model_identifier);
+    else if (nRequiredIntermediateVariables > 0)
+        say_before_instance(name, instanceEnvironment, logMessage, "%s: %zu intermediate variables required, but %s "
+                            "provides no intermediate update", fn, nRequiredIntermediateVariables,
+                            info->model_identifier);
+    else
+        refused = 0;
+    char *copy = refused ? NULL : malloc(strlen(name) + 1);
     if (copy == NULL) {
+        if (!refused) say_before_instance(name, instanceEnvironment, logMessage, "%s: out of memory", fn);
+        free(self->variables);
+        fmu_model_free(self->model);
+        fmu_resource_free(self->resource);
         free(self);
-        say_before_instance(name, instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: out of memory");
         return NULL;
     }
     strcpy(copy, name);
@@ -441,13 +516,6 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     self->environment = instanceEnvironment;
     self->logging_on = loggingOn;
     self->mode = MODE_INSTANTIATED;
-    self->model = fmu_model_new(self->msg);
-    if (self->model == NULL) {
-        logf_status(self, fmi3Error, "fmi3InstantiateCoSimulation: %s", self->msg);
-        free(self->name);
-        free(self);
-        return NULL;
-    }
     self->magic = INSTANCE_MAGIC;
     return self;
 }
@@ -458,9 +526,8 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3LogMessageCallback logMessage)
 {
     (void)instantiationToken, (void)resourcePath, (void)visible, (void)loggingOn;
-    const char *ident = fmu_model_info_get()->model_identifier;
-    say_before_instance(instanceName ? instanceName : ident, instanceEnvironment, logMessage,
-                        "fmi3InstantiateModelExchange: %s is a Co-Simulation FMU only", ident);
+    say_before_instance(instanceName ? instanceName : "(unnamed instance)", instanceEnvironment, logMessage,
+                        "fmi3InstantiateModelExchange: this FMU is a Co-Simulation FMU only");
     return NULL;
 }
 
@@ -473,9 +540,8 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
 {
     (void)instantiationToken, (void)resourcePath, (void)visible, (void)loggingOn;
     (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
-    const char *ident = fmu_model_info_get()->model_identifier;
-    say_before_instance(instanceName ? instanceName : ident, instanceEnvironment, logMessage,
-                        "fmi3InstantiateScheduledExecution: %s is a Co-Simulation FMU only", ident);
+    say_before_instance(instanceName ? instanceName : "(unnamed instance)", instanceEnvironment, logMessage,
+                        "fmi3InstantiateScheduledExecution: this FMU is a Co-Simulation FMU only");
     return NULL;
 }
 
@@ -487,7 +553,9 @@ void fmi3FreeInstance(fmi3Instance instance_)
     fmu_state_free_all(&self->states);  /* the states the host did not free: they belong to the instance */
     fmu_discard_free(&self->discard);
     free(self->scratch);
+    free(self->variables);
     fmu_model_free(self->model);
+    fmu_resource_free(self->resource);  /* after the model and the variables, which point into it */
     free(self->name);
     free(self);
 }
@@ -909,8 +977,8 @@ fmi3Status fmi3DoStep(fmi3Instance instance_, fmi3Float64 currentCommunicationPo
     const double t = currentCommunicationPoint, h = communicationStepSize;
     if (!(isfinite(h) && h > 0.0))
         return refuse(self, fn, "communication step size h=%.17g must be finite and > 0", h);
-    const double t_fmu = fmu_model_time(self->model);
-    if (!isfinite(t) || fabs(t - t_fmu) > 1e-9 * fmax(1.0, fabs(t_fmu)))
+    const double t_fmu = fmu_model_time(self->model), scale = fabs(t_fmu) > 1.0 ? fabs(t_fmu) : 1.0;  /* no libm */
+    if (!isfinite(t) || fabs(t - t_fmu) > 1e-9 * scale)
         return refuse(self, fn, "currentCommunicationPoint t=%.17g differs from the FMU's time %.17g", t, t_fmu);
     if (!isfinite(t + h)) return refuse(self, fn, "t + h = %.17g is not finite", t + h);
     if (fmu_discard_is_repeat(&self->discard, self->model, t, h)) {

@@ -15,6 +15,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "fmu_resource.h"
+
 #define FMU_MESSAGE 2048
 
 enum fmu_result {
@@ -42,10 +44,12 @@ typedef struct fmu_model_info {
     unsigned n_boolean;         /* then Boolean variables: n_real + n_string .. */
 } fmu_model_info;
 
-const fmu_model_info *fmu_model_info_get(void);
+/* The model's identity and sizes (read from its resource). */
+const fmu_model_info *fmu_model_info_get(const fmu_model *m);
 
-/* A new model at its start values, or NULL with the reason in msg. */
-fmu_model *fmu_model_new(char *msg);
+/* A new model of the scene in the resource r (fmu_resource.h), at its start values, or NULL with the reason in msg.
+   The model points into r, which must outlive it. */
+fmu_model *fmu_model_new(const fmu_resource *r, char *msg);
 void fmu_model_free(fmu_model *m);
 /* Back to the start values and the initial state (fmi2Reset). */
 int fmu_model_reset(fmu_model *m, char *msg);

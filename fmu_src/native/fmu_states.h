@@ -56,7 +56,7 @@ static inline const char *fmu_state_problem(const fmu_model *model, const fmu_st
     if (n < sizeof *h || memcmp(h->magic, fmu_state_magic(), sizeof h->magic) != 0) return "not a linknet FMU state";
     if (h->byte_order != FMU_STATE_BYTE_ORDER) return "a state written on a machine of another byte order";
     if (h->format != FMU_STATE_FORMAT) return "a state of another format version (another linknet FMU release)";
-    if (h->fingerprint != fmu_model_info_get()->fingerprint)
+    if (h->fingerprint != fmu_model_info_get(model)->fingerprint)
         return "a state of another FMU (its scene fingerprint differs: another scene, other options, another FMI "
                "version or another build)";
     if (h->size != fmu_state_size(model) || h->size != n) return "a state of the wrong size";
@@ -70,7 +70,7 @@ static inline void fmu_state_write(fmu_state_header *h, const fmu_model *model, 
     memcpy(h->magic, fmu_state_magic(), sizeof h->magic);
     h->format = FMU_STATE_FORMAT;
     h->byte_order = FMU_STATE_BYTE_ORDER;
-    h->fingerprint = fmu_model_info_get()->fingerprint;
+    h->fingerprint = fmu_model_info_get(model)->fingerprint;
     h->size = fmu_state_size(model);
     h->mode = mode;
     h->reserved = 0;

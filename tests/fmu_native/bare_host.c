@@ -1,7 +1,10 @@
 /* The plainest FMI 2.0 Co-Simulation host: linked with libc and libdl only (no libm in the process, as a C host that
  * does no floating-point math of its own), so an FMU binary that needs libm must say so itself (a DT_NEEDED entry).
  *
- *   bare_host LIBRARY ID GUID N H VR     dlopen(LIBRARY), N doSteps of H from 0, print VR's value after each (%a)
+ *   bare_host LIBRARY ID GUID N H VR [RESOURCES]
+ *       dlopen(LIBRARY), N doSteps of H from 0, print VR's value after each (%a). RESOURCES: the fmuResourceLocation
+ *       (a file: URI of the unzipped FMU's resources folder, where the FMU reads its scene); without it, the
+ *       resources folder of the FMU LIBRARY lies in (LIBRARY is <FMU>/binaries/<platform>/<ID>.so)
  *
  * Exit codes: 0 ok, 2 usage, 3 load error (dlerror on stderr), 4 an FMI call failed.
  */
@@ -9,6 +12,7 @@
 #include <dlfcn.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 typedef void *(*instantiate_t)(const char *, int, const char *, const char *, const void *, int, int);
 typedef int (*component_t)(void *);
@@ -25,9 +29,17 @@ static void logger(void *env, const char *instance, int status, const char *cate
 
 int main(int argc, char **argv)
 {
-    if (argc != 7) {
-        fprintf(stderr, "usage: %s LIBRARY ID GUID N H VR\n", argv[0]);
+    if (argc != 7 && argc != 8) {
+        fprintf(stderr, "usage: %s LIBRARY ID GUID N H VR [RESOURCES]\n", argv[0]);
         return 2;
+    }
+    char resources[4200];
+    if (argc == 8) {
+        snprintf(resources, sizeof resources, "%s", argv[7]);
+    } else {
+        snprintf(resources, sizeof resources, "file://%s", argv[1]);
+        char *binaries = strstr(resources, "/binaries/");
+        if (binaries) strcpy(binaries, "/resources");
     }
     void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
     if (!lib) {
@@ -53,7 +65,7 @@ int main(int argc, char **argv)
     }
     struct { void *logger, *allocate, *free, *step_finished, *env; } callbacks = {(void *)logger, (void *)calloc,
                                                                                (void *)free, NULL, NULL};
-    void *c = instantiate(argv[2], 1, argv[3], "", &callbacks, 0, 0);
+    void *c = instantiate(argv[2], 1, argv[3], resources, &callbacks, 0, 0);
     const int n = atoi(argv[4]);
     const double h = strtod(argv[5], NULL);
     const unsigned vr = (unsigned)strtoul(argv[6], NULL, 10);

@@ -4,6 +4,9 @@
  * hexadecimal floats (exact) and the number of messages logged with fmi3Error status.
  *
  *   fmi3_host BINARY TOKEN VR_F N_F VR_X N_X STEPS CYCLES
+ *
+ * BINARY lies in the unzipped FMU (<FMU>/binaries/<platform>/<id>.so): its resourcePath is <FMU>/resources/, where
+ * the FMU reads its scene.
  */
 #include <dlfcn.h>
 #include <math.h>
@@ -69,6 +72,14 @@ int main(int argc, char **argv)
     LOAD(fmi3SerializedFMUStateSize)
     LOAD(fmi3SerializeFMUState)
     LOAD(fmi3DeserializeFMUState)
+    char resources[4200];
+    snprintf(resources, sizeof resources, "%s", argv[1]);
+    char *binaries = strstr(resources, "/binaries/");
+    if (binaries == NULL) {
+        fprintf(stderr, "%s is not in an unzipped FMU's binaries/\n", argv[1]);
+        return 1;
+    }
+    strcpy(binaries, "/resources/");
     const char *token = argv[2];
     const fmi3ValueReference vr_F = (fmi3ValueReference)atoi(argv[3]), vr_X = (fmi3ValueReference)atoi(argv[5]);
     const size_t n_F = (size_t)atoi(argv[4]), n_X = (size_t)atoi(argv[6]);
@@ -79,7 +90,7 @@ int main(int argc, char **argv)
     fmi3Float64 last;
 
     for (int cycle = 0; cycle < cycles; cycle++) {
-        fmi3Instance c = fmi3InstantiateCoSimulation("host", token, NULL, fmi3False, fmi3False, fmi3False, fmi3False,
+        fmi3Instance c = fmi3InstantiateCoSimulation("host", token, resources, fmi3False, fmi3False, fmi3False, fmi3False,
                                                      NULL, 0, NULL, logger, NULL);
         if (c == NULL) return 4;
         CHECK(fmi3EnterInitializationMode(c, fmi3False, 0.0, 0.0, fmi3False, 0.0), fmi3OK);

@@ -519,15 +519,15 @@ static int cmd_contract(int argc, char **argv)
     fmi2Status s;
 
     /* instantiation */
-    fmi2Component c = F.instantiate("wrong_guid", fmi2CoSimulation, "{00000000-0000-0000-0000-000000000000}", "",
-                                    &callbacks, 0, 0);
+    fmi2Component c = F.instantiate("wrong_guid", fmi2CoSimulation, "{00000000-0000-0000-0000-000000000000}",
+                                    resources, &callbacks, 0, 0);
     report("instantiate_wrong_guid", c == NULL ? fmi2Error : fmi2OK);
-    c = F.instantiate("me", fmi2ModelExchange, GUID, "", &callbacks, 0, 0);
+    c = F.instantiate("me", fmi2ModelExchange, GUID, resources, &callbacks, 0, 0);
     report("instantiate_model_exchange", c == NULL ? fmi2Error : fmi2OK);
-    c = F.instantiate("null_guid", fmi2CoSimulation, NULL, "", &callbacks, 0, 0);
+    c = F.instantiate("null_guid", fmi2CoSimulation, NULL, resources, &callbacks, 0, 0);
     report("instantiate_null_guid", c == NULL ? fmi2Error : fmi2OK);
 
-    c = F.instantiate("contract", fmi2CoSimulation, GUID, NULL, &callbacks, 0, 0);
+    c = F.instantiate("contract", fmi2CoSimulation, GUID, resources, &callbacks, 0, 0);
     if (!c) return 4;
     report("step_before_initialization", F.do_step(c, 0.0, 0.01, 1));
     report("set_start_time", F.setup(c, 0, 0.0, 1.5, 0, 0.0));

@@ -72,9 +72,11 @@ def test_model_description_agrees_with_the_pythonfmu_fmu(scene, options, fmu_roo
 def test_source_files_listed_and_present(fmu_root):
     fmu = built(fmu_root, "chain_10")
     files = [f.get("name") for f in _md(fmu).find("CoSimulation").find("SourceFiles")]
-    assert {"fmi2Functions.c", "linknet_model.c", "linknet_scene.c", "data.c", "dim2.c", "dim3.c"} <= set(files)
+    assert {"fmi2Functions.c", "linknet_model.c", "lnfmu_scene.c", "fmu_resource.c", "data.c", "dim2.c",
+            "dim3.c"} <= set(files)
     for name in files:
         assert (fmu.dir / "sources" / name).is_file(), name
+    assert (fmu.dir / "resources" / "linknet_scene.bin").is_file()  # the scene, read at instantiation
     # the stage files are compiled through dim2.c / dim3.c, not on their own
     assert not any(name.startswith("stages/") for name in files)
     assert (fmu.dir / "sources" / "linknet" / "stages" / "rattle.c").is_file()
@@ -119,14 +121,14 @@ def _compile(cmd):
 def test_sources_rebuild_with_gcc_and_clang_and_give_the_same_results(compiler, fmu_root, host, no_python_env,
                                                                       tmp_path):
     """Each FMU's sources/ compiled as a tool would, from the <SourceFiles> list with sources/ as the only include
-    directory. The scene-independent files are byte-identical across scenes, so they are compiled once (from the
-    first FMU's sources) and each further FMU compiles its own linknet_scene.c."""
+    directory. The sources are the same file for file in every scene's FMU (the scene is in resources/), so one
+    binary, compiled once from the first FMU's sources, runs every scene with its shipped binary's results."""
     from concurrent.futures import ThreadPoolExecutor
     cc = GCC if compiler == "gcc" else CLANG
     if cc is None:
         pytest.skip(f"{compiler} not installed (apt-get install {compiler})")
     flags = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-O2", "-fPIC"]
-    objects = {}
+    library = None
     first_sources = None
     for scene, methods in (("net_10x10", ("dop853", "rattle")), ("spinning_tetrahedron", ("yoshida4", "dop853")),
                            ("redundant_truss", ("rattle",))):
@@ -135,24 +137,20 @@ def test_sources_rebuild_with_gcc_and_clang_and_give_the_same_results(compiler, 
         shutil.copytree(fmu.dir, copy)
         files = [f.get("name") for f in _md(fmu).find("CoSimulation").find("SourceFiles")]
         sources = copy / "sources"
-        objdir = tmp_path / f"obj_{scene}"
-        objdir.mkdir()
         if first_sources is None:
             first_sources = sources
-            jobs = {f: objdir / (f.replace("/", "__") + ".o") for f in files if f != "linknet_scene.c"}
+            objdir = tmp_path / "obj"
+            objdir.mkdir()
+            jobs = {f: objdir / (f.replace("/", "__") + ".o") for f in files}
             with ThreadPoolExecutor(max_workers=2) as pool:
                 list(pool.map(_compile, [[cc] + flags + ["-I", str(sources), "-c", str(sources / f), "-o", str(o)]
                                          for f, o in jobs.items()]))
-            objects = jobs
+            library = tmp_path / "rebuilt.so"
+            _compile([cc, "-shared", "-o", str(library)] + [str(o) for o in jobs.values()] + ["-lm"])
         else:
-            for f in files:  # everything but the scene's data is the same file in every FMU
-                if f != "linknet_scene.c":
-                    assert (sources / f).read_bytes() == (first_sources / f).read_bytes(), f
-        scene_object = objdir / "linknet_scene.o"
-        _compile([cc] + flags + ["-I", str(sources), "-c", str(sources / "linknet_scene.c"), "-o", str(scene_object)])
-        so = copy / "binaries" / "linux64" / f"{fmu.ident}.so"
-        so.unlink()
-        _compile([cc, "-shared", "-o", str(so), str(scene_object)] + [str(o) for o in objects.values()] + ["-lm"])
+            for p in sorted(first_sources.rglob("*.[ch]")):  # every source file is the same in every FMU
+                assert (sources / p.relative_to(first_sources)).read_bytes() == p.read_bytes(), p
+        shutil.copy2(library, copy / "binaries" / "linux64" / f"{fmu.ident}.so")
         rebuilt = Built(fmu.path, copy, fmu.ident, fmu.guid, fmu.vr, fmu.md)
         for method in methods:
             opts = host_options(fmu, method)

@@ -7,8 +7,9 @@
  * same saved state; the best of R runs is kept. After each pair of runs the two final states must be equal bit
  * for bit (the same work was timed).
  *
- *   timing_host N H REPEATS STEP INPUT_VR [INPUT_VR ...]
+ *   timing_host RESOURCES N H REPEATS STEP INPUT_VR [INPUT_VR ...]
  *
+ * RESOURCES: the unzipped FMU's resources folder (an absolute path), where both instances read the scene.
  * H: communication step; STEP: the "step" parameter (H/STEP RATTLE steps per call); the first INPUT_VR gets a
  * new value every call ("one input"), all of them in the "all inputs" runs. Prints one line per figure, in
  * nanoseconds per call.
@@ -49,26 +50,33 @@ static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status sta
 
 int main(int argc, char **argv)
 {
-    if (argc < 6) {
-        fprintf(stderr, "usage: %s N H REPEATS STEP INPUT_VR [INPUT_VR ...]\n", argv[0]);
+    if (argc < 7) {
+        fprintf(stderr, "usage: %s RESOURCES N H REPEATS STEP INPUT_VR [INPUT_VR ...]\n", argv[0]);
         return 2;
     }
-    const long N = atol(argv[1]);
-    const double h = atof(argv[2]);
-    const int R = atoi(argv[3]);
-    const double step = atof(argv[4]);
-    const int n_in = argc - 5;
+    const char *folder = argv[1];
+    const long N = atol(argv[2]);
+    const double h = atof(argv[3]);
+    const int R = atoi(argv[4]);
+    const double step = atof(argv[5]);
+    const int n_in = argc - 6;
     fmi2ValueReference *in = malloc((size_t)n_in * sizeof *in);
-    for (int j = 0; j < n_in; j++) in[j] = (fmi2ValueReference)atoi(argv[5 + j]);
-    const lnfmu_scene *s = &lnfmu_scene_data;
-    const fmu_model_info *info = fmu_model_info_get();
+    for (int j = 0; j < n_in; j++) in[j] = (fmi2ValueReference)atoi(argv[6 + j]);
+    char msg[FMU_MESSAGE], location[4200];
+    fmu_resource *resource = fmu_resource_load(folder, msg, sizeof msg);
+    const lnfmu_scene *s = resource ? lnfmu_scene_load(resource, msg) : NULL;
+    if (!s) {
+        fprintf(stderr, "%s\n", msg);
+        return 4;
+    }
+    snprintf(location, sizeof location, "file://%s", folder);
     fmi2ValueReference step_vr = 0;
     for (ln_int vr = 0; vr < s->n_real; vr++)
         if (s->variables[vr].kind == LNFMU_STEP) step_vr = (fmi2ValueReference)vr;
 
     /* the FMI instance */
     const fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
-    fmi2Component c = fmi2Instantiate("timed", fmi2CoSimulation, info->guid, "", &cb, fmi2False, fmi2False);
+    fmi2Component c = fmi2Instantiate("timed", fmi2CoSimulation, s->guid, location, &cb, fmi2False, fmi2False);
     if (!c) return 4;
     CHECK(fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0));
     CHECK(fmi2EnterInitializationMode(c));
@@ -78,8 +86,7 @@ int main(int argc, char **argv)
     CHECK(fmi2GetFMUstate(c, &start));
 
     /* the bare model, driven with ln_advance */
-    char msg[FMU_MESSAGE];
-    fmu_model *m = fmu_model_new(msg);
+    fmu_model *m = fmu_model_new(resource, msg);
     if (!m) return 4;
     CHECK(fmu_model_set_real(m, &step_vr, 1, &step, 0, msg));
     CHECK(fmu_model_initialize(m, msg));
