@@ -239,7 +239,8 @@ def _simulators(scene, cfg):
     for name in [cfg["integrator"]] + [n for n in cfg["integrators"] if n != cfg["integrator"]]:
         kwargs = dict(rtol=cfg["tolerance"]) if ln.METHODS[name].adaptive else dict(dt=cfg["step"])
         # the scene data's model and methods are the run's; the companion's are made from them in C (linknet_model.c)
-        sims[name] = ln.Simulator(scene, method=name, dynamics=dyn, error_estimate=False, **kwargs)
+        sims[name] = ln.Simulator(scene, method=name, dynamics=dyn, error_estimate=False, backend="native",
+                                   **kwargs)
         dyn = sims[name].dyn
     return sims
 

@@ -128,6 +128,16 @@ def test_the_native_backend_refuses_a_scene_with_ropes_or_a_ground_naming_the_fi
     assert "backend numpy (ropes, ground: the native core does not take them yet)" in sim.summary()
 
 
+def test_the_native_fmu_build_refuses_a_rope_scene_naming_the_rope_and_writes_nothing(tmp_path):
+    out = tmp_path / "rope_pendulum.fmu"
+    scene = ROOT / "models" / "ropes" / "rope_pendulum.json"
+    run = subprocess.run([sys.executable, str(ROOT / "build_fmu.py"), str(scene), "--native", "--platforms", "host",
+                          "-o", str(out)], capture_output=True, text=True, timeout=120)
+    assert run.returncode != 0 and "Traceback" not in run.stderr, run.stderr
+    assert "link 1 (pivot-bob) is a rope" in run.stderr and "the native core" in run.stderr
+    assert not out.exists() and not list(tmp_path.iterdir())
+
+
 def test_the_outputs_linearization_is_refused_for_ropes_and_a_ground_naming_the_rope():
     # it is the rods' (25)-(26): it would treat the rope as a rod and has no derivative across the events
     sim = ln.Simulator(ln.Scene.from_dict(data()), "dop853")

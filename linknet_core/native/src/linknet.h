@@ -13,7 +13,7 @@
  * else in 3-D. The DIM-generic stage files are compiled twice, by dim2.c and dim3.c; FN(name) gives each
  * copy its own symbol (name_2d, name_3d). The state in ln_data is always (K,3).
  *
- * No dependency beyond libc and libm; no allocation inside a step (ln_data_new allocates everything,
+ * No dependency beyond libc (the elementary functions are ln_math.c's); no allocation inside a step (ln_data_new allocates everything,
  * except the minimum-norm workspace, allocated at its first use).
  */
 #ifndef LINKNET_H
@@ -26,7 +26,8 @@
 
 /* No fused multiply-add: every a*b+c of the core is rounded twice, as the platforms without FMA do, so that one
    source gives one arithmetic wherever it is compiled. Every build passes -ffp-contract=off as well; clang and MSVC
-   also obey the pragma (clang contracts by default), GCC's ISO C modes (-std=c99) do not contract. */
+   also obey the pragma (clang contracts by default), GCC's ISO C modes (-std=c99) do not contract (its GNU modes
+   would: the FMU's CMakeLists passes -ffp-contract=off; a pragma here would follow definitions in stages.h). */
 #if defined(__clang__)
 #pragma STDC FP_CONTRACT OFF
 #elif defined(_MSC_VER)
