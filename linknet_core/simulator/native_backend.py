@@ -11,6 +11,7 @@ from linknet_core.native.integrator import NativeIntegrator
 from linknet_core.native.model import native_model
 from linknet_core.native.rigid import NativeRigidIntegrator
 from linknet_core.simulator.backend import Backend
+from linknet_core.simulator.settings import BACKEND_CLASSES
 from linknet_core.simulator.specialisation import RIGID, STATIC, choose_specialisation
 
 
@@ -126,3 +127,6 @@ class NativeRigidBackend(NativeBackend):
         integrator = NativeRigidIntegrator(dyn, specialisation.bodies, stepping.cls, X0, U0, dt=stepping.dt,
                                            rtol=stepping.rtol, atol=stepping.atol)
         return cls(scene, dyn, integrator, integrator.initial_state, list(integrator.notes))
+
+
+BACKEND_CLASSES["native"] = NativeBackend

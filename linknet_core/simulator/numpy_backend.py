@@ -10,6 +10,7 @@ from linknet_core.dynamics.drive import AnchorDrive, anchor_jump
 from linknet_core.errors import SolverError
 from linknet_core.integrators import make_integrator
 from linknet_core.simulator.backend import Backend
+from linknet_core.simulator.settings import BACKEND_CLASSES
 
 
 def all_finite(*arrays: np.ndarray) -> bool:
@@ -73,3 +74,6 @@ class NumpyBackend(Backend):
         impulse, jump_position, jump_velocity = self.drive.last_jump
         return {"impulse": impulse.copy(), "jump_position": jump_position, "jump_velocity": jump_velocity,
                 "jumps": self.drive.jumps}
+
+
+BACKEND_CLASSES["numpy"] = NumpyBackend

@@ -23,15 +23,14 @@ from linknet_core.accuracy import Companion, companion, default_method
 from linknet_core.dynamics.equations import rhs_kernel_problem
 from linknet_core.errors import SolverError
 from linknet_core.integrators import method_settings, real_number
-from linknet_core.simulator.backend import Backend
-from linknet_core.simulator.native_backend import NativeBackend
-from linknet_core.simulator.numpy_backend import NumpyBackend
 
 DEFAULT_LENGTH_TOL = 1e-6  # relative violation of (11) accepted in a scene's initial positions
 DEFAULT_MAX_STEPS_PER_CALL = 100_000_000
-# the backends by name (linknet_core.simulator.backend): "auto" is the native core. A backend registered here (the
-# dict itself, which linknet_core.simulator.simulator names too) is accepted by name with no other change.
-BACKEND_CLASSES: dict[str, type[Backend]] = {"native": NativeBackend, "numpy": NumpyBackend}
+# the backends by name (subclasses of linknet_core.simulator.backend.Backend): "auto" is the native core. Each
+# backend's module registers its class here when it loads (native_backend.py, numpy_backend.py; the Simulator's
+# module imports both), so the settings need not import them; a backend registered here (the dict itself, which
+# linknet_core.simulator.simulator names too) is accepted by name with no other change.
+BACKEND_CLASSES: dict[str, type] = {}
 
 # a field so marked does not change what a Simulator's set-up (initial state, backend, specialisation) is for a scene
 _NOT_SETUP = {"setup": False}

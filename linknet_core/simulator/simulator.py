@@ -20,6 +20,7 @@ from linknet_core.dynamics.unilateral import event_arrays, event_counts, numpy_o
 from linknet_core.errors import SceneError, SolverError
 from linknet_core.dynamics.forces import kinetic_energy
 from linknet_core.integrators import real_number
+from linknet_core.simulator import native_backend, numpy_backend  # noqa: F401 (each registers its backend by name)
 from linknet_core.simulator.settings import BACKEND_CLASSES, DEFAULT_LENGTH_TOL, RunSettings, run_settings
 from linknet_core.simulator.specialisation import STATIC, Specialisation
 from linknet_core.structure.topology import kept_per_scene
