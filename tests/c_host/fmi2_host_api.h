@@ -1,6 +1,7 @@
 /* What every plain-C FMI 2.0 Co-Simulation host of the tests and benchmarks shares: loading an extracted FMU's
  * binary and its function table, the callbacks, the logger and the check of a call's status. The hosts include this
- * file and nothing else of the FMI; tests/c_host/fmi2_host.c, benchmarks/c_reference/fmi2_timing_host.c and
+ * file and nothing else of the FMI; tests/c_host/fmi2_host.c, tests/fmu_native/state_handle_host.c,
+ * benchmarks/c_reference/fmi2_timing_host.c and
  * benchmarks/c_reference/directional_timing_host.c.
  *
  * The FMI 2.0 types and the functions' argument lists are those of fmu_src/native/fmi2_api.h, the header both FMU
@@ -45,7 +46,9 @@ static inline void fmi2_host_logger(fmi2ComponentEnvironment env, fmi2String ins
     fprintf(stderr, "[%s] status %d %s: %s\n", instance, (int)status, category ? category : "", message);
 }
 
-static const fmi2CallbackFunctions fmi2_host_callbacks = {fmi2_host_logger, calloc, free, NULL, NULL};
+/* unused in a host with a logger of its own (a -Werror build warns of an unused static otherwise) */
+static const fmi2CallbackFunctions fmi2_host_callbacks __attribute__((unused)) = {fmi2_host_logger, calloc, free,
+                                                                                 NULL, NULL};
 
 /* <fmu_dir>/binaries/linux64/<model_id>.so of an extracted FMU, every function looked up. Exits with status 3 (the
    hosts' load error) where the binary does not load or lacks a function, naming it. */

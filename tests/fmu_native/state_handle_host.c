@@ -16,41 +16,15 @@
  * with exit() after freeing its instances.
  */
 #define _DEFAULT_SOURCE
-#include <dlfcn.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
 
-typedef void *fmi2Component;
-typedef void *fmi2FMUstate;
-typedef unsigned int fmi2ValueReference;
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef struct {
-    void (*logger)(void *, const char *, fmi2Status, const char *, const char *, ...);
-    void *(*allocateMemory)(size_t, size_t);
-    void (*freeMemory)(void *);
-    void (*stepFinished)(void *, fmi2Status);
-    void *componentEnvironment;
-} fmi2CallbackFunctions;
+#include "../c_host/fmi2_host_api.h"
 
-static struct {
-    fmi2Component (*instantiate)(const char *, int, const char *, const char *, const fmi2CallbackFunctions *, int,
-                                 int);
-    void (*free_instance)(fmi2Component);
-    fmi2Status (*setup)(fmi2Component, int, double, double, int, double);
-    fmi2Status (*enter_init)(fmi2Component);
-    fmi2Status (*exit_init)(fmi2Component);
-    fmi2Status (*get_real)(fmi2Component, const fmi2ValueReference *, size_t, double *);
-    fmi2Status (*do_step)(fmi2Component, double, double, int);
-    fmi2Status (*get_state)(fmi2Component, fmi2FMUstate *);
-    fmi2Status (*set_state)(fmi2Component, fmi2FMUstate);
-    fmi2Status (*free_state)(fmi2Component, fmi2FMUstate *);
-    fmi2Status (*state_size)(fmi2Component, fmi2FMUstate, size_t *);
-    fmi2Status (*serialize)(fmi2Component, fmi2FMUstate, char *, size_t);
-    fmi2Status (*deserialize)(fmi2Component, const char *, size_t, fmi2FMUstate *);
-} F;
+static fmi2_host F;  /* the binary's functions, loaded by fmi2_host_open */
 
 static char logged[8192];  /* what the FMU logged during the current call */
 static int fatal_seen;
@@ -71,44 +45,6 @@ static void logger(void *env, const char *instance, fmi2Status status, const cha
 
 static fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
 static const char *GUID;
-static char resources[4200];
-
-static void *sym(void *lib, const char *name)
-{
-    void *f = dlsym(lib, name);
-    if (!f) {
-        fprintf(stderr, "missing symbol %s\n", name);
-        exit(3);
-    }
-    return f;
-}
-
-static void load(const char *dir, const char *id)
-{
-    char path[4096];
-    snprintf(path, sizeof path, "%s/binaries/linux64/%s.so", dir, id);
-    snprintf(resources, sizeof resources, "file://%s/resources", dir);
-    void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-    if (!lib) {
-        fprintf(stderr, "dlopen failed: %s\n", dlerror());
-        exit(3);
-    }
-#define BIND(field, name) *(void **)&F.field = sym(lib, name)
-    BIND(instantiate, "fmi2Instantiate");
-    BIND(free_instance, "fmi2FreeInstance");
-    BIND(setup, "fmi2SetupExperiment");
-    BIND(enter_init, "fmi2EnterInitializationMode");
-    BIND(exit_init, "fmi2ExitInitializationMode");
-    BIND(get_real, "fmi2GetReal");
-    BIND(do_step, "fmi2DoStep");
-    BIND(get_state, "fmi2GetFMUstate");
-    BIND(set_state, "fmi2SetFMUstate");
-    BIND(free_state, "fmi2FreeFMUstate");
-    BIND(state_size, "fmi2SerializedFMUstateSize");
-    BIND(serialize, "fmi2SerializeFMUstate");
-    BIND(deserialize, "fmi2DeSerializeFMUstate");
-#undef BIND
-}
 
 #define MUST(call)                                                                                  \
     do {                                                                                            \
@@ -134,14 +70,14 @@ static void report(const char *name, fmi2Status status)
 
 static fmi2Component started(const char *name)
 {
-    fmi2Component c = F.instantiate(name, 1, GUID, resources, &callbacks, 0, 0);
+    fmi2Component c = F.Instantiate(name, fmi2CoSimulation, GUID, F.resources, &callbacks, fmi2False, fmi2False);
     if (!c) {
         fprintf(stderr, "fmi2Instantiate failed: %s\n", logged);
         exit(4);
     }
-    MUST(F.setup(c, 0, 0.0, 0.0, 0, 0.0));
-    MUST(F.enter_init(c));
-    MUST(F.exit_init(c));
+    MUST(F.SetupExperiment(c, 0, 0.0, 0.0, 0, 0.0));
+    MUST(F.EnterInitializationMode(c));
+    MUST(F.ExitInitializationMode(c));
     return c;
 }
 
@@ -150,7 +86,7 @@ static fmi2Component started(const char *name)
 static void print_values(const char *label, fmi2Component c, const fmi2ValueReference *vr, size_t n)
 {
     double v[64];
-    MUST(F.get_real(c, vr, n, v));
+    MUST(F.GetReal(c, vr, n, v));
     printf("VALUES %s", label);
     for (size_t i = 0; i < n; i++) printf(" %a", v[i]);
     printf("\n");
@@ -166,74 +102,74 @@ static int cmd_handles(int argc, char **argv)
     if (unreadable == MAP_FAILED) return 5;
 
     fmi2Component c = started("misused");
-    MUST(F.do_step(c, 0.0, H, 1));
+    MUST(F.DoStep(c, 0.0, H, 1));
     fmi2FMUstate saved = NULL;
-    MUST(F.get_state(c, &saved));  /* the state at t = H: restored at the end, then one more step */
+    MUST(F.GetFMUstate(c, &saved));  /* the state at t = H: restored at the end, then one more step */
 
     /* NULL */
-    CASE("set_null", F.set_state(c, NULL));
-    CASE("free_null_address", F.free_state(c, NULL));
-    CASE("get_null_address", F.get_state(c, NULL));
-    CASE("size_null", F.state_size(c, NULL, &(size_t){0}));
+    CASE("set_null", F.SetFMUstate(c, NULL));
+    CASE("free_null_address", F.FreeFMUstate(c, NULL));
+    CASE("get_null_address", F.GetFMUstate(c, NULL));
+    CASE("size_null", F.SerializedFMUstateSize(c, NULL, &(size_t){0}));
 
     /* a handle never handed out: its memory is the bytes of a real state, or cannot be read at all */
     size_t size = 0;
-    MUST(F.state_size(c, saved, &size));
+    MUST(F.SerializedFMUstateSize(c, saved, &size));
     char *bytes = malloc(size);
-    MUST(F.serialize(c, saved, bytes, size));
+    MUST(F.SerializeFMUstate(c, saved, bytes, size));
     fmi2FMUstate look_alike = bytes, made_up = unreadable;
-    CASE("set_look_alike", F.set_state(c, look_alike));
-    CASE("set_made_up", F.set_state(c, made_up));
-    CASE("size_made_up", F.state_size(c, made_up, &size));
-    CASE("serialize_made_up", F.serialize(c, made_up, bytes, size));
-    CASE("free_made_up", F.free_state(c, &made_up));
-    CASE("get_overwriting_made_up", F.get_state(c, &made_up));
+    CASE("set_look_alike", F.SetFMUstate(c, look_alike));
+    CASE("set_made_up", F.SetFMUstate(c, made_up));
+    CASE("size_made_up", F.SerializedFMUstateSize(c, made_up, &size));
+    CASE("serialize_made_up", F.SerializeFMUstate(c, made_up, bytes, size));
+    CASE("free_made_up", F.FreeFMUstate(c, &made_up));
+    CASE("get_overwriting_made_up", F.GetFMUstate(c, &made_up));
 
     /* freed: set, sized, serialized and freed again through a copy of the handle */
     fmi2FMUstate taken = NULL;
-    MUST(F.get_state(c, &taken));
+    MUST(F.GetFMUstate(c, &taken));
     fmi2FMUstate copy = taken;
-    CASE("free_taken", F.free_state(c, &taken));
+    CASE("free_taken", F.FreeFMUstate(c, &taken));
     printf("VALUE variable_after_free %s\n", taken == NULL ? "NULL" : "set");
-    CASE("free_again_variable_null", F.free_state(c, &taken));  /* FMI: freeing NULL does nothing */
-    CASE("set_freed", F.set_state(c, copy));
-    CASE("size_freed", F.state_size(c, copy, &size));
-    CASE("serialize_freed", F.serialize(c, copy, bytes, size));
-    CASE("double_free", F.free_state(c, &copy));
+    CASE("free_again_variable_null", F.FreeFMUstate(c, &taken));  /* FMI: freeing NULL does nothing */
+    CASE("set_freed", F.SetFMUstate(c, copy));
+    CASE("size_freed", F.SerializedFMUstateSize(c, copy, &size));
+    CASE("serialize_freed", F.SerializeFMUstate(c, copy, bytes, size));
+    CASE("double_free", F.FreeFMUstate(c, &copy));
 
     /* the handle where the address of the host's variable belongs (fmusim 0.0.39's fmi2FreeFMUstate) */
     fmi2FMUstate held = NULL;
-    MUST(F.get_state(c, &held));
-    CASE("free_handle_for_address", F.free_state(c, (fmi2FMUstate *)held));
-    CASE("get_into_handle_for_address", F.get_state(c, (fmi2FMUstate *)held));
-    CASE("deserialize_into_handle_for_address", F.deserialize(c, bytes, size, (fmi2FMUstate *)held));
-    CASE("free_handle_for_address_again", F.free_state(c, (fmi2FMUstate *)held));
-    CASE("set_held_after", F.set_state(c, held));  /* still live: the misuse neither freed nor wrote it */
-    CASE("free_held", F.free_state(c, &held));
+    MUST(F.GetFMUstate(c, &held));
+    CASE("free_handle_for_address", F.FreeFMUstate(c, (fmi2FMUstate *)held));
+    CASE("get_into_handle_for_address", F.GetFMUstate(c, (fmi2FMUstate *)held));
+    CASE("deserialize_into_handle_for_address", F.DeSerializeFMUstate(c, bytes, size, (fmi2FMUstate *)held));
+    CASE("free_handle_for_address_again", F.FreeFMUstate(c, (fmi2FMUstate *)held));
+    CASE("set_held_after", F.SetFMUstate(c, held));  /* still live: the misuse neither freed nor wrote it */
+    CASE("free_held", F.FreeFMUstate(c, &held));
 
     /* a state of another instance of the same FMU */
     fmi2Component other = started("other");
     fmi2FMUstate others = NULL;
-    MUST(F.get_state(other, &others));
-    CASE("set_other_instances", F.set_state(c, others));
-    CASE("free_other_instances", F.free_state(c, &others));
-    MUST(F.free_state(other, &others));
-    F.free_instance(other);
+    MUST(F.GetFMUstate(other, &others));
+    CASE("set_other_instances", F.SetFMUstate(c, others));
+    CASE("free_other_instances", F.FreeFMUstate(c, &others));
+    MUST(F.FreeFMUstate(other, &others));
+    F.FreeInstance(other);
 
     /* still working: the saved state restored, one step, the outputs; against a fresh instance without misuse */
-    CASE("set_saved", F.set_state(c, saved));
-    CASE("step_after", F.do_step(c, H, H, 1));
+    CASE("set_saved", F.SetFMUstate(c, saved));
+    CASE("step_after", F.DoStep(c, H, H, 1));
     print_values("after", c, vr, n);
-    CASE("free_saved", F.free_state(c, &saved));
+    CASE("free_saved", F.FreeFMUstate(c, &saved));
     fmi2FMUstate left = NULL;
-    MUST(F.get_state(c, &left));  /* left for fmi2FreeInstance to free */
-    F.free_instance(c);
+    MUST(F.GetFMUstate(c, &left));  /* left for fmi2FreeInstance to free */
+    F.FreeInstance(c);
 
     fmi2Component clean = started("clean");
-    MUST(F.do_step(clean, 0.0, H, 1));
-    MUST(F.do_step(clean, H, H, 1));
+    MUST(F.DoStep(clean, 0.0, H, 1));
+    MUST(F.DoStep(clean, H, H, 1));
     print_values("clean", clean, vr, n);
-    F.free_instance(clean);
+    F.FreeInstance(clean);
     free(bytes);
     printf("FATAL_SEEN %d\n", fatal_seen);
     return 0;
@@ -256,13 +192,13 @@ static int cmd_leave(int n_cycles, int k_states)
     size_t size = 0;
     for (int cycle = 0; cycle < n_cycles; cycle++) {
         fmi2Component c = started("leaver");
-        MUST(F.do_step(c, 0.0, H, 1));
+        MUST(F.DoStep(c, 0.0, H, 1));
         for (int k = 0; k < k_states; k++) {
             fmi2FMUstate s = NULL;
-            MUST(F.get_state(c, &s));
-            if (cycle == 0 && k == 0) MUST(F.state_size(c, s, &size));
+            MUST(F.GetFMUstate(c, &s));
+            if (cycle == 0 && k == 0) MUST(F.SerializedFMUstateSize(c, s, &size));
         }
-        F.free_instance(c);
+        F.FreeInstance(c);
         if (cycle + 1 == n_cycles / 10) tenth = resident_kib();
     }
     printf("rss_tenth %ld\nrss_end %ld\nstate_bytes %zu\n", tenth, resident_kib(), size);
@@ -276,7 +212,7 @@ int main(int argc, char **argv)
         return 2;
     }
     GUID = argv[3];
-    load(argv[1], argv[2]);
+    fmi2_host_open(&F, argv[1], argv[2]);
     int rc = 2;
     if (strcmp(argv[4], "handles") == 0)
         rc = cmd_handles(argc - 5, argv + 5);
