@@ -348,7 +348,7 @@ def scene_resource(scene, cfg, layout) -> tuple[Resource, dict]:
     values["variable_kind"], values["variable_index"] = variable_table(layout, model)
     values.update(n_real=layout.n_real, variable_names=[v.name for v in layout.reals])
     unknown = sorted(name for name, value in values.items() if value is None)
-    if unknown:  # the library no longer says it where build.py asks
+    if unknown:  # a field of the list that neither the library's table nor build.py gives a value
         raise NativeBuildError(f"the scene's resource: no value for {', '.join(unknown)}: teach fmu_src/native/build.py")
     identity = {"guid", "fingerprint"}  # added by build_native_fmu, from the digest of everything else
     codes = field_codes()

@@ -44,6 +44,7 @@ from linknet_core.dynamics.complementarity import solve_mixed_lcp
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import ConsistencyError, SceneError, SolverError
 from linknet_core.scene.description import Scene
+from linknet_core.state import InitialReport
 
 # A unilateral constraint touches (it may carry force, and an acceleration LCP takes it) when its gap is at most
 # TOUCH_TOL of its length scale (a rope's length; the contact scale for the ground) and it does not separate faster
@@ -393,7 +394,7 @@ class ModeDynamics:
         if step is not None and self.n_virtual:
             dt, fraction, U, F_input = step
             step = (dt, fraction, self.pad_velocity(direction_at, U), self._pad_zero(F_input))
-        stops, reached = inner.floor_stops, inner.floor_reached
+        stops = inner.floor_stops
         total = 0
         Xc = X
         for _ in range(4):
@@ -869,35 +870,25 @@ class UnilateralDynamics(Dynamics):
 
 
 @dataclass
-class UnilateralReport:
-    """What was done to the initial state of a scene with ropes or a ground (the InitialReport of rods, and the
-    ropes and contacts it starts with)."""
+class UnilateralReport(InitialReport):
+    """What was done to the initial state of a scene with ropes or a ground: the InitialReport of rods, and the
+    ropes and contacts it starts with."""
 
-    worst_length_error: float
-    positions_projected: bool
-    velocity_correction: float
-    velocity_correction_mass: int
     taut_ropes: int
     ropes: int
     contacts: int
 
+    velocity_rule = ": the approach along taut ropes, the ground and (12) removed (an inelastic impulse)"
+
     def lines(self, scene: Scene) -> list[str]:
-        out = []
-        if self.positions_projected:
-            out.append(f"initial positions projected onto the link lengths (worst error was "
-                       f"{self.worst_length_error:.3g} relative)")
-        if self.velocity_correction > 0:
-            out.append(f"initial velocities: the approach along taut ropes, the ground and (12) removed (an inelastic "
-                       f"impulse): largest correction {self.velocity_correction:.3g} m/s at "
-                       f"{scene.mass_label(self.velocity_correction_mass)}")
         what = []
         if self.ropes:
             what.append(f"{self.taut_ropes} of {self.ropes} ropes taut at the start")
         if scene.ground is not None:
             what.append(f"{self.contacts} masses on the ground")
-        out.append("ropes and ground: the numpy reference runs this scene, event by event (the native core does not "
-                   "take ropes or a ground yet); " + ", ".join(what))
-        return out
+        return super().lines(scene) + [
+            "ropes and ground: the numpy reference runs this scene, event by event (the native core does not take "
+            "ropes or a ground yet); " + ", ".join(what)]
 
 
 def event_arrays(events, ground=None) -> dict:

@@ -511,9 +511,9 @@ def run_study(engine: Engine, spec: StudySpec, plan: Plan, sink, on_progress=Non
             with lock:
                 first, count = in_flight[future.key]
             result, failure = _fetch(future)
-            # off the batches in flight only now: a result lost with its worker after the task finished (not yet
-            # fetched) is fetched once the scheduler has run the task again, and the worker's removal, which says
-            # so, may come while the fetch waits
+            # off the batches in flight only once fetched: a result lost with its worker after the task finished
+            # (not yet fetched) is fetched once the scheduler has run the task again, and the worker's removal,
+            # which says so, may come while the fetch waits
             with lock:
                 del in_flight[future.key]
             future.release()

@@ -2,6 +2,7 @@
 (static scenes included) or, for a scene of free rigid bodies, on the bodies' path."""
 from __future__ import annotations
 
+import contextlib
 import functools
 
 import numpy as np
@@ -73,16 +74,22 @@ class NativeBackend(Backend):
                 integrator.set_internals(saved)
             raise
 
-    def outputs(self, state, F, hold):
+    @contextlib.contextmanager
+    def _holding(self, t, hold):
+        """The input-driven anchors at ``hold`` (None: as they are) for one evaluation, the internals restored after."""
         integrator = self.integrator
         saved = integrator.internals() if hold is not None else None
         try:
             if hold is not None:
-                integrator.set_anchors(state.t, hold)
-            return integrator.outputs(state.X, state.U, F)
+                integrator.set_anchors(t, hold)
+            yield integrator
         finally:
             if saved is not None:
                 integrator.set_internals(saved)
+
+    def outputs(self, state, F, hold):
+        with self._holding(state.t, hold) as integrator:
+            return integrator.outputs(state.X, state.U, F)
 
     def anchor_report(self) -> dict:
         return self.integrator.anchor_report()
@@ -93,19 +100,12 @@ class NativeBackend(Backend):
     def linearization(self, state, F, hold):
         from linknet_core.native.interface import NativeLinearization
 
-        integrator = self.integrator
-        saved = integrator.internals() if hold is not None else None
-        try:
-            if hold is not None:
-                integrator.set_anchors(state.t, hold)
+        with self._holding(state.t, hold) as integrator:
             try:
                 return NativeLinearization(integrator.model, integrator.data, state.X, state.U, F)
             except SolverError:
                 integrator._raise_motion_error()  # a callable's own failure, where it was one
                 raise
-        finally:
-            if saved is not None:
-                integrator.set_internals(saved)
 
 
 class NativeRigidBackend(NativeBackend):

@@ -25,7 +25,7 @@ from linknet_core.simulator.settings import BACKEND_CLASSES, DEFAULT_LENGTH_TOL,
 from linknet_core.simulator.specialisation import STATIC, Specialisation
 from linknet_core.structure.topology import kept_per_scene
 from linknet_core.scene.description import Scene, load_scene
-from linknet_core.state import State
+from linknet_core.state import InitialReport, State
 
 # Snapshots (get_state) name the simulator they come from: this format, the scene's fingerprint, the method and the
 # path (backend and specialisation), so set_state refuses another scene's or another path's snapshot rather than
@@ -45,24 +45,6 @@ class SimulationInterrupted(KeyboardInterrupt):
         self.result = result
 
 
-@dataclass
-class InitialReport:
-    """What was done to the scene's initial state before the run."""
-
-    worst_length_error: float  # relative, before any projection
-    positions_projected: bool
-    velocity_correction: float  # max |dU| removed to satisfy (12), m/s
-    velocity_correction_mass: int  # 0-based mass where it was largest (-1 if none)
-
-    def lines(self, scene: Scene) -> list[str]:
-        out = []
-        if self.positions_projected:
-            out.append(f"initial positions projected onto the link lengths (worst error was "
-                       f"{self.worst_length_error:.3g} relative)")
-        if self.velocity_correction > 0:
-            out.append(f"initial velocities projected onto (12): largest correction {self.velocity_correction:.3g} m/s "
-                       f"at {scene.mass_label(self.velocity_correction_mass)}")
-        return out
 
 
 def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: bool | None = None,

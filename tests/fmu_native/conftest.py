@@ -3,12 +3,11 @@ environment with no Python in it. Helpers: native_fmu_support.py."""
 from __future__ import annotations
 
 import shutil
-import subprocess
 from pathlib import Path
 
 import pytest
 
-from native_fmu_support import GCC, HERE
+from native_fmu_support import compile_host
 
 
 @pytest.fixture(scope="session")
@@ -18,12 +17,7 @@ def fmu_root(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def host(tmp_path_factory) -> Path:
-    if GCC is None:
-        pytest.skip("no C compiler")
-    exe = tmp_path_factory.mktemp("native_host") / "native_host"
-    subprocess.run([GCC, "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-o", str(exe), str(HERE / "native_host.c"),
-                    "-ldl", "-lpthread", "-lm"], check=True)
-    return exe
+    return compile_host(tmp_path_factory, "native_host.c", "-ldl", "-lpthread", "-lm")
 
 
 @pytest.fixture(scope="session")

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
@@ -46,6 +47,18 @@ class Built:
 
 
 _cache: dict = {}
+
+
+def compile_host(tmp_path_factory, source: str, *libraries: str) -> Path:
+    """A C host of this folder (``source``: its .c file) compiled warning-free into a test's temporary folder; the
+    test is skipped where there is no C compiler."""
+    if GCC is None:
+        pytest.skip("no C compiler (apt-get install gcc)")
+    name = Path(source).stem
+    exe = tmp_path_factory.mktemp(name) / name
+    subprocess.run([GCC, "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-o", str(exe), str(HERE / source),
+                    *libraries], check=True)
+    return exe
 
 
 def built(root: Path, scene: str | Path, native: bool = True, **options) -> Built:

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import linknet_core as ln
-from native_fmu_support import GCC, HERE, MODELS, built
+from native_fmu_support import MODELS, built, compile_host
 
 OK, ERROR = 0, 3
 H = 0.01  # the host's communication step (state_handle_host.c)
@@ -64,12 +64,7 @@ EXPECTED = {
 
 @pytest.fixture(scope="module")
 def state_host(tmp_path_factory):
-    if GCC is None:
-        pytest.skip("no C compiler")
-    exe = tmp_path_factory.mktemp("state_handle_host") / "state_handle_host"
-    subprocess.run([GCC, "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-o", str(exe),
-                    str(HERE / "state_handle_host.c"), "-ldl"], check=True)
-    return exe
+    return compile_host(tmp_path_factory, "state_handle_host.c", "-ldl")
 
 
 def _run(host, fmu, env, *args):

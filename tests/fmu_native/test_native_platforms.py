@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from native_fmu_support import (AMPLITUDE_X, AMPLITUDE_Z, HERE, MODELS, N_STEPS, SCENES, H, Built, built, input_mass,
-                                output_names, parse_rows, run_host)
+from native_fmu_support import (AMPLITUDE_X, AMPLITUDE_Z, HERE, MODELS, N_STEPS, SCENES, H, Built, built, compile_host,
+                                input_mass, output_names, parse_rows, run_host)
 import build_fmu
 from native.build import PLATFORMS, PLATFORMS_VARIABLE
 
@@ -468,11 +468,7 @@ def test_sources_build_with_their_cmakelists(fmu_root, host, no_python_env, tmp_
 @pytest.fixture(scope="module")
 def bare_host(tmp_path_factory) -> Path:
     """bare_host.c: a C host with no libm in its process (linked with libc and libdl only)."""
-    if GCC is None:
-        pytest.skip("no C compiler (apt-get install gcc)")
-    exe = tmp_path_factory.mktemp("bare_host") / "bare_host"
-    subprocess.run([GCC, "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-o", str(exe), str(HERE / "bare_host.c"),
-                    "-ldl"], check=True)
+    exe = compile_host(tmp_path_factory, "bare_host.c", "-ldl")
     assert "libm" not in subprocess.run(["ldd", str(exe)], capture_output=True, text=True, check=True).stdout
     return exe
 

@@ -75,7 +75,7 @@ def test_check_passes_on_the_shipped_rope_scenes(capsys):
     assert out.count("the taut system: every rope taut as a rod (1 of 1 links are ropes)") == 2
     for name in COMPLEMENTARITY:  # each printed as a check line, passed (not skipped), on both scenes
         assert len(re.findall(rf"^PASS  {re.escape(name)}", out, re.M)) == 2
-    # the crane's taut mode runs on the native core too (a scene of rods): its line is no longer a skip
+    # the crane's taut mode is a scene of rods, so the native core checks it too: its line is a pass, not a skip
     assert re.search(r"^PASS  native core with driven anchors = symbolic", out, re.M)
 
 
