@@ -1,8 +1,8 @@
 """The native core's shared library (built from src/ at install time) and its structs, as ctypes sees them.
 
-ln_model, ln_method and struct ln_rigid_model are built from the library's table of their fields (src/ln_model_fields.h
-lists them once) and checked offset by offset against the compiler's; ln_data's part and ln_energy_terms mirror
-src/linknet.h field for field, and tests/native checks their sizes against the C compiler's (``ln_sizeof``).
+ln_model, ln_method, struct ln_rigid_model, ln_energy_terms and ln_data are built from the library's table of their
+fields (src/ln_model_fields.h and src/ln_data_fields.h list them once) and checked offset by offset against the
+compiler's.
 Everything here is declaration: what the model and data mean, and how they are filled, is in
 :mod:`linknet_core.native.model`.
 """
@@ -35,38 +35,6 @@ COMPOSITION, RUNGE_KUTTA, STATIC = 0, 1, 2
 RMS_ERROR, HAIRER_ERROR = 0, 1
 
 
-class Data(ctypes.Structure):
-    _fields_ = [
-        ("t", ctypes.c_double),
-        ("X", c_double_p), ("U", c_double_p), ("F_input", c_double_p),
-        ("h_next", ctypes.c_double),
-        ("planar", ctypes.c_int),
-        ("steps", ln_int), ("rejected", ln_int), ("n_rhs", ln_int), ("split_steps", ln_int), ("finest_split", ln_int),
-        ("last_steps", ln_int),
-        ("status", ctypes.c_int),
-        ("fail_link", ln_int),
-        ("fail_residual", ctypes.c_double), ("fail_before", ctypes.c_double),
-        ("fail_iterations", ln_int),
-        ("fail_t", ctypes.c_double),
-        ("fail_floor", ctypes.c_double), ("floor_reached", ctypes.c_double), ("floor_stops", ln_int),
-        ("T", c_double_p), ("acc", c_double_p), ("reaction", c_double_p),
-        ("drive_t0", ctypes.c_double), ("drive_hold_t", ctypes.c_double),
-        ("drive_P", c_double_p), ("drive_V", c_double_p), ("drive_A", c_double_p),
-        ("drive_callback", ctypes.c_void_p), ("drive_user", ctypes.c_void_p),
-        ("impulse", c_double_p),
-        ("jump_position", ctypes.c_double), ("jump_velocity", ctypes.c_double),
-        ("jumps", ln_int),
-    ]
-    # the scratch that follows in ln_data is the C side's own: ctypes never reads past these fields
-
-
-class EnergyTerms(ctypes.Structure):
-    _fields_ = [
-        ("mass", c_double_p), ("weight", c_double_p), ("force", c_double_p),
-        ("n_springs", ln_int), ("spring_mass", ln_int_p), ("spring_param", c_double_p),
-    ]
-
-
 def _library_path() -> Path:
     here = NATIVE_DIR
     for suffix in importlib.machinery.EXTENSION_SUFFIXES:
@@ -87,16 +55,16 @@ def _declare(name, restype, *argtypes):
     return function
 
 
-# ---- the constant structs, mirrored from the library's own table of their fields (src/ln_model_fields.h lists them;
-# model_fields.c expands the lists into the table): nothing here repeats a field, and every offset is checked against
-# the compiler's
+# ---- the structs, mirrored from the library's own table of their fields (src/ln_model_fields.h and
+# src/ln_data_fields.h list them; model_fields.c expands the lists into the table): nothing here repeats a field, and
+# every offset is checked against the compiler's
 _struct_fields = _declare("ln_struct_fields", ln_int, ctypes.c_int)
-_struct_size = _declare("ln_struct_size", ctypes.c_size_t, ctypes.c_int)
+struct_size = _declare("ln_struct_size", ctypes.c_size_t, ctypes.c_int)
 _struct_field = _declare("ln_struct_field", ctypes.c_char_p, ctypes.c_int, ln_int, ctypes.POINTER(ctypes.c_int),
                          ctypes.c_char_p, ctypes.POINTER(ln_int), ctypes.POINTER(ctypes.c_size_t),
                          ctypes.POINTER(ctypes.c_size_t))
 struct_field_count = _declare("ln_struct_field_count", ln_int, ctypes.c_int, ln_int, ctypes.c_void_p, ctypes.c_void_p)
-MODEL_STRUCT, METHOD_STRUCT, RIGID_MODEL_STRUCT = 0, 1, 2  # enum ln_struct
+MODEL_STRUCT, METHOD_STRUCT, RIGID_MODEL_STRUCT, DATA_STRUCT, ENERGY_TERMS_STRUCT = 0, 1, 2, 3, 4  # enum ln_struct
 FIELD_SCALAR, FIELD_ARRAY, FIELD_FIXED, FIELD_OPAQUE = 0, 1, 2, 3  # enum ln_field_kind
 # LN_FIELD_CODE of a type: the character Python's struct module (and numpy) give the same type
 CTYPES_OF_CODE = {"q": ln_int, "i": ctypes.c_int, "d": ctypes.c_double, "B": ctypes.c_uint8}
@@ -114,7 +82,7 @@ class StructField(NamedTuple):
 
 
 def struct_fields(which: int) -> list[StructField]:
-    """The fields of a core struct (MODEL_STRUCT, METHOD_STRUCT, RIGID_MODEL_STRUCT) in declaration order."""
+    """The fields of a core struct (an enum ln_struct: MODEL_STRUCT, ...) in declaration order."""
     out = []
     kind, code, fixed, offset, size = ctypes.c_int(), ctypes.create_string_buffer(1), ln_int(), ctypes.c_size_t(), \
         ctypes.c_size_t()
@@ -143,9 +111,9 @@ def _mirror(which: int, class_name: str, doc: str) -> type:
         if getattr(mirror, f.name).offset != f.offset:
             raise ImportError(f"linknet's native core: ctypes lays out {class_name}.{f.name} at byte "
                               f"{getattr(mirror, f.name).offset}, the C compiler at {f.offset}")
-    if ctypes.sizeof(mirror) != _struct_size(which):
+    if ctypes.sizeof(mirror) != struct_size(which):
         raise ImportError(f"linknet's native core: ctypes makes {class_name} {ctypes.sizeof(mirror)} bytes long, the C "
-                          f"compiler {_struct_size(which)}")
+                          f"compiler {struct_size(which)}")
     return mirror
 
 
@@ -153,6 +121,11 @@ Model = _mirror(MODEL_STRUCT, "Model", "ln_model (src/ln_model_fields.h: LN_MODE
 Method = _mirror(METHOD_STRUCT, "Method", "ln_method (src/ln_model_fields.h: LN_METHOD_FIELDS).")
 RigidModel = _mirror(RIGID_MODEL_STRUCT, "RigidModel", "struct ln_rigid_model (src/ln_model_fields.h: "
                      "LN_RIGID_MODEL_FIELDS).")
+EnergyTerms = _mirror(ENERGY_TERMS_STRUCT, "EnergyTerms", "ln_energy_terms (src/ln_model_fields.h: "
+                      "LN_ENERGY_TERMS_FIELDS).")
+# ln_data: its scratch and the objects it owns are the C side's own, mirrored only for their places (OWNED and
+# BORROWED fields are opaque pointers)
+Data = _mirror(DATA_STRUCT, "Data", "ln_data (src/ln_data_fields.h: LN_DATA_FIELDS).")
 
 Model_p, Method_p, Data_p = ctypes.POINTER(Model), ctypes.POINTER(Method), ctypes.POINTER(Data)
 data_new = _declare("ln_data_new", Data_p, Model_p, ln_int)
@@ -173,7 +146,6 @@ model_weights = _declare("ln_model_weights", ctypes.c_int, Model_p, c_double_p, 
 _force_kind = _declare("ln_force_kind", ln_int, ctypes.c_char_p)
 force_kind_name = _declare("ln_force_kind_name", ctypes.c_char_p, ln_int)
 fixed_step_count = _declare("ln_fixed_step_count", ln_int, ctypes.c_double, ctypes.c_double)
-sizeof = _declare("ln_sizeof", ctypes.c_size_t, ctypes.c_int)
 # the structure analysis's graph routines (src/graph.h); arrays passed by address (np.ndarray.ctypes.data)
 _graph_components = _declare("ln_graph_components", ln_int, ln_int, ln_int, ctypes.c_void_p, ctypes.c_void_p,
                              ctypes.c_void_p)

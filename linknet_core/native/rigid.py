@@ -28,28 +28,14 @@ STATE_SIZE = 13  # LN_RIGID_STATE
 MAX_STAGES = 32  # LN_RIGID_MAX_STAGES: Runge-Kutta stages the C side's body-state scratch holds
 SPHERICAL_TOP, SYMMETRIC_TOP, ASYMMETRIC_TOP = 0, 1, 2  # enum ln_top, the codes of BodyGeometry.kind
 
-_int_p = ctypes.POINTER(ctypes.c_int64)
-_double_p = ctypes.POINTER(ctypes.c_double)
-
-
-class RigidModel(ctypes.Structure):
-    """struct ln_rigid_model of src/rigid.h, field for field."""
-
-    _fields_ = [
-        ("n_bodies", ctypes.c_int64),
-        ("body_of", _int_p),      # (K) body of each mass, -1 off the bodies
-        ("r", _double_p),         # (K,3) body-frame positions about the centre of mass
-        ("inertia", _double_p),   # (B,3) principal moments
-        ("body_mass", _double_p),  # (B)
-        ("kind", _int_p),         # (B) enum ln_top
-    ]
+_int_p, _double_p = lib.ln_int_p, lib.c_double_p
 
 
 class NativeRigid(NamedTuple):
     """What :func:`rigid_model` builds. ``struct`` points into ``keepalive``'s arrays, which must live as long
     as any ln_model that points to ``struct``."""
 
-    struct: RigidModel
+    struct: lib.RigidModel
     keepalive: tuple
     Y0: np.ndarray            # (B,13) the initial body states (ln_rigid_set_state)
     X0: np.ndarray            # (K,3) the initial state the bodies were frozen in (projected if it had to be)
@@ -79,9 +65,9 @@ def rigid_model(dynamics: Dynamics, bodies: BodyLayout, X0, U0) -> NativeRigid:
     kind = np.ascontiguousarray(geometry.kind, np.int64)
     if body_of.shape != (scene.K,) or r.shape != (scene.K, 3) or inertia.shape != (bodies.count, 3):
         raise ValueError("the body layout does not match the scene")
-    struct = RigidModel(bodies.count, body_of.ctypes.data_as(_int_p), r.ctypes.data_as(_double_p),
-                        inertia.ctypes.data_as(_double_p), body_mass.ctypes.data_as(_double_p),
-                        kind.ctypes.data_as(_int_p))
+    struct = lib.RigidModel(bodies.count, body_of.ctypes.data_as(_int_p), r.ctypes.data_as(_double_p),
+                            inertia.ctypes.data_as(_double_p), body_mass.ctypes.data_as(_double_p),
+                            kind.ctypes.data_as(_int_p))
     Y0 = body_states(scene, bodies, geometry, X0, U0)
     return NativeRigid(struct, (body_of, r, inertia, body_mass, kind), Y0, X0, U0, geometry, notes)
 
@@ -99,8 +85,6 @@ class RigidFunctions:
         self._fixed = lib.ln_rigid_rk_fixed_steps
         self._fixed.restype = ctypes.c_int
         self._fixed.argtypes = [vp, vp, vp, ctypes.c_double, ctypes.c_int64]
-        self.model_size = lib.ln_rigid_model_size
-        self.model_size.restype, self.model_size.argtypes = ctypes.c_size_t, []
 
     def get_state(self, model, data, n_bodies: int) -> np.ndarray:
         """A copy of the body states (B,13)."""

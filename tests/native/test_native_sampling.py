@@ -121,14 +121,6 @@ def test_diagnostics_filled_while_sampling_are_the_reference_diagnostics(shipped
                                    atol=16 * eps * max(energy_scale, 1.0))
 
 
-def test_the_energy_terms_struct_has_the_c_layout():
-    import ctypes
-
-    from linknet_core.clib import library
-
-    assert ctypes.sizeof(library.EnergyTerms) == library.sizeof(3)
-
-
 @pytest.mark.parametrize("t_end,n", [(2.0, 2), (2.0, 201), (0.3, 31), (1e-300, 7), (7.77, 1000), (1e6, 3)])
 def test_output_times_are_linspace(t_end, n):
     from linknet_core.simulator.simulator import _output_times

@@ -44,10 +44,16 @@ def _assert_same(native, reference, F=None, atol=1e-10):
     np.testing.assert_allclose(T_native, T_reference, rtol=1e-8, atol=1e-8 * max(1.0, np.abs(T_reference).max()))
 
 
-def test_the_ctypes_structs_have_the_c_layout():
-    assert ctypes.sizeof(library.Model) == library.sizeof(0)
-    assert ctypes.sizeof(library.Method) == library.sizeof(1)
-    assert ctypes.sizeof(library.Data) == library.sizeof(2)
+@pytest.mark.parametrize("mirror,which", [
+    (library.Model, library.MODEL_STRUCT), (library.Method, library.METHOD_STRUCT),
+    (library.RigidModel, library.RIGID_MODEL_STRUCT), (library.Data, library.DATA_STRUCT),
+    (library.EnergyTerms, library.ENERGY_TERMS_STRUCT)])
+def test_the_ctypes_structs_have_the_c_layout(mirror, which):
+    """ctypes lays out each mirror itself; the C compiler's offsets and sizes come from the library's table."""
+    fields = library.struct_fields(which)
+    assert [name for name, _ in mirror._fields_] == [f.name for f in fields]
+    assert [getattr(mirror, f.name).offset for f in fields] == [f.offset for f in fields]
+    assert ctypes.sizeof(mirror) == library.struct_size(which)
 
 
 SHIPPED = ["pendulum", "double_pendulum", "chain_10", "chain_100", "four_bar", "net_10x10"]

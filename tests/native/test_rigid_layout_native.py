@@ -13,13 +13,12 @@ import pytest
 
 import linknet_core as ln
 from linknet_core.clib import library as lib
-from linknet_core.native.rigid import RigidModel
 from linknet_core.structure.bodies import body_geometry, fit_bodies, free_rigid_bodies, rotation_matrices
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 _layout = lib.lib.ln_rigid_layout
 _layout.restype = ctypes.c_int
-_layout.argtypes = [lib.ln_int, lib.c_double_p, lib.c_double_p, lib.c_double_p, ctypes.POINTER(RigidModel),
+_layout.argtypes = [lib.ln_int, lib.c_double_p, lib.c_double_p, lib.c_double_p, ctypes.POINTER(lib.RigidModel),
                     lib.c_double_p, lib.c_double_p, lib.c_double_p, lib.ln_int_p, lib.c_double_p]
 
 
@@ -45,7 +44,7 @@ def test_the_c_layout_is_the_reference_layout(scene):
     K, B = scene.K, bodies.count
     X, U, mass = (np.ascontiguousarray(a, np.float64) for a in (scene.X0, scene.U0, scene.mass))
     body_of = np.ascontiguousarray(bodies.body_of, np.int64)
-    rigid = RigidModel(B, lib.pointer(body_of, lib.ln_int))
+    rigid = lib.RigidModel(B, lib.pointer(body_of, lib.ln_int))
     r, inertia, body_mass, Y = np.zeros((K, 3)), np.zeros((B, 3)), np.zeros(B), np.zeros((B, 13))
     kind = np.zeros(B, np.int64)
     assert _layout(K, lib.pointer(mass), lib.pointer(X), lib.pointer(U), ctypes.byref(rigid), lib.pointer(r),

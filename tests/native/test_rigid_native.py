@@ -7,7 +7,6 @@ Physics: exact free fall of the centre of mass, the exact flow of spherical and
 """
 from __future__ import annotations
 
-import ctypes
 import pickle
 from pathlib import Path
 
@@ -19,7 +18,7 @@ import linknet_core as ln
 from linknet_core.scene import builders
 from linknet_core.integrators import METHODS
 from linknet_core.clib import library as lib
-from linknet_core.native.rigid import NativeRigidIntegrator, RigidFunctions, RigidModel, body_states
+from linknet_core.native.rigid import NativeRigidIntegrator, RigidFunctions, body_states
 from linknet_core.structure.bodies import free_rigid_bodies
 from linknet_core.simulator.simulator import prepare_initial_state
 from scene_builders import IRREGULAR, body
@@ -159,10 +158,6 @@ def invariants(scene, X, U):
 
 
 # ---- layout and state ----------------------------------------------------------------------------
-
-def test_the_ctypes_struct_has_the_c_layout():
-    assert FN.model_size() == ctypes.sizeof(RigidModel)
-
 
 def test_body_states_round_trip_and_bad_states_are_refused():
     b = Bodies(two_bodies(), "rattle", dt=1e-3)

@@ -20,19 +20,42 @@
 #include "stages.h"
 #undef FN
 
-static double *doubles(ln_int n) { return calloc((size_t)(n > 0 ? n : 1), sizeof(double)); }
+/* ln_data's fields as its list (ln_data_fields.h) says each lives; a macro a field's kind does not use expands to
+   nothing. The ARRAY counts read the model as `m` and the data as `s`. */
+#define IGNORE_FIELD(type, name)
+#define IGNORE_ARRAY(type, name, count)
+#define IGNORE_OWNED(type, name, release)
 
+/* every ARRAY, at least one entry each (a pointer that is not NULL), zeroed; 0 when out of memory */
+#define ALLOCATE_ARRAY(type, name, count) \
+    ok = ok && (d->name = calloc((size_t)((count) > 0 ? (count) : 1), sizeof(type))) != NULL;
+static int allocate_arrays(const ln_model *m, ln_data *d)
+{
+    const ln_data *s = d;
+    int ok = 1;
+    LN_DATA_FIELDS(IGNORE_FIELD, IGNORE_FIELD, ALLOCATE_ARRAY, IGNORE_OWNED, IGNORE_FIELD)
+    (void)s;
+    return ok;
+}
+
+/* every SCALAR and ARRAY entry back to zero and every BORROWED pointer to NULL */
+#define ZERO_SCALAR(type, name) d->name = (type)0;
+#define ZERO_ARRAY(type, name, count) \
+    if ((count) > 0) memset(d->name, 0, (size_t)(count) * sizeof(type));
+#define FORGET_BORROWED(type, name) d->name = NULL;
+static void zero_fields(const ln_model *m, ln_data *d)
+{
+    const ln_data *s = d;
+    LN_DATA_FIELDS(ZERO_SCALAR, IGNORE_FIELD, ZERO_ARRAY, IGNORE_OWNED, FORGET_BORROWED)
+    (void)s;
+}
+
+#define FREE_ARRAY(type, name, count) free(d->name);
+#define RELEASE_OWNED(type, name, release) release(d->name);
 void ln_data_free(ln_data *d)
 {
     if (!d) return;
-    double *arrays[] = {d->X, d->U, d->F_input, d->T, d->acc, d->reaction, d->X_start, d->U_start, d->X_step, d->U_step, d->Xp, d->Up, d->Fp,
-                        d->F_base, d->F, d->Uh, d->Xc, d->U_iterate, d->acc1, d->Xs, d->Us, d->Xn, d->Un, d->X_drift,
-                        d->E0, d->E1, d->B, d->mu, d->phi, d->scale, d->work, d->KX, d->KU, d->pair_values, d->chain_sub,
-                        d->chain_Dinv, d->krylov, d->drive_P, d->drive_V, d->drive_A, d->impulse, d->drive_scratch};
-    for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
-    ln_ldl_numeric_free(d->ldl);
-    ln_minnorm_free(d->minnorm);
-    ln_rigid_data_free(d->rigid);
+    LN_DATA_FIELDS(IGNORE_FIELD, IGNORE_FIELD, FREE_ARRAY, RELEASE_OWNED, IGNORE_FIELD)
     free(d);
 }
 
@@ -41,6 +64,7 @@ static void initial_values(const ln_model *m, ln_data *d)
 {
     d->planar = m->planar;
     d->fail_link = -1;
+    d->drive_hold_t = d->drive_t0;  /* the scene's time origin is the data's setting, kept */
     /* input-driven anchors rest at their scene position until an input arrives: the first row of their
        piece table (drive.c) holds it */
     for (ln_int a = 0; a < m->n_driven; a++)
@@ -51,29 +75,8 @@ ln_data *ln_data_new(const ln_model *m, ln_int n_stages)
 {
     ln_data *d = calloc(1, sizeof *d);
     if (!d) return NULL;
-    const ln_int K3 = 3 * m->K, L = m->L, L3 = 3 * m->L, K2 = 2 * m->K;
-    d->X = doubles(K3); d->U = doubles(K3); d->F_input = doubles(K3); d->T = doubles(L); d->acc = doubles(K3);
-    d->reaction = doubles(3 * m->n_fixed);
-    d->X_start = doubles(K3); d->U_start = doubles(K3); d->X_step = doubles(K3); d->U_step = doubles(K3);
-    d->Xp = doubles(K2); d->Up = doubles(K2); d->Fp = doubles(K2);
-    d->F_base = doubles(K3); d->F = doubles(K3); d->Uh = doubles(K3); d->Xc = doubles(K3);
-    d->U_iterate = doubles(K3); d->acc1 = doubles(K3); d->Xs = doubles(K3); d->Us = doubles(K3);
-    d->Xn = doubles(K3); d->Un = doubles(K3); d->X_drift = doubles(K3);
-    d->E0 = doubles(L3); d->E1 = doubles(L3);
-    d->B = doubles(L); d->mu = doubles(L); d->phi = doubles(L); d->scale = doubles(L); d->work = doubles(L);
-    d->n_stages_allocated = n_stages > 0 ? n_stages : 0;
-    d->KX = doubles((d->n_stages_allocated + 1) * K3);
-    d->KU = doubles((d->n_stages_allocated + 1) * K3);
-    d->pair_values = doubles(m->n_pairs);
-    d->chain_sub = doubles(L); d->chain_Dinv = doubles(L);
-    const ln_int n_driven = m->n_driven;
-    d->drive_P = doubles(3 * n_driven); d->drive_V = doubles(3 * n_driven); d->drive_A = doubles(3 * n_driven);
-    d->impulse = doubles(3 * n_driven); d->drive_scratch = doubles(18 * n_driven);
-    int ok = d->X && d->U && d->F_input && d->T && d->acc && d->reaction && d->X_start && d->U_start && d->X_step && d->U_step && d->Xp && d->Up && d->Fp
-             && d->F_base && d->F && d->Uh && d->Xc && d->U_iterate && d->acc1 && d->Xs && d->Us && d->Xn && d->Un && d->X_drift
-             && d->E0 && d->E1 && d->B && d->mu && d->phi && d->scale && d->work && d->KX && d->KU
-             && d->pair_values && d->chain_sub && d->chain_Dinv
-             && d->drive_P && d->drive_V && d->drive_A && d->impulse && d->drive_scratch;
+    d->n_stages_allocated = n_stages > 0 ? n_stages : 0;  /* before the arrays: the stages' arrays count on it */
+    int ok = allocate_arrays(m, d);
     if (ok && m->solver == LN_SOLVER_LDL) ok = (d->ldl = ln_ldl_numeric_new(m->ldl)) != NULL;
     if (ok && m->rigid) ok = (d->rigid = ln_rigid_data_new(m, n_stages)) != NULL;
     if (!ok) {
@@ -86,31 +89,7 @@ ln_data *ln_data_new(const ln_model *m, ln_int n_stages)
 
 void ln_data_reset(const ln_model *m, ln_data *d)
 {
-    const ln_int K3 = 3 * m->K, L = m->L, L3 = 3 * m->L, K2 = 2 * m->K, n_driven = m->n_driven;
-    const ln_int stage_values = (d->n_stages_allocated + 1) * K3;
-    struct { double *array; ln_int n; } arrays[] = {
-        {d->X, K3}, {d->U, K3}, {d->F_input, K3}, {d->T, L}, {d->acc, K3}, {d->reaction, 3 * m->n_fixed},
-        {d->X_start, K3}, {d->U_start, K3}, {d->X_step, K3}, {d->U_step, K3}, {d->Xp, K2}, {d->Up, K2},
-        {d->Fp, K2}, {d->F_base, K3}, {d->F, K3}, {d->Uh, K3}, {d->Xc, K3}, {d->U_iterate, K3}, {d->acc1, K3},
-        {d->Xs, K3}, {d->Us, K3}, {d->Xn, K3}, {d->Un, K3}, {d->X_drift, K3}, {d->E0, L3}, {d->E1, L3}, {d->B, L}, {d->mu, L},
-        {d->phi, L}, {d->scale, L}, {d->work, L}, {d->KX, stage_values}, {d->KU, stage_values},
-        {d->pair_values, m->n_pairs}, {d->chain_sub, L}, {d->chain_Dinv, L}, {d->drive_P, 3 * n_driven},
-        {d->drive_V, 3 * n_driven}, {d->drive_A, 3 * n_driven}, {d->impulse, 3 * n_driven},
-        {d->drive_scratch, 18 * n_driven}};
-    for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++)
-        if (arrays[i].n > 0) memset(arrays[i].array, 0, (size_t)arrays[i].n * sizeof(double));
-    d->t = d->h_next = 0.0;
-    d->steps = d->rejected = d->n_rhs = d->split_steps = d->finest_split = d->last_steps = 0;
-    d->status = LN_OK;
-    d->fail_residual = d->fail_before = d->fail_t = d->fail_floor = d->floor_reached = 0.0;
-    d->fail_iterations = d->floor_stops = 0;
-    d->drive_hold_t = d->drive_t0;  /* the scene's time origin is the data's setting, kept */
-    d->drive_callback = NULL;
-    d->drive_user = NULL;
-    d->jump_position = d->jump_velocity = 0.0;
-    d->jumps = 0;
-    d->singular = 0;
-    d->singular_events = d->exact_newton_projections = 0;
+    zero_fields(m, d);
     initial_values(m, d);
 }
 
@@ -352,15 +331,4 @@ int ln_sample(const ln_model *m, const ln_method *meth, ln_data *d, const double
         *written = i + 1;
     }
     return LN_OK;
-}
-
-size_t ln_sizeof(int which)
-{
-    switch (which) {
-    case 0: return sizeof(ln_model);
-    case 1: return sizeof(ln_method);
-    case 2: return offsetof(ln_data, X_start);  /* the part of ln_data the Python binding reads */
-    case 3: return sizeof(ln_energy_terms);
-    default: return 0;
-    }
 }

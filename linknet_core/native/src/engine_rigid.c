@@ -807,6 +807,3 @@ int ln_rigid_layout(ln_int K, const double *mass, const double *X, const double 
     rigid->kind = top;
     return LN_OK;
 }
-
-
-size_t ln_rigid_model_size(void) { return sizeof(struct ln_rigid_model); }

@@ -22,6 +22,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "ln_data_fields.h"
 #include "ln_model_fields.h"
 
 /* No fused multiply-add: every a*b+c of the core is rounded twice, as the platforms without FMA do, so that one
@@ -51,7 +52,7 @@ typedef int64_t ln_int;
 #endif
 #endif
 
-/* Status of a stage or of a whole advance. Keep in step with linknet_core/native/binding.py (STATUS). */
+/* Status of a stage or of a whole advance. Keep in step with linknet_core/clib/library.py (STATUS). */
 enum ln_status {
     LN_OK = 0,
     LN_PROJECTION_FAILED = 1,   /* the position projection onto (11) did not converge */
@@ -102,74 +103,14 @@ typedef struct ln_method {
     LN_DECLARE_FIELDS(LN_METHOD_FIELDS)
 } ln_method;
 
+/* What input-driven anchors follow when a data's drive_callback is set: P, V, A of each input-driven anchor in turn
+   at t (9 values per anchor) into PVA; 0 on success. */
+typedef int ln_drive_motion(void *user, double t, double *PVA);
+
+/* The data: the state t, X, U, the integrator's internals and every scratch array. Its fields are listed in
+   ln_data_fields.h (LN_DATA_FIELDS), with what each means and how it lives. */
 typedef struct ln_data {
-    /* the state */
-    double t;
-    double *X, *U;                  /* (K,3) */
-    double *F_input;                /* (K,3) held input force; rows of anchored masses are ignored */
-
-    /* the integrator's internals */
-    double h_next;                  /* adaptive methods: next step (0: choose the starting step) */
-    int planar;                     /* 1 while the 2-D path is used (a planar scene until it left the plane) */
-    ln_int steps, rejected, n_rhs;  /* accumulated over the run */
-    ln_int split_steps;             /* fixed steps split into sub-steps because their position stage failed */
-    ln_int finest_split;            /* the most sub-steps one step was split into */
-    ln_int last_steps;              /* steps of the last advance */
-
-    /* diagnostics of the last failure */
-    int status;
-    ln_int fail_link;               /* worst link of a failed projection, or -1 */
-    double fail_residual;           /* relative residual reached */
-    double fail_before;             /* relative residual before the projection */
-    ln_int fail_iterations;
-    double fail_t;                  /* time of the last accepted state */
-    double fail_floor;              /* relative round-off floor the failed projection's last step allowed */
-    double floor_reached;           /* largest relative residual at which a projection stopped on its floor */
-    ln_int floor_stops;             /* position projections stopped at their round-off floor above the tolerance */
-
-    /* the last evaluation's tensions, accelerations and anchor reactions */
-    double *T;                      /* (L); after an advance of a composition that failed with LN_PROJECTION_FAILED:
-                                       the tensions at the start of the step that failed */
-    double *acc;                    /* (K,3) */
-    double *reaction;               /* (n_fixed,3) the force the network exerts on each anchor (ln_evaluate) */
-
-    /* driven anchors (drive.c): scene motions run in scene time t - drive_t0; input-driven anchors follow the
-       held quadratic P + V s + A s^2/2, s = t - drive_hold_t (rows of drive_P, drive_V, drive_A), or, when
-       drive_callback is set, what it writes for them at t: P, V, A of each input-driven anchor in turn (9 values
-       per anchor); it returns 0 on success. */
-    double drive_t0, drive_hold_t;
-    double *drive_P, *drive_V, *drive_A;    /* (n_driven,3) */
-    int (*drive_callback)(void *user, double t, double *PVA);
-    void *drive_user;
-    double *impulse;                /* (n_driven,3) what the links gave each driven anchor at the last jump, N s */
-    double jump_position, jump_velocity;    /* the last advance's anchor jump: largest coordinate change, 0 if none */
-    ln_int jumps;                   /* advances that started with a jump of the anchors (counted over the run) */
-
-    /* scratch (sized for DIM = 3; the 2-D path uses the first 2K or 2L entries) */
-    double *X_start, *U_start;      /* (K,3) the state at the start of an advance (all-or-nothing) */
-    double *X_step, *U_step;        /* (K,3) the state at the start of a fixed step (for splitting it) */
-    double *Xp, *Up, *Fp;           /* (K,2) the state and base force in the plane's coordinates */
-    double *F_base, *F, *Uh, *Xc, *U_iterate, *acc1, *Xs, *Us, *Xn, *Un;    /* (K,3) */
-    double *X_drift;                /* (K,3) a RATTLE stage's drift X + h U_half, before its position stage */
-    double *E0, *E1;                /* (L,3) unit vectors */
-    double *B, *mu, *phi, *scale, *work;                                    /* (L) */
-    double *KX, *KU;                /* ((s+1),K,3) Runge-Kutta stages */
-    ln_int n_stages_allocated;
-
-    /* the factorisation of A */
-    double *pair_values;            /* (n_pairs) the entries of A (25), pair by pair */
-    struct ln_ldl_numeric *ldl;     /* LN_SOLVER_LDL */
-    double *chain_sub, *chain_Dinv; /* (L) LN_SOLVER_CHAIN: Thomas' elimination in path order */
-    int singular;                   /* the last factorisation met a vanishing pivot: minimum-norm solves */
-    ln_int singular_events;         /* factorisations that switched to the minimum-norm path */
-
-    double *krylov;                 /* the exact-Newton position stage's Krylov basis, allocated at first use */
-    ln_int krylov_size;
-    ln_int exact_newton_projections;   /* position stages that needed exact Newton */
-
-    struct ln_minnorm_work *minnorm;
-    struct ln_rigid_data *rigid;
-    double *drive_scratch;          /* (n_driven, 9) */
+    LN_DECLARE_DATA_FIELDS
 } ln_data;
 
 /* ---- data.c: allocation and the whole-interval advance ------------------------------------------ */
@@ -184,15 +125,10 @@ LN_API void ln_data_reset(const ln_model *m, ln_data *d);
    but LN_OK the state and internals are those before the call, and the diagnostics say why. */
 LN_API int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps);
 
-/* What a sample's energy needs beyond the model (diagnostics.c), as the numpy reference writes its terms: the
-   masses, the weights M_k g, the constant forces and the springs (the force elements with a potential). */
+/* What a sample's energy needs beyond the model (diagnostics.c): its fields are listed in ln_model_fields.h
+   (LN_ENERGY_TERMS_FIELDS). */
 typedef struct ln_energy_terms {
-    const double *mass;             /* (K) M_k (anchors' entries unused) */
-    const double *weight;           /* (K,3) M_k g, zero rows on anchors */
-    const double *force;            /* (K,3) the scene's constant forces (anchors' rows unused) */
-    ln_int n_springs;
-    const ln_int *spring_mass;      /* (n_springs,2) the masses a, b of each */
-    const double *spring_param;     /* (n_springs,2) k, d0 of each */
+    LN_DECLARE_FIELDS(LN_ENERGY_TERMS_FIELDS)
 } ln_energy_terms;
 
 /* Samples of a run at the output times times[0..n) with d->F_input held throughout: advance to each (ln_advance,
@@ -271,13 +207,12 @@ LN_API ln_int ln_fixed_step_count(double span, double dt);
    message. 0, out untouched, where the count is within the limit. */
 LN_API int ln_step_count_problem(double t, double t_target, double dt, ln_int max_steps, char *out, size_t n);
 
-/* sizeof(ln_model), sizeof(ln_method), the part of ln_data the Python binding mirrors and sizeof(ln_energy_terms)
-   (which = 0, 1, 2, 3): the binding checks its struct layouts against these. */
-LN_API size_t ln_sizeof(int which);
-
-/* model_fields.c: the fields of the structs ln_model_fields.h lists, as the Python binding builds its mirrors from
-   them and the native FMU's build writes the structs as data. `which` is an enum ln_struct. */
-enum ln_struct { LN_MODEL_STRUCT = 0, LN_METHOD_STRUCT = 1, LN_RIGID_MODEL_STRUCT = 2 };
+/* model_fields.c: the fields of the structs ln_model_fields.h and ln_data_fields.h list, as the Python binding builds
+   its mirrors from them and the native FMU's build writes the constant structs as data. `which` is an enum ln_struct.
+   ln_data's SCALAR and KEPT fields are SCALAR here, its OWNED and BORROWED ones OPAQUE. */
+enum ln_struct {
+    LN_MODEL_STRUCT = 0, LN_METHOD_STRUCT = 1, LN_RIGID_MODEL_STRUCT = 2, LN_DATA_STRUCT = 3, LN_ENERGY_TERMS_STRUCT = 4
+};
 enum ln_field_kind { LN_FIELD_SCALAR = 0, LN_FIELD_ARRAY = 1, LN_FIELD_FIXED = 2, LN_FIELD_OPAQUE = 3 };
 /* Fields of the struct (-1: no such struct) and its size. */
 LN_API ln_int ln_struct_fields(int which);

@@ -1,9 +1,9 @@
 /* The fields of the core's constant structs, each written once, as MuJoCo's mjxmacro.h lists mjModel's.
  *
- * From these lists the preprocessor declares linknet.h's ln_model and ln_method and rigid.h's struct
+ * From these lists the preprocessor declares linknet.h's ln_model, ln_method and ln_energy_terms and rigid.h's struct
  * ln_rigid_model, and model_fields.c the table of their fields (name, type, offset, number of entries) that the
  * library exports. The Python binding builds its ctypes mirrors from that table when it loads the library
- * (linknet_core/clib/library.py), and the native FMU writes the structs into its resource file from it
+ * (linknet_core/clib/library.py), and the native FMU writes the model's into its resource file from it
  * (fmu_src/native/build.py) and reads them back with these same lists (fmu_src/native/linknet_model.c). Adding a
  * field is one line here, plus the code that fills it.
  *
@@ -141,6 +141,17 @@
                                                            first two equal) */                                      \
     ARRAY(double, body_mass, s->n_bodies)                                                                           \
     ARRAY(ln_int, kind, s->n_bodies)                    /* enum ln_top */
+
+/* ln_energy_terms (linknet.h): what a sample's energy needs beyond the model (diagnostics.c), as the numpy reference
+   writes its terms: the masses, the weights M_k g, the constant forces and the springs (the force elements with a
+   potential). */
+#define LN_ENERGY_TERMS_FIELDS(SCALAR, ARRAY, FIXED, OPAQUE)                                                        \
+    ARRAY(double, mass, m->K)                           /* (K) M_k (anchors' entries unused) */                     \
+    ARRAY(double, weight, 3 * m->K)                     /* (K,3) M_k g, zero rows on anchors */                     \
+    ARRAY(double, force, 3 * m->K)                      /* (K,3) the scene's constant forces (anchors' rows unused) */\
+    SCALAR(ln_int, n_springs)                                                                                       \
+    ARRAY(ln_int, spring_mass, 2 * s->n_springs)        /* (n_springs,2) the masses a, b of each */                 \
+    ARRAY(double, spring_param, 2 * s->n_springs)       /* (n_springs,2) k, d0 of each */
 
 /* The declarations of the fields, for a struct's body. */
 #define LN_DECLARE_SCALAR(type, name) type name;

@@ -26,8 +26,8 @@ enum ln_top {
 
 #define LN_RIGID_STATE 13           /* numbers per body: c, v, q, Pi */
 
-/* Fixed for a run: its fields are listed in ln_model_fields.h (LN_RIGID_MODEL_FIELDS). linknet_core/native/rigid.py
-   mirrors it for ctypes, and its size is checked against ln_rigid_model_size. */
+/* Fixed for a run: its fields are listed in ln_model_fields.h (LN_RIGID_MODEL_FIELDS), whence the Python binding's
+   mirror (linknet_core/clib/library.py: RigidModel). */
 struct ln_rigid_model {
     LN_DECLARE_FIELDS(LN_RIGID_MODEL_FIELDS)
 };
@@ -82,8 +82,5 @@ LN_API int ln_rigid_rk_fixed_steps(const ln_model *m, const ln_method *meth, ln_
    linknet_core.structure.bodies is the numpy reference (body_geometry, fit_bodies). */
 LN_API int ln_rigid_layout(ln_int K, const double *mass, const double *X, const double *U, struct ln_rigid_model *rigid,
                            double *r, double *inertia, double *body_mass, ln_int *kind, double *Y0);
-
-/* sizeof(struct ln_rigid_model): the ctypes mirror's size is checked against it */
-LN_API size_t ln_rigid_model_size(void);
 
 #endif
