@@ -502,23 +502,34 @@ class UnilateralDynamics(Dynamics):
             return rope
         return np.concatenate([rope, U[self.contact_masses] @ self.scene.ground.normal])
 
-    def gap_polynomial(self, coefficients, u: int) -> np.ndarray:
-        """A polynomial in theta (coefficients, lowest degree first) with the sign of constraint u's gap along the
-        positions c0 + c1 theta + c2 theta^2 + c3 theta^3 (``coefficients``: four (K,3) arrays): n . (X_k - p) of a
-        contact (cubic); R_l^2 - |X_k2 - X_k1|^2 of a rope (sextic)."""
+    def gap_polynomials(self, coefficients) -> np.ndarray:
+        """(n_unilateral, 7): for every unilateral constraint a polynomial in theta (coefficients, lowest degree
+        first) with the sign of its gap along the positions c0 + c1 theta + c2 theta^2 + c3 theta^3
+        (``coefficients``: four (K,3) arrays): R_l^2 - |X_k2 - X_k1|^2 of a rope (sextic), n . (X_k - p) of a
+        contact (cubic, its higher coefficients zero)."""
         scene = self.scene
-        k = self.index[u]
-        if not self.is_rope[u]:
-            p = np.array([c[k] @ scene.ground.normal for c in coefficients])
-            p[0] -= scene.ground.point @ scene.ground.normal
-            return p
-        D = [c[scene.k2[k]] - c[scene.k1[k]] for c in coefficients]
-        p = np.zeros(7)
-        for i in range(4):
-            for j in range(4):
-                p[i + j] -= D[i] @ D[j]
-        p[0] += scene.length[k] ** 2
-        return p
+        out = np.zeros((self.n_unilateral, 7))
+        l = self.rope_links
+        if l.size:
+            D = np.stack([c[scene.k2[l]] - c[scene.k1[l]] for c in coefficients])  # (4, n_ropes, 3)
+            products = np.einsum("irx,jrx->ijr", D, D)
+            for i in range(4):
+                for j in range(4):
+                    out[:l.size, i + j] -= products[i, j]
+            out[:l.size, 0] += scene.length[l] ** 2
+        if self.contact_masses.size:
+            n = scene.ground.normal
+            out[l.size:, :4] = np.stack([c[self.contact_masses] @ n for c in coefficients], axis=1)
+            out[l.size:, 0] -= scene.ground.point @ n
+        return out
+
+    def gap_polynomial_depths(self, depth) -> np.ndarray:
+        """(n_unilateral,): the value of each constraint's gap_polynomials below which its gap is below -``depth``
+        (m, one per constraint): R^2 - |d|^2 < -depth (2 R + depth) <=> |d| > R + depth for a rope; the gap itself
+        for a contact."""
+        depth = np.broadcast_to(np.asarray(depth, float), (self.n_unilateral,))
+        R = self.scene.length[self.rope_links]
+        return np.concatenate([depth[:R.size] * (2.0 * R + depth[:R.size]), depth[R.size:]])
 
     def velocity_scale(self, U) -> float:
         """A speed to measure rates against: the fastest free mass, or what gravity gives over the scene's size."""

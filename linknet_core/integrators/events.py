@@ -8,12 +8,14 @@ event ends a mode:
 * **slack** / **release**: a taut rope's tension, the ground's force on a mass, falls through 0.
 
 Each step is checked after it is taken: the gaps of the slack constraints along the step's dense interpolant (the
-cubic Hermite of X from X and U at both ends: exact for a ballistic flight, O(h^4) otherwise), and the forces of the
-active ones at its end. The first event is located there by a bracketing root find (Illinois' regula falsi) and the
-step is taken again from its start to the event, by the method's own step; a gap event's time is then made exact by
-Newton's method on that step's length (the gap and its rate at its end), so that the event lies on the method's
-own trajectory, not on the interpolant. At the event the impulse is applied and the next mode chosen
-(UnilateralDynamics.impact, select_mode), and the integration restarts from there:
+cubic Hermite of X from X and U at both ends: exact for a ballistic flight, O(h^4) otherwise), everywhere in the
+step however briefly they dip (their sign is a polynomial in the step's fraction, bounded by its Bernstein
+coefficients and looked at exactly where the bound allows a dip), each dip confirmed on the method's own step to its
+lowest point; and the forces of the active ones at its end. The first event is located there by a bracketing root
+find (Illinois' regula falsi) and the step is taken again from its start to the event, by the method's own step; a
+gap event's time is then made exact by Newton's method on that step's length (the gap and its rate at its end), so
+that the event lies on the method's own trajectory, not on the interpolant. At the event the impulse is applied and
+the next mode chosen (UnilateralDynamics.impact, select_mode), and the integration restarts from there:
 
 * the adaptive methods (dopri5, dop853) end the step at the event and go on with their step-size controller;
 * the fixed-step methods (rattle and its compositions) finish the step from the event in the new mode, so that
@@ -22,15 +24,13 @@ own trajectory, not on the interpolant. At the event the impulse is applied and 
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
 from linknet_core.dynamics.unilateral import CROSS_TOL, FORCE_TOL, TOUCH_TOL, Event
 from linknet_core.errors import SolverError, StepFailure
 
-# Points of the dense interpolant at which each step's slack gaps are looked at (beside its end): a rope that comes
-# taut and slack again within one step is found where the interpolant dips below zero at one of them.
-GAP_SAMPLES = 8
 # More events than this within one step (or one adaptive step attempt) means a chatter the rest rule did not stop
 MAX_EVENTS_PER_STEP = 200
 # A part of a fixed step shorter than this fraction of dt is taken by a Taylor step (FixedStepEvents._plain_step)
@@ -52,29 +52,71 @@ def hermite_coefficients(y0, d0, y1, d1, h):
     return (y0, h * d0, 3 * (y1 - y0) - h * (2 * d0 + d1), 2 * (y0 - y1) + h * (d0 + d1))
 
 
-def first_falling_root(p) -> float | None:
-    """The first theta in [0, 1] where the polynomial p (coefficients, lowest degree first) crosses zero downwards
-    (p' < 0 there: a gap closing), None if there is none; roots of p by its companion matrix (numpy.roots), each
-    polished by Newton's method on p."""
+def _bernstein_matrix(n: int) -> np.ndarray:
+    """(n+1, n+1): the map from a polynomial's power coefficients (lowest degree first) to its coefficients in the
+    Bernstein basis of degree n on [0, 1]: b_j = sum_{i <= j} C(j, i) / C(n, i) a_i (Farouki and Rajan, Computer
+    Aided Geometric Design 5, 1988, eq. 2)."""
+    M = np.zeros((n + 1, n + 1))
+    for j in range(n + 1):
+        for i in range(j + 1):
+            M[j, i] = math.comb(j, i) / math.comb(n, i)
+    return M
+
+
+# the gap polynomials are sextic at most (a rope's R^2 - |d|^2 along the cubic Hermite of X)
+_BERNSTEIN_6 = _bernstein_matrix(6)
+
+
+def may_fall_below(P, depth) -> np.ndarray:
+    """(n,) bool: which of the polynomials P (n, 7: coefficients, lowest degree first, sextic at most) can fall
+    below -depth somewhere on [0, 1]. A polynomial lies within the convex hull of its Bernstein coefficients
+    (Farouki and Rajan 1988): where all are >= -depth it does not, for certain, and gap_dips need not look;
+    the others are looked at exactly."""
+    return (np.asarray(P, float) @ _BERNSTEIN_6.T).min(axis=1) < -np.asarray(depth, float)
+
+
+def gap_dips(p, depth) -> list[tuple[float, float]]:
+    """Each excursion of the polynomial p (coefficients, lowest degree first) below -depth (depth >= 0) on [0, 1],
+    in order, however brief (a rope that would come taut and slack again within the step, a mass that grazes the
+    ground): [(theta where p crosses zero on its way down into it, theta of its lowest point), ...]. Exact on the
+    polynomial: [0, 1] is cut at the real parts of every root of p' (its critical points, and spurious cuts that only
+    split a monotone piece), so p is monotone between the cuts, its lowest values are at them, and an excursion is a
+    run of consecutive cuts below -depth. Its zero is on the last piece before it that starts at p >= 0 (after the
+    excursion before it), found by the bracketing root find; where there is none (p starts below 0 within round-off,
+    as a rebound does, and stays there) the crossing of -depth is taken. An excursion from theta = 0 crosses at 0."""
     p = np.trim_zeros(np.asarray(p, float), "b")
     if p.size < 2:
-        return None
+        return [(0.0, 0.0)] if p.size and p[0] < -depth else []
     dp = np.arange(1, p.size) * p[1:]
-    scale = float(np.abs(p).max())
-    best = None
-    for r in np.roots(p[::-1]):
-        if abs(r.imag) > 1e-6 * max(1.0, abs(r.real)) or not -1e-9 <= r.real <= 1.0 + 1e-9:
+    cuts = np.roots(dp[::-1]).real if dp.size > 1 else np.zeros(0)
+    cuts = np.unique(np.concatenate([[0.0, 1.0], cuts[(cuts > 0.0) & (cuts < 1.0)]]))
+    values = np.polyval(p[::-1], cuts)
+    below = values < -depth
+    out = []
+    after = -1  # the last cut of the excursion before
+    j = 0
+    while j < cuts.size:
+        if not below[j]:
+            j += 1
             continue
-        x = float(r.real)
-        for _ in range(3):
-            slope = np.polyval(dp[::-1], x)
-            if slope == 0:
-                break
-            x -= np.polyval(p[::-1], x) / slope
-        x = min(max(x, 0.0), 1.0)
-        if np.polyval(dp[::-1], x) < -1e-12 * scale and (best is None or x < best):
-            best = x
-    return best
+        k = j
+        while k + 1 < cuts.size and below[k + 1]:
+            k += 1
+        lowest = float(cuts[j + int(np.argmin(values[j:k + 1]))])
+        if j == 0:
+            out.append((0.0, lowest))
+        else:
+            above = after + 1 + np.flatnonzero(values[after + 1:j] >= 0.0)
+            shift = 0.0 if above.size else depth
+            i = int(above[-1]) if above.size else j - 1
+
+            def f(theta, shift=shift):
+                return float(np.polyval(p[::-1], theta)) + shift
+            out.append((float(bracketed_root(f, cuts[i], cuts[i + 1], values[i] + shift, values[i + 1] + shift)[1]),
+                        lowest))
+        after = k
+        j = k + 1
+    return out
 
 
 def bracketed_root(f, lo, hi, f_lo, f_hi, xtol=4e-16, guess=None):
@@ -200,32 +242,33 @@ class EventHandling:
                                                                     friction_tol]),
                 np.concatenate([self.mode, dyn.stuck | sliding]))
 
-    def _first_event(self, X0, U0, t0, X1, U1, t1, F_input):
+    def _first_event(self, X0, U0, t0, X1, U1, t1, F_input, step):
         """The first event within the step from (X0, U0) at t0 to (X1, U1) at t1, or None: (theta in [0, 1], kind
-        'gap' or 'force', constraint u)."""
+        'gap' or 'force', constraint u). ``step(h)``: the method's own step from t0 of length h (what a gap's dip
+        on the interpolant is confirmed on)."""
         uni = self.unilateral
         h = t1 - t0
         mode = self.mode
         found = None
         inactive = ~mode
         if inactive.any():
-            # the slack constraints that the interpolant takes below the ground or past their length at one of the
-            # sample points, then each one's first crossing on it: a root of the gap's polynomial in theta (the
-            # Hermite of X is cubic, a rope's |d|^2 sextic), exact on a ballistic flight however many bounces the
-            # step spans, the first one where the gap falls (a rebound starting at round-off below 0 rises first)
+            # the slack constraints whose gap along the step's interpolant falls below -tol anywhere in it (however
+            # briefly): the gap's sign is a polynomial in theta (the Hermite of X is cubic, a rope's R^2 - |d|^2
+            # sextic), screened by its Bernstein coefficients and then looked at exactly (exact on a ballistic
+            # flight however many bounces the step spans); each dip, in order, is then confirmed on the method's own
+            # step to its lowest point: where the interpolant's error (h^4 times X's fourth derivative) makes a dip
+            # that the method's trajectory does not have, as it can just after a slack event (gap, rate and second
+            # derivative all zero, the gap growing as t^3), it is no event
             tol = CROSS_TOL * np.maximum(uni.scale, np.abs(X1).max())
-            lowest = uni.gaps(X1)
-            for j in range(1, GAP_SAMPLES):
-                lowest = np.minimum(lowest, uni.gaps(hermite(X0, U0, X1, U1, h, j / GAP_SAMPLES)))
-            coefficients = hermite_coefficients(X0, U0, X1, U1, h)
-            for u in np.flatnonzero(inactive & (lowest < -tol)):
-                root = first_falling_root(uni.gap_polynomial(coefficients, int(u)))
-                if root is None:  # a gap that leaves zero tangentially (a double root): where it passes -tol
-                    def below(th, u=u):
-                        return float(uni.gaps(hermite(X0, U0, X1, U1, h, th))[u] + tol[u])
-                    root = bracketed_root(below, 0.0, 1.0, below(0.0), below(1.0))[1] if below(0.0) >= 0 else 0.0
-                if found is None or root < found[0]:
-                    found = (root, "gap", int(u))
+            P = uni.gap_polynomials(hermite_coefficients(X0, U0, X1, U1, h))
+            depth = uni.gap_polynomial_depths(tol)
+            dips = sorted((crossing, lowest, int(u)) for u in np.flatnonzero(inactive & may_fall_below(P, depth))
+                          for crossing, lowest in gap_dips(P[u], float(depth[u])))
+            for crossing, lowest, u in dips:
+                Xm = X0 if lowest == 0.0 else X1 if lowest == 1.0 else step(lowest * h)[0]
+                if uni.gaps(Xm)[u] < -tol[u]:
+                    found = (crossing, "gap", u)
+                    break
         if mode.any():
             forces, tol, watched = self._forces_at(t1, X1, U1, F_input)
             dropped = np.flatnonzero(watched & (forces < -tol))
@@ -396,14 +439,14 @@ class FixedStepEvents(EventHandling):
         for _ in range(MAX_EVENTS_PER_STEP):
             self._slip_reference(t0, X, U, F_input)
             X1, U1 = self._plain_step(X, U, t0, t1, F_input)
-            found = self._first_event(X, U, t0, X1, U1, t1, F_input)
+
+            def step(h, X=X, U=U, t0=t0):
+                return self._plain_step(X, U, t0, t0 + h, F_input)
+            found = self._first_event(X, U, t0, X1, U1, t1, F_input, step)
             if found is None:
                 return X1, U1
             _, kind, u = found
             h_max = t1 - t0
-
-            def step(h, X=X, U=U, t0=t0):
-                return self._plain_step(X, U, t0, t0 + h, F_input)
             Xe, Ue, h_e = self._locate(step, X, U, t0, h_max, X1, U1, F_input, found)
             t_e = t1 if h_e >= h_max else t0 + h_e
             X, U = self._apply_event(Xe, Ue, t_e, F_input, kind, u)
@@ -423,7 +466,9 @@ class AdaptiveEvents(EventHandling):
         super().advance(state, t_target, F_input, max_steps)
 
     def _event_in_step(self, X, U, t, k0, X_new, U_new, t_new, acc_new, F_input):
-        found = self._first_event(X, U, t, X_new, U_new, t_new, F_input)
+        def step(h):
+            return self.step(X, U, h, F_input, t, t + h)
+        found = self._first_event(X, U, t, X_new, U_new, t_new, F_input, step)
         if found is None:
             self._events_this_step = 0
             self._slip_reference(t_new, X_new, U_new, F_input)  # the next step's
@@ -433,9 +478,6 @@ class AdaptiveEvents(EventHandling):
             raise self._zeno(t)
         _, kind, u = found
         h_max = t_new - t
-
-        def step(h):
-            return self.step(X, U, h, F_input, t, t + h)
         Xe, Ue, h_e = self._locate(step, X, U, t, h_max, X_new, U_new, F_input, found)
         t_e = t_new if h_e >= h_max else t + h_e
         Xe, Ue = self._apply_event(Xe, Ue, t_e, F_input, kind, u)
