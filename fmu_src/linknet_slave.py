@@ -226,8 +226,6 @@ class LinknetNetwork(Fmi2Slave):
         self._shortest_link = anchor_jumps.shortest_links(scene.k1, scene.k2, scene.length,
                                                           self._layout.anchor_inputs)
         self._outputs_stale = self._linearization_stale = True
-        self._real[self._layout.Jrope_vr] = 0.0
-        self._real[self._layout.Jground_vr] = 0.0
 
     def _mark_anchor_inputs(self, vrs):
         """Note which anchors' P, V, A the value references `vrs` (an int array of inputs) set."""
@@ -660,6 +658,9 @@ class LinknetNetwork(Fmi2Slave):
         scene = self._scene0.with_parameters(mass=mass, length=self._real[lay.R_vr].copy(),
                                              gravity=self._real[lay.g_vr].copy())
         self._make_simulator(scene)
+        # a run that starts over has taken no step: no impulses (a restored state keeps those of its step)
+        self._real[lay.Jrope_vr] = 0.0
+        self._real[lay.Jground_vr] = 0.0
         self._broken = None  # parameters are applied before initialization ends: an earlier failure is gone
 
     @guarded(_false)
