@@ -326,8 +326,9 @@ def triangulated_net_corners(n=4, spacing=0.1, total_mass=1.0, fold=0.0, gravity
 def tilted_tower(width=1.0, storey=1.0, mass=1.0, tilt=(0.3, 0.2), braced_faces=(0, 1), name="tilted_tower") -> Scene:
     """braced_tower with one diagonal brace in ``braced_faces`` of the first storey's four side faces (face c joins
     corners c and c+1), gravity tilted by ``tilt`` = (g_x, g_y) / g. The braces stiffen the first storey against
-    sway in their planes, so the tilted load twists it while the top storey sways; in its motion the constraint
-    Jacobian loses rank (a new self-stress appears) where links come into line."""
+    sway in their planes, so the tilted load twists it while the top storey sways, and the storey below twists the
+    flat braced top square: rigid links hold that twist only at second order, with tensions that grow without bound
+    (benchmarks.degenerate_limit: with springs, the square's stretch stays 3.3e-8 at every stiffness)."""
     gx, gy = tilt
     g = 9.81
     gravity = [g * gx, g * gy, -g * math.sqrt(1.0 - gx * gx - gy * gy)]
@@ -343,8 +344,9 @@ def braced_panel_net(n=4, spacing=0.1, total_mass=1.0, fold_deg=60.0, tilt_deg=3
     """An n x n net with both diagonals in every cell (each cell a flat doubly braced square: a self-stress and a
     first-order twist out of its plane that is no finite motion, (27)), pinned at its corner n0_0, folded by
     ``fold_deg`` along the grid line x = spacing, the whole turned by ``tilt_deg`` about the x axis and spinning
-    rigidly about the pin at ``spin`` (rad/s). The true motion keeps every cell flat; the minimum-norm tensions give
-    the cells' twists no resistance (hypothesis (35) fails along them as soon as a velocity acquires one)."""
+    rigidly about the pin at ``spin`` (rad/s). The minimum-norm tensions give the cells' twists no resistance
+    (hypothesis (35) fails along them as soon as a velocity acquires one); the same net with stiff springs does not
+    converge as the stiffness grows (benchmarks.degenerate_limit), so the rigid model has no bounded-tension motion."""
     a, t = math.radians(fold_deg), math.radians(tilt_deg)
     pts = []
     for i in range(n):

@@ -35,10 +35,17 @@ DENSE_RIGIDITY_LIMIT = DENSE_RANK_LIMIT  # links (the SVD of C costs ~L (3 K_fre
 BLOCKED = 1e-6
 # A link is in a self-stress's support when it carries at least this share of its largest tension.
 SHARE = 1e-6
+# ... and is named in its description when it carries at least this share: away from the exact singular
+# configuration a near-self-stress keeps small components on the links around it (a flat braced top square on four
+# legs that have tilted by 1e-5 rad: 1.9e-5 on each leg), which say nothing about where the lengths cannot be met.
+NAMED_SHARE = 1e-3
 LOCALISE_LIMIT = 400  # links: above it, self-stresses are localised by an echelon form instead of linear programmes
 MOVED = 1e-2  # a mass moves with a flex when it holds at least this share of the flex's largest displacement
 COLLINEAR = 1e-9  # |E_l x E_l'| below this: the links lie on one line
 COPLANAR = 1e-9  # smallest singular value of the centred masses over the largest below this: one plane
+# ... below this, nearly one plane: a near-self-stress at a failure's start (a flat cell a run has pushed 2e-5 of its
+# size out of its plane) is described as the panel it is
+NEARLY_FLAT = 1e-3
 
 
 @dataclass(frozen=True)
@@ -99,8 +106,9 @@ def second_order_rigid_flexes(scene: Scene, X: np.ndarray | None = None) -> list
         p = span[int(np.argmax(ratios[blocked]))]
         size = np.linalg.norm(np.sqrt(np.sum(span ** 2, axis=0)), axis=1)
         moved = np.flatnonzero(size >= MOVED * size.max())
+        named = support[np.abs(omega[support]) >= NAMED_SHARE * np.abs(omega).max()]
         found.append(BlockedFlex(links=support, masses=moved, stress=omega, flex=p, span=span,
-                                 blocking=float(ratios[i]), description=_describe(scene, X, support, moved)))
+                                 blocking=float(ratios[i]), description=_describe(scene, X, named, moved)))
     return found
 
 
@@ -177,12 +185,13 @@ def _describe(scene: Scene, X: np.ndarray, links: np.ndarray, moved: np.ndarray)
                 "first order, which only stretching the string could allow (held at second order only)")
     centred = X[masses] - X[masses].mean(axis=0)
     sv = np.linalg.svd(centred, compute_uv=False)
-    if sv.size == 3 and sv[2] <= COPLANAR * sv[0]:
+    if sv.size == 3 and sv[2] <= NEARLY_FLAT * sv[0]:
         panel = "doubly braced panel" if masses.size == 4 and links.size == 6 else "braced panel"
         motion = "twist" if masses.size == 4 else "bend"
-        return (f"the {panel} of masses {_names(scene, masses)} (links {_link_list(links)}) is flat: it can {motion} "
-                f"out of its plane to first order (moving {moved_names}), which only stretching its links could "
-                "allow (held at second order only)")
+        flat = "flat" if sv[2] <= COPLANAR * sv[0] else f"nearly flat ({sv[2]:.2g} m out of its plane)"
+        return (f"the {panel} of masses {_names(scene, masses)} (links {_link_list(links)}) is {flat}: it can "
+                f"{motion} out of its plane to first order (moving {moved_names}), which only stretching its links "
+                "could allow (held at second order only)")
     return (f"the self-stress over links {_link_list(links)} blocks a first-order flex of {moved_names} at second "
             "order only (the flex would stretch those links)")
 
