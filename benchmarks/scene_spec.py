@@ -2,7 +2,9 @@
 
 Peers (OpenMM, Exudyn, MuJoCo, ASE, the scipy baselines) must not depend on linknet_core, so each adapter
 reads this flat record: K masses (positions, velocities, masses, anchored flags), L links (k1, k2, R, 0-based)
-and a uniform gravity vector. It is built either from the scene JSON format (``from_dict``) or from a
+and a uniform gravity vector; which links are ropes (they pull, never push, and go slack; docs/ropes.md) with their
+restitution, and the ground plane if there is one (the scene file's entry), for the adapters that model them and
+so that the others can refuse them. It is built either from the scene JSON format (``from_dict``) or from a
 ``linknet_core.Scene`` (``from_core``); both give the same record for the same file.
 """
 from __future__ import annotations
@@ -28,6 +30,20 @@ class SceneSpec:
     gravity: np.ndarray   # (3,)
     # driven anchors: (mass index, the scene file's motion dict), their motion prescribed (fixed is True on them)
     motions: tuple = ()
+    rope: np.ndarray | None = None          # (L,) bool: the link is a rope, else a rod (all rods when None)
+    restitution: np.ndarray | None = None   # (L,) Newton's restitution of a rope coming taut (0 on rods)
+    ground: dict | None = None              # the scene file's "ground" entry (point, normal, restitution, friction)
+
+    def __post_init__(self):
+        if self.rope is None:
+            object.__setattr__(self, "rope", np.zeros(len(self.length), bool))
+        if self.restitution is None:
+            object.__setattr__(self, "restitution", np.zeros(len(self.length)))
+
+    @property
+    def unilateral(self) -> bool:
+        """Ropes or a ground: constraints that act one way and switch on and off."""
+        return bool(np.any(self.rope)) or self.ground is not None
 
     @property
     def K(self) -> int:
@@ -74,31 +90,41 @@ class SceneSpec:
                            for l, a, b in zip(links, k1, k2)])
         g = np.array(d.get("gravity", [0.0, 0.0, -9.81]), dtype=float)
         motions = tuple((i, dict(m["motion"])) for i, m in enumerate(masses) if m.get("driven"))
-        return cls(d.get("name", "scene"), names, mass, fixed, X0, U0, k1, k2, length, g, motions)
+        rope = np.array([l.get("kind", "rod") == "rope" for l in links], bool)
+        restitution = np.array([float(l.get("restitution", 0.0)) for l in links])
+        return cls(d.get("name", "scene"), names, mass, fixed, X0, U0, k1, k2, length, g, motions, rope, restitution,
+                   dict(d["ground"]) if d.get("ground") else None)
 
     @classmethod
     def from_core(cls, scene) -> "SceneSpec":
         """From a linknet_core.Scene (the public attributes of docs/architecture.md)."""
         fixed = np.asarray(scene.fixed, dtype=bool)
-        masses = scene.to_dict()["masses"]  # the scene file's motions, not linknet's tables of them
-        motions = tuple((i, dict(m["motion"])) for i, m in enumerate(masses) if m.get("driven"))
+        as_file = scene.to_dict()   # the scene file's motions and ground, not linknet's tables of them
+        motions = tuple((i, dict(m["motion"])) for i, m in enumerate(as_file["masses"]) if m.get("driven"))
         U0 = np.array(scene.U0, dtype=float)
         U0[fixed] = 0.0
         return cls(getattr(scene, "name", "scene"), tuple(scene.mass_names),
                    np.array(scene.mass, dtype=float), fixed, np.array(scene.X0, dtype=float), U0,
                    np.array(scene.k1, dtype=np.int64), np.array(scene.k2, dtype=np.int64),
-                   np.array(scene.length, dtype=float), np.array(scene.gravity, dtype=float), motions)
+                   np.array(scene.length, dtype=float), np.array(scene.gravity, dtype=float), motions,
+                   np.array(getattr(scene, "rope", np.zeros(len(scene.length), bool)), dtype=bool),
+                   np.array(getattr(scene, "restitution", np.zeros(len(scene.length))), dtype=float),
+                   dict(as_file["ground"]) if as_file.get("ground") else None)
 
     def to_dict(self) -> dict:
-        return {
+        out = {
             "name": self.name,
             "gravity": self.gravity.tolist(),
             "masses": [{"name": n, "mass": (1.0 if f else float(m)), "position": x.tolist(),
                         "velocity": u.tolist(), "fixed": bool(f)}
                        for n, m, f, x, u in zip(self.mass_names, self.mass, self.fixed, self.X0, self.U0)],
-            "links": [{"a": int(a) + 1, "b": int(b) + 1, "length": float(r)}
-                      for a, b, r in zip(self.k1, self.k2, self.length)],
+            "links": [{"a": int(a) + 1, "b": int(b) + 1, "length": float(r),
+                       **({"kind": "rope", "restitution": float(e)} if rope else {})}
+                      for a, b, r, rope, e in zip(self.k1, self.k2, self.length, self.rope, self.restitution)],
         }
+        if self.ground is not None:
+            out["ground"] = dict(self.ground)
+        return out
 
     def digest(self) -> str:
         """Content hash (not the name): a cached reference is reused only for the very same scene."""
@@ -108,6 +134,10 @@ class SceneSpec:
             h.update(np.ascontiguousarray(a).tobytes())
         if self.motions:  # a scene without driven anchors keeps the digest its cached references were made with
             h.update(json.dumps(self.motions, sort_keys=True).encode())
+        if self.unilateral:  # likewise a scene of rods only
+            for a in (self.rope.astype(np.int8), self.restitution):
+                h.update(np.ascontiguousarray(a).tobytes())
+            h.update(json.dumps(self.ground, sort_keys=True).encode())
         return h.hexdigest()[:16]
 
     # ------------------------------------------------------------------ diagnostics shared by all methods
@@ -126,11 +156,12 @@ class SceneSpec:
         return float(ke + np.sum(self.mass[f]) * np.linalg.norm(self.gravity) * D) or 1.0
 
     def constraint_residual(self, X: np.ndarray) -> float:
-        """max_l | |X_k2 - X_k1| / R_l - 1 |  (relative violation of (11))."""
+        """max_l | |X_k2 - X_k1| / R_l - 1 |  (relative violation of (11)); a rope violates its constraint only
+        where it is longer than R_l (a slack rope is shorter)."""
         if self.L == 0:
             return 0.0
-        d = np.linalg.norm(X[self.k2] - X[self.k1], axis=1)
-        return float(np.max(np.abs(d / self.length - 1.0)))
+        strain = np.linalg.norm(X[self.k2] - X[self.k1], axis=1) / self.length - 1.0
+        return float(np.max(np.where(self.rope, np.maximum(strain, 0.0), np.abs(strain))))
 
 
 def load_json(path) -> SceneSpec:

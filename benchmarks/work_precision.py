@@ -58,8 +58,11 @@ LEVELS = (1e-3, 1e-6, 1e-9)
 SCENES = {
     "pendulum": 2.0, "double_pendulum": 2.0, "chain_10": 2.0, "chain_100": 1.0, "chain_1000": 1.0,
     "net_10x10": 0.25, "four_bar": 2.0, "spinning_tetrahedron": 2.0, "redundant_truss": 2.0,
-    "braced_tower": 0.7, "triangulated_net": 0.5,
+    "braced_tower": 0.7, "triangulated_net": 0.5, "rope_swing": 2.0, "rope_pendulum": 2.0,
 }
+# rope_swing and rope_pendulum (models/ropes/): run by linknet on its numpy reference path, refused by the peers
+# that model rods only, referenced by benchmarks.rope_reference; MoorDyn is their peer where its lines have a rigid
+# limit (rope_swing)
 SCENE_NOTES = {
     "braced_tower": "t_end 0.7 s, not the DefaultExperiment's 2 s: between 0.7 and 0.8 s the tower passes near a "
                     "singular configuration (at 0.8 s the two smallest nonzero eigenvalues of A are 8e-6 of the "
@@ -70,11 +73,23 @@ SCENE_NOTES = {
                         "enforce (11), leaves it faster from about 0.5 s (its relative residual at rtol 1e-12: "
                         "7.5e-13 at 0.5 s, 2.8e-11 at 0.6 s, 1.4e-10 at 0.8 s); whether its two tolerances still "
                         "agree to 1e-12 m beyond 0.5 s was not measured",
+    "rope_swing": "a bob on a perfectly elastic rope (restitution 1): a pendulum until the rope goes slack at "
+                  "0.495 s, then flights ended by five elastic jerks. The reference is event-driven "
+                  "(benchmarks/rope_reference.py: the index-1 right-hand side between the events, scipy's event "
+                  "location, the impacts' impulses by enumeration of the active sets). Linknet runs it on its numpy "
+                  "reference path (the native core does not take ropes), far slower a step than the native core; "
+                  "the peers that model rods only cannot run it. MoorDyn's lines are "
+                  "elastic: one row per stiffness EA (docs/benchmarks/rope_peer.md)",
+    "rope_pendulum": "a bob on an inelastic rope (restitution 0) thrown up and out: flight, jerk, pendulum, slack "
+                     "above the pivot, flight, jerk; reference as rope_swing's; energy is lost at each jerk (the "
+                     "energy-drift column is that loss). No peer here models an inelastic rope: MoorDyn's undamped "
+                     "line tends to restitution 1, and its internal damping acts on slack segments too",
 }
 # Not braced_tower (1 s in --quick): yoshida8 reaches 1.5e-11 m at its second quick step, below where the quick test
 # measures orders, so it would have no order to check; the redundant scenes in motion are checked against the same
 # reference with every method by tests/core/test_redundant_motion.py.
-QUICK_SCENES = ("pendulum", "double_pendulum", "four_bar", "spinning_tetrahedron", "chain_10")
+# rope_swing: the rope events through every method (~5 s on the numpy path), and MoorDyn where it imports.
+QUICK_SCENES = ("pendulum", "double_pendulum", "four_bar", "spinning_tetrahedron", "chain_10", "rope_swing")
 
 # knob sweeps, coarse to fine. Fixed steps as divisors of t_end so every run lands on t_end exactly.
 def full_dts(order):
@@ -132,6 +147,8 @@ def load_benchmark_scene(name: str) -> SceneSpec:
     except Exception:
         ln = None
     path = MODELS / f"{name}.json"
+    if not path.exists() and (MODELS / "ropes" / f"{name}.json").exists():
+        path = MODELS / "ropes" / f"{name}.json"
     if path.exists():
         spec = SceneSpec.from_core(ln.load_scene(path)) if ln is not None else load_json(path)
         return spec if spec.name == name else _renamed(spec, name)
@@ -162,6 +179,7 @@ def all_methods(quick: bool):
     from .peers.ase_peer import ASEVelocityVerlet
     from .peers.exudyn_peer import ExudynGenAlpha
     from .peers.linknet_methods import LinknetMethod, linknet_method_names
+    from .peers.moordyn_peer import MoorDynLine
     from .peers.mujoco_peer import MujocoRK4
     from .peers.openmm_peer import OpenMMVerlet
     from .peers.scipy_baseline import ScipyIVP
@@ -173,7 +191,24 @@ def all_methods(quick: bool):
     methods += [ExudynGenAlpha(), MujocoRK4()]
     if not quick:   # ASE's link-by-link Python RATTLE needs ~3 ms per step even on a pendulum
         methods += [ASEVelocityVerlet()]
+    # MoorDyn's elastic lines on the rope scenes, one row per stiffness (the model's error falls with EA, the cost
+    # of a stable step grows with sqrt(EA)); unavailable, with the reason, where moordyn does not import
+    methods += [MoorDynLine(EA) for EA in MOORDYN_EA_QUICK if quick] + [MoorDynLine(EA) for EA in MOORDYN_EA
+                                                                       if not quick]
     return methods
+
+
+MOORDYN_EA = (1e6, 1e8, 1e10, 1e12)   # N, on rope_swing's 1 m rope and 1 kg bob: stretch 3.5e-5 .. 3.5e-11 m
+MOORDYN_EA_QUICK = (1e6,)
+
+
+def _check_models(method, spec):
+    """Refuse a scene with ropes or a ground for a method that models rods only (every peer but MoorDyn), then the
+    method's own checks."""
+    if spec.unilateral and not (method.family == "linknet" or getattr(method, "models_ropes", False)):
+        what = "ropes" if spec.rope.any() else "a ground"
+        raise Unsupported(f"the scene has {what} (links that go slack); {method.name} models rigid rods only")
+    method.check_scene(spec)
 
 
 # ------------------------------------------------------------------------------------------------ runs
@@ -218,10 +253,12 @@ def sweep(method, spec, t_end, ref, *, quick: bool, budget: Budget, runner, log=
     rows = []
     t_sweep = time.perf_counter()
     try:
-        method.check_scene(spec)
+        _check_models(method, spec)
     except Unsupported as e:
         return [{"status": "unsupported", "message": str(e)}], {"wall_seconds": 0.0, "stop": "unsupported"}
-    if method.knob == "dt":
+    if hasattr(method, "knobs"):   # a method whose useful steps depend on the scene (MoorDyn: its stability limit)
+        knobs = method.knobs(spec, quick)
+    elif method.knob == "dt":
         knobs = quick_dts(method.order or 2) if quick else full_dts(method.order or 2)
     else:
         knobs = QUICK_RTOL if quick else FULL_RTOL
@@ -316,6 +353,11 @@ def sweep(method, spec, t_end, ref, *, quick: bool, budget: Budget, runner, log=
         if not below_floor and len(errs) >= 3 and errs[-1] > errs[-2] > errs[-3] and errs[-3] < 1e-6:
             stop = "round-off: the error grew three times in a row"   # finer settings only add error
             break
+        if getattr(method, "model_error", False) and len(errs) >= 4 and min(errs[-3:]) > 0.5 * min(errs[:-3]):
+            # a model that differs from the scene's (an elastic line for a rigid rope): a finer step buys nothing
+            stop = (f"the model's error: three finer settings gained less than a factor 2 (best "
+                    f"{min(errs):.2g} m)")
+            break
     if skip_from is not None:
         rows += [{"knob": method.knob, "value": k, "status": "skipped", "message": skip_why}
                  for k in knobs[skip_from:]]
@@ -349,7 +391,7 @@ def summarize(scene_result):
 # ------------------------------------------------------------------------------------------------ report
 def _versions():
     v = {"python": sys.version.split()[0]}
-    for mod in ("numpy", "scipy", "numba", "openmm", "exudyn", "mujoco", "ase", "matplotlib"):
+    for mod in ("numpy", "scipy", "numba", "openmm", "exudyn", "mujoco", "ase", "moordyn", "matplotlib"):
         try:
             v[mod] = __import__(mod).__version__
         except Exception:
@@ -554,6 +596,14 @@ PEER_NOTES = [
     "ASE VelocityVerlet + FixBondLengths (RATTLE, link-by-link Python loop, tolerance 1e-13); anchored masses "
     "of mass 1e20. Its link-by-link sweeps converge with redundant links too (braced_tower: the errors of "
     "linknet-rattle to four digits) but slowly there, ~0.1 s a step; not run above 24 links (triangulated_net).",
+    "MoorDyn (MoorDyn-C 2.7 through `pip install moordyn`), on the rope scenes only: every rope a line of one "
+    "undamped segment of stiffness EA, every mass a point, no water (density 0), RK4 at a fixed dtM from just "
+    "inside its stability limit 2/omega down; the initial velocities through MoorDyn's state file (LoadState) and "
+    "ropes taut at the start pre-stretched by T R / EA. An elastic line that cannot push: its error is the "
+    "model's (the stretch, ~1/EA; each jerk lasting pi sqrt(m R / EA), ~1/sqrt(EA)) plus the step's, so each EA "
+    "is a row and its sweep ends where the error levels off. Its undamped limit is a rope of restitution 1; its "
+    "internal damping acts on slack segments too, so no MoorDyn line tends to an inelastic rope (rope_pendulum). "
+    "docs/benchmarks/rope_peer.md.",
 ]
 
 
@@ -629,6 +679,8 @@ def main(argv=None):
                                                   "energy_drift", "seconds", "steps")}, "methods": dict(kept)}
         sres["reference"] = {k: (v.item() if hasattr(v, "item") else v) for k, v in sres["reference"].items()}
         for m in methods:
+            if getattr(m, "ropes_only", False) and not spec.unilateral:
+                continue   # a rope model (MoorDyn's lines) has no row on the scenes of rods
             try:
                 runs, summary = sweep(m, spec, t_end, ref, quick=quick, budget=budget, runner=runner)
             except Exception as e:   # never lose the other methods' results to one adapter's bug

@@ -1,0 +1,251 @@
+"""Event-driven reference for scenes with ropes, independent of linknet_core.
+
+A rope keeps |X_k2 - X_k1| <= R with a tension T >= 0 (docs/ropes.md states the model). Between events the taut
+ropes are rods: the motion is the index-1 formulation of benchmarks.index1 (written from the seed) for the rods and
+the taut ropes, integrated by scipy's DOP853, with scipy's event location (root find on the dense output) for
+
+* a slack rope reaching its length: R^2 - |X_k2 - X_k1|^2 falling through 0, an impact;
+* a taut rope's tension falling through 0: it goes slack.
+
+Which of the ropes at their length carry tension, and which impulses an impact gives, are linear complementarity
+problems; this reference solves them by enumerating the active sets (written here, not linknet's pivoting) and
+takes the one that satisfies every condition:
+
+* tensions:  T_i >= 0 on the active ropes, and on the inactive ones at their length the length does not grow,
+  d^2|d_i|/dt^2 <= 0 (with d|d_i|/dt = 0);
+* impulses (Newton's restitution on the rate of length s = d|d|/dt, M dU = -C^T Lambda):  Lambda_i >= 0 and
+  s_i(after) <= -e_i max(s_i(before), 0), with equality where Lambda_i > 0; rods take s(after) = 0.
+
+The reference refuses (ScopeError) what it does not resolve: a ground, driven anchors, an active-set problem with
+no or several admissible solutions, more than ``MAX_ENUMERATED`` ropes at their length at once.
+"""
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import replace
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from .index1 import Index1System
+from .scene_spec import SceneSpec
+
+MAX_ENUMERATED = 10
+MAX_EVENTS = 10_000
+
+
+class ScopeError(RuntimeError):
+    """The scene leaves what this reference resolves (the message says where and why)."""
+
+
+def _rate(X, U, k1, k2):
+    """Unit directions E (X_k2 - X_k1 normalised) and the rates of length s = E . (U_k2 - U_k1)."""
+    d = X[k2] - X[k1]
+    E = d / np.linalg.norm(d, axis=1)[:, None]
+    return E, np.einsum("ij,ij->i", E, U[k2] - U[k1])
+
+
+class RopeReference:
+    """One run of a rope scene from its initial state, event by event."""
+
+    def __init__(self, spec: SceneSpec, rtol: float, atol: float | None = None, time_tol: float = 1e-12):
+        if spec.ground is not None:
+            raise ScopeError(f"{spec.name}: the rope reference does not model a ground")
+        if spec.motions:
+            raise ScopeError(f"{spec.name}: the rope reference does not model driven anchors")
+        self.spec, self.rtol = spec, rtol
+        self.atol = rtol * 1e-3 if atol is None else atol
+        self.rods = np.flatnonzero(~spec.rope)
+        self.ropes = np.flatnonzero(spec.rope)
+        self.invm = spec.inv_mass
+        self.touch_tol = 1e3 * rtol          # a rope is at its length within this relative gap
+        self.time_tol = time_tol
+        self.events: list[tuple[float, str, int, float]] = []   # (t, 'taut' | 'slack', link, impulse)
+        self.steps = 0
+
+    # ------------------------------------------------------------------ one mode's system
+    def _system(self, links, X):
+        """The index-1 system of the rods and the given taut ropes, at the current positions (its redundancy test
+        looks at them)."""
+        sub = replace(self.spec, X0=X, k1=self.spec.k1[links], k2=self.spec.k2[links], length=self.spec.length[links],
+                      rope=np.zeros(len(links), bool), restitution=np.zeros(len(links)), ground=None)
+        return Index1System(sub)
+
+    def _mode_links(self, taut):
+        return np.sort(np.concatenate([self.rods, self.ropes[taut]])).astype(np.int64)
+
+    def _at_length(self, X):
+        d = np.linalg.norm(X[self.spec.k2[self.ropes]] - X[self.spec.k1[self.ropes]], axis=1)
+        return d >= self.spec.length[self.ropes] * (1.0 - self.touch_tol)
+
+    # ------------------------------------------------------------------ tensions: which ropes carry force
+    def _choose_taut(self, X, U, touching):
+        """The active set among the touching ropes (at their length, not separating) that satisfies the tension
+        conditions; every subset is tried."""
+        cand = np.flatnonzero(touching)
+        if len(cand) > MAX_ENUMERATED:
+            raise ScopeError(f"{len(cand)} ropes at their length at once (more than {MAX_ENUMERATED})")
+        spec = self.spec
+        admissible = []
+        for size in range(len(cand), -1, -1):
+            for subset in itertools.combinations(cand, size):
+                taut = np.zeros(len(self.ropes), bool)
+                taut[list(subset)] = True
+                links = self._mode_links(taut)
+                acc, T = self._system(links, X).accelerations(X, U)
+                scale = max(1.0, float(np.abs(T).max(initial=0.0)))
+                tension = dict(zip(links, T))
+                if any(tension[self.ropes[i]] < -1e-9 * scale for i in subset):
+                    continue
+                ok = True
+                for i in set(cand) - set(subset):
+                    l = self.ropes[i]
+                    k1, k2 = spec.k1[l], spec.k2[l]
+                    d, v = X[k2] - X[k1], U[k2] - U[k1]
+                    r = np.linalg.norm(d)
+                    # d^2|d|/dt^2 at a rate of length 0: (d . a + |v|^2 - s^2) / |d|
+                    s = d @ v / r
+                    length_acc = (d @ (acc[k2] - acc[k1]) + v @ v - s * s) / r
+                    if length_acc > 1e-9 * max(1.0, np.linalg.norm(spec.gravity)):
+                        ok = False
+                        break
+                if ok:
+                    admissible.append(taut)
+        if len(admissible) != 1:
+            raise ScopeError(f"{len(admissible)} admissible sets of taut ropes among {len(cand)} at their length")
+        return admissible[0]
+
+    # ------------------------------------------------------------------ impacts
+    def _impact(self, X, U, arriving):
+        """Velocities after the impact of the rope ``arriving`` (index into self.ropes) with the ropes at their length
+        and the rods; returns (U after, {rope index: impulse})."""
+        spec = self.spec
+        at_length = self._at_length(X)
+        at_length[arriving] = True
+        k1, k2 = spec.k1, spec.k2
+        cand = [i for i in np.flatnonzero(at_length)]
+        if len(cand) > MAX_ENUMERATED:
+            raise ScopeError(f"{len(cand)} ropes at their length at an impact (more than {MAX_ENUMERATED})")
+        links_all = np.concatenate([self.rods, self.ropes[cand]]).astype(np.int64)
+        E, s_before = _rate(X, U, k1[links_all], k2[links_all])
+        n_rod = len(self.rods)
+        e = np.concatenate([np.zeros(n_rod), spec.restitution[self.ropes[cand]]])
+        # rates wanted after the impact: rods 0, ropes -e max(s, 0) where they take an impulse
+        target = -e * np.maximum(s_before, 0.0)
+        target[:n_rod] = 0.0
+        # W = C M^-1 C^T for the rows of C: +E at k2, -E at k1 (s = C U)
+        inv = self.invm
+        c1, c2 = k1[links_all], k2[links_all]
+        W = ((inv[c1] + inv[c2])[:, None] * np.eye(len(links_all))) * np.einsum("ij,ij->i", E, E)[:, None]
+        for a in range(len(links_all)):
+            for b in range(len(links_all)):
+                if a == b:
+                    continue
+                w = 0.0
+                for ka, sa in ((c1[a], -1.0), (c2[a], 1.0)):
+                    for kb, sb in ((c1[b], -1.0), (c2[b], 1.0)):
+                        if ka == kb:
+                            w += sa * sb * inv[ka] * (E[a] @ E[b])
+                W[a, b] = w
+        admissible = []
+        rope_rows = np.arange(n_rod, len(links_all))
+        for size in range(len(rope_rows), -1, -1):
+            for subset in itertools.combinations(rope_rows, size):
+                rows = np.concatenate([np.arange(n_rod), np.array(subset, int)]).astype(int)
+                Lam = np.zeros(len(links_all))
+                if len(rows):
+                    # M dU = -C^T Lambda  =>  s_after = s_before - W Lambda
+                    Lam[rows] = np.linalg.lstsq(W[np.ix_(rows, rows)], s_before[rows] - target[rows], rcond=1e-12)[0]
+                s_after = s_before - W @ Lam
+                scale = max(1e-12, float(np.abs(s_before).max()))
+                if any(Lam[r] < -1e-9 * scale * max(1.0, W[r, r] ** -1) for r in subset):
+                    continue
+                free_rows = [r for r in rope_rows if r not in subset]
+                if any(s_after[r] > target[r] + 1e-9 * scale for r in free_rows):
+                    continue
+                admissible.append((Lam, s_after))
+        if len(admissible) != 1:
+            raise ScopeError(f"{len(admissible)} admissible impulse sets at an impact of {len(cand)} ropes")
+        Lam, s_after = admissible[0]
+        dU = np.zeros_like(U)
+        for j, (a, b) in enumerate(zip(c1, c2)):
+            dU[a] += inv[a] * Lam[j] * E[j]
+            dU[b] -= inv[b] * Lam[j] * E[j]
+        U = U + dU
+        impulses = {cand[j - n_rod]: float(Lam[j]) for j in rope_rows}
+        return U, impulses, s_after[n_rod:]
+
+    # ------------------------------------------------------------------ the run
+    def run(self, t_end: float):
+        spec = self.spec
+        X, U = spec.X0.astype(float).copy(), spec.U0.astype(float).copy()
+        t = 0.0
+        _, s = _rate(X, U, spec.k1[self.ropes], spec.k2[self.ropes])
+        taut = self._choose_taut(X, U, self._at_length(X) & (np.abs(s) <= self.touch_tol * max(1.0, np.abs(U).max())))
+        k1, k2, R = spec.k1, spec.k2, spec.length
+        while t < t_end:
+            if len(self.events) > MAX_EVENTS:
+                raise ScopeError(f"more than {MAX_EVENTS} events before t = {t_end}")
+            links = self._mode_links(taut)
+            system = self._system(links, X)
+            where = {l: j for j, l in enumerate(links)}
+            K = spec.K
+            functions, meaning = [], []
+            for i, l in enumerate(self.ropes):
+                if taut[i]:
+                    def tension(_t, y, j=where[l]):
+                        Xy, Uy = y[:3 * K].reshape(K, 3), y[3 * K:].reshape(K, 3)
+                        return system.tensions(Xy, Uy)[j]
+                    fn = tension
+                    meaning.append(("slack", i))
+                else:
+                    def gap(_t, y, a=k1[l], b=k2[l], r=R[l]):
+                        d = y[3 * b:3 * b + 3] - y[3 * a:3 * a + 3]
+                        return r * r - d @ d
+                    fn = gap
+                    meaning.append(("taut", i))
+                fn.terminal, fn.direction = True, -1
+                functions.append(fn)
+            y0 = np.concatenate([X.ravel(), U.ravel()])
+            sol = solve_ivp(system.rhs, (t, t_end), y0, method="DOP853", rtol=self.rtol, atol=self.atol,
+                            events=functions or None)
+            if sol.status == -1:
+                raise RuntimeError(f"rope reference for {spec.name} failed at t = {t}: {sol.message}")
+            self.steps += len(sol.t) - 1
+            fired = [j for j, te in enumerate(sol.t_events or []) if len(te)]
+            if sol.status == 0 or not fired:
+                X, U = system.split(sol.y[:, -1])
+                t = t_end
+                break
+            t_ev = min(sol.t_events[j][0] for j in fired)
+            first = [j for j in fired if sol.t_events[j][0] <= t_ev + self.time_tol]
+            if len(first) > 1:
+                raise ScopeError(f"{len(first)} events within {self.time_tol:g} s at t = {t_ev}")
+            j = first[0]
+            X, U = system.split(sol.y_events[j][0])
+            t = t_ev
+            kind, i = meaning[j]
+            if kind == "slack":
+                taut[i] = False
+                self.events.append((t, "slack", int(self.ropes[i]), 0.0))
+                continue
+            U, impulses, s_after = self._impact(X, U, i)
+            self.events.append((t, "taut", int(self.ropes[i]), impulses.get(i, 0.0)))
+            at = self._at_length(X)
+            at[i] = True
+            scale = max(1e-12, float(np.abs(s_after).max(initial=0.0)))
+            touching = np.zeros(len(self.ropes), bool)
+            for n, c in enumerate(sorted(impulses)):
+                # a rope left at rate 0 touches; one separating (a rebound) is slack
+                touching[c] = at[c] and abs(s_after[n]) <= 1e-9 * scale
+            taut = self._choose_taut(X, U, touching)
+        return X, U
+
+
+def solve_ropes(spec: SceneSpec, t_end: float, rtol: float, atol: float | None = None):
+    """The scene's state at t_end by the event-driven reference: (X, U, seconds, steps, events)."""
+    t0 = time.perf_counter()
+    ref = RopeReference(spec, rtol, atol)
+    X, U = ref.run(t_end)
+    return X, U, time.perf_counter() - t0, ref.steps, ref.events
