@@ -6,25 +6,21 @@
  *       (a file: URI of the unzipped FMU's resources folder, where the FMU reads its scene); without it, the
  *       resources folder of the FMU LIBRARY lies in (LIBRARY is <FMU>/binaries/<platform>/<ID>.so)
  *
- * Exit codes: 0 ok, 2 usage, 3 load error (dlerror on stderr), 4 an FMI call failed.
+ * Exit codes: 0 ok, 2 usage, 3 load error (dlerror on stderr), 4 an FMI call failed. The binary and its functions are
+ * loaded by tests/c_host/fmi2_host_api.h (fmi2_host_load), the FMI types are fmu_src/native/fmi2_api.h's.
  */
 #define _POSIX_C_SOURCE 200809L
-#include <dlfcn.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-typedef void *(*instantiate_t)(const char *, int, const char *, const char *, const void *, int, int);
-typedef int (*component_t)(void *);
-typedef int (*setup_t)(void *, int, double, double, int, double);
-typedef int (*do_step_t)(void *, double, double, int);
-typedef int (*get_real_t)(void *, const unsigned *, size_t, double *);
-typedef void (*free_t)(void *);
+#include "../c_host/fmi2_host_api.h"
 
-static void logger(void *env, const char *instance, int status, const char *category, const char *message, ...)
+static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status, fmi2String category,
+                   fmi2String message, ...)
 {
     (void)env, (void)instance, (void)category;
-    fprintf(stderr, "log %d: %s\n", status, message);
+    fprintf(stderr, "log %d: %s\n", (int)status, message);
 }
 
 int main(int argc, char **argv)
@@ -41,40 +37,21 @@ int main(int argc, char **argv)
         char *binaries = strstr(resources, "/binaries/");
         if (binaries) strcpy(binaries, "/resources");
     }
-    void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
-    if (!lib) {
-        fprintf(stderr, "dlopen failed: %s\n", dlerror());
-        return 3;
-    }
-    instantiate_t instantiate;
-    component_t enter, leave;
-    setup_t setup;
-    do_step_t do_step;
-    get_real_t get_real;
-    free_t free_instance;
-    *(void **)&instantiate = dlsym(lib, "fmi2Instantiate");
-    *(void **)&setup = dlsym(lib, "fmi2SetupExperiment");
-    *(void **)&enter = dlsym(lib, "fmi2EnterInitializationMode");
-    *(void **)&leave = dlsym(lib, "fmi2ExitInitializationMode");
-    *(void **)&do_step = dlsym(lib, "fmi2DoStep");
-    *(void **)&get_real = dlsym(lib, "fmi2GetReal");
-    *(void **)&free_instance = dlsym(lib, "fmi2FreeInstance");
-    if (!instantiate || !setup || !enter || !leave || !do_step || !get_real || !free_instance) {
-        fprintf(stderr, "missing an fmi2 function\n");
-        return 3;
-    }
-    struct { void *logger, *allocate, *free, *step_finished, *env; } callbacks = {(void *)logger, (void *)calloc,
-                                                                               (void *)free, NULL, NULL};
-    void *c = instantiate(argv[2], 1, argv[3], resources, &callbacks, 0, 0);
+    fmi2_host F;
+    fmi2_host_load(&F, argv[1], resources);
+    const fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
+    fmi2Component c = F.Instantiate(argv[2], fmi2CoSimulation, argv[3], F.resources, &callbacks, fmi2False, fmi2False);
     const int n = atoi(argv[4]);
     const double h = strtod(argv[5], NULL);
-    const unsigned vr = (unsigned)strtoul(argv[6], NULL, 10);
-    if (!c || setup(c, 0, 0.0, 0.0, 0, 0.0) || enter(c) || leave(c)) return 4;
+    const fmi2ValueReference vr = (fmi2ValueReference)strtoul(argv[6], NULL, 10);
+    if (!c || F.SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) != fmi2OK
+        || F.EnterInitializationMode(c) != fmi2OK || F.ExitInitializationMode(c) != fmi2OK)
+        return 4;
     for (int i = 0; i < n; i++) {
-        double value;
-        if (do_step(c, i * h, h, 1) || get_real(c, &vr, 1, &value)) return 4;
+        fmi2Real value;
+        if (F.DoStep(c, i * h, h, fmi2True) != fmi2OK || F.GetReal(c, &vr, 1, &value) != fmi2OK) return 4;
         printf("%a\n", value);
     }
-    free_instance(c);
+    F.FreeInstance(c);
     return 0;
 }
