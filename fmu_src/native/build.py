@@ -251,6 +251,51 @@ def _pointer_values(ptr, n: int, ctype):
     return np.ctypeslib.as_array(ctypes.cast(ptr, ctypes.POINTER(ctype)), (n,)).copy()
 
 
+@dataclass(frozen=True)
+class VariableFamily:
+    """A family of the Layout's Real variables (fmu_src/linknet_fmu/layout.py) that has the shape of an array: one
+    quantity of each of a list of masses (x, y, z columns, or one value each), of each link, or of each axis."""
+
+    name: str                   # the Layout's name of its variables (F of F[k,i]), the FMI 3.0 array's name
+    kind: str                   # its code's name in enum lnfmu_kind (lnfmu_scene.h): what the C side reads
+    vrs: str                    # the Layout's attribute of its value references: (rows, 3) or (rows,)
+    masses: str | None          # the Layout's attribute of the masses its rows are; None: links or axes, in order
+    among: str | None           # the rows the C side numbers them by: the mass's row in ln_model.fixed_idx ("fixed")
+    #                             or driven_idx ("driven"); None: the mass itself
+    description: str            # the whole family, as the FMI 3.0 array variable describes it
+
+
+_HELD = "held constant over each communication step"
+_MOTION = ("the anchor moves as P + V tau + A tau^2/2, tau from the communication point where they were set, until "
+           "they are set again")
+# in the Layout's order of value references
+VARIABLE_FAMILIES = (
+    VariableFamily("F", "F", "F_vr", "input_masses", None,
+                   f"external forces on the masses (N), columns x, y, z, {_HELD}"),
+    VariableFamily("P", "P", "P_vr", "anchor_inputs", "driven",
+                   f"positions of the input-driven anchors (m); {_MOTION}"),
+    VariableFamily("V", "V", "V_vr", "anchor_inputs", "driven",
+                   f"velocities of the input-driven anchors (m/s); {_MOTION}"),
+    VariableFamily("A", "A", "A_vr", "anchor_inputs", "driven",
+                   f"accelerations of the input-driven anchors (m/s2); {_MOTION}"),
+    VariableFamily("X", "X", "X_vr", "output_masses", None, "positions of the masses (m), columns x, y, z"),
+    VariableFamily("U", "U", "U_vr", "output_masses", None, "velocities of the masses (m/s), columns x, y, z"),
+    VariableFamily("T", "T", "T_vr", None, None, "tensions in the links (N), in the scene's link order; > 0 pulls the "
+                   "masses together; each depends directly on the inputs of its group of links"),
+    VariableFamily("Freact", "FREACT", "Freact_vr", "fixed_indices", "fixed",
+                   "forces the network exerts on the anchored masses (N)"),
+    VariableFamily("Jreact", "JREACT", "Jreact_vr", "driven_indices", "driven",
+                   "impulses the network gave the driven anchors at the start of the last communication step (N.s; a "
+                   "jump of a velocity input); 0 if none"),
+    VariableFamily("M", "M", "M_vr", "free_indices", None, "masses of the free masses (kg, > 0)"),
+    VariableFamily("R", "R", "R_vr", None, None, "lengths of the links (m, > 0; the initial positions must satisfy "
+                   "them), in the scene's link order"),
+    VariableFamily("g", "G", "g_vr", None, None, "gravitational acceleration (m/s2), x, y, z"),
+)
+# the Layout's single Real variables: the Layout's attribute of the value reference, the code's name in enum lnfmu_kind
+SCALAR_VARIABLES = (("error_estimate_vr", "ERROR_ESTIMATE"), ("tolerance_vr", "TOLERANCE"), ("step_vr", "STEP"))
+
+
 def variable_table(layout, model) -> tuple[np.ndarray, np.ndarray]:
     """(kind, index) of every Real variable by value reference (enum lnfmu_kind of lnfmu_scene.h: what the variable
     is, and its index into the model's arrays)."""
@@ -265,7 +310,6 @@ def variable_table(layout, model) -> tuple[np.ndarray, np.ndarray]:
         if values is not None:
             rows[values] = np.arange(n)
         row_of[name] = rows
-    axis = np.arange(3)
 
     def put(name, vrs, idx):
         vrs = np.asarray(vrs, np.int64)
@@ -273,26 +317,18 @@ def variable_table(layout, model) -> tuple[np.ndarray, np.ndarray]:
             kind[vrs.ravel()] = kinds[name]
             index[vrs.ravel()] = np.broadcast_to(np.asarray(idx, np.int64), vrs.shape).ravel()
 
-    def per_axis(rows):
-        return 3 * np.asarray(rows, np.int64).reshape(-1, 1) + axis
-
-    put("F", layout.F_vr, per_axis(layout.input_masses))
-    put("X", layout.X_vr, per_axis(layout.output_masses))
-    put("U", layout.U_vr, per_axis(layout.output_masses))
-    put("FREACT", layout.Freact_vr, per_axis(row_of["fixed"][np.asarray(layout.fixed_indices, np.int64)]))
-    # P, V, A, Jreact of a driven anchor: its row in the model's driven_idx (the data's drive_P, ..., impulse)
-    anchors = per_axis(row_of["driven"][np.asarray(layout.anchor_inputs, np.int64)])
-    put("P", layout.P_vr, anchors)
-    put("V", layout.V_vr, anchors)
-    put("A", layout.A_vr, anchors)
-    put("JREACT", layout.Jreact_vr, per_axis(row_of["driven"][np.asarray(layout.driven_indices, np.int64)]))
-    put("T", layout.T_vr, np.arange(len(layout.T_vr)))
-    put("M", layout.M_vr, layout.free_indices)
-    put("R", layout.R_vr, np.arange(len(layout.R_vr)))
-    put("G", layout.g_vr, axis[:len(layout.g_vr)])
-    put("ERROR_ESTIMATE", [layout.error_estimate_vr], [0])
-    put("TOLERANCE", [layout.tolerance_vr], [0])
-    put("STEP", [layout.step_vr], [0])
+    for family in VARIABLE_FAMILIES:
+        vrs = np.asarray(getattr(layout, family.vrs), np.int64)
+        if family.masses is None:  # links or axes, in order
+            rows = np.arange(vrs.shape[0], dtype=np.int64)
+        else:
+            rows = np.asarray(getattr(layout, family.masses), np.int64)
+            if family.among is not None:
+                rows = row_of[family.among][rows]
+        # a row of x, y, z columns is three entries of the C side's (rows, 3) array
+        put(family.kind, vrs, 3 * rows.reshape(-1, 1) + np.arange(3) if vrs.ndim == 2 else rows)
+    for attribute, name in SCALAR_VARIABLES:
+        put(name, [getattr(layout, attribute)], [0])
     if (kind < 0).any() or (index < 0).any():
         raise NativeBuildError("the layout's Real variables are not all mapped: teach fmu_src/native/build.py")
     return kind, index

@@ -4,10 +4,10 @@ The same model as the FMI 2.0 native FMU (fmu_src/native/build.py): the scene as
 build.scene_resource, the core and linknet_model.c through fmu_model.h, compiled once and cached by
 build.compile_binaries, with the FMI 3.0 glue (fmi3Functions.c, the standard's headers in fmi3/) in place of the FMI 2.0
 one. What differs is the variables: the Layout's scalars (fmu_src/linknet_fmu/layout.py, the one both FMI 2.0 FMUs
-use) grouped into FMI 3 array variables,
-X and U [masses with outputs,3], T [L], Freact [anchored,3], F [masses with inputs,3], P, V, A [input-driven
-anchors,3], Jreact [driven,3], M [free], R [L], g [3], with <Dimension> elements; a table of them
-(fmi3_variables.h) is added to the scene's resource.
+use) grouped into FMI 3 array variables, one per family the FMI 2.0 build defines (build.VARIABLE_FAMILIES): X and U
+[masses with outputs,3], T [L], Freact [anchored,3], F [masses with inputs,3], P, V, A [input-driven anchors,3],
+Jreact [driven,3], M [free], R [L], g [3], with <Dimension> elements; a table of them (fmi3_variables.h) is added to
+the scene's resource.
 
     python3 fmu_src/native/build_fmi3.py models/chain_10.json -o chain_10_fmi3.fmu [--platforms host]
     python3 -m fmu_src.native.build_fmi3 models/chain_10.json -o chain_10_fmi3.fmu
@@ -85,48 +85,30 @@ def _mass_rows(masses) -> str:
 
 
 def fmi3_variables(layout, cfg) -> list[Variable]:
-    """The FMI 3 variables of a Layout, in value-reference order (0: time). An array with no rows is left out (the
-    FMI 2.0 FMUs have no scalar of it either)."""
-    out = [Variable("time", "time", "independent", "continuous", None, "Time", "simulation time", None, ())]
-
-    def array(name, vrs, rows_of, what):
-        vrs = np.asarray(vrs, dtype=int)
+    """The FMI 3 variables of a Layout, in value-reference order (0: time): each of the FMI 2.0 build's variable
+    families (build.VARIABLE_FAMILIES) an array, its single Reals (build.SCALAR_VARIABLES) scalars, in the Layout's
+    order, then the String and Boolean parameters. An array with no rows is left out (the FMI 2.0 FMUs have no scalar
+    of it either)."""
+    reals = []
+    for family in build.VARIABLE_FAMILIES:
+        vrs = np.asarray(getattr(layout, family.vrs), dtype=int)
         if vrs.size == 0:
-            return
+            continue
         flat = vrs.ravel()
         if not np.array_equal(flat, np.arange(flat[0], flat[0] + flat.size)):
-            raise NativeBuildError(f"the Layout's {name} value references are not consecutive: teach "
+            raise NativeBuildError(f"the Layout's {family.name} value references are not consecutive: teach "
                                    "fmu_src/native/build_fmi3.py")
         v = layout.reals[int(flat[0])]
-        rows = f"; {_mass_rows(rows_of)}" if rows_of is not None else ""
-        out.append(Variable(name, "Float64", v.causality, v.variability, v.initial, v.declared_type, what + rows,
-                            int(flat[0]), tuple(vrs.shape)))
-
-    held = "held constant over each communication step"
-    motion = ("the anchor moves as P + V tau + A tau^2/2, tau from the communication point where they were set, until "
-              "they are set again")
-    array("F", layout.F_vr, layout.input_masses, f"external forces on the masses (N), columns x, y, z, {held}")
-    array("P", layout.P_vr, layout.anchor_inputs, f"positions of the input-driven anchors (m); {motion}")
-    array("V", layout.V_vr, layout.anchor_inputs, f"velocities of the input-driven anchors (m/s); {motion}")
-    array("A", layout.A_vr, layout.anchor_inputs, f"accelerations of the input-driven anchors (m/s2); {motion}")
-    array("X", layout.X_vr, layout.output_masses, "positions of the masses (m), columns x, y, z")
-    array("U", layout.U_vr, layout.output_masses, "velocities of the masses (m/s), columns x, y, z")
-    array("T", layout.T_vr, None, "tensions in the links (N), in the scene's link order; > 0 pulls the masses "
-          "together; each depends directly on the inputs of its group of links")
-    array("Freact", layout.Freact_vr, layout.fixed_indices, "forces the network exerts on the anchored masses (N)")
-    array("Jreact", layout.Jreact_vr, layout.driven_indices, "impulses the network gave the driven anchors at the "
-          "start of the last communication step (N.s; a jump of a velocity input); 0 if none")
-    e = layout.reals[layout.error_estimate_vr]
-    out.append(Variable(e.name, "Float64", e.causality, e.variability, e.initial, e.declared_type, e.description,
-                        int(layout.error_estimate_vr), ()))
-    array("M", layout.M_vr, layout.free_indices, "masses of the free masses (kg, > 0)")
-    array("R", layout.R_vr, None, "lengths of the links (m, > 0; the initial positions must satisfy them), in the "
-          "scene's link order")
-    array("g", layout.g_vr, None, "gravitational acceleration (m/s2), x, y, z")
-    for vr in (layout.tolerance_vr, layout.step_vr):
+        rows = f"; {_mass_rows(getattr(layout, family.masses))}" if family.masses is not None else ""
+        reals.append(Variable(family.name, "Float64", v.causality, v.variability, v.initial, v.declared_type,
+                              family.description + rows, int(flat[0]), tuple(vrs.shape)))
+    for attribute, _ in build.SCALAR_VARIABLES:
+        vr = int(getattr(layout, attribute))
         v = layout.reals[vr]
-        out.append(Variable(v.name, "Float64", v.causality, v.variability, v.initial, v.declared_type, v.description,
-                            int(vr), ()))
+        reals.append(Variable(v.name, "Float64", v.causality, v.variability, v.initial, v.declared_type,
+                              v.description, vr, ()))
+    out = [Variable("time", "time", "independent", "continuous", None, "Time", "simulation time", None, ())]
+    out += sorted(reals, key=lambda v: v.first)
     out.append(Variable("integrator", "String", "parameter", "fixed", "exact", None,
                         "integration method: " + ", ".join(cfg["integrators"]), int(layout.integrator_vr), ()))
     out.append(Variable("estimate_error", "Boolean", "parameter", "fixed", "exact", None,
