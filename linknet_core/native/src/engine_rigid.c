@@ -55,9 +55,9 @@ static inline double larger(double a, double b) { return b > a ? b : a; }
 void ln_rigid_data_free(struct ln_rigid_data *r)
 {
     if (!r) return;
-    double *arrays[] = {r->Y, r->Y_start, r->R, r->f, r->tau, r->w, r->th, r->v0, r->Pi0, r->v_prev, r->Pi_prev,
-                        r->Ys, r->Yn, r->KY};
-    for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
+#define FREE_ARRAY(name, count) free(r->name);
+    LN_RIGID_DATA_ARRAYS(FREE_ARRAY)
+#undef FREE_ARRAY
     free(r);
 }
 
@@ -67,14 +67,13 @@ struct ln_rigid_data *ln_rigid_data_new(const ln_model *m, ln_int n_stages)
     struct ln_rigid_data *r = calloc(1, sizeof *r);
     if (!r) return NULL;
     const ln_int B = m->rigid->n_bodies;
+    if (n_stages < 0) n_stages = 0;
     r->n_bodies = B;
-    r->Y = doubles(NY * B); r->Y_start = doubles(NY * B); r->R = doubles(9 * B);
-    r->f = doubles(3 * B); r->tau = doubles(3 * B); r->w = doubles(3 * B); r->th = doubles(3 * B);
-    r->v0 = doubles(3 * B); r->Pi0 = doubles(3 * B); r->v_prev = doubles(3 * B); r->Pi_prev = doubles(3 * B);
-    r->Ys = doubles(NY * B); r->Yn = doubles(NY * B);
-    r->KY = doubles(((n_stages > 0 ? n_stages : 0) + 1) * NY * B);
-    if (!(r->Y && r->Y_start && r->R && r->f && r->tau && r->w && r->th && r->v0 && r->Pi0 && r->v_prev && r->Pi_prev
-          && r->Ys && r->Yn && r->KY)) {
+    int ok = 1;
+#define NEW_ARRAY(name, count) ok = ok && (r->name = doubles(count)) != NULL;
+    LN_RIGID_DATA_ARRAYS(NEW_ARRAY)
+#undef NEW_ARRAY
+    if (!ok) {
         ln_rigid_data_free(r);
         return NULL;
     }

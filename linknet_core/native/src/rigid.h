@@ -33,16 +33,30 @@ struct ln_rigid_model {
 };
 
 /* Owned by ln_data; the body states and what a whole-interval advance needs, allocated once. */
+/* The rigid path's scratch arrays, each listed once (allocated by ln_rigid_data_new, freed by ln_rigid_data_free):
+   ARRAY(name, count), count an expression in the bodies B and the method's stages n_stages. */
+#define LN_RIGID_DATA_ARRAYS(ARRAY)                                                                                 \
+    ARRAY(Y, NY * B)                            /* (B,13) the body states */                                        \
+    ARRAY(Y_start, NY * B)                      /* (B,13) where the last advance started (ln_rigid_restore) */      \
+    ARRAY(R, 9 * B)                             /* (B,3,3) rotation matrices (row-major) of the current evaluation*/\
+    ARRAY(f, 3 * B)                             /* (B,3) resultant */                                               \
+    ARRAY(tau, 3 * B)                           /* (B,3) moment about c */                                          \
+    ARRAY(w, 3 * B)                             /* (B,3) angular velocity */                                        \
+    ARRAY(th, 3 * B)                            /* (B,3) rotation vector */                                         \
+    ARRAY(v0, 3 * B)                            /* (B,3) the implicit half kick's iterates */                       \
+    ARRAY(Pi0, 3 * B)                                                                                               \
+    ARRAY(v_prev, 3 * B)                                                                                            \
+    ARRAY(Pi_prev, 3 * B)                                                                                           \
+    ARRAY(Ys, NY * B)                           /* (B,13) a Runge-Kutta stage */                                    \
+    ARRAY(Yn, NY * B)                           /* (B,13) the new point */                                          \
+    ARRAY(KY, (n_stages + 1) * NY * B)          /* (n_stages+1, B, 13) Runge-Kutta stage derivatives */
+
+#define LN_RIGID_DATA_DECLARE(name, count) double *name;
 struct ln_rigid_data {
     ln_int n_bodies;
-    double *Y;                      /* (B,13) the body states */
-    double *Y_start;                /* (B,13) where the last advance started (ln_rigid_restore) */
-    double *R;                      /* (B,3,3) rotation matrices (row-major) of the current evaluation */
-    double *f, *tau, *w, *th;       /* (B,3) resultant, moment about c, angular velocity, rotation vector */
-    double *v0, *Pi0, *v_prev, *Pi_prev;    /* (B,3) the implicit half kick's iterates */
-    double *Ys, *Yn;                /* (B,13) a Runge-Kutta stage, the new point */
-    double *KY;                     /* (n_stages+1, B, 13) Runge-Kutta stage derivatives */
+    LN_RIGID_DATA_ARRAYS(LN_RIGID_DATA_DECLARE)
 };
+#undef LN_RIGID_DATA_DECLARE
 
 LN_API struct ln_rigid_data *ln_rigid_data_new(const ln_model *m, ln_int n_stages);  /* stages of the method */
 LN_API void ln_rigid_data_free(struct ln_rigid_data *r);
