@@ -41,6 +41,7 @@ from typing import NamedTuple
 import numpy as np
 
 from linknet_core.dynamics.complementarity import solve_mixed_lcp
+from linknet_core.dynamics.roots import bracketed_root
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import ConsistencyError, SceneError, SolverError
 from linknet_core.scene.description import Scene
@@ -334,11 +335,17 @@ class ModeDynamics:
         (26) is linear in the load). It is not symmetric; it is solved directly (least squares, minimum-norm where
         the mode is redundant, as (31)). For a mass alone on the ground D = 0 (its friction is tangential, its
         normal row sees only its own normal load)."""
+        return self.friction_and_tensions(X, U, F_input, anchor_acc, directions)[0]
+
+    def friction_and_tensions(self, X, U, F_input=None, anchor_acc=None, directions=None):
+        """(the friction of ``friction`` (K,3), the mode's tensions in its row order that go with it: the solution
+        of (W - D) T = B(F))."""
         W, B, directions = self.normal_system(X, U, F_input, anchor_acc, directions)
-        N = np.linalg.lstsq(W, B, rcond=None)[0][self.sliding_rows]
+        T = np.linalg.lstsq(W, B, rcond=None)[0]
         out = np.zeros((self.K, 3))
-        np.add.at(out, self.parent.contact_masses[self.sliding], -self.parent.friction * N[:, None] * directions)
-        return out
+        np.add.at(out, self.parent.contact_masses[self.sliding],
+                  -self.parent.friction * T[self.sliding_rows][:, None] * directions)
+        return out, T
 
     def normal_system(self, X, U, F_input=None, anchor_acc=None, directions=None):
         """(W - D, B(F), slip directions (n_sliding, 3)): the mode's (25)-(26) with the sliding contacts' friction
@@ -581,8 +588,7 @@ class UnilateralDynamics(Dynamics):
         its tangential velocity's, while that is above TOUCH_TOL of the velocity scale and not against the step's
         reference (slip_reference); else the reference (the slip went through zero within the step: the stop is
         an event, and up to it the friction keeps its direction); else, a contact starting to slip from rest, the
-        direction of its mass's tangential acceleration without this friction (for a mass alone on the ground the
-        direction it slips in; for masses coupled by links an approximation at the first instant of the slip)."""
+        direction of the tangential acceleration its friction leaves it (starting_slip_directions)."""
         c = md.sliding
         v = self.tangential_velocities(U)[c]
         speed = np.linalg.norm(v, axis=1)
@@ -592,15 +598,111 @@ class UnilateralDynamics(Dynamics):
         out[moving] = v[moving] / speed[moving, None]
         unknown = ~moving & (np.linalg.norm(ref, axis=1) == 0)
         if unknown.any():
-            Xa, Ua = md.pad(X), md.pad_velocity(X, U)
-            acc = md._unpad(md.inner.accelerations(Xa, Ua, md._pad_zero(F_input), md._pad_zero(anchor_acc))[0])
-            n = self.scene.ground.normal
-            for j in np.flatnonzero(unknown):
-                a = acc[self.contact_masses[c[j]]]
-                a = a - (a @ n) * n
-                size = np.linalg.norm(a)
-                out[j] = a / size if size > 0 else 0.0
+            out[unknown] = self.starting_slip_directions(X, U, md, unknown, out, F_input, anchor_acc)
         return out
+
+    def starting_slip_directions(self, X, U, md: ModeDynamics, starting, directions, F_input=None, anchor_acc=None):
+        """(n_starting, 3): the directions d_j in which md's sliding contacts ``starting`` (bool over md.sliding; at
+        rest along the plane) start to slip, the other sliding contacts slipping along their ``directions`` (rows
+        of ``starting`` ignored). Coulomb's law at the acceleration level, at the first instant of a slip from rest:
+        the friction -mu N_j d_j opposes the tangential acceleration it leaves, a_j = lambda_j d_j with lambda_j >= 0
+        (Pfeiffer and Glocker, Multibody Dynamics with Unilateral Contacts, 1996; Glocker, Set-Valued Force Laws,
+        2001). The mode's accelerations and normal forces are affine in the loads (the rod path's (9), (25)-(26),
+        the other contacts' friction carried in W - D as ``friction`` does): with the starting contacts' friction
+        forces f_k taken as loads, a_j = a0_j + sum_k G_jk f_k and N_j = N0_j + sum_k k_jk . f_k, measured by
+        1 + 2 n_starting solves. Each d_j (an angle phi on the plane) then solves (a0_j + sum_{k != j} G_jk f_k -
+        s_j G_jj d_j) x d_j = 0 with s_j = mu N_j = mu (N0_j + sum_{k != j} k_jk . f_k) / (1 + mu k_jj . d_j) and
+        a_j . d_j >= 0, by a scan of phi and a bracketing root find (_slip_direction); of several roots the one
+        nearest the direction of the frictionless acceleration a0_j (exact for a mass alone on the ground, where G_jj
+        is isotropic and k_jj = 0, and kept as it is where it satisfies the law to round-off). With several contacts
+        starting at once the roots are taken in turn (Gauss-Seidel) until the directions settle. Where the law has
+        no root (the ground could hold the mass) the frictionless direction is kept."""
+        mu = self.friction
+        tangents = self.tangents
+        starting = np.asarray(starting, bool)
+        masses = self.contact_masses[md.sliding[starting]]
+        rows = md.sliding_rows[starting]
+        others = np.array(directions, float)
+        others[starting] = 0.0  # the starting contacts' friction: loads below, not in W - D
+        F0 = np.zeros((self.scene.K, 3)) if F_input is None else np.asarray(F_input, float)
+        Xa, Ua = md.pad(X), md.pad_velocity(X, U)
+
+        def response(load):
+            F = F0 + load
+            friction, T = md.friction_and_tensions(X, U, F, anchor_acc, others)
+            acc = md._unpad(md.inner.accelerations(Xa, Ua, md._pad_zero(F + friction), md._pad_zero(anchor_acc))[0])
+            return acc[masses] @ tangents.T, T[rows]
+
+        a0, N0 = response(np.zeros_like(F0))
+        m = masses.size
+        # the loads' responses, measured with loads of the size of the friction forces (a unit load on a heavy scene
+        # would be lost in the round-off of a0)
+        probe = mu * max(float(np.abs(N0).max()), np.finfo(float).tiny)
+        G = np.zeros((m, 2, m, 2))
+        k = np.zeros((m, m, 2))
+        for j in range(m):
+            for i in range(2):
+                load = np.zeros_like(F0)
+                load[masses[j]] = probe * tangents[i]
+                a, N = response(load)
+                G[:, :, j, i] = (a - a0) / probe
+                k[:, j, i] = (N - N0) / probe
+        size = np.linalg.norm(a0, axis=1)
+        d = np.divide(a0, size[:, None], out=np.zeros_like(a0), where=size[:, None] > 0)
+        f = np.zeros((m, 2))
+        for _ in range(100 if m > 1 else 1):
+            moved = 0.0
+            for j in range(m):
+                others_j = np.arange(m) != j
+                a_j = a0[j] + np.einsum("xky,ky->x", G[j, :, others_j, :].transpose(1, 0, 2), f[others_j])
+                N_j = N0[j] + np.einsum("ky,ky->", k[j, others_j], f[others_j])
+                d_j = self._slip_direction(a_j, N_j, G[j, :, j, :], k[j, j], d[j])
+                moved = max(moved, float(np.abs(d_j - d[j]).max()))
+                d[j] = d_j
+                f[j] = -mu * N_j / (1.0 + mu * (k[j, j] @ d_j)) * d_j
+            if moved <= 1e-15:
+                break
+        return d @ tangents
+
+    def _slip_direction(self, a, N, G, k, guess) -> np.ndarray:
+        """The slip direction d from rest of one contact, on the plane's tangents: (a - s G d) x d = 0 with s = mu
+        N / (1 + mu k . d) > 0 and (a - s G d) . d >= 0 (starting_slip_directions); ``guess`` (the frictionless
+        acceleration's direction) where it satisfies this to round-off (kept exactly: a planar motion stays
+        planar), else the root nearest it, else ``guess``. At a slip event the tangential acceleration starts from
+        0 (the friction mu N equals the force that held the mass): the root there is the one with (a - s G d) = 0,
+        d along the force the ground can no longer give, which is kept to round-off of a."""
+        mu = self.friction
+        slack = 64 * np.finfo(float).eps * max(float(np.linalg.norm(a)), mu * abs(N) * float(np.abs(G).max()))
+
+        def law(phi):
+            d = np.array([math.cos(phi), math.sin(phi)])
+            s = mu * N / (1.0 + mu * (k @ d))
+            acc = a - s * (G @ d)
+            return float(acc[1] * d[0] - acc[0] * d[1]), float(acc @ d), s
+
+        def holds(phi):
+            _, along, s = law(phi)
+            return along >= -slack and s > 0
+
+        if not guess.any():
+            return guess
+        angle = math.atan2(guess[1], guess[0])
+        cross, along, s = law(angle)
+        if abs(cross) <= slack and along >= -slack and s > 0:
+            return guess
+        grid = angle - math.pi + 2 * math.pi * (np.arange(65) + 0.5) / 64
+        values = [law(phi)[0] for phi in grid]
+        roots = [float(phi) for phi, value in zip(grid, values) if value == 0.0 and holds(phi)]
+        for lo, hi, v_lo, v_hi in zip(grid[:-1], grid[1:], values[:-1], values[1:]):
+            if v_lo * v_hi < 0:
+                sign = 1.0 if v_lo > 0 else -1.0
+                phi = bracketed_root(lambda x, sign=sign: sign * law(x)[0], lo, hi, sign * v_lo, sign * v_hi)[1]
+                if holds(phi):
+                    roots.append(float(phi))
+        if not roots:
+            return guess
+        phi = min(roots, key=lambda root: abs(math.remainder(root - angle, 2 * math.pi)))
+        return np.array([math.cos(phi), math.sin(phi)])
 
     def set_slip_reference(self, X, U, md: ModeDynamics, F_input=None, anchor_acc=None) -> None:
         """The sliding contacts' slip directions at the start of a step become the step's reference (the others'

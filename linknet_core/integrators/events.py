@@ -28,8 +28,10 @@ import math
 
 import numpy as np
 
+from linknet_core.dynamics.roots import bracketed_root
 from linknet_core.dynamics.unilateral import CROSS_TOL, FORCE_TOL, TOUCH_TOL, Event
 from linknet_core.errors import SolverError, StepFailure
+from linknet_core.tolerances import MIN_FACTOR, SAFETY
 
 # More events than this within one step (or one adaptive step attempt) means a chatter the rest rule did not stop
 MAX_EVENTS_PER_STEP = 200
@@ -117,41 +119,6 @@ def gap_dips(p, depth) -> list[tuple[float, float]]:
         after = k
         j = k + 1
     return out
-
-
-def bracketed_root(f, lo, hi, f_lo, f_hi, xtol=4e-16, guess=None):
-    """(lo, hi): the bracket of a sign change of f, f(lo) >= 0 > f(hi), shrunk to xtol (relative) by the Illinois
-    variant of regula falsi, with a bisection wherever the last three iterations did not halve it; ``guess``: the
-    first point tried."""
-    last = 0
-    widths = []  # the bracket's width after each iteration
-    m = guess
-    for _ in range(200):
-        if hi - lo <= xtol * max(1.0, abs(lo), abs(hi)):
-            break
-        if m is None:
-            if len(widths) >= 3 and hi - lo > 0.5 * widths[-3]:
-                m = 0.5 * (lo + hi)
-            else:
-                m = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-        if not lo < m < hi:
-            m = 0.5 * (lo + hi)
-            if not lo < m < hi:
-                break
-        fm = f(m)
-        if fm >= 0:
-            lo, f_lo = m, fm
-            if last == 1:  # the same end moved twice: halve the other's value (Illinois)
-                f_hi *= 0.5
-            last = 1
-        else:
-            hi, f_hi = m, fm
-            if last == -1:
-                f_lo *= 0.5
-            last = -1
-        widths.append(hi - lo)
-        m = None
-    return lo, hi
 
 
 class EventHandling:
@@ -471,8 +438,11 @@ class AdaptiveEvents(EventHandling):
         found = self._first_event(X, U, t, X_new, U_new, t_new, F_input, step)
         if found is None:
             self._events_this_step = 0
+            shorter = self._young_slip_step(X, U, t, k0, X_new, U_new, t_new, F_input, step)
+            if shorter is not None:
+                X_new, U_new, t_new = shorter
             self._slip_reference(t_new, X_new, U_new, F_input)  # the next step's
-            return None
+            return shorter
         self._events_this_step += 1
         if self._events_this_step > MAX_EVENTS_PER_STEP:
             raise self._zeno(t)
@@ -482,6 +452,34 @@ class AdaptiveEvents(EventHandling):
         t_e = t_new if h_e >= h_max else t + h_e
         Xe, Ue = self._apply_event(Xe, Ue, t_e, F_input, kind, u)
         return Xe, Ue, t_e
+
+    def _young_slip_step(self, X, U, t, k0, X_new, U_new, t_new, F_input, step):
+        """None where the accepted step from (X, U) at t to (X_new, U_new) at t_new stands, else (X, U, t) of a
+        shorter step that replaces it. A sliding contact's friction points along its slip velocity, U_t / |U_t|,
+        singular at rest: in the first step of a slip from rest the stages' velocities err by more than their own
+        size allows, the method loses its order (the step errs as h^3) and its error estimate does not see it
+        (the first step is chosen long, the acceleration being smooth). That step is checked against two half
+        steps of the method; where they differ beyond the tolerance (the controller's norm) it is replaced by the
+        method's step of the length where that error, taken as h^3, meets it. The later steps start from a speed
+        that dominates their stages' errors."""
+        dyn = self.dyn
+        if not dyn.sliding.size:
+            return None
+        h = t_new - t
+        uni = self.unilateral
+        speed = np.linalg.norm(uni.tangential_velocities(U)[dyn.sliding], axis=1)
+        if not np.any(speed <= TOUCH_TOL * uni.velocity_scale(U)):
+            return None
+        X_half, U_half = step(0.5 * h)
+        X_two, U_two = self.step(X_half, U_half, 0.5 * h, F_input, t + 0.5 * h, t_new)
+        free = self.free
+        difference = np.concatenate([(X_two - X_new)[free].ravel(), (U_two - U_new)[free].ravel()])
+        error = float(np.sqrt(np.mean((difference / self._scale(X, U, X_new, U_new)) ** 2)))
+        if error <= 1.0:
+            return None
+        h_ok = h * max(SAFETY * error ** (-1.0 / 3.0), MIN_FACTOR)
+        X_ok, U_ok = step(h_ok)
+        return X_ok, U_ok, t + h_ok
 
 
 @functools.lru_cache(maxsize=None)
