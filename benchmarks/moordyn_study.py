@@ -116,10 +116,71 @@ def linknet_rows(spec, refs, budget, log):
     return rows
 
 
-def frontier(rows, family):
+def native_rod_rows(spec, refs, log, repeats=5):
+    """linknet's native core on the same bob held by a rod, up to the first sample time only, where the rope is
+    still taut (its slack event comes later): the same motion, so the same reference; what the engine that does
+    not take ropes yet costs on it. Best of ``repeats`` (the runs take microseconds)."""
+    import linknet_core as ln
+    from .rope_reference import RopeReference
+    first = RopeReference(spec, 1e-13)
+    first.run(TIMES[0])
+    if first.events:
+        raise RuntimeError(f"{SCENE}: an event at {first.events[0][0]:g} s, before {TIMES[0]:g} s: not a rod there")
+    data = spec.to_dict()
+    for link in data["links"]:
+        link.pop("kind", None), link.pop("restitution", None)
+    scene = ln.Scene.from_dict(data)
+    rows = []
+    for method, knobs in LINKNET.items():
+        knob_name = "rtol" if method.startswith("dop") else "dt"
+        for knob in knobs:
+            kwargs = {knob_name: knob, "error_estimate": False, "max_steps_per_call": 10 ** 9, "backend": "native"}
+            ln.Simulator(scene, method=method, **kwargs).advance(1e-3)
+            best = None
+            for _ in range(repeats):
+                sim = ln.Simulator(scene, method=method, **kwargs)
+                start = time.process_time()
+                sim.advance(TIMES[0])
+                spent = time.process_time() - start
+                best = spent if best is None else min(best, spent)
+            err = float(np.max(np.linalg.norm(sim.state.X - refs[0][0], axis=1)))
+            rows.append({"method": f"linknet-native-rod-{method}", knob_name: knob, "errors": [err], "cpu": [best]})
+            log(f"  linknet-native-rod-{method:9s} {knob_name} {knob:9.3g}  error at {TIMES[0]:g} s {err:9.2e}  "
+                f"cpu {best * 1e6:.3g} us")
+            if err < 1e-11:
+                break
+    return rows
+
+
+def slack_damping(log, span=0.1):
+    """Two 1 kg masses on a slack 1 m line, 0.5 m apart and approaching at 2 m/s: MoorDyn's internal damping BA
+    acts on a slack segment too (its force BA (dl/dt) / l), so their approach decays as exp(-2 BA t / (m l)) where a
+    rope would leave them free. Gravity moves both alike."""
+    from .scene_spec import SceneSpec
+    from .peers.moordyn_peer import _Session
+    spec = SceneSpec.from_dict({
+        "name": "slack_line", "gravity": [0, 0, -9.81],
+        "masses": [{"name": "a", "position": [0, 0, 0], "mass": 1.0, "velocity": [1.0, 0, 0]},
+                   {"name": "b", "position": [0.5, 0, 0], "mass": 1.0, "velocity": [-1.0, 0, 0]}],
+        "links": [{"a": 1, "b": 2, "length": 1.0, "kind": "rope", "restitution": 1.0}]})
+    rows = []
+    for BA in (0.0, 1.0, 10.0):
+        session = _Session(MoorDynLine(1e6, damping=BA), spec, 1e-4)
+        try:
+            X, U = session.step(0.0, span)
+        finally:
+            session.close()
+        approach = float(U[0, 0] - U[1, 0])
+        rows.append({"BA": BA, "approach_speed": approach, "exp(-2 BA t / (m l)) x 2": 2 * math.exp(-2 * BA * span)})
+        log(f"  slack line, BA {BA:g} N s: approach speed after {span:g} s {approach:.6f} m/s "
+            f"(2 exp(-2 BA t / (m l)) = {2 * math.exp(-2 * BA * span):.6f}; a rope: 2)")
+    return rows
+
+
+def frontier(rows, family, times=TIMES):
     """Per sample time and level: the cheapest run of the family whose error there is at or below the level."""
     out = {}
-    for i, t in enumerate(TIMES):
+    for i, t in enumerate(times):
         for level in LEVELS:
             ok = [r for r in rows if r["method"].startswith(family) and r["errors"][i] <= level]
             best = min(ok, key=lambda r: r["cpu"][i]) if ok else None
@@ -132,20 +193,25 @@ def frontier(rows, family):
 def _cell(b):
     if b is None:
         return "—"
-    knob = (f"EA {b['EA']:.0e}, dt {b['dt']:.2g}" if "EA" in b else
-            f"{b['method'].removeprefix('linknet-')} " + (f"rtol {b['rtol']:.0e}" if "rtol" in b else f"dt {b['dt']:.2g}"))
+    if "EA" in b:
+        knob = f"EA {b['EA']:.0e}, dt {b['dt']:.2g}"
+    else:
+        name = b["method"].removeprefix("linknet-").removeprefix("native-rod-")
+        knob = f"{name} " + (f"rtol {b['rtol']:.0e}" if "rtol" in b else f"dt {b['dt']:.2g}")
     return f"{b['cpu'] * 1e3:.3g} ms ({knob})"
 
 
 def markdown(result) -> str:
-    lines = ["| t [s] | level [m] | MoorDyn: CPU (setting) | linknet: CPU (setting) | MoorDyn / linknet |",
-             "|---|---|---|---|---|"]
+    lines = ["| t [s] | level [m] | MoorDyn: CPU (setting) | linknet, numpy path, rope: CPU (setting) | "
+             "MoorDyn / linknet | linknet native, rod: CPU (setting) |", "|---|---|---|---|---|---|"]
     for t in TIMES:
         for level in LEVELS:
             key = f"{t:g}/{level:g}"
             m, l = result["frontier"]["moordyn"][key], result["frontier"]["linknet"][key]
+            native = result["frontier"]["native_rod"].get(key)
             ratio = f"{m['cpu'] / l['cpu']:.3g}" if m and l and l["cpu"] > 0 else "—"
-            lines.append(f"| {t:g} | {level:g} | {_cell(m)} | {_cell(l)} | {ratio} |")
+            lines.append(f"| {t:g} | {level:g} | {_cell(m)} | {_cell(l)} | {ratio} | "
+                         f"{_cell(native) if t == TIMES[0] else 'n/a (slack after 0.495 s)'} |")
     lines += ["", "Best error of each MoorDyn stiffness (any step) at each sample time:", "",
               "| EA [N] | " + " | ".join(f"t = {t:g} s" for t in TIMES) + " |", "|---|" + "---|" * len(TIMES)]
     for EA in EAS:
@@ -173,10 +239,13 @@ def main(argv=None):
           + ", ".join(f"{a:.2g}" for _, a in refs) + " m")
     md = moordyn_rows(spec, refs, args.budget, print)
     lk = linknet_rows(spec, refs, args.budget, print)
+    native = native_rod_rows(spec, refs, print)
+    damping = slack_damping(print)
     import moordyn
     result = {"scene": SCENE, "times": TIMES, "levels": LEVELS, "reference_agreement": [a for _, a in refs],
-              "moordyn": md, "linknet": lk,
-              "frontier": {"moordyn": frontier(md, "moordyn"), "linknet": frontier(lk, "linknet")},
+              "moordyn": md, "linknet": lk, "native_rod": native, "slack_damping": damping,
+              "frontier": {"moordyn": frontier(md, "moordyn"), "linknet": frontier(lk, "linknet-"),
+                           "native_rod": frontier(native, "linknet-native-rod", TIMES[:1])},
               "meta": {"command": "python -m benchmarks.moordyn_study " + " ".join(argv or sys.argv[1:]),
                        "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": _machine(),
                        "versions": _versions() | {"moordyn_wrapper": getattr(moordyn, "__version__", None)},

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
+import importlib.metadata
 import json
 import math
 import os
@@ -393,7 +394,12 @@ def _versions():
     v = {"python": sys.version.split()[0]}
     for mod in ("numpy", "scipy", "numba", "openmm", "exudyn", "mujoco", "ase", "moordyn", "matplotlib"):
         try:
-            v[mod] = __import__(mod).__version__
+            module = __import__(mod)
+        except Exception:
+            v[mod] = None
+            continue
+        try:   # moordyn's wrapper has no __version__: its distribution's
+            v[mod] = getattr(module, "__version__", None) or importlib.metadata.version(mod)
         except Exception:
             v[mod] = None
     try:

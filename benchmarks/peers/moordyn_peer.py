@@ -58,9 +58,10 @@ class MoorDynLine(Method):
     ropes_only = True      # ...and only on those (a line cannot push: no scene of rods has a MoorDyn counterpart)
     model_error = True     # its error levels off at the elastic model's: the sweep ends there
 
-    def __init__(self, EA: float, scheme: str = "RK4"):
-        self.EA, self.scheme = float(EA), scheme
-        self.name = f"moordyn-{scheme}-EA{EA:.0e}".replace("+", "")
+    def __init__(self, EA: float, scheme: str = "RK4", damping: float = 0.0):
+        """``damping``: the line type's BA [N s], the internal damping (0 in the benchmark; see the docstring)."""
+        self.EA, self.scheme, self.damping = float(EA), scheme, float(damping)
+        self.name = f"moordyn-{scheme}-EA{EA:.0e}".replace("+", "") + (f"-BA{damping:g}" if damping else "")
 
     def available(self):
         return moordyn_available()
@@ -145,8 +146,8 @@ class MoorDynLine(Method):
         return X + move.reshape(-1, 3)
 
     def input_file(self, spec, X0, dt) -> str:
-        """MoorDyn v2 input: one line type (EA, massless, undamped, no hydrodynamics), the points, one line of one
-        segment per rope, the options."""
+        """MoorDyn v2 input: one line type (EA, massless, BA = ``damping``, no hydrodynamics), the points, one line of
+        one segment per rope, the options."""
         rows = [f"{k + 1} {'Fixed' if spec.fixed[k] else 'Free'} {x[0]!r} {x[1]!r} {x[2]!r} "
                 f"{0.0 if spec.fixed[k] else float(spec.mass[k])!r} 0 0 0" for k, x in enumerate(X0)]
         lines = [f"{l + 1} rope {a + 1} {b + 1} {float(R)!r} 1 -"
@@ -156,7 +157,7 @@ class MoorDynLine(Method):
             "---------------------- LINE TYPES ----------------------",
             "TypeName Diam Mass/m EA BA/-zeta EI Cd Ca CdAx CaAx",
             "(name) (m) (kg/m) (N) (N-s/-) (N-m^2) (-) (-) (-) (-)",
-            f"rope 0.01 0.0 {self.EA!r} 0.0 0.0 0.0 0.0 0.0 0.0",
+            f"rope 0.01 0.0 {self.EA!r} {self.damping!r} 0.0 0.0 0.0 0.0 0.0",
             "---------------------- POINTS ----------------------",
             "ID Attachment X Y Z Mass Volume CdA Ca",
             "(#) (-) (m) (m) (m) (kg) (m^3) (m^2) (-)",
