@@ -1,7 +1,7 @@
 """Work-precision benchmark: wall time against error, linknet's integrators side by side with peers.
 
-    python -m benchmarks.work_precision            # full run, writes docs/benchmarks/
-    python -m benchmarks.work_precision --quick    # CI-sized run (< 3 min), writes docs/benchmarks/quick/
+    python -m benchmarks.work_precision            # full run, writes build/work_precision/ (--merge: docs/benchmarks/)
+    python -m benchmarks.work_precision --quick    # CI-sized run (< 3 min), writes build/work_precision/quick/
 
 For each scene: an independent reference (benchmarks.reference, verified by two tolerances agreeing), then
 every method over a sweep of its accuracy knob (dt for fixed-step methods, rtol for adaptive ones), from
@@ -618,10 +618,12 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="CI-sized run: few scenes, few settings")
     ap.add_argument("--scenes", nargs="*", help="subset of scenes")
     ap.add_argument("--methods", nargs="*", help="subset of methods (names as in the table)")
-    ap.add_argument("--out", type=Path, help="output folder (default docs/benchmarks, or docs/benchmarks/quick)")
+    ap.add_argument("--out", type=Path, help="output folder (default build/work_precision[/quick]; with --merge, "
+                    "docs/benchmarks)")
     ap.add_argument("--models", type=Path, help="folder of scene JSON files (default models/)")
     ap.add_argument("--merge", action="store_true",
-                    help="update an existing results.json in --out: rerun only the given scenes/methods")
+                    help="write into the tracked docs/benchmarks (or --out), updating an existing results.json there: "
+                         "rerun only the given scenes/methods")
     ap.add_argument("--render", type=Path, help="only rewrite results.md and the plots from this results JSON")
     ap.add_argument("--no-cache", action="store_true", help="recompute references even if cached")
     ap.add_argument("--run-timeout", type=float, help="hard limit of one setting [s] (default: Budget)")
@@ -636,7 +638,9 @@ def main(argv=None):
     if args.models:
         global MODELS
         MODELS = args.models
-    out = args.out or (ROOT / "docs" / "benchmarks" / ("quick" if quick else ""))
+    # a run writes under build/ unless asked to merge into the tracked results
+    out = args.out or (ROOT / "docs" / "benchmarks" if args.merge else ROOT / "build" / "work_precision"
+                       / ("quick" if quick else ""))
     out.mkdir(parents=True, exist_ok=True)
     budget = QUICK_BUDGET if quick else FULL_BUDGET
     budget = replace(budget, **{k: v for k, v in (("run_timeout", args.run_timeout), ("sweep", args.sweep_budget),
