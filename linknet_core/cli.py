@@ -253,7 +253,7 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["fmu"]:  # every argument is build_fmu.py's, --help among them (argparse would take that one)
         return cmd_fmu(argparse.Namespace(command="fmu", build_fmu_args=argv[1:]))
-    parser = build_parser()
+    parser = ensemble_command.tool_parser(argv) or build_parser()  # linknet ensemble consolidate|recover
     args = parser.parse_args(argv)
     handlers = {"simulate": cmd_simulate, "analyze": cmd_analyze, "check": cmd_check, "animate": visual.cmd_animate,
                 "view": visual.cmd_view, "ensemble": ensemble_command.cmd_ensemble, "fmu": cmd_fmu}

@@ -5,6 +5,9 @@
                         t_end=2, out="study.nc")          # 9 members, a local cluster with one worker per core
     study.max_tension                                       # xarray: (member), coordinates M[11], R[1..10]
 
+    study = open_study("study.nc")                          # read back later, its shard files checked
+    consolidate("study.nc", "whole.nc")                     # one self-contained file (recover: rebuild from shards)
+
 Docs: docs/ensemble.md. Only numpy is imported with this package; Dask, xarray, h5netcdf and fmpy are
 imported when a study runs (FMU hosts load linknet_core without them).
 """
@@ -54,8 +57,9 @@ def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, met
     project_initial: project initial positions onto the link lengths; default: yes when R or X0 is varied
         (a member's lengths would otherwise contradict the scene's positions), else the scene's option.
     out: netCDF file to write (members stream into it as they finish; with trajectories, those are in shard
-        files in the folder beside it, ``NAME.shards``, which the file joins: keep the two together); None
-        keeps the study in memory.
+        files in the folder beside it, ``NAME.shards``, which the file joins: keep the two together, or make one
+        self-contained file with ``consolidate``; read it back with ``open_study``, which checks the shards);
+        None keeps the study in memory.
     client: None (a local cluster: ``workers`` processes, default one per core, and the scheduler's own), a
         scheduler address, or a ``distributed.Client``. members_per_task: fixed batch size (default: adaptive).
     connect_timeout: seconds (default 10) to reach a scheduler address and see its Dask handshake; an address
@@ -114,37 +118,63 @@ def ensemble(scene=None, vary=None, samples=None, *, t_end: float, fmu=None, met
              "varied": [p.name for p in plan.parameters], "grid_shape": list(plan.grid_shape),
              "n_samples": plan.n_samples, "created": datetime.now(timezone.utc).isoformat(timespec="seconds")}
     started = time.perf_counter()
-    # connect first: an unreachable cluster leaves no file behind
-    with Engine(client, workers, **_connect_timeout(connect_timeout, client)) as engine:
-        facts["engine"] = engine.description
-        try:
-            sink = StudyFile(path, spec, plan, base)
-        except OSError as exc:
-            raise LinknetError(f"cannot write {path}: {exc}") from None
-        spec = replace(spec, shards=sink.shard_folder)  # where the workers write the members' trajectories
-        final = None
-        try:
-            final = run_study(engine, spec, plan, sink, on_progress, members_per_task)
-        finally:
-            if bar is not None:
-                bar.close()
-            if final is not None:
-                facts.update(wall_seconds=time.perf_counter() - started,
-                             members_per_second=final.total / final.elapsed,
-                             first_result_seconds=None if final.first_result_seconds is None
-                             else final.first_result_seconds + final.started - started, workers=final.workers,
-                             failed=final.failed, retried=final.retried, tasks=final.tasks,
-                             member_cpu_seconds=final.member_cpu_seconds,
-                             client_write_cpu_seconds=final.write_cpu_seconds,
-                             worker_write_cpu_seconds=final.worker_write_cpu_seconds, complete=1)
-            else:  # interrupted: the members written so far stay readable, marked as such
-                facts["complete"] = 0
+    sink = None
+    final = None
+    try:
+        # connect first: an unreachable cluster leaves no file behind
+        with Engine(client, workers, **_connect_timeout(connect_timeout, client)) as engine:
+            facts["engine"] = engine.description
             try:
-                sink.close(facts)
+                sink = StudyFile(path, spec, plan, base, attrs=facts)
+            except OSError as exc:
+                raise LinknetError(f"cannot write {path}: {exc}") from None
+            spec = replace(spec, shards=sink.shard_folder)  # where the workers write the members' trajectories
+            stopped = None
+            try:
+                final = run_study(engine, spec, plan, sink, on_progress, members_per_task)
+            except BaseException as exc:
+                stopped = exc
+                raise
             finally:
-                if final is None and keep_in_memory:
-                    remove_study(path)
+                if bar is not None:
+                    bar.close()
+                if final is not None:
+                    facts.update(wall_seconds=time.perf_counter() - started,
+                                 members_per_second=final.total / final.elapsed,
+                                 first_result_seconds=None if final.first_result_seconds is None
+                                 else final.first_result_seconds + final.started - started, workers=final.workers,
+                                 failed=final.failed, retried=final.retried, tasks=final.tasks,
+                                 member_cpu_seconds=final.member_cpu_seconds,
+                                 client_write_cpu_seconds=final.write_cpu_seconds,
+                                 worker_write_cpu_seconds=final.worker_write_cpu_seconds, complete=1)
+                else:  # interrupted: the members written so far stay readable, marked as such
+                    facts["complete"] = 0
+                try:
+                    sink.close(facts)
+                finally:
+                    if final is None and keep_in_memory:
+                        remove_study(path)
+                if stopped is not None and not keep_in_memory:
+                    _note_where_members_are(stopped, path, sink)
+    finally:
+        # the study's workers are stopped now (a local cluster's) or have left it: a write one of them began
+        # while the study ended is removed with what else the file does not map
+        if sink is not None and final is None and not keep_in_memory:
+            sink.tidy()
     return _open(path, keep_in_memory)
+
+
+def _note_where_members_are(exc: BaseException, path: Path, sink) -> None:
+    """Say on the exception that stopped a study (a Ctrl-C, a failure) where its finished members are and how to
+    read them (Python shows a note under the exception's message; ``linknet ensemble`` prints it)."""
+    from linknet_core.ensemble.shards import folder_for
+
+    folder = folder_for(path)
+    text = f"the {sink.members_kept} member(s) finished before the study stopped are in {path} (complete = 0)"
+    if sink.shard_folder is not None:
+        text += (f", their trajectories in the shard files of {folder} beside it: keep the two together, or make "
+                 f"one self-contained file with: linknet ensemble consolidate {path}")
+    exc.add_note(text)
 
 
 def _connect_timeout(seconds, client) -> dict:
@@ -163,13 +193,12 @@ def _connect_timeout(seconds, client) -> dict:
 
 
 def _open(path: Path, keep_in_memory: bool):
-    import xarray as xr
-
     from linknet_core.accuracy import warn_accuracy
     from linknet_core.ensemble.report import accuracy_note
     from linknet_core.ensemble.store import remove_study
+    from linknet_core.ensemble.study_files import open_study
 
-    ds = xr.open_dataset(path, engine="h5netcdf")
+    ds = open_study(path)
     if keep_in_memory:
         ds.load()
         ds.close()
@@ -271,5 +300,18 @@ def _tip(scene: Scene, tip) -> int:
 
 from linknet_core.ensemble.report import plot, summary  # noqa: E402  (matplotlib is imported only when plotting)
 
+# a study file read back, made self-contained, rebuilt from its shards (study_files.py); imported when first used,
+# as they import h5py and xarray
+_STUDY_FILE_TOOLS = ("open_study", "consolidate", "recover", "MissingShardsError")
+
+
+def __getattr__(name):
+    if name in _STUDY_FILE_TOOLS:
+        from linknet_core.ensemble import study_files
+
+        return getattr(study_files, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 __all__ = ["ensemble", "summary", "plot", "make_plan", "parse_name", "parse_values", "FAMILIES",
-           "DEFAULT_OUTPUTS"]
+           "DEFAULT_OUTPUTS", *_STUDY_FILE_TOOLS]

@@ -1,7 +1,9 @@
-"""``linknet ensemble``: a parameter study or Monte Carlo run from the command line.
+"""``linknet ensemble``: a parameter study or Monte Carlo run from the command line, and the tools for its file.
 
     linknet ensemble models/chain_10.json --vary M[3]=0.5:2:10 --vary R[1..10]=0.09:0.11:5 --t-end 2 \\
         --out study.nc [--scheduler tcp://host:8786] [--plot study.png] [--fmu chain_10.fmu]
+    linknet ensemble consolidate study.nc [-o self_contained.nc] [--remove-shards]
+    linknet ensemble recover study.shards [-o study.nc]
 """
 from __future__ import annotations
 
@@ -53,8 +55,21 @@ mass_text = text_with("a mass (1-based number or name)", r".+", "11")
 scheduler_address = text_with("a Dask scheduler address", r"(\w+://)?\S+:\d+", "tcp://host:8786")
 
 
+TOOLS = {
+    "consolidate": "write a study file as one self-contained file: its trajectories copied in from the shard files "
+                   "of the folder beside it (study.shards for study.nc), which it then no longer needs",
+    "recover": "rebuild a study file from its shard folder (the study's process died, or the file was lost): every "
+               "member a shard holds, the others marked missing",
+}
+_TOOLS_TEXT = ("The study file's tools: 'linknet ensemble consolidate STUDY.nc [-o OUT.nc] [--remove-shards]' "
+               "(one self-contained file) and 'linknet ensemble recover STUDY.shards [-o STUDY.nc]' (rebuild the "
+               "study file from its shards); each has --help.")
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from linknet_core.integrators import METHODS
+
+    p.epilog = _TOOLS_TEXT
 
     p.add_argument("scene", nargs="?", type=readable_file, help="scene JSON file (with --fmu, the scene the FMU was built from; an FMU "
                                             "built on pythonfmu carries its scene, and may stand here itself)")
@@ -212,7 +227,52 @@ def _samples(args, scene) -> dict | None:
     return columns or None
 
 
+def tool_parser(argv) -> argparse.ArgumentParser | None:
+    """The parser of a ``linknet ensemble consolidate|recover ...`` command line (None for any other): the
+    study's parser takes a scene as its first word, so the tools are parsed apart (the CLI asks here first). Its
+    namespace has ``command`` "ensemble" and ``tool`` the tool's name, which ``cmd_ensemble`` runs."""
+    from linknet_core.options import one_line_errors
+
+    if len(argv) < 2 or argv[0] != "ensemble" or argv[1] not in TOOLS:
+        return None
+    parser = argparse.ArgumentParser(prog="linknet")
+    ensemble = parser.add_subparsers(dest="command", required=True).add_parser("ensemble", epilog=_TOOLS_TEXT)
+    tools = ensemble.add_subparsers(dest="tool", required=True)
+    consolidate = tools.add_parser("consolidate", help=TOOLS["consolidate"], description=TOOLS["consolidate"] + (
+        ". It reads bit for bit as the study file did; written through a temporary file renamed when complete."))
+    consolidate.add_argument("study", type=readable_file_with((".nc",), "study file"),
+                             help="the study file (its shard folder beside it)")
+    consolidate.add_argument("-o", "--out", type=_output((".nc",), "the self-contained study (a netCDF file)"),
+                             help="where to write the self-contained file (default: replace STUDY itself)")
+    consolidate.add_argument("--remove-shards", action="store_true",
+                             help="remove the shard folder once STUDY itself is self-contained (not with -o)")
+    recover = tools.add_parser("recover", help=TOOLS["recover"], description=TOOLS["recover"] + (
+        ". The folder keeps the study's layout (layout.nc) and its shards; beside the folder the file reads its "
+        "trajectories from them, elsewhere it is self-contained. A complete study is never replaced."))
+    recover.add_argument("shards", metavar="SHARDS_DIR", help="the study's shard folder (study.shards)")
+    recover.add_argument("-o", "--out", type=_output((".nc",), "the study (a netCDF file)"),
+                         help="the study file to write (default: the folder's own, study.nc for study.shards)")
+    one_line_errors(parser)
+    return parser
+
+
+def cmd_tool(args) -> int:
+    """``linknet ensemble consolidate`` and ``linknet ensemble recover``."""
+    from linknet_core.ensemble.study_files import consolidate, recover
+
+    if args.tool == "consolidate":
+        written = consolidate(args.study, args.out, remove_shards=args.remove_shards)
+        print(f"wrote {written}: self-contained, its trajectories in the file"
+              + (f"; removed the shard folder beside {args.study}" if args.remove_shards else ""))
+        return 0
+    recovery = recover(args.shards, args.out)
+    print(recovery.text())
+    return 0
+
+
 def cmd_ensemble(args) -> int:
+    if getattr(args, "tool", None):
+        return cmd_tool(args)
     from linknet_core.ensemble import load_source, ensemble, plot, summary
     from linknet_core.ensemble.parameters import NOTHING_TO_VARY
 
@@ -231,8 +291,14 @@ def cmd_ensemble(args) -> int:
                       project_initial=args.project_initial, out=args.out, client=args.scheduler,
                       connect_timeout=args.connect_timeout,
                       workers=args.workers, members_per_task=args.members_per_task, progress=not args.no_progress)
-    except KeyboardInterrupt:
-        kept = f"; the members finished so far are in {args.out}" if args.out else ""
+    except KeyboardInterrupt as exc:
+        from linknet_core.ensemble.shards import folder_for
+
+        # the library's note says where the finished members are; without one the file did not close
+        notes = getattr(exc, "__notes__", None)
+        kept = f"; {notes[0]}" if notes else (
+            f"; should {args.out} not open, rebuild it from the shards beside it: linknet ensemble recover "
+            f"{folder_for(args.out)}" if args.out else "")
         print(f"linknet ensemble: interrupted{kept}", file=sys.stderr)
         return 130
     except (LinknetError, SystemExit):

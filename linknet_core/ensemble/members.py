@@ -119,6 +119,9 @@ class StudyRuntime:
                             "error_estimate": (), "error_goal": ()})
 
     def close(self):
+        # the study has ended: a batch still running (cancelled, on a cluster the study did not start) writes no
+        # shard into a folder its study has tidied
+        self.shard_folder = None
         if self.fmu is not None:
             self.fmu.close()
 

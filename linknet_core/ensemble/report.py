@@ -89,7 +89,9 @@ def summary(ds) -> str:
     lines = [f'{ds.attrs.get("scene_name")}: {ds.sizes["member"]} members through the '
              f'{ds.attrs.get("runs_through")}, t_end = {ds.attrs.get("t_end"):g} s, {ds.attrs.get("solver")}; '
              f'{int(ok.sum())} ok, {int((status == "failed").sum())} failed, {int((status == "not run").sum())} '
-             f'not run, {int(ds["retried"].values.sum())} retried',
+             f'not run, {int(ds["retried"].values.sum())} retried'
+             + (f', {int((status == "missing").sum())} missing (rebuilt from {ds.attrs["recovered_from"]}: no shard '
+                f'held them)' if (status == "missing").any() else ""),
              f'  engine: {ds.attrs.get("engine")}; {ds.attrs.get("wall_seconds", float("nan")):.2f} s wall and '
              f'first result after {ds.attrs.get("first_result_seconds", float("nan")):.2f} s (engine start included), '
              f'{ds.attrs.get("members_per_second", float("nan")):.1f} members/s once running', ""]

@@ -12,6 +12,9 @@ of interest, each member's error, run time and CPU time, and the worker's addres
 a file named ``members-*.h5`` is never half written, whatever happens to its worker, and a task run again
 (after its worker died) renames an identical file over it.
 
+The folder also keeps the study file as laid out when the study started (``layout.nc``), from which the study file
+can be rebuilt with the shards present (``linknet ensemble recover``, study_files.py).
+
 Workers write shards only where they see the folder the client made: the folder holds a marker naming the
 study, which a worker looks for before its first task. A worker that does not see it (another machine without the
 storage shared) or whose write fails (a full disk) returns its members' trajectories to the client as a task's
@@ -31,8 +34,13 @@ import numpy as np
 from linknet_core.output import WriteError, failure_reason
 
 MARKER = "linknet-study"  # file in a shard folder naming its study (its id)
+# the study file as laid out when the study started (every member "not run"), kept in its shard folder: what
+# ``linknet ensemble recover`` rebuilds the study file from, with the shards, when the study file was lost
+LAYOUT = "layout.nc"
 SHARD_PREFIX = "members-"
 SHARD_SUFFIX = ".h5"
+TEMPORARY_SUFFIX = ".tmp"  # a shard being written; renamed to its name once complete
+_SHARD_NAME = re.compile(rf"{SHARD_PREFIX}(\d+)-(\d+)\.(\w+){re.escape(SHARD_SUFFIX)}")
 
 
 def folder_for(path) -> Path:
@@ -45,6 +53,12 @@ def shard_name(study_id: str, first: int, count: int) -> str:
     """A task's shard: its members, and its study (an earlier study's task still running on a cluster, after the
     folder was made anew for another study at the same place, cannot write over this study's shard)."""
     return f"{SHARD_PREFIX}{first:09d}-{count}.{study_id[:12]}{SHARD_SUFFIX}"
+
+
+def shard_study(path) -> str | None:
+    """The first 12 characters of the study id in a shard's name (None: not a shard's name)."""
+    match = _SHARD_NAME.fullmatch(Path(path).name)
+    return match.group(3) if match else None
 
 
 def prepare_folder(folder: Path, study_id: str) -> None:
@@ -128,7 +142,7 @@ def write_shard(folder, study_id: str, batch: dict, trajectories) -> Path:
     import h5py
 
     path = Path(folder) / shard_name(study_id, batch["first"], batch["count"])
-    temporary = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+    temporary = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}{TEMPORARY_SUFFIX}")
     kept = [name for name in batch["outputs"] if name in trajectories]
     columns = {name: np.asarray(values) for name, values in batch["outputs"].items() if name not in trajectories}
     columns.update((name, np.asarray(batch[name], dtype=float)) for name in ("run_seconds", "cpu_seconds")
@@ -157,7 +171,7 @@ def write_shard(folder, study_id: str, batch: dict, trajectories) -> Path:
         f.close()
         f = None
         os.replace(temporary, path)
-    except Exception as exc:
+    except BaseException as exc:  # a Ctrl-C in the client's write too: no temporary file outlives its write
         if f is not None:
             silence(f)
         datasets = []
@@ -166,13 +180,16 @@ def write_shard(folder, study_id: str, batch: dict, trajectories) -> Path:
             os.unlink(temporary)
         except OSError:
             pass
+        if not isinstance(exc, Exception):
+            raise
         raise WriteError(path, h5_reason(exc)) from None
     return path
 
 
-def read_shard(path) -> dict:
+def read_shard(path, trajectories: bool = True) -> dict:
     """A shard read back: the task's result as ``members.run_batch`` returned it (outputs whole), with ``shard``
-    its path."""
+    its path and ``shapes`` the shape of each trajectory it holds; ``trajectories=False`` leaves those out of the
+    outputs (the small part only)."""
     import h5py
 
     with h5py.File(path, "r") as f:
@@ -180,10 +197,11 @@ def read_shard(path) -> dict:
         table = f["members"][()]
         errors = [e.decode() if isinstance(e, bytes) else str(e) for e in f["error"][()]] if "error" in f else \
             [""] * facts["count"]
-        outputs = {name: f[name][()] for name in facts["trajectories"]}
+        shapes = {name: f[name].shape for name in facts["trajectories"]}
+        outputs = {name: f[name][()] for name in facts["trajectories"]} if trajectories else {}
     columns = {name: table[name] for name in table.dtype.names}
     batch = {"first": facts["first"], "count": facts["count"], "worker": facts["worker"], "error": errors,
-             "run_seconds": columns.pop("run_seconds"), "shard": str(path)}
+             "run_seconds": columns.pop("run_seconds"), "shard": str(path), "shapes": shapes}
     if "cpu_seconds" in columns:
         batch["cpu_seconds"] = columns.pop("cpu_seconds")
     batch["outputs"] = {**outputs, **columns}
@@ -195,18 +213,24 @@ def shard_files(folder) -> list[Path]:
     folder = Path(folder)
     if not folder.is_dir():
         return []
-    return sorted(p for p in folder.iterdir() if p.name.startswith(SHARD_PREFIX) and p.name.endswith(SHARD_SUFFIX))
+    return sorted(p for p in folder.iterdir() if shard_study(p) is not None)
+
+
+def temporary_files(folder) -> list[Path]:
+    """The files of a shard folder still being written, or left by a writer that was killed part way."""
+    folder = Path(folder)
+    return sorted(p for p in folder.iterdir() if p.name.endswith(TEMPORARY_SUFFIX)) if folder.is_dir() else []
 
 
 def remove_unlisted(folder, keep) -> int:
-    """Remove from a shard folder every file but the marker and the shards in ``keep`` (paths): shards of tasks
-    whose results the study did not take (a batch that finished on a worker that then died, and ran again split
-    into single members) and temporary files of tasks that never finished. Returns how many were removed."""
+    """Remove from a shard folder every file but the marker, the layout and the shards in ``keep`` (paths): shards
+    of tasks whose results the study did not take (a batch that finished on a worker that then died, and ran again
+    split into single members) and temporary files of tasks that never finished. Returns how many were removed."""
     folder = Path(folder)
     keep = {Path(p).name for p in keep}
     removed = 0
     for entry in folder.iterdir() if folder.is_dir() else ():
-        if entry.name == MARKER or entry.name in keep:
+        if entry.name in (MARKER, LAYOUT) or entry.name in keep:
             continue
         try:
             entry.unlink()

@@ -9,7 +9,10 @@ folder beside the study file (shards.py); the client writes only what is small: 
 run time, worker and quantities of interest, ~100 bytes, and keeps which members are in which shard. When the
 study closes, each trajectory variable becomes an HDF5 virtual dataset that maps every task's members to its
 shard: the file reads as one dataset (xarray, h5py, netCDF-4 through HDF5 1.10 or later) as long as the folder
-stays beside it, and members of no shard (failed, not run) read as NaN. A batch whose worker did not write its
+stays beside it, and members of no shard (failed, not run) read as NaN. Without its folder it would read NaN
+trajectories too: its attributes say what it depends on, and study_files.py's open_study checks the shards,
+consolidate makes one self-contained file, and recover rebuilds the file from the folder, which keeps the file as
+laid out when the study started (``layout.nc``). A batch whose worker did not write its
 shard (a worker that does not see the folder, a failed write) brings its trajectories to the client, which writes
 the shard itself.
 
@@ -26,18 +29,20 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import time
 from pathlib import Path
 
 import numpy as np
 
-from linknet_core.output import WriteError, failure_reason, rescue_path
+from linknet_core.output import WriteError, atomic_write, failure_reason, rescue_path
 from linknet_core.version import __version__
 from linknet_core.scene import Scene
 from linknet_core.ensemble.members import OUTPUTS, StudySpec, output_values
 from linknet_core.ensemble.parameters import Plan
-from linknet_core.ensemble.shards import (abandon as _abandon, folder_for, h5_reason as _h5_reason, prepare_folder,
-                                          remove_folder, remove_unlisted, silence as _silence, write_shard)
+from linknet_core.ensemble.shards import (LAYOUT, abandon as _abandon, folder_for, h5_reason as _h5_reason,
+                                          prepare_folder, read_shard, remove_folder, remove_unlisted, shard_files,
+                                          shard_study, silence as _silence, write_shard)
 
 _AXES = np.array(["x", "y", "z"])
 
@@ -71,11 +76,13 @@ class StudyFile:
     """Creates the file and its shard folder, takes finished batches, records retries, and closes it with the
     study's facts, the trajectories joined."""
 
-    def __init__(self, path, spec: StudySpec, plan: Plan, scene: Scene, rescue: bool = False):
+    def __init__(self, path, spec: StudySpec, plan: Plan, scene: Scene, rescue: bool = False,
+                 attrs: dict | None = None):
         import h5py
 
         self.path = str(path)
         self._string = h5py.string_dtype()
+        self._attrs = dict(attrs or {})  # the study's facts known at its start, written with the layout
         self._setup = (spec, plan, scene)  # to lay out a rescue file like this one
         self._study_id = spec.study_id
         self._trajectories = [name for name in OUTPUTS if name in spec.outputs]
@@ -100,6 +107,9 @@ class StudyFile:
             prepare_folder(Path(self.shard_folder), spec.study_id)
         try:
             self._layout(spec, plan, scene)
+            if self.shard_folder:  # kept with the shards: the study file can be rebuilt from the folder alone
+                atomic_write(Path(self.shard_folder) / LAYOUT,
+                             lambda temporary: shutil.copyfile(self.path, temporary))
             self.h5 = h5py.File(self.path, "r+")
             self._variables = {name: self.h5[name] for name in  # looked up once: a lookup costs ~0.1 ms
                                [*_QOI_META, "status", "error", "worker", "run_seconds", "retried"]}
@@ -119,7 +129,6 @@ class StudyFile:
         free space of the file's disk or the process's file size limit (None if they fit). Disk space taken while it
         runs is answered by the rescue file instead."""
         import resource
-        import shutil
 
         values = plan.n_members * (output_values(scene, spec.outputs, spec.times.size) + 9)
         need = 8 * values
@@ -141,6 +150,15 @@ class StudyFile:
         member_coordinates = " ".join(p.name for p in plan.parameters)
         f = h5netcdf.File(self.path, "w")
         try:
+            # the facts known now (no "complete" yet: a file without it was never closed), and where its
+            # trajectories will be, so that even a file whose study never ended says what it needs
+            attrs = {"title": "linknet ensemble", "linknet_version": __version__, **self._attrs,
+                     "study_id": spec.study_id}
+            if self.shard_folder:
+                attrs.update(shard_attributes(self.path, [self.shard_folder], self._trajectories))
+            for key, value in attrs.items():
+                if value is not None:
+                    f.attrs[key] = _attribute(value)
             f.dimensions = dims
             self._coordinate(f, "member", ("member",), np.arange(n), "", "member number (0-based, in plan order)")
             self._coordinate(f, "time", ("time",), spec.times, "s", "output time")
@@ -163,7 +181,9 @@ class StudyFile:
                     self._data(f, name, _OUTPUT_META[name], dims, member_coordinates + extra)
             for name, meta in _QOI_META.items():
                 self._data(f, name, meta, dims, member_coordinates, integer=name == "max_tension_link")
-            status = self._per_member(f, "status", "ok, failed or not run", member_coordinates, text=True)
+            status = self._per_member(f, "status", "ok, failed or not run (missing: a study rebuilt from its shards "
+                                      "(linknet ensemble recover) found no shard holding the member)",
+                                      member_coordinates, text=True)
             status[:] = np.array(["not run"] * n, dtype=object)
             self._per_member(f, "error", "why the member failed ('' if it did not)", member_coordinates, text=True)
             self._per_member(f, "worker", "address of the Dask worker that ran the member", "", text=True)
@@ -197,6 +217,9 @@ class StudyFile:
         var.attrs.update({"units": unit, "long_name": long_name})
         if coordinates:
             var.attrs["coordinates"] = coordinates
+        if "time" in shape_dims:  # shown with the variable (ncdump -h, xarray's attrs): where its values are
+            var.attrs["stored_in"] = (f"shard files in the folder {Path(self.shard_folder).name} beside this file "
+                                      "(see the global attribute depends_on)")
 
     def _per_member(self, f, name, long_name, coordinates, text=False, unit="", dtype="f8"):
         var = f.create_variable(name, ("member",), self._string if text else dtype,
@@ -235,26 +258,16 @@ class StudyFile:
                 self._held = None
                 written_by_client = True
             record = {key: batch[key] for key in ("first", "count", "outputs", "error", "run_seconds", "worker")}
-            record.update(shard=batch.get("shard"), written_by_client=written_by_client)
+            record.update(shard=batch.get("shard"), written_by_client=written_by_client,
+                          offset=batch.get("offset", 0), shard_count=batch.get("shard_count", batch["count"]))
             self._records.append(record)
-            self._record(record)
+            record_batch(self._variables, record)
             now = time.monotonic()
             if now - self._last_flush > FLUSH_SECONDS:
                 self.h5.flush()
                 self._last_flush = now
         except Exception as exc:
             raise self._fail(exc) from None
-
-    def _record(self, batch: dict) -> None:
-        rows = slice(batch["first"], batch["first"] + batch["count"])
-        variables = self._variables
-        for name, values in batch["outputs"].items():
-            variables[name][rows] = values
-        errors = batch["error"]
-        variables["status"][rows] = np.array(["failed" if e else "ok" for e in errors], dtype=object)
-        variables["error"][rows] = np.array(errors, dtype=object)
-        variables["worker"][rows] = np.array([batch["worker"]] * batch["count"], dtype=object)
-        variables["run_seconds"][rows] = batch["run_seconds"]
 
     def continues(self) -> bool:
         """Whether the study can go on after a failed write: its members go to the rescue file, unless that failed
@@ -285,7 +298,7 @@ class StudyFile:
     def _start_rescue(self) -> None:
         """Lay out the rescue file and give it every member taken so far (their shards stay where they are)."""
         try:
-            rescue = StudyFile(rescue_path(self.path), *self._setup, rescue=True)
+            rescue = StudyFile(rescue_path(self.path), *self._setup, rescue=True, attrs=self._attrs)
         except WriteError as again:
             raise self._lose(again) from None
         self._rescue = rescue
@@ -316,12 +329,17 @@ class StudyFile:
 
     def close(self, attrs: dict) -> None:
         """Join the trajectories (virtual datasets over the shards), remove what no member needs from the shard
-        folder, and write the study's facts as netCDF global attributes (None values are left out). If the file
-        could not be written (now or before), the study's members are in the rescue file, and a WriteError says
-        where."""
-        import h5netcdf
-
-        attrs = {"title": "linknet ensemble", "linknet_version": __version__, **attrs}
+        folder, and write the study's facts as netCDF global attributes (None values are left out; ``complete``
+        is 1 unless given). A study that did not complete first takes the shards in its folder that finished but
+        whose results it had not received yet: their members count as finished. If the file could not be written
+        (now or before), the study's members are in the rescue file, and a WriteError says where."""
+        attrs = {"title": "linknet ensemble", "linknet_version": __version__, **self._attrs, **attrs}
+        attrs["complete"] = int(attrs.get("complete", 1))
+        if self._failure is None and not attrs["complete"] and self.shard_folder:
+            try:
+                self._take_finished_shards()
+            except Exception as exc:
+                self._fail(exc)
         if self._trajectories:  # who wrote the trajectories (all by the client: the workers do not see the folder)
             by_client = sum(r["count"] for r in self._records if r["shard"] and r["written_by_client"])
             attrs["members_written_by_workers"] = sum(r["count"] for r in self._records if r["shard"]) - by_client
@@ -332,16 +350,14 @@ class StudyFile:
             try:
                 if self._retried:
                     self._variables["retried"][self._retried] = np.ones(len(self._retried), dtype="i1")
-                self._join()
+                join_trajectories(self.h5, self._trajectories, self._records, self.shard_folder)
                 self.h5.flush()  # a full disk fails here, with every object still open, not inside close
                 self._variables = {}
                 self.h5.close()
                 self.h5 = None
-                with h5netcdf.File(self.path, "a") as f:
-                    for key, value in attrs.items():
-                        if value is None:
-                            continue
-                        f.attrs[key] = json.dumps(value) if isinstance(value, (dict, list, tuple)) else value
+                folders = shard_folders(self._records)
+                write_attributes(self.path, {**attrs, **shard_attributes(self.path, folders, self._trajectories)},
+                                 remove=() if folders else SHARD_ATTRIBUTES)
                 if self.shard_folder:
                     remove_unlisted(self.shard_folder, [r["shard"] for r in self._records if r["shard"]])
                 return
@@ -369,34 +385,203 @@ class StudyFile:
                          detail=f"the study went on in the temporary folder: its {count} finished member(s) are in "
                                 f"{rescue.path}, a study file of the same layout (xarray.open_dataset){shards}")
 
-    def _join(self) -> None:
-        """Each trajectory variable becomes a virtual dataset: every recorded batch's members mapped to its shard
-        (by a path relative to this file for the shards beside it, so the file and its folder can move together),
-        NaN where no shard holds a member. The variable's attributes and dimension scales carry over."""
-        import h5py
+    @property
+    def members_kept(self) -> int:
+        """Members whose results are in the file (finished, or failed with their error), its rescue's included."""
+        return self._taken
 
-        entries = [(r["first"], r["count"], r["shard"]) for r in self._records if r["shard"]]
-        if not self._trajectories or not entries:
-            return
-        own = Path(self.shard_folder)
-        for name in self._trajectories:
-            old = self.h5[name]
-            shape = old.shape
-            layout = h5py.VirtualLayout(shape=shape, dtype=old.dtype)
-            for first, count, shard in entries:
-                shard = Path(shard)
-                source = f"{own.name}/{shard.name}" if shard.parent == own else str(shard)
-                layout[first:first + count] = h5py.VirtualSource(source, name, shape=(count, *shape[1:]))
-            attrs = {key: value for key, value in old.attrs.items() if key != "DIMENSION_LIST"}
-            scales = [old.dims[axis][0] for axis in range(old.ndim)]
-            for axis, scale in enumerate(scales):
-                old.dims[axis].detach_scale(scale)
-            del self.h5[name]
-            joined = self.h5.create_virtual_dataset(name, layout, fillvalue=np.nan)
-            for key, value in attrs.items():
-                joined.attrs[key] = value
-            for axis, scale in enumerate(scales):
-                joined.dims[axis].attach_scale(scale)
+    def _take_finished_shards(self) -> None:
+        """Record the members of this study's shards that finished but were not received (a study stopped while
+        their results were on their way) and are in no record yet."""
+        covered = np.zeros(self._variables["status"].shape[0], dtype=bool)
+        for record in self._records:
+            covered[record["first"]:record["first"] + record["count"]] = True
+        listed = {Path(r["shard"]).name for r in self._records if r["shard"]}
+        waiting = [path for path in shard_files(self.shard_folder)
+                   if path.name not in listed and shard_study(path) == self._study_id[:12]]
+        datasets = {**self._variables, **{name: self.h5[name] for name in self._trajectories}}
+        records, _ = shard_records(waiting, covered, datasets, self._trajectories)
+        for record in records:
+            self._records.append(record)
+            record_batch(self._variables, record)
+            self._taken += record["count"]
+
+    def tidy(self) -> int:
+        """Remove from the shard folder what the closed file does not map: shards of results it did not take and
+        temporary files, such as those of workers stopped part way through a write while the study ended
+        (called once the study's workers are stopped). Returns how many files were removed."""
+        if not self.shard_folder or not os.path.isdir(self.shard_folder):
+            return 0
+        return remove_unlisted(self.shard_folder, [r["shard"] for r in self._records if r["shard"]])
+
+
+# the attributes saying that a study file's trajectories are read from its shard files (removed from a file that
+# holds them itself)
+SHARD_ATTRIBUTES = ("shard_folder", "depends_on")
+_STORED_IN = "stored_in"  # the same, on each trajectory variable
+
+
+def shard_folders(records) -> list[str]:
+    """The folders of the shards that the records map, in order."""
+    return sorted({str(Path(r["shard"]).parent) for r in records if r["shard"]})
+
+
+def shard_attributes(path, folders, trajectories) -> dict:
+    """The global attributes of a study file whose trajectories (the variables named) are in the shard files of
+    ``folders``: a folder beside the file by its name, any other by its path; what the file needs, and what to do
+    to move it."""
+    here = Path(os.path.abspath(path)).parent
+    names = [Path(f).name if Path(f).parent == here else str(f) for f in folders]
+    file = Path(path).name
+    where = " and ".join(f"the folder {n}" + (" beside this file" if n == Path(n).name else "") for n in names)
+    return {"shard_folder": names[0] if len(names) == 1 else json.dumps(names),
+            "depends_on": f"{where}: the trajectories ({', '.join(trajectories)}) are HDF5 virtual datasets that read "
+                          f"the shard files there, and read as NaN where those are missing. Copy or move {file} with "
+                          f"{'them' if len(names) > 1 else 'it'}, or make one self-contained file: linknet ensemble "
+                          f"consolidate {file}. Open it with linknet_core.ensemble.open_study, which checks the "
+                          "shards"}
+
+
+def write_attributes(path, attrs: dict, remove=()) -> None:
+    """Write netCDF global attributes into the study file at ``path`` (None values left out; dicts and lists as
+    JSON), and remove those named in ``remove`` (with ``stored_in`` of every variable when the shard attributes
+    go)."""
+    import h5netcdf
+
+    with h5netcdf.File(path, "a") as f:
+        for key, value in attrs.items():
+            if value is not None:
+                f.attrs[key] = _attribute(value)
+        for key in remove:
+            if key in f.attrs:
+                del f.attrs[key]
+        if set(SHARD_ATTRIBUTES) & set(remove):
+            for variable in f.variables.values():
+                if _STORED_IN in variable.attrs:
+                    del variable.attrs[_STORED_IN]
+
+
+def _attribute(value):
+    return json.dumps(value) if isinstance(value, (dict, list, tuple)) else value
+
+
+def record_batch(variables: dict, batch: dict) -> None:
+    """Write a batch's small part (quantities of interest, status, error, worker, run time) into the study file's
+    variables (h5py datasets by name): its members first .. first + count - 1."""
+    rows = slice(batch["first"], batch["first"] + batch["count"])
+    for name, values in batch["outputs"].items():
+        variables[name][rows] = values
+    errors = batch["error"]
+    variables["status"][rows] = np.array(["failed" if e else "ok" for e in errors], dtype=object)
+    variables["error"][rows] = np.array(errors, dtype=object)
+    variables["worker"][rows] = np.array([batch["worker"]] * batch["count"], dtype=object)
+    variables["run_seconds"][rows] = batch["run_seconds"]
+
+
+def shard_records(paths, covered: np.ndarray, variables: dict, trajectories) -> tuple[list[dict], list[tuple]]:
+    """Records, as a StudyFile keeps them, of the members that the shards at ``paths`` hold and ``covered`` (a
+    flag per member, updated) does not: a shard's members already covered are left out (a batch and the single
+    members it was split into after its worker died hold the same members), so every member is taken once.
+    ``variables``: the study file's datasets by name, the trajectories among them (a shard's must match their
+    shape). Returns the records and the shards that cannot be taken, each with why (unreadable, not this study's
+    shape)."""
+    batches, refused = [], []
+    for path in paths:
+        try:
+            batch = read_shard(path, trajectories=False)
+        except Exception as exc:  # a file cut short (its disk filled), not an HDF5 file, ...
+            refused.append((Path(path), _h5_reason(exc)))
+            continue
+        problem = _shard_problem(batch, covered.size, variables, trajectories)
+        if problem:
+            refused.append((Path(path), problem))
+        else:
+            batches.append(batch)
+    records = []
+    for batch in sorted(batches, key=lambda b: (b["first"], -b["count"])):
+        first, count = batch["first"], batch["count"]
+        free = np.flatnonzero(~covered[first:first + count])
+        for run in np.split(free, np.flatnonzero(np.diff(free) != 1) + 1) if free.size else ():
+            start, stop = int(run[0]), int(run[-1]) + 1
+            records.append({"first": first + start, "count": stop - start, "offset": start, "shard_count": count,
+                            "outputs": {name: np.asarray(values)[start:stop]
+                                        for name, values in batch["outputs"].items() if name in variables},
+                            "error": batch["error"][start:stop], "run_seconds": batch["run_seconds"][start:stop],
+                            "worker": batch["worker"], "shard": batch["shard"], "written_by_client": False})
+        covered[first:first + count] = True
+    return records, refused
+
+
+def _shard_problem(batch: dict, members: int, variables: dict, trajectories) -> str | None:
+    """Why a shard cannot be part of the study whose variables are given (None if it can)."""
+    first, count = batch["first"], batch["count"]
+    if first < 0 or count < 1 or first + count > members:
+        return f"it holds members {first}-{first + count - 1}, the study has {members}"
+    for name in trajectories:
+        shape = batch["shapes"].get(name)
+        if shape is None:
+            return f"it holds no {name}"
+        if tuple(shape) != (count, *variables[name].shape[1:]):
+            return f"its {name} has shape {tuple(shape)}, the study's members {tuple(variables[name].shape[1:])}"
+    return None
+
+
+def join_trajectories(h5, names, records, own_folder) -> None:
+    """Each trajectory variable of the study file ``h5`` (an h5py File) becomes a virtual dataset: every record's
+    members mapped to its shard (by a path relative to the file for the shards in ``own_folder``, the folder beside
+    it, so the file and its folder can move together; by its absolute path elsewhere), NaN where no shard holds
+    a member. The variable's attributes and dimension scales carry over."""
+    import h5py
+
+    entries = [(r["first"], r["count"], r.get("offset", 0), r.get("shard_count", r["count"]), Path(r["shard"]))
+               for r in records if r["shard"]]
+    if not names or not entries:
+        return
+    own = Path(own_folder) if own_folder else None
+    for name in names:
+        shape = h5[name].shape
+        layout = h5py.VirtualLayout(shape=shape, dtype=h5[name].dtype)
+        for first, count, offset, size, shard in entries:
+            source = f"{own.name}/{shard.name}" if shard.parent == own else str(shard)
+            piece = h5py.VirtualSource(source, name, shape=(size, *shape[1:]))
+            layout[first:first + count] = piece if (offset, count) == (0, size) else piece[offset:offset + count]
+        h5.create_virtual_dataset(_SWAP_NAME, layout, fillvalue=np.nan)
+        swap_dataset(h5, name, _SWAP_NAME)
+
+
+_SWAP_NAME = "linknet-replacement"  # where a dataset's replacement is made before it takes the dataset's place
+COPY_BLOCK_BYTES = 64 << 20  # members copied per read and write when a trajectory is made part of the file
+
+
+def materialize(h5, name: str, source) -> None:
+    """Make ``name`` in the h5py File ``h5`` an ordinary dataset holding ``source``'s values (an h5py Dataset,
+    virtual: read through its map), chunked a member to a chunk as the study lays its trajectories out, copied a
+    block of members at a time; its attributes and dimension scales carry over."""
+    shape = source.shape
+    chunks = (1, *shape[1:]) if all(shape) else None  # HDF5 chunks no empty dimension
+    copy = h5.create_dataset(_SWAP_NAME, shape=shape, dtype=source.dtype, chunks=chunks, fillvalue=np.nan)
+    per_member = max(1, int(np.prod(shape[1:], dtype=np.int64)) * source.dtype.itemsize)
+    step = max(1, COPY_BLOCK_BYTES // per_member)
+    for first in range(0, shape[0], step):
+        copy[first:first + step] = source[first:first + step]
+    swap_dataset(h5, name, _SWAP_NAME)
+
+
+def swap_dataset(h5, name: str, replacement: str) -> None:
+    """Put the dataset ``replacement`` in the place of the dataset ``name`` (which is deleted), with its attributes
+    and dimension scales (the netCDF dimensions xarray reads)."""
+    old = h5[name]
+    attrs = {key: value for key, value in old.attrs.items() if key != "DIMENSION_LIST"}
+    scales = [old.dims[axis][0] for axis in range(old.ndim)]
+    for axis, scale in enumerate(scales):
+        old.dims[axis].detach_scale(scale)
+    del h5[name]
+    h5.move(replacement, name)
+    new = h5[name]
+    for key, value in attrs.items():
+        new.attrs[key] = value
+    for axis, scale in enumerate(scales):
+        new.dims[axis].attach_scale(scale)
 
 
 def remove_study(path) -> None:

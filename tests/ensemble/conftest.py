@@ -1,6 +1,6 @@
-"""Shared fixtures of the ensemble tests: a LocalCluster, and a real cluster of separate processes (a
-``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1), both shared by this folder's tests and
-closed when they are done. Helpers (the serial reference runs) are in ensemble_support.py."""
+"""Shared fixtures of the ensemble tests: a LocalCluster, one whose worker is a thread of this process, and a real
+cluster of separate processes (a ``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1), each shared by
+this folder's tests and closed when they are done. Helpers (the serial reference runs) are in ensemble_support.py."""
 from __future__ import annotations
 
 import json
@@ -22,6 +22,19 @@ def local_client():
 
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                            dashboard_address="127.0.0.1:0")
+    client = Client(cluster)
+    yield client
+    client.close()
+    cluster.close()
+
+
+@pytest.fixture(scope="package")
+def threads_client():
+    """A LocalCluster whose single worker is a thread of this process: what a test changes in the ensemble's
+    modules here, the worker sees."""
+    from distributed import Client, LocalCluster
+
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address="127.0.0.1:0")
     client = Client(cluster)
     yield client
     client.close()

@@ -76,7 +76,7 @@ def test_killed_worker_costs_only_its_members_retries(process_client, tmp_path, 
         sources = sorted((m.vspace.get_select_bounds()[0][0], m.file_name) for m in f["X"].virtual_sources())
     assert [first for first, _ in sources] == list(range(12))  # one task per member, each mapped once
     names = sorted(p.name for p in (tmp_path / "killed.shards").iterdir())
-    assert names == sorted([shards.MARKER] + [os.path.basename(source) for _, source in sources])
+    assert names == sorted([shards.MARKER, shards.LAYOUT] + [os.path.basename(source) for _, source in sources])
     process_client.wait_for_workers(2, timeout=60)  # the nanny restarted the killed worker
 
 

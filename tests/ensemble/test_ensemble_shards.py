@@ -19,19 +19,6 @@ T_END, N_OUT = 0.3, 16
 MASSES = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0]
 
 
-@pytest.fixture(scope="module")
-def threads_client():
-    """A LocalCluster whose single worker is a thread of this process: what a test changes in the ensemble's
-    modules here, the worker sees."""
-    from distributed import Client, LocalCluster
-
-    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address="127.0.0.1:0")
-    client = Client(cluster)
-    yield client
-    client.close()
-    cluster.close()
-
-
 def _mapped_members(path, name: str) -> list[tuple[int, int, str]]:
     """(first, count, shard file) of each piece of the joined variable ``name``, in member order."""
     pieces = []
@@ -51,9 +38,9 @@ def test_workers_write_shards_the_file_joins_them_and_moves_with_its_folder(loca
     assert ds.attrs["members_written_by_workers"] == len(MASSES) and ds.attrs["members_written_by_client"] == 0
     folder = tmp_path / "study.shards"
     files = sorted(p.name for p in folder.iterdir())
-    # the marker and one shard per task, nothing else (no temporary file)
-    assert files[0] == shards.MARKER and len(files) == 1 + int(ds.attrs["tasks"])
-    assert all(name.startswith("members-") and name.endswith(".h5") for name in files[1:])
+    # the marker, the study's layout and one shard per task, nothing else (no temporary file)
+    assert files[:2] == [shards.LAYOUT, shards.MARKER] and len(files) == 2 + int(ds.attrs["tasks"])
+    assert all(name.startswith("members-") and name.endswith(".h5") for name in files[2:])
     for name in ("X", "U", "T", "Freact"):  # every member in exactly one shard, mapped by a relative path
         pieces = _mapped_members(out, name)
         assert [first for first, _, _ in pieces] == list(np.cumsum([0] + [c for _, c, _ in pieces[:-1]]))
