@@ -9,7 +9,8 @@ Run as ``python -m linknet_core.ensemble.scheduler_process CONFIG_JSON``: it app
 (the study's LOCAL_CLUSTER_CONFIG), starts a scheduler on 127.0.0.1 on a free port, writes its address as one
 line on stdout, and runs until its stdin closes: the client closes it when the cluster closes, and the OS
 closes it when the client's process ends in any way (killed included), so a scheduler never outlives its
-study. Dask's log messages below ERROR are silenced, as a LocalCluster silences them.
+study. Dask's log messages below ERROR are silenced, as a LocalCluster silences them, and so is the one ERROR a
+killed worker brings on a study that goes on (the results lost with it: ``_LostResultNotice``).
 """
 from __future__ import annotations
 
@@ -48,9 +49,25 @@ async def _serve(config: dict) -> None:
         finished.cancel()
 
 
+class _LostResultNotice(logging.Filter):
+    """Drops the scheduler's "Couldn't gather keys" ERROR. It comes when a worker died holding finished results
+    that the client then asks for: the client that asked reschedules those tasks itself (Dask's client logs that
+    as a warning, which the study hears), they run again, and the study records their members as retried, or, if
+    they cannot run, as failed with the reason. On a study that succeeds the line was the one thing on stderr, and
+    it says nothing the study does not; a failing study says why in its own error."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.msg != LOST_RESULT_MESSAGE
+
+
+LOST_RESULT_MESSAGE = "Couldn't gather keys: %s"  # distributed.scheduler.Scheduler.gather's format
+_LOST_RESULT_FILTER = _LostResultNotice()
+
+
 def _silence_dask_logs() -> None:
     for name in ("distributed", "tornado"):
         logging.getLogger(name).setLevel(logging.ERROR)
+    logging.getLogger("distributed.scheduler").addFilter(_LOST_RESULT_FILTER)  # adding it twice keeps one
 
 
 def main() -> None:

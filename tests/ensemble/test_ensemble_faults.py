@@ -9,7 +9,7 @@ import h5py
 import numpy as np
 
 import linknet_core as ln
-from linknet_core.ensemble import shards, summary
+from linknet_core.ensemble import open_study, shards, summary
 
 from .ensemble_support import MODELS, assert_member_equals, serial_run
 
@@ -103,3 +103,96 @@ def test_a_failed_fetch_is_tried_again_then_the_batch_reruns():
     assert _fetch(_FlakyFuture(FETCH_ATTEMPTS - 1)) == ({"first": 0}, None)
     result, failure = _fetch(_FlakyFuture(FETCH_ATTEMPTS))
     assert result is None and isinstance(failure, _FetchFailed) and "comm fault" in str(failure)
+
+
+def test_the_studys_scheduler_drops_only_the_lost_result_error():
+    """The study's own scheduler process drops the one ERROR Dask logs when a worker died holding finished results
+    that the client then asked for (the client reschedules them, and the study records their members as
+    retried); every other error, a task that keeps killing its workers among them, still gets through."""
+    from linknet_core.ensemble import scheduler_process
+
+    names = ("distributed", "tornado", "distributed.scheduler")
+    levels = {name: logging.getLogger(name).level for name in names}
+    scheduler = logging.getLogger("distributed.scheduler")
+    seen = []
+
+    class Keep(logging.Handler):
+        def emit(self, record):
+            seen.append(record.getMessage())
+
+    keep = Keep()
+    scheduler.addHandler(keep)
+    try:
+        scheduler_process._silence_dask_logs()
+        scheduler.error("Couldn't gather keys: %s", {"linknet-ensemble-0a1b-3-1": "processing"})
+        scheduler.error("Task %s marked as failed because %d workers died while trying to run it",
+                        "linknet-ensemble-0a1b-3-1", 3)
+        scheduler.error("Couldn't gather %s keys", 2)  # another message, though alike
+    finally:
+        scheduler.removeHandler(keep)
+        scheduler.removeFilter(scheduler_process._LOST_RESULT_FILTER)
+        for name, level in levels.items():
+            logging.getLogger(name).setLevel(level)
+    assert seen == ["Task linknet-ensemble-0a1b-3-1 marked as failed because 3 workers died while trying to run it",
+                    "Couldn't gather 2 keys"]
+
+
+KILL_SCRIPT = """
+import json, os, signal, sys, time
+import numpy as np
+from distributed import default_client
+import linknet_core as ln
+
+def main():
+    killed = []
+
+    def kill_a_worker_holding_a_result(progress):
+        # a worker whose finished result the study has not fetched yet: the study asks for it right after
+        if progress.done < 2 or killed:
+            return
+        client = default_client()
+        deadline = time.monotonic() + 60
+        while not killed and time.monotonic() < deadline:
+            holding = [worker for worker, keys in client.has_what().items() if keys]
+            if holding:
+                pid = client.run(os.getpid, workers=[holding[0]])[holding[0]]
+                killed.append(pid)
+                os.kill(pid, signal.SIGKILL)
+            time.sleep(0.005)
+
+    ds = ln.ensemble(MODEL, vary={"M[11]": np.linspace(0.5, 2.0, 10)}, t_end=0.3, n_out=11, dt=1e-5, workers=2,
+                     members_per_task=1, progress=kill_a_worker_holding_a_result, out=OUT)
+    print(json.dumps({"status": [str(s) for s in ds["status"].values], "retried": int(ds["retried"].sum()),
+                      "killed": killed}))
+
+if __name__ == "__main__":
+    main()
+"""
+
+
+def test_a_worker_killed_on_the_studys_own_cluster_leaves_stderr_silent(tmp_path):
+    """The study's own local cluster (its scheduler in a process of its own) with a worker process killed
+    (SIGKILL) mid-study: the study succeeds, every member equal to its serial run, and nothing reaches stderr
+    (Dask's scheduler logged "Couldn't gather keys" as an ERROR when the killed worker held finished results)."""
+    import json
+    import subprocess
+    import sys
+
+    from .ensemble_support import ROOT
+
+    out = tmp_path / "killed.nc"
+    script = tmp_path / "kill_a_worker.py"
+    model = str(MODELS / "chain_10.json")
+    script.write_text(KILL_SCRIPT.replace("MODEL", repr(model)).replace("OUT", repr(str(out))))
+    # the script runs from its own folder: linknet from this checkout, for it and its workers
+    path = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, cwd=str(ROOT), timeout=300,
+                         env={**os.environ, "PYTHONPATH": path})
+    assert run.returncode == 0, run.stderr
+    assert run.stderr == ""
+    result = json.loads(run.stdout)
+    assert result["killed"] and result["status"] == ["ok"] * 10
+    scene = ln.load_scene(MODELS / "chain_10.json")
+    with open_study(out) as ds:
+        for m, mass in enumerate(np.linspace(0.5, 2.0, 10)):
+            assert_member_equals(ds, m, serial_run(scene, {"M[11]": mass}, 0.3, 11, dt=1e-5))
