@@ -174,7 +174,10 @@ def _note_where_members_are(exc: BaseException, path: Path, sink) -> None:
     if sink.shard_folder is not None:
         text += (f", their trajectories in the shard files of {folder} beside it: keep the two together, or make "
                  f"one self-contained file with: linknet ensemble consolidate {path}")
-    exc.add_note(text)
+    if hasattr(exc, "add_note"):
+        exc.add_note(text)
+    else:  # Python 3.10: the note is kept where 3.11 keeps it (linknet ensemble reads it; tracebacks do not show it)
+        exc.__notes__ = [*getattr(exc, "__notes__", []), text]
 
 
 def _connect_timeout(seconds, client) -> dict:
