@@ -463,7 +463,7 @@ def test_the_command_says_where_an_interrupted_studys_members_are(tmp_path, monk
 
     def interrupted(*args, **kwargs):
         stop = KeyboardInterrupt()
-        stop.add_note("the 3 member(s) finished before the study stopped are in x.nc (complete = 0)")
+        stop.__notes__ = ["the 3 member(s) finished before the study stopped are in x.nc (complete = 0)"]
         raise stop
 
     monkeypatch.setattr(ensemble_package, "ensemble", interrupted)
