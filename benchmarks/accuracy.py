@@ -2,12 +2,12 @@
 (benchmarks.reference, scipy's DOP853 on the seed's (9), (25)-(26)), the run's own error estimate there
 (linknet_core.accuracy: its companion run), the goal, and the time with and without the estimate.
 
-    python -m benchmarks.accuracy [--quick] [--scenes NAME ...] [--out FILE.md]
+    python -m benchmarks.accuracy [--quick] [--scenes NAME ...] [--out FILE.md]    # prints the table (and writes FILE.md)
 
 Every shipped scene runs to the t_end where its reference is verified (benchmarks.work_precision.SCENES, or the
 stop time the scene's notes give), plus scenes of this script's own that no test tunes to (EXTRA). The references
-are cached in docs/benchmarks/references (their digest covers every number of the scene). Measures; asserts
-nothing (tests/core/test_error_estimate.py asserts).
+are cached in docs/benchmarks/references (their digest covers every number of the scene; a tracked cache, see
+benchmarks.reference). Measures; asserts nothing (tests/core/test_error_estimate.py asserts).
 """
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ import numpy as np
 import linknet_core as ln
 from linknet_core.accuracy import AccuracyWarning
 
+from .output import checked, write_text
 from .reference import reference
 from .scene_spec import SceneSpec
 
@@ -134,8 +135,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help=f"only {', '.join(QUICK)}")
     p.add_argument("--scenes", nargs="*")
-    p.add_argument("--out", help="also write the table (Markdown) to this file")
+    p.add_argument("--out", help="also write the table (Markdown) to this file (not inside docs/)")
     args = p.parse_args(argv)
+    out = checked(args.out, can_merge=False, parser=p) if args.out else None
     names = set(args.scenes) if args.scenes else (set(QUICK) if args.quick else None)
     scenes = shipped_scenes(names)
     scenes.update({n: v for n, v in extra_scenes().items() if names is None or n in names})
@@ -147,11 +149,9 @@ def main(argv=None) -> int:
         rows.extend(scene_rows)
     text = table(rows)
     print(text)
-    if args.out:
-        tmp = Path(args.out).with_suffix(".tmp")
-        tmp.write_text(text + "\n")
-        tmp.replace(args.out)
-        print(f"wrote {args.out}")
+    if out:
+        write_text(out, text + "\n")
+        print(f"wrote {out}")
     return 0
 
 

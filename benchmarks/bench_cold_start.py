@@ -21,7 +21,10 @@ Times: wall time of the process (what a user waits) and its CPU time (user + sys
 repeated ``--repeats`` times, trees and commands interleaved; the table gives the median of the repeats and
 the ratio first / second of the medians.
 
-    python benchmarks/bench_cold_start.py --trees before=/work/before after=/work/main [--repeats 3] [--out DIR]
+    python benchmarks/bench_cold_start.py --trees before=/work/before after=/work/main [--repeats 3] [--out DIR] [--merge]
+
+Writes cold_start.json and cold_start.md into build/native_vs_numba (with --merge the tracked
+docs/benchmarks/native_vs_numba, which ``python -m benchmarks.native_vs_numba report`` renders).
 """
 from __future__ import annotations
 
@@ -37,6 +40,11 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+if __package__ in (None, ""):  # run as a file: the checkout's benchmarks package (this process measures nothing)
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from benchmarks.output import add_output_arguments, resolve, write_text  # noqa: E402
 
 COMMANDS = {
     "pendulum dop853 rtol 1e-8, 2 s": ["models/pendulum.json", "--t-end", "2", "--method", "dop853", "--rtol", "1e-8"],
@@ -157,9 +165,9 @@ def main(argv=None):
     ap.add_argument("--trees", nargs="+", required=True, metavar="NAME=PATH")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--in-place", action="store_true", help="delete the caches inside each tree instead of copying")
-    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent.parent / "docs" / "benchmarks"
-                    / "native_vs_numba")
+    add_output_arguments(ap, "native_vs_numba", tracked="native_vs_numba")
     args = ap.parse_args(argv)
+    out = resolve(ap, args, "native_vs_numba", tracked="native_vs_numba")
     trees = {k: Path(v).resolve() for k, v in (item.split("=", 1) for item in args.trees)}
     meta = {"command": "python benchmarks/bench_cold_start.py --trees " + " ".join(args.trees)
             + f" --repeats {args.repeats}" + (" --in-place" if args.in_place else ""),
@@ -174,11 +182,9 @@ def main(argv=None):
     results = measure(trees, args.repeats, args.in_place)
     meta["load_end"] = _load()
     summary = summarise(results)
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "cold_start.json").write_text(json.dumps({"meta": meta, "summary": summary, "runs": results},
-                                                         indent=1))
+    write_text(out / "cold_start.json", json.dumps({"meta": meta, "summary": summary, "runs": results}, indent=1))
     text = markdown(summary, meta)
-    (args.out / "cold_start.md").write_text(text)
+    write_text(out / "cold_start.md", text)
     print(text)
 
 

@@ -65,6 +65,8 @@ from linknet_core.accuracy import AccuracyWarning
 from linknet_core.ensemble import make_plan
 from linknet_core.ensemble.engine import local_cluster, quiet_shutdown  # the cluster ln.ensemble starts
 
+from benchmarks.output import build_path, write_text
+
 ROOT = Path(__file__).resolve().parent.parent
 SCENE = ROOT / "models" / "chain_10.json"
 DT, N_OUT, T_END = 1e-3, 201, 2.0
@@ -616,8 +618,9 @@ def main(argv=None) -> int:
     p.add_argument("--explain", metavar="JSON", default=None,
                    help="print the model's fit to the studies of an earlier run's JSON (wall time predicted against "
                         "measured, per study) and stop")
-    p.add_argument("--out", default=str(ROOT / "build" / "bench_ensemble.json"))
+    p.add_argument("--out", help="results (JSON; default build/bench_ensemble.json); not inside docs/")
     args = p.parse_args(argv)
+    out = build_path("bench_ensemble.json", args.out, parser=p)
     if args.quick:
         return quick(args)
     if args.explain:
@@ -710,9 +713,8 @@ def main(argv=None) -> int:
     print()
     print("Wall time of each phase: " + ", ".join(f"{name} {seconds:.1f} s" for name, seconds in phase.seconds.items())
           + f"; {time.perf_counter() - phase._start:.0f} s in all")
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(results, indent=1) + "\n")
-    print(f"wrote {args.out}")
+    write_text(out, json.dumps(results, indent=1) + "\n")
+    print(f"wrote {out}")
     return 0
 
 

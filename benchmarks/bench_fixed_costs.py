@@ -25,7 +25,8 @@ loads its cache, so that only the per-call work is measured.
 
 With ``--trees`` the script runs itself once per tree and round in a fresh process (PYTHONPATH = the tree,
 working directory = the tree, by file path so that nothing else shadows the package), interleaving the trees
-round by round, and writes DIR/fixed_costs.json and DIR/fixed_costs.md: the best of all rounds per figure.
+round by round, and writes fixed_costs.json and fixed_costs.md (the best of all rounds per figure) into
+build/native_vs_numba, or DIR (--out DIR), or with --merge the tracked docs/benchmarks/native_vs_numba.
 """
 from __future__ import annotations
 
@@ -466,6 +467,14 @@ def _markdown(trees: dict, best: dict, meta: dict) -> str:
     return "\n".join(lines)
 
 
+def _output():
+    """The checkout's benchmarks.output, for the driver only: a tree's own run (PYTHONPATH = that tree) imports
+    nothing of this checkout."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+    from benchmarks import output
+    return output
+
+
 def drive(trees: dict, rounds: int, repeats: int, out: Path) -> dict:
     this = Path(__file__).resolve()
     numba_cache = Path(tempfile.mkdtemp(prefix="linknet_fixed_costs_numba_"))  # no tree's cache is touched
@@ -491,11 +500,11 @@ def drive(trees: dict, rounds: int, repeats: int, out: Path) -> dict:
             results[tree].append(res)
     meta["load_end"] = _load()
     best = {t: _best(r) for t, r in results.items()}
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "fixed_costs.json").write_text(json.dumps({"meta": meta, "trees": {k: str(v) for k, v in trees.items()},
-                                                      "best": best, "rounds": results}, indent=1))
+    write_text = _output().write_text
+    write_text(out / "fixed_costs.json", json.dumps({"meta": meta, "trees": {k: str(v) for k, v in trees.items()},
+                                                     "best": best, "rounds": results}, indent=1))
     text = _markdown(trees, best, meta)
-    (out / "fixed_costs.md").write_text(text)
+    write_text(out / "fixed_costs.md", text)
     print(text)
     return best
 
@@ -511,9 +520,12 @@ def main(argv=None):
                          "--trees: one table of every tree's phases")
     ap.add_argument("--breakdown", action="store_true",
                     help="native tree only: where a one-step advance spends its time (Python, ctypes, C)")
-    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent.parent / "docs" / "benchmarks"
-                    / "native_vs_numba",
-                    help="with --trees: output folder")
+    ap.add_argument("--out", type=Path, metavar="DIR", help="with --trees: output folder (default "
+                    "build/native_vs_numba; with --merge, docs/benchmarks/native_vs_numba); inside docs/ only with "
+                    "--merge")
+    ap.add_argument("--merge", action="store_true",
+                    help="with --trees: write into the tracked docs/benchmarks/native_vs_numba (or --out) instead of "
+                         "build/")
     args = ap.parse_args(argv)
     if args.trees and args.phases:
         trees = {k: Path(v).resolve() for k, v in (item.split("=", 1) for item in args.trees)}
@@ -529,8 +541,9 @@ def main(argv=None):
         print(_phases_markdown(trees, results))
         return
     if args.trees:
+        out = _output().resolve(ap, args, "native_vs_numba", tracked="native_vs_numba")
         trees = dict(item.split("=", 1) for item in args.trees)
-        drive({k: Path(v).resolve() for k, v in trees.items()}, args.rounds, args.repeats, args.out.resolve())
+        drive({k: Path(v).resolve() for k, v in trees.items()}, args.rounds, args.repeats, out.resolve())
         return
     res = breakdown(args.repeats) if args.breakdown else phases() if args.phases else measure(args.repeats)
     if args.json:

@@ -40,6 +40,8 @@ import build_fmu  # noqa: E402
 import linknet_core as ln  # noqa: E402
 from linknet_core.symbolic.codegen import compiler  # noqa: E402
 
+from benchmarks.output import build_path, write_text  # noqa: E402
+
 
 def _best_time(fn, repeats):
     """Best of `repeats` timings of fn() (name kept for the callers)."""
@@ -269,10 +271,12 @@ def bench_getter_paths(scene_name, fmu_dir, repeats):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true", help="few steps (smoke run)")
-    p.add_argument("--out", default=str(ROOT / "build" / "bench_fmu.json"))
+    p.add_argument("--out", help="results (JSON; default build/bench_fmu.json, the FMUs in bench_fmus/ beside it); "
+                   "not inside docs/")
     a = p.parse_args(argv)
+    out = build_path("bench_fmu.json", a.out, parser=p)
     n_steps, repeats = (20, 2) if a.quick else (300, 15)
-    fmu_dir = Path(a.out).parent / "bench_fmus"
+    fmu_dir = out.parent / "bench_fmus"
     fmu_dir.mkdir(parents=True, exist_ok=True)
     c_host, c_host_build = build_c_timing_host(fmu_dir)
     if c_host is None:
@@ -327,8 +331,8 @@ def main(argv=None):
     for r in results["getters"]:
         print(f"   {r['scene']:10s} {r['n_outputs']:5d} outputs: array {r['array_get_real_s'] * 1e6:8.1f}us, "
               f"default {r['default_get_real_s'] * 1e6:9.1f}us ({r['speedup']:.0f}x)")
-    Path(a.out).write_text(json.dumps(results, indent=1))
-    print(f"saved {a.out}")
+    write_text(out, json.dumps(results, indent=1))
+    print(f"saved {out}")
     return 0
 
 

@@ -24,6 +24,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 HOST = ROOT / "benchmarks" / "c_reference" / "directional_timing_host.c"
 
+from benchmarks.output import build_path  # noqa: E402
+
 
 def build_host(out: Path) -> Path:
     cc = os.environ.get("CC", "cc")
@@ -63,9 +65,10 @@ def main(argv=None) -> int:
     p.add_argument("--kinds", nargs="+", choices=("native", "python"), default=["native", "python"])
     p.add_argument("--n", type=int, default=200, help="calls per round")
     p.add_argument("--rounds", type=int, default=5)
-    p.add_argument("--out", default=str(ROOT / "build" / "bench_directional"))
+    p.add_argument("--out", help="work folder: the FMUs and the C host (default build/bench_directional); not "
+                   "inside docs/")
     a = p.parse_args(argv)
-    out = Path(a.out)
+    out = build_path("bench_directional", a.out, parser=p)
     out.mkdir(parents=True, exist_ok=True)
     exe = build_host(out)
     print(f"load average {os.getloadavg()[0]:.2f} (2 cores here); best of {a.rounds} rounds of {a.n} calls")

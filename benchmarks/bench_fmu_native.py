@@ -43,6 +43,7 @@ for p in (ROOT, ROOT / "fmu_src"):
 
 import build_fmu  # noqa: E402
 import linknet_core as ln  # noqa: E402
+from benchmarks.output import BUILD, build_path, write_text  # noqa: E402
 from native.build import CFLAGS  # noqa: E402
 
 HOSTS = ROOT / "tests" / "fmu_native"
@@ -138,14 +139,15 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true", help="CI-sized: fewer scenes and repeats")
     p.add_argument("--scenes", nargs="+")
-    p.add_argument("--out", default=str(ROOT / "build" / "bench_fmu_native.json"))
+    p.add_argument("--out", help="results (JSON; default build/bench_fmu_native.json); not inside docs/")
     a = p.parse_args(argv)
+    out = build_path("bench_fmu_native.json", a.out, parser=p)
     scenes = a.scenes or (["chain_10", "chain_100"] if a.quick else ["chain_10", "chain_100", "net_10x10",
                                                                       "redundant_truss"])
     cold_repeats, py_cold_repeats = (5, 2) if a.quick else (21, 5)
     N, R = (300, 7) if a.quick else (300, 31)
     cc = compiler()
-    work = ROOT / "build" / "bench_fmu_native"
+    work = BUILD / "bench_fmu_native"  # the FMUs
     work.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix="bench_fmu_native_"))
     host = tmp / "native_host"
@@ -202,8 +204,7 @@ def main(argv=None) -> int:
                                        pythonfmu_dostep_ns=pyf["dostep"], simulator_advance_ns=1e9 * adv)
         print(f"{name}: done", file=sys.stderr)
     shutil.rmtree(tmp, ignore_errors=True)
-    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.out).write_text(json.dumps(results, indent=1))
+    write_text(out, json.dumps(results, indent=1))
     report(results)
     return 0
 

@@ -29,9 +29,10 @@ two paths' final positions, and how much the scene amplifies a 1e-13 m change of
 planar scenes (pendulum, double pendulum, chain_10, chain_100; RATTLE, DOPRI5, DOP853) run in 2-D and forced
 onto 3-D.
 
-    python -m benchmarks.bench_kernel [--quick] [--integrators] [--no-kernel] [--out DIR]
+    python -m benchmarks.bench_kernel [--quick] [--integrators] [--no-kernel] [--out DIR] [--merge]
 
-Writes DIR/kernel.json and DIR/kernel.md (default docs/benchmarks, or docs/benchmarks/quick with --quick).
+Writes DIR/kernel.json and DIR/kernel.md (default build/kernel, or build/kernel/quick with --quick; with --merge the
+tracked docs/benchmarks).
 Measures only; asserts nothing but the agreement of the implementations.
 """
 from __future__ import annotations
@@ -64,7 +65,8 @@ from linknet_core.clib import library as native_lib
 from linknet_core.native.model import NativeData, NativeModel
 from linknet_core.symbolic.codegen import compiler
 
-ROOT = Path(__file__).resolve().parent.parent
+from benchmarks.output import add_output_arguments, resolve, write_text
+
 C_SOURCE = Path(__file__).resolve().parent / "c_reference" / "chain_rhs.c"
 C_SOURCE_FUSED = Path(__file__).resolve().parent / "c_reference" / "chain_rhs_fused.c"
 C_FLAGS = ["-O2", "-shared", "-fPIC"]
@@ -413,8 +415,7 @@ def integrator_table(t_end=2.0, quick=False, log=print):
 
 # ------------------------------------------------------------------------------------------------ output
 def write_outputs(out: Path, result: dict) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "kernel.json").write_text(json.dumps(result, indent=1, sort_keys=True))
+    write_text(out / "kernel.json", json.dumps(result, indent=1, sort_keys=True))
     meta = result["meta"]
     lines = ["# Native core vs plain C", "",
              f"`{meta['command']}` on {meta['machine']} ({meta['cpus']} CPUs), Python {meta['python']}, "
@@ -511,7 +512,7 @@ def write_outputs(out: Path, result: dict) -> None:
                          f"{1e3 * c['seconds']:.3f} | {c['us_per_step']:.2f} | {r['speedup']:.0f} | "
                          f"{r['max_position_difference_m']:.0e} | {r['sensitivity_m']:.0e} |")
         lines.append("")
-    (out / "kernel.md").write_text("\n".join(lines))
+    write_text(out / "kernel.md", "\n".join(lines))
 
 
 def _load() -> str:
@@ -526,8 +527,9 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="short timings (and fewer integrator scenes)")
     ap.add_argument("--integrators", action="store_true", help="also part 2: whole runs, numpy vs native")
     ap.add_argument("--no-kernel", action="store_true", help="skip part 1")
-    ap.add_argument("--out", type=Path, help="output folder (default docs/benchmarks, or docs/benchmarks/quick)")
+    add_output_arguments(ap, "kernel", quick=True)
     args = ap.parse_args(argv)
+    out = resolve(ap, args, "kernel", quick=args.quick)
 
     repeats = 3 if args.quick else 5
     result = {"meta": {"command": "python -m benchmarks.bench_kernel " + " ".join(argv if argv is not None
@@ -543,7 +545,6 @@ def main(argv=None):
         result["planar_integrators"] = planar_integrator_table(quick=args.quick)
         result["integrators"] = integrator_table(quick=args.quick)
     result["meta"]["load_end"] = _load()
-    out = args.out or (ROOT / "docs" / "benchmarks" / ("quick" if args.quick else ""))
     write_outputs(out, result)
     print(f"wrote {out / 'kernel.json'} and {out / 'kernel.md'}")
     return result

@@ -236,7 +236,10 @@ def main(argv=None) -> int:
         print(table)
         return 0 if equal else 1
     if a.trees:
-        folder = (a.out or REPO / "build" / "bit_identity").resolve()  # the runs' working directories are the trees
+        # the checkout's benchmarks package, for this driver only: each tree's run imports nothing of this checkout
+        sys.path.insert(0, str(REPO))
+        from benchmarks.output import build_path, write_text
+        folder = build_path("bit_identity", a.out, parser=p).resolve()  # the runs' working directories are the trees
         folder.mkdir(parents=True, exist_ok=True)
         paths = []
         for entry in a.trees:
@@ -248,7 +251,7 @@ def main(argv=None) -> int:
                            check=True)
             paths.append(out)
         table, equal = compare(paths)
-        (folder / "table.md").write_text(table)
+        write_text(folder / "table.md", table)
         print(table)
         return 0 if equal else 1
     run_all(a.out or REPO / "build" / "bit_identity" / "digests.json")

@@ -8,16 +8,14 @@ rigidity analysis names grow with k without bound while the positions may still 
 takes a stretch set by the geometry, not by the load (the tilted tower's top square), or a sag that shrinks slower
 than 1/k (a taut string between anchors). The rigid scene's own run is listed beside it: where it stops, and why.
 
-    python3 -m benchmarks.degenerate_limit [--t-end 0.3] [--stiffness 1e7 1e8 1e9 1e10 1e11] [--merge]
+    python3 -m benchmarks.degenerate_limit [--t-end 0.3] [--stiffness 1e7 1e8 1e9 1e10 1e11] [--out DIR] [--merge]
 
-Writes build/degenerate_limit.md (docs/benchmarks/degenerate_limit.md with --merge).
+Writes build/degenerate_limit/degenerate_limit.md (the tracked docs/benchmarks/degenerate_limit.md with --merge).
 """
 from __future__ import annotations
 
 import argparse
-import math
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -25,7 +23,7 @@ import linknet_core as ln
 from linknet_core.scene.builders import degenerate_scenes
 from linknet_core.structure.rigidity import second_order_rigid_flexes
 
-ROOT = Path(__file__).resolve().parent.parent
+from .output import add_output_arguments, resolve, write_text
 
 
 def spring_version(scene: ln.Scene, k: float) -> ln.Scene:
@@ -76,12 +74,13 @@ def growth(rows, key):
     return float(np.polyfit(k, v, 1)[0])
 
 
-def main() -> None:
+def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--t-end", type=float, default=0.3)
     parser.add_argument("--stiffness", type=float, nargs="+", default=[1e7, 1e8, 1e9, 1e10, 1e11])
-    parser.add_argument("--merge", action="store_true", help="write docs/benchmarks/degenerate_limit.md")
-    a = parser.parse_args()
+    add_output_arguments(parser, "degenerate_limit")
+    a = parser.parse_args(argv)
+    out = resolve(parser, a, "degenerate_limit") / "degenerate_limit.md"
     lines = ["# The degenerate nets' stiff-spring limit", "",
              f"`python3 -m benchmarks.degenerate_limit --t-end {a.t_end} --stiffness "
              f"{' '.join(f'{k:g}' for k in a.stiffness)}`: every link a spring of stiffness k, dop853 rtol 1e-11, "
@@ -103,11 +102,7 @@ def main() -> None:
                       f"{' -> '.join(f'{g:.1g}' for g in gaps)} m. A rigid answer with bounded tensions shows tension ~ "
                       "k^0, stretch ~ k^-1 and gaps falling ~10x per decade.", ""]
         print("\n".join(lines[-(len(rows) + 8):]), flush=True)
-    out = ROOT / ("docs/benchmarks" if a.merge else "build") / "degenerate_limit.md"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".md.tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    tmp.replace(out)
+    write_text(out, "\n".join(lines) + "\n")
     print(f"wrote {out}")
 
 

@@ -1,7 +1,8 @@
 """MoorDyn's elastic lines against linknet's rigid rope on the rope scene, at several times of the run.
 
-    python -m benchmarks.moordyn_study                 # writes docs/benchmarks/rope_peer.json, prints the tables
-    python -m benchmarks.moordyn_study --out build/x.json --budget 10
+    python -m benchmarks.moordyn_study                 # writes build/moordyn_study/rope_peer.json, prints the tables
+    python -m benchmarks.moordyn_study --merge         # into the tracked docs/benchmarks/rope_peer.json
+    python -m benchmarks.moordyn_study --out /tmp/x --budget 10
 
 The work-precision benchmark compares the state at t_end only. Here every run is sampled at times that separate
 the errors of an elastic line (benchmarks/peers/moordyn_peer.py):
@@ -36,10 +37,10 @@ if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
     __package__ = "benchmarks"
 
+from .output import add_output_arguments, resolve, write_text  # noqa: E402
 from .peers.moordyn_peer import MoorDynLine, moordyn_available  # noqa: E402
 from .rope_reference import solve_ropes  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
 SCENE = "rope_swing"
 TIMES = (0.4, 0.9, 1.2, 2.0)
 GRID = 0.1   # the sample times are multiples of it
@@ -224,9 +225,10 @@ def markdown(result) -> str:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks" / "rope_peer.json")
+    add_output_arguments(ap, "moordyn_study")
     ap.add_argument("--budget", type=float, default=30.0, help="CPU seconds one run may take (predicted)")
     args = ap.parse_args(argv)
+    out = resolve(ap, args, "moordyn_study") / "rope_peer.json"
     ok, why = moordyn_available()
     if not ok:
         print(f"MoorDyn unavailable: {why}")
@@ -250,10 +252,9 @@ def main(argv=None):
                        "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": _machine(),
                        "versions": _versions() | {"moordyn_wrapper": getattr(moordyn, "__version__", None)},
                        "load_average": {"start": load_start, "end": _loadavg()}, "timing": "CPU (process_time)"}}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1))
+    write_text(out, json.dumps(result, indent=1))
     print(markdown(result))
-    print(f"wrote {args.out}")
+    print(f"wrote {out}")
     return result
 
 

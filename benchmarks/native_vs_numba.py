@@ -9,15 +9,16 @@ figure is the best of the rounds. A JIT-compiled tree gets one numba cache folde
     python -m benchmarks.native_vs_numba kernel --trees before=/work/before after=/work/main [--rounds 2]
     python -m benchmarks.native_vs_numba work-precision --trees before=/work/before after=/work/main \
         [--rounds 2] [--scenes pendulum chain_10 chain_100 net_10x10] [--wp-args='--sweep-budget 45']
-    python -m benchmarks.native_vs_numba report
+    python -m benchmarks.native_vs_numba report [--merge]
 
 ``work-precision`` runs linknet's own methods only (the peers are the same code in both trees), every tree with
 the same work_precision arguments (--wp-args, for example smaller sweep budgets for both), and records each
 sweep's wall time and the load when it started. ``kernel`` and ``work-precision`` write DIR/kernel.json and
-DIR/work_precision.json (DIR: --out, default docs/benchmarks/native_vs_numba), each tree's raw rounds included; ``kernel`` also writes the after tree's
-best rounds in bench_kernel's own format (DIR/kernel_after/kernel.md). ``report`` renders DIR.md (by default
-docs/benchmarks/native_vs_numba.md) from DIR/findings.md (written by hand), these JSON files and
-bench_fixed_costs.py's and bench_cold_start.py's outputs in the same folder.
+DIR/work_precision.json (DIR: build/native_vs_numba; --out DIR; with --merge the tracked
+docs/benchmarks/native_vs_numba), each tree's raw rounds included; ``kernel`` also writes the after tree's best
+rounds in bench_kernel's own format (DIR/kernel_after/kernel.md). ``report`` renders DIR.md (build/native_vs_numba.md,
+with --merge docs/benchmarks/native_vs_numba.md) from DIR/findings.md (written by hand), these JSON files and
+bench_fixed_costs.py's and bench_cold_start.py's outputs in the same folder (they write there by the same rule).
 """
 from __future__ import annotations
 
@@ -31,8 +32,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from benchmarks.output import add_output_arguments, resolve, write_text
+
 ROOT = Path(__file__).resolve().parent.parent
-OUT = ROOT / "docs" / "benchmarks" / "native_vs_numba"
 WP_SCENES = ("pendulum", "chain_10", "chain_100", "net_10x10")
 LINKNET_METHODS = ("rattle", "yoshida4", "suzuki4", "yoshida6", "yoshida8", "dopri5", "dop853")
 LEVELS = ("0.001", "1e-06", "1e-09")
@@ -141,9 +143,8 @@ def run_kernel(trees: dict, rounds: int, out: Path) -> dict:
             raw[tree].append(_kernel_run(tree, path, numba_cache, ["--integrators", "--no-kernel"]))
     meta["load_end"] = _load()
     best = {t: _combine_kernel(r) for t, r in raw.items()}
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "kernel.json").write_text(json.dumps({"meta": meta, "trees": {k: str(v) for k, v in trees.items()},
-                                                 "best": best, "rounds": raw}, indent=1))
+    write_text(out / "kernel.json", json.dumps({"meta": meta, "trees": {k: str(v) for k, v in trees.items()},
+                                                "best": best, "rounds": raw}, indent=1))
     last = list(trees)[-1]
     sys.path.insert(0, str(ROOT))
     from benchmarks.bench_kernel import write_outputs  # the after tree's renderer (this tree's script)
@@ -221,9 +222,8 @@ def run_work_precision(trees: dict, rounds: int, scenes, out: Path, extra_args=(
                                                  "error": row["error"]}
             per_scene[scene] = {"levels": levels, "settings": settings}
         best[tree] = per_scene
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "work_precision.json").write_text(json.dumps({"meta": meta, "trees": {k: str(v) for k, v in trees.items()},
-                                                         "best": best, "rounds": _slim(raw)}, indent=1))
+    write_text(out / "work_precision.json", json.dumps({"meta": meta, "trees": {k: str(v) for k, v in trees.items()},
+                                                        "best": best, "rounds": _slim(raw)}, indent=1))
     return best
 
 
@@ -371,7 +371,7 @@ def report(out: Path) -> None:
             text = path.read_text().splitlines()
             lines += ["#" + text[0]] + [("#" + x if x.startswith("## ") else x) for x in text[1:]] + [""]
     target = out.parent / f"{out.name}.md"
-    target.write_text("\n".join(lines))
+    write_text(target, "\n".join(lines))
     print(f"wrote {target}")
 
 
@@ -383,14 +383,15 @@ def main(argv=None):
     ap.add_argument("--scenes", nargs="+", default=list(WP_SCENES), help="work-precision scenes")
     ap.add_argument("--wp-args", default="", help="extra arguments for every tree's work_precision, the same for "
                     "all trees (for example '--sweep-budget 45 --sweep-cap 60')")
-    ap.add_argument("--out", type=Path, default=OUT)
+    add_output_arguments(ap, "native_vs_numba", tracked="native_vs_numba")
     args = ap.parse_args(argv)
+    out = resolve(ap, args, "native_vs_numba", tracked="native_vs_numba")
     trees = {k: Path(v).resolve() for k, v in (x.split("=", 1) for x in args.trees or [])}
     if args.what == "kernel":
-        run_kernel(trees, args.rounds, args.out)
+        run_kernel(trees, args.rounds, out)
     elif args.what == "work-precision":
-        run_work_precision(trees, args.rounds, args.scenes, args.out, args.wp_args.split())
-    report(args.out)
+        run_work_precision(trees, args.rounds, args.scenes, out, args.wp_args.split())
+    report(out)
 
 
 if __name__ == "__main__":

@@ -1,9 +1,11 @@
 """Numerical-stability stress suite for linknet_core.
 
     python -m benchmarks.stress            # every case at full size (long runs included), writes
-                                           # docs/benchmarks/stress.json and stress.md
-    python -m benchmarks.stress --quick    # the reduced sizes the default tests use
-    python -m benchmarks.stress --case whip scale
+                                           # build/stress/stress.json and stress.md
+    python -m benchmarks.stress --quick    # the reduced sizes the default tests use: build/stress/stress_quick.*
+    python -m benchmarks.stress --case whip scale            # stress_whip_scale.json and .md
+    python -m benchmarks.stress --case whip --merge          # into the tracked docs/benchmarks
+    python -m benchmarks.stress --combine --merge            # docs/benchmarks/stress.json from its stress_*.json
 
 Every case states its pass criterion, measures the figures, and says whether it passed. A case that makes
 linknet raise a clear LinknetError where the criterion allows it ("continue correctly or stop with a clear
@@ -31,6 +33,7 @@ if __package__ in (None, ""):
 import linknet_core as ln  # noqa: E402
 
 from .index1 import Index1System  # noqa: E402
+from .output import add_output_arguments, resolve, write_text  # noqa: E402
 from .scene_spec import SceneSpec  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -607,7 +610,7 @@ def write_markdown(results, path):
         lines += [f"## {c['case']}: {'PASS' if c['passed'] else 'FAIL'} ({c['seconds']:.1f} s)", "",
                   *( [f"Run by `{c['command']}` on {c['date']}.", ""] if c.get("command") else []),
                   f"Criterion: {c['criterion']}", "", "```json", json.dumps(c["measured"], indent=1, default=str), "```", ""]
-    path.write_text("\n".join(lines))
+    write_text(path, "\n".join(lines))
 
 
 def combine(out: Path):
@@ -631,7 +634,7 @@ def combine(out: Path):
     results = {"date": max((c["date"] for c in newest.values()), default=""), "quick": False,
                "command": "python -m benchmarks.stress --case <name> (per case; see each case) then --combine",
                "cases": [newest[n] for n in CASES if n in newest]}
-    (out / "stress.json").write_text(json.dumps(results, indent=1, default=str))
+    write_text(out / "stress.json", json.dumps(results, indent=1, default=str))
     write_markdown(results, out / "stress.md")
     print(f"wrote {out / 'stress.json'}: " + ", ".join(f"{c['case']} {'PASS' if c['passed'] else 'FAIL'}"
                                                       for c in results["cases"]))
@@ -642,12 +645,14 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description="linknet numerical-stability stress suite")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--case", nargs="*", choices=list(CASES))
-    ap.add_argument("--out", type=Path)
+    add_output_arguments(ap, "stress")
     ap.add_argument("--combine", action="store_true",
-                    help="gather the newest result of every case from stress_*.json in --out into stress.json/.md")
+                    help="gather the newest result of every case from the stress_*.json in the output folder into "
+                         "its stress.json/.md")
     args = ap.parse_args(argv)
+    out = resolve(ap, args, "stress")  # a quick run's files are named stress_quick*
     if args.combine:
-        return combine(args.out or (ROOT / "docs" / "benchmarks"))
+        return combine(out)
     import datetime as _dt
     results = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "quick": args.quick,
                "command": "python -m benchmarks.stress" + (" --quick" if args.quick else "")
@@ -658,12 +663,10 @@ def main(argv=None):
         print(f"[{name}] {'PASS' if c['passed'] else 'FAIL'} in {c['seconds']:.1f} s\n"
               + json.dumps(c["measured"], indent=1, default=str), flush=True)
         results["cases"].append(c)
-    out = args.out or (ROOT / "docs" / "benchmarks")
-    out.mkdir(parents=True, exist_ok=True)
     stem = "stress_quick" if args.quick else "stress"
     if args.case:
         stem += "_" + "_".join(args.case)
-    (out / f"{stem}.json").write_text(json.dumps(results, indent=1, default=str))
+    write_text(out / f"{stem}.json", json.dumps(results, indent=1, default=str))
     write_markdown(results, out / f"{stem}.md")
     print(f"wrote {out / (stem + '.json')}")
     return results

@@ -42,6 +42,7 @@ if __package__ in (None, ""):   # `python benchmarks/work_precision.py`
 
 from .peers.base import Unsupported  # noqa: E402
 from .peers.isolated import InProcessRunner, IsolatedRunner  # noqa: E402
+from .output import add_output_arguments, checked, resolve, write_text, write_with  # noqa: E402
 from .reference import reference  # noqa: E402
 from .scene_spec import SceneSpec, load_json  # noqa: E402
 
@@ -534,7 +535,7 @@ def write_markdown(results, path: Path):
             lines += [f"![{sname}]({Path(sres['plot']).name})", ""]
     if results.get("notes"):
         lines += ["## Notes on the peers", ""] + [f"- {n}" for n in results["notes"]] + [""]
-    path.write_text("\n".join(lines))
+    write_text(path, "\n".join(lines))
 
 
 def plot_scene(sname, sres, path: Path):
@@ -561,8 +562,10 @@ def plot_scene(sname, sres, path: Path):
     ax.grid(True, which="major", alpha=0.3)
     ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        write_with(path, lambda tmp: fig.savefig(tmp, dpi=110))
+    finally:
+        plt.close(fig)
 
 
 PEER_NOTES = [
@@ -618,12 +621,9 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="CI-sized run: few scenes, few settings")
     ap.add_argument("--scenes", nargs="*", help="subset of scenes")
     ap.add_argument("--methods", nargs="*", help="subset of methods (names as in the table)")
-    ap.add_argument("--out", type=Path, help="output folder (default build/work_precision[/quick]; with --merge, "
-                    "docs/benchmarks)")
+    add_output_arguments(ap, "work_precision", quick=True,
+                         merge_detail="an existing results.json there is updated, only the given scenes/methods rerun")
     ap.add_argument("--models", type=Path, help="folder of scene JSON files (default models/)")
-    ap.add_argument("--merge", action="store_true",
-                    help="write into the tracked docs/benchmarks (or --out), updating an existing results.json there: "
-                         "rerun only the given scenes/methods")
     ap.add_argument("--render", type=Path, help="only rewrite results.md and the plots from this results JSON")
     ap.add_argument("--no-cache", action="store_true", help="recompute references even if cached")
     ap.add_argument("--run-timeout", type=float, help="hard limit of one setting [s] (default: Budget)")
@@ -634,13 +634,13 @@ def main(argv=None):
     args = ap.parse_args(argv)
     quick = args.quick
     if args.render:
-        return render(args.render, args.out or args.render.parent)
+        out = (checked(args.out, args.merge, parser=ap) if args.out else
+               checked(args.render.parent, args.merge, option=f"--render {args.render}: its folder", parser=ap))
+        return render(args.render, out)
     if args.models:
         global MODELS
         MODELS = args.models
-    # a run writes under build/ unless asked to merge into the tracked results
-    out = args.out or (ROOT / "docs" / "benchmarks" if args.merge else ROOT / "build" / "work_precision"
-                       / ("quick" if quick else ""))
+    out = resolve(ap, args, "work_precision", quick=quick)
     out.mkdir(parents=True, exist_ok=True)
     budget = QUICK_BUDGET if quick else FULL_BUDGET
     budget = replace(budget, **{k: v for k, v in (("run_timeout", args.run_timeout), ("sweep", args.sweep_budget),
@@ -712,7 +712,7 @@ def main(argv=None):
         sres["wall_seconds"] = time.perf_counter() - t_scene
         print(f"[{sname}] done in {sres['wall_seconds']:.0f} s", flush=True)
         results["scenes"][sname] = sres
-        (out / "results.partial.json").write_text(json.dumps(results, indent=1, default=_json_default))
+        write_text(out / "results.partial.json", json.dumps(results, indent=1, default=_json_default))
     runner.close()
     if previous:   # keep the scenes that were not rerun, in the benchmark's order
         results["scenes"] = {n: results["scenes"][n] for n in SCENES if n in results["scenes"]}
@@ -731,7 +731,7 @@ def main(argv=None):
         results["meta"]["provenance"]["merged_from"] = (previous["meta"].get("provenance", {}).get("merged_from", [])
                                                         + previous["meta"].get("merged_from", [])
                                                         + [previous["meta"]["date"]])
-    (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
+    write_text(out / "results.json", json.dumps(results, indent=1, default=_json_default))
     write_markdown({k: v for k, v in results.items()} | {"scenes": {k: v for k, v in results["scenes"].items()
                                                                     if "methods" in v}}, out / "results.md")
     (out / "results.partial.json").unlink(missing_ok=True)
@@ -753,7 +753,7 @@ def render(path: Path, out: Path):
         results["meta"] = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                            "command": "python -m benchmarks.work_precision (interrupted; rendered from partial results)",
                            "quick": False, "machine": _machine(), "versions": _versions(), "total_seconds": float("nan")}
-    (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
+    write_text(out / "results.json", json.dumps(results, indent=1, default=_json_default))
     write_markdown(results | {"scenes": {k: v for k, v in results["scenes"].items() if "methods" in v}},
                    out / "results.md")
     return results
