@@ -134,8 +134,8 @@ data_reset = _declare("ln_data_reset", None, Model_p, Data_p)
 advance = _declare("ln_advance", ctypes.c_int, Model_p, Method_p, Data_p, ctypes.c_double, ln_int)
 evaluate = _declare("ln_evaluate", ctypes.c_int, Model_p, Data_p, c_double_p, c_double_p)
 sample = _declare("ln_sample", ctypes.c_int, Model_p, Method_p, Data_p, c_double_p, ln_int, ctypes.c_int, ln_int,
-                  c_double_p, c_double_p, c_double_p, ctypes.POINTER(EnergyTerms), c_double_p, ln_int,
-                  ctypes.POINTER(ln_int))
+                  c_double_p, c_double_p, c_double_p, c_double_p, c_double_p, ctypes.POINTER(EnergyTerms), c_double_p,
+                  ln_int, ctypes.POINTER(ln_int))
 sample_diagnostics = _declare("ln_sample_diagnostics", None, Model_p, ctypes.POINTER(EnergyTerms), c_double_p,
                               c_double_p, c_double_p)
 evaluate_repeated = _declare("ln_evaluate_repeated", ctypes.c_int, Model_p, Data_p, ctypes.c_int, c_double_p,

@@ -40,6 +40,51 @@ def step_count_problem(t_start: float, t_target: float, dt: float, max_steps: in
     return out.value.decode()
 
 
+class TensionPeaks:
+    """Each link's largest |T_l| over one advance, signed (the value of T_l there), and when: located between the
+    accepted steps' ends as the native core does it (tension_peaks.c, which says how and how accurately), in array
+    code. ``begin(t, T)`` with T at the advance's start, ``step(t, T)`` with T at each accepted step's end; ``peak``
+    and ``time`` (L,) hold the result, None before the first advance."""
+
+    def __init__(self):
+        self.peak = self.time = None
+        self._older = self._newer = None
+        self._t0 = self._t1 = 0.0
+        self._points = 0
+
+    def begin(self, t: float, T: np.ndarray) -> None:
+        self.peak, self.time = T.copy(), np.full(T.shape, float(t))
+        self._newer, self._t1, self._points = T, float(t), 1
+
+    def step(self, t: float, T: np.ndarray) -> None:
+        t = float(t)
+        peak, time = self.peak, self.time
+        later = np.abs(T) > np.abs(peak)
+        peak = np.where(later, T, peak)
+        time = np.where(later, t, time)
+        if self._points >= 2:
+            # the quadratic through the last three step ends in Newton's form about the middle one: its vertex s = a / c,
+            # where it lies between the outer two (a + c h1 and c h2 - a of c's sign) and beats the peak so far in
+            # magnitude
+            y0, y1, t1 = self._older, self._newer, self._t1
+            h1, h2 = t1 - self._t0, t - t1
+            d1 = (y1 - y0) * (1.0 / h1)
+            c = ((T - y1) * (1.0 / h2) - d1) * (1.0 / (t - self._t0))
+            slope = d1 + c * h1
+            a = -0.5 * slope
+            p, q = a + c * h1, c * h2 - a
+            inside = ((c > 0.0) & (p > 0.0) & (q > 0.0)) | ((c < 0.0) & (p < 0.0) & (q < 0.0))
+            s = a / np.where(inside, c, 1.0)
+            top = y1 + 0.5 * slope * s
+            vertex = inside & (np.abs(top) > np.abs(peak))
+            peak = np.where(vertex, top, peak)
+            time = np.where(vertex, t1 + s, time)
+        self.peak, self.time = peak, time
+        self._older, self._newer = self._newer, T
+        self._t0, self._t1 = self._t1, t
+        self._points += 1
+
+
 @dataclass
 class StepStats:
     steps: int = 0
@@ -61,6 +106,9 @@ class Integrator:
     def __init__(self, dynamics: Dynamics):
         self.dyn = dynamics
         self.stats = StepStats()
+        # each link's largest |T_l| over the last advance and when (ProjectedRungeKutta and FixedStepIntegrator track
+        # them; the peak and time stay None where an advance does not)
+        self.peaks = TensionPeaks()
         # the driven anchors' motion (linknet_core.dynamics.drive.AnchorDrive), set by the Simulator of a scene
         # that has driven anchors; None: every anchor stands still
         self.drive = None
@@ -101,6 +149,8 @@ class FixedStepIntegrator(Integrator):
         raise NotImplementedError
 
     def _advance_steps(self, X, U, n, h, F_input, t=0.0, t_target=None):
+        peaks = self.peaks
+        peaks.begin(t, self._tensions(X, U, F_input, t))
         for i in range(n):  # the last step ends on the target itself: the driven anchors' final position
             end = t_target if i == n - 1 and t_target is not None else t + (i + 1) * h
             try:
@@ -108,7 +158,16 @@ class FixedStepIntegrator(Integrator):
             except StepFailure as failure:
                 X_new, U_new = self._split_step(X, U, h, F_input, t + i * h, end, failure)
             X, U = X_new, U_new
+            peaks.step(end, self._tensions(X, U, F_input, end))
         return X, U
+
+    def _tensions(self, X, U, F_input, t):
+        """T of (25)-(26) at (X, U) and time t (the driven anchors' accelerations at t), for the located peaks: the
+        steps themselves need no tensions."""
+        anchor_acc = None
+        if self.drive is not None:
+            X, U, anchor_acc = self.drive.apply(t, X, U)
+        return self.dyn.tensions(X, U, F_input, anchor_acc=anchor_acc)
 
     def _split_step(self, X, U, h, F_input, t, t_end, failure):
         """The step from (X, U) at t taken again as 2, 4, ... 2^MAX_SPLIT_LEVEL equal sub-steps, each the whole

@@ -63,10 +63,10 @@ class ProjectedRungeKutta(Integrator):
         """(dX/dt, dU/dt) at (X, U, t). Driven anchors are known functions of time, not part of the integrated
         state: their rows are set to the motion at t (and the derivatives there are its V and A)."""
         if self.drive is None:
-            acc, _ = self.dyn.accelerations(X, U, F_input)
+            acc, self._T = self.dyn.accelerations(X, U, F_input)
             return U, acc
         X, U, anchor_acc = self.drive.apply(t, X, U)
-        acc, _ = self.dyn.accelerations(X, U, F_input, anchor_acc)
+        acc, self._T = self.dyn.accelerations(X, U, F_input, anchor_acc)
         return U, acc
 
     def _attempt(self, X, U, h, k0, F_input, t=0.0, t_end=None):
@@ -151,6 +151,7 @@ class ProjectedRungeKutta(Integrator):
         dyn = self.dyn
         X, U, t, t_start = state.X, state.U, state.t, state.t
         k0 = self._f(X, U, F_input, t)
+        self.peaks.begin(t, self._T)  # the tensions _f left: those at the start
         if self.h is None:
             self.h = self._initial_step(X, U, k0, F_input, t_target - t, t)
         exponent = -1.0 / (self.error_estimator_order + 1)
@@ -167,6 +168,7 @@ class ProjectedRungeKutta(Integrator):
                                   f"met (singular configuration or discontinuous input?){note}")
             t_new = t_target if h == remaining else t + h
             X_new, U_new, KX, KU = self._attempt(X, U, h, k0, F_input, t, t_new)
+            T_new = self._T  # at the new point, before the projections
             err = self.error_norm(KX, KU, h, self._scale(X, U, X_new, U_new))
             if not math.isfinite(err):
                 self.stats.rejected += 1
@@ -202,6 +204,8 @@ class ProjectedRungeKutta(Integrator):
                     raise SolverError(f"more than {max_steps} steps between t = {t_start} and t = {t_target}; {why}")
                 if t < t_target:  # the first stage of the next step (none after the last one)
                     k0 = self._f(X, U, F_input, t)
+                    T_new = self._T
+                self.peaks.step(t, T_new)
             else:
                 self.stats.rejected += 1
                 self.h = h * max(MIN_FACTOR, SAFETY * err ** exponent)

@@ -230,9 +230,11 @@ class NativeIntegrator(Integrator):
         self._hand_out(X, U)
 
     def sample(self, state, times, F_input, max_steps: int, X, U, T, diagnostics, advance_first: bool,
-               update_state: bool = True) -> None:
+               update_state: bool = True, T_peak=None, T_peak_time=None) -> None:
         """Samples at ``times`` (advance to each, then the outputs there) with F_input held, in one call into C
-        (ln_sample), into X, U (n,K,3) and T (n,L), and unless ``diagnostics`` is None each sample's energy,
+        (ln_sample), into X, U (n,K,3) and T (n,L), unless ``T_peak`` is None the located tension peaks of each
+        sample's interval and their times into ``T_peak``, ``T_peak_time`` (n,L; see ``tension_peaks``; a sample
+        taken without an advance gets its T and t), and unless ``diagnostics`` is None each sample's energy,
         residuals of (11) and (12) and kinetic energy into its column of ``diagnostics`` (4,n), one row per
         quantity (needs ``diagnostics_in_c``); X, U, T and ``times`` C-contiguous float64, ``diagnostics`` float64
         with contiguous rows (a C-contiguous array or columns of one). Sample 0 is taken at the current state
@@ -250,8 +252,9 @@ class NativeIntegrator(Integrator):
         else:
             terms = self._energy_terms
             first, stride = _rows_of(diagnostics)
-        status = self._sample(ref(times), times.size, advance_first, max_steps, ref(X), ref(U), ref(T), terms, first,
-                              stride, written)
+        peaks = (None, None) if T_peak is None else (ref(T_peak), ref(T_peak_time))
+        status = self._sample(ref(times), times.size, advance_first, max_steps, ref(X), ref(U), ref(T), *peaks, terms,
+                              first, stride, written)
         if not update_state:
             self._out = (None, None)  # the data no longer holds the state
         elif written.value or status != lib.OK:
@@ -266,6 +269,26 @@ class NativeIntegrator(Integrator):
             raise SolverError(f"the tensions (25)-(26) cannot be evaluated at this state: {lib.STATUS[status]}")
         raise SolverError(self.explain(status, float(times[i - 1]) if i > 0 else t_before, float(times[i]),
                                        max_steps))
+
+    @property
+    def locates_peaks(self) -> bool:
+        """Whether the advances locate tension peaks: not in a static scene, whose advance takes no step."""
+        return not self._static
+
+    def tension_peaks(self):
+        """(T_peak, T_peak_time), (L,) each, of the last advance: each link's largest |T_l| over it, signed, and
+        when, located between the step ends (tension_peaks.c); None where the advance located none (a static scene:
+        its tensions stand still with the input held). A failed advance leaves those of the last one that went
+        through (the core publishes an interval's peaks when all its steps are done)."""
+        if not self._d.history_points:
+            return None
+        peak, time = self._peak_views
+        return peak.copy(), time.copy()
+
+    @functools.cached_property
+    def _peak_views(self):
+        L = self.model.L
+        return self.data._view("T_peak", L), self.data._view("T_peak_time", L)
 
     @functools.cached_property
     def diagnostics_in_c(self) -> bool:

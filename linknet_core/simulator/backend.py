@@ -45,6 +45,8 @@ class Backend:
     # whether simulate may keep the Simulator after a run, to reset and reuse it for the next run of the same scene
     # and settings
     reusable = False
+    # whether the advances locate tension peaks between their steps (tension_peaks)
+    locates_peaks = False
     drive = None  # the driven anchors' motion the numpy reference evaluates with (dynamics.drive.AnchorDrive)
 
     def __init__(self, scene: Scene, dyn: Dynamics, integrator, initial_state: tuple, notes: list | None = None):
@@ -100,9 +102,16 @@ class Backend:
         raise NotImplementedError
 
     def sample(self, state: State, times, F, max_steps: int, X, U, T, diagnostics, advance_first: bool,
-               update_state: bool) -> None:
+               update_state: bool, T_peak=None, T_peak_time=None) -> None:
         """Simulator.sample, where ``samples_in_one_call``."""
         raise SolverError(f"the {self.name} backend does not sample in one call (samples_in_one_call is False)")
+
+    def tension_peaks(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(T_peak, T_peak_time), (L,) each, of the last advance: each link's largest |T_l| over it, signed, and when,
+        located between the accepted steps' ends (linknet_core/native/src/tension_peaks.c says how); None where the
+        backend's path does not locate them (``locates_peaks``). A failed advance leaves those of the last one that
+        went through."""
+        return None
 
     def linearization(self, state: State, F: np.ndarray | None, hold):
         """The outputs' linearization at ``state`` (Simulator.interface_linearization), here by the numpy

@@ -94,8 +94,17 @@ class NativeBackend(Backend):
     def anchor_report(self) -> dict:
         return self.integrator.anchor_report()
 
-    def sample(self, state, times, F, max_steps, X, U, T, diagnostics, advance_first, update_state) -> None:
-        self.integrator.sample(state, times, F, max_steps, X, U, T, diagnostics, advance_first, update_state)
+    def sample(self, state, times, F, max_steps, X, U, T, diagnostics, advance_first, update_state, T_peak=None,
+               T_peak_time=None) -> None:
+        self.integrator.sample(state, times, F, max_steps, X, U, T, diagnostics, advance_first, update_state, T_peak,
+                               T_peak_time)
+
+    @functools.cached_property
+    def locates_peaks(self) -> bool:
+        return self.integrator.locates_peaks
+
+    def tension_peaks(self):
+        return self.integrator.tension_peaks()
 
     def linearization(self, state, F, hold):
         from linknet_core.native.interface import NativeLinearization
@@ -120,6 +129,8 @@ class NativeRigidBackend(NativeBackend):
     start = Backend.start
     reset = Backend.reset
     linearization = Backend.linearization
+    tension_peaks = Backend.tension_peaks  # the bodies' steps evaluate no tensions: none located
+    locates_peaks = False
 
     @classmethod
     def create(cls, scene, dyn, settings, X0, U0, t0, specialisation):

@@ -48,6 +48,8 @@ class NumpyBackend(Backend):
         # checks every path), so keeping references is the snapshot: copying cost ~1 us per call. Nor does a
         # later call write into what internals() hands out.
         X_before, U_before, internals = state.X, state.U, self.integrator.internals()
+        peaks = self.integrator.peaks  # its arrays are replaced, never written into: the references are the snapshot
+        peaks_before = peaks.peak, peaks.time
         drive = self.drive
         try:
             if drive is not None:
@@ -63,12 +65,24 @@ class NumpyBackend(Backend):
             # leave the simulator where it was, so a caller can retry with other settings
             state.t, state.X, state.U = t_before, X_before, U_before
             self.integrator.set_internals(internals)
+            peaks.peak, peaks.time = peaks_before
             raise
 
     def outputs(self, state, F, hold):
         X_at, U_at, anchor_acc = self.anchors_now(state.t, state.X, state.U, hold)
         T = self.dyn.tensions(X_at, U_at, F, anchor_acc=anchor_acc)
         return T, self.dyn.anchor_reactions(X_at, T)
+
+    @property
+    def locates_peaks(self) -> bool:
+        # ropes and a ground: the tensions jump at every event, which the quadratic between step ends cannot follow
+        return not self.scene.unilateral
+
+    def tension_peaks(self):
+        peaks = self.integrator.peaks
+        if not self.locates_peaks or peaks.peak is None:
+            return None
+        return peaks.peak.copy(), peaks.time.copy()
 
     def anchor_report(self) -> dict:
         impulse, jump_position, jump_velocity = self.drive.last_jump

@@ -30,7 +30,7 @@ from linknet_core.state import InitialReport, State
 # Snapshots (get_state) name the simulator they come from: this format, the scene's fingerprint, the method and the
 # path (backend and specialisation), so set_state refuses another scene's or another path's snapshot rather than
 # projecting foreign positions onto this scene's lengths. Raise the number when a snapshot's content changes.
-SNAPSHOT_FORMAT = "linknet-snapshot-3"
+SNAPSHOT_FORMAT = "linknet-snapshot-4"
 # Input forces are refused beyond this magnitude (N), as scene values are (scene.description.MAX_MAGNITUDE): the
 # solver would overflow on them and report a projection failure that does not name the force.
 MAX_FORCE = 1e100
@@ -243,11 +243,19 @@ class Simulator:
         self.engine.start(self.state)
         self.error_goal = error_goal(stepping.cls, stepping.rtol, stepping.atol, scene_size(X0))
         self.error_estimate = 0.0
+        # tension_peaks: whether the backend locates them, whether the last advance's are still in the backend (taken
+        # from it when asked for: a failed advance leaves them there), those taken (None: none located, or no advance
+        # yet), the input the last advance held where they are not located, and whether there was an advance; a
+        # companion's are never asked for
+        self._locates_peaks = self.engine.locates_peaks
+        self._peaks_in_engine, self._peaks, self._peak_input, self._advanced = False, None, None, False
+        self._track_peaks = True
         self._error_factor, self._companion_failure, self.companion = 1.0, None, None
         if settings.error_estimate and self.specialisation.kind != STATIC:  # nothing moves in a static scene
             rule, companion_settings = settings.companion
             self._error_factor = rule.factor
             self.companion = Simulator(scene, t0=t0, settings=companion_settings)
+            self.companion._track_peaks = False
         # what the Dynamics counts (the numpy reference's right-hand sides and projection floor), as reset finds it
         self._initial_counts = (self.dyn.rhs_evaluations, getattr(self.dyn, "floor_stops", 0),
                                 getattr(self.dyn, "floor_reached", 0.0))
@@ -393,6 +401,45 @@ class Simulator:
             if F is None:
                 raise
             raise SolverError(f"{exc}{self._input_note(F)}") from None
+        if self._track_peaks:
+            self._after_advance(F)
+
+    def _after_advance(self, F) -> None:
+        """The last advance's located peaks are the backend's now; where it locates none, the input the advance held
+        (a copy: the caller's array may change) is kept, under which tension_peaks evaluates the tensions instead."""
+        self._advanced = True
+        if self._locates_peaks:
+            self._peaks_in_engine = True
+        else:
+            self._peak_input = None if F is None else F.copy()
+
+    def _taken_peaks(self):
+        """The last advance's located peaks, taken from the backend where they still are (None: none located)."""
+        if self._peaks_in_engine:
+            self._peaks, self._peaks_in_engine = self.engine.tension_peaks(), False
+        return self._peaks
+
+    def tension_peaks(self, F_input=None) -> tuple[np.ndarray, np.ndarray]:
+        """(T_peak, T_peak_time), (L,) each: over the last advance, each link's largest |T_l| (N), signed (the value
+        of T_l there), and when it occurred (s), located between the integrator's accepted steps by the vertex of the
+        quadratic through three consecutive step ends' tensions (linknet_core/native/src/tension_peaks.c; the numpy
+        reference the same), both ends of the interval counting (at its start, the tensions under the input held over
+        it). A tension spike between two advances that the outputs at their ends miss is here. Where the path does
+        not locate them (``peaks_located`` False: free rigid bodies, ropes or a ground, a static scene): the
+        tensions at the current state under the last advance's input, and the current time; before the first
+        advance, under ``F_input`` (as ``outputs`` takes it). Restored with a snapshot (set_state)."""
+        peaks = self._taken_peaks()
+        if peaks is not None:
+            return peaks[0].copy(), peaks[1].copy()
+        F = self._peak_input if self._advanced else self.check_input(F_input)
+        T, _ = self.engine.outputs(self.state, F, None)
+        return T, np.full(self.scene.L, self.state.t)
+
+    @property
+    def peaks_located(self) -> bool:
+        """Whether tension_peaks holds peaks the last advance located between its steps (False before any advance,
+        and on the paths that do not locate them)."""
+        return self._peaks_in_engine or self._peaks is not None
 
     def outputs(self, F_input=None, anchors=None) -> dict:
         """Positions, velocities, tensions (with direct feedthrough of F_input, since B of (26) contains F, and of
@@ -448,24 +495,33 @@ class Simulator:
         return self.interface_linearization(F_input, anchors).jacobian()
 
     def sample(self, times, F_input, X: np.ndarray, U: np.ndarray, T: np.ndarray, advance_first: bool = True,
-               diagnostics: np.ndarray | None = None, update_state: bool = True) -> None:
+               diagnostics: np.ndarray | None = None, update_state: bool = True, T_peak: np.ndarray | None = None,
+               T_peak_time: np.ndarray | None = None) -> None:
         """What ``advance(t_i, F_input)`` then ``outputs(F_input)`` do at each of ``times``, in one call into the
         native core (the point-mass path, no driven anchors: see ``samples_in_one_call``): X[i], U[i], T[i] of each
         sample into X, U (n,K,3) and T (n,L), and, unless ``diagnostics`` is None, its energy, residuals of (11) and
         (12) and kinetic energy into diagnostics[:, i] (4,n) (where ``diagnostics_in_one_call``): the values
-        Dynamics.energy, constraint_residual, velocity_residual and dynamics.forces.kinetic_energy give. Every array
+        Dynamics.energy, constraint_residual, velocity_residual and dynamics.forces.kinetic_energy give; unless
+        ``T_peak`` is None, what tension_peaks gives after each advance into T_peak[i], T_peak_time[i] (n,L) (a
+        sample taken without an advance: its T and time; a static scene: T and t, its tensions standing still). Every
+        array
         C-contiguous float64, ``times`` too (``diagnostics`` may be columns of one). Sample 0 is taken at the
         current state unless ``advance_first``. On a failure the samples before it are written and the SolverError
         is raised. ``update_state`` False leaves ``state`` as it was (the integrator's internals and counters move
         on): for a run's last call when the simulator is reset before any further use (simulate)."""
         F = self.check_input(F_input)
+        t_before = self.state.t
         try:
             self.engine.sample(self.state, times, F, self.max_steps_per_call, X, U, T, diagnostics, advance_first,
-                               update_state)
+                               update_state, T_peak, T_peak_time)
         except SolverError as exc:
+            if self._track_peaks and self.state.t != t_before:  # the state of the last sample that went through
+                self._after_advance(F)
             if F is None:
                 raise
             raise SolverError(f"{exc}{self._input_note(F)}") from None
+        if self._track_peaks and (advance_first or len(times) > 1):
+            self._after_advance(F)
 
     @property
     def diagnostics_in_one_call(self) -> bool:
@@ -490,7 +546,8 @@ class Simulator:
         return {"identity": dict(self.identity), "state": self.state.copy(),
                 "integrator": copy.deepcopy(self.integrator.internals()), "rhs_evaluations": self.dyn.rhs_evaluations,
                 "error": (self.error_estimate, self._companion_failure,
-                          None if self.companion is None else self.companion.get_state())}
+                          None if self.companion is None else self.companion.get_state()),
+                "peaks": (self._taken_peaks(), self._peak_input, self._advanced)}  # arrays nobody writes into
 
     def snapshot_problem(self, snapshot) -> str | None:
         """Why ``snapshot`` cannot be restored here (None if it can): not a snapshot, another format, another scene
@@ -521,6 +578,8 @@ class Simulator:
         self.integrator.set_internals(copy.deepcopy(snapshot["integrator"]))
         self.dyn.rhs_evaluations = snapshot.get("rhs_evaluations", self.dyn.rhs_evaluations)
         self.error_estimate, self._companion_failure = error[0], error[1]
+        self._peaks, self._peak_input, self._advanced = snapshot["peaks"]
+        self._peaks_in_engine = False
         if self.companion is not None:
             self.companion.set_state(error[2])
 
@@ -538,6 +597,7 @@ class Simulator:
         self.engine.reset()
         self.dyn.rhs_evaluations, self.dyn.floor_stops, self.dyn.floor_reached = self._initial_counts
         self.error_estimate, self._companion_failure = 0.0, None
+        self._peaks_in_engine, self._peaks, self._peak_input, self._advanced = False, None, None, False
         if self.companion is not None:
             self.companion.reset(state_untouched)
 
@@ -576,6 +636,11 @@ class Result:
     # each sample (n, L), and the run's events in time order (Event: t, kind, index, impulse)
     slack: np.ndarray | None = None
     events: list | None = None
+    # each link's largest |T_l| over each output interval (t[i-1], t[i]], signed, and when (n, L each; row 0: T and t
+    # at the start), located between the integrator's steps (Simulator.tension_peaks): a spike between two outputs
+    # is here where T misses it. stats["tension_peaks"] says whether they were located or are the sampled T
+    T_peak: np.ndarray | None = None
+    T_peak_time: np.ndarray | None = None
 
     @property
     def max_error_estimate(self) -> float:
@@ -592,6 +657,24 @@ class Result:
         first = int(np.argmax(self.error_estimate > self.error_goal))
         return accuracy_text(self.scene.name, float(self.t[first]), float(self.error_estimate[first]),
                              self.error_goal, self.max_error_estimate)
+
+    def largest_peak(self) -> tuple[float, int, float]:
+        """(the run's largest tension peak in magnitude, signed, N; its link, 0-based; when, s); (0.0, -1, t_0) for a
+        scene without links."""
+        if self.T_peak is None or not self.T_peak.size:
+            return 0.0, -1, float(self.t[0])
+        i, l = np.unravel_index(int(np.argmax(np.abs(self.T_peak))), self.T_peak.shape)
+        return float(self.T_peak[i, l]), int(l), float(self.T_peak_time[i, l])
+
+    def _peak_line(self) -> str:
+        if self.T_peak is None or not self.T_peak.size:
+            return ""
+        peak, l, when = self.largest_peak()
+        sampled = float(np.max(np.abs(self.T)))
+        how = ("between outputs" if self.stats.get("tension_peaks") == "located"
+               else "(sampled only: this path does not locate peaks between outputs)")
+        return (f"\n  largest tension peak {how} = {peak:.6g} N on {self.scene.link_label(l)} at t = {when:.6g} s "
+                f"(largest sampled |T| = {sampled:.6g} N)")
 
     def _accuracy_line(self) -> str:
         if self.error_estimate is None:
@@ -620,6 +703,7 @@ class Result:
 
         atomic_write(path, lambda tmp: np.savez_compressed(
             tmp, t=self.t, X=self.X, U=self.U, T=self.T, energy=self.energy, residual=self.residual,
+            **({} if self.T_peak is None else dict(T_peak=self.T_peak, T_peak_time=self.T_peak_time)),
             velocity_residual=self.velocity_residual, mass_names=np.array(self.scene.mass_names),
             k1=self.scene.k1 + 1, k2=self.scene.k2 + 1, fixed=self.scene.fixed, method=self.method,
             **({} if self.slack is None else dict(slack=self.slack, **event_arrays(self.events, self.scene.ground)))))
@@ -645,7 +729,7 @@ class Result:
                 f"{float(self.residual.max()):.3e} (relative), max velocity residual = "
                 f"{float(self.velocity_residual.max()):.3e} m/s\n"
                 f"  max tension = {float(np.max(self.T)) if self.T.size else 0.0:.6g} N, "
-                f"min tension = {float(np.min(self.T)) if self.T.size else 0.0:.6g} N")
+                f"min tension = {float(np.min(self.T)) if self.T.size else 0.0:.6g} N" + self._peak_line())
 
 
 def simulate(scene: Scene | str | os.PathLike, t_end: float, method: str | None = None, dt: float | None = None,
@@ -812,6 +896,7 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
     X = np.empty((n, K, 3))
     U = np.empty((n, K, 3))
     T = np.empty((n, L))
+    T_peak, T_peak_time = np.empty((n, L)), np.empty((n, L))
     slack = np.empty((n, L), bool) if scene.unilateral else None
     in_one_call = not callable(forces) and sim.samples_in_one_call
     # the samples' diagnostics from the native core as it samples, where it can: one row per quantity (energy,
@@ -838,11 +923,12 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
                 # the run's last call leaves sim.state alone: nothing reads it (sim is dropped, or reset when
                 # pooled), and a state that reset made and nothing replaced is not copied again there
                 if stop - done == n:  # the whole run in one call (two samples)
-                    sim.sample(times, F, X, U, T, advance_first=False, diagnostics=diagnostics, update_state=False)
+                    sim.sample(times, F, X, U, T, advance_first=False, diagnostics=diagnostics, update_state=False,
+                               T_peak=T_peak, T_peak_time=T_peak_time)
                 else:
                     sim.sample(times[done:stop], F, X[done:stop], U[done:stop], T[done:stop], advance_first=done > 0,
                                diagnostics=None if diagnostics is None else diagnostics[:, done:stop],
-                               update_state=stop < n)
+                               update_state=stop < n, T_peak=T_peak[done:stop], T_peak_time=T_peak_time[done:stop])
                 done = stop
                 now = time.perf_counter()
                 if now - start > 1.0 and show is None:
@@ -866,6 +952,10 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
             else:
                 out = sim.outputs(force_at(times[min(i, n - 2)]))
             X[i], U[i], T[i] = out["X"], out["U"], out["T"]
+            if i == 0:
+                T_peak[0], T_peak_time[0] = T[0], t
+            else:  # over the interval just advanced, under its input
+                T_peak[i], T_peak_time[i] = sim.tension_peaks()
             if slack is not None:
                 slack[i] = out["slack"]
             done = i + 1
@@ -885,13 +975,14 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
         raise SimulationInterrupted(_with_events(sim, slack, part, Result(
             scene, method, times[part], X[part], U[part], T[part],
             *_diagnostics(sim, X[part], U[part], None if diagnostics is None else diagnostics[:, part]),
-            stats))) from None
+            stats, T_peak=T_peak[part], T_peak_time=T_peak_time[part]))) from None
     wall = time.perf_counter() - start
     if drawn:
         sys.stderr.write("\n")
     stats = _run_stats(sim, method, dt, rtol, scene, wall)
     return _with_events(sim, slack, slice(None), Result(scene, method, times, X, U, T,
-                                                        *_diagnostics(sim, X, U, diagnostics), stats))
+                                                        *_diagnostics(sim, X, U, diagnostics), stats, T_peak=T_peak,
+                                                        T_peak_time=T_peak_time))
 
 
 def _with_events(sim, slack, part, result: Result) -> Result:
@@ -963,6 +1054,7 @@ def _run_stats(sim, method, dt, rtol, scene, wall) -> dict:
     stats["floor_stops"], stats["floor_reached"] = sim.integrator.projection_floor()
     stats["structure"], stats["method"], stats["dt"], stats["rtol"] = structure, method, dt, rtol
     stats["rhs_kernel"], stats["initial"], stats["specialisation"] = rhs_kernel, list(initial), specialisation
+    stats["tension_peaks"] = "located" if sim.peaks_located else "sampled"
     return stats
 
 

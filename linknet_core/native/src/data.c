@@ -12,6 +12,7 @@
 #include "ln_math.h"
 #include "minnorm.h"
 #include "rigid.h"
+#include "tension_peaks.h"
 
 #define FN(name) name##_2d
 #include "stages.h"
@@ -311,18 +312,21 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
 }
 
 int ln_sample(const ln_model *m, const ln_method *meth, ln_data *d, const double *times, ln_int n, int advance_first,
-              ln_int max_steps, double *X_out, double *U_out, double *T_out, const ln_energy_terms *energy,
-              double *diagnostics_out, ln_int diagnostics_stride, ln_int *written)
+              ln_int max_steps, double *X_out, double *U_out, double *T_out, double *T_peak_out,
+              double *T_peak_time_out, const ln_energy_terms *energy, double *diagnostics_out,
+              ln_int diagnostics_stride, ln_int *written)
 {
     const size_t state_bytes = (size_t)(3 * m->K) * sizeof(double), T_bytes = (size_t)m->L * sizeof(double);
     *written = 0;
     for (ln_int i = 0; i < n; i++) {
         int status;
-        if ((i > 0 || advance_first) && (status = ln_advance(m, meth, d, times[i], max_steps)) != LN_OK) return status;
+        const int advanced = i > 0 || advance_first;
+        if (advanced && (status = ln_advance(m, meth, d, times[i], max_steps)) != LN_OK) return status;
         if ((status = ln_evaluate(m, d, d->X, d->U)) != LN_OK) return status;
         memcpy(X_out + 3 * m->K * i, d->X, state_bytes);
         memcpy(U_out + 3 * m->K * i, d->U, state_bytes);
         if (T_bytes) memcpy(T_out + m->L * i, d->T, T_bytes);
+        if (T_peak_out) ln_tension_peaks(m, d, advanced, T_peak_out + m->L * i, T_peak_time_out + m->L * i);
         if (diagnostics_out) {
             double values[4];
             ln_sample_diagnostics(m, energy, d->X, d->U, values);

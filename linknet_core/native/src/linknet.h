@@ -133,8 +133,10 @@ typedef struct ln_energy_terms {
 
 /* Samples of a run at the output times times[0..n) with d->F_input held throughout: advance to each (ln_advance,
    all or nothing; sample 0 is taken at the current state unless advance_first) and evaluate the outputs there
-   (ln_evaluate), writing X, U (K,3) and T (L) of sample i into X_out, U_out (n,K,3) and T_out (n,L), and, unless
-   diagnostics_out is NULL, the sample's diagnostics (ln_sample_diagnostics) into column i of diagnostics_out, four
+   (ln_evaluate), writing X, U (K,3) and T (L) of sample i into X_out, U_out (n,K,3) and T_out (n,L), unless
+   T_peak_out is NULL the located tension peaks of the interval that ended at sample i (ln_tension_peaks: each
+   link's largest |T_l|, signed; at a sample taken without an advance its T) and their times into T_peak_out and
+   T_peak_time_out (n,L), and, unless diagnostics_out is NULL, the sample's diagnostics (ln_sample_diagnostics) into column i of diagnostics_out, four
    rows (energy, residuals of (11) and (12), kinetic energy) diagnostics_stride apart: the layout the run's result
    hands out, one row per quantity.
    What simulate's output loop does per sample, in one call. Stops at the first status but LN_OK: *written samples
@@ -142,8 +144,8 @@ typedef struct ln_energy_terms {
    (d->t tells which). */
 LN_API int ln_sample(const ln_model *m, const ln_method *meth, ln_data *d, const double *times, ln_int n,
                      int advance_first, ln_int max_steps, double *X_out, double *U_out, double *T_out,
-                     const ln_energy_terms *energy, double *diagnostics_out, ln_int diagnostics_stride,
-                     ln_int *written);
+                     double *T_peak_out, double *T_peak_time_out, const ln_energy_terms *energy,
+                     double *diagnostics_out, ln_int diagnostics_stride, ln_int *written);
 
 /* diagnostics.c: a sample's energy (kinetic plus the potential of gravity, constant forces and springs), the
    largest relative violation of (11), the largest violation of (12) (m/s) and the kinetic energy, in out[0..4),

@@ -61,6 +61,13 @@
     ARRAY(double, acc, 3 * m->K)                        /* (K,3) */                                                 \
     ARRAY(double, reaction, 3 * m->n_fixed)             /* (n_fixed,3) the force the network exerts on each anchor  \
                                                            (ln_evaluate) */                                         \
+    ARRAY(double, T_peak, m->L)                         /* (L) largest |T_l| of the last advance, signed: */        \
+    ARRAY(double, T_peak_time, m->L)                    /* (L) and when, s (tension_peaks.c) */                     \
+    ARRAY(double, T_history, 2 * m->L)                  /* (2,L) T at its last two step ends, older first */        \
+    ARRAY(double, peak_work, 2 * m->L)                  /* (2,L) its peaks and times so far, published on success */\
+    SCALAR(double, history_t0)                          /* their times, s */                                        \
+    SCALAR(double, history_t1)                                                                                      \
+    SCALAR(ln_int, history_points)                      /* step ends taken in the last advance; 0: none located */  \
     /* driven anchors (drive.c): scene motions run in scene time t - drive_t0; input-driven anchors follow the      \
        held quadratic P + V s + A s^2/2, s = t - drive_hold_t (rows of drive_P, drive_V, drive_A), or, when         \
        drive_callback is set, what it writes for them at t: P, V, A of each input-driven anchor in turn (9 values   \

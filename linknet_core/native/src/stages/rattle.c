@@ -19,6 +19,7 @@
 #include "../linknet.h"
 #include "../ln_math.h"
 #include "../stages.h"
+#include "../tension_peaks.h"
 
 LN_SCALAR_LOOPS_BEGIN
 
@@ -191,6 +192,23 @@ LN_COLD void record_failed_step_tensions(const ln_model *m, ln_data *d, const do
         for (ln_int l = 0; l < m->L; l++) d->T[l] = 0.0;
 }
 
+/* T (25)-(26) at (X, U) and time t into d->T, for the located peaks (tension_peaks.h), on A(X) as it stands factored
+   (at a step's end the velocity projection's, at the interval's start the start's): B of (26) and one solve, no
+   factorisation. The forces are the scene's at (X, U), a driven anchor's row of the base force its acceleration at t
+   (as the Runge-Kutta stages take them); E: scratch (L,DIM) for the unit vectors. */
+static int tensions_at(const ln_model *m, ln_data *d, const double *X, const double *U, const double *F_base, double t,
+                       double *E)
+{
+    if (m->L == 0) return LN_OK;
+    int status;
+    if (m->n_driven && (status = ln_drive_rows(m, d, t, NULL, NULL, d->F_base, DIM)) != LN_OK) return status;
+    const double *F = rattle_forces(m, d, X, U, F_base);
+    double *B = d->B;
+    for (ln_int l = 0; l < m->L; l++) link_terms(m, X, U, F, l, E, &B[l]);
+    FN(ln_solve_tension_system)(m, d, B, d->T);
+    return LN_OK;
+}
+
 int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
                         const double *F_base, ln_int n_steps, double t_start, double t_end, ln_int *completed)
 {
@@ -201,6 +219,8 @@ int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, do
     *completed = 0;
     FN(ln_unit_vectors)(m, X, E0);
     if (m->L > 0 && (status = FN(ln_factor_tension_matrix)(m, d, E0)) != LN_OK) return status;
+    if ((status = tensions_at(m, d, X, U, F_base, t_start, E1)) != LN_OK) return status;
+    ln_peaks_begin(m, d, t_start);
     for (ln_int step = 0; step < n_steps; step++) {
         for (ln_int i = 0; i < size; i++) {
             d->X_step[i] = X[i];
@@ -217,8 +237,12 @@ int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, do
         double total = 0.0;
         for (ln_int i = 0; i < size; i++) total += X[i] + U[i];
         if (!isfinite(total)) return LN_NON_FINITE;
+        /* the step's velocity projection left A at the new X factored (its unit vectors in E0): E1 is free */
+        if ((status = tensions_at(m, d, X, U, F_base, end, E1)) != LN_OK) return status;
+        ln_peaks_step(m, d, end);
         *completed = step + 1;
     }
+    ln_peaks_publish(m, d);
     return LN_OK;
 }
 

@@ -14,6 +14,7 @@
 #include "../linknet.h"
 #include "../ln_math.h"
 #include "../stages.h"
+#include "../tension_peaks.h"
 
 /* Up to this many coordinates a stage's point is summed coordinate by coordinate, above it block by block (measured:
    DOP853 per step on a planar pendulum (4 coordinates) 0.87 -> 0.53 us by coordinate, on chain_10 (22) 3.5 us by
@@ -158,6 +159,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
     if (m->n_driven && (status = ln_drive_rows(m, d, t, X, U, d->F_base, DIM)) != LN_OK) return status;
     if ((status = accelerations(m, d, X, U, F_base, acc, d->T, 1)) != LN_OK) return status;
     store_stage(size, 0, U, acc, KX, KU);
+    ln_peaks_begin(m, d, t);
     if (d->h_next <= 0.0) {
         double h0;
         if ((status = starting_step(m, meth, d, X, U, F_base, acc, t, t_target - t, &h0)) != LN_OK) return status;
@@ -213,6 +215,10 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
             if ((status = accelerations(m, d, X, U, F_base, acc, d->T, 0)) != LN_OK) return status;
             store_stage(size, 0, U, acc, KX, KU);
         }
+        /* d->T at the step's end: the next step's first stage, or after the last step its new point's (before the
+           projections, which move it by about the step's local error) */
+        ln_peaks_step(m, d, t);
     }
+    ln_peaks_publish(m, d);
     return LN_OK;
 }
