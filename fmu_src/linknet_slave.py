@@ -262,6 +262,8 @@ class LinknetNetwork(Fmi2Slave):
             self._real[lay.X_vr] = X[lay.output_masses]
             self._real[lay.U_vr] = U[lay.output_masses]
             self._real[lay.T_vr] = T
+            # the peak over the last step (Simulator.tension_peaks); before the first step, T with the inputs as set
+            self._real[lay.T_peak_vr], self._real[lay.T_peak_time_vr] = self._sim.tension_peaks(self._F)
             self._real[lay.Freact_vr] = Freact
             if lay.driven_indices.size:
                 self._real[lay.Jreact_vr] = out["impulse"]
@@ -269,6 +271,7 @@ class LinknetNetwork(Fmi2Slave):
                 self._real[lay.slack_vr] = out["slack"][lay.rope_links]
         except Exception as e:  # never let an exception reach pythonfmu (fmi2Fatal)
             self._real[lay.T_vr] = np.nan
+            self._real[lay.T_peak_vr] = self._real[lay.T_peak_time_vr] = np.nan
             self._real[lay.Freact_vr] = np.nan
             self._real[lay.Jreact_vr] = np.nan
             self._error(f"tensions cannot be computed at t={self._sim.state.t!r}: {e}")
@@ -475,7 +478,7 @@ class LinknetNetwork(Fmi2Slave):
     def _directional_derivative(self, vrs):
         """The derivatives of the outputs vrs along the seed just set, at the current state with the inputs as set:
         Simulator.interface_linearization (kept while the state and inputs stay) along one seed. X, U, Jreact and
-        error_estimate have no direct feedthrough: 0."""
+        error_estimate, T_peak and T_peak_time have no direct feedthrough: 0."""
         lay = self._layout
         where = "fmi2GetDirectionalDerivative: "
         seed, self._seed = self._seed, None
@@ -492,7 +495,8 @@ class LinknetNetwork(Fmi2Slave):
             var = lay.reals[vr]
             what = "an input" if var.causality == "input" else "a parameter"
             self._error(f"{where}unknown {var.name} (value reference {vr}) is {what}, not an output: a "
-                        "directional derivative is that of an output (X, U, T, Freact, Jreact, error_estimate)")
+                        "directional derivative is that of an output (X, U, T, T_peak, T_peak_time, Freact, Jreact, "
+                        "error_estimate)")
             return nan
         if seed is None:
             self._error(f"{where}no seed was given before the derivative was asked for")

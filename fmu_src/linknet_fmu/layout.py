@@ -3,7 +3,8 @@
 One `Layout` per FMU instance (never module-global: several scenes' FMUs share one
 interpreter and one sys.modules). Real variables get value references 0..n_real-1 in the
 order of `self.reals`; the one String parameter (`integrator`) comes last.
-Names are Modelica-style, 1-based: F[k,i], P[k,i], V[k,i], A[k,i], X[k,i], U[k,i], T[l], Freact[k,i],
+Names are Modelica-style, 1-based: F[k,i], P[k,i], V[k,i], A[k,i], X[k,i], U[k,i], T[l], T_peak[l], T_peak_time[l],
+Freact[k,i],
 Jreact[k,i], error_estimate, slack[l], Jrope[l], Jground[k], M[k], R[l], g[i], tolerance, step; then the String parameter integrator (value reference
 n_real) and the Boolean parameter estimate_error (n_real + 1). P, V, A (the motion of an anchor driven by inputs) and Jreact (the impulse on a
 driven anchor) exist only for scenes with driven anchors, so a scene without them keeps its value references; slack
@@ -168,6 +169,17 @@ class Layout:
                                         "> 0 pulls the masses together; depends directly on the inputs of its "
                                         "group of links")
                               for l in range(self.L)], dtype=int)
+        self.T_peak_vr = np.array([self._add(f"T_peak[{l + 1}]", "output", "continuous", "calculated", "Force",
+                                             f"largest tension in link {l + 1} (masses {self.k1[l] + 1}-"
+                                             f"{self.k2[l] + 1}) in magnitude over the last communication step, "
+                                             "signed (T then): located between the integrator's steps, so a spike "
+                                             "between two communication points that T misses is here; before the "
+                                             "first step, T")
+                                   for l in range(self.L)], dtype=int)
+        self.T_peak_time_vr = np.array([self._add(f"T_peak_time[{l + 1}]", "output", "continuous", "calculated",
+                                                  "Time", f"when T_peak[{l + 1}] occurred (s), within the last "
+                                                  "communication step (its ends included)")
+                                        for l in range(self.L)], dtype=int)
         anchor = {int(k): "driven anchor" for k in self.driven_indices}
         self.Freact_vr = np.array([[self._add(f"Freact[{k + 1},{i + 1}]", "output", "continuous", "calculated",
                                               "Force", f"force the network exerts on {anchor.get(int(k), 'anchored')} "
@@ -265,7 +277,8 @@ class Layout:
         """name -> list of names of the inputs it depends on at a communication point.
 
         X and U are integrated states: no direct feedthrough (nor has error_estimate: the gap between two integrated
-        states) (the rows of a driven anchor are where its held
+        states; nor have T_peak and T_peak_time: the peak over the step that ended) (the rows of a driven anchor are
+        where its held
         motion took it at the end of the step). T (via B (26)) and Freact (= the link forces on the anchored
         masses) depend on the inputs of their coupled group of links: the forces on its free masses, and the
         position, velocity and acceleration of its anchors driven by inputs (a driven anchor's P sets the link
@@ -290,7 +303,8 @@ class Layout:
         inputs_of_comp = {c: list(names) for c, names in inputs_of_comp.items()}
         deps = {}
         for row in np.concatenate([self.X_vr.ravel(), self.U_vr.ravel(), self.Jreact_vr.ravel(),
-                                   [self.error_estimate_vr], self.Jrope_vr, self.Jground_vr]):
+                                   [self.error_estimate_vr], self.Jrope_vr, self.Jground_vr, self.T_peak_vr,
+                                   self.T_peak_time_vr]):
             deps[self.reals[row].name] = []
         for l in range(self.L):
             deps[self.reals[self.T_vr[l]].name] = inputs_of_comp[comp[l]]
@@ -316,7 +330,8 @@ class Layout:
         """InitialUnknowns: as `dependencies`, plus the parameters a value depends on at start.
 
         X and U start at the scene's initial state (no parameter moves them); T and Freact
-        depend on the masses and lengths of their group of links (A (25), B (26)) and on g.
+        depend on the masses and lengths of their group of links (A (25), B (26)) and on g, and so does T_peak, which
+        is T before the first step.
         """
         running = self.dependencies(inv_mass)
         comp = self.link_components(inv_mass)
@@ -335,7 +350,7 @@ class Layout:
             c = comp[l]
             if c not in of_comp:
                 of_comp[c] = running[self.reals[self.T_vr[l]].name] + list(params_of_comp[c]) + g_names
-            deps[self.reals[self.T_vr[l]].name] = of_comp[c]
+            deps[self.reals[self.T_vr[l]].name] = deps[self.reals[self.T_peak_vr[l]].name] = of_comp[c]
         for l, vr in zip(self.rope_links, self.slack_vr):
             deps[self.reals[vr].name] = of_comp[comp[l]]
         for k, row, groups in self._anchor_groups(comp):

@@ -282,6 +282,10 @@ VARIABLE_FAMILIES = (
     VariableFamily("U", "U", "U_vr", "output_masses", None, "velocities of the masses (m/s), columns x, y, z"),
     VariableFamily("T", "T", "T_vr", None, None, "tensions in the links (N), in the scene's link order; > 0 pulls the "
                    "masses together; each depends directly on the inputs of its group of links"),
+    VariableFamily("T_peak", "T_PEAK", "T_peak_vr", None, None, "each link's largest tension in magnitude over the "
+                   "last communication step (N), signed, located between the integrator's steps; before the first "
+                   "step, T"),
+    VariableFamily("T_peak_time", "T_PEAK_TIME", "T_peak_time_vr", None, None, "when each T_peak occurred (s)"),
     VariableFamily("Freact", "FREACT", "Freact_vr", "fixed_indices", "fixed",
                    "forces the network exerts on the anchored masses (N)"),
     VariableFamily("Jreact", "JREACT", "Jreact_vr", "driven_indices", "driven",

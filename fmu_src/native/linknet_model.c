@@ -31,6 +31,7 @@
 #include "ln_math.h"
 #include "lnfmu_scene.h"
 #include "rigid.h"
+#include "tension_peaks.h"
 
 
 /* as linknet_core.structure.bodies.freeze_initial_state and Simulator's initial projection */
@@ -67,6 +68,12 @@ struct fmu_model {
     ln_data *dc;
     double factor, goal, error;
     int over_goal;
+
+    /* the outputs T_peak and T_peak_time: the last step's located tension peaks, then their times ((2L), the core's
+       ln_tension_peaks, taken when the step ends: a step that fails later overwrites the data's), once a step was
+       taken since the run (re)started (stepped; before it the outputs are T and t) */
+    double *peak;
+    int stepped;
 
     /* a model built from changed parameters points into these */
     double *R, *weights;                /* (L), (ln_model_weights_size) */
@@ -545,6 +552,7 @@ static int set_initial_state(fmu_model *m, char *msg)
     if (result == FMU_OK) result = start_data(m, m->dc, msg);
     m->error = 0.0;
     m->over_goal = 0;
+    m->stepped = 0;
     m->outputs_stale = m->interface_stale = 1;
     return result;
 }
@@ -619,7 +627,7 @@ void fmu_model_free(fmu_model *m)
     ln_data_free(m->dc);
     ln_ldl_symbolic_free(m->ldl);
     double *arrays[] = {m->value, m->applied, m->R, m->weights, m->r, m->inertia, m->body_mass, m->mass_full,
-                        m->gravity, m->X_init, m->U_init, m->Y_init, m->Xo, m->Uo, m->Ys};
+                        m->gravity, m->X_init, m->U_init, m->Y_init, m->Xo, m->Uo, m->Ys, m->peak};
     for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
     free(m->top);
     free(m->p_set);
@@ -674,6 +682,7 @@ fmu_model *fmu_model_new(const fmu_resource *r, char *msg)
     m->Xo = doubles(3 * K);
     m->Uo = doubles(3 * K);
     m->Ys = doubles(LN_RIGID_STATE * B);
+    m->peak = doubles(2 * L);
     const size_t nd = (size_t)(s->model->n_driven > 0 ? s->model->n_driven : 1);
     m->p_set = calloc(nd, 1);
     m->va_vr = calloc(nd, sizeof *m->va_vr);
@@ -684,7 +693,8 @@ fmu_model *fmu_model_new(const fmu_resource *r, char *msg)
     m->jump_counted = calloc(3 * nd, 1);
     m->jump_long = calloc(3 * nd, 1);
     if (!(m->value && m->applied && m->R && m->weights && m->r && m->inertia && m->body_mass && m->top
-          && m->mass_full && m->gravity && m->X_init && m->U_init && m->Y_init && m->Xo && m->Uo && m->Ys && m->p_set
+          && m->mass_full && m->gravity && m->X_init && m->U_init && m->Y_init && m->Xo && m->Uo && m->Ys && m->peak
+          && m->p_set
           && m->va_vr && m->p_vr && m->jreact_vr && m->jump_P && m->jump_X && m->jump_counted && m->jump_long)) {
         fmu_model_free(m);
         fail(msg, FMU_ERROR, "out of memory");
@@ -806,6 +816,16 @@ int fmu_model_get_real(fmu_model *m, const unsigned *vr, size_t n, double *value
         case LNFMU_U: value[i] = d->U[v->index]; break;
         case LNFMU_JREACT: value[i] = d->impulse[v->index]; break;
         case LNFMU_ERROR_ESTIMATE: value[i] = m->applied_estimate ? m->error : NAN; break;
+        case LNFMU_T_PEAK:
+        case LNFMU_T_PEAK_TIME:
+            if (m->stepped) {
+                value[i] = m->peak[(v->kind == LNFMU_T_PEAK_TIME ? s->L : 0) + v->index];
+                break;
+            }
+            /* before the first step: T at the start with the inputs as set, and the start time */
+            if (m->outputs_stale && result == FMU_OK) result = evaluate_outputs(m, msg);
+            value[i] = v->kind == LNFMU_T_PEAK ? d->T[v->index] : d->t;
+            break;
         case LNFMU_T:
         case LNFMU_FREACT:
             if (m->outputs_stale && result == FMU_OK) result = evaluate_outputs(m, msg);
@@ -940,7 +960,7 @@ int fmu_model_set_real_input_derivatives(fmu_model *m, const unsigned *vr, size_
 static int is_output(int kind)
 {
     return kind == LNFMU_X || kind == LNFMU_U || kind == LNFMU_T || kind == LNFMU_FREACT || kind == LNFMU_JREACT
-           || kind == LNFMU_ERROR_ESTIMATE;
+           || kind == LNFMU_ERROR_ESTIMATE || kind == LNFMU_T_PEAK || kind == LNFMU_T_PEAK_TIME;
 }
 
 /* What a variable that is not of the role asked is, for a refusal. */
@@ -998,7 +1018,8 @@ int fmu_model_directional_derivative(fmu_model *m, const unsigned *unknown, size
         const lnfmu_variable *v = variable(s, unknown[i]);
         if (!is_output(v->kind))
             return fail(msg, FMU_ERROR, "unknown %s (value reference %u) is %s, not an output: a directional "
-                        "derivative is that of an output (X, U, T, Freact, Jreact, error_estimate)", v->name,
+                        "derivative is that of an output (X, U, T, T_peak, T_peak_time, Freact, Jreact, error_estimate)",
+                        v->name,
                         unknown[i], role_of(v->kind));
         feedthrough |= v->kind == LNFMU_T || v->kind == LNFMU_FREACT;
     }
@@ -1185,6 +1206,14 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
                     t_fmu, why);
     }
     m->outputs_stale = m->interface_stale = 1;
+    /* the step's tension peaks; where the path located none (a static scene, free rigid bodies), T at the step's end
+       under its inputs, evaluated now */
+    if (!ln_tension_peaks_located(m->d)) {
+        char ignored[FMU_MESSAGE];
+        evaluate_outputs(m, ignored);  /* a failure leaves T NaN, and says so when T is read */
+    }
+    ln_tension_peaks(&m->model, m->d, 1, m->peak, m->peak + s->L);
+    m->stepped = 1;
     char warning[FMU_MESSAGE] = "", note[FMU_MESSAGE - 64] = "";
     if (jumped) say_position_jump(m, t, warning, sizeof warning);
     clear_anchor_marks(m);
@@ -1245,11 +1274,11 @@ static size_t data_state_doubles(const fmu_model *m)
     return (size_t)(2 + 4 + 6 * s->K + LN_RIGID_STATE * m->n_bodies + 5 + 12 * s->model->n_driven);
 }
 
-/* start time; integrator, applied integrator, dirty, estimate, applied estimate, over goal; the estimate; values;
-   applied; the run's data; the companion's data */
+/* start time; integrator, applied integrator, dirty, estimate, applied estimate, over goal, stepped; the estimate;
+   the tension peaks and their times; values; applied; the run's data; the companion's data */
 size_t fmu_model_state_size(const fmu_model *m)
 {
-    return sizeof(double) * ((size_t)(1 + 6 + 1 + 2 * m->s->n_real) + 2 * data_state_doubles(m));
+    return sizeof(double) * ((size_t)(1 + 7 + 1 + 2 * m->s->L + 2 * m->s->n_real) + 2 * data_state_doubles(m));
 }
 
 static void put(unsigned char **p, const void *x, size_t n)
@@ -1312,7 +1341,9 @@ void fmu_model_state_save(const fmu_model *m, unsigned char *buffer)
     put_int(&p, m->estimate);
     put_int(&p, m->applied_estimate);
     put_int(&p, m->over_goal);
+    put_int(&p, m->stepped);
     put(&p, &m->error, sizeof(double));
+    put(&p, m->peak, (size_t)(2 * s->L) * sizeof(double));
     put(&p, m->value, nr);
     put(&p, m->applied, nr);
     save_data(m, m->d, &p);
@@ -1406,16 +1437,18 @@ int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t si
 {
     const lnfmu_scene *s = m->s;
     if (size != fmu_model_state_size(m)) return fail(msg, FMU_ERROR, "a state of the wrong size");
-    const size_t n_real = (size_t)s->n_real, per_data = data_state_doubles(m);
-    double *value = malloc((2 * n_real + 2 * per_data + 1) * sizeof(double));
+    const size_t n_real = (size_t)s->n_real, per_data = data_state_doubles(m), n_peak = (size_t)(2 * s->L);
+    double *value = malloc((2 * n_real + 2 * per_data + n_peak + 1) * sizeof(double));
     if (!value) return fail(msg, FMU_ERROR, "out of memory");
-    double *applied = value + n_real, *arrays = applied + n_real;
+    double *applied = value + n_real, *arrays = applied + n_real, *peak = arrays + 2 * per_data;
     const unsigned char *p = buffer;
     double start_time, error;
     get(&p, &start_time, sizeof(double));
     const ln_int integrator = get_int(&p), applied_integrator = get_int(&p), dirty = get_int(&p);
     const ln_int estimate = get_int(&p), applied_estimate = get_int(&p), over_goal = get_int(&p);
+    const ln_int stepped = get_int(&p);
     get(&p, &error, sizeof(double));
+    get(&p, peak, n_peak * sizeof(double));
     get(&p, value, n_real * sizeof(double));
     get(&p, applied, n_real * sizeof(double));
     data_state run, companion;
@@ -1427,7 +1460,8 @@ int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t si
     if (integrator < 0 || integrator >= s->n_methods || applied_integrator < 0 || applied_integrator >= s->n_methods)
         problem = "an integrator index out of range";
     else if ((dirty != 0 && dirty != 1) || (estimate != 0 && estimate != 1) || (applied_estimate != 0
-             && applied_estimate != 1) || (over_goal != 0 && over_goal != 1) || !(error >= 0.0))
+             && applied_estimate != 1) || (over_goal != 0 && over_goal != 1) || (stepped != 0 && stepped != 1)
+             || !(error >= 0.0))
         problem = "invalid internals";
     else if (!isfinite(start_time))
         problem = "a non-finite time or step";
@@ -1473,6 +1507,8 @@ int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t si
     m->applied_estimate = (int)applied_estimate;
     m->over_goal = (int)over_goal;
     m->error = error;
+    m->stepped = (int)stepped;
+    if (n_peak) memcpy(m->peak, peak, n_peak * sizeof(double));
     m->start_time = start_time;
     apply_data(m, m->d, &run);
     apply_data(m, m->dc, &companion);

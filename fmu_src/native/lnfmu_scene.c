@@ -179,7 +179,7 @@ static const char *variables_problem(const lnfmu_scene *s)
         ln_int size = 1;
         switch (kind) {
         case LNFMU_F: case LNFMU_X: case LNFMU_U: size = 3 * m->K; break;
-        case LNFMU_T: case LNFMU_R: size = m->L; break;
+        case LNFMU_T: case LNFMU_T_PEAK: case LNFMU_T_PEAK_TIME: case LNFMU_R: size = m->L; break;
         case LNFMU_FREACT: size = 3 * m->n_fixed; break;
         case LNFMU_M: size = m->K; break;
         case LNFMU_G: size = 3; break;

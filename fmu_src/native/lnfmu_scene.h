@@ -37,9 +37,11 @@ enum lnfmu_kind {
     LNFMU_V = 11,       /* input: its velocity; index as P */
     LNFMU_A = 12,       /* input: its acceleration; index as P */
     LNFMU_JREACT = 13,  /* output: impulse on a driven anchor at the last step's start; index as P */
-    LNFMU_ERROR_ESTIMATE = 14   /* output: the run's estimated largest position error (the companion run's gap) */
+    LNFMU_ERROR_ESTIMATE = 14,  /* output: the run's estimated largest position error (the companion run's gap) */
+    LNFMU_T_PEAK = 15,  /* output: the largest |T| of link index over the last step, signed */
+    LNFMU_T_PEAK_TIME = 16      /* output: when it occurred */
 };
-#define LNFMU_KINDS 15
+#define LNFMU_KINDS 17
 
 /* The specialisation the library chose for the scene (linknet_core.Simulator). */
 enum lnfmu_specialisation { LNFMU_POINT_MASSES = 0, LNFMU_STATIC = 1, LNFMU_RIGID = 2 };
