@@ -843,6 +843,22 @@ class UnilateralDynamics(Dynamics):
             U_after = U + md.link_impulse_velocities(X, lam)
         return U_after, impulses, took
 
+    def anchor_impulses(self, X, U_before, U_after, rows) -> np.ndarray:
+        """(len(rows), 3): what the links gave the driven anchors ``rows`` in an impact that took the free masses from
+        U_before to U_after at X (both with the anchors' rows at their motion): the link impulses Lambda with
+        M dU = C^T Lambda on the free masses (9), the minimum-norm ones A^+ C dU of the mode of the links that
+        carried them (any other gives the same forces, (31)), and C^T Lambda on the anchors' rows."""
+        dU = np.where(self.scene.fixed[:, None], 0.0, U_after - U_before)
+        if not rows.size or not dU.any():
+            return np.zeros((rows.size, 3))
+        carrying = self.touching(X) | (np.abs(self.gaps(X)) <= TOUCH_TOL * self.scale)
+        md = self.mode(carrying, X, U_after)
+        Xa = md.pad(X)
+        inner = md.inner
+        A = inner.tension_matrix(Xa).toarray()
+        lam = np.linalg.lstsq(A, inner.constraint_rows(Xa, md._pad_zero(dU)), rcond=None)[0]
+        return md._unpad(inner.link_forces(Xa, lam))[rows]
+
     # ---- the pure functions of the state (outputs, diagnostics) ------------------------------------------------
     def resolve(self, X, U, F_input=None, anchor_acc=None):
         """(T (L,) of every link, normal force (K,) of the ground on every mass) at (X, U): the acceleration LCP on
@@ -926,11 +942,6 @@ class UnilateralDynamics(Dynamics):
         scene = self.scene
         if project_positions is None:
             project_positions = bool(scene.options.get("project_initial_positions", False))
-        if scene.input_driven_indices.size:
-            k = int(scene.input_driven_indices[0])
-            raise SolverError(f"{scene.name}: {scene.mass_label(k)} is driven by inputs, and input-driven anchors do "
-                              "not yet run with ropes or a ground (their jumps are projections onto rods only); give "
-                              "it a motion in the scene (velocity, sine, waypoints)")
         X, U = np.array(scene.X0), np.array(scene.U0)
         anchor_acc = None
         if scene.driven.any():

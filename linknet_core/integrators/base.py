@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from linknet_core.dynamics.drive import anchor_jump
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import SolverError, StepFailure, projection_failure
 from linknet_core.clib.library import fixed_step_count, lib as _core
@@ -44,19 +45,26 @@ class TensionPeaks:
     """Each link's largest |T_l| over one advance, signed (the value of T_l there), and when: located between the
     accepted steps' ends as the native core does it (tension_peaks.c, which says how and how accurately), in array
     code. ``begin(t, T)`` with T at the advance's start, ``step(t, T)`` with T at each accepted step's end; ``peak``
-    and ``time`` (L,) hold the result, None before the first advance."""
+    and ``time`` (L,) hold the result, None before the first advance. ``located=False``: nothing is tracked (the
+    event-driven methods of ropes and a ground, whose modes' tensions jump at every event and have the mode's links
+    only: their runs report the sampled T)."""
 
-    def __init__(self):
+    def __init__(self, located: bool = True):
+        self.located = located
         self.peak = self.time = None
         self._older = self._newer = None
         self._t0 = self._t1 = 0.0
         self._points = 0
 
     def begin(self, t: float, T: np.ndarray) -> None:
+        if not self.located:
+            return
         self.peak, self.time = T.copy(), np.full(T.shape, float(t))
         self._newer, self._t1, self._points = T, float(t), 1
 
     def step(self, t: float, T: np.ndarray) -> None:
+        if not self.located:
+            return
         t = float(t)
         peak, time = self.peak, self.time
         later = np.abs(T) > np.abs(peak)
@@ -127,6 +135,12 @@ class Integrator:
 
     def advance(self, state: State, t_target: float, F_input: np.ndarray | None, max_steps: int) -> None:
         raise NotImplementedError
+
+    def anchor_jump(self, drive, t: float, X: np.ndarray, U: np.ndarray, F_input=None):
+        """The driven anchors brought to their motion at t where it jumped, before an advance: the rods' projection
+        (dynamics.drive.anchor_jump); the event-driven methods take it as an event (events.EventHandling.
+        anchor_jump). Returns (X, U, impulse on each driven anchor, position jump, velocity jump)."""
+        return anchor_jump(self.dyn, drive, t, X, U)
 
     def projection_floor(self) -> tuple[int, float]:
         """(position projections that stopped at their round-off floor above the tolerance, the largest relative

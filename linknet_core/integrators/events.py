@@ -28,6 +28,7 @@ import math
 
 import numpy as np
 
+from linknet_core.integrators.base import TensionPeaks
 from linknet_core.dynamics.roots import bracketed_root
 from linknet_core.dynamics.unilateral import CROSS_TOL, FORCE_TOL, TOUCH_TOL, Event
 from linknet_core.errors import SolverError, StepFailure
@@ -128,6 +129,7 @@ class EventHandling:
 
     def _init_events(self, unilateral):
         self.unilateral = unilateral
+        self.peaks = TensionPeaks(located=False)
         self.mode = None  # chosen from the state at the first advance
         self.stuck = None  # the contacts friction holds (one per contact)
         self.events: list[Event] = []
@@ -178,14 +180,18 @@ class EventHandling:
 
     def _ensure_mode(self, X, U, t, F_input):
         if self.mode is None:
-            Xd, Ud, acc = self._at(t, X, U)
-            uni = self.unilateral
-            candidates = uni.touching(Xd, Ud)
-            resting = uni.resting(Ud)
-            active, _, _ = uni.select_mode(Xd, Ud, F_input, acc, candidates, start=candidates, stuck=resting)
-            self._set_mode(active, X, U, uni.choose_stuck(Xd, Ud, active, resting, F_input, acc))
-            uni.slip_reference[:] = 0.0
+            self._choose_mode(*self._at(t, X, U), F_input, X, U)
+            self.unilateral.slip_reference[:] = 0.0
             self._slip_reference(t, X, U, F_input)
+
+    def _choose_mode(self, Xd, Ud, acc, F_input, X, U):
+        """The mode the state (Xd, Ud: the driven anchors where their motion has them, accelerating at acc) is in:
+        the acceleration LCP on the touching constraints, with the resting contacts friction can hold stuck."""
+        uni = self.unilateral
+        candidates = uni.touching(Xd, Ud)
+        resting = uni.resting(Ud)
+        active, _, _ = uni.select_mode(Xd, Ud, F_input, acc, candidates, start=candidates, stuck=resting)
+        self._set_mode(active, X, U, uni.choose_stuck(Xd, Ud, active, resting, F_input, acc))
 
     # ---- detection and location -------------------------------------------------------------------------------
     def _forces_at(self, t, X, U, F_input):
@@ -301,6 +307,31 @@ class EventHandling:
             Xe, Ue = step(h) if h > 0 else (X0, U0)
         return Xe, Ue, h
 
+    # ---- the driven anchors' jump --------------------------------------------------------------------------
+    def anchor_jump(self, drive, t, X, U, F_input=None):
+        """The driven anchors brought to their motion at t where it jumped (an input-driven anchor's new held motion
+        at a communication point), as an event: the ropes the jump stretched and the masses it pushed below the
+        ground are put back onto them with the touching ones, the impact law takes the jerk (UnilateralDynamics.
+        impact, each rope with its restitution, the rods' rates (12) to zero as the rods' jump projection does),
+        and the mode is chosen from the state after it, the ropes' taut and slack events recorded at t. Returns
+        (X, U, impulse (n_driven, 3): what the links gave each driven anchor, position jump (m), velocity jump
+        (m/s)), as dynamics.drive.anchor_jump does for rods."""
+        P, V, _ = drive.at(t)
+        rows = drive.rows
+        dP = float(np.abs(P - X[rows]).max()) if rows.size else 0.0
+        dV = float(np.abs(V - U[rows]).max()) if rows.size else 0.0
+        impulse = np.zeros((rows.size, 3))
+        if dP == 0.0 and dV == 0.0:
+            return X, U, impulse, 0.0, 0.0
+        uni = self.unilateral
+        if self.mode is None:  # before the first advance: the mode of the state before the jump
+            self._choose_mode(X, U, None, F_input, X, U)
+        X, U = X.copy(), U.copy()
+        X[rows], U[rows] = P, V
+        X_after, U_after = self._apply_event(X, U, t, F_input, "anchor", None)
+        impulse = uni.anchor_impulses(X_after, U, U_after, rows)
+        return X_after, U_after, impulse, dP, dV
+
     # ---- the event -------------------------------------------------------------------------------------------
     def _apply_event(self, X, U, t, F_input, kind, trigger):
         """At an event at t (state X, U of the old mode): positions onto the touching constraints, the impact's
@@ -313,6 +344,8 @@ class EventHandling:
         touching = self.mode | uni.touching(X)
         if kind == "gap":
             touching[trigger] = True
+        elif kind == "anchor":  # the ropes a driven anchor's jump stretched, the masses it pushed into the ground
+            touching |= uni.gaps(X) < 0.0
         stuck_before = self.stuck
         X, _ = uni.mode(touching, X, U).project_positions(X, tol=1e-14)
         U_after, impulses, took = uni.impact(X, U, touching)
@@ -346,7 +379,10 @@ class EventHandling:
         md = uni.mode(active, X, U_after, stuck)
         U_before_grip = U_after
         U_after = md.project_velocities(X, U_after)
-        for u in np.flatnonzero((took | active) & ~self.mode):
+        jerked = (took | active) & ~self.mode
+        if kind == "anchor":  # a rope already taut that a driven anchor's jump jerks: its impulse is reported too
+            jerked |= took
+        for u in np.flatnonzero(jerked):
             self.events.append(Event(float(t), "taut" if uni.is_rope[u] else "contact", int(uni.index[u]),
                                      float(impulses[u])))
         for u in np.flatnonzero(self.mode & ~active):

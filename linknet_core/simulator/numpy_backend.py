@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from linknet_core.dynamics.drive import AnchorDrive, anchor_jump
+from linknet_core.dynamics.drive import AnchorDrive
 from linknet_core.errors import SolverError
 from linknet_core.integrators import make_integrator
 from linknet_core.simulator.backend import Backend
@@ -55,7 +55,7 @@ class NumpyBackend(Backend):
             if drive is not None:
                 if hold is not None:
                     drive.set_input(t_before, hold)
-                state.X, state.U, *drive.last_jump = anchor_jump(self.dyn, drive, t_before, state.X, state.U)
+                state.X, state.U, *drive.last_jump = self.integrator.anchor_jump(drive, t_before, state.X, state.U, F)
                 drive.jumps += drive.last_jump[1] > 0 or drive.last_jump[2] > 0
             self.integrator.advance(state, t_next, F, max_steps)
             if not all_finite(state.X, state.U):

@@ -471,11 +471,21 @@ class Simulator:
         # their motions, so nothing of the run's own drive is needed
         drive = AnchorDrive(self.scene, self._initial.t)
         drive.set_input(t, hold)
-        X, U, impulse, _, _ = anchor_jump(self.dyn, drive, t, self.state.X, self.state.U)
+        if self.scene.unilateral:  # an event of the event integrator, whose mode and events are put back after
+            internals = copy.deepcopy(self.integrator.internals())
+            try:
+                X, U, impulse, _, _ = self.integrator.anchor_jump(drive, t, self.state.X, self.state.U, F)
+            finally:
+                self.integrator.set_internals(internals)
+        else:
+            X, U, impulse, _, _ = anchor_jump(self.dyn, drive, t, self.state.X, self.state.U)
         X_at, U_at, anchor_acc = drive.apply(t, X, U)
         T = self.dyn.tensions(X_at, U_at, F, anchor_acc=anchor_acc)
-        return {"t": t, "X": X_at, "U": U_at, "T": T, "Freact": self.dyn.anchor_reactions(X_at, T),
-                "error_estimate": self.error_estimate, "impulse": impulse}
+        out = {"t": t, "X": X_at, "U": U_at, "T": T, "Freact": self.dyn.anchor_reactions(X_at, T),
+               "error_estimate": self.error_estimate, "impulse": impulse}
+        if self.scene.unilateral:
+            out["slack"] = slack_links(self.scene, T)
+        return out
 
     def interface_linearization(self, F_input=None, anchors=None):
         """The exact derivatives of what :meth:`outputs` gives (T, Freact) and of the accelerations dU/dt with respect

@@ -149,14 +149,6 @@ def test_the_outputs_linearization_is_refused_for_ropes_and_a_ground_naming_the_
         ln.Simulator(grounded, "dop853").interface_linearization()
 
 
-def test_input_driven_anchors_are_refused_with_ropes():
-    scene = ln.Scene.from_dict(data(masses=[{"name": "hook", "position": [0, 0, 0], "driven": True},
-                                            {"name": "bob", "position": [0, 0, -0.5], "mass": 1.0}]))
-    with pytest.raises(ln.SolverError) as err:
-        ln.Simulator(scene, "dop853")
-    assert 'mass 1 ("hook") is driven by inputs' in str(err.value)
-
-
 def test_a_run_reports_slack_ropes_per_sample_and_its_events_and_a_snapshot_restores_the_mode():
     scene = ln.Scene.from_dict(data(masses=[{"name": "pivot", "position": [0, 0, 0], "fixed": True},
                                             {"name": "bob", "position": [0.3, 0, -0.4], "mass": 1.0,
