@@ -263,7 +263,8 @@ class LinknetNetwork(Fmi2Slave):
             self._real[lay.U_vr] = U[lay.output_masses]
             self._real[lay.T_vr] = T
             # the peak over the last step (Simulator.tension_peaks); before the first step, T with the inputs as set
-            self._real[lay.T_peak_vr], self._real[lay.T_peak_time_vr] = self._sim.tension_peaks(self._F)
+            self._real[lay.T_peak_vr], self._real[lay.T_peak_time_vr] = self._sim.tension_peaks(self._F,
+                                                                                               self._anchors())
             self._real[lay.Freact_vr] = Freact
             if lay.driven_indices.size:
                 self._real[lay.Jreact_vr] = out["impulse"]

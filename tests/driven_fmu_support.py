@@ -127,8 +127,8 @@ def library_outputs(scene, names, method=DEFAULT_METHOD, jump_step=None, n_steps
             idx = [int(i) - 1 for i in idx.rstrip("]").split(",")]
             if kind == "T":
                 row.append(out["T"][idx[0]])
-            elif kind in ("T_peak", "T_peak_time"):  # over the last advance (before the first, T and t0 under F)
-                row.append(sim.tension_peaks(F)[kind == "T_peak_time"][idx[0]])
+            elif kind in ("T_peak", "T_peak_time"):  # over the last advance (before the first, T and t0)
+                row.append(sim.tension_peaks(F, anchors)[kind == "T_peak_time"][idx[0]])
             elif kind == "Freact":
                 row.append(np.asarray(out["Freact"])[fixed_row[idx[0]], idx[1]])
             elif kind == "Jreact":

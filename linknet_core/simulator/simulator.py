@@ -419,7 +419,7 @@ class Simulator:
             self._peaks, self._peaks_in_engine = self.engine.tension_peaks(), False
         return self._peaks
 
-    def tension_peaks(self, F_input=None) -> tuple[np.ndarray, np.ndarray]:
+    def tension_peaks(self, F_input=None, anchors=None) -> tuple[np.ndarray, np.ndarray]:
         """(T_peak, T_peak_time), (L,) each: over the last advance, each link's largest |T_l| (N), signed (the value
         of T_l there), and when it occurred (s), located between the integrator's accepted steps by the vertex of the
         quadratic through three consecutive step ends' tensions (linknet_core/native/src/tension_peaks.c; the numpy
@@ -427,12 +427,15 @@ class Simulator:
         it). A tension spike between two advances that the outputs at their ends miss is here. Where the path does
         not locate them (``peaks_located`` False: free rigid bodies, ropes or a ground, a static scene): the
         tensions at the current state under the last advance's input, and the current time; before the first
-        advance, under ``F_input`` (as ``outputs`` takes it). Restored with a snapshot (set_state)."""
+        advance, under ``F_input`` and ``anchors`` (as ``outputs`` takes them: T itself, as both FMUs report it before
+        their first step). Restored with a snapshot (set_state)."""
         peaks = self._taken_peaks()
         if peaks is not None:
             return peaks[0].copy(), peaks[1].copy()
-        F = self._peak_input if self._advanced else self.check_input(F_input)
-        T, _ = self.engine.outputs(self.state, F, None)
+        if self._advanced:
+            T, _ = self.engine.outputs(self.state, self._peak_input, None)
+        else:
+            T, _ = self.engine.outputs(self.state, self.check_input(F_input), self.check_anchors(anchors))
         return T, np.full(self.scene.L, self.state.t)
 
     @property

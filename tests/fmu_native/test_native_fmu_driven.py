@@ -190,9 +190,11 @@ def test_fmpy_simulate_fmu_with_input_derivatives(scenes, fmu_root):
     for n in range(rows.shape[0]):
         sim.advance(n * drive.H + drive.H, F, anchors=((X0 + v * n * drive.H)[None], v[None], np.zeros((1, 3))))
         out = sim.outputs(F)
-        ref.append(np.concatenate([out["X"].ravel(), out["U"].ravel(), out["T"], out["Freact"].ravel(),
-                                   out["impulse"].ravel(), [out["error_estimate"]]]))
-    assert names == [f"{q}[{k},{i}]" for q in "XU" for k in (1, 2) for i in (1, 2, 3)] + ["T[1]"] + \
+        peak, when = sim.tension_peaks()
+        ref.append(np.concatenate([out["X"].ravel(), out["U"].ravel(), out["T"], peak, when,
+                                   out["Freact"].ravel(), out["impulse"].ravel(), [out["error_estimate"]]]))
+    assert names == [f"{q}[{k},{i}]" for q in "XU" for k in (1, 2) for i in (1, 2, 3)] + \
+        ["T[1]", "T_peak[1]", "T_peak_time[1]"] + \
         [f"{q}[1,{i}]" for q in ("Freact", "Jreact") for i in (1, 2, 3)] + ["error_estimate"]
     ref = np.array(ref)
     scale = np.maximum(np.abs(ref).max(axis=0), 1e-300)
@@ -245,6 +247,7 @@ def test_model_structure_is_the_coupled_groups_of_links(scenes, fmu_root):
     expected.update({f"{q}[{k},{i}]": [] for q in "XU" for k in range(1, 10) for i in (1, 2, 3)})
     expected.update({f"Jreact[{k},{i}]": [] for k in (1, 8) for i in (1, 2, 3)})
     expected["error_estimate"] = []
+    expected.update({f"{q}[{l}]": [] for q in ("T_peak", "T_peak_time") for l in range(1, 7)})  # over the last step
     assert deps == expected
     inputs_declared = [v.name for v in md.modelVariables if v.causality == "input"]
     assert inputs_declared[-9:] == [f"{q}[1,{i}]" for q in "PVA" for i in (1, 2, 3)]  # not for the sine anchor
