@@ -187,3 +187,16 @@ def test_the_shipped_rope_scenes_run_through_the_cli_and_count_their_events(path
     assert saved["slack"].shape == (31, 1) and saved["slack"].dtype == bool
     assert len(saved["event_t"]) == sum(counts.values()) and set(saved["event_kind"]) <= set(counts)
     assert np.all(saved["event_index"] == 1)  # the hoist rope, or the rope, of each scene (1-based, as k1, k2)
+
+
+def test_a_runs_npz_holds_its_ground_for_the_pictures(tmp_path):
+    """linknet animate/view draw the ground of a .npz from ground_point and ground_normal: save_npz writes the
+    scene's, with the events."""
+    scene = ln.Scene.from_dict({"name": "ball", "gravity": [0, 0, -9.81],
+                                "masses": [{"name": "ball", "position": [0, 0, 1], "mass": 2.0}],
+                                "ground": {"point": [0, 0, -0.5], "normal": [0, 0.6, 0.8], "restitution": 0.5}})
+    run = ln.simulate(scene, 1.0, n_out=11, error_estimate=False)
+    run.save_npz(tmp_path / "ball.npz")
+    with np.load(tmp_path / "ball.npz") as z:
+        assert np.array_equal(z["ground_point"], [0, 0, -0.5]) and np.allclose(z["ground_normal"], [0, 0.6, 0.8])
+        assert list(z["event_kind"][:1]) == ["contact"] and z["event_impulse"][0] > 0
