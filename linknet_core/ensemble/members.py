@@ -249,6 +249,22 @@ class _QuietFmuErrors:
         return getattr(self.stream, name)
 
 
+
+def fmpy_callbacks(log: list):
+    """fmpy's FMI 2 callbacks with a logger of their own that appends (status, message) to ``log``; whoever
+    instantiates with them keeps them as long as the instance. (fmpy's default logger goes through a proxy in its
+    logging library that has one global target for the whole process.)"""
+    from fmpy.fmi2 import defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+
+    def logger(env, instance, status, category, message):
+        log.append((int(status), message.decode("utf-8", "replace")))
+
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+    callbacks.allocateMemory = defaultCallbacks.allocateMemory
+    callbacks.freeMemory = defaultCallbacks.freeMemory
+    return callbacks
+
 class FmuRunner:
     """One FMU extracted once per worker process, an instance per worker thread reset between members."""
 
@@ -283,17 +299,10 @@ class FmuRunner:
     def _instance(self):
         """This thread's instance (FMU instances are not thread-safe), and its log of messages."""
         if getattr(self._local, "slave", None) is None:
-            from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, defaultCallbacks
+            from fmpy.fmi2 import FMU2Slave
 
             log: list[tuple[int, str]] = []
-
-            def logger(env, instance, status, category, message):
-                log.append((int(status), message.decode("utf-8", "replace")))
-
-            callbacks = fmi2CallbackFunctions()
-            callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-            callbacks.allocateMemory = defaultCallbacks.allocateMemory
-            callbacks.freeMemory = defaultCallbacks.freeMemory
+            callbacks = fmpy_callbacks(log)
             slave = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
                               modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="member")
             # pythonfmu forwards its messages (the reason for a refused member) only with logging on

@@ -61,3 +61,26 @@ def assert_member_equals(ds, member: int, reference) -> None:
     # the member's error estimate is its run's companion's, as the serial run computes it
     assert ds["error_estimate"].values[member] == reference.max_error_estimate
     assert ds["error_goal"].values[member] == reference.error_goal
+
+
+def four_member_study(outputs=("X", "T")):
+    """(spec, plan, scene) of a small study written without a cluster: double_pendulum, M[2] at 1 .. 4 kg, three
+    samples to 0.1 s, RATTLE at 1 ms."""
+    from linknet_core.ensemble.members import StudySpec
+    from linknet_core.ensemble.parameters import make_plan
+
+    scene = ln.load_scene(MODELS / "double_pendulum.json")
+    plan = make_plan(scene, {"M[2]": [1.0, 2.0, 3.0, 4.0]}, None)
+    spec = StudySpec(study_id="0123456789abcdef", scene=scene.to_dict(), parameters=plan.parameters,
+                     times=np.linspace(0, 0.1, 3), method="rattle", dt=1e-3, rtol=None, atol=None,
+                     project_initial=None, outputs=outputs, tip=2)
+    return spec, plan, scene
+
+
+def client_batch(first, count, seed):
+    """A batch as a worker returns it when the client is to write its shard: arbitrary numbers, each member's."""
+    rng = np.random.default_rng(seed)
+    return {"first": first, "count": count, "worker": "tcp://w:1", "error": [""] * count,
+            "run_seconds": rng.random(count),
+            "outputs": {"X": rng.random((count, 3, 3, 3)), "T": rng.random((count, 3, 2)),
+                        "max_tension": rng.random(count)}}

@@ -13,7 +13,7 @@ import linknet_core as ln
 from linknet_core.ensemble import members, shards, summary
 from linknet_core.output import WriteError
 
-from .ensemble_support import MODELS, assert_member_equals, serial_run
+from .ensemble_support import MODELS, assert_member_equals, client_batch, four_member_study, serial_run
 
 T_END, N_OUT = 0.3, 16
 MASSES = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0]
@@ -98,27 +98,6 @@ def test_a_folder_of_the_shards_name_that_is_not_a_studys_is_refused_and_kept(lo
     assert (mine / "notes.txt").read_text() == "mine" and not (tmp_path / "study.nc").exists()
 
 
-def _study(tmp_path, outputs=("X", "T")):
-    from linknet_core.ensemble.members import StudySpec
-    from linknet_core.ensemble.parameters import make_plan
-
-    scene = ln.load_scene(MODELS / "double_pendulum.json")
-    plan = make_plan(scene, {"M[2]": [1.0, 2.0, 3.0, 4.0]}, None)
-    spec = StudySpec(study_id="0123456789abcdef", scene=scene.to_dict(), parameters=plan.parameters,
-                     times=np.linspace(0, 0.1, 3), method="rattle", dt=1e-3, rtol=None, atol=None,
-                     project_initial=None, outputs=outputs, tip=2)
-    return spec, plan, scene
-
-
-def _batch(first, count, seed):
-    """A batch as a worker returns it when the client is to write its shard: arbitrary numbers, each member's."""
-    rng = np.random.default_rng(seed)
-    return {"first": first, "count": count, "worker": "tcp://w:1", "error": [""] * count,
-            "run_seconds": rng.random(count),
-            "outputs": {"X": rng.random((count, 3, 3, 3)), "T": rng.random((count, 3, 2)),
-                        "max_tension": rng.random(count)}}
-
-
 def test_a_failed_write_goes_on_in_the_rescue_file_with_every_member(tmp_path, monkeypatch):
     """The second batch's shard cannot be written (a full disk): that write says so once, the study goes on in a
     rescue file in the temporary folder, and that file holds all four members: the first from the shard beside
@@ -128,8 +107,8 @@ def test_a_failed_write_goes_on_in_the_rescue_file_with_every_member(tmp_path, m
     monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))
     monkeypatch.setattr("tempfile.tempdir", None)
     (tmp_path / "tmp").mkdir()
-    sink = store.StudyFile(tmp_path / "s.nc", *_study(tmp_path))
-    batches = [_batch(0, 1, 1), _batch(1, 2, 2), _batch(3, 1, 3)]
+    sink = store.StudyFile(tmp_path / "s.nc", *four_member_study())
+    batches = [client_batch(0, 1, 1), client_batch(1, 2, 2), client_batch(3, 1, 3)]
     sink.write(batches[0])
     real_write = store.write_shard
     calls = []
@@ -162,7 +141,7 @@ def test_a_shard_is_whole_or_absent(tmp_path, monkeypatch):
     temporary; one that succeeds reads back as the batch it was."""
     folder = tmp_path / "s.shards"
     shards.prepare_folder(folder, "study")
-    batch = _batch(5, 2, 7)
+    batch = client_batch(5, 2, 7)
     path = shards.write_shard(folder, "study", batch, members.OUTPUTS)
     back = shards.read_shard(path)
     assert (back["first"], back["count"], back["error"]) == (5, 2, ["", ""])
@@ -174,7 +153,7 @@ def test_a_shard_is_whole_or_absent(tmp_path, monkeypatch):
 
     monkeypatch.setattr(h5py.Group, "create_dataset", full)
     with pytest.raises(WriteError, match=r"members-000000009-1\.study\.h5: No space left on device \(errno 28\)"):
-        shards.write_shard(folder, "study", _batch(9, 1, 8), members.OUTPUTS)
+        shards.write_shard(folder, "study", client_batch(9, 1, 8), members.OUTPUTS)
     assert sorted(p.name for p in folder.iterdir()) == sorted([shards.MARKER, path.name])
 
 

@@ -19,7 +19,7 @@ from linknet_core.ensemble import (MissingShardsError, consolidate, members, ope
                                    summary)
 from linknet_core.output import WriteError
 
-from .ensemble_support import MODELS, ROOT, assert_member_equals, serial_run
+from .ensemble_support import MODELS, ROOT, assert_member_equals, client_batch, four_member_study, serial_run
 
 T_END, N_OUT = 0.3, 16
 MASSES = [0.5, 1.0, 1.5, 2.0, 2.5]
@@ -269,12 +269,12 @@ def test_recover_never_replaces_a_complete_study_and_elsewhere_writes_it_self_co
 def test_recover_takes_each_member_once_from_overlapping_shards(tmp_path):
     """A batch and the single members it ran again as (its worker died) hold the same members; a shard that
     overlaps those taken gives only its other members. Each member's numbers are the ones its shard holds."""
-    spec, plan, scene = _four_member_study()
+    spec, plan, scene = four_member_study()
     sink = store.StudyFile(tmp_path / "s.nc", spec, plan, scene)
-    given = _batch(0, 2, 1)
+    given = client_batch(0, 2, 1)
     sink.write(given)  # the client writes its shard
     sink.close({})
-    overlapping = _batch(1, 3, 2)  # members 1-3: member 1 is taken already
+    overlapping = client_batch(1, 3, 2)  # members 1-3: member 1 is taken already
     shards.write_shard(tmp_path / "s.shards", spec.study_id, overlapping, members.OUTPUTS)
     (tmp_path / "s.nc").unlink()
     recovery = recover(tmp_path / "s.shards")
@@ -291,27 +291,6 @@ def test_recover_says_what_it_needs(tmp_path):
     run = linknet("recover", tmp_path / "nothing.shards")
     assert run.returncode == 2 and run.stderr.count("\n") == 1 and "is not a linknet study's shard folder" in \
         run.stderr and "Traceback" not in run.stderr
-
-
-def _four_member_study():
-    from linknet_core.ensemble.members import StudySpec
-    from linknet_core.ensemble.parameters import make_plan
-
-    scene = ln.load_scene(MODELS / "double_pendulum.json")
-    plan = make_plan(scene, {"M[2]": [1.0, 2.0, 3.0, 4.0]}, None)
-    spec = StudySpec(study_id="0123456789abcdef", scene=scene.to_dict(), parameters=plan.parameters,
-                     times=np.linspace(0, 0.1, 3), method="rattle", dt=1e-3, rtol=None, atol=None,
-                     project_initial=None, outputs=("X", "T"), tip=2)
-    return spec, plan, scene
-
-
-def _batch(first, count, seed):
-    """A batch as a worker returns it for the client to write: arbitrary numbers, each member's own."""
-    rng = np.random.default_rng(seed)
-    return {"first": first, "count": count, "worker": "tcp://w:1", "error": [""] * count,
-            "run_seconds": rng.random(count),
-            "outputs": {"X": rng.random((count, 3, 3, 3)), "T": rng.random((count, 3, 2)),
-                        "max_tension": rng.random(count)}}
 
 
 # ---- a study stopped part way --------------------------------------------------------------------------------
@@ -450,7 +429,7 @@ def test_a_shard_write_interrupted_part_way_leaves_no_file(tmp_path, monkeypatch
 
     monkeypatch.setattr(h5py.File, "flush", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        shards.write_shard(folder, "study", _batch(0, 2, 1), members.OUTPUTS)
+        shards.write_shard(folder, "study", client_batch(0, 2, 1), members.OUTPUTS)
     assert sorted(p.name for p in folder.iterdir()) == [shards.MARKER]
 
 

@@ -79,6 +79,21 @@ def built(root: Path, scene: str | Path, native: bool = True, **options) -> Buil
     return _cache[key]
 
 
+def fmpy_instance(fmu: Built, name: str, log: list):
+    """(FMU2Slave instantiated, its callbacks): fmpy's FMU2Slave of ``fmu`` with a logger of its own that appends
+    (status, message) to ``log`` (ensemble.members.fmpy_callbacks). The caller keeps the callbacks as long as the
+    instance: fmpy's default logger goes through a proxy whose one global target other instances in the process
+    leave behind (a crash in the FMU's first log call)."""
+    from fmpy.fmi2 import FMU2Slave
+
+    from linknet_core.ensemble.members import fmpy_callbacks
+
+    callbacks = fmpy_callbacks(log)
+    slave = FMU2Slave(guid=fmu.guid, unzipDirectory=str(fmu.dir), modelIdentifier=fmu.ident, instanceName=name)
+    slave.instantiate(callbacks=callbacks, loggingOn=False)
+    return slave, callbacks
+
+
 def run_host(host: Path, env: dict, command: str, fmu: Built, *args, timeout: float = 120) -> str:
     """Run the C host on an FMU; its stdout (fails the test on a non-zero exit, with the host's stderr)."""
     cmd = [str(host), command, str(fmu.dir), fmu.ident, fmu.guid] + [str(a) for a in args]

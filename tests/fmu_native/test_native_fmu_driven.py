@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from native_fmu_support import ROOT, assert_round_off, built
+from native_fmu_support import ROOT, assert_round_off, built, fmpy_instance
 
 sys.path.insert(0, str(ROOT / "tests"))
 import driven_fmu_support as drive  # noqa: E402
@@ -29,19 +29,8 @@ class Instance:
     """One instance of a built FMU through fmpy, by variable names; log messages collected with their status."""
 
     def __init__(self, fmu, name="driven"):
-        from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, defaultCallbacks
         self.fmu, self.log = fmu, []
-
-        def logger(env, instance, status, category, message):
-            self.log.append((int(status), message.decode("utf-8", "replace")))
-
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-        self.callbacks.allocateMemory = defaultCallbacks.allocateMemory
-        self.callbacks.freeMemory = defaultCallbacks.freeMemory
-        self.slave = FMU2Slave(guid=fmu.guid, unzipDirectory=str(fmu.dir), modelIdentifier=fmu.ident,
-                               instanceName=name)
-        self.slave.instantiate(callbacks=self.callbacks, loggingOn=False)
+        self.slave, self.callbacks = fmpy_instance(fmu, name, self.log)
 
     def vrs(self, names):
         return [self.fmu.vr[n] for n in names]

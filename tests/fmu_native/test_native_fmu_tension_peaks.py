@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import linknet_core as ln
-from native_fmu_support import MODELS, built
+from native_fmu_support import MODELS, built, fmpy_instance
 
 QUARTER = 1.8540746773013719 * math.sqrt(1.0 / 9.81)
 
@@ -17,21 +17,8 @@ class Slave:
     """An FMI 2.0 FMU through fmpy's FMU2Slave, initialized at t = 0."""
 
     def __init__(self, fmu):
-        from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
         self.fmu, self.log = fmu, []
-
-        def logger(env, instance, status, category, message):
-            self.log.append((int(status), message.decode("utf-8", "replace")))
-
-        # callbacks of its own, kept with the instance: fmpy's default logger goes through a proxy in its logging
-        # library whose one global target other tests' instances leave behind (a crash in the FMU's first log call)
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-        self.callbacks.allocateMemory = defaultCallbacks.allocateMemory
-        self.callbacks.freeMemory = defaultCallbacks.freeMemory
-        self.slave = FMU2Slave(guid=fmu.guid, unzipDirectory=str(fmu.dir), modelIdentifier=fmu.ident,
-                               instanceName="peaks")
-        self.slave.instantiate(callbacks=self.callbacks, loggingOn=False)
+        self.slave, self.callbacks = fmpy_instance(fmu, "peaks", self.log)
         self.slave.setupExperiment(startTime=0.0)
         self.slave.enterInitializationMode()
         self.slave.exitInitializationMode()

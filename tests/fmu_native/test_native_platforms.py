@@ -381,7 +381,7 @@ def test_win64_under_wine_equals_linux64_on_every_scene(fmu_root, tmp_path_facto
         cmd = [exe, str(host), args[0], "Z:" + str(fmu.dir)] + [str(a) for a in args[1:]]
         out, err = host.parent / "stdout.txt", host.parent / "stderr.txt"
         # the host writes its rows or its error on every run it makes; an exit with nothing written at all is wine
-        # failing to start the process (seen once in a CI run, never again on rerun): that launch is retried once
+        # failing to start the process, not the FMU's answer: that launch is retried once
         for _ in range(2):
             with open(out, "wb") as o, open(err, "wb") as e:
                 rc = subprocess.run(cmd, stdin=subprocess.DEVNULL, stdout=o, stderr=e, env=env,
