@@ -127,19 +127,29 @@ def call_motion(function, t: float, labels) -> tuple:
     return P, V, A
 
 
-def anchor_jump(dyn, drive: AnchorDrive, t: float, X: np.ndarray, U: np.ndarray):
-    """Bring the state's driven rows to the motion at t. Where they jump, positions are projected onto (11) and
-    velocities onto (12) in the mass metric (an inelastic impulse). Returns (X, U, impulse (n_driven, 3): what the
-    links gave each driven anchor, position jump (m), velocity jump (m/s))."""
+def driven_rows_at(drive: AnchorDrive, t: float, X: np.ndarray, U: np.ndarray):
+    """(X, U with the driven rows at the motion at t, position jump (m), velocity jump (m/s)): copies where the rows
+    jump, X and U themselves where they do not (both jumps 0)."""
     P, V, _ = drive.at(t)
     rows = drive.rows
     dP = float(np.abs(P - X[rows]).max()) if rows.size else 0.0
     dV = float(np.abs(V - U[rows]).max()) if rows.size else 0.0
-    impulse = np.zeros((rows.size, 3))
     if dP == 0.0 and dV == 0.0:
-        return X, U, impulse, 0.0, 0.0
+        return X, U, 0.0, 0.0
     X, U = X.copy(), U.copy()
     X[rows], U[rows] = P, V
+    return X, U, dP, dV
+
+
+def anchor_jump(dyn, drive: AnchorDrive, t: float, X: np.ndarray, U: np.ndarray):
+    """Bring the state's driven rows to the motion at t. Where they jump, positions are projected onto (11) and
+    velocities onto (12) in the mass metric (an inelastic impulse). Returns (X, U, impulse (n_driven, 3): what the
+    links gave each driven anchor, position jump (m), velocity jump (m/s))."""
+    rows = drive.rows
+    impulse = np.zeros((rows.size, 3))
+    X, U, dP, dV = driven_rows_at(drive, t, X, U)
+    if dP == 0.0 and dV == 0.0:
+        return X, U, impulse, 0.0, 0.0
     if dP > 0.0:
         X, _ = dyn.project_positions(X, tol=1e-14)
     if dyn.scene.L:

@@ -851,8 +851,7 @@ class UnilateralDynamics(Dynamics):
         dU = np.where(self.scene.fixed[:, None], 0.0, U_after - U_before)
         if not rows.size or not dU.any():
             return np.zeros((rows.size, 3))
-        carrying = self.touching(X) | (np.abs(self.gaps(X)) <= TOUCH_TOL * self.scale)
-        md = self.mode(carrying, X, U_after)
+        md = self.mode(self.touching(X), X, U_after)
         Xa = md.pad(X)
         inner = md.inner
         A = inner.tension_matrix(Xa).toarray()

@@ -28,10 +28,11 @@ import math
 
 import numpy as np
 
-from linknet_core.integrators.base import TensionPeaks
+from linknet_core.dynamics.drive import driven_rows_at
 from linknet_core.dynamics.roots import bracketed_root
 from linknet_core.dynamics.unilateral import CROSS_TOL, FORCE_TOL, TOUCH_TOL, Event
 from linknet_core.errors import SolverError, StepFailure
+from linknet_core.integrators.base import TensionPeaks
 from linknet_core.tolerances import MIN_FACTOR, SAFETY
 
 # More events than this within one step (or one adaptive step attempt) means a chatter the rest rule did not stop
@@ -316,20 +317,13 @@ class EventHandling:
         and the mode is chosen from the state after it, the ropes' taut and slack events recorded at t. Returns
         (X, U, impulse (n_driven, 3): what the links gave each driven anchor, position jump (m), velocity jump
         (m/s)), as dynamics.drive.anchor_jump does for rods."""
-        P, V, _ = drive.at(t)
-        rows = drive.rows
-        dP = float(np.abs(P - X[rows]).max()) if rows.size else 0.0
-        dV = float(np.abs(V - U[rows]).max()) if rows.size else 0.0
-        impulse = np.zeros((rows.size, 3))
+        Xj, Uj, dP, dV = driven_rows_at(drive, t, X, U)
         if dP == 0.0 and dV == 0.0:
-            return X, U, impulse, 0.0, 0.0
-        uni = self.unilateral
+            return X, U, np.zeros((drive.rows.size, 3)), 0.0, 0.0
         if self.mode is None:  # before the first advance: the mode of the state before the jump
             self._choose_mode(X, U, None, F_input, X, U)
-        X, U = X.copy(), U.copy()
-        X[rows], U[rows] = P, V
-        X_after, U_after = self._apply_event(X, U, t, F_input, "anchor", None)
-        impulse = uni.anchor_impulses(X_after, U, U_after, rows)
+        X_after, U_after = self._apply_event(Xj, Uj, t, F_input, "anchor", None)
+        impulse = self.unilateral.anchor_impulses(X_after, Uj, U_after, drive.rows)
         return X_after, U_after, impulse, dP, dV
 
     # ---- the event -------------------------------------------------------------------------------------------

@@ -75,12 +75,11 @@ class NumpyBackend(Backend):
 
     @property
     def locates_peaks(self) -> bool:
-        # ropes and a ground: the tensions jump at every event, which the quadratic between step ends cannot follow
-        return not self.scene.unilateral
+        return self.integrator.peaks.located  # not the event-driven methods of ropes and a ground
 
     def tension_peaks(self):
         peaks = self.integrator.peaks
-        if not self.locates_peaks or peaks.peak is None:
+        if not peaks.located or peaks.peak is None:
             return None
         return peaks.peak.copy(), peaks.time.copy()
 
