@@ -342,7 +342,7 @@ class EventHandling:
             touching |= uni.gaps(X) < 0.0
         stuck_before = self.stuck
         X, _ = uni.mode(touching, X, U).project_positions(X, tol=1e-14)
-        U_after, impulses, took = uni.impact(X, U, touching)
+        U_after, impulses, took, tangential = uni.coulomb_impact(X, U, touching)
         Xd, Ud, acc = self._at(t, X, U_after)
         # the touching constraints that do not separate, or separate slower than the rest speed (an inelastic
         # collapse: neighbouring ropes jerking each other slack in turn, the speeds shrinking by a factor per turn,
@@ -364,12 +364,9 @@ class EventHandling:
         if (kind == "force" and friction_contact is None and active[trigger]
                 and not (active != self.mode).any()):
             active[trigger] = False  # its force is at zero to round-off and falling: it leaves
-        stuck, tangential = stuck_before, np.zeros(uni.contact_masses.size)
-        if uni.friction > 0:
-            # Coulomb's law at the impact, then which contacts the ground holds
-            U_after, stuck, tangential = uni.friction_impulse(X, U_after, impulses, active, stuck_before & may_stick)
-            Xd, Ud, acc = self._at(t, X, U_after)
-            stuck = uni.choose_stuck(Xd, Ud, active, stuck | may_stick, F_input, acc)
+        stuck = stuck_before
+        if uni.friction > 0:  # which contacts the ground holds after the impact (coulomb_impact stopped some)
+            stuck = uni.choose_stuck(Xd, Ud, active, may_stick, F_input, acc)
         md = uni.mode(active, X, U_after, stuck)
         U_before_grip = U_after
         U_after = md.project_velocities(X, U_after)
@@ -463,23 +460,34 @@ class AdaptiveEvents(EventHandling):
         super().advance(state, t_target, F_input, max_steps)
 
     def _event_in_step(self, X, U, t, k0, X_new, U_new, t_new, acc_new, F_input):
+        stages = self.stage_tensions  # the accepted attempt's (a confirmation step below takes others)
+
         def step(h):
             return self.step(X, U, h, F_input, t, t + h)
         found = self._first_event(X, U, t, X_new, U_new, t_new, F_input, step)
         if found is None:
+            inside = self._force_dip_at_stages(X, U, t, t_new - t, F_input, stages, step)
+            if inside is not None:  # a force that fell through zero and rose again within the step
+                return self._take_event(step, X, U, t, inside, F_input)
             self._events_this_step = 0
             shorter = self._young_slip_step(X, U, t, k0, X_new, U_new, t_new, F_input, step)
             if shorter is not None:
                 X_new, U_new, t_new = shorter
             self._slip_reference(t_new, X_new, U_new, F_input)  # the next step's
             return shorter
+        return self._take_event(step, X, U, t, (found, t_new, X_new, U_new), F_input)
+
+    def _take_event(self, step, X, U, t, where, F_input):
+        """The step from (X, U) at t ended at the event ``where`` = (found, t1, X1, U1): ``found`` (theta, kind, u)
+        as _first_event gives it within the step to (X1, U1) at t1; its impulse applied. Returns (X, U, t)."""
+        found, t1, X1, U1 = where
         self._events_this_step += 1
         if self._events_this_step > MAX_EVENTS_PER_STEP:
             raise self._zeno(t)
         _, kind, u = found
-        h_max = t_new - t
-        Xe, Ue, h_e = self._locate(step, X, U, t, h_max, X_new, U_new, F_input, found)
-        t_e = t_new if h_e >= h_max else t + h_e
+        h_max = t1 - t
+        Xe, Ue, h_e = self._locate(step, X, U, t, h_max, X1, U1, F_input, found)
+        t_e = t1 if h_e >= h_max else t + h_e
         Xe, Ue = self._apply_event(Xe, Ue, t_e, F_input, kind, u)
         return Xe, Ue, t_e
 
@@ -510,6 +518,55 @@ class AdaptiveEvents(EventHandling):
         h_ok = h * max(SAFETY * error ** (-1.0 / 3.0), MIN_FACTOR)
         X_ok, U_ok = step(h_ok)
         return X_ok, U_ok, t + h_ok
+
+    def _force_dip_at_stages(self, X0, U0, t0, h, F_input, stages, step):
+        """A force event inside a step whose end _first_event found clear: an active constraint's force (a taut
+        rope's tension, the ground's normal force) that falls through zero and rises again within the step (a rope
+        barely slack at the top of a loop). The forces at the step's inner stages (nodes c_i in (0, 1): the tensions
+        the method computed there, at no cost) are screened: at each node below its tolerance, and at the vertex of
+        the parabola through every three consecutive nodes whose middle one is lowest (a smooth minimum between
+        nodes, found as the tension peaks are); a candidate is confirmed on the method's own step to it. Returns
+        (found, t1, X1, U1) for _take_event (the event lies in the step to the candidate), or None."""
+        if not self.mode.any():
+            return None
+        samples = sorted((c, T) for c, T in stages if 0.0 < c < 1.0 and T is not None and T.size)
+        if len(samples) < 1:
+            return None
+        nodes = np.array([c for c, _ in samples])
+        forces = np.array([self.dyn.unilateral_forces(T) for _, T in samples])  # (n_nodes, n_unilateral)
+        scale = max(float(np.abs(T).max()) for _, T in samples)
+        tol = FORCE_TOL * scale
+        candidates = []  # (theta, constraint)
+        for u in np.flatnonzero(self.mode):
+            f = forces[:, u]
+            low = np.flatnonzero(f < -tol)
+            if low.size:
+                candidates.append((float(nodes[low[0]]), int(u)))
+                continue
+            for j in range(1, nodes.size - 1):
+                if f[j] <= f[j - 1] and f[j] <= f[j + 1] and nodes[j - 1] < nodes[j] < nodes[j + 1]:
+                    theta, value = _parabola_vertex(nodes[j - 1:j + 2], f[j - 1:j + 2])
+                    if value < -tol:
+                        candidates.append((theta, int(u)))
+                        break
+        for theta, u in sorted(candidates):
+            Xc, Uc = step(theta * h)
+            values, tolerances, watched = self._forces_at(t0 + theta * h, Xc, Uc, F_input)
+            if watched[u] and values[u] < -tolerances[u]:
+                return (0.5, "force", u), t0 + theta * h, Xc, Uc
+        return None
+
+
+def _parabola_vertex(x, y) -> tuple[float, float]:
+    """(x, y) of the vertex of the parabola through three points with x[0] < x[1] < x[2] and y[1] the lowest,
+    clamped to [x[0], x[2]]."""
+    d01, d12 = (y[1] - y[0]) / (x[1] - x[0]), (y[2] - y[1]) / (x[2] - x[1])
+    a = (d12 - d01) / (x[2] - x[0])
+    if not a > 0.0:
+        return float(x[1]), float(y[1])
+    b = d01 - a * (x[0] + x[1])
+    xv = min(max(-b / (2.0 * a), float(x[0])), float(x[2]))
+    return xv, float(y[1] + (xv - x[1]) * (d01 + a * (xv - x[0])))
 
 
 @functools.lru_cache(maxsize=None)

@@ -1,0 +1,56 @@
+"""A rope's tension that falls through zero and rises again within one adaptive step: a bob whirled in a vertical
+circle with slightly too little speed to keep its rope taut over the top. The tension m (v^2 / R - g cos phi)
+(phi from the top) is negative only over a short arc around the top, a few ms where the adaptive step is tens of
+ms: the step's ends both have the rope pulling. The event integrators screen the forces at the method's inner
+stages and find the slack there; the reference is the closed form: the slack angle where the tension vanishes,
+its time by quadrature of the pendulum's energy, then the ballistic flight to |X| = R."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+import linknet_core as ln
+from tests.ropes.rope_references import G, ballistic, bob_scene, first_exit
+
+R = 1.0
+
+
+def loop_reference(shortfall):
+    """(slack time, taut time, radial speed at the jerk) of a bob started at the bottom with the speed that would
+    bring it over the top with v^2 = g R (1 - shortfall)."""
+    vb2 = G * R * (1.0 - shortfall) + 4.0 * G * R
+    cos_top = (vb2 - 2.0 * G * R) / (3.0 * G * R)  # T = 0: v^2 / R = g cos(phi), v^2 = vb2 - 2 g R (1 + cos phi)
+    theta = np.pi - np.arccos(cos_top)  # from the bottom
+    t_slack = quad(lambda th: R / np.sqrt(vb2 - 2.0 * G * R * (1.0 - np.cos(th))), 0.0, theta,
+                   epsabs=0.0, epsrel=1e-13, limit=200)[0]
+    v = np.sqrt(vb2 - 2.0 * G * R * (1.0 - np.cos(theta)))
+    X = R * np.array([np.sin(theta), 0.0, -np.cos(theta)])
+    V = v * np.array([np.cos(theta), 0.0, np.sin(theta)])
+    s = first_exit(X, V, R, 0.2)
+    Xt, Vt = ballistic(X, V, s)
+    return t_slack, t_slack + s, float(Xt @ Vt) / R, np.sqrt(vb2)
+
+
+@pytest.mark.parametrize("method, time_tol", [("dop853", 2e-8), ("dopri5", 1e-7)])
+@pytest.mark.parametrize("shortfall", [1e-4, 1e-5])
+def test_slack_over_the_top_inside_a_step(method, time_tol, shortfall):
+    t_slack, t_taut, radial, v_bottom = loop_reference(shortfall)
+    # the dip in tension lasts (t_taut - t_slack): a few ms, well inside one step at this tolerance
+    assert t_taut - t_slack < 0.011
+    run = ln.simulate(bob_scene([0, 0, -R], [v_bottom, 0, 0], R), 0.8, method=method, rtol=1e-10, n_out=5,
+                      backend="numpy")
+    events = [e for e in run.events if e.t > 1e-3]
+    assert [e.kind for e in events] == ["slack", "taut"]
+    assert events[0].t == pytest.approx(t_slack, abs=time_tol)
+    assert events[1].t == pytest.approx(t_taut, abs=5 * time_tol)
+    # the jerk takes the radial velocity of the flight's end: impulse m |v_r| (mass 1)
+    assert events[1].impulse == pytest.approx(radial, rel=1e-3)
+    assert run.stats["steps"] < 200  # the adaptive steps stayed long: the dip was found inside one
+
+
+def test_a_loop_with_speed_to_spare_keeps_its_rope_taut():
+    v_bottom = np.sqrt(G * R * (1.0 + 1e-3) + 4.0 * G * R)  # over the top with v^2 = 1.001 g R: T > 0 throughout
+    run = ln.simulate(bob_scene([0, 0, -R], [v_bottom, 0, 0], R), 0.8, rtol=1e-10, n_out=5, backend="numpy")
+    assert [e.kind for e in run.events if e.t > 1e-3] == []
+    assert np.all(run.T[:, 0] > 0)
