@@ -11,7 +11,9 @@ Each step is checked after it is taken: the gaps of the slack constraints along 
 cubic Hermite of X from X and U at both ends: exact for a ballistic flight, O(h^4) otherwise), everywhere in the
 step however briefly they dip (their sign is a polynomial in the step's fraction, bounded by its Bernstein
 coefficients and looked at exactly where the bound allows a dip), each dip confirmed on the method's own step to its
-lowest point; and the forces of the active ones at its end. The first event is located there by a bracketing root
+lowest point; and the forces of the active ones at its end and, in an adaptive step, at its inner stages, where a
+force that falls through zero and rises again within the step shows (AdaptiveEvents._force_dip_at_stages; a fixed
+step looks at its end only). The first event is located there by a bracketing root
 find (Illinois' regula falsi) and the step is taken again from its start to the event, by the method's own step; a
 gap event's time is then made exact by Newton's method on that step's length (the gap and its rate at its end), so
 that the event lies on the method's own trajectory, not on the interpolant. At the event the impulse is applied and
