@@ -617,7 +617,6 @@ class UnilateralDynamics(Dynamics):
         is isotropic and k_jj = 0, and kept as it is where it satisfies the law to round-off). With several contacts
         starting at once the roots are taken in turn (Gauss-Seidel) until the directions settle. Where the law has
         no root (the ground could hold the mass) the frictionless direction is kept."""
-        mu = self.friction
         tangents = self.tangents
         starting = np.asarray(starting, bool)
         masses = self.contact_masses[md.sliding[starting]]
@@ -633,16 +632,28 @@ class UnilateralDynamics(Dynamics):
             acc = md._unpad(md.inner.accelerations(Xa, Ua, md._pad_zero(F + friction), md._pad_zero(anchor_acc))[0])
             return acc[masses] @ tangents.T, T[rows]
 
-        a0, N0 = response(np.zeros_like(F0))
+        return self._coulomb_directions(response, masses)
+
+    def _coulomb_directions(self, response, masses) -> np.ndarray:
+        """(m, 3): the slip directions d_j of the contacts of ``masses`` under Coulomb's law at one level (the
+        acceleration level from rest, or an impact): ``response(load)`` gives, for a load (K, 3) on the masses (a
+        force, or an impulse), the tangential quantity a_j the law acts on (their accelerations, or their velocities
+        after the impact), on the plane's tangents (m, 2), and their normal forces or impulses N_j (m,). Both are
+        affine in the load (one mode, one basis), measured by 1 + 2 m responses: a_j = a0_j + sum_k G_jk f_k and
+        N_j = N0_j + sum_k k_jk . f_k for friction loads f_k at the masses; each d_j then solves the scalar law of
+        _slip_direction, taken in turn (Gauss-Seidel) until the directions settle."""
+        mu = self.friction
+        tangents = self.tangents
+        a0, N0 = response(np.zeros((self.scene.K, 3)))
         m = masses.size
-        # the loads' responses, measured with loads of the size of the friction forces (a unit load on a heavy scene
-        # would be lost in the round-off of a0)
+        # the loads' responses, measured with loads of the size of the friction (a unit load on a heavy scene would
+        # be lost in the round-off of a0)
         probe = mu * max(float(np.abs(N0).max()), np.finfo(float).tiny)
         G = np.zeros((m, 2, m, 2))
         k = np.zeros((m, m, 2))
         for j in range(m):
             for i in range(2):
-                load = np.zeros_like(F0)
+                load = np.zeros((self.scene.K, 3))
                 load[masses[j]] = probe * tangents[i]
                 a, N = response(load)
                 G[:, :, j, i] = (a - a0) / probe
@@ -746,37 +757,81 @@ class UnilateralDynamics(Dynamics):
         speed = np.linalg.norm(self.tangential_velocities(U), axis=1)
         return speed <= TOUCH_TOL * self.velocity_scale(U)
 
-    def friction_impulse(self, X, U, normal_impulses, active, stuck):
-        """Coulomb's law at an impact, one level down from the forces: each contact that took a normal impulse
-        P_n is given the tangential impulse P_t that stops its slip (the velocities projected onto the mode with it
-        stuck, as a stuck contact's grips hold it) where |P_t| <= mu P_n; else mu P_n against the slip (along that
-        P_t), and the velocities then projected onto the mode without its grip. Returns (U, the contacts that stick,
-        |P_t| (n_contacts,)). The normal impulse is the frictionless impact's (Newton's restitution): exact for a
-        mass alone on the ground; for masses coupled by links the tangential impulse does not feed back into the
-        normal one."""
+    def coulomb_impact(self, X, U, touching):
+        """The impact at a state where the unilateral constraints ``touching`` are at contact, with Coulomb's
+        friction on the ground: Moreau's impact law with Coulomb friction as one problem in the normal and the
+        tangential impulses (Pfeiffer and Glocker, Multibody Dynamics with Unilateral Contacts, 1996, sec. 7.3;
+        Glocker, Set-Valued Force Laws, 2001, ch. 8): with the velocity jump M dU = C^T Lambda + sum_c P_t,c at the
+        contacts' masses,
+
+            rods:               (C U+)_i = 0
+            ropes, contacts:    Lambda_i >= 0,  xi_i = (C U+)_i + e_i min((C U-)_i, 0) >= 0,  Lambda_i xi_i = 0
+            friction:           |P_t,c| <= mu P_n,c;  P_t,c = -mu P_n,c v_t,c+ / |v_t,c+| where v_t,c+ != 0
+
+        (Newton's restitution on the normal, none along the plane). A stuck contact (v_t,c+ = 0) is a pair of grip
+        rows, equalities of the impact's LCP whose multipliers are P_t,c; a sliding one's friction is -mu P_n,c d_c
+        with d_c its slip direction after the impact: Coulomb's law one level down, solved as at the first instant of
+        a slip (_coulomb_directions, with the velocities after the impact in place of the accelerations; exact for a
+        planar motion). Every contact that took an impulse or rests starts stuck; the one furthest outside its cone
+        slides, in turn, until every stuck one is inside it. With e = 0 the impact dissipates: P_n v_n+ = 0, P_t .
+        v_t+ = -mu P_n |v_t+| <= 0 and the kinetic energy changes by P . v+ - P . W P / 2 <= 0 (Newton's restitution
+        with friction on coupled masses can add energy where a slip reverses; Glocker 2001, sec. 8.6). Where no
+        contact takes a normal impulse the frictionless impact is the solution. Returns (U after, normal impulses
+        (n_unilateral,) N s, the constraints that took one, |P_t| (n_contacts,) N s)."""
+        U_free, impulses, took = self.impact(X, U, touching)
         n_ropes = self.rope_links.size
-        hit = (np.asarray(normal_impulses)[n_ropes:] > 0) & np.asarray(active, bool)[n_ropes:]
-        P_abs = np.zeros(self.contact_masses.size)
-        if self.friction == 0 or not hit.any():
-            return U, np.asarray(stuck, bool) & ~hit, P_abs
-        trial = np.asarray(stuck, bool) | hit
-        md = self.mode(active, X, U, trial)
-        Xa, Ua = md.pad(X), md.pad_velocity(X, U)
-        rates = md.inner.constraint_rows(Xa, Ua)
-        multipliers = np.linalg.lstsq(md.inner.tension_matrix(Xa).toarray(), rates, rcond=None)[0]
-        P_t = np.zeros((self.contact_masses.size, 3))
-        P_t[md.stuck] = -md.grip_forces(multipliers)  # the impulse -C^T mu of the projection, on the grips' rows
-        P_abs = np.linalg.norm(P_t, axis=1)
-        P_n = np.asarray(normal_impulses)[n_ropes:]
-        over = hit & (P_abs > self.friction * P_n)
-        if not over.any():
-            return md.project_velocities(X, U), trial, np.where(hit, P_abs, 0.0)
-        U = np.array(U, float)
-        capped = self.friction * P_n[over] / P_abs[over]
-        U[self.contact_masses[over]] += (capped[:, None] * P_t[over]) * self._inv_mass3[self.contact_masses[over]]
-        P_abs[over] = self.friction * P_n[over]
-        stuck = trial & ~over
-        return self.mode(active, X, U, stuck).project_velocities(X, U), stuck, np.where(hit, P_abs, 0.0)
+        if self.friction == 0 or not took[n_ropes:].any():
+            return U_free, impulses, took, np.zeros(self.contact_masses.size)
+        touching = np.asarray(touching, bool)
+        stuck = touching[n_ropes:] & (took[n_ropes:] | self.resting(U))
+        while True:
+            md = self.mode(touching, X, U, stuck)
+            lam, friction = self._coulomb_impulses(md, X, U)
+            P_n = md.unilateral_forces(lam)[n_ropes:]
+            P_t = np.zeros((self.contact_masses.size, 3))
+            P_t[md.stuck] = md.grip_forces(lam)
+            margins = np.where(md.stuck, self.friction * P_n - np.linalg.norm(P_t, axis=1), np.inf)
+            worst = int(np.argmin(margins))
+            if margins[worst] >= -FORCE_TOL * float(np.abs(lam).max()):
+                break
+            stuck[worst] = False
+        U_after = U + md.link_impulse_velocities(X, lam) + self._inv_mass3 * friction
+        P_t[md.sliding] = friction[self.contact_masses[md.sliding]]
+        impulses = md.unilateral_forces(lam)
+        return U_after, impulses, impulses > 0, np.linalg.norm(P_t, axis=1)
+
+    def _coulomb_impulses(self, md: ModeDynamics, X, U):
+        """(Lambda in md's row order, the sliding contacts' friction impulses (K, 3)) of the impact with md's stuck
+        contacts held (their grip rows) and the others sliding (coulomb_impact). A friction impulse f on the
+        masses shifts the rows' rates by C M^-1 f: the slip directions d_c are found with the sliding contacts'
+        friction as loads (the velocities after the impact and the normal impulses are affine in them), then the
+        impact is solved with -mu P_n,c d_c carried into the columns of W, (W - D) Lambda + q as the acceleration
+        level's W - D carries the sliding friction (ModeDynamics.normal_system)."""
+        W, rates, q, _, rows_uni = self._impact_problem(md, X, U)
+        start = rows_uni & (rates < 0)
+        Xa = md.pad(X)
+        masses = self.contact_masses[md.sliding]
+
+        def rate_shift(load):
+            return md.inner.constraint_rows(Xa, md.pad_velocity(X, self._inv_mass3 * load))
+
+        def response(load):
+            lam, _ = solve_mixed_lcp(W, -(q + rate_shift(load)), rows_uni, start)
+            U_plus = U + md.link_impulse_velocities(X, lam) + self._inv_mass3 * load
+            return self.tangential_velocities(U_plus)[md.sliding] @ self.tangents.T, lam[md.sliding_rows]
+
+        friction = np.zeros((self.scene.K, 3))
+        if not masses.size:
+            return solve_mixed_lcp(W, -q, rows_uni, start)[0], friction
+        directions = self._coulomb_directions(response, masses)
+        coupled = np.array(W)
+        for row, k, d in zip(md.sliding_rows, masses, directions):
+            load = np.zeros((self.scene.K, 3))
+            load[k] = -self.friction * d
+            coupled[:, row] += rate_shift(load)
+        lam, _ = solve_mixed_lcp(coupled, -q, rows_uni, start)
+        np.add.at(friction, masses, -self.friction * lam[md.sliding_rows][:, None] * directions)
+        return lam, friction
 
     def select_mode(self, X, U, F_input=None, anchor_acc=None, candidates=None, start=None, release=None,
                     stuck=None):
@@ -816,16 +871,7 @@ class UnilateralDynamics(Dynamics):
         projection; only where different restitutions meet at one instant are they U- + M^-1 C^T Lambda of the
         LCP's impulses. ``inelastic``: e = 0 for all (the initial state)."""
         md = self.mode(touching, X, U)
-        Xa, Ua = md.pad(X), md.pad_velocity(X, U)
-        inner = md.inner
-        W = inner.tension_matrix(Xa).toarray()
-        rates = inner.constraint_rows(Xa, Ua)  # C U: each row's dg/dt (scaled by |d|/R off the manifold)
-        rows_uni = md.constraint_of_row >= 0
-        e = np.zeros(rates.size)
-        if not inelastic:
-            e[rows_uni] = self.restitution[md.constraint_of_row[rows_uni]]
-        e[e * np.maximum(-rates, 0.0) < self.rest_speed(U)] = 0.0
-        q = rates + e * np.minimum(rates, 0.0)  # xi = W Lambda + q
+        W, rates, q, e, rows_uni = self._impact_problem(md, X, U, inelastic)
         lam, basis = solve_mixed_lcp(W, -q, rows_uni, rows_uni & (rates < 0))
         impulses = md.unilateral_forces(lam)
         took = impulses > 0
@@ -842,6 +888,22 @@ class UnilateralDynamics(Dynamics):
         else:
             U_after = U + md.link_impulse_velocities(X, lam)
         return U_after, impulses, took
+
+    def _impact_problem(self, md: ModeDynamics, X, U, inelastic: bool = False):
+        """(W, rates, q, e, unilateral rows) of Moreau's impact law on md's rows: W = C M^-1 C^T, the rows' rates C U
+        (each row's dg/dt, scaled by |d|/R off the manifold), Newton's restitution e of each unilateral row (0 on
+        the others, and where the rebound would be slower than rest_speed), and q = C U + e min(C U, 0), so that
+        xi = W Lambda + q >= 0 on the unilateral rows and = 0 on the others (a stuck contact's grip rows among
+        them: its tangential velocity after the impact is zero)."""
+        Xa, Ua = md.pad(X), md.pad_velocity(X, U)
+        W = md.inner.tension_matrix(Xa).toarray()
+        rates = md.inner.constraint_rows(Xa, Ua)
+        rows_uni = md.constraint_of_row >= 0
+        e = np.zeros(rates.size)
+        if not inelastic:
+            e[rows_uni] = self.restitution[md.constraint_of_row[rows_uni]]
+        e[e * np.maximum(-rates, 0.0) < self.rest_speed(U)] = 0.0
+        return W, rates, rates + e * np.minimum(rates, 0.0), e, rows_uni
 
     def anchor_impulses(self, X, U_before, U_after, rows) -> np.ndarray:
         """(len(rows), 3): what the links gave the driven anchors ``rows`` in an impact that took the free masses from
