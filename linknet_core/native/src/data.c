@@ -153,7 +153,8 @@ int ln_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U)
         U = d->Us;
     }
     d->n_rhs++;
-    const int status = ln_accelerations_3d(m, d, X, U, d->F_base, d->acc, d->T, 1);
+    const int status = m->n_ropes ? ln_rope_evaluate(m, d, X, U) : ln_accelerations_3d(m, d, X, U, d->F_base, d->acc,
+                                                                                         d->T, 1);
     /* the link forces on the anchors, gathered in the rows of a (K,3) scratch (only anchors' rows used) */
     double *on_mass = d->Uh;
     for (ln_int i = 0; i < m->n_fixed; i++)
@@ -238,9 +239,18 @@ static void leave_plane(const ln_model *m, ln_data *d)
     }
 }
 
-static int run_interval(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps,
+static int run_interval(const ln_model *m_scene, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps,
                         ln_int *steps)
 {
+    /* ropes: the stages run on the mode's model, whose 1/R_l is 0 on the slack ropes (stages/ropes.c) */
+    ln_model mode;
+    const ln_model *m = m_scene;
+    if (m_scene->n_ropes) {
+        if (meth->kind != LN_RUNGE_KUTTA) return LN_ROPES_NEED_RUNGE_KUTTA;
+        mode = *m_scene;
+        mode.inv_R = d->mode_inv_R;
+        m = &mode;
+    }
     const double span = t_target - d->t;
     int planar = d->planar && enter_plane(m, d);
     d->planar = planar;  /* once the state or an input has left the plane, 3-D from then on */
@@ -280,6 +290,14 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
     const int planar = d->planar;
     const ln_int rejected = d->rejected, n_rhs = d->n_rhs, split_steps = d->split_steps, finest_split = d->finest_split;
     const ln_int jumps = d->jumps;
+    /* ropes: the mode, the log and the impulses are part of what is put back */
+    const int mode_chosen = d->mode_chosen;
+    const ln_int n_events = d->n_events, events_lost = d->events_lost, events_this_step = d->events_this_step;
+    if (m->n_ropes) {
+        memcpy(d->active_start, d->link_active, (size_t)m->L);
+        memcpy(d->impulse_start, d->rope_impulse, (size_t)m->L * sizeof(double));
+        memset(d->rope_impulse, 0, (size_t)m->L * sizeof(double));
+    }
     memcpy(d->X_start, d->X, (size_t)n3 * sizeof(double));
     memcpy(d->U_start, d->U, (size_t)n3 * sizeof(double));
     ln_int steps = 0;
@@ -302,6 +320,14 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
         d->split_steps = split_steps;
         d->finest_split = finest_split;
         d->jumps = jumps;
+        if (m->n_ropes) {
+            memcpy(d->link_active, d->active_start, (size_t)m->L);
+            memcpy(d->rope_impulse, d->impulse_start, (size_t)m->L * sizeof(double));
+            d->mode_chosen = mode_chosen;
+            d->n_events = n_events;
+            d->events_lost = events_lost;
+            d->events_this_step = events_this_step;
+        }
         if (m->rigid) ln_rigid_restore(m, d);
         return d->status = status;
     }

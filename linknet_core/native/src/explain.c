@@ -113,7 +113,8 @@ const char *ln_status_name(int status)
 {
     static const char *const names[] = {"ok", "projection failed", "singular", "non-finite", "step underflow",
                                         "too many steps", "left the plane", "implicit kick failed", "bad argument",
-                                        "out of memory", "anchor motion failed"};
+                                        "out of memory", "anchor motion failed", "rope event chatter",
+                                        "no rope mode", "ropes need a Runge-Kutta method"};
     return status >= 0 && status < (int)(sizeof names / sizeof names[0]) ? names[status] : "unknown status";
 }
 
@@ -172,8 +173,21 @@ void ln_explain(const ln_model *m, const ln_method *meth, const ln_data *d, int 
     case LN_BAD_ARGUMENT:
         snprintf(out, n, "cannot advance from t = %s to t = %s: the target must be later and finite", t0, t1);
         break;
+    case LN_EVENT_CHATTER:
+        snprintf(out, n, "more than %lld rope events in consecutive steps %s (a chatter of jerks): reduce the "
+                 "tolerance, or the ropes' restitution", (long long)m->max_events_per_step, span);
+        break;
+    case LN_NO_MODE:
+        snprintf(out, n, "the complementarity problem of the ropes at their length has no solution %s (the "
+                 "constraints contradict each other, as a rope shorter than a rod beside it would), or it cycled and "
+                 "has more than %lld touching ropes to enumerate", span, (long long)m->enumeration_limit);
+        break;
+    case LN_ROPES_NEED_RUNGE_KUTTA:
+        snprintf(out, n, "the native core takes ropes on the Runge-Kutta methods only (dopri5, dop853); RATTLE and "
+                 "its compositions run ropes on the numpy reference (backend=\"numpy\")");
+        break;
     default:
-        if (status > 0 && status <= LN_DRIVE_FAILED)
+        if (status > 0 && status <= LN_ROPES_NEED_RUNGE_KUTTA)
             snprintf(out, n, "the native core stopped %s: %s", span, ln_status_name(status));
         else
             snprintf(out, n, "the native core stopped %s: status %d", span, status);

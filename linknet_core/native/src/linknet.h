@@ -64,8 +64,15 @@ enum ln_status {
     LN_IMPLICIT_KICK_FAILED = 7,/* RATTLE's implicit velocity half step (drag, dampers) did not converge */
     LN_BAD_ARGUMENT = 8,        /* a target time not after t, a negative count, ... */
     LN_NO_MEMORY = 9,
-    LN_DRIVE_FAILED = 10        /* the driven anchors' motion callback failed (or returned non-finite values) */
+    LN_DRIVE_FAILED = 10,       /* the driven anchors' motion callback failed (or returned non-finite values) */
+    LN_EVENT_CHATTER = 11,      /* ropes: more events than max_events_per_step in consecutive steps */
+    LN_NO_MODE = 12,            /* ropes: the complementarity problem of the touching ropes has no solution, or it
+                                   cycled and is too large to enumerate */
+    LN_ROPES_NEED_RUNGE_KUTTA = 13  /* ropes: the native core takes their events on the Runge-Kutta methods only */
 };
+
+/* What an event of a rope is (ln_data's event log). Keep in step with linknet_core/clib/library.py. */
+enum ln_event_kind { LN_EVENT_TAUT = 0, LN_EVENT_SLACK = 1 };
 
 /* How A of (25) is factored, chosen once per scene from its structure. */
 enum ln_solver {
@@ -124,6 +131,15 @@ LN_API void ln_data_reset(const ln_model *m, ln_data *d);
 /* Advance d from d->t to t_target with d->F_input held (zero-order hold), all or nothing: on any status
    but LN_OK the state and internals are those before the call, and the diagnostics say why. */
 LN_API int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps);
+
+/* stages/ropes.c, for scenes with ropes: the tensions and accelerations at X, U (K,3) with d->F_input held, in the
+   mode the state is in (the acceleration complementarity problem on the ropes at their length and not separating:
+   a pure function of the state, as the numpy reference's UnilateralDynamics.resolve), slack ropes' T exactly 0.
+   ln_evaluate calls it for a model with ropes. The integrator's mode is not changed. */
+int ln_rope_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U);
+/* The log of events kept since the last drain is taken: the count is returned and the log emptied (the events are
+   d->event_t, event_kind, event_link, event_impulse [0, count) until the next advance). */
+LN_API ln_int ln_rope_events_drained(ln_data *d);
 
 /* What a sample's energy needs beyond the model (diagnostics.c): its fields are listed in ln_model_fields.h
    (LN_ENERGY_TERMS_FIELDS). */

@@ -16,11 +16,13 @@
  *                                ln_data_free with release(name), which takes NULL
  *   BORROWED(type, name)         type *name;  what the data's user plugs in and keeps: NULL in a new data and after
  *                                ln_data_reset, never freed
- * where the type of a SCALAR, KEPT or ARRAY field is one of ln_int, int, double (LN_FIELD_CODE gives its code).
+ * where the type of a SCALAR, KEPT or ARRAY field is one of ln_int, int, double, uint8_t (LN_FIELD_CODE gives its code).
  * What a new data holds beyond zeros (the first motion of the driven anchors, ...) is data.c's initial_values.
  */
 #ifndef LINKNET_DATA_FIELDS_H
 #define LINKNET_DATA_FIELDS_H
+
+#define LN_EVENT_LOG 4096  /* the events one data keeps between two drains */
 
 #define LN_DATA_FIELDS(SCALAR, KEPT, ARRAY, OWNED, BORROWED)                                                        \
     /* the state */                                                                                                 \
@@ -134,7 +136,32 @@
     OWNED(struct ln_minnorm_work, minnorm, ln_minnorm_free)                                                         \
     OWNED(struct ln_rigid_data, rigid, ln_rigid_data_free)  /* free rigid bodies (ln_model.rigid) */                \
     ARRAY(double, drive_scratch, 18 * m->n_driven)      /* P, V, A (n_driven,3 each) of the anchors at a time, then \
-                                                           the callback's 9 values per anchor */
+                                                           the callback's 9 values per anchor */ \
+    /* ropes (stages/ropes.c): the mode is part of the state (an FMU state copies it); the events of the advances  \
+       since the log was last drained (ln_rope_events_drained), and each rope's impulse summed over the last       \
+       advance. None of it is allocated beyond one entry where the model has no ropes */                           \
+    ARRAY(uint8_t, link_active, m->n_ropes ? m->L : 0)  /* (L) 1 for rods and taut ropes: the mode */              \
+    SCALAR(int, mode_chosen)                            /* 0 until the first advance chooses the mode */            \
+    SCALAR(ln_int, events_this_step)                    /* consecutive accepted steps that ended at an event */     \
+    ARRAY(double, rope_impulse, m->n_ropes ? m->L : 0)  /* (L) N s: each rope's impulse over the last advance */    \
+    SCALAR(ln_int, n_events)                            /* events in the log */                                     \
+    SCALAR(ln_int, events_lost)                         /* events beyond the log's capacity, not kept */            \
+    ARRAY(double, event_t, m->n_ropes ? LN_EVENT_LOG : 0)     /* the log: time, s */                                \
+    ARRAY(ln_int, event_kind, m->n_ropes ? LN_EVENT_LOG : 0)  /* enum ln_event_kind */                              \
+    ARRAY(ln_int, event_link, m->n_ropes ? LN_EVENT_LOG : 0)  /* the rope's link, 0-based */                        \
+    ARRAY(double, event_impulse, m->n_ropes ? LN_EVENT_LOG : 0)  /* N s (0 for slack) */                            \
+    /* ropes' scratch: the mode's 1/R_l (0 on a slack rope: its unit vector, term of (26) and residual of (11)      \
+       vanish; stages see it through the mode's copy of the model), what one advance puts back on failure, the     \
+       events' states and the complementarity problems' vectors */                                                  \
+    ARRAY(double, mode_inv_R, m->n_ropes ? m->L : 0)                                                                \
+    ARRAY(uint8_t, active_start, m->n_ropes ? m->L : 0)                                                             \
+    ARRAY(double, impulse_start, m->n_ropes ? m->L : 0)                                                             \
+    ARRAY(uint8_t, mask, m->n_ropes ? m->L : 0)                                                                     \
+    ARRAY(uint8_t, rope_flags, m->n_ropes ? 11 * m->n_ropes : 0)  /* (11, n_ropes) sets of ropes */                   \
+    ARRAY(double, rope_values, m->n_ropes ? 10 * m->n_ropes : 0)  /* (10, n_ropes) per-rope values */                 \
+    ARRAY(double, event_states, m->n_ropes ? 16 * 3 * m->K : 0)  /* (16, K, 3) states */                           \
+    ARRAY(double, link_values, m->n_ropes ? 6 * m->L : 0)        /* (6, L) per-link values */                       \
+    ARRAY(double, E_full, m->n_ropes ? 3 * m->L : 0)             /* (L,3) every link's unit vector, slack or not */
 
 /* The declarations of the fields, for the struct's body. */
 #define LN_DECLARE_DATA_SCALAR(type, name) type name;

@@ -105,7 +105,26 @@
     SCALAR(double, floor_cap)                                                                                       \
     /* a position projection's Gauss-Newton that would fail is retried once with its minimum-norm solves cutting   \
        at retry_rank_tol instead of rank_tol (linknet_core.structure.RETRY_SINGULAR_RCOND); 0: no retry */          \
-    SCALAR(double, retry_rank_tol)
+    SCALAR(double, retry_rank_tol)                                                                                  \
+    /* ropes (stages/ropes.c): links that only pull, each slack or taut (the mode, ln_data.link_active); their     \
+       events' tolerances, filled from the numpy reference's single source (linknet_core.dynamics.unilateral:      \
+       TOUCH_TOL, CROSS_TOL, FORCE_TOL, REST_HEIGHT; .complementarity: LCP_TOL, PIVOTS_PER_ROW, ENUMERATION_LIMIT;  \
+       linknet_core.integrators.events: MAX_EVENTS_PER_STEP, GAP_NEWTON_ITERATIONS). A rope's length scale is its   \
+       R_l. No ropes: n_ropes = 0 and nothing of this is read */                                                   \
+    SCALAR(ln_int, n_ropes)                                                                                         \
+    ARRAY(ln_int, rope_link, s->n_ropes)                /* the link of each rope, in link order */                  \
+    ARRAY(double, rope_restitution, s->n_ropes)         /* Newton's restitution of each rope's jerk */              \
+    SCALAR(double, touch_tol)                                                                                       \
+    SCALAR(double, cross_tol)                                                                                       \
+    SCALAR(double, force_tol)                                                                                       \
+    SCALAR(double, rest_height)                                                                                     \
+    SCALAR(double, lcp_tol)                                                                                         \
+    SCALAR(ln_int, pivots_per_row)                                                                                  \
+    SCALAR(ln_int, enumeration_limit)                                                                               \
+    SCALAR(ln_int, max_events_per_step)                                                                             \
+    SCALAR(ln_int, gap_newton_iterations)                                                                           \
+    SCALAR(double, scene_size)                          /* the scene's length scale, m (UnilateralDynamics.size) */ \
+    SCALAR(double, gravity_norm)                        /* |g|, m/s^2: the velocity and rest speed scales */
 
 /* ln_method: what an integrator is, the method as data. */
 #define LN_METHOD_FIELDS(SCALAR, ARRAY, FIXED, OPAQUE)                                                              \

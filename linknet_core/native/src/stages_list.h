@@ -7,3 +7,4 @@
 #include "stages/projections.c"
 #include "stages/rattle.c"
 #include "stages/runge_kutta.c"
+#include "stages/ropes.c"

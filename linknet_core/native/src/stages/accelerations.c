@@ -58,7 +58,8 @@ LN_ALWAYS_INLINE int chain_tensions(const ln_model *m, ln_data *d, const double 
         const ln_int l = order[i];
         double rhs;
         const double sq = link_terms(m, X, U, F, l, E, &rhs);
-        if (refactor && !chain_pivot(m, d, i, m->chain_diag_weight[i] * sq, i > 0 ? chain_off(m, E, i) : 0.0))
+        if (refactor && !chain_pivot(m, d, i, mode_diagonal(m, l, m->chain_diag_weight[i] * sq),
+                                     i > 0 ? chain_off(m, E, i) : 0.0))
             singular = 1;
         if (i > 0) rhs -= sub[i] * w[i - 1];
         w[i] = rhs;

@@ -439,7 +439,8 @@ LN_ALWAYS_INLINE int project_velocities_chain(const ln_model *m, ln_data *d, con
             sq += u * u;
             rhs += u * (U[a * DIM + e] - U[b * DIM + e]);
         }
-        if (!chain_pivot(m, d, i, m->chain_diag_weight[i] * sq, i > 0 ? chain_off(m, E, i) : 0.0)) singular = 1;
+        if (!chain_pivot(m, d, i, mode_diagonal(m, l, m->chain_diag_weight[i] * sq), i > 0 ? chain_off(m, E, i) : 0.0))
+            singular = 1;
         if (i > 0) rhs -= d->chain_sub[i] * w[i - 1];
         w[i] = rhs;
     }

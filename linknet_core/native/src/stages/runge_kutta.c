@@ -153,6 +153,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
     double t = *t_inout;
     int status;
     *accepted = 0;
+    if (m->n_ropes && (status = FN(ln_rope_start)(m, d, X, U, F_base, t)) != LN_OK) return status;
     d->n_rhs++;
     /* driven anchors are known functions of time: each stage's rows of X, U and of the base force (their
        accelerations) are set to the motion at the stage's time, t + c_i h */
@@ -169,7 +170,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
         const double remaining = t_target - t;
         const double h = ln_controlled_step(d->h_next, t, t_target);
         if (h < 0.0) return LN_STEP_UNDERFLOW;
-        const double t_new = (h == remaining) ? t_target : t + h;
+        double t_new = (h == remaining) ? t_target : t + h;
         /* the stages 1..s-1, then (row s: the weights b) the new point Xn, Un, whose evaluation also factors
            A(Xn), which the position projection below reuses */
         for (ln_int i = 1; i <= s; i++) {
@@ -200,6 +201,9 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
         }
         if (status != LN_OK) return status;
         if ((status = project_velocities(m, d, Xn, Un, d->E1)) != LN_OK) return status;
+        /* ropes: a step that holds an event ends just past it, in the new mode (stages/ropes.c) */
+        if (m->n_ropes && (status = FN(ln_rope_step_events)(m, meth, d, X, U, F_base, t, Xn, Un, &t_new)) != LN_OK)
+            return status;
         t = t_new;
         d->h_next = ln_next_step_size(meth, h, d->h_next, err);
         for (ln_int j = 0; j < size; j++) {
@@ -210,9 +214,10 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
         ++*accepted;
         if (*accepted > max_steps) return LN_TOO_MANY_STEPS;
         if (t < t_target) {
-            /* the first stage of the next step; A(X) is factored already (velocity projection) */
+            /* the first stage of the next step; A(X) is factored already (velocity projection), unless the ropes'
+               events have factored others since */
             d->n_rhs++;
-            if ((status = accelerations(m, d, X, U, F_base, acc, d->T, 0)) != LN_OK) return status;
+            if ((status = accelerations(m, d, X, U, F_base, acc, d->T, m->n_ropes != 0)) != LN_OK) return status;
             store_stage(size, 0, U, acc, KX, KU);
         }
         /* d->T at the step's end: the next step's first stage, or after the last step its new point's (before the

@@ -19,6 +19,14 @@
 #include "../linknet.h"
 #include "../stages.h"
 
+/* A slack rope (stages/ropes.c) is out of the system: the mode's model has 1/R_l = 0 there, so its unit vector, its
+   term of (26) and its residual of (11) vanish, and its zero diagonal entry of A takes 1 (T_l = 0, and the
+   factorisation stays regular). A rod's 1/R_l is never 0: scenes without ropes take the same path as ever. */
+static inline double mode_diagonal(const ln_model *m, ln_int l, double diag)
+{
+    return m->inv_R[l] != 0.0 ? diag : 1.0;
+}
+
 static inline double dot_rows(const double *E, ln_int p, ln_int q)
 {
     double s = 0.0;
@@ -68,7 +76,7 @@ static ln_int factor_chain(const ln_model *m, ln_data *d, const double *E)
     ln_int bad = -1;
     for (ln_int i = 0; i < m->L; i++) {
         const ln_int l = m->chain_order[i];
-        const double diag = m->chain_diag_weight[i] * dot_rows(E, l, l);
+        const double diag = mode_diagonal(m, l, m->chain_diag_weight[i] * dot_rows(E, l, l));
         if (!chain_pivot(m, d, i, diag, i > 0 ? chain_off(m, E, i) : 0.0) && bad == -1) bad = i;
     }
     return bad;
@@ -106,6 +114,10 @@ int FN(ln_factor_tension_matrix)(const ln_model *m, ln_data *d, const double *E)
     case LN_SOLVER_LDL:
         for (ln_int p = 0; p < m->n_pairs; p++)
             d->pair_values[p] = m->pair_weight[p] * dot_rows(E, m->pair_first[p], m->pair_second[p]);
+        if (m->n_ropes)
+            for (ln_int p = 0; p < m->n_pairs; p++)
+                if (m->pair_first[p] == m->pair_second[p])
+                    d->pair_values[p] = mode_diagonal(m, m->pair_first[p], d->pair_values[p]);
         return ln_ldl_factor(m->ldl, d->ldl, d->pair_values, m->pivot_tol) < 0 ? LN_OK : FN(ln_factor_singular)(m, d, E);
     case LN_SOLVER_MIN_NORM:
         d->singular = 1;  /* self-stresses: every solve is minimum-norm */

@@ -1,0 +1,983 @@
+/* Ropes: links that pull and never push, |X_k2 - X_k1| <= R_l with T_l >= 0, their mode, impacts and events, for the
+ * embedded Runge-Kutta methods. The numpy reference of every rule here is linknet_core.dynamics.unilateral (the
+ * model, the impact, the mode), linknet_core.dynamics.complementarity (the LCP) and linknet_core.integrators.events
+ * (detection, location, the event); this file mirrors them for ropes (the ground stays on the numpy reference).
+ *
+ * A rope's gap is g_l = R_l - |X_k2 - X_k1| >= 0, its rate dg/dt = -(d . dU) / |d|. While taut a rope is a link of
+ * the seed in (9), (11)-(13), (25)-(26); slack, it is out of the system: the mode's model (a copy of the model whose
+ * 1/R_l is 0 on the slack ropes, d->mode_inv_R) gives it E_l = 0, no term of (26), no residual of (11) and a unit
+ * diagonal in A (stages/tension.c), so that every stage of the rod path serves the mode unchanged.
+ *
+ * Which touching ropes carry tension is the mixed LCP (Moreau; Lotstedt; Pfeiffer and Glocker, Multibody Dynamics
+ * with Unilateral Contacts, 1996; Cottle, Pang and Stone, The Linear Complementarity Problem, 1992, sec. 1.2, 4.2):
+ * with W = C M^-1 C^T (A of (25)) and b = B of (26), (W lambda - b)_i = 0 on the rods, and lambda_i >= 0,
+ * w_i = (W lambda - b)_i >= 0, lambda_i w_i = 0 on the touching ropes. Solved by principal pivoting with Murty's
+ * least-index rule (Murty 1974): each basis is the rods and the basis ropes as equalities, solved by the core's own
+ * tension solver on the basis's mask (minimum-norm (31) where singular), w of the other rows from C M^-1 C^T lambda -
+ * b; the lowest rope that breaks its sign condition is flipped; a problem that cycles has its active sets enumerated
+ * (at most 2^enumeration_limit). At an impact the same problem one level down gives the impulses: Moreau's impact
+ * law with Newton's restitution, b = -(C U + e min(C U, 0)); inelastic, the velocities are the projection onto the
+ * impact's active set in the mass metric; with a common e, U- + (1 + e)(P U- - U-).
+ *
+ * Events, after every accepted step, in the mode it was taken in: the slack ropes' gaps along the step's cubic
+ * Hermite of X, whose sign is the sextic R^2 - |d(theta)|^2, screened by its Bernstein coefficients (Farouki and
+ * Rajan, Computer Aided Geometric Design 5, 1988) and looked at exactly where they allow a dip, each dip confirmed on
+ * the method's own step to its lowest point; the taut ropes' tensions at the step's end against -force_tol of the
+ * largest |T|. The event is taken on the method's own step: a gap's time by Newton's method on the step's length, a
+ * force's by Illinois' regula falsi on it, ending just past the zero; the step ends there, the positions go onto the
+ * touching ropes, the impact is applied and the next mode chosen.
+ */
+#include <math.h>
+#include <string.h>
+
+#include "../dim.h"
+#include "../drive.h"
+#include "../linknet.h"
+#include "../ln_math.h"
+#include "../stages.h"
+
+#define ROPE_EPS 2.220446049250313e-16
+#define ROPE_TINY 2.2250738585072014e-308
+
+/* ---- DIM-independent helpers (static: one copy in each DIM's translation unit, which includes this file once) -- */
+typedef double (*rope_root_fn)(void *ctx, double x);
+
+/* (lo, hi): the bracket of a sign change of f, f(lo) >= 0 > f(hi), shrunk to xtol (relative) by the Illinois
+   variant of regula falsi, with a bisection wherever the last three iterations did not halve it; the first point
+   tried is guess where has_guess (linknet_core.dynamics.roots.bracketed_root). */
+static void rope_bracketed_root(rope_root_fn f, void *ctx, double *lo_io, double *hi_io, double f_lo, double f_hi,
+                                double xtol, int has_guess, double guess)
+{
+    double lo = *lo_io, hi = *hi_io, widths[200], m = guess;
+    int last = 0, n_widths = 0, have_m = has_guess;
+    for (int it = 0; it < 200; it++) {
+        if (hi - lo <= xtol * ln_fmax(1.0, ln_fmax(fabs(lo), fabs(hi)))) break;
+        if (!have_m) {
+            if (n_widths >= 3 && hi - lo > 0.5 * widths[n_widths - 3]) m = 0.5 * (lo + hi);
+            else m = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
+        }
+        if (!(lo < m && m < hi)) {
+            m = 0.5 * (lo + hi);
+            if (!(lo < m && m < hi)) break;
+        }
+        const double fm = f(ctx, m);
+        if (fm >= 0) {
+            lo = m;
+            f_lo = fm;
+            if (last == 1) f_hi *= 0.5;  /* the same end moved twice: halve the other's value (Illinois) */
+            last = 1;
+        } else {
+            hi = m;
+            f_hi = fm;
+            if (last == -1) f_lo *= 0.5;
+            last = -1;
+        }
+        widths[n_widths++] = hi - lo;
+        have_m = 0;
+    }
+    *lo_io = lo;
+    *hi_io = hi;
+}
+
+/* p(x), coefficients lowest degree first, by Horner's rule from the highest (as numpy's polyval). */
+static double rope_polyval(const double *p, int n, double x)
+{
+    double s = 0.0;
+    for (int i = n - 1; i >= 0; i--) s = s * x + p[i];
+    return s;
+}
+
+static double rope_poly_fn(void *ctx, double x)
+{
+    const double *p = ctx;
+    return rope_polyval(p + 1, (int)p[0], x) * p[8] + p[9];
+}
+
+/* The real roots in (0, 1) of the polynomial p of n coefficients (degree n - 1 <= 6), ascending, into roots;
+   returns their count. Recursively: the roots of p' cut [0, 1] into monotone pieces, each sign change is bracketed. */
+static int rope_roots_01(const double *p, int n, double *roots)
+{
+    while (n > 0 && p[n - 1] == 0.0) n--;
+    if (n < 2) return 0;
+    double dp[7], cuts[8];
+    for (int i = 1; i < n; i++) dp[i - 1] = (double)i * p[i];
+    int n_cuts = 0;
+    cuts[n_cuts++] = 0.0;
+    n_cuts += rope_roots_01(dp, n - 1, cuts + 1);
+    cuts[n_cuts++] = 1.0;
+    double ctx[10] = {0};
+    ctx[0] = (double)n;
+    for (int i = 0; i < n; i++) ctx[1 + i] = p[i];
+    int count = 0;
+    for (int i = 0; i + 1 < n_cuts; i++) {
+        double a = cuts[i], b = cuts[i + 1];
+        const double fa = rope_polyval(p, n, a), fb = rope_polyval(p, n, b);
+        if (fa == 0.0 && a > 0.0 && (count == 0 || roots[count - 1] != a)) roots[count++] = a;
+        if (!((fa > 0.0 && fb < 0.0) || (fa < 0.0 && fb > 0.0))) continue;
+        ctx[8] = fa > 0.0 ? 1.0 : -1.0;  /* the sign that makes f(a) >= 0 > f(b) */
+        ctx[9] = 0.0;
+        rope_bracketed_root(rope_poly_fn, ctx, &a, &b, ctx[8] * fa, ctx[8] * fb, 4e-16, 0, 0.0);
+        roots[count++] = b;
+    }
+    return count;
+}
+
+/* Whether the sextic P (7 coefficients, lowest degree first) can fall below -depth on [0, 1]: the minimum of its
+   Bernstein coefficients of degree 6, b_j = sum_{i <= j} C(j, i) / C(6, i) a_i (Farouki and Rajan 1988, eq. 2). */
+static int rope_may_fall_below(const double *P, double depth)
+{
+    static const double binom[7][7] = {{1}, {1, 1}, {1, 2, 1}, {1, 3, 3, 1}, {1, 4, 6, 4, 1}, {1, 5, 10, 10, 5, 1},
+                                       {1, 6, 15, 20, 15, 6, 1}};
+    double lowest = INFINITY;
+    for (int j = 0; j <= 6; j++) {
+        double b = 0.0;
+        for (int i = 0; i <= j; i++) b += P[i] * (binom[j][i] / binom[6][i]);
+        if (b < lowest) lowest = b;
+    }
+    return lowest < -depth;
+}
+
+/* Each excursion of the polynomial p (7 coefficients) below -depth on [0, 1], in order, however brief: its zero
+   crossing on the way down and its lowest point, into crossing, lowest (3 at most: a sextic has 3 minima);
+   returns the count (linknet_core.integrators.events.gap_dips). */
+static int rope_gap_dips(const double *p_in, double depth, double *crossing, double *lowest)
+{
+    int n = 7;
+    while (n > 0 && p_in[n - 1] == 0.0) n--;
+    if (n < 2) {
+        if (n == 1 && p_in[0] < -depth) {
+            crossing[0] = lowest[0] = 0.0;
+            return 1;
+        }
+        return 0;
+    }
+    double dp[6], cuts[8], values[8];
+    for (int i = 1; i < n; i++) dp[i - 1] = (double)i * p_in[i];
+    int n_cuts = 0;
+    cuts[n_cuts++] = 0.0;
+    n_cuts += rope_roots_01(dp, n - 1, cuts + 1);
+    cuts[n_cuts++] = 1.0;
+    for (int i = 0; i < n_cuts; i++) values[i] = rope_polyval(p_in, n, cuts[i]);
+    int count = 0, after = -1, j = 0;
+    while (j < n_cuts && count < 3) {
+        if (!(values[j] < -depth)) {
+            j++;
+            continue;
+        }
+        int k = j;
+        while (k + 1 < n_cuts && values[k + 1] < -depth) k++;
+        int low = j;
+        for (int i = j + 1; i <= k; i++)
+            if (values[i] < values[low]) low = i;
+        lowest[count] = cuts[low];
+        if (j == 0) {
+            crossing[count] = 0.0;
+        } else {
+            int i = -1;
+            for (int q = after + 1; q < j; q++)
+                if (values[q] >= 0.0) i = q;
+            const double shift = i >= 0 ? 0.0 : depth;
+            if (i < 0) i = j - 1;
+            double ctx[10] = {0};
+            ctx[0] = (double)n;
+            for (int q = 0; q < n; q++) ctx[1 + q] = p_in[q];
+            ctx[8] = 1.0;
+            ctx[9] = shift;
+            double a = cuts[i], b = cuts[i + 1];
+            rope_bracketed_root(rope_poly_fn, ctx, &a, &b, values[i] + shift, values[i + 1] + shift, 4e-16, 0, 0.0);
+            crossing[count] = b;
+        }
+        count++;
+        after = k;
+        j = k + 1;
+    }
+    return count;
+}
+
+/* ---- the ropes' geometry, unmasked ---------------------------------------------------------------------------- */
+static inline double FN(rope_gap)(const ln_model *m, const double *X, ln_int l)
+{
+    const ln_int a = m->k1[l], b = m->k2[l];
+    double dd = 0.0;
+    for (int e = 0; e < DIM; e++) {
+        const double x = X[b * DIM + e] - X[a * DIM + e];
+        dd += x * x;
+    }
+    const double R = m->R[l];
+    return (R * R - dd) / (R + ln_sqrt(dd));  /* no cancellation at g ~ 0 */
+}
+
+static inline double FN(rope_rate)(const ln_model *m, const double *X, const double *U, ln_int l)
+{
+    const ln_int a = m->k1[l], b = m->k2[l];
+    double dd = 0.0, s = 0.0;
+    for (int e = 0; e < DIM; e++) {
+        const double x = X[b * DIM + e] - X[a * DIM + e];
+        dd += x * x;
+        s += x * (U[b * DIM + e] - U[a * DIM + e]);
+    }
+    return -s / ln_sqrt(dd);
+}
+
+/* The fastest free mass, or what gravity gives over the scene's size (UnilateralDynamics.velocity_scale). */
+static double FN(rope_velocity_scale)(const ln_model *m, const double *U)
+{
+    double fastest = 0.0;
+    for (ln_int f = 0; f < m->n_free; f++) {
+        const ln_int k = m->free_idx[f];
+        double s = 0.0;
+        for (int e = 0; e < DIM; e++) s += U[k * DIM + e] * U[k * DIM + e];
+        fastest = ln_fmax(fastest, s);
+    }
+    return ln_fmax(ln_fmax(ln_sqrt(fastest), ln_sqrt(m->gravity_norm * m->scene_size)), 1e-300);
+}
+
+/* Below this rebound speed an impact is perfectly inelastic: a fall of rest_height of the scene's size under its
+   acceleration scale (UnilateralDynamics.rest_speed). */
+static double FN(rope_rest_speed)(const ln_model *m, const double *U)
+{
+    const double v = FN(rope_velocity_scale)(m, U);
+    const double acceleration = ln_fmax(m->gravity_norm, v * v / m->scene_size);
+    return ln_sqrt(2.0 * acceleration * m->rest_height * m->scene_size);
+}
+
+static double FN(rope_largest_coordinate)(const ln_model *m, const double *X)
+{
+    double s = 0.0;
+    for (ln_int i = 0; i < m->K * DIM; i++) s = ln_fmax(s, fabs(X[i]));
+    return s;
+}
+
+/* The mode's model sees the links of mask (1: in the system) through d->mode_inv_R. */
+static void FN(rope_use_mask)(const ln_model *m, ln_data *d, const uint8_t *mask)
+{
+    for (ln_int l = 0; l < m->L; l++) d->mode_inv_R[l] = mask[l] ? 1.0 / m->R[l] : 0.0;
+}
+
+/* The mask of the rods and the ropes r with flags[r]. */
+static void FN(rope_mask_of)(const ln_model *m, ln_data *d, const uint8_t *flags)
+{
+    for (ln_int l = 0; l < m->L; l++) d->mask[l] = 1;
+    for (ln_int r = 0; r < m->n_ropes; r++) d->mask[m->rope_link[r]] = flags[r];
+    FN(rope_use_mask)(m, d, d->mask);
+}
+
+/* The driven anchors' rows of X, U and of the base force at t (a no-op without driven anchors; 3-D there). */
+static int FN(rope_drive)(const ln_model *m, ln_data *d, double t, double *X, double *U)
+{
+    return m->n_driven ? ln_drive_rows(m, d, t, X, U, d->F_base, DIM) : LN_OK;
+}
+
+/* The forces F of (9) at (X, U): the base force and the force elements, into F (K, DIM). */
+static const double *FN(rope_forces)(const ln_model *m, ln_data *d, const double *X, const double *U,
+                                     const double *F_base)
+{
+    if (m->n_elements == 0) return F_base;
+    FN(ln_scene_forces)(m, X, U, F_base, d->F);
+    return d->F;
+}
+
+/* ---- the mixed LCP of the touching ropes (linknet_core.dynamics.complementarity.solve_mixed_lcp) --------------- */
+struct FN(rope_lcp) {
+    const double *E;      /* (L, DIM) every link's unit vector */
+    const double *b;      /* (L) right-hand side on the problem's rows */
+    const uint8_t *rows;  /* (n_ropes) the ropes that are rows of the problem (the rods always are) */
+    uint8_t *basis;       /* (n_ropes) in: the start; out: the ropes in the final basis */
+    const uint8_t *release;  /* (n_ropes) or NULL */
+    double *lam;          /* (L) out */
+    double *w;            /* (L) scratch: W lambda - b */
+    double *v;            /* (K, DIM) scratch */
+};
+
+/* lambda of one basis: the rods and the basis ropes as equalities, solved by the tension solver on their mask. */
+static int FN(rope_basis_solution)(const ln_model *mm, ln_data *d, const struct FN(rope_lcp) *p, const uint8_t *basis)
+{
+    FN(rope_mask_of)(mm, d, basis);
+    double *Em = d->E0, *rhs = d->phi;
+    FN(ln_unit_vectors)(mm, d->Xc, Em);
+    const int status = FN(ln_factor_tension_matrix)(mm, d, Em);
+    if (status != LN_OK) return status;
+    for (ln_int l = 0; l < mm->L; l++) rhs[l] = d->mask[l] ? p->b[l] : 0.0;
+    FN(ln_solve_tension_system)(mm, d, rhs, p->lam);
+    for (ln_int l = 0; l < mm->L; l++)
+        if (!d->mask[l]) p->lam[l] = 0.0;
+    return LN_OK;
+}
+
+/* w = C M^-1 C^T lambda - b on the ropes of the problem. */
+static void FN(rope_lcp_w)(const ln_model *mm, const struct FN(rope_lcp) *p)
+{
+    for (ln_int i = 0; i < mm->K * DIM; i++) p->v[i] = 0.0;
+    FN(ln_add_correction)(mm, p->E, p->lam, 1.0, p->v);
+    for (ln_int r = 0; r < mm->n_ropes; r++) {
+        if (!p->rows[r]) continue;
+        const ln_int l = mm->rope_link[r], a = mm->k1[l], b = mm->k2[l];
+        double s = 0.0;
+        for (int e = 0; e < DIM; e++) s += p->E[l * DIM + e] * (p->v[a * DIM + e] - p->v[b * DIM + e]);
+        p->w[l] = s - p->b[l];
+    }
+}
+
+/* Solves the problem; the state the unit vectors were taken at is in d->Xc. LN_OK or LN_NO_MODE. */
+static int FN(rope_solve_lcp)(const ln_model *mm, ln_data *d, struct FN(rope_lcp) *p)
+{
+    const ln_int L = mm->L, R = mm->n_ropes;
+    /* the problem's scale: its rows' largest |b| and largest diagonal entry of W, |E_l|^2 (1/M_k1 + 1/M_k2) */
+    double b_scale = 0.0, diag = 0.0;
+    ln_int n_rows = 0;
+    for (ln_int l = 0; l < L; l++) d->mask[l] = 1;
+    for (ln_int r = 0; r < R; r++) {
+        d->mask[mm->rope_link[r]] = p->rows[r];
+        n_rows += p->rows[r] != 0;
+        if (!p->rows[r]) p->basis[r] = 0;
+    }
+    for (ln_int l = 0; l < L; l++) {
+        if (!d->mask[l]) continue;
+        b_scale = ln_fmax(b_scale, fabs(p->b[l]));
+        double sq = 0.0;
+        for (int e = 0; e < DIM; e++) sq += p->E[l * DIM + e] * p->E[l * DIM + e];
+        diag = ln_fmax(diag, fabs(sq * (mm->inv_m[mm->k1[l]] + mm->inv_m[mm->k2[l]])));
+    }
+    b_scale = ln_fmax(b_scale, ROPE_TINY);
+    diag = ln_fmax(diag, ROPE_TINY);
+    const double tol_w = mm->lcp_tol * b_scale, tol_l = mm->lcp_tol * b_scale / diag;
+    int status;
+    for (ln_int it = 0; it < mm->pivots_per_row * n_rows + 1; it++) {
+        if ((status = FN(rope_basis_solution)(mm, d, p, p->basis)) != LN_OK) return status;
+        FN(rope_lcp_w)(mm, p);
+        ln_int bad = -1;
+        for (ln_int r = 0; r < R && bad < 0; r++) {
+            if (!p->rows[r]) continue;
+            const ln_int l = mm->rope_link[r];
+            const double low = p->release && p->release[r] ? tol_l : -tol_l;
+            if ((p->basis[r] && p->lam[l] < low) || (!p->basis[r] && p->w[l] < -tol_w)) bad = r;
+        }
+        if (bad < 0) return LN_OK;
+        p->basis[bad] = !p->basis[bad];
+    }
+    /* a degenerate problem that cycles: every active set, the one that breaks the conditions least */
+    if (n_rows > mm->enumeration_limit) return LN_NO_MODE;
+    uint8_t *trial = d->rope_flags + 7 * R, *best_basis = d->rope_flags + 6 * R;  /* slots of their own */
+    double best = -1.0;
+    for (uint64_t code = 0; code < ((uint64_t)1 << n_rows); code++) {
+        ln_int j = 0;
+        for (ln_int r = 0; r < R; r++) {
+            trial[r] = 0;
+            if (!p->rows[r]) continue;
+            trial[r] = (uint8_t)((code >> (n_rows - 1 - j)) & 1u);  /* the first row varies slowest */
+            j++;
+        }
+        if ((status = FN(rope_basis_solution)(mm, d, p, trial)) != LN_OK) return status;
+        FN(rope_lcp_w)(mm, p);
+        double worst_l = 0.0, worst_w = 0.0;
+        for (ln_int r = 0; r < R; r++) {
+            if (!p->rows[r]) continue;
+            const ln_int l = mm->rope_link[r];
+            if (trial[r]) worst_l = ln_fmax(worst_l, ln_fmax(-p->lam[l], 0.0));
+            else worst_w = ln_fmax(worst_w, ln_fmax(-p->w[l], 0.0));
+        }
+        const double worst = ln_fmax(worst_l / tol_l, worst_w / tol_w);
+        if (best < 0.0 || worst < best) {
+            best = worst;
+            memcpy(best_basis, trial, (size_t)R);
+        }
+    }
+    if (best > 1.0 / mm->lcp_tol) return LN_NO_MODE;
+    memcpy(p->basis, best_basis, (size_t)R);
+    return FN(rope_basis_solution)(mm, d, p, p->basis);
+}
+
+/* Every link's unit vector at X, slack or not, into d->E_full (kept in d->Xc: the state of the problem). */
+static void FN(rope_full_vectors)(const ln_model *m, ln_data *d, const double *X)
+{
+    memcpy(d->Xc, X, (size_t)(m->K * DIM) * sizeof(double));
+    for (ln_int l = 0; l < m->L; l++) {
+        const ln_int a = m->k1[l], b = m->k2[l];
+        const double r = 1.0 / m->R[l];
+        for (int e = 0; e < DIM; e++) d->E_full[l * DIM + e] = (X[b * DIM + e] - X[a * DIM + e]) * r;
+    }
+}
+
+/* The active set at (X, U) (driven rows set): the acceleration LCP on the ropes candidates, started from start,
+   release (or NULL) the ropes whose tension has just fallen to 0 (UnilateralDynamics.select_mode). The ropes in
+   the final basis into active (n_ropes). */
+static int FN(rope_select_mode)(const ln_model *mm, ln_data *d, const double *X, const double *U, const double *F_base,
+                                const uint8_t *candidates, const uint8_t *start, const uint8_t *release,
+                                uint8_t *active)
+{
+    const ln_int L = mm->L;
+    double *B = d->link_values, *lam = d->link_values + L, *w = d->link_values + 2 * L;
+    FN(rope_full_vectors)(mm, d, X);
+    const double *F = FN(rope_forces)(mm, d, X, U, F_base);
+    /* B of (26) for every link, with the full unit vectors (accelerations.c's link_terms) */
+    for (ln_int l = 0; l < L; l++) {
+        const ln_int a = mm->k1[l], b = mm->k2[l];
+        const double r = 1.0 / mm->R[l], ia = mm->accel_weight[a], ib = mm->accel_weight[b];
+        double du2 = 0.0, proj = 0.0;
+        for (int e = 0; e < DIM; e++) {
+            const double u = (X[b * DIM + e] - X[a * DIM + e]) * r;
+            const double du = U[b * DIM + e] - U[a * DIM + e];
+            du2 += du * du;
+            proj += u * (F[b * DIM + e] * ib - F[a * DIM + e] * ia);
+        }
+        B[l] = du2 * r + proj;
+    }
+    for (ln_int r = 0; r < mm->n_ropes; r++) active[r] = candidates[r] && start[r];
+    struct FN(rope_lcp) p = {d->E_full, B, candidates, active, release, lam, w, d->Uh};
+    return FN(rope_solve_lcp)(mm, d, &p);
+}
+
+/* The mode's tensions at (X, U) (driven rows set at their time), slack ropes' exactly 0, into T; acc into acc. */
+static int FN(rope_mode_tensions)(const ln_model *mm, ln_data *d, const double *X, const double *U,
+                                  const double *F_base, double *acc, double *T)
+{
+    const int status = FN(ln_accelerations)(mm, d, X, U, F_base, acc, T, 1);
+    for (ln_int l = 0; l < mm->L; l++)
+        if (mm->inv_R[l] == 0.0) T[l] = 0.0;
+    return status;
+}
+
+/* ---- the state's mode, for the outputs ------------------------------------------------------------------------ */
+/* Ropes at their length (gap within touch_tol of R_l) and, given U, not separating faster than touch_tol of the
+   velocity scale (UnilateralDynamics.touching). */
+static void FN(rope_touching)(const ln_model *m, const double *X, const double *U, uint8_t *out)
+{
+    const double scale = U ? FN(rope_velocity_scale)(m, U) : 0.0;
+    for (ln_int r = 0; r < m->n_ropes; r++) {
+        const ln_int l = m->rope_link[r];
+        out[r] = fabs(FN(rope_gap)(m, X, l)) <= m->touch_tol * m->R[l];
+        if (U && out[r]) out[r] = FN(rope_rate)(m, X, U, l) <= m->touch_tol * scale;
+    }
+}
+
+/* The mode of the state (X, U): the acceleration LCP on the touching ropes, every one of them started taut. */
+static int FN(rope_state_mode)(const ln_model *mm, ln_data *d, const double *X, const double *U, const double *F_base,
+                               uint8_t *active)
+{
+    uint8_t *candidates = d->rope_flags + 5 * mm->n_ropes;
+    FN(rope_touching)(mm, X, U, candidates);
+    return FN(rope_select_mode)(mm, d, X, U, F_base, candidates, candidates, NULL, active);
+}
+
+/* The integrator's mode from the state at the first advance (EventHandling._ensure_mode), and its mask in use. */
+int FN(ln_rope_start)(const ln_model *mm, ln_data *d, double *X, double *U, const double *F_base, double t)
+{
+    if (!d->mode_chosen) {
+        int status = FN(rope_drive)(mm, d, t, X, U);
+        uint8_t *active = d->rope_flags + 4 * mm->n_ropes;
+        if (status == LN_OK) status = FN(rope_state_mode)(mm, d, X, U, F_base, active);
+        if (status != LN_OK) return status;
+        for (ln_int l = 0; l < mm->L; l++) d->link_active[l] = 1;
+        for (ln_int r = 0; r < mm->n_ropes; r++) d->link_active[mm->rope_link[r]] = active[r];
+        d->mode_chosen = 1;
+    }
+    d->events_this_step = 0;
+    FN(rope_use_mask)(mm, d, d->link_active);
+    return LN_OK;
+}
+
+/* ---- the method's own step (ProjectedRungeKutta.step) ---------------------------------------------------------- */
+/* One step of length h from (X0, U0) at t0 without error control, then the projections onto (11) and (12) of the
+   mode, into (Xo, Uo). Scratch: the step loop's stages. */
+static int FN(rope_method_step)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X0,
+                                const double *U0, const double *F_base, double t0, double h, double *Xo, double *Uo)
+{
+    const ln_int size = mm->K * DIM, s = meth->n_stages;
+    double *KX = d->KX, *KU = d->KU, *Xs = d->Xs, *Us = d->Us, *acc = d->acc;
+    double *Xa = d->event_states + 14 * 3 * mm->K, *Ua = Xa + 3 * mm->K;
+    memcpy(Xa, X0, (size_t)size * sizeof(double));
+    memcpy(Ua, U0, (size_t)size * sizeof(double));
+    int status;
+    if ((status = FN(rope_drive)(mm, d, t0, Xa, Ua)) != LN_OK) return status;
+    d->n_rhs++;
+    if ((status = accelerations(mm, d, Xa, Ua, F_base, acc, d->T, 1)) != LN_OK) return status;
+    store_stage(size, 0, Ua, acc, KX, KU);
+    const double t_end = t0 + h;
+    for (ln_int i = 1; i <= s; i++) {
+        double *Yx = i < s ? Xs : Xo, *Yu = i < s ? Us : Uo;
+        combine(size, Xa, Ua, h, meth->AB + i * s, i, KX, KU, Yx, Yu);
+        if ((status = FN(rope_drive)(mm, d, i < s ? t0 + meth->C[i] * h : t_end, Yx, Yu)) != LN_OK) return status;
+        d->n_rhs++;
+        if ((status = accelerations(mm, d, Yx, Yu, F_base, acc, d->T, 1)) != LN_OK) return status;
+        store_stage(size, i, Yu, acc, KX, KU);
+    }
+    if ((status = project_positions(mm, d, Xo, d->E1, meth->position_tol, meth->max_projection_iter)) != LN_OK)
+        return status;
+    return project_velocities(mm, d, Xo, Uo, d->E1);
+}
+
+/* ---- detection and location ------------------------------------------------------------------------------------ */
+struct FN(rope_event_ctx) {
+    const ln_model *mm;
+    const ln_method *meth;
+    ln_data *d;
+    const double *X0, *U0, *X1, *U1, *A0, *A1, *F_base;
+    double t0, h;
+    ln_int link;
+    int status;
+    double *Xt, *Ut;            /* a trial state */
+    double *X_hi, *U_hi;        /* the state at the bracket's upper end */
+    double hi_kept;             /* where X_hi, U_hi were taken (-1: none) */
+};
+
+/* Rope `link`'s tension in the mode along the step's Hermite interpolant at theta (X from X, U; U from U, A). */
+static double FN(rope_force_on_interpolant)(void *vctx, double theta)
+{
+    struct FN(rope_event_ctx) *c = vctx;
+    const ln_model *mm = c->mm;
+    ln_data *d = c->d;
+    const double t2 = theta * theta, t3 = t2 * theta, h = c->h;
+    const double h00 = 2 * t3 - 3 * t2 + 1, h10 = t3 - 2 * t2 + theta, h01 = 3 * t2 - 2 * t3, h11 = t3 - t2;
+    for (ln_int i = 0; i < mm->K * DIM; i++) {
+        c->Xt[i] = h00 * c->X0[i] + h10 * h * c->U0[i] + h01 * c->X1[i] + h11 * h * c->U1[i];
+        c->Ut[i] = h00 * c->U0[i] + h10 * h * c->A0[i] + h01 * c->U1[i] + h11 * h * c->A1[i];
+    }
+    int status = FN(rope_drive)(mm, d, c->t0 + theta * h, c->Xt, c->Ut);
+    if (status == LN_OK) status = FN(rope_mode_tensions)(mm, d, c->Xt, c->Ut, c->F_base, d->acc1, d->T);
+    if (status != LN_OK) {
+        c->status = status;
+        return NAN;
+    }
+    return d->T[c->link];
+}
+
+/* Rope `link`'s tension in the mode at the end of the method's own step of length h. */
+static double FN(rope_force_on_step)(void *vctx, double h)
+{
+    struct FN(rope_event_ctx) *c = vctx;
+    const ln_model *mm = c->mm;
+    ln_data *d = c->d;
+    int status = FN(rope_method_step)(mm, c->meth, d, c->X0, c->U0, c->F_base, c->t0, h, c->Xt, c->Ut);
+    if (status == LN_OK) status = FN(rope_mode_tensions)(mm, d, c->Xt, c->Ut, c->F_base, d->acc1, d->T);
+    if (status != LN_OK) {
+        c->status = status;
+        return NAN;
+    }
+    const double f = d->T[c->link];
+    if (!(f >= 0)) {  /* the bracket's new upper end: its state kept */
+        memcpy(c->X_hi, c->Xt, (size_t)(mm->K * DIM) * sizeof(double));
+        memcpy(c->U_hi, c->Ut, (size_t)(mm->K * DIM) * sizeof(double));
+        c->hi_kept = h;
+    }
+    return f;
+}
+
+/* The largest |T| of the mode's links, and the ropes' tensions, at (X, U) and t (EventHandling._forces_at). */
+static int FN(rope_forces_at)(const ln_model *mm, ln_data *d, double t, const double *X, const double *U,
+                              const double *F_base, double *scale)
+{
+    double *Xt = d->event_states + 12 * 3 * mm->K, *Ut = Xt + 3 * mm->K;
+    memcpy(Xt, X, (size_t)(mm->K * DIM) * sizeof(double));
+    memcpy(Ut, U, (size_t)(mm->K * DIM) * sizeof(double));
+    int status = FN(rope_drive)(mm, d, t, Xt, Ut);
+    if (status == LN_OK) status = FN(rope_mode_tensions)(mm, d, Xt, Ut, F_base, d->acc1, d->T);
+    double largest = 0.0;
+    for (ln_int l = 0; l < mm->L; l++) largest = ln_fmax(largest, fabs(d->T[l]));
+    *scale = largest;
+    return status;
+}
+
+/* The first event within the accepted step from (X0, U0) at t0 to (X1, U1) at t0 + h, in the mode it was taken in
+   (EventHandling._first_event): *found 0 (none), 1 (a gap: a slack rope reached its length) or 2 (a force: a taut
+   rope's tension fell through 0), the rope in *rope, theta in *theta. */
+static int FN(rope_first_event)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X0,
+                                const double *U0, double t0, const double *X1, const double *U1, double h,
+                                const double *F_base, int *found, ln_int *rope, double *theta)
+{
+    const ln_int R = mm->n_ropes, K3 = 3 * mm->K;
+    *found = 0;
+    int status, any_slack = 0, any_taut = 0;
+    for (ln_int r = 0; r < R; r++) {
+        if (d->link_active[mm->rope_link[r]]) any_taut = 1;
+        else any_slack = 1;
+    }
+    double *Xm = d->event_states + 10 * K3, *Um = Xm + K3;
+    if (any_slack) {
+        /* each slack rope's dips below -tol along the interpolant (3 at most per rope), confirmed in the order of
+           (crossing, lowest, rope) */
+        double *cross_all = d->rope_values, *low_all = d->rope_values + 3 * R, *rope_all = d->rope_values + 6 * R;
+        uint8_t *tried = d->rope_flags + 8 * R;
+        const double largest = FN(rope_largest_coordinate)(mm, X1);
+        double best_cross = 0.0;
+        ln_int best_rope = -1, n_dips = 0;
+        for (ln_int r = 0; r < R; r++) {
+            const ln_int l = mm->rope_link[r];
+            if (d->link_active[l]) continue;
+            const double Rl = mm->R[l], tol = mm->cross_tol * ln_fmax(Rl, largest), depth = tol * (2.0 * Rl + tol);
+            /* R^2 - |d(theta)|^2 along the Hermite of X: D_i the coefficients of d = X_k2 - X_k1 */
+            double D[4][DIM], P[7] = {0};
+            const ln_int a = mm->k1[l], b = mm->k2[l];
+            for (int e = 0; e < DIM; e++) {
+                double c[2][4];
+                for (int end = 0; end < 2; end++) {
+                    const ln_int k = end ? b : a;
+                    const double y0 = X0[k * DIM + e], y1 = X1[k * DIM + e], d0 = U0[k * DIM + e], d1 = U1[k * DIM + e];
+                    c[end][0] = y0;
+                    c[end][1] = h * d0;
+                    c[end][2] = 3 * (y1 - y0) - h * (2 * d0 + d1);
+                    c[end][3] = 2 * (y0 - y1) + h * (d0 + d1);
+                }
+                for (int i = 0; i < 4; i++) D[i][e] = c[1][i] - c[0][i];
+            }
+            for (int i = 0; i < 4; i++)
+                for (int j = 0; j < 4; j++) {
+                    double s = 0.0;
+                    for (int e = 0; e < DIM; e++) s += D[i][e] * D[j][e];
+                    P[i + j] -= s;
+                }
+            P[0] += Rl * Rl;
+            if (!rope_may_fall_below(P, depth)) continue;
+            double cross[3], low[3];
+            const int n = rope_gap_dips(P, depth, cross, low);
+            for (int i = 0; i < n; i++) {
+                cross_all[n_dips] = cross[i];
+                low_all[n_dips] = low[i];
+                rope_all[n_dips] = (double)r;
+                tried[n_dips] = 0;
+                n_dips++;
+            }
+        }
+        for (ln_int k = 0; k < n_dips; k++) {
+            ln_int next = -1;
+            for (ln_int i = 0; i < n_dips; i++) {
+                if (tried[i]) continue;
+                if (next < 0 || cross_all[i] < cross_all[next]
+                    || (cross_all[i] == cross_all[next]
+                        && (low_all[i] < low_all[next] || (low_all[i] == low_all[next] && rope_all[i] < rope_all[next]))))
+                    next = i;
+            }
+            tried[next] = 1;
+            const ln_int r = (ln_int)rope_all[next], l = mm->rope_link[r];
+            const double lowest = low_all[next];
+            const double *Xc = X1;
+            if (lowest == 0.0) {
+                Xc = X0;
+            } else if (lowest != 1.0) {
+                if ((status = FN(rope_method_step)(mm, meth, d, X0, U0, F_base, t0, lowest * h, Xm, Um)) != LN_OK)
+                    return status;
+                Xc = Xm;
+            }
+            const double tol = mm->cross_tol * ln_fmax(mm->R[l], largest);
+            if (FN(rope_gap)(mm, Xc, l) < -tol) {
+                best_cross = cross_all[next];
+                best_rope = r;
+                break;
+            }
+        }
+        if (best_rope >= 0) {
+            *found = 1;
+            *rope = best_rope;
+            *theta = best_cross;
+        }
+    }
+    if (any_taut) {
+        double scale;
+        if ((status = FN(rope_forces_at)(mm, d, t0 + h, X1, U1, F_base, &scale)) != LN_OK) return status;
+        double *forces = d->link_values + 3 * mm->L;
+        memcpy(forces, d->T, (size_t)mm->L * sizeof(double));
+        const double tol = mm->force_tol * scale;
+        int dropped = 0;
+        for (ln_int r = 0; r < R; r++) {
+            const ln_int l = mm->rope_link[r];
+            if (d->link_active[l] && forces[l] < -tol) dropped = 1;
+        }
+        if (dropped) {
+            double *A0 = d->event_states + 8 * K3, *A1 = A0 + K3;
+            double *Xa = d->event_states + 12 * K3, *Ua = Xa + K3;
+            /* the accelerations at the step's ends, in the mode */
+            const double *ends[2][2] = {{X0, U0}, {X1, U1}};
+            for (int end = 0; end < 2; end++) {
+                memcpy(Xa, ends[end][0], (size_t)(mm->K * DIM) * sizeof(double));
+                memcpy(Ua, ends[end][1], (size_t)(mm->K * DIM) * sizeof(double));
+                if ((status = FN(rope_drive)(mm, d, end ? t0 + h : t0, Xa, Ua)) != LN_OK) return status;
+                if ((status = FN(rope_mode_tensions)(mm, d, Xa, Ua, F_base, end ? A1 : A0, d->T)) != LN_OK)
+                    return status;
+            }
+            for (ln_int r = 0; r < R; r++) {
+                const ln_int l = mm->rope_link[r];
+                if (!(d->link_active[l] && forces[l] < -tol)) continue;
+                struct FN(rope_event_ctx) c = {mm, meth, d, X0, U0, X1, U1, A0, A1, F_base, t0, h, l, LN_OK,
+                                               Xm, Um, NULL, NULL, -1.0};
+                const double f0 = FN(rope_force_on_interpolant)(&c, 0.0);
+                double root = 0.0;
+                if (!(f0 < 0)) {
+                    double lo = 0.0, hi = 1.0;
+                    rope_bracketed_root(FN(rope_force_on_interpolant), &c, &lo, &hi, f0, forces[l], 1e-6, 0, 0.0);
+                    root = hi;  /* the order of the events only: the time is found on the method's steps */
+                }
+                if (c.status != LN_OK) return c.status;
+                if (*found == 0 || root < *theta) {
+                    *found = 2;
+                    *rope = r;
+                    *theta = root;
+                }
+            }
+        }
+    }
+    return LN_OK;
+}
+
+/* The state at the event on the method's own trajectory, into (Xe, Ue), and the step h_e from t0 to it
+   (EventHandling._to_gap_root, _to_force_root). */
+static int FN(rope_locate)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X0, const double *U0,
+                           double t0, double h_max, const double *X1, const double *U1, const double *F_base,
+                           int kind, ln_int rope, double theta, double *Xe, double *Ue, double *h_e)
+{
+    const ln_int size = mm->K * DIM, l = mm->rope_link[rope];
+    const size_t bytes = (size_t)size * sizeof(double);
+    int status;
+    if (kind == 1) {
+        /* Newton's method on the step's length until the gap at its end is zero to round-off */
+        double h = theta * h_max;
+        if (h > 0) {
+            if ((status = FN(rope_method_step)(mm, meth, d, X0, U0, F_base, t0, h, Xe, Ue)) != LN_OK) return status;
+        } else {
+            memcpy(Xe, X0, bytes);
+            memcpy(Ue, U0, bytes);
+        }
+        for (ln_int it = 0; it < mm->gap_newton_iterations; it++) {
+            const double g = FN(rope_gap)(mm, Xe, l), rate = FN(rope_rate)(mm, Xe, Ue, l);
+            if (fabs(g) <= 4 * ROPE_EPS * ln_fmax(mm->R[l], FN(rope_largest_coordinate)(mm, Xe)) || !(rate < 0)) break;
+            const double h_new = ln_fmin(ln_fmax(h - g / rate, 0.0), h_max);
+            if (h_new == h) break;
+            h = h_new;
+            if (h > 0) {
+                if ((status = FN(rope_method_step)(mm, meth, d, X0, U0, F_base, t0, h, Xe, Ue)) != LN_OK) return status;
+            } else {
+                memcpy(Xe, X0, bytes);
+                memcpy(Ue, U0, bytes);
+            }
+        }
+        *h_e = h;
+        return LN_OK;
+    }
+    /* the bracketing root find on the step's length, ending just past the zero of the force */
+    double scale;
+    if ((status = FN(rope_forces_at)(mm, d, t0, X0, U0, F_base, &scale)) != LN_OK) return status;
+    const double f0 = d->T[l];
+    if ((status = FN(rope_forces_at)(mm, d, t0 + h_max, X1, U1, F_base, &scale)) != LN_OK) return status;
+    const double f1 = d->T[l];
+    if (!(f0 >= 0)) {
+        memcpy(Xe, X0, bytes);
+        memcpy(Ue, U0, bytes);
+        *h_e = 0.0;
+        return LN_OK;
+    }
+    double *Xt = d->event_states + 10 * 3 * mm->K, *Ut = Xt + 3 * mm->K;
+    struct FN(rope_event_ctx) c = {mm, meth, d, X0, U0, X1, U1, NULL, NULL, F_base, t0, h_max, l, LN_OK,
+                                   Xt, Ut, Xe, Ue, -1.0};
+    memcpy(Xe, X1, bytes);
+    memcpy(Ue, U1, bytes);
+    c.hi_kept = h_max;
+    double lo = 0.0, hi = h_max;
+    rope_bracketed_root(FN(rope_force_on_step), &c, &lo, &hi, f0, f1, 1e-13, 1, theta * h_max);
+    if (c.status != LN_OK) return c.status;
+    if (c.hi_kept != hi) {  /* hi is always a point where the force was < 0: its state was kept; else take it again */
+        if ((status = FN(rope_method_step)(mm, meth, d, X0, U0, F_base, t0, hi, Xe, Ue)) != LN_OK) return status;
+    }
+    *h_e = hi;
+    return LN_OK;
+}
+
+/* ---- the event ------------------------------------------------------------------------------------------------- */
+/* Projections of the mode of mask flags (positions along M^-1 C(X)^T from X itself: the closest point in the mass
+   metric, as ln_project_state; or the velocities only). */
+static int FN(rope_project)(const ln_model *mm, const ln_method *meth, ln_data *d, const uint8_t *flags, double *X,
+                            double *U)
+{
+    FN(rope_mask_of)(mm, d, flags);
+    int status;
+    if (X) {
+        FN(ln_unit_vectors)(mm, X, d->E0);
+        if ((status = FN(ln_factor_tension_matrix)(mm, d, d->E0)) != LN_OK) return status;
+        if ((status = project_positions(mm, d, X, d->E0, 1e-14, meth->max_projection_iter)) != LN_OK) return status;
+    }
+    if (U) return project_velocities(mm, d, X ? X : d->Xc, U, d->E0);
+    return LN_OK;
+}
+
+static void FN(rope_record)(const ln_model *mm, ln_data *d, double t, int kind, ln_int link, double impulse)
+{
+    if (kind == LN_EVENT_TAUT) d->rope_impulse[link] += impulse;
+    if (d->n_events >= LN_EVENT_LOG) {
+        d->events_lost++;
+        return;
+    }
+    d->event_t[d->n_events] = t;
+    d->event_kind[d->n_events] = kind;
+    d->event_link[d->n_events] = link;
+    d->event_impulse[d->n_events] = impulse;
+    d->n_events++;
+    (void)mm;
+}
+
+/* The impulse at (X, U) where the ropes touching are at their length (UnilateralDynamics.impact): U becomes the
+   velocities after it, impulses (n_ropes) each rope's impulse, took whether it took one. */
+static int FN(rope_impact)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X, double *U,
+                           const uint8_t *touching, double *impulses, uint8_t *took)
+{
+    const ln_int L = mm->L, R = mm->n_ropes, size = mm->K * DIM;
+    double *rates = d->link_values, *q = d->link_values + L, *lam = d->link_values + 2 * L;
+    double *w = d->link_values + 4 * L, *e = d->link_values + 5 * L;
+    uint8_t *basis = d->rope_flags + 3 * R;
+    FN(rope_full_vectors)(mm, d, X);
+    const double scale = FN(rope_velocity_scale)(mm, U), rest = FN(rope_rest_speed)(mm, U);
+    /* C U of the impact's rows (the rods and the touching ropes), and each row's restitution */
+    for (ln_int l = 0; l < L; l++) {
+        const ln_int a = mm->k1[l], b = mm->k2[l];
+        double s = 0.0;
+        for (int k = 0; k < DIM; k++) s += d->E_full[l * DIM + k] * (U[a * DIM + k] - U[b * DIM + k]);
+        rates[l] = s;
+        e[l] = 0.0;
+    }
+    for (ln_int r = 0; r < R; r++) {
+        const ln_int l = mm->rope_link[r];
+        if (!touching[r]) continue;
+        e[l] = mm->rope_restitution[r];
+        if (e[l] * ln_fmax(-rates[l], 0.0) < rest) e[l] = 0.0;  /* the rest rule */
+    }
+    for (ln_int l = 0; l < L; l++) q[l] = -(rates[l] + e[l] * ln_fmin(rates[l], 0.0));  /* b = -q */
+    for (ln_int r = 0; r < R; r++) basis[r] = touching[r] && rates[mm->rope_link[r]] < 0;
+    struct FN(rope_lcp) p = {d->E_full, q, touching, basis, NULL, lam, w, d->Uh};
+    int status = FN(rope_solve_lcp)(mm, d, &p);
+    if (status != LN_OK) return status;
+    int separating = 0;
+    for (ln_int l = 0; l < L; l++)
+        if (d->mask[l] && rates[l] > mm->touch_tol * scale) separating = 1;
+    for (ln_int r = 0; r < R; r++) {
+        impulses[r] = touching[r] ? lam[mm->rope_link[r]] : 0.0;
+        took[r] = impulses[r] > 0;
+    }
+    /* distinct restitutions among the approaching basis ropes */
+    double first = 0.0;
+    int distinct = 0;
+    for (ln_int r = 0; r < R; r++) {
+        const ln_int l = mm->rope_link[r];
+        if (!(basis[r] && rates[l] < 0)) continue;
+        if (distinct == 0) {
+            first = e[l];
+            distinct = 1;
+        } else if (e[l] != first) {
+            distinct = 2;
+        }
+    }
+    if (distinct <= 1 && !separating) {
+        double *U_before = d->event_states + 6 * 3 * mm->K;
+        memcpy(U_before, U, (size_t)size * sizeof(double));
+        memcpy(d->Xc, X, (size_t)size * sizeof(double));
+        if ((status = FN(rope_project)(mm, meth, d, basis, NULL, U)) != LN_OK) return status;
+        if (first != 0.0)
+            for (ln_int i = 0; i < size; i++) U[i] = U_before[i] + (1.0 + first) * (U[i] - U_before[i]);
+    } else {
+        FN(ln_add_correction)(mm, d->E_full, lam, 1.0, U);  /* U + M^-1 C^T Lambda */
+    }
+    return LN_OK;
+}
+
+/* At an event at t (state X, U of the old mode): positions onto the touching ropes, the impact, the next mode, the
+   events recorded (EventHandling._apply_event). kind 1: rope trigger reached its length; 2: its tension fell to 0. */
+static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_data *d, double *X, double *U,
+                                const double *F_base, double t, int kind, ln_int trigger)
+{
+    const ln_int R = mm->n_ropes;
+    uint8_t *touching = d->rope_flags, *took = d->rope_flags + R, *candidates = d->rope_flags + 2 * R;
+    uint8_t *active = d->rope_flags + 4 * R, *release = d->rope_flags + 5 * R;
+    double *impulses = d->rope_values + 9 * R;
+    int status;
+    FN(rope_touching)(mm, X, NULL, touching);
+    for (ln_int r = 0; r < R; r++) touching[r] |= d->link_active[mm->rope_link[r]];
+    if (kind == 1) touching[trigger] = 1;
+    if ((status = FN(rope_project)(mm, meth, d, touching, X, NULL)) != LN_OK) return status;
+    if ((status = FN(rope_impact)(mm, meth, d, X, U, touching, impulses, took)) != LN_OK) return status;
+    if ((status = FN(rope_drive)(mm, d, t, X, U)) != LN_OK) return status;
+    /* the touching ropes that do not separate, or separate slower than the rest speed (an inelastic collapse) */
+    const double limit = ln_fmax(mm->touch_tol * FN(rope_velocity_scale)(mm, U), FN(rope_rest_speed)(mm, U));
+    for (ln_int r = 0; r < R; r++) {
+        candidates[r] = touching[r] && FN(rope_rate)(mm, X, U, mm->rope_link[r]) <= limit;
+        release[r] = kind == 2 && r == trigger;
+    }
+    if ((status = FN(rope_select_mode)(mm, d, X, U, F_base, candidates, candidates, release, active)) != LN_OK)
+        return status;
+    if (kind == 2 && active[trigger]) {
+        int changed = 0;
+        for (ln_int r = 0; r < R; r++)
+            if (active[r] != d->link_active[mm->rope_link[r]]) changed = 1;
+        if (!changed) active[trigger] = 0;  /* its force is at zero to round-off and falling: it leaves */
+    }
+    memcpy(d->Xc, X, (size_t)(mm->K * DIM) * sizeof(double));
+    if ((status = FN(rope_project)(mm, meth, d, active, NULL, U)) != LN_OK) return status;
+    for (ln_int r = 0; r < R; r++) {
+        const ln_int l = mm->rope_link[r];
+        if ((took[r] || active[r]) && !d->link_active[l]) FN(rope_record)(mm, d, t, LN_EVENT_TAUT, l, impulses[r]);
+    }
+    for (ln_int r = 0; r < R; r++) {
+        const ln_int l = mm->rope_link[r];
+        if (d->link_active[l] && !active[r]) FN(rope_record)(mm, d, t, LN_EVENT_SLACK, l, 0.0);
+    }
+    for (ln_int r = 0; r < R; r++) d->link_active[mm->rope_link[r]] = active[r];
+    return LN_OK;
+}
+
+/* After the accepted step from (X0, U0) at t0 to (X1, U1) at *t1 (AdaptiveEvents._event_in_step): where an event lies
+   within it, (X1, U1, *t1) become the state just past the event, in the new mode. The mode's mask is in use again
+   on return. */
+int FN(ln_rope_step_events)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X0, const double *U0,
+                            const double *F_base, double t0, double *X1, double *U1, double *t1)
+{
+    const ln_int K3 = 3 * mm->K;
+    const double h_max = *t1 - t0;
+    int found = 0;
+    ln_int rope = -1;
+    double theta = 0.0;
+    /* the step's start and end, kept: the step loop's own arrays are scratch of the method's steps */
+    double *Xs0 = d->event_states, *Us0 = Xs0 + K3, *Xs1 = d->event_states + 2 * K3, *Us1 = Xs1 + K3;
+    double *Xe = d->event_states + 4 * K3, *Ue = Xe + K3;
+    const size_t bytes = (size_t)(mm->K * DIM) * sizeof(double);
+    memcpy(Xs0, X0, bytes);
+    memcpy(Us0, U0, bytes);
+    memcpy(Xs1, X1, bytes);
+    memcpy(Us1, U1, bytes);
+    int status = FN(rope_first_event)(mm, meth, d, Xs0, Us0, t0, Xs1, Us1, h_max, F_base, &found, &rope, &theta);
+    if (status == LN_OK && found) {
+        if (++d->events_this_step > mm->max_events_per_step) {
+            status = LN_EVENT_CHATTER;
+        } else {
+            double h_e = 0.0;
+            status = FN(rope_locate)(mm, meth, d, Xs0, Us0, t0, h_max, Xs1, Us1, F_base, found, rope, theta, Xe, Ue,
+                                     &h_e);
+            const double t_e = h_e >= h_max ? *t1 : t0 + h_e;
+            if (status == LN_OK) status = FN(rope_apply_event)(mm, meth, d, Xe, Ue, F_base, t_e, found, rope);
+            if (status == LN_OK) {
+                memcpy(X1, Xe, bytes);
+                memcpy(U1, Ue, bytes);
+                *t1 = t_e;
+            }
+        }
+    } else if (status == LN_OK) {
+        d->events_this_step = 0;
+    }
+    FN(rope_use_mask)(mm, d, d->link_active);
+    return status;
+}
+
+#if DIM == 3
+int ln_rope_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U)
+{
+    ln_model mode = *m;
+    mode.inv_R = d->mode_inv_R;
+    uint8_t *active = d->rope_flags + 4 * m->n_ropes;
+    int status = FN(rope_state_mode)(&mode, d, X, U, d->F_base, active);
+    if (status != LN_OK) return status;
+    FN(rope_mask_of)(&mode, d, active);
+    status = FN(rope_mode_tensions)(&mode, d, X, U, d->F_base, d->acc, d->T);
+    FN(rope_use_mask)(&mode, d, d->link_active);
+    return status;
+}
+
+ln_int ln_rope_events_drained(ln_data *d)
+{
+    const ln_int n = d->n_events;
+    d->n_events = 0;
+    return n;
+}
+#endif
