@@ -27,9 +27,14 @@ c_uint8_p = ctypes.POINTER(ctypes.c_uint8)
 # enum ln_status, as the messages name them
 STATUS = {0: "ok", 1: "projection failed", 2: "singular", 3: "non-finite", 4: "step underflow", 5: "too many steps",
           6: "left the plane", 7: "implicit kick failed", 8: "bad argument", 9: "out of memory",
-          10: "anchor motion failed"}
+          10: "anchor motion failed", 11: "rope event chatter", 12: "no rope mode",
+          13: "ropes need a Runge-Kutta method"}
 OK, PROJECTION_FAILED, SINGULAR, NON_FINITE, STEP_UNDERFLOW, TOO_MANY_STEPS = 0, 1, 2, 3, 4, 5
 LEFT_PLANE, IMPLICIT_KICK_FAILED, BAD_ARGUMENT, NO_MEMORY, DRIVE_FAILED = 6, 7, 8, 9, 10
+EVENT_CHATTER, NO_MODE, ROPES_NEED_RUNGE_KUTTA = 11, 12, 13
+# enum ln_event_kind: the kinds of a rope's event in ln_data's log, by the names linknet_core.dynamics.unilateral.Event
+# gives them
+EVENT_KINDS = ("taut", "slack")
 SOLVER_NONE, SOLVER_CHAIN, SOLVER_LDL, SOLVER_MIN_NORM = 0, 1, 2, 3
 COMPOSITION, RUNGE_KUTTA, STATIC = 0, 1, 2
 RMS_ERROR, HAIRER_ERROR = 0, 1
@@ -140,6 +145,7 @@ sample_diagnostics = _declare("ln_sample_diagnostics", None, Model_p, ctypes.POI
                               c_double_p, c_double_p)
 evaluate_repeated = _declare("ln_evaluate_repeated", ctypes.c_int, Model_p, Data_p, ctypes.c_int, c_double_p,
                              c_double_p, ln_int)
+rope_events_drained = _declare("ln_rope_events_drained", ln_int, Data_p)
 model_weights_size = _declare("ln_model_weights_size", ln_int, Model_p)
 model_weights = _declare("ln_model_weights", ctypes.c_int, Model_p, c_double_p, c_double_p, c_double_p, c_double_p,
                          c_double_p)

@@ -80,18 +80,19 @@ class Event(NamedTuple):
 
 
 def native_refusal(scene: Scene) -> str | None:
-    """Why the native core cannot run ``scene`` (its first rope link, or its ground), or None where it can."""
-    ropes = np.flatnonzero(scene.rope)
-    if ropes.size:
-        what = f"{scene.link_label(int(ropes[0]))} is a rope"
-        if ropes.size > 1:
-            what += f" (and {ropes.size - 1} more link{'s' if ropes.size > 2 else ''})"
-    elif scene.ground is not None:
-        what = "it has a ground"
-    else:
+    """Why the native core cannot run ``scene`` (its ground), or None where it can: ropes run on it
+    (linknet_core/native/src/stages/ropes.c), a ground and its friction on the numpy reference only."""
+    if scene.ground is None:
         return None
-    return (f"{scene.name}: {what}, and the native core (backend=\"native\", the native FMU) does not take ropes or a "
+    return (f"{scene.name}: it has a ground, and the native core (backend=\"native\", the native FMU) does not take a "
             "ground yet; the numpy reference runs it (backend=\"auto\" or \"numpy\", and the pythonfmu FMU)")
+
+
+def scene_size(scene: Scene) -> float:
+    """The scene's length scale, m: its extent or longest link, at least 1 m (a single mass on the ground has
+    none). What the events' tolerances and the rest speed are measured against (the native core takes it too)."""
+    extent = float(np.ptp(scene.X0, axis=0).max()) if scene.K > 1 else 0.0
+    return max(extent, float(scene.length.max()) if scene.L else 0.0, 1.0)
 
 
 def linearization_refusal(scene: Scene) -> str:
@@ -139,12 +140,16 @@ def describe(scene: Scene) -> list[str]:
 
 
 def numpy_only(scene: Scene, backend: str) -> bool:
-    """Whether ``scene`` must run on the numpy reference (it has ropes or a ground); a backend of 'native' for such a
-    scene is refused with native_refusal's words."""
+    """Whether ``scene`` runs on the numpy reference: a scene with ropes or a ground, unless the native core is asked
+    for by name (backend="native") and it takes the scene (ropes, no ground: native_refusal; the native backend
+    checks the method and the anchors); a ground with backend="native" is refused with native_refusal's words."""
     if not scene.unilateral:
         return False
     if backend == "native":
-        raise SolverError(native_refusal(scene))
+        refusal = native_refusal(scene)
+        if refusal is not None:
+            raise SolverError(refusal)
+        return False
     return True
 
 
@@ -466,9 +471,7 @@ class UnilateralDynamics(Dynamics):
         self.n_unilateral = self.rope_links.size + self.contact_masses.size
         self.is_rope = np.concatenate([np.ones(self.rope_links.size, bool), np.zeros(self.contact_masses.size, bool)])
         self.index = np.concatenate([self.rope_links, self.contact_masses])  # the link or mass of each constraint
-        # the scene's length scale (its extent or longest link, at least 1 m: a single mass on the ground has none)
-        extent = float(np.ptp(scene.X0, axis=0).max()) if scene.K > 1 else 0.0
-        self.size = max(extent, float(scene.length.max()) if scene.L else 0.0, 1.0)
+        self.size = scene_size(scene)
         # the virtual link length of a contact (any positive length is exact; this keeps its coordinates at the
         # scene's scale)
         self.contact_length = self.size

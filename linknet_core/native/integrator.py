@@ -42,14 +42,17 @@ class _Internals:
     jumps: int = 0
     drive: tuple | None = None  # driven anchors: (hold time, P, V, A, callable) of the input-driven ones
     last_jump: tuple | None = None  # driven anchors: (impulse, position jump, velocity jump) of the last advance
+    ropes: tuple | None = None  # ropes: (mode chosen, link_active, rope_impulse, the events so far)
 
     def __deepcopy__(self, memo):
-        """Numbers copy as themselves: only the driven anchors' hold and last jump have anything to copy (the
-        generic deepcopy of the dataclass cost more than a one-step advance)."""
+        """Numbers copy as themselves: only the driven anchors' hold and last jump and the ropes' mode and events have
+        anything to copy (the generic deepcopy of the dataclass cost more than a one-step advance)."""
         drive = None if self.drive is None else copy.deepcopy(self.drive, memo)
         last_jump = None if self.last_jump is None else copy.deepcopy(self.last_jump, memo)
+        ropes = None if self.ropes is None else (self.ropes[0], self.ropes[1].copy(), self.ropes[2].copy(),
+                                                 list(self.ropes[3]))
         return _Internals(self.t, self.h_next, self.planar, self.steps, self.rejected, self.n_rhs, self.split_steps,
-                          self.finest_split, self.jumps, drive, last_jump)
+                          self.finest_split, self.jumps, drive, last_jump, ropes)
 
 
 def _rows_of(array: np.ndarray):
@@ -98,6 +101,9 @@ class NativeIntegrator(Integrator):
         self._motion = None  # the user's callable of t, when the input-driven anchors follow one
         self._motion_error = None  # what it raised inside the last advance
         self._callback = None  # the C callback that calls it, made when first needed
+        # ropes (stages/ropes.c): the events of the run so far, drained from the core's log after every call
+        self._ropes = int(model.struct.n_ropes) > 0
+        self._events: list = []
 
     # ---- stats and internals: they live in the native data ------------------------------------
     @property
@@ -120,8 +126,12 @@ class NativeIntegrator(Integrator):
             drive = (d.drive_hold_t, data.drive_P.copy(), data.drive_V.copy(), data.drive_A.copy(), self._motion)
         if self.scene.motions:
             last_jump = (self.data.impulse.copy(), d.jump_position, d.jump_velocity)
+        ropes = None
+        if self._ropes:
+            data = self.data
+            ropes = (int(d.mode_chosen), data.link_active.copy(), data.rope_impulse.copy(), list(self.events))
         return {"native": _Internals(d.t, d.h_next, d.planar, d.steps, d.rejected, d.n_rhs, d.split_steps,
-                                     d.finest_split, d.jumps, drive, last_jump)}
+                                     d.finest_split, d.jumps, drive, last_jump, ropes)}
 
     def reset(self, internals: dict | None = None) -> None:
         """Back to a new integrator's data (NativeData.reset: every counter, the projection floor's included, the
@@ -130,6 +140,7 @@ class NativeIntegrator(Integrator):
         self.data.reset()
         self._motion_error = None
         self._input_zero = True
+        self._events = []
         if internals is not None:
             self.set_internals(internals)
             return
@@ -148,7 +159,44 @@ class NativeIntegrator(Integrator):
             self._follow(motion)
         if saved.last_jump is not None:
             self.data.impulse[...], d.jump_position, d.jump_velocity = saved.last_jump
+        if saved.ropes is not None:
+            self._drain()
+            d.mode_chosen, active, impulse, events = saved.ropes
+            self.data.link_active[...], self.data.rope_impulse[...] = active, impulse
+            self._events = list(events)
         self._out = (None, None)  # the state may have been set from outside too: copy it in next time
+
+    # ---- ropes -------------------------------------------------------------------------------------
+    def _drain(self) -> None:
+        """The core's log of rope events (ln_data: event_t, event_kind, event_link, event_impulse) into the run's
+        events, and the log emptied."""
+        if not self._ropes:
+            return
+        from linknet_core.dynamics.unilateral import Event
+
+        n = int(lib.rope_events_drained(self._data_p))
+        if n:
+            data = self.data
+            t, kind, link, impulse = (data.event_log(name, n) for name in ("event_t", "event_kind", "event_link",
+                                                                          "event_impulse"))
+            self._events.extend(Event(float(t[i]), lib.EVENT_KINDS[int(kind[i])], int(link[i]), float(impulse[i]))
+                                for i in range(n))
+        lost = int(self._d.events_lost)
+        if lost:
+            self._d.events_lost = 0
+            raise SolverError(f"{self.scene.name}: {lost} rope events within one call into the native core were "
+                              "more than its log keeps (ln_data_fields.h: LN_EVENT_LOG); advance over shorter "
+                              "intervals")
+
+    @property
+    def events(self) -> list:
+        """The run's rope events so far, in time order (linknet_core.dynamics.unilateral.Event; index: the link)."""
+        self._drain()
+        return self._events
+
+    def rope_impulses(self) -> np.ndarray:
+        """(L,) N s: each rope's impulse summed over the last advance (0 on rods)."""
+        return self.data.rope_impulse.copy()
 
     # ---- driven anchors -----------------------------------------------------------------------------
     def set_anchors(self, t: float, anchors) -> None:
@@ -219,6 +267,7 @@ class NativeIntegrator(Integrator):
     def advance(self, state, t_target: float, F_input, max_steps: int) -> None:
         self._load(state, F_input)
         status = lib.advance(self._model_p, self._method_p, self._data_p, t_target, max_steps)
+        self._drain()
         if status != lib.OK:
             self._raise_motion_error()
             raise SolverError(self.explain(status, state.t, t_target, max_steps))
@@ -255,6 +304,7 @@ class NativeIntegrator(Integrator):
         peaks = (None, None) if T_peak is None else (ref(T_peak), ref(T_peak_time))
         status = self._sample(ref(times), times.size, advance_first, max_steps, ref(X), ref(U), ref(T), *peaks, terms,
                               first, stride, written)
+        self._drain()
         if not update_state:
             self._out = (None, None)  # the data no longer holds the state
         elif written.value or status != lib.OK:
@@ -272,8 +322,9 @@ class NativeIntegrator(Integrator):
 
     @property
     def locates_peaks(self) -> bool:
-        """Whether the advances locate tension peaks: not in a static scene, whose advance takes no step."""
-        return not self._static
+        """Whether the advances locate tension peaks: not in a static scene, whose advance takes no step, nor with
+        ropes, whose modes change the tensions' meaning at the events (as the numpy reference's event integrators)."""
+        return not self._static and not self._ropes
 
     def tension_peaks(self):
         """(T_peak, T_peak_time), (L,) each, of the last advance: each link's largest |T_l| over it, signed, and
@@ -292,8 +343,9 @@ class NativeIntegrator(Integrator):
 
     @functools.cached_property
     def diagnostics_in_c(self) -> bool:
-        """Whether ``sample`` can fill the samples' diagnostics (a scene whose potentials the core knows)."""
-        return self._energy_terms is not None
+        """Whether ``sample`` can fill the samples' diagnostics (a scene whose potentials the core knows, and no ropes:
+        their residuals of (11) and (12) are one-sided, UnilateralDynamics's)."""
+        return self._energy_terms is not None and not self._ropes
 
     @functools.cached_property
     def _energy_terms(self):

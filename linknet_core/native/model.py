@@ -181,6 +181,7 @@ class NativeModel:
             m.plane_P[:] = np.ascontiguousarray(P, np.float64).ravel().tolist()
             m.plane_o[:], m.plane_n[:] = list(o), list(n)
             m.plane_length, m.plane_tol = length, PLANE_TOL
+        self._fill_ropes(m, scene, f8, i8)
         self.rigid = rigid
         if rigid is not None:
             m.rigid = ctypes.cast(ctypes.pointer(rigid), ctypes.c_void_p)
@@ -200,6 +201,26 @@ class NativeModel:
         m.motion_pieces = i8(np.concatenate([[0], np.cumsum([motion.pieces.shape[0] for motion in motions])]))
         m.piece = f8(np.concatenate([motion.pieces for motion in motions]).reshape(-1, PIECE_COLUMNS))
         m.sine = f8(np.array([motion.sine for motion in motions]).reshape(-1, SINE_COLUMNS))
+
+    @staticmethod
+    def _fill_ropes(m, scene, f8, i8) -> None:
+        """The ropes (stages/ropes.c): their links and restitutions, the events' tolerances from the numpy
+        reference's single source, and the scene's length and gravity scales as UnilateralDynamics takes them."""
+        ropes = np.flatnonzero(scene.rope)
+        m.n_ropes = ropes.size
+        if not ropes.size:
+            return
+        from linknet_core.dynamics import complementarity, unilateral
+        from linknet_core.integrators import events
+
+        m.rope_link, m.rope_restitution = i8(ropes), f8(scene.restitution[ropes])
+        m.touch_tol, m.cross_tol = unilateral.TOUCH_TOL, unilateral.CROSS_TOL
+        m.force_tol, m.rest_height = unilateral.FORCE_TOL, unilateral.REST_HEIGHT
+        m.lcp_tol, m.pivots_per_row = complementarity.LCP_TOL, complementarity.PIVOTS_PER_ROW
+        m.enumeration_limit = complementarity.ENUMERATION_LIMIT
+        m.max_events_per_step, m.gap_newton_iterations = events.MAX_EVENTS_PER_STEP, events.GAP_NEWTON_ITERATIONS
+        m.scene_size = unilateral.scene_size(scene)
+        m.gravity_norm = float(np.linalg.norm(scene.gravity))
 
     @property
     def scene(self):
@@ -345,13 +366,14 @@ class NativeData:
         self.X, self.U, self.F_input = self._view("X", K, 3), self._view("U", K, 3), self._view("F_input", K, 3)
         self.T = self._view("T", model.L)
 
-    def _view(self, field: str, rows: int, columns: int = 0) -> np.ndarray:
+    def _view(self, field: str, rows: int, columns: int = 0, dtype=np.float64) -> np.ndarray:
         """A numpy view of the C array ``field`` of the data (~1 us, against ~3 us for np.ctypeslib.as_array)."""
         shape = (rows, columns) if columns else (rows,)
         if not rows:
-            return np.zeros(shape)
+            return np.zeros(shape, dtype)
         address = ctypes.c_void_p.from_address(ctypes.addressof(self.struct) + _DATA_OFFSET[field]).value
-        return np.frombuffer((ctypes.c_double * (rows * max(columns, 1))).from_address(address)).reshape(shape)
+        size = rows * max(columns, 1) * np.dtype(dtype).itemsize
+        return np.frombuffer((ctypes.c_char * size).from_address(address), dtype).reshape(shape)
 
     def reset(self) -> None:
         """Back to what a new data of the model holds (ln_data_reset: state, internals, counters, the driven
@@ -364,6 +386,13 @@ class NativeData:
     drive_V = functools.cached_property(lambda self: self._view("drive_V", int(self.model.struct.n_driven), 3))
     drive_A = functools.cached_property(lambda self: self._view("drive_A", int(self.model.struct.n_driven), 3))
     impulse = functools.cached_property(lambda self: self._view("impulse", int(self.model.struct.n_driven), 3))
+    # ropes: the mode (1 for rods and taut ropes) and each rope's impulse over the last advance (L each)
+    link_active = functools.cached_property(lambda self: self._view("link_active", self.model.L, dtype=np.uint8))
+    rope_impulse = functools.cached_property(lambda self: self._view("rope_impulse", self.model.L))
+
+    def event_log(self, field: str, n: int) -> np.ndarray:
+        """The first n entries of the event log's array ``field`` (event_t, event_kind, event_link, event_impulse)."""
+        return self._view(field, n, dtype=np.int64 if field in ("event_kind", "event_link") else np.float64).copy()
 
     def __del__(self):
         if getattr(self, "_ptr", None):

@@ -13,7 +13,23 @@ from linknet_core.native.model import native_model
 from linknet_core.native.rigid import NativeRigidIntegrator
 from linknet_core.simulator.backend import Backend
 from linknet_core.simulator.settings import BACKEND_CLASSES
-from linknet_core.simulator.specialisation import RIGID, STATIC, choose_specialisation
+from linknet_core.simulator.specialisation import NONE, RIGID, STATIC, Specialisation, choose_specialisation
+
+
+def rope_refusal(scene, method_cls) -> str | None:
+    """Why the native core cannot run ``scene``'s ropes with the method ``method_cls`` (None where it can): it takes
+    their events on the embedded Runge-Kutta methods only, and not with input-driven anchors (whose jumps at the
+    communication points are events of the numpy reference's event integrator)."""
+    if not scene.rope.any():
+        return None
+    if not method_cls.adaptive:
+        return (f"{scene.name}: the native core takes ropes on the Runge-Kutta methods (dopri5, dop853), not on "
+                f"{method_cls.name}; the numpy reference runs {method_cls.name} with ropes (backend=\"numpy\" or "
+                "\"auto\")")
+    if any(motion.kind == "input" for motion in scene.motions):
+        return (f"{scene.name}: the native core does not take ropes with input-driven anchors (their jumps are rope "
+                "events of the numpy reference); backend=\"numpy\" or \"auto\" runs it")
+    return None
 
 
 class NativeBackend(Backend):
@@ -27,6 +43,11 @@ class NativeBackend(Backend):
     @classmethod
     def choose_specialisation(cls, scene, dyn, settings, U0):
         stepping = settings.stepping
+        if scene.rope.any():  # the modes change the links: the point-mass path, event by event
+            refusal = rope_refusal(scene, stepping.cls)
+            if refusal is not None:
+                raise SolverError(refusal)
+            return Specialisation(NONE, "ropes: the point-mass path, one mode of taut ropes at a time"), U0
         specialisation = choose_specialisation(scene, dyn, stepping.method, enabled=settings.specialise,
                                                tolerances=(stepping.rtol, stepping.atol))
         if specialisation.kind == STATIC:

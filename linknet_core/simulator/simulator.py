@@ -999,9 +999,11 @@ def _run(sim: Simulator, scene: Scene, t_end: float, method, dt, rtol, n_out, ou
 
 
 def _with_events(sim, slack, part, result: Result) -> Result:
-    """The result with the slack ropes of its samples and the run's events, for a scene with ropes or a ground."""
+    """The result with the slack ropes of its samples and the run's events, for a scene with ropes or a ground. The
+    slack flags follow from the samples' tensions (slack_links), as every sample's outputs give them: the samples
+    taken in one call into the native core fill no ``slack`` of their own."""
     if slack is not None:
-        result.slack, result.events = slack[part], list(sim.integrator.events)
+        result.slack, result.events = slack_links(sim.scene, result.T), list(sim.integrator.events)
     return result
 
 
