@@ -1516,6 +1516,50 @@ def _enumerate_active_sets(W, B, n_rods, tol_lam, tol_w):
     return found
 
 
+def _plane_tangents(normal):
+    """(2, 3): an orthonormal pair spanning the plane perpendicular to the unit vector ``normal`` (its SVD's other
+    right singular vectors)."""
+    return np.linalg.svd(np.asarray(normal, float)[None, :])[2][1:]
+
+
+def _coulomb_mode_solution(scene, X, U, F, anchor_acc, links, contacts, stuck, directions, mu):
+    """Newton's laws with Coulomb's friction written again for one mode: the ``links`` (rods, taut ropes) and the
+    masses ``contacts`` on the ground as in _seed_rows, of which those ``stuck`` (bool per contact) are held along
+    the plane by a tangential force F_t (two unknowns on the plane's tangents) and the others slide, loaded by
+    -mu N d with d their row of ``directions`` (3,). M a = F + C^T lambda + sum F_t + sum -mu N d; every row's
+    second derivative zero (W lambda - B plus the friction's C M^-1 f = 0), a stuck mass's tangential acceleration
+    zero. Returns (a (K, 3), lambda per row (links, then contacts: N), F_t (n_contacts, 3): the stuck ones' grip,
+    the sliding ones' -mu N d)."""
+    C, W, B, inv_mass, a_free = _seed_rows(scene, X, U, F, anchor_acc, links, contacts)
+    K, n_links, n_c = scene.K, len(links), len(contacts)
+    tangents = _plane_tangents(scene.ground.normal)
+    held = np.flatnonzero(stuck)
+    columns = np.zeros((3 * K, n_links + n_c + 2 * held.size))  # the force each unknown puts on the masses
+    columns[:, :n_links + n_c] = C.T
+    for j, k in enumerate(contacts):
+        if not stuck[j]:
+            columns[3 * k:3 * k + 3, n_links + j] -= mu * np.asarray(directions[j], float)
+    for i, j in enumerate(held):
+        k = contacts[j]
+        columns[3 * k:3 * k + 3, n_links + n_c + 2 * i:n_links + n_c + 2 * i + 2] = tangents.T
+    response = np.repeat(inv_mass, 3)[:, None] * columns  # a - a_free per unknown
+    grip_rows = np.zeros((2 * held.size, 3 * K))
+    for i, j in enumerate(held):
+        k = contacts[j]
+        grip_rows[2 * i:2 * i + 2, 3 * k:3 * k + 3] = tangents
+    A = np.vstack([C @ response, grip_rows @ response])
+    b = np.concatenate([B, -grip_rows @ a_free.ravel()])
+    x = np.linalg.lstsq(A, b, rcond=RTOL_NULL)[0] if b.size else np.zeros(0)
+    a = a_free + (response @ x).reshape(K, 3)
+    lam = x[:n_links + n_c]
+    friction = np.zeros((n_c, 3))
+    for j in range(n_c):
+        friction[j] = -mu * lam[n_links + j] * np.asarray(directions[j], float) if not stuck[j] else 0.0
+    for i, j in enumerate(held):
+        friction[j] = x[n_links + n_c + 2 * i:n_links + n_c + 2 * i + 2] @ tangents
+    return a, lam, friction, float(np.abs(A @ x - b).max(initial=0.0))
+
+
 class _Worst:
     """The largest violation of one condition over the states, with what broke it (in the scene's words)."""
 
@@ -1548,8 +1592,10 @@ def _check_unilateral(scene, sym, states, dynamics=None):
     set of the touching constraints that satisfies the conditions, from the seed's (9) and (25)-(26) written again
     here (_seed_rows), the external forces from the symbolic model: the accelerations are unique (W is positive
     semidefinite), and so are the multipliers where the active rows are independent. Skipped at states with more
-    than ENUMERATION_MAX touching constraints, and where a touching contact has Coulomb friction (its friction
-    enters the LCP's matrix, which the frictionless enumeration here does not model)."""
+    than ENUMERATION_MAX touching constraints. Where a touching contact has Coulomb friction (its friction enters
+    the LCP's matrix), the mode linknet chose is checked instead against Newton's laws with Coulomb's friction
+    written again (_check_coulomb_mode): stuck within the cone, sliding at -mu N d, slipping from rest against the
+    tangential acceleration the friction leaves."""
     from linknet_core.dynamics.unilateral import UnilateralDynamics
 
     uni = dynamics if dynamics is not None else UnilateralDynamics(scene)
@@ -1566,7 +1612,9 @@ def _check_unilateral(scene, sym, states, dynamics=None):
     acc = {c: _Worst() for c in ("T >= 0", "d2gap/dt2 >= 0", "T d2gap/dt2 = 0")}
     lcp = {c: _Worst() for c in ("LCP multiplier >= 0", "LCP multipliers = enumeration", "tensions = enumeration",
                                  "accelerations = enumeration", "one solution")}
-    n_touching = n_enumerated = n_enumerated_touching = 0
+    coulomb = {c: _Worst() for c in COULOMB_CONDITIONS}
+    coulomb_modes = np.zeros(4, int)  # contacts stuck, sliding, slipping from rest; touching ones left out
+    n_touching = n_enumerated = n_enumerated_touching = n_coulomb = 0
     skipped = {}
     slack_seen = taut_seen = 0
     for t, X, U, Aa in states:
@@ -1615,8 +1663,12 @@ def _check_unilateral(scene, sym, states, dynamics=None):
         n_ropes = ropes.size
         if uni.friction > 0 and (cand >= n_ropes).any():
             skipped["friction"] = (skipped.get("friction", (0,))[0] + 1,
-                                   f"a touching contact with Coulomb friction (mu {uni.friction:g}), which enters the "
-                                   f"LCP's matrix and the frictionless enumeration here does not model (last at {at})")
+                                   f"a touching contact with Coulomb friction (mu {uni.friction:g}), whose friction "
+                                   "enters the LCP's matrix: the mode chosen there is checked against Newton's laws "
+                                   f"with Coulomb's law instead (the friction check; last at {at})")
+            n_coulomb += 1
+            coulomb_modes += _check_coulomb_mode(scene, uni, X, U, F, Aa, A, T, at, names, cand, coulomb,
+                                                 (f_scale, v_scale, a_scale))
             continue
         candidates = np.zeros(uni.n_unilateral, bool)
         candidates[cand] = True
@@ -1689,7 +1741,103 @@ def _check_unilateral(scene, sym, states, dynamics=None):
     else:
         results.append(CheckResult("LCP = enumeration of the active sets", True, 0.0, tol,
                                    why or "no rope or contact touched at the sampled states", skipped=True))
+    if n_coulomb:
+        result("Coulomb friction: the mode against Newton's laws", coulomb,
+               f"{n_coulomb} state(s) with a touching contact on the rough ground (mu {uni.friction:g}; over them "
+               f"{coulomb_modes[0]} stuck, {coulomb_modes[1]} sliding, {coulomb_modes[2]} slipping from rest, "
+               f"{coulomb_modes[3]} touching and left out), the mode the LCP chose (taut, on the ground, stuck or "
+               "sliding) solved again from (9), (25)-(26) with Coulomb's friction: " + ", ".join(f"{c} {w.value:.1e}" for c, w in coulomb.items())
+               + " (relative to the force, velocity and acceleration scales)")
+    elif uni.friction > 0:
+        results.append(CheckResult("Coulomb friction: the mode against Newton's laws", True, 0.0, tol,
+                                   "no contact touched the rough ground at the sampled states", skipped=True))
     return results
+
+
+COULOMB_CONDITIONS = ("N >= 0, T >= 0", "stuck: |F_t| <= mu N", "sliding: F_t = -mu N d", "slip direction",
+                      "off the ground: d2gap/dt2 >= 0", "forces = Newton's laws", "accelerations = Newton's laws")
+
+
+def _check_coulomb_mode(scene, uni, X, U, F, anchor_acc, A, T, at, names, cand, table, scales):
+    """Coulomb's law at one state, on the mode linknet chose there (UnilateralDynamics.state_mode: which ropes are
+    taut, which masses are on the ground, which of those stick), against Newton's laws with Coulomb's friction
+    written again (_coulomb_mode_solution), the slip directions taken from the state: a sliding mass's tangential
+    velocity where it moves, else (a slip from rest) the direction of the friction linknet gives it, which must then
+    be that of the tangential acceleration it leaves (a_t = lambda d, lambda >= 0). The conditions: the normal forces
+    and taut ropes' tensions >= 0; a stuck mass's tangential force within the cone |F_t| <= mu N; a sliding mass's
+    friction -mu N d (linknet's against the one solved here); the touching constraints left out separating, d2gap/dt2
+    >= 0; and linknet's accelerations, tensions, normal forces and friction equal to those solved here. ``cand``: the
+    touching constraints (as check.py found them); ``table``: {condition: _Worst}. Returns how many contacts were
+    stuck, sliding and slipping from rest, and how many touching constraints the mode left out."""
+    f_scale, v_scale, a_scale = scales
+    n_ropes, mu = uni.rope_links.size, uni.friction
+    ground = scene.ground
+    md = uni.state_mode(X, U, None, anchor_acc)
+    normal_l, tangential_l = uni.ground_forces(X, U, None, anchor_acc)
+    rods = np.flatnonzero(~scene.rope)
+    taut = uni.rope_links[md.active[:n_ropes]]
+    links = np.concatenate([rods, taut]).astype(int)
+    contacts = uni.contact_masses[md.active[n_ropes:]]
+    stuck = md.stuck[md.active[n_ropes:]]
+    v_t = U[contacts] - np.outer(U[contacts] @ ground.normal, ground.normal)
+    speed = np.linalg.norm(v_t, axis=1)
+    moving = speed > TOUCH_RTOL * v_scale
+    directions = np.zeros((contacts.size, 3))
+    directions[moving] = v_t[moving] / speed[moving, None]
+    at_rest = ~moving & ~stuck
+    given = np.linalg.norm(tangential_l[contacts], axis=1)
+    directions[at_rest] = -np.divide(tangential_l[contacts][at_rest], given[at_rest, None],
+                                     out=np.zeros((int(at_rest.sum()), 3)), where=given[at_rest, None] > 0)
+    a, lam, friction, residual = _coulomb_mode_solution(scene, X, U, F, anchor_acc, links, contacts, stuck,
+                                                        directions, mu)
+    N = lam[links.size:]
+    label = dict(zip(uni.contact_masses.tolist(), names[n_ropes:]))
+    for i, l in enumerate(links[rods.size:]):
+        table["N >= 0, T >= 0"].add(-lam[rods.size + i] / f_scale,
+                                    f"rope {scene.link_label(int(l))} at {at}: tension {lam[rods.size + i]:.6g} N")
+    for j, k in enumerate(contacts):
+        where = f"{label[int(k)]} at {at}"
+        table["N >= 0, T >= 0"].add(-N[j] / f_scale, f"{where}: normal force {N[j]:.6g} N")
+        if stuck[j]:
+            margin = float(np.linalg.norm(friction[j])) - mu * N[j]
+            table["stuck: |F_t| <= mu N"].add(margin / f_scale, f"{where} (stuck): |F_t| "
+                                              f"{np.linalg.norm(friction[j]):.6g} N, mu N {mu * N[j]:.6g} N")
+        else:
+            off = float(np.linalg.norm(tangential_l[k] - friction[j]))
+            table["sliding: F_t = -mu N d"].add(off / f_scale, f"{where} (sliding): linknet's friction "
+                                                f"{np.round(tangential_l[k], 9).tolist()} N, -mu N d "
+                                                f"{np.round(friction[j], 9).tolist()} N")
+            if at_rest[j]:  # the slip from rest: the friction opposes the tangential acceleration it leaves
+                a_t = a[k] - (a[k] @ ground.normal) * ground.normal
+                along = float(a_t @ directions[j])
+                across = float(np.linalg.norm(a_t - along * directions[j]))
+                table["slip direction"].add(max(across, -along) / a_scale,
+                                            f"{where} (slipping from rest along {np.round(directions[j], 9).tolist()}): "
+                                            f"its tangential acceleration {np.round(a_t, 9).tolist()} m/s^2")
+        table["forces = Newton's laws"].add(abs(normal_l[k] - N[j]) / f_scale,
+                                            f"{where}: normal force {normal_l[k]:.6g} N, Newton's laws {N[j]:.6g} N")
+    for i, l in enumerate(links):
+        table["forces = Newton's laws"].add(abs(T[l] - lam[i]) / f_scale, f"{scene.link_label(int(l))} at {at}: "
+                                            f"tension {T[l]:.6g} N, Newton's laws {lam[i]:.6g} N")
+    # the touching ropes and contacts the mode leaves out: separating (their gap's second derivative >= 0)
+    for u in cand:
+        if md.active[u]:
+            continue
+        if u < n_ropes:
+            l = uni.rope_links[u]
+            d = X[scene.k2[l]] - X[scene.k1[l]]
+            g2 = float(_gap_second_derivatives(d[None], (U[scene.k2[l]] - U[scene.k1[l]])[None],
+                                               (a[scene.k2[l]] - a[scene.k1[l]])[None])[0])
+        else:
+            g2 = float(a[uni.contact_masses[u - n_ropes]] @ ground.normal)
+        table["off the ground: d2gap/dt2 >= 0"].add(-g2 / a_scale, f"{names[u]} at {at} (left out): d2gap/dt2 "
+                                                                   f"{g2:.6g} m/s^2")
+    free = ~(scene.fixed | scene.driven)
+    worst = float(np.abs((A - a)[free]).max(initial=0.0))
+    table["accelerations = Newton's laws"].add(max(worst, residual) / a_scale,
+                                               f"at {at}: accelerations differ by {worst:.3g} m/s^2 (Newton's laws "
+                                               f"solved to {residual:.3g})")
+    return np.array([stuck.sum(), (~stuck).sum(), at_rest.sum(), sum(not md.active[u] for u in cand)])
 
 
 def run_unilateral_checks(scene, samples=5, seed=0, kernel=False, native=True, states=None):
