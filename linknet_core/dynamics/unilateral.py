@@ -317,6 +317,12 @@ class ModeDynamics:
     def rhs_kernel(self) -> str:
         return "numpy"
 
+    @property
+    def sliding_friction(self) -> bool:
+        """Whether a contact slides in this mode: its friction -mu N d in ``forces`` then depends on the velocities
+        (d along its tangential velocity), and RATTLE's second half kick is implicit in them, as for drag."""
+        return bool(self.sliding.size)
+
     def forces(self, X, U, F_input=None):
         """The external forces on the masses (F_input included) and the sliding contacts' friction: what the
         integrators that take the constraint forces from projections (RATTLE) kick with."""

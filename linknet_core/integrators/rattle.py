@@ -46,8 +46,9 @@ class Rattle(FixedStepIntegrator):
         if drive is not None:
             U_kicked = drive.move_velocities(t_end, U_kicked)
         U_new = dyn.project_velocities(X_new, U_kicked)
-        if has_velocity_dependent_forces(self.dyn.scene):
-            U_new = self._implicit_kick(X_new, U_half, U_new, h, F_input, t_end)
+        drag = has_velocity_dependent_forces(self.dyn.scene)
+        if drag or getattr(self.dyn, "sliding_friction", False):  # Coulomb friction on a sliding mass (ropes, ground)
+            U_new = self._implicit_kick(X_new, U_half, U_new, h, F_input, t_end, stiff_ok=not drag)
         return X_new, U_new
 
     def _velocity_after_position_stage(self, X, X_free, X_new, U_half, h, factored_at_X):
@@ -63,11 +64,15 @@ class Rattle(FixedStepIntegrator):
         normal = shift - self.dyn.project_velocities(X, shift)
         return np.where(self.dyn._inv_mass3 == 0.0, (X_new - X) / h, U_half + normal / h)
 
-    def _implicit_kick(self, X_new, U_half, U_new, h, F_input, t_end):
-        """Second half kick with the forces at U_{n+1} itself (drag, dampers): the step stays symmetric and
-        so second order (with the half-step velocity it is first order). Fixed-point iteration, contraction
-        factor ~ h c / (2 m) for a damping coefficient c on a mass m."""
+    def _implicit_kick(self, X_new, U_half, U_new, h, F_input, t_end, stiff_ok=False):
+        """Second half kick with the forces at U_{n+1} itself (drag, dampers, a sliding mass's Coulomb friction
+        along its velocity): the step stays symmetric and so second order (with the half-step velocity it is first
+        order). Fixed-point iteration, contraction factor ~ h c / (2 m) for a damping coefficient c on a mass m, and
+        ~ h mu N / (2 m |v_t|) for friction, which a slow slip (its first steps from rest) takes above 1. With
+        ``stiff_ok`` (friction alone) an iteration that stops contracting ends with its first iterate instead: the
+        kick with the forces at the explicit kick's velocity, whose error O(h^2) leaves the step second order."""
         dyn = self.dyn
+        first, last_change = None, np.inf
         for _ in range(60):
             F1 = dyn.forces(X_new, U_new, F_input)
             U_kicked = U_half + 0.5 * h * dyn._inv_mass3 * F1
@@ -76,7 +81,13 @@ class Rattle(FixedStepIntegrator):
             U_next = dyn.project_velocities(X_new, U_kicked)
             change = float(np.abs(U_next - U_new).max())
             U_new = U_next
+            first = U_new if first is None else first
             if change <= 4e-16 * float(np.abs(U_new).max()) or change == 0.0:
                 return U_new
+            if stiff_ok and change >= last_change:
+                return first
+            last_change = change
+        if stiff_ok:
+            return first
         raise StepFailure(f"the implicit velocity half step (drag, dampers) does not converge at dt = {h:g}: the "
                           "damping is too stiff for this step (h c / 2m near or above 1); reduce dt")
