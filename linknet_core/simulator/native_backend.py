@@ -7,6 +7,7 @@ import functools
 
 import numpy as np
 
+from linknet_core.dynamics.unilateral import native_refusal
 from linknet_core.errors import SolverError
 from linknet_core.native.integrator import NativeIntegrator
 from linknet_core.native.model import native_model
@@ -15,21 +16,6 @@ from linknet_core.simulator.backend import Backend
 from linknet_core.simulator.settings import BACKEND_CLASSES
 from linknet_core.simulator.specialisation import NONE, RIGID, STATIC, Specialisation, choose_specialisation
 
-
-def rope_refusal(scene, method_cls) -> str | None:
-    """Why the native core cannot run ``scene``'s ropes with the method ``method_cls`` (None where it can): it takes
-    their events on the embedded Runge-Kutta methods only, and not with input-driven anchors (whose jumps at the
-    communication points are events of the numpy reference's event integrator)."""
-    if not scene.rope.any():
-        return None
-    if not method_cls.adaptive:
-        return (f"{scene.name}: the native core takes ropes on the Runge-Kutta methods (dopri5, dop853), not on "
-                f"{method_cls.name}; the numpy reference runs {method_cls.name} with ropes (backend=\"numpy\" or "
-                "\"auto\")")
-    if any(motion.kind == "input" for motion in scene.motions):
-        return (f"{scene.name}: the native core does not take ropes with input-driven anchors (their jumps are rope "
-                "events of the numpy reference); backend=\"numpy\" or \"auto\" runs it")
-    return None
 
 
 class NativeBackend(Backend):
@@ -44,7 +30,7 @@ class NativeBackend(Backend):
     def choose_specialisation(cls, scene, dyn, settings, U0):
         stepping = settings.stepping
         if scene.rope.any():  # the modes change the links: the point-mass path, event by event
-            refusal = rope_refusal(scene, stepping.cls)
+            refusal = native_refusal(scene, stepping.cls)
             if refusal is not None:
                 raise SolverError(refusal)
             return Specialisation(NONE, "ropes: the point-mass path, one mode of taut ropes at a time"), U0
@@ -129,6 +115,10 @@ class NativeBackend(Backend):
 
     def linearization(self, state, F, hold):
         from linknet_core.native.interface import NativeLinearization
+
+        if self.scene.unilateral:  # the rods' (25)-(26): no derivative across a rope's events
+            from linknet_core.dynamics.unilateral import linearization_refusal
+            raise SolverError(linearization_refusal(self.scene))
 
         with self._holding(state.t, hold) as integrator:
             try:
