@@ -7,13 +7,16 @@ where that needs |P_t| <= mu P_n; else it slides, P_t = -mu P_n d with d the dir
 after the impact (found here by a scan of its angle and brentq). A linear system for each case: the closed form of a
 rigid body hitting with one contact point. The friction feeds back into the normal impulse through the rod: with mu
 0.3 the normal impulse of a foot sliding on is 14% below the frictionless impact's, and 19% above it for a foot
-slid backwards."""
+slid backwards. And a dumbbell landing flat on both ends at once, its ends' slips turned by the rod, against the same
+equations with two contacts (each stuck or sliding, the two slip angles by fsolve)."""
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 import pytest
 from rope_references import G
-from scipy.optimize import brentq
+from scipy.optimize import brentq, fsolve
 
 import linknet_core as ln
 from linknet_core.dynamics.unilateral import UnilateralDynamics
@@ -74,6 +77,10 @@ def newtons_impact(X, U, mu, restitution):
                 slides.append((U_plus, P_n, P_t))
     assert len(slides) == 1, "Coulomb's impact law has one solution here"
     return (*slides[0], "slide")
+
+
+def degrees(a, b):
+    return float(np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1.0, 1.0))))
 
 
 def kinetic_energy(U):
@@ -142,3 +149,86 @@ def test_a_rod_dropped_at_a_slant_lands_with_coulombs_impulse_and_its_energy_nev
     after = np.flatnonzero(~before)[0]
     impact_loss = kinetic_energy(U_land) - kinetic_energy(U_ref)
     assert energy[after] - (energy[0] - impact_loss) < 1e-9 * energy[0]
+
+
+def newtons_flat_landing(X, U, masses, mu):
+    """The dumbbell of ``masses`` lying along its rod, both ends hitting the plane z = 0 at once (inelastic): each
+    end m_i dU_i = P_n,i z + P_t,i -+ Lambda e, e . (U2+ - U1+) = 0, U_i+ . z = 0, and Coulomb's law at each end
+    (stuck: its tangential velocity zero, |P_t,i| <= mu P_n,i; sliding: P_t,i = -mu P_n,i d_i, d_i along its
+    tangential velocity after, the two angles by fsolve from the directions before). [(the ends' regimes, U+)] of
+    every combination that satisfies the law."""
+    e = (X[1] - X[0]) / np.linalg.norm(X[1] - X[0])
+
+    def solve(regimes, slips):
+        # unknowns: U1+ (3), U2+ (3), Lambda, P_n (2), P_t (2 x 2)
+        A, b = np.zeros((13, 13)), np.zeros(13)
+        for i, sign in ((0, 1.0), (1, -1.0)):
+            A[3 * i:3 * i + 3, 3 * i:3 * i + 3] = masses[i] * np.eye(3)
+            A[3 * i:3 * i + 3, 6], A[3 * i:3 * i + 3, 7 + i] = -sign * e, -Z
+            A[3 * i:3 * i + 2, 9 + 2 * i:11 + 2 * i] = -np.eye(2)
+            b[3 * i:3 * i + 3] = masses[i] * U[i]
+            A[7 + i, 3 * i + 2] = 1.0
+            row = 9 + 2 * i
+            if regimes[i] == "stick":
+                A[row, 3 * i], A[row + 1, 3 * i + 1] = 1.0, 1.0
+            else:
+                A[row, row] = A[row + 1, row + 1] = 1.0
+                A[row:row + 2, 7 + i] = mu * slips[i]
+        A[6, 0:3], A[6, 3:6] = -e, e
+        x = np.linalg.lstsq(A, b, rcond=None)[0]  # both stuck along the rod: the tangential impulses' split is free
+        return x[:6].reshape(2, 3), x[7:9], x[9:13].reshape(2, 2)
+
+    def unit(phi):
+        return np.array([np.cos(phi), np.sin(phi)])
+    found = []
+    for regimes in (("stick", "stick"), ("stick", "slide"), ("slide", "stick"), ("slide", "slide")):
+        sliding = [i for i in range(2) if regimes[i] == "slide"]
+
+        def slips_of(phis):
+            slips = [np.zeros(2), np.zeros(2)]
+            for i, phi in zip(sliding, phis):
+                slips[i] = unit(phi)
+            return slips
+
+        def across(phis):
+            U_plus = solve(regimes, slips_of(phis))[0]
+            return [U_plus[i, 1] * np.cos(p) - U_plus[i, 0] * np.sin(p) for i, p in zip(sliding, phis)]
+        with warnings.catch_warnings():  # a combination without a root ends with fsolve's warning, and is refused below
+            warnings.simplefilter("ignore", RuntimeWarning)
+            phis = fsolve(across, [np.arctan2(U[i, 1], U[i, 0]) for i in sliding], xtol=1e-15) if sliding else []
+        slips = slips_of(phis)
+        U_plus, P_n, P_t = solve(regimes, slips)
+        holds = bool(np.all(P_n >= 0))
+        for i in range(2):
+            if regimes[i] == "stick":
+                holds &= bool(np.linalg.norm(P_t[i]) <= mu * P_n[i])
+            else:
+                v = U_plus[i, :2]
+                holds &= bool(v @ slips[i] > 0 and abs(v[1] * slips[i][0] - v[0] * slips[i][1]) < 1e-13)
+        if holds:
+            found.append((regimes, U_plus))
+    return found
+
+
+@pytest.mark.parametrize("velocities,mu", [(([1.0, 0.5, -2], [1.0, -0.7, -1.5]), 0.3),
+                                           (([0.3, 0.9, -2], [0.3, -0.4, -1.0]), 0.4)])
+def test_a_dumbbell_landing_flat_slides_on_both_ends_their_slips_turned_by_the_rod(velocities, mu):
+    # the rod carries the ends' friction along its length, not across: each end's slip turns (by 2.4 and 2.1
+    # degrees, and 1.3 and 1.4), which the impact solves for both at once
+    masses = np.array([1.0, 1.5])
+    X, U = np.array([[0.5, 0.0, 0.0], [-0.5, 0.0, 0.0]]), np.array(velocities, float)
+    found = newtons_flat_landing(X, U, masses, mu)
+    assert [regimes for regimes, _ in found] == [("slide", "slide")]
+    U_ref = found[0][1]
+    scene = ln.Scene.from_dict({
+        "name": "flat_dumbbell", "gravity": [0, 0, -G],
+        "masses": [{"name": f"m{i + 1}", "position": X[i].tolist(), "mass": float(masses[i]),
+                    "velocity": U[i].tolist()} for i in range(2)],
+        "links": [{"a": "m1", "b": "m2", "length": 1.0}],
+        "ground": {"point": [0, 0, 0], "normal": [0, 0, 1], "friction": mu}})
+    dyn = UnilateralDynamics(scene)
+    U_after = dyn.coulomb_impact(X, U, dyn.touching(X))[0]
+    assert np.abs(U_after - U_ref).max() <= 1e-14 * float(np.abs(U).max())
+    turned = [degrees(U_ref[i, :2], U[i, :2]) for i in range(2)]
+    assert min(turned) > 1.0
+    assert 0.5 * np.einsum("i,ij,ij->", masses, U_ref, U_ref) < 0.5 * np.einsum("i,ij,ij->", masses, U, U)
