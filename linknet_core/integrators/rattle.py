@@ -3,8 +3,9 @@
 Order 2, symplectic and time-reversible for conservative forces, so the energy error stays bounded over
 long runs (no drift). Positions satisfy (11) to the Newton tolerance (1e-14 relative by default) and
 velocities satisfy (12) to round-off at the end of every step. With velocity-dependent forces (drag,
-dampers) the second half kick is implicit in the new velocity (fixed-point iteration): the step stays
-symmetric and second order; it is no longer symplectic (the system is not Hamiltonian then anyway).
+dampers, a sliding mass's Coulomb friction on a ground) the second half kick is implicit in the new velocity
+(fixed-point iteration): the step stays symmetric and second order; it is no longer symplectic (the system is
+not Hamiltonian then anyway).
 """
 from __future__ import annotations
 
