@@ -40,7 +40,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from linknet_core.dynamics.complementarity import solve_mixed_lcp
+from linknet_core.dynamics.complementarity import _basis_solution, solve_mixed_lcp
 from linknet_core.dynamics.roots import bracketed_root
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import ConsistencyError, SceneError, SolverError
@@ -822,32 +822,38 @@ class UnilateralDynamics(Dynamics):
         """(Lambda in md's row order, the sliding contacts' friction impulses (K, 3)) of the impact with md's stuck
         contacts held (their grip rows) and the others sliding (coulomb_impact). A friction impulse f on the
         masses shifts the rows' rates by C M^-1 f: the slip directions d_c are found with the sliding contacts'
-        friction as loads (the velocities after the impact and the normal impulses are affine in them), then the
-        impact is solved with -mu P_n,c d_c carried into the columns of W, (W - D) Lambda + q as the acceleration
-        level's W - D carries the sliding friction (ModeDynamics.normal_system)."""
+        friction as loads (the velocities after the impact and the impulses are affine in them within one basis of
+        the impact's LCP: the ropes and contacts that take an impulse), then the impact is solved with -mu P_n,c d_c
+        carried into the columns of W, (W - D) Lambda + q as the acceleration level's W - D carries the sliding
+        friction (ModeDynamics.normal_system); where that changes the basis (a rope the friction jerks slack or
+        taut), the directions are found again in the new one."""
         W, rates, q, _, rows_uni = self._impact_problem(md, X, U)
-        start = rows_uni & (rates < 0)
         Xa = md.pad(X)
         masses = self.contact_masses[md.sliding]
+        friction = np.zeros((self.scene.K, 3))
+        lam, basis = solve_mixed_lcp(W, -q, rows_uni, rows_uni & (rates < 0))
+        if not masses.size:
+            return lam, friction
 
         def rate_shift(load):
             return md.inner.constraint_rows(Xa, md.pad_velocity(X, self._inv_mass3 * load))
 
-        def response(load):
-            lam, _ = solve_mixed_lcp(W, -(q + rate_shift(load)), rows_uni, start)
+        def response(load):  # in the impact's basis (its rows taken as equalities): affine in the load
+            lam = _basis_solution(W, -(q + rate_shift(load)), basis)
             U_plus = U + md.link_impulse_velocities(X, lam) + self._inv_mass3 * load
             return self.tangential_velocities(U_plus)[md.sliding] @ self.tangents.T, lam[md.sliding_rows]
 
-        friction = np.zeros((self.scene.K, 3))
-        if not masses.size:
-            return solve_mixed_lcp(W, -q, rows_uni, start)[0], friction
-        directions = self._coulomb_directions(response, masses)
-        coupled = np.array(W)
-        for row, k, d in zip(md.sliding_rows, masses, directions):
-            load = np.zeros((self.scene.K, 3))
-            load[k] = -self.friction * d
-            coupled[:, row] += rate_shift(load)
-        lam, _ = solve_mixed_lcp(coupled, -q, rows_uni, start)
+        for _ in range(self.n_unilateral + 1):  # until the basis the directions were found in is the impact's
+            directions = self._coulomb_directions(response, masses)
+            coupled = np.array(W)
+            for row, k, d in zip(md.sliding_rows, masses, directions):
+                load = np.zeros((self.scene.K, 3))
+                load[k] = -self.friction * d
+                coupled[:, row] += rate_shift(load)
+            lam, found = solve_mixed_lcp(coupled, -q, rows_uni, basis)
+            if (found == basis).all():
+                break
+            basis = found
         np.add.at(friction, masses, -self.friction * lam[md.sliding_rows][:, None] * directions)
         return lam, friction
 

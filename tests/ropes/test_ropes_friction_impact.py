@@ -232,3 +232,32 @@ def test_a_dumbbell_landing_flat_slides_on_both_ends_their_slips_turned_by_the_r
     turned = [degrees(U_ref[i, :2], U[i, :2]) for i in range(2)]
     assert min(turned) > 1.0
     assert 0.5 * np.einsum("i,ij,ij->", masses, U_ref, U_ref) < 0.5 * np.einsum("i,ij,ij->", masses, U, U)
+
+
+@pytest.mark.parametrize("velocity,mu,rope", [([2.0, 0.0, -2.0], 0.9, "taut"), ([2.0, 0.5, -2.0], 0.6, "taut"),
+                                              ([2.0, 0.0, -2.0], 0.3, "slack"), ([2.0, 1.0, -2.0], 0.3, "slack")])
+def test_a_two_mass_rope_landing_sliding_jerks_taut_or_goes_slack_with_coulombs_impulse(velocity, mu, rope):
+    # the rope 20 degrees up ahead of the landing mass: where the rod's impulse in the rigid body's equations pulls,
+    # the rope takes it (the same impact); where it would push, the rope goes slack and the foot lands alone: P_n =
+    # m1 v_n, and its tangential velocity loses mu v_n (or stops), the other mass flying on untouched
+    angle = np.radians(20.0)
+    X = np.array([[0.0, 0.0, 0.0], [np.cos(angle), 0.0, np.sin(angle)]])
+    U = np.array([velocity, velocity], float)
+    U_rod, P_n, _, _ = newtons_impact(X, U, mu, 0.0)
+    pull = -MASSES[1] * (U_rod[1] - U[1]) @ (X[1] - X[0])  # the rod's impulse on the far mass, along the rope
+    scene = rod_scene(X, U, mu, 0.0).to_dict()
+    scene["links"][0]["kind"] = "rope"
+    dyn = UnilateralDynamics(ln.Scene.from_dict(scene))
+    U_after, impulses, _, _ = dyn.coulomb_impact(X, U, dyn.touching(X))
+    if rope == "taut":
+        assert pull > 0
+        U_ref = U_rod
+        assert impulses[0] > 0 and impulses[1] == pytest.approx(P_n, rel=1e-14)
+    else:
+        assert pull < 0
+        v_n, v_t = -U[0, 2], U[0, :2]
+        left = max(np.linalg.norm(v_t) - mu * v_n, 0.0)
+        U_ref = np.array(U)
+        U_ref[0] = np.concatenate([left * v_t / np.linalg.norm(v_t), [0.0]])
+        assert impulses[0] == 0.0 and impulses[1] == pytest.approx(MASSES[0] * v_n, rel=1e-14)
+    assert np.abs(U_after - U_ref).max() <= 1e-14 * float(np.abs(U).max())
