@@ -778,8 +778,8 @@ class UnilateralDynamics(Dynamics):
     def coulomb_impact(self, X, U, touching):
         """The impact at a state where the unilateral constraints ``touching`` are at contact, with Coulomb's
         friction on the ground: Moreau's impact law with Coulomb friction as one problem in the normal and the
-        tangential impulses (Pfeiffer and Glocker, Multibody Dynamics with Unilateral Contacts, 1996, sec. 7.3;
-        Glocker, Set-Valued Force Laws, 2001, ch. 8): with the velocity jump M dU = C^T Lambda + sum_c P_t,c at the
+        tangential impulses (Pfeiffer and Glocker, Multibody Dynamics with Unilateral Contacts, 1996; Glocker,
+        Set-Valued Force Laws, 2001): with the velocity jump M dU = C^T Lambda + sum_c P_t,c at the
         contacts' masses,
 
             rods:               (C U+)_i = 0
@@ -793,8 +793,8 @@ class UnilateralDynamics(Dynamics):
         planar motion). Every contact that took an impulse or rests starts stuck; the one furthest outside its cone
         slides, in turn, until every stuck one is inside it. With e = 0 the impact dissipates: P_n v_n+ = 0, P_t .
         v_t+ = -mu P_n |v_t+| <= 0 and the kinetic energy changes by P . v+ - P . W P / 2 <= 0 (Newton's restitution
-        with friction on coupled masses can add energy where a slip reverses; Glocker 2001, sec. 8.6). Where no
-        contact takes a normal impulse the frictionless impact is the solution. Returns (U after, normal impulses
+        with friction on coupled masses can add energy where a slip reverses: Stronge, J. Appl. Mech. 58, 1991).
+        Where no contact takes a normal impulse the frictionless impact is the solution. Returns (U after, normal impulses
         (n_unilateral,) N s, the constraints that took one, |P_t| (n_contacts,) N s)."""
         U_free, impulses, took = self.impact(X, U, touching)
         n_ropes = self.rope_links.size
