@@ -794,8 +794,8 @@ class UnilateralDynamics(Dynamics):
         slides, in turn, until every stuck one is inside it. With e = 0 the impact dissipates: P_n v_n+ = 0, P_t .
         v_t+ = -mu P_n |v_t+| <= 0 and the kinetic energy changes by P . v+ - P . W P / 2 <= 0 (Newton's restitution
         with friction on coupled masses can add energy where a slip reverses: Stronge, J. Appl. Mech. 58, 1991).
-        Where no contact takes a normal impulse the frictionless impact is the solution. Returns (U after, normal impulses
-        (n_unilateral,) N s, the constraints that took one, |P_t| (n_contacts,) N s)."""
+        Where no contact takes a normal impulse the frictionless impact is the solution. Returns (U after, normal
+        impulses (n_unilateral,) N s, the constraints that took one, |P_t| (n_contacts,) N s)."""
         U_free, impulses, took = self.impact(X, U, touching)
         n_ropes = self.rope_links.size
         if self.friction == 0 or not took[n_ropes:].any():

@@ -1746,7 +1746,8 @@ def _check_unilateral(scene, sym, states, dynamics=None):
                f"{n_coulomb} state(s) with a touching contact on the rough ground (mu {uni.friction:g}; over them "
                f"{coulomb_modes[0]} stuck, {coulomb_modes[1]} sliding, {coulomb_modes[2]} slipping from rest, "
                f"{coulomb_modes[3]} touching and left out), the mode the LCP chose (taut, on the ground, stuck or "
-               "sliding) solved again from (9), (25)-(26) with Coulomb's friction: " + ", ".join(f"{c} {w.value:.1e}" for c, w in coulomb.items())
+               "sliding) solved again from (9), (25)-(26) with Coulomb's friction: "
+               + ", ".join(f"{c} {w.value:.1e}" for c, w in coulomb.items())
                + " (relative to the force, velocity and acceleration scales)")
     elif uni.friction > 0:
         results.append(CheckResult("Coulomb friction: the mode against Newton's laws", True, 0.0, tol,
