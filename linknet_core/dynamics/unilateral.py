@@ -81,16 +81,12 @@ class Event(NamedTuple):
 
 def native_refusal(scene: Scene, method_cls=None) -> str | None:
     """Why the native core cannot run ``scene`` (with the integrator class ``method_cls``, where given), or None where
-    it can. It takes ropes (linknet_core/native/src/stages/ropes.c) on the embedded Runge-Kutta methods, not with
-    input-driven anchors (whose jumps are rope events of the event integrator here); a ground and its friction run on
-    the numpy reference only."""
+    it can. It takes ropes (linknet_core/native/src/stages/ropes.c), not with input-driven anchors (whose jumps are
+    rope events of the event integrator here); a ground and its friction run on the numpy reference only."""
     if scene.ground is not None:
         what = "it has a ground, and the native core (backend=\"native\", the native FMU) does not take a ground yet"
     elif not scene.rope.any() or method_cls is None:
         return None
-    elif not method_cls.adaptive:
-        what = (f"the native core takes ropes on the Runge-Kutta methods (dopri5, dop853), not on {method_cls.name}, "
-                "whose steps hold the events at their located times on the numpy reference")
     elif any(motion.kind == "input" for motion in scene.motions):
         what = ("it has ropes and input-driven anchors, whose jumps are rope events that the native core does not "
                 "take")

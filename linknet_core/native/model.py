@@ -219,6 +219,7 @@ class NativeModel:
         m.lcp_tol, m.pivots_per_row = complementarity.LCP_TOL, complementarity.PIVOTS_PER_ROW
         m.enumeration_limit = complementarity.ENUMERATION_LIMIT
         m.max_events_per_step, m.gap_newton_iterations = events.MAX_EVENTS_PER_STEP, events.GAP_NEWTON_ITERATIONS
+        m.short_step = events.SHORT_STEP
         m.scene_size = unilateral.scene_size(scene)
         m.gravity_norm = float(np.linalg.norm(scene.gravity))
 

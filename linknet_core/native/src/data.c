@@ -246,7 +246,6 @@ static int run_interval(const ln_model *m_scene, const ln_method *meth, ln_data 
     ln_model mode;
     const ln_model *m = m_scene;
     if (m_scene->n_ropes) {
-        if (meth->kind != LN_RUNGE_KUTTA) return LN_ROPES_NEED_RUNGE_KUTTA;
         mode = *m_scene;
         mode.inv_R = d->mode_inv_R;
         m = &mode;

@@ -114,7 +114,7 @@ const char *ln_status_name(int status)
     static const char *const names[] = {"ok", "projection failed", "singular", "non-finite", "step underflow",
                                         "too many steps", "left the plane", "implicit kick failed", "bad argument",
                                         "out of memory", "anchor motion failed", "rope event chatter",
-                                        "no rope mode", "ropes need a Runge-Kutta method"};
+                                        "no rope mode"};
     return status >= 0 && status < (int)(sizeof names / sizeof names[0]) ? names[status] : "unknown status";
 }
 
@@ -182,12 +182,8 @@ void ln_explain(const ln_model *m, const ln_method *meth, const ln_data *d, int 
                  "constraints contradict each other, as a rope shorter than a rod beside it would), or it cycled and "
                  "has more than %lld touching ropes to enumerate", span, (long long)m->enumeration_limit);
         break;
-    case LN_ROPES_NEED_RUNGE_KUTTA:
-        snprintf(out, n, "the native core takes ropes on the Runge-Kutta methods only (dopri5, dop853); RATTLE and "
-                 "its compositions run ropes on the numpy reference (backend=\"numpy\")");
-        break;
     default:
-        if (status > 0 && status <= LN_ROPES_NEED_RUNGE_KUTTA)
+        if (status > 0 && status <= LN_NO_MODE)
             snprintf(out, n, "the native core stopped %s: %s", span, ln_status_name(status));
         else
             snprintf(out, n, "the native core stopped %s: status %d", span, status);

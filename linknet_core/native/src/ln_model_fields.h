@@ -109,7 +109,7 @@
     /* ropes (stages/ropes.c): links that only pull, each slack or taut (the mode, ln_data.link_active); their     \
        events' tolerances, filled from the numpy reference's single source (linknet_core.dynamics.unilateral:      \
        TOUCH_TOL, CROSS_TOL, FORCE_TOL, REST_HEIGHT; .complementarity: LCP_TOL, PIVOTS_PER_ROW, ENUMERATION_LIMIT;  \
-       linknet_core.integrators.events: MAX_EVENTS_PER_STEP, GAP_NEWTON_ITERATIONS). A rope's length scale is its   \
+       linknet_core.integrators.events: MAX_EVENTS_PER_STEP, GAP_NEWTON_ITERATIONS, SHORT_STEP). A rope's length scale is its   \
        R_l. No ropes: n_ropes = 0 and nothing of this is read */                                                   \
     SCALAR(ln_int, n_ropes)                                                                                         \
     ARRAY(ln_int, rope_link, s->n_ropes)                /* the link of each rope, in link order */                  \
@@ -123,6 +123,8 @@
     SCALAR(ln_int, enumeration_limit)                                                                               \
     SCALAR(ln_int, max_events_per_step)                                                                             \
     SCALAR(ln_int, gap_newton_iterations)                                                                           \
+    SCALAR(double, short_step)                          /* fixed-step methods: a part of a step shorter than this   \
+                                                           fraction of dt is a Taylor step (events.SHORT_STEP) */   \
     SCALAR(double, scene_size)                          /* the scene's length scale, m (UnilateralDynamics.size) */ \
     SCALAR(double, gravity_norm)                        /* |g|, m/s^2: the velocity and rest speed scales */
 

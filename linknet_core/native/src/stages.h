@@ -44,10 +44,13 @@ double FN(ln_rk_error_norm)(const ln_model *m, const ln_method *meth, const doub
 int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
                     const double *F_base, double *t, double t_target, ln_int max_steps, ln_int *accepted);
 
-/* stages/ropes.c: scenes with ropes, on the embedded Runge-Kutta methods; mm is the mode's model (its inv_R is
+/* stages/ropes.c: scenes with ropes; mm is the mode's model (its inv_R is
    d->mode_inv_R: 0 on the slack ropes). start: the mode chosen from the state at the first advance, its mask in use.
    step_events: after an accepted step from (X0, U0) at t0 to (X1, U1) at *t1, the first event within it taken
    (the step then ends just past it, in the new mode). */
 int FN(ln_rope_start)(const ln_model *mm, ln_data *d, double *X, double *U, const double *F_base, double t);
 int FN(ln_rope_step_events)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X0, const double *U0,
                             const double *F_base, double t0, double *X1, double *U1, double *t1);
+/* A fixed-step method's step from (X, U) at t0 to t1 in place, with the events within it taken at their times. */
+int FN(ln_rope_fixed_step)(const ln_model *mm, const ln_method *meth, ln_data *d, double *X, double *U,
+                           const double *F_base, double t0, double t1);

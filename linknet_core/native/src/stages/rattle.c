@@ -217,6 +217,7 @@ int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, do
     double *E0 = d->E0, *E1 = d->E1;
     int status;
     *completed = 0;
+    if (m->n_ropes && (status = FN(ln_rope_start)(m, d, X, U, F_base, t_start)) != LN_OK) return status;
     FN(ln_unit_vectors)(m, X, E0);
     if (m->L > 0 && (status = FN(ln_factor_tension_matrix)(m, d, E0)) != LN_OK) return status;
     if ((status = tensions_at(m, d, X, U, F_base, t_start, E1)) != LN_OK) return status;
@@ -229,9 +230,19 @@ int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, do
         /* the last step ends on t_end itself: the driven anchors' final position */
         const double t = t_start + (double)step * h;
         const double end = step == n_steps - 1 ? t_end : t_start + (double)(step + 1) * h;
-        status = composition_step(m, meth, d, X, U, F_base, h, t, end, &E0, &E1);
-        if (status == LN_PROJECTION_FAILED || status == LN_IMPLICIT_KICK_FAILED)
-            status = split_step(m, meth, d, X, U, F_base, h, t, end, &E0, &E1, status);
+        if (m->n_ropes) {
+            /* ropes: the step taken to each event within it and finished in the new mode (stages/ropes.c), then A
+               factored at its end again for the tensions below */
+            status = FN(ln_rope_fixed_step)(m, meth, d, X, U, F_base, t, end);
+            if (status == LN_OK) {
+                FN(ln_unit_vectors)(m, X, E0);
+                status = FN(ln_factor_tension_matrix)(m, d, E0);
+            }
+        } else {
+            status = composition_step(m, meth, d, X, U, F_base, h, t, end, &E0, &E1);
+            if (status == LN_PROJECTION_FAILED || status == LN_IMPLICIT_KICK_FAILED)
+                status = split_step(m, meth, d, X, U, F_base, h, t, end, &E0, &E1, status);
+        }
         if (status == LN_PROJECTION_FAILED) record_failed_step_tensions(m, d, F_base);
         if (status != LN_OK) return status;
         double total = 0.0;

@@ -1,5 +1,5 @@
-/* Ropes: links that pull and never push, |X_k2 - X_k1| <= R_l with T_l >= 0, their mode, impacts and events, for the
- * embedded Runge-Kutta methods. The numpy reference of every rule here is linknet_core.dynamics.unilateral (the
+/* Ropes: links that pull and never push, |X_k2 - X_k1| <= R_l with T_l >= 0, their mode, impacts and events, for
+ * every method. The numpy reference of every rule here is linknet_core.dynamics.unilateral (the
  * model, the impact, the mode), linknet_core.dynamics.complementarity (the LCP) and linknet_core.integrators.events
  * (detection, location, the event); this file mirrors them for ropes (the ground stays on the numpy reference).
  *
@@ -24,8 +24,10 @@
  * Rajan, Computer Aided Geometric Design 5, 1988) and looked at exactly where they allow a dip, each dip confirmed on
  * the method's own step to its lowest point; the taut ropes' tensions at the step's end against -force_tol of the
  * largest |T|. The event is taken on the method's own step: a gap's time by Newton's method on the step's length, a
- * force's by Illinois' regula falsi on it, ending just past the zero; the step ends there, the positions go onto the
- * touching ropes, the impact is applied and the next mode chosen.
+ * force's by Illinois' regula falsi on it, ending just past the zero; there the positions go onto the touching ropes,
+ * the impact is applied and the next mode chosen. The adaptive methods end the step at the event and go on with their
+ * controller; the fixed-step ones (RATTLE and its compositions) finish the step from the event in the new mode, so
+ * that their steps stay where they are (a part shorter than short_step of dt by a Taylor step).
  */
 #include <math.h>
 #include <string.h>
@@ -476,12 +478,54 @@ int FN(ln_rope_start)(const ln_model *mm, ln_data *d, double *X, double *U, cons
     return LN_OK;
 }
 
-/* ---- the method's own step (ProjectedRungeKutta.step) ---------------------------------------------------------- */
-/* One step of length h from (X0, U0) at t0 without error control, then the projections onto (11) and (12) of the
-   mode, into (Xo, Uo). Scratch: the step loop's stages. */
+/* ---- the method's own step ------------------------------------------------------------------------------------ */
+/* A fixed-step method's step from (X0, U0) at t0 to t1 in the mode, into (Xo, Uo) (FixedStepEvents._plain_step): the
+   composition's step (split where its position stage fails), or, for a part of a step shorter than short_step of
+   dt, the second-order Taylor step X + h U + h^2 A / 2, U + h A projected onto the mode: RATTLE's velocity takes its
+   position stage's correction over h, whose round-off a very short step would magnify, and the Taylor step's own
+   error, h^3 times the jerk, is below round-off there. */
+static int FN(rope_plain_step)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X0,
+                               const double *U0, const double *F_base, double t0, double t1, double *Xo, double *Uo)
+{
+    const ln_int size = mm->K * DIM;
+    const double h = t1 - t0;
+    int status;
+    if (h < mm->short_step * meth->dt) {
+        double *Xa = d->event_states + 14 * 3 * mm->K, *Ua = Xa + 3 * mm->K, *A = d->acc1;
+        memcpy(Xa, X0, (size_t)size * sizeof(double));
+        memcpy(Ua, U0, (size_t)size * sizeof(double));
+        if ((status = FN(rope_drive)(mm, d, t0, Xa, Ua)) != LN_OK) return status;
+        if ((status = FN(rope_mode_tensions)(mm, d, Xa, Ua, F_base, A, d->T)) != LN_OK) return status;
+        for (ln_int i = 0; i < size; i++) {
+            Xo[i] = X0[i] + h * U0[i] + (0.5 * h * h) * A[i];
+            Uo[i] = U0[i] + h * A[i];
+        }
+        if ((status = FN(rope_drive)(mm, d, t1, Xo, Uo)) != LN_OK) return status;
+        FN(ln_unit_vectors)(mm, Xo, d->E0);
+        if ((status = FN(ln_factor_tension_matrix)(mm, d, d->E0)) != LN_OK) return status;
+        if ((status = project_positions(mm, d, Xo, d->E0, 1e-14, meth->max_projection_iter)) != LN_OK) return status;
+        return project_velocities(mm, d, Xo, Uo, d->E0);
+    }
+    double *E0 = d->E0, *E1 = d->E1;
+    memcpy(Xo, X0, (size_t)size * sizeof(double));
+    memcpy(Uo, U0, (size_t)size * sizeof(double));
+    memcpy(d->X_step, X0, (size_t)size * sizeof(double));  /* where a split step starts again */
+    memcpy(d->U_step, U0, (size_t)size * sizeof(double));
+    FN(ln_unit_vectors)(mm, Xo, E0);
+    if ((status = FN(ln_factor_tension_matrix)(mm, d, E0)) != LN_OK) return status;
+    status = composition_step(mm, meth, d, Xo, Uo, F_base, h, t0, t1, &E0, &E1);
+    if (status == LN_PROJECTION_FAILED || status == LN_IMPLICIT_KICK_FAILED)
+        status = split_step(mm, meth, d, Xo, Uo, F_base, h, t0, t1, &E0, &E1, status);
+    return status;
+}
+
+/* The method's own step of length h from (X0, U0) at t0, into (Xo, Uo): a fixed-step method's plain step, or an
+   embedded Runge-Kutta step without error control followed by the projections onto (11) and (12) of the mode
+   (ProjectedRungeKutta.step). Scratch: the step loops' own. */
 static int FN(rope_method_step)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X0,
                                 const double *U0, const double *F_base, double t0, double h, double *Xo, double *Uo)
 {
+    if (meth->kind == LN_COMPOSITION) return FN(rope_plain_step)(mm, meth, d, X0, U0, F_base, t0, t0 + h, Xo, Uo);
     const ln_int size = mm->K * DIM, s = meth->n_stages;
     double *KX = d->KX, *KU = d->KU, *Xs = d->Xs, *Us = d->Us, *acc = d->acc;
     double *Xa = d->event_states + 14 * 3 * mm->K, *Ua = Xa + 3 * mm->K;
@@ -520,6 +564,21 @@ struct FN(rope_event_ctx) {
     double hi_kept;             /* where X_hi, U_hi were taken (-1: none) */
 };
 
+/* The largest |T| of the mode's links, and the ropes' tensions, at (X, U) and t (EventHandling._forces_at). */
+static int FN(rope_forces_at)(const ln_model *mm, ln_data *d, double t, const double *X, const double *U,
+                              const double *F_base, double *scale)
+{
+    double *Xt = d->event_states + 12 * 3 * mm->K, *Ut = Xt + 3 * mm->K;
+    memcpy(Xt, X, (size_t)(mm->K * DIM) * sizeof(double));
+    memcpy(Ut, U, (size_t)(mm->K * DIM) * sizeof(double));
+    int status = FN(rope_drive)(mm, d, t, Xt, Ut);
+    if (status == LN_OK) status = FN(rope_mode_tensions)(mm, d, Xt, Ut, F_base, d->acc1, d->T);
+    double largest = 0.0;
+    for (ln_int l = 0; l < mm->L; l++) largest = ln_fmax(largest, fabs(d->T[l]));
+    *scale = largest;
+    return status;
+}
+
 /* Rope `link`'s tension in the mode along the step's Hermite interpolant at theta (X from X, U; U from U, A). */
 static double FN(rope_force_on_interpolant)(void *vctx, double theta)
 {
@@ -547,8 +606,9 @@ static double FN(rope_force_on_step)(void *vctx, double h)
     struct FN(rope_event_ctx) *c = vctx;
     const ln_model *mm = c->mm;
     ln_data *d = c->d;
+    double scale;
     int status = FN(rope_method_step)(mm, c->meth, d, c->X0, c->U0, c->F_base, c->t0, h, c->Xt, c->Ut);
-    if (status == LN_OK) status = FN(rope_mode_tensions)(mm, d, c->Xt, c->Ut, c->F_base, d->acc1, d->T);
+    if (status == LN_OK) status = FN(rope_forces_at)(mm, d, c->t0 + h, c->Xt, c->Ut, c->F_base, &scale);
     if (status != LN_OK) {
         c->status = status;
         return NAN;
@@ -560,21 +620,6 @@ static double FN(rope_force_on_step)(void *vctx, double h)
         c->hi_kept = h;
     }
     return f;
-}
-
-/* The largest |T| of the mode's links, and the ropes' tensions, at (X, U) and t (EventHandling._forces_at). */
-static int FN(rope_forces_at)(const ln_model *mm, ln_data *d, double t, const double *X, const double *U,
-                              const double *F_base, double *scale)
-{
-    double *Xt = d->event_states + 12 * 3 * mm->K, *Ut = Xt + 3 * mm->K;
-    memcpy(Xt, X, (size_t)(mm->K * DIM) * sizeof(double));
-    memcpy(Ut, U, (size_t)(mm->K * DIM) * sizeof(double));
-    int status = FN(rope_drive)(mm, d, t, Xt, Ut);
-    if (status == LN_OK) status = FN(rope_mode_tensions)(mm, d, Xt, Ut, F_base, d->acc1, d->T);
-    double largest = 0.0;
-    for (ln_int l = 0; l < mm->L; l++) largest = ln_fmax(largest, fabs(d->T[l]));
-    *scale = largest;
-    return status;
 }
 
 /* The first event within the accepted step from (X0, U0) at t0 to (X1, U1) at t0 + h, in the mode it was taken in
@@ -958,6 +1003,48 @@ int FN(ln_rope_step_events)(const ln_model *mm, const ln_method *meth, ln_data *
     }
     FN(rope_use_mask)(mm, d, d->link_active);
     return status;
+}
+
+/* One step of a fixed-step method from (X, U) at t0 to t1, in place (FixedStepEvents._step_with_events): a step
+   that holds an event is taken to the event, the event applied, and the step finished from there in the new mode,
+   so that the steps stay where they are. */
+int FN(ln_rope_fixed_step)(const ln_model *mm, const ln_method *meth, ln_data *d, double *X, double *U,
+                           const double *F_base, double t0, double t1)
+{
+    const ln_int K3 = 3 * mm->K;
+    const size_t bytes = (size_t)(mm->K * DIM) * sizeof(double);
+    double *Xs0 = d->event_states, *Us0 = Xs0 + K3, *Xs1 = d->event_states + 2 * K3, *Us1 = Xs1 + K3;
+    double *Xe = d->event_states + 4 * K3, *Ue = Xe + K3;
+    int status = LN_OK;
+    for (ln_int k = 0; k < mm->max_events_per_step; k++) {
+        memcpy(Xs0, X, bytes);
+        memcpy(Us0, U, bytes);
+        if ((status = FN(rope_plain_step)(mm, meth, d, Xs0, Us0, F_base, t0, t1, Xs1, Us1)) != LN_OK) break;
+        int found = 0;
+        ln_int rope = -1;
+        double theta = 0.0, h_e = 0.0;
+        const double h_max = t1 - t0;
+        status = FN(rope_first_event)(mm, meth, d, Xs0, Us0, t0, Xs1, Us1, h_max, F_base, &found, &rope, &theta);
+        if (status != LN_OK) break;
+        if (!found) {
+            memcpy(X, Xs1, bytes);
+            memcpy(U, Us1, bytes);
+            FN(rope_use_mask)(mm, d, d->link_active);
+            return LN_OK;
+        }
+        status = FN(rope_locate)(mm, meth, d, Xs0, Us0, t0, h_max, Xs1, Us1, F_base, found, rope, theta, Xe, Ue,
+                                 &h_e);
+        const double t_e = h_e >= h_max ? t1 : t0 + h_e;
+        if (status == LN_OK) status = FN(rope_apply_event)(mm, meth, d, Xe, Ue, F_base, t_e, found, rope);
+        FN(rope_use_mask)(mm, d, d->link_active);
+        if (status != LN_OK) return status;
+        memcpy(X, Xe, bytes);
+        memcpy(U, Ue, bytes);
+        if (t_e >= t1) return LN_OK;
+        t0 = t_e;
+    }
+    FN(rope_use_mask)(mm, d, d->link_active);
+    return status != LN_OK ? status : LN_EVENT_CHATTER;
 }
 
 #if DIM == 3
