@@ -192,6 +192,7 @@ def _damaged(data: bytes, entries: dict) -> dict:
         return {**entries, name: (code, values)}
 
     k = entries["scene.K"][1][0]
+    n_model = sum(name.startswith("model.") for name in entries)  # ln_model's fields the resource holds
     return {
         "truncated": (data[:-100], "truncated: its header says"),
         "format": (data[:8] + struct.pack("<I", 99) + data[12:], "format version 99, this FMU's binary reads "
@@ -201,7 +202,8 @@ def _damaged(data: bytes, entries: dict) -> dict:
         "not a resource": (b"PK\x03\x04" + bytes(200), "not a linknet scene resource"),
         "empty": (b"", "shorter than the header"),
         "longer": (data + b"\0" * 8, "longer than the"),
-        "missing entry": (write_resource(without("model.k1")), "has 46 entries model.*, this FMU's binary reads 47"),
+        "missing entry": (write_resource(without("model.k1")),
+                          f"has {n_model - 1} entries model.*, this FMU's binary reads {n_model}"),
         "renamed entry": (write_resource({**without("model.k1"), "model.k1x": entries["model.k1"]}),
                           "has no entry model.k1 "),
         "count": (write_resource(replaced("scene.K", "q", [k + 1])), "entry scene.mass_names holds"),

@@ -213,3 +213,27 @@ def test_auto_runs_ropes_on_the_native_core_and_a_ground_on_the_reference_which_
     with pytest.raises(ln.SolverError, match="it has a ground"):
         ln.Simulator(grounded, "dop853", backend="native")
     assert ln.Simulator(grounded, "dop853").backend == "numpy"
+
+
+def test_the_core_refuses_a_jump_of_an_input_driven_anchor_with_ropes_and_keeps_its_data():
+    # what the native FMU relies on: the core alone (no library check before it) says why, and the advance is undone
+    from linknet_core.integrators import METHODS
+    from linknet_core.native.integrator import NativeIntegrator
+    from linknet_core.native.model import native_model
+    from linknet_core.state import State
+    from linknet_core.structure.topology import analyse
+
+    scene = ln.Scene.from_dict({"name": "hook", "gravity": [0, 0, -G],
+                                "masses": [{"name": "hook", "position": [0, 0, 0], "driven": True,
+                                            "motion": {"kind": "input"}},
+                                           {"name": "bob", "position": [0, 0, -1.0], "mass": 1.0}],
+                                "links": [{"a": 1, "b": 2, "length": 1.0, "kind": "rope"}]})
+    integrator = NativeIntegrator(native_model(scene, analyse(scene)), METHODS["dop853"], rtol=1e-9)
+    state = State(0.0, np.array(scene.X0), np.array(scene.U0))
+    integrator.advance(state, 0.1, None, 1000)  # hanging at rest under the anchor at rest: taut, no event
+    X, active = state.X.copy(), integrator.data.link_active.copy()
+    integrator.set_anchors(0.1, (np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), np.zeros((1, 3))))
+    with pytest.raises(ln.SolverError, match="jumps at t = 0.1 .* a rope event .* the native core does not take"):
+        integrator.advance(state, 0.2, None, 1000)
+    assert state.t == 0.1 and np.array_equal(integrator.data.X, X)
+    assert np.array_equal(integrator.data.link_active, active) and integrator.events == []

@@ -120,9 +120,12 @@ int ln_drive_jump(const ln_model *m, const ln_method *meth, ln_data *d)
         for (int e = 0; e < 3; e++) {
             jump_x = ln_fmax(jump_x, fabs(P[3 * a + e] - X[3 * k + e]));
             jump_u = ln_fmax(jump_u, fabs(V[3 * a + e] - U[3 * k + e]));
-            d->impulse[3 * a + e] = 0.0;
         }
     }
+    /* with ropes a jump is an impact on the ropes it stretches or jerks (the numpy reference's EventHandling.
+       anchor_jump), not the rods' projection below: refused, the data left as it was */
+    if (m->n_ropes && (jump_x != 0.0 || jump_u != 0.0)) return LN_ROPE_ANCHOR_JUMP;
+    for (ln_int i = 0; i < 3 * n; i++) d->impulse[i] = 0.0;
     d->jump_position = jump_x;
     d->jump_velocity = jump_u;
     if (jump_x == 0.0 && jump_u == 0.0) return LN_OK;

@@ -66,8 +66,10 @@ enum ln_status {
     LN_NO_MEMORY = 9,
     LN_DRIVE_FAILED = 10,       /* the driven anchors' motion callback failed (or returned non-finite values) */
     LN_EVENT_CHATTER = 11,      /* ropes: more events than max_events_per_step in consecutive steps */
-    LN_NO_MODE = 12             /* ropes: the complementarity problem of the touching ropes has no solution, or it
+    LN_NO_MODE = 12,            /* ropes: the complementarity problem of the touching ropes has no solution, or it
                                    cycled and is too large to enumerate */
+    LN_ROPE_ANCHOR_JUMP = 13    /* ropes: the driven anchors' motion jumped (an input-driven anchor's new hold), which
+                                   is a rope event the core does not take (the numpy reference does) */
 };
 
 /* What an event of a rope is (ln_data's event log). Keep in step with linknet_core/clib/library.py. */
