@@ -107,6 +107,21 @@ def test_a_net_hanging_taut_from_the_start_chooses_its_mode_as_the_reference_doe
     assert np.abs(native.X - reference.X).max() <= STATE_TOL
 
 
+@pytest.mark.parametrize("velocity", [(0.0, 0.0, 2.0), (0.5, 0.2, 2.0)])
+def test_a_mass_in_four_redundant_ropes_gives_the_references_events_on_the_minimum_norm_path(velocity):
+    # four ropes from the corners of a square to one mass, all at their length at the start: A is singular (four
+    # rows, three degrees of freedom), so the modes with three or four taut ropes are solved minimum-norm (31); thrown
+    # straight up, all four jerk at once (a degenerate impact LCP), thrown aslant they jerk and slacken in turn
+    anchors = [(1, 1, 0), (-1, 1, 0), (-1, -1, 0), (1, -1, 0)]
+    masses = [{"name": f"A{i + 1}", "position": list(p), "fixed": True} for i, p in enumerate(anchors)]
+    masses.append({"name": "bob", "position": [0, 0, -1.0], "mass": 1.0, "velocity": list(velocity)})
+    scene = ln.Scene.from_dict({"name": "four_ropes", "gravity": [0, 0, -G], "masses": masses,
+                                "links": [{"a": i + 1, "b": 5, "length": math.sqrt(3.0), "kind": "rope"}
+                                          for i in range(4)]})
+    reference, native = _both(scene, 1.0, n_out=11)
+    _agree(reference, native, min_events=4)
+
+
 X0, V0 = np.array([0.3, 0.0, -0.4]), np.array([1.5, 0.0, 3.0])
 
 
