@@ -178,13 +178,26 @@ class RopeReference:
 
     # ------------------------------------------------------------------ the run
     def run(self, t_end: float):
+        """The state (X, U) at t_end."""
+        return self.run_at([t_end])[0]
+
+    def run_at(self, times):
+        """The states (X, U) at each of the increasing ``times``, in one run: the integration stops at each (a mode
+        goes on from there), so a state is the same whether it is asked alone or with others, to the tolerance."""
+        times = [float(t) for t in times]
+        if any(b <= a for a, b in zip(times, times[1:])) or times[0] < 0.0:
+            raise ValueError(f"sample times must increase from 0: {times}")
         spec = self.spec
         X, U = spec.X0.astype(float).copy(), spec.U0.astype(float).copy()
-        t = 0.0
+        t, states, t_end = 0.0, [], times[-1]
         _, s = _rate(X, U, spec.k1[self.ropes], spec.k2[self.ropes])
         taut = self._choose_taut(X, U, self._at_length(X) & (np.abs(s) <= self.touch_tol * max(1.0, np.abs(U).max())))
         k1, k2, R = spec.k1, spec.k2, spec.length
-        while t < t_end:
+        while len(states) < len(times):
+            if t >= times[len(states)]:   # a sample time at the start, or at an event
+                states.append((X.copy(), U.copy()))
+                continue
+            t_next = times[len(states)]
             if len(self.events) > MAX_EVENTS:
                 raise ScopeError(f"more than {MAX_EVENTS} events before t = {t_end}")
             links = self._mode_links(taut)
@@ -208,7 +221,7 @@ class RopeReference:
                 fn.terminal, fn.direction = True, -1
                 functions.append(fn)
             y0 = np.concatenate([X.ravel(), U.ravel()])
-            sol = solve_ivp(system.rhs, (t, t_end), y0, method="DOP853", rtol=self.rtol, atol=self.atol,
+            sol = solve_ivp(system.rhs, (t, t_next), y0, method="DOP853", rtol=self.rtol, atol=self.atol,
                             events=functions or None)
             if sol.status == -1:
                 raise RuntimeError(f"rope reference for {spec.name} failed at t = {t}: {sol.message}")
@@ -216,8 +229,9 @@ class RopeReference:
             fired = [j for j, te in enumerate(sol.t_events or []) if len(te)]
             if sol.status == 0 or not fired:
                 X, U = system.split(sol.y[:, -1])
-                t = t_end
-                break
+                t = t_next
+                states.append((X.copy(), U.copy()))
+                continue
             t_ev = min(sol.t_events[j][0] for j in fired)
             first = [j for j in fired if sol.t_events[j][0] <= t_ev + self.time_tol]
             if len(first) > 1:
@@ -240,7 +254,14 @@ class RopeReference:
                 # a rope left at rate 0 touches; one separating (a rebound) is slack
                 touching[c] = at[c] and abs(s_after[n]) <= 1e-9 * scale
             taut = self._choose_taut(X, U, touching)
-        return X, U
+        return states
+
+
+def solve_ropes_at(spec: SceneSpec, times, rtol: float, atol: float | None = None):
+    """The scene's positions at each of the increasing ``times`` by the event-driven reference, in one run:
+    (list of X, the events)."""
+    ref = RopeReference(spec, rtol, atol)
+    return [X for X, _ in ref.run_at(times)], ref.events
 
 
 def solve_ropes(spec: SceneSpec, t_end: float, rtol: float, atol: float | None = None):

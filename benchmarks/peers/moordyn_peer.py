@@ -147,7 +147,9 @@ class MoorDynLine(Method):
 
     def input_file(self, spec, X0, dt) -> str:
         """MoorDyn v2 input: one line type (EA, massless, BA = ``damping``, no hydrodynamics), the points, one line of
-        one segment per rope, the options."""
+        one segment per rope, the options. Numbers are written as Python floats: a numpy scalar's repr
+        (np.float64(...)) is no number to MoorDyn, whose Step then never returns."""
+        dt = float(dt)
         rows = [f"{k + 1} {'Fixed' if spec.fixed[k] else 'Free'} {x[0]!r} {x[1]!r} {x[2]!r} "
                 f"{0.0 if spec.fixed[k] else float(spec.mass[k])!r} 0 0 0" for k, x in enumerate(X0)]
         lines = [f"{l + 1} rope {a + 1} {b + 1} {float(R)!r} 1 -"
