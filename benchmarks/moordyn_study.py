@@ -1,22 +1,31 @@
-"""MoorDyn's elastic lines against linknet's rigid rope on the rope scene, at several times of the run.
+"""MoorDyn's elastic lines against linknet's rigid ropes on the rope scenes, at several times of each run.
 
     python -m benchmarks.moordyn_study                 # writes build/moordyn_study/rope_peer.json, prints the tables
     python -m benchmarks.moordyn_study --merge         # into the tracked docs/benchmarks/rope_peer.json
+    python -m benchmarks.moordyn_study --scene rope_chain_whip --merge   # docs/benchmarks/rope_peer_chain_whip.json
+    python -m benchmarks.moordyn_study --scene rope_chain_drop --quick    # the smoke run: build/moordyn_study/quick
     python -m benchmarks.moordyn_study --out /tmp/x --budget 10
 
 The work-precision benchmark compares the state at t_end only. Here every run is sampled at times that separate
-the errors of an elastic line (benchmarks/peers/moordyn_peer.py):
+the errors of an elastic line (benchmarks/peers/moordyn_peer.py). rope_swing (models/ropes, one rope):
 
 * 0.4 s: the rope taut throughout (a pendulum): the model's error is the stretch, ~1/EA;
 * 0.9 s: after the slack event and a free flight;
 * 1.2 s: after two jerks, each of which lasts pi sqrt(m R / EA) on the line: ~1/sqrt(EA);
 * 2.0 s: after five jerks (the benchmark's t_end), where the flights amplify what came before.
 
-For each stiffness EA, MoorDyn's step is halved from its stability limit until the error at 2 s levels off (three
-halvings gain less than a factor 2) or a run would pass the budget; linknet's methods sweep their knob. Times are
-CPU seconds of this one process (time.process_time: the machine's cores are shared, its wall clock is not the
-run's), of the integration only (MoorDyn's Step calls, linknet's Simulator.advance), summed up to each sample
-time. The references are benchmarks.rope_reference's at each sample time (two tolerances, their agreement stored).
+rope_chain_drop (models/ropes/chains, 8 segments dropped from a slack zig-zag): 0.2 s (one jerk), 0.3 s (6), 0.5 s
+(54), 1.0 s (195); every jerk of one segment with the others slack. rope_chain_whip (8 segments hanging taut, the
+free end thrown): 0.1 s (the end's first flight, the rest taut: the stretch), 0.3 s (one jerk, the whole rope taut
+at it), 0.6 s (2), 1.0 s (5).
+
+For each stiffness EA, MoorDyn's step is halved from its stability limit until the error at the last sample time
+levels off (three halvings gain less than a factor 2) or a run would pass the budget; linknet's methods sweep their
+knob, on the numpy reference path and on the native core where it takes the scene (the fastest of a few runs: they
+take microseconds to milliseconds). Times are CPU seconds of this one process (time.process_time: the machine's
+cores are shared, its wall clock is not the run's), of the integration only (MoorDyn's Step calls, linknet's
+Simulator.advance), summed up to each sample time. The references are benchmarks.rope_reference's at the sample
+times, in one run (two tolerances, their agreement stored).
 """
 from __future__ import annotations
 
@@ -26,6 +35,7 @@ import math
 import os
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -39,42 +49,71 @@ if __package__ in (None, ""):
 
 from .output import add_output_arguments, resolve, write_text  # noqa: E402
 from .peers.moordyn_peer import MoorDynLine, moordyn_available  # noqa: E402
-from .rope_reference import solve_ropes  # noqa: E402
+from .rope_reference import solve_ropes_at  # noqa: E402
 
-SCENE = "rope_swing"
-TIMES = (0.4, 0.9, 1.2, 2.0)
-GRID = 0.1   # the sample times are multiples of it
-EAS = (1e4, 1e6, 1e8, 1e10, 1e12)
+
+@dataclass(frozen=True)
+class Study:
+    """One scene's study: where the scene is, its sample times (multiples of ``grid``, so that a MoorDyn step can
+    divide them), the stiffnesses swept, the accuracy levels of the tables, and the results file."""
+    scene: str
+    times: tuple
+    eas: tuple
+    levels: tuple
+    output: str
+    grid: float = 0.1
+    folder: str = ""            # under models/ ("" for load_benchmark_scene's places)
+    native_rod: bool = False    # also the native core on the same masses held by rods, up to times[0]
+
+
+STUDIES = {s.scene: s for s in (
+    Study("rope_swing", (0.4, 0.9, 1.2, 2.0), (1e4, 1e6, 1e8, 1e10, 1e12), (1e-2, 1e-3, 1e-4, 1e-6, 1e-9),
+          "rope_peer.json", native_rod=True),
+    Study("rope_chain_drop", (0.2, 0.3, 0.5, 1.0), (1e4, 1e6, 1e8, 1e10), (1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-9),
+          "rope_peer_chain_drop.json", folder="ropes/chains"),
+    Study("rope_chain_whip", (0.1, 0.3, 0.6, 1.0), (1e4, 1e6, 1e8, 1e10), (1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-9),
+          "rope_peer_chain_whip.json", folder="ropes/chains"),
+)}
 LINKNET = {"dop853": [10.0 ** -e for e in range(3, 13)], "dopri5": [10.0 ** -e for e in range(3, 11)],
            "rattle": [0.01 / 2 ** i for i in range(0, 9)], "yoshida8": [0.04 / 2 ** i for i in range(0, 5)]}
-LEVELS = (1e-2, 1e-3, 1e-4, 1e-6, 1e-9)
+BACKENDS = {"numpy": 1, "native": 5}   # linknet's two engines, and the runs of which the fastest counts
+QUICK_EA = 1e6                          # the smoke run's one stiffness
+QUICK_KNOBS = 1                         # and each linknet method's first setting
+QUICK_TIMES = 2                         # to the first two sample times
 
 
-def references(spec):
-    out = []
-    for t in TIMES:
-        X = solve_ropes(spec, t, 2.5e-14)[0]
-        Xc = solve_ropes(spec, t, 1e-13)[0]
-        out.append((X, float(np.abs(X - Xc).max())))
-    return out
+def load_scene(study):
+    from .work_precision import MODELS, load_benchmark_scene
+    if not study.folder:
+        return load_benchmark_scene(study.scene)
+    import linknet_core as ln
+    from .scene_spec import SceneSpec
+    return SceneSpec.from_core(ln.load_scene(MODELS / study.folder / f"{study.scene}.json"))
+
+
+def references(spec, times):
+    """The reference positions at the times (rtol 2.5e-14) and their distance from the reference at rtol 1e-13."""
+    fine, _ = solve_ropes_at(spec, times, 2.5e-14)
+    coarse, _ = solve_ropes_at(spec, times, 1e-13)
+    return [(X, float(np.abs(X - Xc).max())) for X, Xc in zip(fine, coarse)]
 
 
 def errors(Xs, refs):
     return [float(np.max(np.linalg.norm(X - R[0], axis=1))) for X, R in zip(Xs, refs)]
 
 
-def moordyn_rows(spec, refs, budget, log):
+def moordyn_rows(spec, refs, budget, log, study, quick=False):
     rows = []
-    for EA in EAS:
+    for EA in (QUICK_EA,) if quick else study.eas:
         line = MoorDynLine(EA)
         line.check_scene(spec)
         last, finals = None, []
-        for dt in line.knobs(spec, quick=False):
-            dt = GRID / math.ceil(GRID / dt - 1e-9)   # a whole number of steps between the sample times
+        for dt in line.knobs(spec, quick=quick):
+            dt = study.grid / math.ceil(study.grid / dt - 1e-9)   # a whole number of steps between the sample times
             if last is not None and 2.0 * last > budget:
                 log(f"  MoorDyn EA {EA:.0e}: dt {dt:.3g} s not run (predicted {2 * last:.3g} s > budget {budget:g} s)")
                 break
-            Xs, cpu = line.trajectory(spec, TIMES, dt)
+            Xs, cpu = line.trajectory(spec, study.times, dt)
             err = errors(Xs, refs)
             rows.append({"method": line.name, "EA": EA, "dt": dt, "errors": err, "cpu": cpu.tolist()})
             log(f"  {line.name:22s} dt {dt:9.3g}  errors " + " ".join(f"{e:9.2e}" for e in err)
@@ -86,47 +125,61 @@ def moordyn_rows(spec, refs, budget, log):
     return rows
 
 
-def linknet_rows(spec, refs, budget, log):
+def linknet_rows(spec, refs, budget, log, times, quick=False):
+    """linknet's methods over their knobs, on each backend that takes the scene: errors at the times and the CPU
+    seconds of Simulator.advance summed to each (the fastest of BACKENDS[backend] runs)."""
     import linknet_core as ln
     scene = ln.Scene.from_dict(spec.to_dict())
     rows = []
-    for method, knobs in LINKNET.items():
-        knob_name = "rtol" if method.startswith("dop") else "dt"
-        last = None
-        for knob in knobs:
-            if last is not None and 2.5 * last > budget:
-                log(f"  linknet-{method}: {knob_name} {knob:.3g} not run (predicted > budget {budget:g} s)")
-                break
-            kwargs = {knob_name: knob, "error_estimate": False, "max_steps_per_call": 10 ** 9}
-            ln.Simulator(scene, method=method, **kwargs).advance(1e-3)   # warm-up: one-time set-up is not the run
-            sim = ln.Simulator(scene, method=method, **kwargs)
-            Xs, cpu, spent = [], [], 0.0
-            for t in TIMES:
-                start = time.process_time()
-                sim.advance(t)
-                spent += time.process_time() - start
-                Xs.append(sim.state.X.copy())
-                cpu.append(spent)
-            err = errors(Xs, refs)
-            rows.append({"method": f"linknet-{method}", knob_name: knob, "errors": err, "cpu": cpu})
-            log(f"  linknet-{method:14s} {knob_name} {knob:9.3g}  errors " + " ".join(f"{e:9.2e}" for e in err)
-                + f"  cpu {cpu[-1]:.3g} s")
-            last = cpu[-1]
-            if err[-1] < 1e-11:
-                break
+    for backend, repeats in BACKENDS.items():
+        for method, knobs in LINKNET.items():
+            knob_name = "rtol" if method.startswith("dop") else "dt"
+            last = None
+            for knob in knobs[:QUICK_KNOBS] if quick else knobs:
+                if last is not None and 2.5 * last > budget:
+                    log(f"  linknet-{backend}-{method}: {knob_name} {knob:.3g} not run "
+                        f"(predicted > budget {budget:g} s)")
+                    break
+                kwargs = {knob_name: knob, "error_estimate": False, "max_steps_per_call": 10 ** 9, "backend": backend}
+                try:   # warm-up: one-time set-up is not the run
+                    ln.Simulator(scene, method=method, **kwargs).advance(1e-3)
+                except ln.SolverError as e:
+                    log(f"  linknet-{backend}-{method}: refused ({e})")
+                    break
+                best = None
+                for _ in range(repeats):
+                    sim = ln.Simulator(scene, method=method, **kwargs)
+                    Xs, cpu, spent = [], [], 0.0
+                    for t in times:
+                        start = time.process_time()
+                        sim.advance(t)
+                        spent += time.process_time() - start
+                        Xs.append(sim.state.X.copy())
+                        cpu.append(spent)
+                    if best is None or cpu[-1] < best[1][-1]:
+                        best = (Xs, cpu)
+                Xs, cpu = best
+                err = errors(Xs, refs)
+                rows.append({"method": f"linknet-{backend}-{method}", "backend": backend, knob_name: knob,
+                             "errors": err, "cpu": cpu})
+                log(f"  linknet-{backend}-{method:8s} {knob_name} {knob:9.3g}  errors "
+                    + " ".join(f"{e:9.2e}" for e in err) + f"  cpu {cpu[-1] * 1e3:.3g} ms")
+                last = cpu[-1]
+                if err[-1] < 1e-11:
+                    break
     return rows
 
 
-def native_rod_rows(spec, refs, log, repeats=5):
-    """linknet's native core on the same bob held by a rod, up to the first sample time only, where the rope is
-    still taut (its slack event comes later): the same motion, so the same reference; what the engine that does
-    not take ropes yet costs on it. Best of ``repeats`` (the runs take microseconds)."""
+def native_rod_rows(spec, refs, log, times, repeats=5):
+    """linknet's native core on the same masses held by rods, up to the first sample time only, where the ropes are
+    still taut (their first event comes later): the same motion, so the same reference. Best of ``repeats`` (the
+    runs take microseconds)."""
     import linknet_core as ln
     from .rope_reference import RopeReference
     first = RopeReference(spec, 1e-13)
-    first.run(TIMES[0])
+    first.run(times[0])
     if first.events:
-        raise RuntimeError(f"{SCENE}: an event at {first.events[0][0]:g} s, before {TIMES[0]:g} s: not a rod there")
+        raise RuntimeError(f"{spec.name}: an event at {first.events[0][0]:g} s, before {times[0]:g} s: not a rod there")
     data = spec.to_dict()
     for link in data["links"]:
         link.pop("kind", None), link.pop("restitution", None)
@@ -141,12 +194,12 @@ def native_rod_rows(spec, refs, log, repeats=5):
             for _ in range(repeats):
                 sim = ln.Simulator(scene, method=method, **kwargs)
                 start = time.process_time()
-                sim.advance(TIMES[0])
+                sim.advance(times[0])
                 spent = time.process_time() - start
                 best = spent if best is None else min(best, spent)
             err = float(np.max(np.linalg.norm(sim.state.X - refs[0][0], axis=1)))
             rows.append({"method": f"linknet-native-rod-{method}", knob_name: knob, "errors": [err], "cpu": [best]})
-            log(f"  linknet-native-rod-{method:9s} {knob_name} {knob:9.3g}  error at {TIMES[0]:g} s {err:9.2e}  "
+            log(f"  linknet-native-rod-{method:9s} {knob_name} {knob:9.3g}  error at {times[0]:g} s {err:9.2e}  "
                 f"cpu {best * 1e6:.3g} us")
             if err < 1e-11:
                 break
@@ -178,11 +231,11 @@ def slack_damping(log, span=0.1):
     return rows
 
 
-def frontier(rows, family, times=TIMES):
+def frontier(rows, family, times, levels):
     """Per sample time and level: the cheapest run of the family whose error there is at or below the level."""
     out = {}
     for i, t in enumerate(times):
-        for level in LEVELS:
+        for level in levels:
             ok = [r for r in rows if r["method"].startswith(family) and r["errors"][i] <= level]
             best = min(ok, key=lambda r: r["cpu"][i]) if ok else None
             out[f"{t:g}/{level:g}"] = None if best is None else {
@@ -197,61 +250,80 @@ def _cell(b):
     if "EA" in b:
         knob = f"EA {b['EA']:.0e}, dt {b['dt']:.2g}"
     else:
-        name = b["method"].removeprefix("linknet-").removeprefix("native-rod-")
+        name = b["method"].split("-")[-1]
         knob = f"{name} " + (f"rtol {b['rtol']:.0e}" if "rtol" in b else f"dt {b['dt']:.2g}")
     return f"{b['cpu'] * 1e3:.3g} ms ({knob})"
 
 
+def _ratio(a, b):
+    return f"{a['cpu'] / b['cpu']:.3g}" if a and b and b["cpu"] > 0 else "—"
+
+
 def markdown(result) -> str:
-    lines = ["| t [s] | level [m] | MoorDyn: CPU (setting) | linknet, numpy path, rope: CPU (setting) | "
-             "MoorDyn / linknet | linknet native, rod: CPU (setting) |", "|---|---|---|---|---|---|"]
-    for t in TIMES:
-        for level in LEVELS:
+    times, levels, fr = result["times"], result["levels"], result["frontier"]
+    native_rod = "native_rod" in fr
+    lines = ["| t [s] | level [m] | MoorDyn: CPU (setting) | linknet numpy path: CPU (setting) | MoorDyn / numpy | "
+             "linknet native core: CPU (setting) | MoorDyn / native |"
+             + (" linknet native, rod: CPU (setting) |" if native_rod else ""),
+             "|---|---|---|---|---|---|---|" + ("---|" if native_rod else "")]
+    for t in times:
+        for level in levels:
             key = f"{t:g}/{level:g}"
-            m, l = result["frontier"]["moordyn"][key], result["frontier"]["linknet"][key]
-            native = result["frontier"]["native_rod"].get(key)
-            ratio = f"{m['cpu'] / l['cpu']:.3g}" if m and l and l["cpu"] > 0 else "—"
-            lines.append(f"| {t:g} | {level:g} | {_cell(m)} | {_cell(l)} | {ratio} | "
-                         f"{_cell(native) if t == TIMES[0] else 'n/a (slack after 0.495 s)'} |")
+            m, n, c = fr["moordyn"][key], fr["linknet-numpy"][key], fr["linknet-native"][key]
+            row = f"| {t:g} | {level:g} | {_cell(m)} | {_cell(n)} | {_ratio(m, n)} | {_cell(c)} | {_ratio(m, c)} |"
+            if native_rod:
+                row += f" {_cell(fr['native_rod'][key]) if key in fr['native_rod'] else 'n/a (slack later)'} |"
+            lines.append(row)
     lines += ["", "Best error of each MoorDyn stiffness (any step) at each sample time:", "",
-              "| EA [N] | " + " | ".join(f"t = {t:g} s" for t in TIMES) + " |", "|---|" + "---|" * len(TIMES)]
-    for EA in EAS:
+              "| EA [N] | " + " | ".join(f"t = {t:g} s" for t in times) + " |", "|---|" + "---|" * len(times)]
+    for EA in sorted({r["EA"] for r in result["moordyn"]}):
         rs = [r for r in result["moordyn"] if r["EA"] == EA]
-        if rs:
-            lines.append(f"| {EA:.0e} | " + " | ".join(f"{min(r['errors'][i] for r in rs):.2e}"
-                                                      for i in range(len(TIMES))) + " |")
+        lines.append(f"| {EA:.0e} | " + " | ".join(f"{min(r['errors'][i] for r in rs):.2e}"
+                                                  for i in range(len(times))) + " |")
     return "\n".join(lines)
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    add_output_arguments(ap, "moordyn_study")
+    add_output_arguments(ap, "moordyn_study", quick=True)
+    ap.add_argument("--scene", choices=sorted(STUDIES), default="rope_swing", help="the scene studied")
     ap.add_argument("--budget", type=float, default=30.0, help="CPU seconds one run may take (predicted)")
+    ap.add_argument("--quick", action="store_true",
+                    help=f"smoke run: the first {QUICK_TIMES} sample times, MoorDyn at EA {QUICK_EA:.0e} N only and "
+                         f"three steps, linknet's first setting of each method, no rods (writes under "
+                         "build/moordyn_study/quick)")
     args = ap.parse_args(argv)
-    out = resolve(ap, args, "moordyn_study") / "rope_peer.json"
+    study = STUDIES[args.scene]
+    out = resolve(ap, args, "moordyn_study", quick=args.quick) / study.output
     ok, why = moordyn_available()
     if not ok:
         print(f"MoorDyn unavailable: {why}")
         return None
-    from .work_precision import _loadavg, _machine, _versions, load_benchmark_scene
-    spec = load_benchmark_scene(SCENE)
+    from .work_precision import _loadavg, _machine, _versions
+    spec = load_scene(study)
+    times = list(study.times[:QUICK_TIMES] if args.quick else study.times)
     load_start = _loadavg()
-    refs = references(spec)
-    print(f"{SCENE}: reference agreement at {', '.join(f'{t:g}' for t in TIMES)} s: "
+    refs = references(spec, times)
+    print(f"{study.scene}: reference agreement at {', '.join(f'{t:g}' for t in times)} s: "
           + ", ".join(f"{a:.2g}" for _, a in refs) + " m")
-    md = moordyn_rows(spec, refs, args.budget, print)
-    lk = linknet_rows(spec, refs, args.budget, print)
-    native = native_rod_rows(spec, refs, print)
-    damping = slack_damping(print)
+    md = moordyn_rows(spec, refs, args.budget, print, study, quick=args.quick)
+    lk = linknet_rows(spec, refs, args.budget, print, times, quick=args.quick)
+    result = {"scene": study.scene, "times": times, "levels": list(study.levels), "quick": args.quick,
+              "reference_agreement": [a for _, a in refs], "moordyn": md, "linknet": lk,
+              "frontier": {"moordyn": frontier(md, "moordyn", times, study.levels),
+                           **{f"linknet-{b}": frontier(lk, f"linknet-{b}-", times, study.levels) for b in BACKENDS}}}
+    if study.native_rod and not args.quick:
+        result["native_rod"] = native_rod_rows(spec, refs, print, times)
+        result["frontier"]["native_rod"] = frontier(result["native_rod"], "linknet-native-rod", times[:1],
+                                                    study.levels)
+    if study.scene == "rope_swing" and not args.quick:
+        result["slack_damping"] = slack_damping(print)
     import moordyn
-    result = {"scene": SCENE, "times": TIMES, "levels": LEVELS, "reference_agreement": [a for _, a in refs],
-              "moordyn": md, "linknet": lk, "native_rod": native, "slack_damping": damping,
-              "frontier": {"moordyn": frontier(md, "moordyn"), "linknet": frontier(lk, "linknet-"),
-                           "native_rod": frontier(native, "linknet-native-rod", TIMES[:1])},
-              "meta": {"command": "python -m benchmarks.moordyn_study " + " ".join(argv or sys.argv[1:]),
-                       "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": _machine(),
-                       "versions": _versions() | {"moordyn_wrapper": getattr(moordyn, "__version__", None)},
-                       "load_average": {"start": load_start, "end": _loadavg()}, "timing": "CPU (process_time)"}}
+    command = "python -m benchmarks.moordyn_study " + " ".join(sys.argv[1:] if argv is None else argv)
+    result["meta"] = {"command": command,
+                      "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": _machine(),
+                      "versions": _versions() | {"moordyn_wrapper": getattr(moordyn, "__version__", None)},
+                      "load_average": {"start": load_start, "end": _loadavg()}, "timing": "CPU (process_time)"}
     write_text(out, json.dumps(result, indent=1))
     print(markdown(result))
     print(f"wrote {out}")

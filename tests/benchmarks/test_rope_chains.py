@@ -1,0 +1,138 @@
+"""The MoorDyn comparison's rope scenes of several segments (models/ropes/chains): the event-driven reference against
+closed forms and the energy an elastic rope keeps, linknet against that reference, the MoorDyn peer's two regimes
+(its stretch ~1/EA while taut; a jerk of the whole taut rope that a stiffer line does not bring closer to the rigid
+one), and the study's smoke run. The MoorDyn checks skip where moordyn is not installed. Quick: ~5 s of CPU."""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from benchmarks import moordyn_study as study  # noqa: E402
+from benchmarks.peers.moordyn_peer import MoorDynLine  # noqa: E402
+from benchmarks.rope_reference import RopeReference, solve_ropes_at  # noqa: E402
+
+pytest.importorskip("linknet_core")
+
+G, R, M = 9.81, 0.25, 0.125   # both scenes: 8 segments of 0.25 m, 0.125 kg at each node
+
+
+@pytest.fixture(scope="module")
+def drop():
+    return study.load_scene(study.STUDIES["rope_chain_drop"])
+
+
+@pytest.fixture(scope="module")
+def whip():
+    return study.load_scene(study.STUDIES["rope_chain_whip"])
+
+
+def energy(spec, X, U):
+    m = spec.mass[spec.free]
+    X, U = X[spec.free], U[spec.free]
+    return float(0.5 * m @ np.sum(U * U, axis=1) - m @ (X @ spec.gravity))
+
+
+def test_the_scenes_are_what_the_study_says(drop, whip):
+    for spec in (drop, whip):
+        assert spec.K == 9 and spec.L == 8 and spec.rope.all() and np.all(spec.restitution == 1.0)
+        assert np.allclose(spec.length, R) and np.allclose(spec.mass[spec.free], M) and spec.fixed.tolist()[0]
+    gaps = np.linalg.norm(drop.X0[drop.k2] - drop.X0[drop.k1], axis=1)
+    assert np.all(gaps < 0.75 * R) and not drop.U0.any()          # every segment slack, at rest
+    assert np.allclose(whip.X0[1:, 2], -R * np.arange(1, 9)) and whip.U0[8].tolist() == [2.0, 0.0, 2.0]
+
+
+def test_the_dropped_rope_falls_freely_until_its_first_segment_snaps_and_keeps_its_energy(drop):
+    """The free nodes fall together (the segments between them keep their lengths) until the first segment reaches
+    its length: node 1 from (0.15, 0, -0.1) to z = -0.2, at t = sqrt(2 x 0.1 / g); the jerk reverses its radial
+    velocity (impulse 2 m v_r, restitution 1). Every jerk after keeps the energy."""
+    ref = RopeReference(drop, 1e-13)
+    (X, U), (Xe, Ue) = ref.run_at([0.1, 1.0])
+    t1 = math.sqrt(2 * 0.1 / G)
+    assert np.allclose(X[1:], drop.X0[1:] + [0, 0, -0.5 * G * 0.1 ** 2], atol=1e-13)
+    t, kind, link, impulse = ref.events[0]
+    assert (kind, link) == ("taut", 0) and abs(t - t1) < 1e-12
+    assert abs(impulse - 2 * M * G * t1 * 0.2 / R) < 1e-11       # v_r = g t1 (0.2 / R), the fall along the segment
+    assert len(ref.events) > 100 and {e[1] for e in ref.events} == {"taut"}   # every jerk a rebound, none stays taut
+    assert abs(energy(drop, Xe, Ue) - energy(drop, drop.X0, drop.U0)) < 1e-11
+    lengths = np.linalg.norm(Xe[drop.k2] - Xe[drop.k1], axis=1)
+    assert np.all(lengths <= R * (1 + 1e-12))
+
+
+def test_the_whip_flies_its_end_on_a_parabola_until_it_jerks_the_taut_rope_and_keeps_its_energy(whip):
+    """The rope above the thrown end hangs at rest, taut; the end flies from (0, 0, -2) at (2, 0, 2) m/s until it is
+    0.25 m from node 7 (the root of a quartic in t); Newton's restitution 1 on the jerked segment, with the taut
+    ones held, keeps the energy (every row with an impulse leaves at minus its arriving rate)."""
+    ref = RopeReference(whip, 1e-13)
+    (X, _), (Xe, Ue) = ref.run_at([0.1, 1.0])
+    t, kind, link, _ = ref.events[0]
+    P = np.polynomial.polynomial
+    gap = P.polyadd(P.polypow([0, 2], 2), P.polypow([-R, 2, -G / 2], 2))   # |X8(t) - X7|^2, ascending powers of t
+    gap[0] -= R * R
+    roots = P.polyroots(gap)
+    t_closed = min(r.real for r in roots if abs(r.imag) < 1e-12 and r.real > 1e-9)
+    assert (kind, link) == ("taut", 7) and abs(t - t_closed) < 1e-12
+    assert np.allclose(X[1:8], whip.X0[1:8], atol=1e-13)             # the taut rope at rest meanwhile
+    assert abs(energy(whip, Xe, Ue) - energy(whip, whip.X0, whip.U0)) < 1e-10
+    assert {e[2] for e in ref.events} == {7}                          # the other segments never go slack
+
+
+@pytest.mark.parametrize("scene, t_end", [("rope_chain_drop", 0.5), ("rope_chain_whip", 0.6)])
+def test_linknet_meets_the_reference_on_both_engines(scene, t_end):
+    """Adaptive dop853 at rtol 1e-9 on the numpy reference path and the native core (where it takes ropes)."""
+    import linknet_core as ln
+    spec = study.load_scene(study.STUDIES[scene])
+    X_ref = solve_ropes_at(spec, [t_end], 1e-13)[0][0]
+    for backend in ("numpy", "native"):
+        try:
+            sim = ln.Simulator(ln.Scene.from_dict(spec.to_dict()), method="dop853", rtol=1e-9, backend=backend)
+        except ln.SolverError:
+            continue
+        sim.advance(t_end)
+        assert np.abs(sim.state.X - X_ref).max() < 1e-7, backend
+
+
+def test_moordyn_runs_at_a_numpy_step_and_lets_free_nodes_fall_exactly(drop):
+    """RK4 integrates a constant acceleration exactly: before the first jerk (0.143 s) every node has fallen
+    g t^2 / 2. The step given as a numpy scalar (as a sweep computes it) runs."""
+    pytest.importorskip("moordyn")
+    X, _ = MoorDynLine(1e6).trajectory(drop, [0.1], np.float64(2.5e-4))
+    assert np.allclose(X[0][1:], drop.X0[1:] + [0, 0, -0.5 * G * 0.1 ** 2], atol=1e-12)
+
+
+def test_moordyn_stretches_the_taut_rope_then_misses_the_rigid_jerk_at_any_stiffness(whip):
+    """Before the end's jerk (0.1 s) the rope above hangs still, each segment longer by T R / EA: node 7 lower by
+    28 m g R / EA (T = m g (8 - i) on segment i). After the jerk (0.3 s) a stiffer line does not come closer to the
+    rigid rope: its jerk travels along the elastic segments as a wave, where the rigid rope's moves them all at once
+    (a single rope's jerk error falls as 1/sqrt(EA): 10 times for 100 times the stiffness)."""
+    pytest.importorskip("moordyn")
+    X_ref = solve_ropes_at(whip, [0.1, 0.3], 1e-13)[0]
+    err = {}
+    for EA in (1e6, 1e8):
+        line = MoorDynLine(EA)
+        dt = line.knobs(whip, quick=True)[2]
+        dt = 0.1 / math.ceil(0.1 / dt)
+        Xs, _ = line.trajectory(whip, [0.1, 0.3], dt)
+        err[EA] = [float(np.abs(X - Xr).max()) for X, Xr in zip(Xs, X_ref)]
+        stretch = 28 * M * G * R / EA
+        assert abs(err[EA][0] - stretch) < 0.01 * stretch, (EA, err[EA])
+    assert 5e-3 < err[1e6][1] < 5e-2 and 0.5 < err[1e8][1] / err[1e6][1] < 2, err
+
+
+def test_the_study_smoke_run_writes_its_tables(tmp_path):
+    pytest.importorskip("moordyn")
+    result = study.main(["--scene", "rope_chain_drop", "--quick", "--out", str(tmp_path)])
+    saved = json.loads((tmp_path / "rope_peer_chain_drop.json").read_text())
+    assert saved["quick"] and saved["times"] == [0.2, 0.3] and saved["frontier"] == json.loads(
+        json.dumps(result["frontier"]))
+    assert max(saved["reference_agreement"]) < 1e-10
+    assert {r["EA"] for r in saved["moordyn"]} == {study.QUICK_EA}
+    # between the jerks every node flies freely: linknet's only error is where it locates them
+    numpy_rows = [r for r in saved["linknet"] if r["backend"] == "numpy"]
+    assert numpy_rows and all(r["errors"][-1] < 1e-6 for r in numpy_rows)
