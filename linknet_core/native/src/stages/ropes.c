@@ -243,10 +243,19 @@ static double FN(rope_rest_speed)(const ln_model *m, const double *U)
     return ln_sqrt(2.0 * acceleration * m->rest_height * m->scene_size);
 }
 
+/* The largest |coordinate| of the positions in 3-D (the numpy reference's np.abs(X).max(), the scale of the events'
+   round-off tolerances): a planar run's X = o + P x. */
 static double FN(rope_largest_coordinate)(const ln_model *m, const double *X)
 {
     double s = 0.0;
+#if DIM == 2
+    const double *P = m->plane_P, *o = m->plane_o;
+    for (ln_int k = 0; k < m->K; k++)
+        for (int e = 0; e < 3; e++)
+            s = ln_fmax(s, fabs(o[e] + P[2 * e] * X[2 * k] + P[2 * e + 1] * X[2 * k + 1]));
+#else
     for (ln_int i = 0; i < m->K * DIM; i++) s = ln_fmax(s, fabs(X[i]));
+#endif
     return s;
 }
 
