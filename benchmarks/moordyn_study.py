@@ -115,7 +115,8 @@ def moordyn_rows(spec, refs, budget, log, study, quick=False):
                 break
             Xs, cpu = line.trajectory(spec, study.times, dt)
             err = errors(Xs, refs)
-            rows.append({"method": line.name, "EA": EA, "dt": dt, "errors": err, "cpu": cpu.tolist()})
+            rows.append({"method": line.name, "EA": EA, "dt": dt, "errors": err, "cpu": cpu.tolist(),
+                         "X": np.asarray(Xs).tolist()})
             log(f"  {line.name:22s} dt {dt:9.3g}  errors " + " ".join(f"{e:9.2e}" for e in err)
                 + f"  cpu {cpu[-1]:.3g} s")
             last = float(cpu[-1])
@@ -231,6 +232,21 @@ def slack_damping(log, span=0.1):
     return rows
 
 
+def stiffness_convergence(rows):
+    """The distance between the finest runs of successive stiffnesses at each sample time: where it falls far below
+    their errors, the lines converge as EA grows, to a limit the rigid reference is not (the error at the largest
+    stiffness, less this distance, is the gap between the two limits)."""
+    finest = {}
+    for r in rows:
+        if r["EA"] not in finest or r["dt"] < finest[r["EA"]]["dt"]:
+            finest[r["EA"]] = r
+    eas = sorted(finest)
+    return [{"EA": a, "EA_next": b, "dt": finest[a]["dt"], "dt_next": finest[b]["dt"],
+             "distance": [float(np.max(np.linalg.norm(np.subtract(Xa, Xb), axis=1)))
+                          for Xa, Xb in zip(finest[a]["X"], finest[b]["X"])]}
+            for a, b in zip(eas, eas[1:])]
+
+
 def frontier(rows, family, times, levels):
     """Per sample time and level: the cheapest run of the family whose error there is at or below the level."""
     out = {}
@@ -280,6 +296,12 @@ def markdown(result) -> str:
         rs = [r for r in result["moordyn"] if r["EA"] == EA]
         lines.append(f"| {EA:.0e} | " + " | ".join(f"{min(r['errors'][i] for r in rs):.2e}"
                                                   for i in range(len(times))) + " |")
+    if result.get("stiffness_convergence"):
+        lines += ["", "Distance between the finest MoorDyn runs of successive stiffnesses:", "",
+                  "| EA [N] | " + " | ".join(f"t = {t:g} s" for t in times) + " |", "|---|" + "---|" * len(times)]
+        for c in result["stiffness_convergence"]:
+            lines.append(f"| {c['EA']:.0e} (dt {c['dt']:.3g}) to {c['EA_next']:.0e} (dt {c['dt_next']:.3g}) | "
+                         + " | ".join(f"{d:.2e}" for d in c["distance"]) + " |")
     return "\n".join(lines)
 
 
@@ -310,6 +332,7 @@ def main(argv=None):
     lk = linknet_rows(spec, refs, args.budget, print, times, quick=args.quick)
     result = {"scene": study.scene, "times": times, "levels": list(study.levels), "quick": args.quick,
               "reference_agreement": [a for _, a in refs], "moordyn": md, "linknet": lk,
+              "stiffness_convergence": stiffness_convergence(md),
               "frontier": {"moordyn": frontier(md, "moordyn", times, study.levels),
                            **{f"linknet-{b}": frontier(lk, f"linknet-{b}-", times, study.levels) for b in BACKENDS}}}
     if study.native_rod and not args.quick:
