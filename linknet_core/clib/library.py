@@ -27,11 +27,10 @@ c_uint8_p = ctypes.POINTER(ctypes.c_uint8)
 # enum ln_status, as the messages name them
 STATUS = {0: "ok", 1: "projection failed", 2: "singular", 3: "non-finite", 4: "step underflow", 5: "too many steps",
           6: "left the plane", 7: "implicit kick failed", 8: "bad argument", 9: "out of memory",
-          10: "anchor motion failed", 11: "rope event chatter", 12: "no rope mode",
-          13: "rope anchor jump"}
+          10: "anchor motion failed", 11: "rope event chatter", 12: "no rope mode"}
 OK, PROJECTION_FAILED, SINGULAR, NON_FINITE, STEP_UNDERFLOW, TOO_MANY_STEPS = 0, 1, 2, 3, 4, 5
 LEFT_PLANE, IMPLICIT_KICK_FAILED, BAD_ARGUMENT, NO_MEMORY, DRIVE_FAILED = 6, 7, 8, 9, 10
-EVENT_CHATTER, NO_MODE, ROPE_ANCHOR_JUMP = 11, 12, 13
+EVENT_CHATTER, NO_MODE = 11, 12
 # enum ln_event_kind: the kinds of a rope's event in ln_data's log, by the names linknet_core.dynamics.unilateral.Event
 # gives them
 EVENT_KINDS = ("taut", "slack")
@@ -146,6 +145,7 @@ sample_diagnostics = _declare("ln_sample_diagnostics", None, Model_p, ctypes.POI
 evaluate_repeated = _declare("ln_evaluate_repeated", ctypes.c_int, Model_p, Data_p, ctypes.c_int, c_double_p,
                              c_double_p, ln_int)
 rope_events_drained = _declare("ln_rope_events_drained", ln_int, Data_p)
+jump_anchors = _declare("ln_jump_anchors", ctypes.c_int, Model_p, Method_p, Data_p)
 model_weights_size = _declare("ln_model_weights_size", ln_int, Model_p)
 model_weights = _declare("ln_model_weights", ctypes.c_int, Model_p, c_double_p, c_double_p, c_double_p, c_double_p,
                          c_double_p)

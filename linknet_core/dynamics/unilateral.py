@@ -79,21 +79,13 @@ class Event(NamedTuple):
     impulse: float
 
 
-def native_refusal(scene: Scene, method_cls=None) -> str | None:
-    """Why the native core cannot run ``scene`` (with the integrator class ``method_cls``, where given), or None where
-    it can. It takes ropes (linknet_core/native/src/stages/ropes.c), not with input-driven anchors (whose jumps are
-    rope events of the event integrator here); a ground and its friction run on the numpy reference only."""
-    if scene.ground is not None:
-        what = "it has a ground, and the native core (backend=\"native\", the native FMU) does not take a ground yet"
-    elif not scene.rope.any() or method_cls is None:
+def native_refusal(scene: Scene) -> str | None:
+    """Why the native core cannot run ``scene`` (its ground), or None where it can: it takes ropes
+    (linknet_core/native/src/stages/ropes.c); a ground and its friction run on the numpy reference only."""
+    if scene.ground is None:
         return None
-    elif any(motion.kind == "input" for motion in scene.motions):
-        what = ("it has ropes and input-driven anchors, whose jumps are rope events that the native core does not "
-                "take")
-    else:
-        return None
-    return (f"{scene.name}: {what}; the numpy reference runs it (backend=\"auto\" or \"numpy\", and the pythonfmu "
-            "FMU)")
+    return (f"{scene.name}: it has a ground, and the native core (backend=\"native\", the native FMU) does not take a "
+            "ground yet; the numpy reference runs it (backend=\"auto\" or \"numpy\", and the pythonfmu FMU)")
 
 
 def scene_size(scene: Scene) -> float:
@@ -147,12 +139,12 @@ def describe(scene: Scene) -> list[str]:
     return lines
 
 
-def numpy_only(scene: Scene, backend: str, method_cls=None) -> bool:
-    """Whether ``scene`` runs on the numpy reference with the integrator class ``method_cls``: where the native core
-    cannot take it (native_refusal), a backend of 'native' refused with native_refusal's words."""
+def numpy_only(scene: Scene, backend: str) -> bool:
+    """Whether ``scene`` runs on the numpy reference: where the native core cannot take it (native_refusal), a
+    backend of 'native' refused with native_refusal's words."""
     if not scene.unilateral:
         return False
-    refusal = native_refusal(scene, method_cls)
+    refusal = native_refusal(scene)
     if backend == "native" and refusal is not None:
         raise SolverError(refusal)
     return refusal is not None

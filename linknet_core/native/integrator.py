@@ -230,6 +230,28 @@ class NativeIntegrator(Integrator):
             self._motion_error = exc
             return 1
 
+    def anchor_jump(self, drive, t: float, X, U, F_input=None):
+        """The driven anchors brought to ``drive``'s motion at t where it jumped, by the core's own jump (ln_jump_anchors:
+        with ropes the rope event of stages/ropes.c, its events logged): what Simulator.outputs_after_jump asks of a
+        scene with ropes, which puts the internals back after. Returns (X, U, impulse (n_driven, 3), position jump,
+        velocity jump), as dynamics.drive.anchor_jump."""
+        P, V, A = drive.at(t)
+        rows = self._input_slots
+        self._follow(None)
+        self.data.drive_P[rows], self.data.drive_V[rows], self.data.drive_A[rows] = P[rows], V[rows], A[rows]
+        d = self._d
+        d.drive_hold_t = d.t = t
+        self.data.X[...], self.data.U[...] = X, U
+        self.data.F_input[...] = 0.0 if F_input is None else F_input
+        self._input_zero = F_input is None
+        self._out = (None, None)
+        status = lib.jump_anchors(self._model_p, self._method_p, self._data_p)
+        self._drain()
+        if status != lib.OK:
+            raise SolverError(self.explain(status, t, t, 1))
+        return (self.data.X.copy(), self.data.U.copy(), self.data.impulse.copy(), float(d.jump_position),
+                float(d.jump_velocity))
+
     def anchor_report(self) -> dict:
         """The driven anchors' last jump: the impulse each got (n_driven, 3), N s; the largest position and
         velocity change; jumps counted over the run."""

@@ -7,7 +7,6 @@ import functools
 
 import numpy as np
 
-from linknet_core.dynamics.unilateral import native_refusal
 from linknet_core.errors import SolverError
 from linknet_core.native.integrator import NativeIntegrator
 from linknet_core.native.model import native_model
@@ -30,9 +29,6 @@ class NativeBackend(Backend):
     def choose_specialisation(cls, scene, dyn, settings, U0):
         stepping = settings.stepping
         if scene.rope.any():  # the modes change the links: the point-mass path, event by event
-            refusal = native_refusal(scene, stepping.cls)
-            if refusal is not None:
-                raise SolverError(refusal)
             return Specialisation(NONE, "ropes: the point-mass path, one mode of taut ropes at a time"), U0
         specialisation = choose_specialisation(scene, dyn, stepping.method, enabled=settings.specialise,
                                                tolerances=(stepping.rtol, stepping.atol))

@@ -108,34 +108,31 @@ def test_a_rope_at_its_length_moving_outwards_at_the_start_takes_an_inelastic_im
     assert any("largest correction 2 m/s" in line for line in sim.initial_report.lines(sim.scene))
 
 
-@pytest.mark.parametrize("scene_data,method,named", [
-    (data(masses=[{"name": "hook", "position": [0, 0, 0], "driven": True, "motion": {"kind": "input"}},
-                  {"name": "bob", "position": [0, 0, -1.0], "mass": 1.0}]), "rattle",
-     "s: it has ropes and input-driven anchors"),
-    (data(links=[{"a": 1, "b": 2, "length": 0.5}], ground={"point": [0, 0, -2], "normal": [0, 0, 1]}), "dop853",
-     "s: it has a ground, and the native core"),
-])
-def test_the_native_backend_refuses_a_ground_and_ropes_with_input_anchors_and_auto_takes_the_numpy_path(
-        scene_data, method, named):
-    scene = ln.Scene.from_dict(scene_data)
-    step = {"dt": 1e-3} if method == "rattle" else {}
+@pytest.mark.parametrize("method,step", [("dop853", {}), ("rattle", {"dt": 1e-3})])
+def test_the_native_backend_refuses_a_ground_and_auto_takes_the_numpy_path_there_and_the_native_core_for_ropes(
+        method, step):
+    grounded = ln.Scene.from_dict(data(links=[{"a": 1, "b": 2, "length": 0.5}],
+                                       ground={"point": [0, 0, -2], "normal": [0, 0, 1]}))
     with pytest.raises(ln.SolverError) as err:
-        ln.Simulator(scene, method, backend="native", **step)
-    assert named in str(err.value) and "the numpy reference runs it" in str(err.value)
-    sim = ln.Simulator(scene, method, **step)
+        ln.Simulator(grounded, method, backend="native", **step)
+    assert "s: it has a ground, and the native core" in str(err.value)
+    assert "the numpy reference runs it" in str(err.value)
+    sim = ln.Simulator(grounded, method, **step)
     assert sim.backend == "numpy"
     assert "backend numpy (ropes, ground: the numpy reference, event by event)" in sim.summary()
+    assert ln.Simulator(ln.Scene.from_dict(data()), method, **step).backend == "native"
 
 
-def test_the_native_fmu_build_of_a_rope_scene_fails_cleanly_and_writes_nothing(tmp_path):
-    # the native core runs ropes; the native FMU does not map their variables (slack, Jrope) yet
-    out = tmp_path / "rope_pendulum.fmu"
-    scene = ROOT / "models" / "ropes" / "rope_pendulum.json"
+def test_the_native_fmu_build_of_a_rope_scene_with_a_ground_fails_cleanly_and_writes_nothing(tmp_path):
+    # the native FMU takes ropes (tests/fmu_native/test_native_fmu_ropes.py), not a ground
+    out = tmp_path / "rope_ground.fmu"
+    scene = tmp_path / "rope_ground.json"
+    scene.write_text(json.dumps(data(ground={"point": [0, 0, -5], "normal": [0, 0, 1]})))
     run = subprocess.run([sys.executable, str(ROOT / "build_fmu.py"), str(scene), "--native", "--platforms", "host",
                           "-o", str(out)], capture_output=True, text=True, timeout=120)
     assert run.returncode != 0 and "Traceback" not in run.stderr, run.stderr
-    assert "build_fmu:" in run.stderr
-    assert not out.exists() and not list(tmp_path.iterdir())
+    assert "build_fmu:" in run.stderr and "it has a ground" in run.stderr
+    assert not out.exists() and list(tmp_path.iterdir()) == [scene]
 
 
 def test_the_outputs_linearization_is_refused_for_ropes_and_a_ground_naming_the_rope():

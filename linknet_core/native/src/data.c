@@ -270,6 +270,12 @@ static int run_interval(const ln_model *m_scene, const ln_method *meth, ln_data 
     return status;
 }
 
+int ln_jump_anchors(const ln_model *m, const ln_method *meth, ln_data *d)
+{
+    if (!ln_base_forces(m, d, d->F_base)) return LN_NON_FINITE;
+    return m->n_driven ? ln_drive_jump(m, meth, d) : LN_OK;
+}
+
 int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_target, ln_int max_steps)
 {
     const ln_int n3 = 3 * m->K;

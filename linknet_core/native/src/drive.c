@@ -122,13 +122,14 @@ int ln_drive_jump(const ln_model *m, const ln_method *meth, ln_data *d)
             jump_u = ln_fmax(jump_u, fabs(V[3 * a + e] - U[3 * k + e]));
         }
     }
-    /* with ropes a jump is an impact on the ropes it stretches or jerks (the numpy reference's EventHandling.
-       anchor_jump), not the rods' projection below: refused, the data left as it was */
-    if (m->n_ropes && (jump_x != 0.0 || jump_u != 0.0)) return LN_ROPE_ANCHOR_JUMP;
     for (ln_int i = 0; i < 3 * n; i++) d->impulse[i] = 0.0;
     d->jump_position = jump_x;
     d->jump_velocity = jump_u;
     if (jump_x == 0.0 && jump_u == 0.0) return LN_OK;
+    if (m->n_ropes) {  /* with ropes a jump is an impact on the ropes it stretches or jerks (stages/ropes.c) */
+        d->jumps++;
+        return ln_rope_anchor_jump(m, meth, d, P, V);
+    }
     for (ln_int a = 0; a < n; a++) {
         const ln_int k = m->driven_idx[a];
         for (int e = 0; e < 3; e++) {

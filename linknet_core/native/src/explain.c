@@ -114,7 +114,7 @@ const char *ln_status_name(int status)
     static const char *const names[] = {"ok", "projection failed", "singular", "non-finite", "step underflow",
                                         "too many steps", "left the plane", "implicit kick failed", "bad argument",
                                         "out of memory", "anchor motion failed", "rope event chatter",
-                                        "no rope mode", "rope anchor jump"};
+                                        "no rope mode"};
     return status >= 0 && status < (int)(sizeof names / sizeof names[0]) ? names[status] : "unknown status";
 }
 
@@ -182,13 +182,8 @@ void ln_explain(const ln_model *m, const ln_method *meth, const ln_data *d, int 
                  "constraints contradict each other, as a rope shorter than a rod beside it would), or it cycled and "
                  "has more than %lld touching ropes to enumerate", span, (long long)m->enumeration_limit);
         break;
-    case LN_ROPE_ANCHOR_JUMP:
-        snprintf(out, n, "the driven anchors' motion jumps at t = %s (a new held input), which with ropes is a rope "
-                 "event (a jerk of the ropes it stretches) that the native core does not take; the numpy reference "
-                 "does (backend=\"numpy\", the pythonfmu FMU)", t0);
-        break;
     default:
-        if (status > 0 && status <= LN_ROPE_ANCHOR_JUMP)
+        if (status > 0 && status <= LN_NO_MODE)
             snprintf(out, n, "the native core stopped %s: %s", span, ln_status_name(status));
         else
             snprintf(out, n, "the native core stopped %s: status %d", span, status);

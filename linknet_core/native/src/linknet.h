@@ -66,10 +66,8 @@ enum ln_status {
     LN_NO_MEMORY = 9,
     LN_DRIVE_FAILED = 10,       /* the driven anchors' motion callback failed (or returned non-finite values) */
     LN_EVENT_CHATTER = 11,      /* ropes: more events than max_events_per_step in consecutive steps */
-    LN_NO_MODE = 12,            /* ropes: the complementarity problem of the touching ropes has no solution, or it
+    LN_NO_MODE = 12             /* ropes: the complementarity problem of the touching ropes has no solution, or it
                                    cycled and is too large to enumerate */
-    LN_ROPE_ANCHOR_JUMP = 13    /* ropes: the driven anchors' motion jumped (an input-driven anchor's new hold), which
-                                   is a rope event the core does not take (the numpy reference does) */
 };
 
 /* What an event of a rope is (ln_data's event log). Keep in step with linknet_core/clib/library.py. */
@@ -138,9 +136,19 @@ LN_API int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, doub
    a pure function of the state, as the numpy reference's UnilateralDynamics.resolve), slack ropes' T exactly 0.
    ln_evaluate calls it for a model with ropes. The integrator's mode is not changed. */
 int ln_rope_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U);
+/* A jump of the driven anchors' motion at d->t to P, V (n_driven,3) in a scene with ropes, as an event: the ropes it
+   stretched put back with the touching ones, the impact law taking the jerk (each rope's restitution, the rods'
+   rates (12) to zero), the mode chosen from the state after it, taut events for every rope it jerked; d->impulse
+   what the links gave each driven anchor (EventHandling.anchor_jump). ln_drive_jump calls it. */
+int ln_rope_anchor_jump(const ln_model *m, const ln_method *meth, ln_data *d, const double *P, const double *V);
 /* The log of events kept since the last drain is taken: the count is returned and the log emptied (the events are
    d->event_t, event_kind, event_link, event_impulse [0, count) until the next advance). */
 LN_API ln_int ln_rope_events_drained(ln_data *d);
+
+/* The driven anchors brought to their motion at d->t where it jumped, as every advance starts (drive.c's jump: the
+   rods' projection, or with ropes the rope event), and nothing else: the outputs a run will start from. Not all or
+   nothing: the caller keeps what it needs to put back (the state, the mode, the log). */
+LN_API int ln_jump_anchors(const ln_model *m, const ln_method *meth, ln_data *d);
 
 /* What a sample's energy needs beyond the model (diagnostics.c): its fields are listed in ln_model_fields.h
    (LN_ENERGY_TERMS_FIELDS). */

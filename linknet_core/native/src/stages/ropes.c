@@ -929,7 +929,9 @@ static int FN(rope_impact)(const ln_model *mm, const ln_method *meth, ln_data *d
 }
 
 /* At an event at t (state X, U of the old mode): positions onto the touching ropes, the impact, the next mode, the
-   events recorded (EventHandling._apply_event). kind 1: rope trigger reached its length; 2: its tension fell to 0. */
+   events recorded (EventHandling._apply_event). kind 1: rope trigger reached its length; 2: its tension fell to 0;
+   3: the driven anchors' motion jumped (the ropes it stretched are put back with the touching ones, and every rope
+   it jerked, taut already or not, is a taut event). */
 static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_data *d, double *X, double *U,
                                 const double *F_base, double t, int kind, ln_int trigger)
 {
@@ -941,6 +943,8 @@ static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_da
     FN(rope_touching)(mm, X, NULL, touching);
     for (ln_int r = 0; r < R; r++) touching[r] |= d->link_active[mm->rope_link[r]];
     if (kind == 1) touching[trigger] = 1;
+    if (kind == 3)
+        for (ln_int r = 0; r < R; r++) touching[r] |= FN(rope_gap)(mm, X, mm->rope_link[r]) < 0.0;
     if ((status = FN(rope_project)(mm, meth, d, touching, X, NULL)) != LN_OK) return status;
     if ((status = FN(rope_impact)(mm, meth, d, X, U, touching, impulses, took)) != LN_OK) return status;
     if ((status = FN(rope_drive)(mm, d, t, X, U)) != LN_OK) return status;
@@ -962,7 +966,8 @@ static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_da
     if ((status = FN(rope_project)(mm, meth, d, active, NULL, U)) != LN_OK) return status;
     for (ln_int r = 0; r < R; r++) {
         const ln_int l = mm->rope_link[r];
-        if ((took[r] || active[r]) && !d->link_active[l]) FN(rope_record)(mm, d, t, LN_EVENT_TAUT, l, impulses[r]);
+        if ((took[r] || active[r]) && (!d->link_active[l] || (kind == 3 && took[r])))
+            FN(rope_record)(mm, d, t, LN_EVENT_TAUT, l, impulses[r]);
     }
     for (ln_int r = 0; r < R; r++) {
         const ln_int l = mm->rope_link[r];
@@ -1057,6 +1062,66 @@ int FN(ln_rope_fixed_step)(const ln_model *mm, const ln_method *meth, ln_data *d
 }
 
 #if DIM == 3
+int ln_rope_anchor_jump(const ln_model *m, const ln_method *meth, ln_data *d, const double *P, const double *V)
+{
+    ln_model mode = *m;
+    mode.inv_R = d->mode_inv_R;
+    const ln_model *mm = &mode;
+    double *X = d->X, *U = d->U, *U_jumped = d->event_states + 6 * 3 * m->K;
+    const size_t bytes = (size_t)(3 * m->K) * sizeof(double);
+    int status;
+    if (!d->mode_chosen) {  /* the mode of the state before the jump (its anchors' accelerations not in B) */
+        uint8_t *active = d->rope_flags + 4 * m->n_ropes;
+        if ((status = FN(rope_state_mode)(mm, d, X, U, d->F_base, active)) != LN_OK) return status;
+        for (ln_int l = 0; l < m->L; l++) d->link_active[l] = 1;
+        for (ln_int r = 0; r < m->n_ropes; r++) d->link_active[m->rope_link[r]] = active[r];
+        d->mode_chosen = 1;
+    }
+    for (ln_int a = 0; a < m->n_driven; a++)
+        for (int e = 0; e < 3; e++) {
+            X[3 * m->driven_idx[a] + e] = P[3 * a + e];
+            U[3 * m->driven_idx[a] + e] = V[3 * a + e];
+        }
+    memcpy(U_jumped, U, bytes);
+    status = FN(rope_apply_event)(mm, meth, d, X, U, d->F_base, d->t, 3, -1);
+    /* what the links gave the driven anchors: the minimum-norm impulses A^+ C dU of the ropes at their length and
+       the rods (any other gives the same forces, (31)), C^T Lambda on the anchors' rows (UnilateralDynamics.
+       anchor_impulses) */
+    if (status == LN_OK) {
+        uint8_t *at_length = d->rope_flags + 2 * m->n_ropes;
+        double *dU = d->Uh, *rows = d->link_values, *lam = d->link_values + m->L;
+        int moved = 0;
+        for (ln_int k = 0; k < m->K; k++)
+            for (int e = 0; e < 3; e++) {
+                dU[3 * k + e] = m->is_fixed[k] ? 0.0 : U[3 * k + e] - U_jumped[3 * k + e];
+                moved |= dU[3 * k + e] != 0.0;
+            }
+        if (moved) {
+            FN(rope_touching)(mm, X, NULL, at_length);
+            FN(rope_mask_of)(mm, d, at_length);
+            FN(ln_unit_vectors)(mm, X, d->E0);
+            if ((status = FN(ln_factor_tension_matrix)(mm, d, d->E0)) == LN_OK) {
+                for (ln_int l = 0; l < m->L; l++) {
+                    const ln_int a = m->k1[l], b = m->k2[l];
+                    double sum = 0.0;
+                    for (int e = 0; e < 3; e++) sum += d->E0[3 * l + e] * (dU[3 * a + e] - dU[3 * b + e]);
+                    rows[l] = sum;
+                }
+                FN(ln_solve_tension_system)(mm, d, rows, lam);
+                for (ln_int l = 0; l < m->L; l++)
+                    for (ln_int a = 0; a < m->n_driven; a++) {
+                        const ln_int k = m->driven_idx[a];
+                        const double sign = m->k1[l] == k ? 1.0 : m->k2[l] == k ? -1.0 : 0.0;
+                        if (sign == 0.0 || !d->mask[l]) continue;
+                        for (int e = 0; e < 3; e++) d->impulse[3 * a + e] += sign * lam[l] * d->E0[3 * l + e];
+                    }
+            }
+        }
+    }
+    FN(rope_use_mask)(mm, d, d->link_active);
+    return status;
+}
+
 int ln_rope_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U)
 {
     ln_model mode = *m;
