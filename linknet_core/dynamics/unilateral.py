@@ -135,7 +135,9 @@ def describe(scene: Scene) -> list[str]:
             shown = ", ".join(on[:8]) + (f" and {len(on) - 8} more" if len(on) > 8 else "")
             lines.append(f"masses on the ground at the start: {len(on)}" + (f" ({shown})" if on else ""))
     lines.append("path: the numpy reference, event by event (linknet_core.dynamics.unilateral; the native core does "
-                 "not take ropes or a ground yet)")
+                 "not take a ground yet)" if ground is not None else
+                 "path: the native core, event by event (linknet_core/native/src/stages/ropes.c; the numpy reference "
+                 "with backend=\"numpy\")")
     return lines
 
 
@@ -1084,8 +1086,8 @@ class UnilateralReport(InitialReport):
         if scene.ground is not None:
             what.append(f"{self.contacts} masses on the ground")
         return super().lines(scene) + [
-            "ropes and ground: the numpy reference runs this scene, event by event (the native core does not take "
-            "ropes or a ground yet); " + ", ".join(what)]
+            "ropes and ground: event by event (the native core takes ropes, the numpy reference a ground); "
+            + ", ".join(what)]
 
 
 def event_arrays(events, ground=None) -> dict:
