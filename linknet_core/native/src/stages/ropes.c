@@ -89,10 +89,16 @@ static double rope_polyval(const double *p, int n, double x)
     return s;
 }
 
+/* sign p(x) + shift, for the bracketing root find (which wants f(lo) >= 0 > f(hi)) */
+struct rope_poly {
+    int n;
+    double p[7], sign, shift;
+};
+
 static double rope_poly_fn(void *ctx, double x)
 {
-    const double *p = ctx;
-    return rope_polyval(p + 1, (int)p[0], x) * p[8] + p[9];
+    const struct rope_poly *q = ctx;
+    return q->sign * rope_polyval(q->p, q->n, x) + q->shift;
 }
 
 /* The real roots in (0, 1) of the polynomial p of n coefficients (degree n - 1 <= 6), ascending, into roots;
@@ -107,18 +113,16 @@ static int rope_roots_01(const double *p, int n, double *roots)
     cuts[n_cuts++] = 0.0;
     n_cuts += rope_roots_01(dp, n - 1, cuts + 1);
     cuts[n_cuts++] = 1.0;
-    double ctx[10] = {0};
-    ctx[0] = (double)n;
-    for (int i = 0; i < n; i++) ctx[1 + i] = p[i];
+    struct rope_poly q = {n, {0}, 1.0, 0.0};
+    for (int i = 0; i < n; i++) q.p[i] = p[i];
     int count = 0;
     for (int i = 0; i + 1 < n_cuts; i++) {
         double a = cuts[i], b = cuts[i + 1];
         const double fa = rope_polyval(p, n, a), fb = rope_polyval(p, n, b);
         if (fa == 0.0 && a > 0.0 && (count == 0 || roots[count - 1] != a)) roots[count++] = a;
         if (!((fa > 0.0 && fb < 0.0) || (fa < 0.0 && fb > 0.0))) continue;
-        ctx[8] = fa > 0.0 ? 1.0 : -1.0;  /* the sign that makes f(a) >= 0 > f(b) */
-        ctx[9] = 0.0;
-        rope_bracketed_root(rope_poly_fn, ctx, &a, &b, ctx[8] * fa, ctx[8] * fb, 4e-16, 0, 0.0);
+        q.sign = fa > 0.0 ? 1.0 : -1.0;
+        rope_bracketed_root(rope_poly_fn, &q, &a, &b, q.sign * fa, q.sign * fb, 4e-16, 0, 0.0);
         roots[count++] = b;
     }
     return count;
@@ -180,13 +184,10 @@ static int rope_gap_dips(const double *p_in, double depth, double *crossing, dou
                 if (values[q] >= 0.0) i = q;
             const double shift = i >= 0 ? 0.0 : depth;
             if (i < 0) i = j - 1;
-            double ctx[10] = {0};
-            ctx[0] = (double)n;
-            for (int q = 0; q < n; q++) ctx[1 + q] = p_in[q];
-            ctx[8] = 1.0;
-            ctx[9] = shift;
+            struct rope_poly poly = {n, {0}, 1.0, shift};
+            for (int c = 0; c < n; c++) poly.p[c] = p_in[c];
             double a = cuts[i], b = cuts[i + 1];
-            rope_bracketed_root(rope_poly_fn, ctx, &a, &b, values[i] + shift, values[i + 1] + shift, 4e-16, 0, 0.0);
+            rope_bracketed_root(rope_poly_fn, &poly, &a, &b, values[i] + shift, values[i + 1] + shift, 4e-16, 0, 0.0);
             crossing[count] = b;
         }
         count++;
@@ -850,7 +851,8 @@ static int FN(rope_project)(const ln_model *mm, const ln_method *meth, ln_data *
     return LN_OK;
 }
 
-static void FN(rope_record)(const ln_model *mm, ln_data *d, double t, int kind, ln_int link, double impulse)
+/* An event into the data's log (what does not fit is counted), a jerk's impulse into its rope's sum. */
+static void FN(rope_record)(ln_data *d, double t, int kind, ln_int link, double impulse)
 {
     if (kind == LN_EVENT_TAUT) d->rope_impulse[link] += impulse;
     if (d->n_events >= LN_EVENT_LOG) {
@@ -862,7 +864,6 @@ static void FN(rope_record)(const ln_model *mm, ln_data *d, double t, int kind, 
     d->event_link[d->n_events] = link;
     d->event_impulse[d->n_events] = impulse;
     d->n_events++;
-    (void)mm;
 }
 
 /* The impulse at (X, U) where the ropes touching are at their length (UnilateralDynamics.impact): U becomes the
@@ -967,11 +968,11 @@ static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_da
     for (ln_int r = 0; r < R; r++) {
         const ln_int l = mm->rope_link[r];
         if ((took[r] || active[r]) && (!d->link_active[l] || (kind == 3 && took[r])))
-            FN(rope_record)(mm, d, t, LN_EVENT_TAUT, l, impulses[r]);
+            FN(rope_record)(d, t, LN_EVENT_TAUT, l, impulses[r]);
     }
     for (ln_int r = 0; r < R; r++) {
         const ln_int l = mm->rope_link[r];
-        if (d->link_active[l] && !active[r]) FN(rope_record)(mm, d, t, LN_EVENT_SLACK, l, 0.0);
+        if (d->link_active[l] && !active[r]) FN(rope_record)(d, t, LN_EVENT_SLACK, l, 0.0);
     }
     for (ln_int r = 0; r < R; r++) d->link_active[mm->rope_link[r]] = active[r];
     return LN_OK;
