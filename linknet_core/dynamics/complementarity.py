@@ -60,7 +60,7 @@ def solve_mixed_lcp(W: np.ndarray, b: np.ndarray, unilateral: np.ndarray, start:
         return bad_l | bad_w
 
     for _ in range(PIVOTS_PER_ROW * uni.size + 1):
-        lam = _basis_solution(W, b, active)
+        lam = basis_solution(W, b, active)
         bad = violations(lam, W @ lam - b, active)
         if not bad.any():
             return lam, active
@@ -74,7 +74,7 @@ def solve_mixed_lcp(W: np.ndarray, b: np.ndarray, unilateral: np.ndarray, start:
     for chosen in itertools.product((False, True), repeat=uni.size):
         basis = ~unilateral
         basis[uni] = chosen
-        lam = _basis_solution(W, b, basis)
+        lam = basis_solution(W, b, basis)
         w = W @ lam - b
         worst = max(float(np.max(np.maximum(-lam[uni] * basis[uni], 0.0), initial=0.0)) / tol_l,
                     float(np.max(np.maximum(-w[uni] * ~basis[uni], 0.0), initial=0.0)) / tol_w)
@@ -86,7 +86,7 @@ def solve_mixed_lcp(W: np.ndarray, b: np.ndarray, unilateral: np.ndarray, start:
     return best[1], best[2]
 
 
-def _basis_solution(W, b, basis):
+def basis_solution(W, b, basis):
     """lambda of one basis: W_SS lambda_S = b_S on the basis rows S, minimum-norm where W_SS is singular (the seed's
     (31): the self-stresses of redundant rows take no share), lambda = 0 elsewhere."""
     lam = np.zeros(b.size)

@@ -40,7 +40,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from linknet_core.dynamics.complementarity import _basis_solution, solve_mixed_lcp
+from linknet_core.dynamics.complementarity import basis_solution, solve_mixed_lcp
 from linknet_core.dynamics.roots import bracketed_root
 from linknet_core.dynamics.equations import Dynamics
 from linknet_core.errors import ConsistencyError, SceneError, SolverError
@@ -829,7 +829,7 @@ class UnilateralDynamics(Dynamics):
             return md.inner.constraint_rows(Xa, md.pad_velocity(X, self._inv_mass3 * load))
 
         def response(load):  # in the impact's basis (its rows taken as equalities): affine in the load
-            lam = _basis_solution(W, -(q + rate_shift(load)), basis)
+            lam = basis_solution(W, -(q + rate_shift(load)), basis)
             U_plus = U + md.link_impulse_velocities(X, lam) + self._inv_mass3 * load
             return self.tangential_velocities(U_plus)[md.sliding] @ self.tangents.T, lam[md.sliding_rows]
 

@@ -82,7 +82,7 @@ class RigidityReport:
         native_path = native.describe()
         if self.specialisation.kind != "none":
             native_path += f" (not used: the {self.specialisation.kind} specialisation stands in)"
-        if s.unilateral:  # ropes or a ground: the numpy reference runs the scene
+        if s.unilateral:  # ropes or a ground: their own description says which path runs them
             from linknet_core.dynamics.unilateral import describe
 
             lines += describe(s)
