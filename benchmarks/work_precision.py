@@ -62,9 +62,9 @@ SCENES = {
     "net_10x10": 0.25, "four_bar": 2.0, "spinning_tetrahedron": 2.0, "redundant_truss": 2.0,
     "braced_tower": 0.7, "triangulated_net": 0.5, "rope_swing": 2.0, "rope_pendulum": 2.0,
 }
-# rope_swing and rope_pendulum (models/ropes/): run by linknet on its numpy reference path, refused by the peers
-# that model rods only, referenced by benchmarks.rope_reference; MoorDyn is their peer where its lines have a rigid
-# limit (rope_swing)
+# rope_swing and rope_pendulum (models/ropes/): run by linknet on its native core (the default backend), refused
+# by the peers that model rods only, referenced by benchmarks.rope_reference; MoorDyn is their peer where its lines
+# have a rigid limit (rope_swing)
 SCENE_NOTES = {
     "braced_tower": "t_end 0.7 s, not the DefaultExperiment's 2 s: between 0.7 and 0.8 s the tower passes near a "
                     "singular configuration (at 0.8 s the two smallest nonzero eigenvalues of A are 8e-6 of the "
@@ -78,8 +78,8 @@ SCENE_NOTES = {
     "rope_swing": "a bob on a perfectly elastic rope (restitution 1): a pendulum until the rope goes slack at "
                   "0.495 s, then flights ended by five elastic jerks. The reference is event-driven "
                   "(benchmarks/rope_reference.py: the index-1 right-hand side between the events, scipy's event "
-                  "location, the impacts' impulses by enumeration of the active sets). Linknet runs it on its numpy "
-                  "reference path (the native core does not take ropes), far slower a step than the native core; "
+                  "location, the impacts' impulses by enumeration of the active sets). Linknet runs it on its native "
+                  "core, event by event as its numpy reference does (tests hold the two together); "
                   "the peers that model rods only cannot run it. MoorDyn's lines are "
                   "elastic: one row per stiffness EA (docs/benchmarks/rope_peer.md)",
     "rope_pendulum": "a bob on an inelastic rope (restitution 0) thrown up and out: flight, jerk, pendulum, slack "
@@ -90,7 +90,7 @@ SCENE_NOTES = {
 # Not braced_tower (1 s in --quick): yoshida8 reaches 1.5e-11 m at its second quick step, below where the quick test
 # measures orders, so it would have no order to check; the redundant scenes in motion are checked against the same
 # reference with every method by tests/core/test_redundant_motion.py.
-# rope_swing: the rope events through every method (~5 s on the numpy path), and MoorDyn where it imports.
+# rope_swing: the rope events through every method, and MoorDyn where it imports.
 QUICK_SCENES = ("pendulum", "double_pendulum", "four_bar", "spinning_tetrahedron", "chain_10", "rope_swing")
 
 # knob sweeps, coarse to fine. Fixed steps as divisors of t_end so every run lands on t_end exactly.
