@@ -184,6 +184,27 @@ def test_two_masses_on_a_rope_thrown_up_jerk_where_their_uniform_relative_motion
     assert np.abs(centre - flight).max() <= 1e-13
 
 
+def test_a_slack_inside_one_long_step_is_found_at_the_methods_inner_stages_as_the_reference_finds_it():
+    # rope_swing at rtol 1e-3, advanced to 0.4 s and on: the tension falls through zero at 0.495 s and rises again
+    # within one step, both of whose ends pull; the inner stages' tensions show it (a bob thrown aside by the rope:
+    # |X_bob| < R after the slack, where a missed slack keeps it on the circle, |X_bob| = R)
+    scene = ln.load_scene(ROOT / "models" / "ropes" / "rope_swing.json")
+    runs = {}
+    for backend in ("numpy", "native"):
+        sim = ln.Simulator(scene, "dop853", rtol=1e-3, error_estimate=False, backend=backend)
+        sim.advance(0.4)
+        sim.advance(0.9)
+        runs[backend] = sim
+    reference, native = runs["numpy"], runs["native"]
+    assert [e.kind for e in reference.integrator.events] == ["slack"]
+    assert [(e.kind, e.index) for e in native.integrator.events] == [("slack", 0)]
+    # at rtol 1e-3 the steps are long and the round-off of the two solves grows along them (measured 1.2e-13 s and
+    # 1.7e-13 m); 1e-11 keeps two orders of margin and is eight orders below a missed event's effect
+    assert abs(native.integrator.events[0].t - reference.integrator.events[0].t) <= 1e-11
+    assert np.abs(native.state.X - reference.state.X).max() <= 1e-11
+    assert np.linalg.norm(native.state.X[1]) < 0.9
+
+
 def test_a_snapshot_continues_identically_and_a_reset_runs_the_same_events_again():
     scene = ln.load_scene(ROOT / "models" / "ropes" / "rope_pendulum.json")
     sim = ln.Simulator(scene, "dop853", rtol=1e-10, backend="native")

@@ -3,7 +3,9 @@ circle with slightly too little speed to keep its rope taut over the top. The te
 (phi from the top) is negative only over a short arc around the top, a few ms where the adaptive step is tens of
 ms: the step's ends both have the rope pulling. The event integrators screen the forces at the method's inner
 stages and find the slack there; the reference is the closed form: the slack angle where the tension vanishes,
-its time by quadrature of the pendulum's energy, then the ballistic flight to |X| = R."""
+its time by quadrature of the pendulum's energy, then the ballistic flight to |X| = R. Both the numpy reference
+(events.py, AdaptiveEvents._force_dip_at_stages) and the native core (stages/ropes.c, rope_force_dip_at_stages)
+are held to it."""
 from __future__ import annotations
 
 import numpy as np
@@ -32,14 +34,15 @@ def loop_reference(shortfall):
     return t_slack, t_slack + s, float(Xt @ Vt) / R, np.sqrt(vb2)
 
 
+@pytest.mark.parametrize("backend", ["numpy", "native"])
 @pytest.mark.parametrize("method, time_tol", [("dop853", 2e-8), ("dopri5", 1e-7)])
 @pytest.mark.parametrize("shortfall", [1e-4, 1e-5])
-def test_slack_over_the_top_inside_a_step(method, time_tol, shortfall):
+def test_slack_over_the_top_inside_a_step(method, time_tol, shortfall, backend):
     t_slack, t_taut, radial, v_bottom = loop_reference(shortfall)
     # the dip in tension lasts (t_taut - t_slack): a few ms, well inside one step at this tolerance
     assert t_taut - t_slack < 0.011
     run = ln.simulate(bob_scene([0, 0, -R], [v_bottom, 0, 0], R), 0.8, method=method, rtol=1e-10, n_out=5,
-                      backend="numpy")
+                      backend=backend)
     events = [e for e in run.events if e.t > 1e-3]
     assert [e.kind for e in events] == ["slack", "taut"]
     assert events[0].t == pytest.approx(t_slack, abs=time_tol)
@@ -49,8 +52,9 @@ def test_slack_over_the_top_inside_a_step(method, time_tol, shortfall):
     assert run.stats["steps"] < 200  # the adaptive steps stayed long: the dip was found inside one
 
 
-def test_a_loop_with_speed_to_spare_keeps_its_rope_taut():
+@pytest.mark.parametrize("backend", ["numpy", "native"])
+def test_a_loop_with_speed_to_spare_keeps_its_rope_taut(backend):
     v_bottom = np.sqrt(G * R * (1.0 + 1e-3) + 4.0 * G * R)  # over the top with v^2 = 1.001 g R: T > 0 throughout
-    run = ln.simulate(bob_scene([0, 0, -R], [v_bottom, 0, 0], R), 0.8, rtol=1e-10, n_out=5, backend="numpy")
+    run = ln.simulate(bob_scene([0, 0, -R], [v_bottom, 0, 0], R), 0.8, rtol=1e-10, n_out=5, backend=backend)
     assert [e.kind for e in run.events if e.t > 1e-3] == []
     assert np.all(run.T[:, 0] > 0)

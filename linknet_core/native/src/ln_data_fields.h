@@ -161,7 +161,11 @@
     ARRAY(double, rope_values, m->n_ropes ? 10 * m->n_ropes : 0)  /* (10, n_ropes) per-rope values */                 \
     ARRAY(double, event_states, m->n_ropes ? 16 * 3 * m->K : 0)  /* (16, K, 3) states */                           \
     ARRAY(double, link_values, m->n_ropes ? 6 * m->L : 0)        /* (6, L) per-link values */                       \
-    ARRAY(double, E_full, m->n_ropes ? 3 * m->L : 0)             /* (L,3) every link's unit vector, slack or not */
+    ARRAY(double, E_full, m->n_ropes ? 3 * m->L : 0)             /* (L,3) every link's unit vector, slack or not */ \
+    /* the ropes' tensions at an adaptive step's inner stages (its accepted attempt's): where a force that falls   \
+       through zero and rises again within the step is looked for (ln_rope_step_events) */                        \
+    ARRAY(double, stage_tensions, m->n_ropes ? s->n_stages_allocated * m->n_ropes : 0)  /* (stages, n_ropes) */    \
+    SCALAR(double, stage_force_scale)                   /* the largest |T| of the mode's links at those stages */
 
 /* The declarations of the fields, for the struct's body. */
 #define LN_DECLARE_DATA_SCALAR(type, name) type name;

@@ -23,7 +23,8 @@
  * Hermite of X, whose sign is the sextic R^2 - |d(theta)|^2, screened by its Bernstein coefficients (Farouki and
  * Rajan, Computer Aided Geometric Design 5, 1988) and looked at exactly where they allow a dip, each dip confirmed on
  * the method's own step to its lowest point; the taut ropes' tensions at the step's end against -force_tol of the
- * largest |T|. The event is taken on the method's own step: a gap's time by Newton's method on the step's length, a
+ * largest |T|, and on the adaptive methods, where the end shows none, at the step's inner stages (a tension that
+ * dips through zero and recovers within one step), each candidate confirmed on the method's own step. The event is taken on the method's own step: a gap's time by Newton's method on the step's length, a
  * force's by Illinois' regula falsi on it, ending just past the zero; there the positions go onto the touching ropes,
  * the impact is applied and the next mode chosen. The adaptive methods end the step at the event and go on with their
  * controller; the fixed-step ones (RATTLE and its compositions) finish the step from the event in the new mode, so
@@ -978,6 +979,108 @@ static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_da
     return LN_OK;
 }
 
+/* The ropes' tensions of stage i of the attempt being made (d->T after its evaluation), and the largest |T| of the
+   mode's links over its stages so far (the first stage starts it). */
+void FN(ln_rope_keep_stage)(const ln_model *mm, ln_data *d, ln_int i)
+{
+    double *kept = d->stage_tensions + (i - 1) * mm->n_ropes;
+    for (ln_int r = 0; r < mm->n_ropes; r++) kept[r] = d->T[mm->rope_link[r]];
+    double largest = i == 1 ? 0.0 : d->stage_force_scale;
+    for (ln_int l = 0; l < mm->L; l++)
+        if (d->link_active[l]) largest = ln_fmax(largest, fabs(d->T[l]));
+    d->stage_force_scale = largest;
+}
+
+/* (x, y) of the vertex of the parabola through (x[j], y[j]), j = 0..2, x ascending and y[1] the lowest, clamped to
+   [x[0], x[2]] (events._parabola_vertex). */
+static void rope_parabola_vertex(const double *x, const double *y, double *xv_out, double *yv_out)
+{
+    const double d01 = (y[1] - y[0]) / (x[1] - x[0]), d12 = (y[2] - y[1]) / (x[2] - x[1]);
+    const double a = (d12 - d01) / (x[2] - x[0]);
+    if (!(a > 0.0)) {
+        *xv_out = x[1];
+        *yv_out = y[1];
+        return;
+    }
+    const double b = d01 - a * (x[0] + x[1]);
+    const double xv = ln_fmin(ln_fmax(-b / (2.0 * a), x[0]), x[2]);
+    *xv_out = xv;
+    *yv_out = y[1] + (xv - x[1]) * (d01 + a * (xv - x[0]));
+}
+
+/* A force event inside an accepted step whose end showed none (AdaptiveEvents._force_dip_at_stages): a taut rope's
+   tension that falls through zero and rises again within the step. The tensions the method computed at its inner
+   stages (nodes c_i in (0, 1), kept by ln_rope_keep_stage) are screened at each node against -force_tol of their
+   largest |T|, and at the vertex of the parabola through three consecutive nodes (by c) whose middle one is lowest;
+   the candidates, in the order of (theta, rope), are confirmed on the method's own step to theta h. Where one is,
+   *rope is its rope, *h_dip the step to it and (Xc, Uc) the state there; else *rope = -1. */
+static int FN(rope_force_dip_at_stages)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X0,
+                                        const double *U0, const double *F_base, double t0, double h, double *Xc,
+                                        double *Uc, ln_int *rope, double *h_dip)
+{
+    const ln_int R = mm->n_ropes, s = meth->n_stages;
+    *rope = -1;
+    int any_taut = 0;
+    for (ln_int r = 0; r < R; r++) any_taut |= d->link_active[mm->rope_link[r]] != 0;
+    if (!any_taut || s < 2) return LN_OK;
+    /* the inner nodes, ascending (insertion sort of stage indices by c; a method has a few dozen stages at most) */
+    ln_int order[64], n = 0;
+    for (ln_int i = 1; i < s && n < 64; i++) {
+        const double c = meth->C[i];
+        if (!(c > 0.0 && c < 1.0)) continue;
+        ln_int j = n++;
+        while (j > 0 && meth->C[order[j - 1]] > c) {
+            order[j] = order[j - 1];
+            j--;
+        }
+        order[j] = i;
+    }
+    if (n < 1) return LN_OK;
+    const double tol = mm->force_tol * d->stage_force_scale;
+    double *theta_of = d->rope_values, *rope_of = d->rope_values + R;  /* the candidates */
+    ln_int n_candidates = 0;
+    for (ln_int r = 0; r < R; r++) {
+        if (!d->link_active[mm->rope_link[r]]) continue;
+        double nodes[64], f[64], theta = -1.0;
+        for (ln_int j = 0; j < n; j++) {
+            nodes[j] = meth->C[order[j]];
+            f[j] = d->stage_tensions[(order[j] - 1) * R + r];
+        }
+        for (ln_int j = 0; j < n && theta < 0.0; j++)
+            if (f[j] < -tol) theta = nodes[j];
+        for (ln_int j = 1; j + 1 < n && theta < 0.0; j++) {
+            if (!(f[j] <= f[j - 1] && f[j] <= f[j + 1] && nodes[j - 1] < nodes[j] && nodes[j] < nodes[j + 1]))
+                continue;
+            double xv, yv;
+            rope_parabola_vertex(nodes + j - 1, f + j - 1, &xv, &yv);
+            if (yv < -tol) theta = xv;
+        }
+        if (theta < 0.0) continue;
+        ln_int j = n_candidates++;  /* kept in the order of (theta, rope) */
+        while (j > 0 && theta_of[j - 1] > theta) {
+            theta_of[j] = theta_of[j - 1];
+            rope_of[j] = rope_of[j - 1];
+            j--;
+        }
+        theta_of[j] = theta;
+        rope_of[j] = (double)r;
+    }
+    for (ln_int k = 0; k < n_candidates; k++) {
+        const double theta = theta_of[k];
+        const ln_int r = (ln_int)rope_of[k];
+        double scale;
+        int status = FN(rope_method_step)(mm, meth, d, X0, U0, F_base, t0, theta * h, Xc, Uc);
+        if (status == LN_OK) status = FN(rope_forces_at)(mm, d, t0 + theta * h, Xc, Uc, F_base, &scale);
+        if (status != LN_OK) return status;
+        if (d->T[mm->rope_link[r]] < -mm->force_tol * scale) {
+            *rope = r;
+            *h_dip = theta * h;
+            return LN_OK;
+        }
+    }
+    return LN_OK;
+}
+
 /* After the accepted step from (X0, U0) at t0 to (X1, U1) at *t1 (AdaptiveEvents._event_in_step): where an event lies
    within it, (X1, U1, *t1) become the state just past the event, in the new mode. The mode's mask is in use again
    on return. */
@@ -998,14 +1101,26 @@ int FN(ln_rope_step_events)(const ln_model *mm, const ln_method *meth, ln_data *
     memcpy(Xs1, X1, bytes);
     memcpy(Us1, U1, bytes);
     int status = FN(rope_first_event)(mm, meth, d, Xs0, Us0, t0, Xs1, Us1, h_max, F_base, &found, &rope, &theta);
+    double h_to = h_max;  /* the step the event is located in: to the step's end, or to a dip inside it */
+    if (status == LN_OK && !found) {
+        /* a tension that fell through zero and rose again within the step: the event lies in the step to the
+           confirmed dip, whose state takes the end's place (Xs1, Us1), its time found from the middle on */
+        double h_dip = 0.0;
+        status = FN(rope_force_dip_at_stages)(mm, meth, d, Xs0, Us0, F_base, t0, h_max, Xs1, Us1, &rope, &h_dip);
+        if (status == LN_OK && rope >= 0) {
+            found = 2;
+            theta = 0.5;
+            h_to = h_dip;
+        }
+    }
     if (status == LN_OK && found) {
         if (++d->events_this_step > mm->max_events_per_step) {
             status = LN_EVENT_CHATTER;
         } else {
             double h_e = 0.0;
-            status = FN(rope_locate)(mm, meth, d, Xs0, Us0, t0, h_max, Xs1, Us1, F_base, found, rope, theta, Xe, Ue,
+            status = FN(rope_locate)(mm, meth, d, Xs0, Us0, t0, h_to, Xs1, Us1, F_base, found, rope, theta, Xe, Ue,
                                      &h_e);
-            const double t_e = h_e >= h_max ? *t1 : t0 + h_e;
+            const double t_e = h_e >= h_to ? (h_to == h_max ? *t1 : t0 + h_to) : t0 + h_e;
             if (status == LN_OK) status = FN(rope_apply_event)(mm, meth, d, Xe, Ue, F_base, t_e, found, rope);
             if (status == LN_OK) {
                 memcpy(X1, Xe, bytes);

@@ -182,6 +182,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
             d->n_rhs++;
             if ((status = accelerations(m, d, Yx, Yu, F_base, acc, d->T, 1)) != LN_OK) return status;
             store_stage(size, i, Yu, acc, KX, KU);
+            if (m->n_ropes && i < s) FN(ln_rope_keep_stage)(m, d, i);
         }
         const double err = FN(ln_rk_error_norm)(m, meth, X, U, Xn, Un, KX, KU, h);
         if (!(err <= 1.0)) {  /* too large, or not finite */
