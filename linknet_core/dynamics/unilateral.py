@@ -62,6 +62,12 @@ FORCE_TOL = 1e-10
 # acceleration scale is perfectly inelastic: a ball bouncing with e < 1 comes to rest after finitely many events
 # instead of infinitely many in finite time.
 REST_HEIGHT = 1e-9
+# An impact's impulse on a unilateral constraint is no impulse when it would change that constraint's own rate by
+# less than IMPULSE_ROUNDOFF of the velocity scale (Lambda_u W_uu, W_uu = C_u M^-1 C_u^T its diagonal of W: a rope's
+# |E|^2 (1/M_k1 + 1/M_k2), a contact's 1/M_k): a few ulps of the rates the impact's LCP is solved from, whose round-off
+# alone gives a constraint the impact leaves as it was (a rope taut already under a jump of the driven anchors) an
+# impulse of ~1e-17 N s, either sign as the rounding falls; no velocity the state can show changes by that.
+IMPULSE_ROUNDOFF = 8 * float(np.finfo(float).eps)
 
 
 class Event(NamedTuple):
@@ -806,7 +812,7 @@ class UnilateralDynamics(Dynamics):
         U_after = U + md.link_impulse_velocities(X, lam) + self._inv_mass3 * friction
         P_t[md.sliding] = friction[self.contact_masses[md.sliding]]
         impulses = md.unilateral_forces(lam)
-        return U_after, impulses, impulses > 0, np.linalg.norm(P_t, axis=1)
+        return U_after, impulses, self.took_impulse(X, U, impulses), np.linalg.norm(P_t, axis=1)
 
     def _coulomb_impulses(self, md: ModeDynamics, X, U):
         """(Lambda in md's row order, the sliding contacts' friction impulses (K, 3)) of the impact with md's stuck
@@ -888,7 +894,7 @@ class UnilateralDynamics(Dynamics):
         W, rates, q, e, rows_uni = self._impact_problem(md, X, U, inelastic)
         lam, basis = solve_mixed_lcp(W, -q, rows_uni, rows_uni & (rates < 0))
         impulses = md.unilateral_forces(lam)
-        took = impulses > 0
+        took = self.took_impulse(X, U, impulses)
         sub = basis & rows_uni
         active = np.zeros(self.n_unilateral, bool)
         active[md.constraint_of_row[sub]] = True
@@ -902,6 +908,18 @@ class UnilateralDynamics(Dynamics):
         else:
             U_after = U + md.link_impulse_velocities(X, lam)
         return U_after, impulses, took
+
+    def took_impulse(self, X, U, impulses) -> np.ndarray:
+        """(n_unilateral,) bool: the constraints whose impulse in an impact at (X, U) (velocities before it) is one,
+        not round-off: Lambda_u W_uu above IMPULSE_ROUNDOFF of the velocity scale, W_uu = C_u M^-1 C_u^T (a rope's
+        |E_l|^2 (1/M_k1 + 1/M_k2) with E_l = d / R_l, a contact's 1/M_k; 0 where both ends are anchored, which no
+        impulse moves)."""
+        scene, inv = self.scene, self._inv_mass3[:, 0]
+        ropes = self.rope_links
+        d = X[scene.k2[ropes]] - X[scene.k1[ropes]]
+        W_rope = np.einsum("ij,ij->i", d, d) / scene.length[ropes] ** 2 * (inv[scene.k1[ropes]] + inv[scene.k2[ropes]])
+        W_uu = np.concatenate([W_rope, inv[self.contact_masses]])
+        return np.asarray(impulses) * W_uu > IMPULSE_ROUNDOFF * self.velocity_scale(U)
 
     def _impact_problem(self, md: ModeDynamics, X, U, inelastic: bool = False):
         """(W, rates, q, e, unilateral rows) of Moreau's impact law on md's rows: W = C M^-1 C^T, the rows' rates C U

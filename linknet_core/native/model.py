@@ -216,6 +216,7 @@ class NativeModel:
         m.rope_link, m.rope_restitution = i8(ropes), f8(scene.restitution[ropes])
         m.touch_tol, m.cross_tol = unilateral.TOUCH_TOL, unilateral.CROSS_TOL
         m.force_tol, m.rest_height = unilateral.FORCE_TOL, unilateral.REST_HEIGHT
+        m.impulse_roundoff = unilateral.IMPULSE_ROUNDOFF
         m.lcp_tol, m.pivots_per_row = complementarity.LCP_TOL, complementarity.PIVOTS_PER_ROW
         m.enumeration_limit = complementarity.ENUMERATION_LIMIT
         m.max_events_per_step, m.gap_newton_iterations = events.MAX_EVENTS_PER_STEP, events.GAP_NEWTON_ITERATIONS

@@ -108,7 +108,7 @@
     SCALAR(double, retry_rank_tol)                                                                                  \
     /* ropes (stages/ropes.c): links that only pull, each slack or taut (the mode, ln_data.link_active); their     \
        events' tolerances, filled from the numpy reference's single source (linknet_core.dynamics.unilateral:      \
-       TOUCH_TOL, CROSS_TOL, FORCE_TOL, REST_HEIGHT; .complementarity: LCP_TOL, PIVOTS_PER_ROW, ENUMERATION_LIMIT;  \
+       TOUCH_TOL, CROSS_TOL, FORCE_TOL, REST_HEIGHT, IMPULSE_ROUNDOFF; .complementarity: LCP_TOL, PIVOTS_PER_ROW, ENUMERATION_LIMIT;  \
        linknet_core.integrators.events: MAX_EVENTS_PER_STEP, GAP_NEWTON_ITERATIONS, SHORT_STEP). A rope's length scale is its   \
        R_l. No ropes: n_ropes = 0 and nothing of this is read */                                                   \
     SCALAR(ln_int, n_ropes)                                                                                         \
@@ -118,6 +118,7 @@
     SCALAR(double, cross_tol)                                                                                       \
     SCALAR(double, force_tol)                                                                                       \
     SCALAR(double, rest_height)                                                                                     \
+    SCALAR(double, impulse_roundoff)                                                                                \
     SCALAR(double, lcp_tol)                                                                                         \
     SCALAR(ln_int, pivots_per_row)                                                                                  \
     SCALAR(ln_int, enumeration_limit)                                                                               \

@@ -900,9 +900,14 @@ static int FN(rope_impact)(const ln_model *mm, const ln_method *meth, ln_data *d
     int separating = 0;
     for (ln_int l = 0; l < L; l++)
         if (d->mask[l] && rates[l] > mm->touch_tol * scale) separating = 1;
+    /* an impulse that changes its rope's own rate by less than impulse_roundoff of the velocity scale is the LCP's
+       round-off, not an impulse (UnilateralDynamics.took_impulse): Lambda_l W_ll, W_ll = |E_l|^2 (1/M_k1 + 1/M_k2) */
     for (ln_int r = 0; r < R; r++) {
-        impulses[r] = touching[r] ? lam[mm->rope_link[r]] : 0.0;
-        took[r] = impulses[r] > 0;
+        const ln_int l = mm->rope_link[r];
+        impulses[r] = touching[r] ? lam[l] : 0.0;
+        double sq = 0.0;
+        for (int k = 0; k < DIM; k++) sq += d->E_full[l * DIM + k] * d->E_full[l * DIM + k];
+        took[r] = impulses[r] * (sq * (mm->inv_m[mm->k1[l]] + mm->inv_m[mm->k2[l]])) > mm->impulse_roundoff * scale;
     }
     /* distinct restitutions among the approaching basis ropes */
     double first = 0.0;
