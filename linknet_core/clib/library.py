@@ -27,10 +27,10 @@ c_uint8_p = ctypes.POINTER(ctypes.c_uint8)
 # enum ln_status, as the messages name them
 STATUS = {0: "ok", 1: "projection failed", 2: "singular", 3: "non-finite", 4: "step underflow", 5: "too many steps",
           6: "left the plane", 7: "implicit kick failed", 8: "bad argument", 9: "out of memory",
-          10: "anchor motion failed", 11: "rope event chatter", 12: "no rope mode"}
+          10: "anchor motion failed", 11: "rope event chatter", 12: "no rope mode", 13: "not linearizable"}
 OK, PROJECTION_FAILED, SINGULAR, NON_FINITE, STEP_UNDERFLOW, TOO_MANY_STEPS = 0, 1, 2, 3, 4, 5
 LEFT_PLANE, IMPLICIT_KICK_FAILED, BAD_ARGUMENT, NO_MEMORY, DRIVE_FAILED = 6, 7, 8, 9, 10
-EVENT_CHATTER, NO_MODE = 11, 12
+EVENT_CHATTER, NO_MODE, NOT_LINEARIZABLE = 11, 12, 13
 # enum ln_event_kind: the kinds of a rope's event in ln_data's log, by the names linknet_core.dynamics.unilateral.Event
 # gives them
 EVENT_KINDS = ("taut", "slack")

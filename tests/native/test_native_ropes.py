@@ -205,6 +205,18 @@ def test_a_slack_inside_one_long_step_is_found_at_the_methods_inner_stages_as_th
     assert np.linalg.norm(native.state.X[1]) < 0.9
 
 
+def test_the_cores_linearization_refuses_a_model_with_ropes_with_its_own_status():
+    # the library refuses the outputs' linearization for ropes before it asks the core; the core's own check guards
+    # any other caller (the rods' formulas would take every rope for a rod)
+    from linknet_core.native.interface import NativeInterface, NativeLinearization
+
+    sim = ln.Simulator(ln.load_scene(ROOT / "models" / "ropes" / "rope_pendulum.json"), "dop853", backend="native")
+    integrator = sim.integrator
+    with pytest.raises(ln.SolverError, match="not linearizable"):
+        NativeLinearization(integrator.model, integrator.data, sim.state.X, sim.state.U,
+                            interface=NativeInterface(integrator.model))
+
+
 def test_a_snapshot_continues_identically_and_a_reset_runs_the_same_events_again():
     scene = ln.load_scene(ROOT / "models" / "ropes" / "rope_pendulum.json")
     sim = ln.Simulator(scene, "dop853", rtol=1e-10, backend="native")

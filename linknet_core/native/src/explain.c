@@ -114,7 +114,7 @@ const char *ln_status_name(int status)
     static const char *const names[] = {"ok", "projection failed", "singular", "non-finite", "step underflow",
                                         "too many steps", "left the plane", "implicit kick failed", "bad argument",
                                         "out of memory", "anchor motion failed", "rope event chatter",
-                                        "no rope mode"};
+                                        "no rope mode", "not linearizable"};
     return status >= 0 && status < (int)(sizeof names / sizeof names[0]) ? names[status] : "unknown status";
 }
 
@@ -183,7 +183,7 @@ void ln_explain(const ln_model *m, const ln_method *meth, const ln_data *d, int 
                  "has more than %lld touching ropes to enumerate", span, (long long)m->enumeration_limit);
         break;
     default:
-        if (status > 0 && status <= LN_NO_MODE)
+        if (status > 0 && status <= LN_NOT_LINEARIZABLE)
             snprintf(out, n, "the native core stopped %s: %s", span, ln_status_name(status));
         else
             snprintf(out, n, "the native core stopped %s: status %d", span, status);

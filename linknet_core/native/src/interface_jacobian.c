@@ -112,6 +112,9 @@ int ln_interface_prepare(const ln_model *m, ln_interface *J, const ln_data *sour
     ln_data *d = J->d;
     const ln_int K3 = 3 * m->K, L = m->L, n3 = 3 * m->n_driven;
     J->prepared = 0;
+    /* the formulas are the rods' (25)-(26): with ropes they would take every rope for a rod, and the outputs have
+       no derivative where a rope goes slack (the library refuses first; this guards any other caller) */
+    if (m->n_ropes) return LN_NOT_LINEARIZABLE;
     /* the caller's time and anchors' motion, and the input forces */
     d->t = source->t;
     if (F_input) memcpy(d->F_input, F_input, (size_t)K3 * sizeof(double));

@@ -66,8 +66,10 @@ enum ln_status {
     LN_NO_MEMORY = 9,
     LN_DRIVE_FAILED = 10,       /* the driven anchors' motion callback failed (or returned non-finite values) */
     LN_EVENT_CHATTER = 11,      /* ropes: more events than max_events_per_step in consecutive steps */
-    LN_NO_MODE = 12             /* ropes: the complementarity problem of the touching ropes has no solution, or it
+    LN_NO_MODE = 12,            /* ropes: the complementarity problem of the touching ropes has no solution, or it
                                    cycled and is too large to enumerate */
+    LN_NOT_LINEARIZABLE = 13    /* the outputs' linearization asked of a model with ropes: it is the rods' (25)-(26),
+                                   which holds within one mode only */
 };
 
 /* What an event of a rope is (ln_data's event log). Keep in step with linknet_core/clib/library.py. */
