@@ -55,7 +55,7 @@ HERE = Path(__file__).resolve().parent
 if str(HERE.parent) not in sys.path:  # fmu_src: the layout both FMU kinds share
     sys.path.insert(0, str(HERE.parent))
 from linknet_fmu.layout import (ERROR_ESTIMATE_CATEGORY, ERROR_ESTIMATE_CATEGORY_DESCRIPTION,  # noqa: E402
-                                ESTIMATE_ERROR_DESCRIPTION)
+                                ESTIMATE_ERROR_DESCRIPTION, EVENT_CATEGORY, EVENT_CATEGORY_DESCRIPTION)
 
 GLUE_FILES = ("fmi2Functions.c", "linknet_model.c", "lnfmu_scene.c", "fmu_resource.c", "fmi2_api.h", "fmu_model.h",
               "fmu_states.h", "lnfmu_scene.h", "fmu_resource.h")
@@ -69,6 +69,15 @@ LOG_CATEGORIES = (("logStatusWarning", "Log messages with fmi2Warning status."),
                   ("logStatusFatal", "Log messages with fmi2Fatal status (never sent by this FMU)."),
                   ("logAll", "Log all messages."),
                   (ERROR_ESTIMATE_CATEGORY, ERROR_ESTIMATE_CATEGORY_DESCRIPTION))
+
+
+def log_categories(layout) -> tuple:
+    """The FMU's log categories: LOG_CATEGORIES, and the events' where the scene has ropes (one message per event
+    of a doStep; the glue accepts it in SetDebugLogging for these FMUs only, fmi2_api.h), in the pythonfmu FMU's
+    order."""
+    if layout.rope_links.size:
+        return LOG_CATEGORIES + ((EVENT_CATEGORY, EVENT_CATEGORY_DESCRIPTION),)
+    return LOG_CATEGORIES
 
 
 class NativeBuildError(RuntimeError):
@@ -263,6 +272,8 @@ class VariableFamily:
     among: str | None           # the rows the C side numbers them by: the mass's row in ln_model.fixed_idx ("fixed")
     #                             or driven_idx ("driven"); None: the mass itself
     description: str            # the whole family, as the FMI 3.0 array variable describes it
+    links: str | None = None    # the Layout's attribute of the links its rows are (masses None); None with masses
+    #                             None: every link or axis, in order
 
 
 _HELD = "held constant over each communication step"
@@ -291,6 +302,10 @@ VARIABLE_FAMILIES = (
     VariableFamily("Jreact", "JREACT", "Jreact_vr", "driven_indices", "driven",
                    "impulses the network gave the driven anchors at the start of the last communication step (N.s; a "
                    "jump of a velocity input); 0 if none"),
+    VariableFamily("slack", "SLACK", "slack_vr", None, None, "1 where a rope is slack (carries no tension: its T is "
+                   "0), 0 where it is taut", links="rope_links"),
+    VariableFamily("Jrope", "JROPE", "Jrope_vr", None, None, "each rope's impulse of coming taut (its jerks) within "
+                   "the last communication step, summed (N.s); 0 if none", links="rope_links"),
     VariableFamily("M", "M", "M_vr", "free_indices", None, "masses of the free masses (kg, > 0)"),
     VariableFamily("R", "R", "R_vr", None, None, "lengths of the links (m, > 0; the initial positions must satisfy "
                    "them), in the scene's link order"),
@@ -323,7 +338,9 @@ def variable_table(layout, model) -> tuple[np.ndarray, np.ndarray]:
 
     for family in VARIABLE_FAMILIES:
         vrs = np.asarray(getattr(layout, family.vrs), np.int64)
-        if family.masses is None:  # links or axes, in order
+        if family.links is not None:  # some links: the link's number
+            rows = np.asarray(getattr(layout, family.links), np.int64)
+        elif family.masses is None:  # links or axes, in order
             rows = np.arange(vrs.shape[0], dtype=np.int64)
         else:
             rows = np.asarray(getattr(layout, family.masses), np.int64)
@@ -344,6 +361,7 @@ def scene_resource(scene, cfg, layout) -> tuple[Resource, dict]:
     import linknet_core as ln
     from linknet_core.clib import library
     from linknet_core.clib.ldl import package_library
+    from linknet_core.dynamics.unilateral import linearization_refusal
 
     sims = _simulators(scene, cfg)
     sim = sims[cfg["integrator"]]
@@ -363,6 +381,7 @@ def scene_resource(scene, cfg, layout) -> tuple[Resource, dict]:
                   length_tol=sim.settings.length_tol)  # the run's own rule for the initial lengths
     values["tolerance_min"], values["tolerance_max"] = library_tolerance_range()
     values["max_force"] = float(getattr(importlib.import_module(ln.Simulator.__module__), "MAX_FORCE", 0.0))
+    values["linearization_refusal"] = linearization_refusal(scene) if scene.unilateral else ""
     # the elimination order the sparse LDL^T was analysed in (analysed again at instantiation with ln_ldl_analyse)
     values["ldl_ordering"] = []
     if model.ldl:
@@ -462,7 +481,7 @@ def model_description_parts(cfg, layout, guid: str, sources: list[str], start_va
     for name in sources:
         ET.SubElement(files, "File", name=name)
     cats = ET.SubElement(root, "LogCategories")
-    for name, text in LOG_CATEGORIES:
+    for name, text in log_categories(layout):
         ET.SubElement(cats, "Category", name=name, description=text)
     variables = []
     for v in layout.reals:
@@ -794,8 +813,9 @@ def bake(scene, cfg, layout, progress=lambda stage: None) -> tuple[Resource, dic
     progress(f"baking the scene ({len(layout.reals)} variables)")
     try:
         return scene_resource(scene, cfg, layout)
-    except ln.LinknetError as e:
-        raise NativeBuildError(f"{scene.name}: {e}") from None
+    except ln.LinknetError as e:  # named once: the library's messages mostly name the scene themselves
+        text = str(e)
+        raise NativeBuildError(text if text.startswith(f"{scene.name}: ") else f"{scene.name}: {text}") from None
 
 
 def pack(out: Path, files: dict) -> None:

@@ -74,14 +74,24 @@ class Variable:
         return int(np.prod(self.shape)) if self.shape else 1
 
 
-def _mass_rows(masses) -> str:
-    """Which mass each row is, 1-based as in the FMI 2.0 names: 'rows 1..10 are masses 2..11'."""
-    numbers = [int(k) + 1 for k in masses]
+def _rows(items, what: str) -> str:
+    """Which mass or link (``what``: "mass" or "link") each row is, 1-based as in the FMI 2.0 names: 'rows 1..10 are
+    masses 2..11'."""
+    numbers = [int(k) + 1 for k in items]
+    plural = {"mass": "masses", "link": "links"}[what]
     if len(numbers) == 1:
-        return f"row 1 is mass {numbers[0]}"
+        return f"row 1 is {what} {numbers[0]}"
     if numbers == list(range(numbers[0], numbers[0] + len(numbers))):
-        return f"rows 1..{len(numbers)} are masses {numbers[0]}..{numbers[-1]}"
-    return f"rows 1..{len(numbers)} are masses {', '.join(map(str, numbers))}"
+        return f"rows 1..{len(numbers)} are {plural} {numbers[0]}..{numbers[-1]}"
+    return f"rows 1..{len(numbers)} are {plural} {', '.join(map(str, numbers))}"
+
+
+def _mass_rows(masses) -> str:
+    return _rows(masses, "mass")
+
+
+def _link_rows(links) -> str:
+    return _rows(links, "link")
 
 
 def fmi3_variables(layout, cfg) -> list[Variable]:
@@ -99,7 +109,8 @@ def fmi3_variables(layout, cfg) -> list[Variable]:
             raise NativeBuildError(f"the Layout's {family.name} value references are not consecutive: teach "
                                    "fmu_src/native/build_fmi3.py")
         v = layout.reals[int(flat[0])]
-        rows = f"; {_mass_rows(getattr(layout, family.masses))}" if family.masses is not None else ""
+        rows = (f"; {_mass_rows(getattr(layout, family.masses))}" if family.masses is not None
+                else f"; {_link_rows(getattr(layout, family.links))}" if family.links is not None else "")
         reals.append(Variable(family.name, "Float64", v.causality, v.variability, v.initial, v.declared_type,
                               family.description + rows, int(flat[0]), tuple(vrs.shape)))
     for attribute, _ in build.SCALAR_VARIABLES:
@@ -170,7 +181,7 @@ def model_description(cfg, layout, variables, guid: str, start_values: dict, exp
     for name in types_used:
         ET.SubElement(typedefs, "Float64Type", name=name, quantity=TYPES[name][0], unit=TYPES[name][1])
     cats = ET.SubElement(root, "LogCategories")
-    for name, text in build.LOG_CATEGORIES:
+    for name, text in build.log_categories(layout):
         ET.SubElement(cats, "Category", name=name, description=text.replace("fmi2", "fmi3"))
     ET.SubElement(root, "DefaultExperiment", {k: repr(float(x)) for k, x in experiment.items()})
     model_variables = ET.SubElement(root, "ModelVariables")

@@ -129,6 +129,15 @@ static fmi2Status report(instance *self, const char *function, int result)
     }
 }
 
+/* The events of the step just taken, one message each with fmi2OK status in their own category (logging on). */
+static void log_events(instance *self)
+{
+    if (!self->logging_on) return;
+    char text[FMU_MESSAGE];
+    for (size_t i = 0; fmu_model_event(self->model, i, text, sizeof text); i++)
+        emit_in(self, fmi2OK, LINKNET_EVENT_CATEGORY, text);
+}
+
 /* The instance behind a component handle, or NULL for a handle that is not a live instance of this FMU (no
    logger can be reached through such a handle). */
 static instance *checked(fmi2Component c)
@@ -173,8 +182,10 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
 {
     ENTER("fmi2SetDebugLogging");
     if (nCategories > 0 && categories == NULL) return refuse(self, fn, "categories is NULL");
-    const char *unknown = linknet_unknown_log_category(nCategories, categories);
-    if (unknown) return refuse(self, fn, "unknown log category \"%s\" (known: " LINKNET_LOG_CATEGORIES ")", unknown);
+    const int events = fmu_model_info_get(self->model)->events;
+    const char *unknown = linknet_unknown_log_category(nCategories, categories, events);
+    if (unknown)
+        return refuse(self, fn, "unknown log category \"%s\" (known: %s)", unknown, linknet_log_categories(events));
     self->logging_on = loggingOn != fmi2False;
     return fmi2OK;
 }
@@ -591,6 +602,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     const int result = fmu_model_do_step(self->model, t, h, self->msg);
     if (result != FMU_DISCARD && result != FMU_DISCARD_FINAL) {
         self->discard.discarded = 0;
+        log_events(self);
         return changed_by(self, report(self, fn, result));
     }
     fmu_discard_remember(&self->discard, self->model, t, h, self->msg);

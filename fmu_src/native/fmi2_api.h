@@ -159,24 +159,35 @@ FMI2_Export fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKin
 FMI2_Export fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value);
 FMI2_Export fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value);
 
-/* The log categories both linknet FMU kinds declare (fmu_src/native/build.py: LOG_CATEGORIES) and accept in
+/* The log categories both linknet FMU kinds declare (fmu_src/native/build.py: log_categories) and accept in
    fmi2SetDebugLogging, and the check of a host's list against them: written here once for the native FMU's glue and
-   the pythonfmu FMU's front layer. */
+   the pythonfmu FMU's front layer. The events' category is declared by the FMUs of scenes with ropes or a ground
+   only, and accepted only by them. */
 #define LINKNET_NOTE_CATEGORY "logErrorEstimate"  /* information on a result computed as asked: the error estimate
                                                    beyond its goal (fmi2Warning status, the call's status unchanged) */
+#define LINKNET_EVENT_CATEGORY "logEvents"  /* = EVENT_CATEGORY of fmu_src/linknet_fmu/layout.py: one message per rope
+                                               or ground event of a doStep, with fmi2OK status */
 #define LINKNET_LOG_CATEGORIES "logStatusWarning, logStatusDiscard, logStatusError, logStatusFatal, logAll, " \
                                LINKNET_NOTE_CATEGORY
 
-/* The first of categories[0..n) that is none of them ("(null)" for a NULL name), or NULL when every one is known. */
-static inline const char *linknet_unknown_log_category(size_t n, const fmi2String categories[])
+/* The categories a host may name: LINKNET_LOG_CATEGORIES, and LINKNET_EVENT_CATEGORY where the FMU logs events. */
+static inline const char *linknet_log_categories(int events)
+{
+    return events ? LINKNET_LOG_CATEGORIES ", " LINKNET_EVENT_CATEGORY : LINKNET_LOG_CATEGORIES;
+}
+
+/* The first of categories[0..n) that is none of them ("(null)" for a NULL name), or NULL when every one is known.
+   events: the FMU declares LINKNET_EVENT_CATEGORY (a scene with ropes or a ground). */
+static inline const char *linknet_unknown_log_category(size_t n, const fmi2String categories[], int events)
 {
     static const char *const known[] = {"logStatusWarning", "logStatusDiscard", "logStatusError", "logStatusFatal",
-                                        "logAll", LINKNET_NOTE_CATEGORY};
+                                        "logAll", LINKNET_NOTE_CATEGORY, LINKNET_EVENT_CATEGORY};
+    const size_t n_known = sizeof known / sizeof known[0] - (events ? 0 : 1);  /* the events' category is last */
     for (size_t i = 0; i < n; i++) {
         if (categories[i] == NULL) return "(null)";
         size_t k = 0;
-        while (k < sizeof known / sizeof known[0] && strcmp(categories[i], known[k]) != 0) k++;
-        if (k == sizeof known / sizeof known[0]) return categories[i];
+        while (k < n_known && strcmp(categories[i], known[k]) != 0) k++;
+        if (k == n_known) return categories[i];
     }
     return NULL;
 }

@@ -26,7 +26,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "fmi2_api.h" /* the log categories both glues accept (LINKNET_LOG_CATEGORIES); no fmi2 function is defined */
+#include "fmi2_api.h" /* the log categories both glues accept (linknet_log_categories); no fmi2 function is defined */
 #include "fmi3/fmi3Functions.h"
 #include "fmi3_variables.h"
 #include "fmu_model.h"
@@ -117,6 +117,15 @@ static fmi3Status report(instance *self, const char *function, int result)
     }
     default: logf_status(self, fmi3Error, "%s: %s", function, self->msg); return fmi3Error;
     }
+}
+
+/* The events of the step just taken, one message each with fmi3OK status in their own category (logging on). */
+static void log_events(instance *self)
+{
+    if (!self->logging_on) return;
+    char text[FMU_MESSAGE];
+    for (size_t i = 0; fmu_model_event(self->model, i, text, sizeof text); i++)
+        emit_in(self, fmi3OK, LINKNET_EVENT_CATEGORY, text);
 }
 
 static instance *checked(fmi3Instance c)
@@ -380,8 +389,10 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance instance_, fmi3Boolean loggingOn, si
 {
     ENTER("fmi3SetDebugLogging");
     if (nCategories > 0 && categories == NULL) return refuse(self, fn, "categories is NULL");
-    const char *unknown = linknet_unknown_log_category(nCategories, categories);
-    if (unknown) return refuse(self, fn, "unknown log category \"%s\" (known: " LINKNET_LOG_CATEGORIES ")", unknown);
+    const int events = fmu_model_info_get(self->model)->events;
+    const char *unknown = linknet_unknown_log_category(nCategories, categories, events);
+    if (unknown)
+        return refuse(self, fn, "unknown log category \"%s\" (known: %s)", unknown, linknet_log_categories(events));
     self->logging_on = loggingOn;
     return fmi3OK;
 }
@@ -992,6 +1003,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance_, fmi3Float64 currentCommunicationPo
     *lastSuccessfulTime = fmu_model_time(self->model);
     if (result != FMU_DISCARD && result != FMU_DISCARD_FINAL) {
         self->discard.discarded = 0;
+        log_events(self);
         const fmi3Status status = changed_by(self, report(self, fn, result));
         *terminateSimulation = self->terminated ? fmi3True : fmi3False;
         return status;

@@ -42,6 +42,7 @@ typedef struct fmu_model_info {
     unsigned n_real;            /* Real variables have value references 0 .. n_real - 1 */
     unsigned n_string;          /* String variables follow: n_real .. n_real + n_string - 1 */
     unsigned n_boolean;         /* then Boolean variables: n_real + n_string .. */
+    int events;                 /* the model has events to log (a scene with ropes): fmu_model_event */
 } fmu_model_info;
 
 /* The model's identity and sizes (read from its resource). */
@@ -83,6 +84,10 @@ int fmu_model_initialize(fmu_model *m, char *msg);
    FMU_DISCARD: not done, a shorter step may succeed; FMU_DISCARD_FINAL: not done, and no shorter one can). */
 int fmu_model_do_step(fmu_model *m, double t, double h, char *msg);
 double fmu_model_time(const fmu_model *m);
+/* The events of the last successful step (a rope going slack or coming taut), each one line of text for the log,
+   and the events beyond what the model keeps per step: i from 0 while it returns 1 (the line in out, n bytes); 0 past
+   the last line. Empty before the first step and after a failed step, a reset or a restored state. */
+int fmu_model_event(const fmu_model *m, size_t i, char *out, size_t n);
 
 /* The model's whole state as bytes (size fixed per model), and back. restore checks what it reads. */
 size_t fmu_model_state_size(const fmu_model *m);

@@ -75,6 +75,10 @@ struct fmu_model {
     double *peak;
     int stepped;
 
+    /* ropes: the events of the last successful step, in the run's data's log (ln_rope_events_drained: they stay there
+       until the next advance), and how many more it did not keep; the glue logs them (fmu_model_event) */
+    ln_int events_logged, events_lost;
+
     /* a model built from changed parameters points into these */
     double *R, *weights;                /* (L), (ln_model_weights_size) */
     double *r, *inertia, *body_mass;
@@ -534,6 +538,11 @@ static int start_data(fmu_model *m, ln_data *d, char *msg)
     d->h_next = s->h_next_init;
     d->planar = s->planar_init && m->model.planar;
     d->steps = d->rejected = d->n_rhs = 0;
+    if (s->model->n_ropes) {  /* the mode is chosen from the state at the first advance; no impulse, no event yet */
+        d->mode_chosen = 0;
+        d->events_this_step = d->n_events = d->events_lost = 0;
+        memset(d->rope_impulse, 0, (size_t)s->L * sizeof(double));
+    }
     if (m->n_bodies) {
         if (ln_rigid_set_state(&m->model, d, m->Y_init) != LN_OK)
             return fail(msg, FMU_ERROR, "the initial rigid-body state is not finite");
@@ -550,6 +559,7 @@ static int set_initial_state(fmu_model *m, char *msg)
 {
     int result = start_data(m, m->d, msg);
     if (result == FMU_OK) result = start_data(m, m->dc, msg);
+    m->events_logged = m->events_lost = 0;
     m->error = 0.0;
     m->over_goal = 0;
     m->stepped = 0;
@@ -663,6 +673,7 @@ fmu_model *fmu_model_new(const fmu_resource *r, char *msg)
     m->info.n_real = (unsigned)s->n_real;
     m->info.n_string = 1;   /* integrator */
     m->info.n_boolean = 1;  /* estimate_error */
+    m->info.events = s->model->n_ropes > 0;
     const ln_int K = s->K, L = s->L, P = s->model->n_pairs;
     m->n_bodies = s->rigid ? s->rigid->n_bodies : 0;
     const ln_int B = m->n_bodies;
@@ -831,6 +842,12 @@ int fmu_model_get_real(fmu_model *m, const unsigned *vr, size_t n, double *value
             if (m->outputs_stale && result == FMU_OK) result = evaluate_outputs(m, msg);
             value[i] = v->kind == LNFMU_T ? d->T[v->index] : d->reaction[v->index];
             break;
+        case LNFMU_SLACK:  /* the library's rule (unilateral.slack_links): a rope whose tension is exactly 0, which
+                              the state's mode gives every slack rope */
+            if (m->outputs_stale && result == FMU_OK) result = evaluate_outputs(m, msg);
+            value[i] = isnan(d->T[v->index]) ? NAN : d->T[v->index] == 0.0 ? 1.0 : 0.0;
+            break;
+        case LNFMU_JROPE: value[i] = d->rope_impulse[v->index]; break;
         default: value[i] = m->value[vr[i]]; break;
         }
     }
@@ -960,7 +977,8 @@ int fmu_model_set_real_input_derivatives(fmu_model *m, const unsigned *vr, size_
 static int is_output(int kind)
 {
     return kind == LNFMU_X || kind == LNFMU_U || kind == LNFMU_T || kind == LNFMU_FREACT || kind == LNFMU_JREACT
-           || kind == LNFMU_ERROR_ESTIMATE || kind == LNFMU_T_PEAK || kind == LNFMU_T_PEAK_TIME;
+           || kind == LNFMU_ERROR_ESTIMATE || kind == LNFMU_T_PEAK || kind == LNFMU_T_PEAK_TIME || kind == LNFMU_SLACK
+           || kind == LNFMU_JROPE;
 }
 
 /* What a variable that is not of the role asked is, for a refusal. */
@@ -1018,11 +1036,12 @@ int fmu_model_directional_derivative(fmu_model *m, const unsigned *unknown, size
         const lnfmu_variable *v = variable(s, unknown[i]);
         if (!is_output(v->kind))
             return fail(msg, FMU_ERROR, "unknown %s (value reference %u) is %s, not an output: a directional "
-                        "derivative is that of an output (X, U, T, T_peak, T_peak_time, Freact, Jreact, error_estimate)",
-                        v->name,
-                        unknown[i], role_of(v->kind));
+                        "derivative is that of an output (X, U, T, T_peak, T_peak_time, Freact, Jreact, "
+                        "error_estimate, slack, Jrope)", v->name, unknown[i], role_of(v->kind));
         feedthrough |= v->kind == LNFMU_T || v->kind == LNFMU_FREACT;
     }
+    if (s->linearization_refusal[0])  /* the library's reason (ropes: the rods' linearization holds in one mode) */
+        return fail(msg, FMU_ERROR, "%s", s->linearization_refusal);
     if (!feedthrough) {  /* no output asked has direct feedthrough */
         for (size_t i = 0; i < n_unknown; i++) derivative[i] = 0.0;
         return FMU_OK;
@@ -1156,6 +1175,10 @@ static int companion_step(fmu_model *m, double t_fmu, double t_target, char *not
     /* the companion: the same step with the same inputs, at its own settings */
     companion_inputs(m);
     const int companion = ln_companion_advance(&m->model, &m->method_c, m->dc, t_target, s->max_steps);
+    if (m->model.n_ropes) {  /* the companion's events are not the run's: its log is emptied unread */
+        ln_rope_events_drained(m->dc);
+        m->dc->events_lost = 0;
+    }
     if (companion != LN_OK) {
         /* the run's own result stands; the estimate is +inf from here on (until a reset or a restored state). The
            words are the library's (Simulator.error_note), the reason the core's (ln_explain) */
@@ -1183,6 +1206,7 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
 {
     const lnfmu_scene *s = m->s;
     const double t_fmu = m->d->t, t_target = t + h;
+    m->events_logged = m->events_lost = 0;
     if (t_target <= t_fmu) return FMU_OK;  /* h below half an ulp of t: nothing to integrate */
     const int jumped = position_jump(m);
     const int status = ln_advance(&m->model, &m->method, m->d, t_target, s->max_steps);
@@ -1206,6 +1230,11 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
                     t_fmu, why);
     }
     m->outputs_stale = m->interface_stale = 1;
+    if (m->model.n_ropes) {  /* the step's events, kept in the data's log for the glue to log */
+        m->events_logged = ln_rope_events_drained(m->d);
+        m->events_lost = m->d->events_lost;
+        m->d->events_lost = 0;
+    }
     /* the step's tension peaks; where the path located none (a static scene, free rigid bodies), T at the step's end
        under its inputs, evaluated now */
     if (!ln_tension_peaks_located(m->d)) {
@@ -1223,6 +1252,49 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
                                 result == FMU_NOTE ? note : "");
     if (result == FMU_NOTE) return fail(msg, FMU_NOTE, "%s", note);
     return FMU_OK;
+}
+
+/* x as Python's repr writes a float (the fewest significant digits that read back as x; positional from 1e-4 to
+   1e16, with ".0" on a whole number), so that the log's times are those of the pythonfmu FMU's messages
+   (fmu_src/linknet_fmu/rope_events.py: event_message). */
+static void python_repr(double x, char *out, size_t n)
+{
+    if (!isfinite(x)) {
+        snprintf(out, n, "%s", isnan(x) ? "nan" : x > 0 ? "inf" : "-inf");
+        return;
+    }
+    int digits = 1;
+    for (; digits < 17; digits++) {
+        snprintf(out, n, "%.*e", digits - 1, x);
+        if (strtod(out, NULL) == x) break;
+    }
+    snprintf(out, n, "%.*e", digits - 1, x);
+    const int exponent = atoi(strchr(out, 'e') + 1);
+    if (exponent < -4 || exponent >= 16) return;  /* "1.5e-05": Python's form too */
+    const int decimals = digits - 1 - exponent;
+    snprintf(out, n, "%.*f", decimals > 0 ? decimals : 0, x);
+    if (!strchr(out, '.')) append(out, n, ".0");
+}
+
+int fmu_model_event(const fmu_model *m, size_t i, char *out, size_t n)
+{
+    const lnfmu_scene *s = m->s;
+    const ln_data *d = m->d;
+    if (i < (size_t)m->events_logged) {  /* rope_events.event_message's words */
+        char t[40], label[512];
+        python_repr(d->event_t[i], t, sizeof t);
+        link_label(s, d->event_link[i], label, sizeof label);
+        snprintf(out, n, "event at t=%s: %s of %s, impulse %.17g N s", t,
+                 d->event_kind[i] == LN_EVENT_TAUT ? "taut" : "slack", label, d->event_impulse[i]);
+        return 1;
+    }
+    if (i == (size_t)m->events_logged && m->events_lost > 0) {
+        snprintf(out, n, "%lld more events of this step were not kept (the native core keeps %d per step): their "
+                 "impulses are in Jrope, their times and kinds are not logged; take shorter communication steps",
+                 (long long)m->events_lost, LN_EVENT_LOG);
+        return 1;
+    }
+    return 0;
 }
 
 /* ---- Booleans: estimate_error -------------------------------------------------------------------- */
@@ -1265,13 +1337,20 @@ int fmu_model_set_boolean(fmu_model *m, const unsigned *vr, size_t n, const int 
 
 /* ---- state --------------------------------------------------------------------------------------- */
 
+/* The links a data's rope state has (L with ropes, else none). */
+static ln_int rope_state_links(const fmu_model *m) { return m->model.n_ropes ? m->s->L : 0; }
+
 /* A data's part of the state (the run's, then the companion's): t, h_next; planar, steps, rejected, n_rhs; X, U;
    body states; the driven anchors' clock (t0, start of the hold), their last jump (position, velocity, count), their
-   held motion P, V, A and their impulse. */
+   held motion P, V, A and their impulse; with ropes, whether the mode was chosen, the mode (each link 1 where it is
+   in the system, as a double) and each rope's impulse over the last step. The ropes' event log is not state: the
+   glue logs each step's events at its end, the log is empty between steps. */
 static size_t data_state_doubles(const fmu_model *m)
 {
     const lnfmu_scene *s = m->s;
-    return (size_t)(2 + 4 + 6 * s->K + LN_RIGID_STATE * m->n_bodies + 5 + 12 * s->model->n_driven);
+    const ln_int ropes = rope_state_links(m);
+    return (size_t)(2 + 4 + 6 * s->K + LN_RIGID_STATE * m->n_bodies + 5 + 12 * s->model->n_driven
+                    + (ropes ? 1 + 2 * ropes : 0));
 }
 
 /* start time; integrator, applied integrator, dirty, estimate, applied estimate, over goal, stepped; the estimate;
@@ -1327,6 +1406,15 @@ static void save_data(const fmu_model *m, const ln_data *d, unsigned char **p)
     put(p, d->drive_V, nd);
     put(p, d->drive_A, nd);
     put(p, d->impulse, nd);
+    const ln_int ropes = rope_state_links(m);
+    if (ropes) {
+        put_int(p, d->mode_chosen);
+        for (ln_int l = 0; l < ropes; l++) {
+            const double active = d->link_active[l];
+            put(p, &active, sizeof(double));
+        }
+        put(p, d->rope_impulse, (size_t)ropes * sizeof(double));
+    }
 }
 
 void fmu_model_state_save(const fmu_model *m, unsigned char *buffer)
@@ -1365,6 +1453,8 @@ typedef struct data_state {
     double drive_t0, drive_hold_t, jump_position, jump_velocity;
     ln_int jumps;
     double *drive;  /* P, V, A, impulse: 3 n_driven each */
+    ln_int mode_chosen;
+    double *rope;   /* the mode (L, 0 or 1), then the ropes' impulses (L); with ropes only */
 } data_state;
 
 static void read_data(const fmu_model *m, const unsigned char **p, data_state *ds, double *arrays)
@@ -1375,6 +1465,7 @@ static void read_data(const fmu_model *m, const unsigned char **p, data_state *d
     ds->U = ds->X + n3;
     ds->Y = ds->U + n3;
     ds->drive = ds->Y + nb;
+    ds->rope = ds->drive + 4 * nd;
     get(p, &ds->t, sizeof(double));
     get(p, &ds->h_next, sizeof(double));
     ds->planar = get_int(p);
@@ -1390,6 +1481,20 @@ static void read_data(const fmu_model *m, const unsigned char **p, data_state *d
     get(p, &ds->jump_velocity, sizeof(double));
     ds->jumps = get_int(p);
     get(p, ds->drive, 4 * nd * sizeof(double));
+    const size_t ropes = (size_t)rope_state_links(m);
+    ds->mode_chosen = 0;
+    if (ropes) {
+        ds->mode_chosen = get_int(p);
+        get(p, ds->rope, 2 * ropes * sizeof(double));
+    }
+}
+
+/* Whether link l is a rope. */
+static int is_rope_link(const fmu_model *m, ln_int l)
+{
+    for (ln_int r = 0; r < m->model.n_ropes; r++)
+        if (m->model.rope_link[r] == l) return 1;
+    return 0;
 }
 
 /* What a data's state says that is not possible, or NULL. */
@@ -1404,6 +1509,14 @@ static const char *data_problem(const fmu_model *m, const data_state *ds)
     if (!(isfinite(ds->drive_t0) && isfinite(ds->drive_hold_t) && isfinite(ds->jump_position)
           && isfinite(ds->jump_velocity)) || ds->jumps < 0 || !finite_all(ds->drive, 4 * nd))
         return "a non-finite or invalid motion of the driven anchors";
+    const ln_int ropes = rope_state_links(m);
+    if (ropes) {
+        if (ds->mode_chosen != 0 && ds->mode_chosen != 1) return "an invalid mode of the ropes";
+        for (ln_int l = 0; l < ropes; l++)  /* 0 or 1, and a rod always in the system */
+            if (!(ds->rope[l] == 1.0 || (ds->rope[l] == 0.0 && is_rope_link(m, l))))
+                return "an invalid mode of the ropes";
+        if (!finite_all(ds->rope + ropes, (size_t)ropes)) return "a non-finite impulse of a rope";
+    }
     return NULL;
 }
 
@@ -1430,6 +1543,13 @@ static void apply_data(fmu_model *m, ln_data *d, const data_state *ds)
         memcpy(d->drive_V, ds->drive + nd, nd * sizeof(double));
         memcpy(d->drive_A, ds->drive + 2 * nd, nd * sizeof(double));
         memcpy(d->impulse, ds->drive + 3 * nd, nd * sizeof(double));
+    }
+    const ln_int ropes = rope_state_links(m);
+    if (ropes) {  /* the mode and impulses; the log is empty between steps */
+        d->mode_chosen = (int)ds->mode_chosen;
+        for (ln_int l = 0; l < ropes; l++) d->link_active[l] = ds->rope[l] == 1.0;
+        memcpy(d->rope_impulse, ds->rope + ropes, (size_t)ropes * sizeof(double));
+        d->n_events = d->events_lost = d->events_this_step = 0;
     }
 }
 
@@ -1512,6 +1632,7 @@ int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t si
     m->start_time = start_time;
     apply_data(m, m->d, &run);
     apply_data(m, m->dc, &companion);
+    m->events_logged = m->events_lost = 0;  /* logged with the step that made them */
     load_inputs(m);
     clear_anchor_marks(m);  /* which inputs were set is not in the state: a jump from it is said as one of P */
     m->outputs_stale = m->interface_stale = 1;

@@ -34,10 +34,12 @@ static int fail(char *msg, const char *format, ...)
 
 /* ---- a struct of a list, entry by entry --------------------------------------------------------- */
 
-/* The entry "<prefix>.<name>" into name (a field name fits: the list's are short). */
+/* The entry "<prefix>.<name>" into out; a name too long for an entry (build.py writes none) becomes "", which no
+   entry has, so that the read fails naming no other entry. */
 static const char *entry_name(char *out, const char *prefix, const char *name)
 {
-    snprintf(out, FMU_RESOURCE_NAME, "%s.%s", prefix, name);
+    const int n = snprintf(out, FMU_RESOURCE_NAME, "%s.%s", prefix, name);
+    if (n < 0 || n >= FMU_RESOURCE_NAME) out[0] = '\0';
     return out;
 }
 
@@ -167,7 +169,18 @@ static const char *model_problem(const ln_model *m, const lnfmu_scene *s)
         return "the tension system's solver is not possible";
     if (m->n_driven && !(m->driven_idx && m->motion_kind && m->motion_pieces && m->sine))
         return "an array of the driven anchors is missing";
+    if (m->n_ropes < 0 || m->n_ropes > m->L || (m->n_ropes && !(m->rope_link && m->rope_restitution))
+        || !within(m->rope_link, m->n_ropes, 0, m->L))
+        return "the ropes do not fit the links";
     return NULL;
+}
+
+/* Whether link l is one of the model's ropes. */
+static int is_rope(const ln_model *m, ln_int l)
+{
+    for (ln_int r = 0; r < m->n_ropes; r++)
+        if (m->rope_link[r] == l) return 1;
+    return 0;
 }
 
 /* Why the variables do not fit the model, or NULL. */
@@ -184,10 +197,13 @@ static const char *variables_problem(const lnfmu_scene *s)
         case LNFMU_M: size = m->K; break;
         case LNFMU_G: size = 3; break;
         case LNFMU_P: case LNFMU_V: case LNFMU_A: case LNFMU_JREACT: size = 3 * m->n_driven; break;
+        case LNFMU_SLACK: case LNFMU_JROPE: size = m->L; break;
         case LNFMU_TOLERANCE: case LNFMU_STEP: case LNFMU_ERROR_ESTIMATE: break;
         default: return "a variable of a kind this FMU does not know";
         }
         if (s->variable_index[vr] < 0 || s->variable_index[vr] >= size) return "a variable's index out of range";
+        if ((kind == LNFMU_SLACK || kind == LNFMU_JROPE) && !is_rope(m, s->variable_index[vr]))
+            return "a rope's variable of a link that is not a rope";  /* the data keeps ropes' impulses only */
     }
     return NULL;
 }

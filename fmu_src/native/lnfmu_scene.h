@@ -39,9 +39,11 @@ enum lnfmu_kind {
     LNFMU_JREACT = 13,  /* output: impulse on a driven anchor at the last step's start; index as P */
     LNFMU_ERROR_ESTIMATE = 14,  /* output: the run's estimated largest position error (the companion run's gap) */
     LNFMU_T_PEAK = 15,  /* output: the largest |T| of link index over the last step, signed */
-    LNFMU_T_PEAK_TIME = 16      /* output: when it occurred */
+    LNFMU_T_PEAK_TIME = 16,     /* output: when it occurred */
+    LNFMU_SLACK = 17,   /* output: 1 where rope link index is slack at the state (its T is 0), else 0 */
+    LNFMU_JROPE = 18    /* output: rope link index's impulse over the last step (its jerks) */
 };
-#define LNFMU_KINDS 17
+#define LNFMU_KINDS 19
 
 /* The specialisation the library chose for the scene (linknet_core.Simulator). */
 enum lnfmu_specialisation { LNFMU_POINT_MASSES = 0, LNFMU_STATIC = 1, LNFMU_RIGID = 2 };
@@ -74,6 +76,8 @@ enum lnfmu_specialisation { LNFMU_POINT_MASSES = 0, LNFMU_STATIC = 1, LNFMU_RIGI
     SCALAR(double, tolerance_min)                       /* rtol lies in [tolerance_min, tolerance_max) */           \
     SCALAR(double, tolerance_max)                                                                                   \
     SCALAR(double, max_force)                           /* an input force beyond this (N) is refused; 0: no limit */\
+    TEXT(linearization_refusal)                         /* why the directional derivatives are refused (the     \
+                                                           library's words: a scene with ropes), or empty */        \
     OPTIONAL(ln_int, ldl_ordering, s->L)                /* LN_SOLVER_LDL: the elimination order (position -> link) */\
     SCALAR(int, specialisation)                         /* enum lnfmu_specialisation */                             \
     SCALAR(ln_int, n_bodies)                            /* LNFMU_RIGID: the bodies ("rigid.*" at the defaults) */   \

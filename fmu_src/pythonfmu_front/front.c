@@ -157,6 +157,7 @@ typedef struct front {
     struct front *next_parked;
     int mode;                         /* enum mode */
     int directional;                  /* the modelDescription declares providesDirectionalDerivative */
+    int events;                       /* it declares the events' log category (LINKNET_EVENT_CATEGORY) */
     front_state *states;              /* the FMU states this instance handed out and has not freed */
     size_t n_states, states_capacity;
     /* the last discarded step, until something is set or restored: the same step asked again fails the same way */
@@ -382,8 +383,10 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
 {
     ENTER("fmi2SetDebugLogging");
     if (nCategories > 0 && categories == NULL) return refuse(self, fn, "categories is NULL");
-    const char *unknown = linknet_unknown_log_category(nCategories, categories);
-    if (unknown) return refuse(self, fn, "unknown log category \"%s\" (known: " LINKNET_LOG_CATEGORIES ")", unknown);
+    const char *unknown = linknet_unknown_log_category(nCategories, categories, self->events);
+    if (unknown)
+        return refuse(self, fn, "unknown log category \"%s\" (known: %s)", unknown,
+                      linknet_log_categories(self->events));
     self->logging_on = loggingOn != fmi2False;  /* pythonfmu keeps logging everything to relay() */
     return fmi2OK;
 }
@@ -492,13 +495,23 @@ static int declares_directional(const char *text)
     return strncmp(p, "true", 4) == 0 || (p[0] == '1' && (p[1] == '"' || p[1] == '\''));
 }
 
+/* Whether the LogCategories of a modelDescription.xml (text, NUL-terminated) name LINKNET_EVENT_CATEGORY. */
+static int declares_events(const char *text)
+{
+    const char *element = strstr(text, "<LogCategories");
+    const char *end = element ? strstr(element, "</LogCategories>") : NULL;
+    const char *p = element ? strstr(element, "\"" LINKNET_EVENT_CATEGORY "\"") : NULL;
+    return p != NULL && (end == NULL || p < end);
+}
+
 /* The host's GUID against the guid of the modelDescription.xml beside the FMU's resources (pythonfmu checks none; no
    GUID is compiled into this layer, see the top of the file): 0 when they agree, 1 when they differ, -1 when the
-   file cannot be read (why says which). *directional: whether the file declares providesDirectionalDerivative (0
-   where it cannot be read). */
-static int guid_problem(const char *resources, const char *host_guid, char *why, size_t n, int *directional)
+   file cannot be read (why says which). *directional: whether the file declares providesDirectionalDerivative,
+   *events the events' log category (0 where it cannot be read). */
+static int guid_problem(const char *resources, const char *host_guid, char *why, size_t n, int *directional,
+                        int *events)
 {
-    *directional = 0;
+    *directional = *events = 0;
     char path[PATH_MAX], guid[256];
     if (!model_description_path(resources, path, sizeof path)) {
         snprintf(why, n, "the resource location \"%s\" is not a local folder", resources);
@@ -521,6 +534,7 @@ static int guid_problem(const char *resources, const char *host_guid, char *why,
     head[got] = '\0';
     const int found = guid_of(head, guid, sizeof guid);
     *directional = declares_directional(head);
+    *events = declares_events(head);
     free(head);
     if (!found) {
         snprintf(why, n, "%s has no guid in its fmiModelDescription element", path);
@@ -556,8 +570,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         return NULL;
     }
     char why[2 * PATH_MAX + 512];
-    int directional;
-    const int guid_differs = guid_problem(fmuResourceLocation, fmuGUID, why, sizeof why, &directional);
+    int directional, events;
+    const int guid_differs = guid_problem(fmuResourceLocation, fmuGUID, why, sizeof why, &directional, &events);
     if (guid_differs > 0) {
         refuse(&probe, fn, "%s", why);
         return NULL;
@@ -598,6 +612,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     self->discarded = self->terminated = 0;
     self->mode = MODE_INSTANTIATED;
     self->directional = directional;
+    self->events = events;
     if (guid_differs < 0) {  /* said, and the instance made: pythonfmu finds the slave in the resources or says why */
         char text[sizeof why + 128];
         snprintf(text, sizeof text, "%s: the GUID \"%s\" cannot be checked: %s", fn, fmuGUID, why);
