@@ -16,27 +16,38 @@ import linknet_core as ln
 # plane, to a near-self-stress that the position projection's Gauss-Newton retry (RETRY_SINGULAR_RCOND) gets
 # through with every method on both backends (test_the_pushed_triangulated_net_goes_through_on_both_backends).
 FORCED = list(SCENES)
+# The pushed net's error-controlled runs cost more with every communication step (dop853: 0.26, 0.79, 1.29, 1.73,
+# 2.13 s of CPU for steps 1 to 5 on the native core, in each of the three runs compared), so they compare two steps,
+# in which the position projection already stops at its floor and takes its retry 68 (dopri5) and 129 (dop853)
+# times; the fixed-step methods, ~0.1 s a step, compare all N_STEPS.
+FEW_STEPS = {("triangulated_net", "dopri5"): 2, ("triangulated_net", "dop853"): 2}
+
+
+def steps(scene: str, method: str) -> int:
+    """How many communication steps of H the runs of ``scene`` with ``method`` compare."""
+    return FEW_STEPS.get((scene, method), N_STEPS)
 
 
 @pytest.fixture(scope="module")
 def pythonfmu_rows(fmu_root):
     """Every scene and integrator through the pythonfmu FMUs, in one fmpy client process."""
     fmus = {scene: built(fmu_root, scene, native=False) for scene in FORCED}
-    jobs = {scene: (str(f.path), output_names(f), input_mass(f)) for scene, f in fmus.items()}
+    jobs = {scene: (str(f.path), output_names(f), input_mass(f), {m: steps(scene, m) for m in METHODS})
+            for scene, f in fmus.items()}
     code = f"""
 {FMU_CLIENT_LIB}
 import math
 jobs = {jobs!r}
-for scene, (path, names, k) in jobs.items():
+for scene, (path, names, k, n_steps) in jobs.items():
     for method in {METHODS!r}:
         f = Fmu(path, scene + '_' + method)
         f.init(strings={{'integrator': method}})
         rows = []
-        for n in range({N_STEPS} + 1):
+        for n in range(n_steps[method] + 1):
             t = n * {H!r}
             f.set({{f'F[{{k}},1]': {0.5!r}, f'F[{{k}},3]': {2.0!r} * math.cos({20.0!r} * t)}})
             rows.append([t] + list(f.get(names)))
-            if n < {N_STEPS}:
+            if n < n_steps[method]:
                 f.step(t, {H!r})
         f.slave.terminate()
         f.slave.freeInstance()
@@ -78,8 +89,9 @@ def test_native_fmu_equals_library_and_pythonfmu_fmu(scene, fmu_root, host, no_p
     k = input_mass(fmu)
     assert np.any(input_force(k, sc.K, 0.0) != 0.0)
     for method in METHODS:
-        native = parse_rows(run_host(host, no_python_env, "run", fmu, 0.0, N_STEPS, H, *host_options(fmu, method)))
-        library = library_rows(sc, fmu, method)
+        n = steps(scene, method)
+        native = parse_rows(run_host(host, no_python_env, "run", fmu, 0.0, n, H, *host_options(fmu, method)))
+        library = library_rows(sc, fmu, method, n=n)
         names = output_names(fmu)
         assert_round_off(native, library, f"{scene}, {method}: native FMU vs library", names)
         assert_round_off(rows[f"{scene}__{method}"], library, f"{scene}, {method}: pythonfmu FMU vs library", names)
