@@ -85,13 +85,23 @@ class Event(NamedTuple):
     impulse: float
 
 
-def native_refusal(scene: Scene) -> str | None:
-    """Why the native core cannot run ``scene`` (its ground), or None where it can: it takes ropes
-    (linknet_core/native/src/stages/ropes.c); a ground and its friction run on the numpy reference only."""
-    if scene.ground is None:
+def native_refusal(scene: Scene, method=None) -> str | None:
+    """Why the native core cannot run ``scene`` with ``method`` (an integrator class; None: every method, as the
+    native FMU offers them), or None where it can. It takes ropes on every method, and a frictionless ground on the
+    adaptive Runge-Kutta methods (linknet_core/native/src/stages/ropes.c: each contact a unilateral link to a
+    virtual anchor); Coulomb friction, and a ground on the fixed-step methods, run on the numpy reference only."""
+    ground = scene.ground
+    if ground is None:
         return None
-    return (f"{scene.name}: it has a ground, and the native core (backend=\"native\", the native FMU) does not take a "
-            "ground yet; the numpy reference runs it (backend=\"auto\" or \"numpy\", and the pythonfmu FMU)")
+    numpy_runs = "the numpy reference runs it (backend=\"auto\" or \"numpy\", and the pythonfmu FMU)"
+    if ground.friction > 0:
+        return (f"{scene.name}: it has a ground with Coulomb friction (mu = {ground.friction:g}), and the native core "
+                f"(backend=\"native\", the native FMU) takes a frictionless ground only; {numpy_runs}")
+    if method is None or not method.adaptive:
+        return (f"{scene.name}: it has a ground, and the native core takes a ground on the adaptive methods (dop853, "
+                "dopri5) only, not on the fixed-step ones (RATTLE and its compositions), nor the native FMU, which "
+                f"offers every method; {numpy_runs}")
+    return None
 
 
 def scene_size(scene: Scene) -> float:
@@ -140,19 +150,22 @@ def describe(scene: Scene) -> list[str]:
             on = [scene.mass_label(int(k)) for k in dyn.contact_masses[dyn.touching(X)[dyn.rope_links.size:]]]
             shown = ", ".join(on[:8]) + (f" and {len(on) - 8} more" if len(on) > 8 else "")
             lines.append(f"masses on the ground at the start: {len(on)}" + (f" ({shown})" if on else ""))
-    lines.append("path: the numpy reference, event by event (linknet_core.dynamics.unilateral; the native core does "
-                 "not take a ground yet)" if ground is not None else
+    lines.append("path: the numpy reference, event by event (linknet_core.dynamics.unilateral; the native core takes "
+                 "a frictionless ground only)" if ground is not None and ground.friction > 0 else
+                 "path: the native core, event by event, on the adaptive methods (linknet_core/native/src/stages/"
+                 "ropes.c, each contact a unilateral link to a virtual anchor); the numpy reference on the fixed-step "
+                 "ones" if ground is not None else
                  "path: the native core, event by event (linknet_core/native/src/stages/ropes.c; the numpy reference "
                  "with backend=\"numpy\")")
     return lines
 
 
-def numpy_only(scene: Scene, backend: str) -> bool:
-    """Whether ``scene`` runs on the numpy reference: where the native core cannot take it (native_refusal), a
-    backend of 'native' refused with native_refusal's words."""
+def numpy_only(scene: Scene, backend: str, method=None) -> bool:
+    """Whether ``scene`` runs on the numpy reference with ``method`` (an integrator class): where the native core
+    cannot take it (native_refusal), a backend of 'native' refused with native_refusal's words."""
     if not scene.unilateral:
         return False
-    refusal = native_refusal(scene)
+    refusal = native_refusal(scene, method)
     if backend == "native" and refusal is not None:
         raise SolverError(refusal)
     return refusal is not None
@@ -235,8 +248,6 @@ class ModeDynamics:
         infinite mass, fixed, not driven, at its place above its mass) or with zeros (no force, no drag: whatever
         per-mass field Scene has); the per-link fields are taken at the mode's links (named here: a new per-link
         field of Scene is added to them); the ropes' fields are left to their defaults (a mode's links are rods)."""
-        import dataclasses
-
         scene, parent = self.scene, self.parent
         n_c = self.n_virtual
         K = self.K
@@ -255,18 +266,7 @@ class ModeDynamics:
                    f"ground{k + 1}" for k in self.contact_masses) + tuple(
                    f"grip{i % 2 + 1}_{k + 1}" for i, k in enumerate(gripped)),
                "rope": None, "restitution": None, "ground": None, "gravity": scene.gravity}
-        fields = {}
-        for field in dataclasses.fields(Scene):
-            value = getattr(scene, field.name)
-            if field.name in own:
-                value = own[field.name]
-            elif isinstance(value, np.ndarray) and value.shape[:1] == (K,):  # a per-mass field (the per-link ones
-                value = np.concatenate([value, np.zeros((n_c,) + value.shape[1:], value.dtype)])  # are in ``own``)
-            elif isinstance(value, dict):
-                value = dict(value)
-            if isinstance(value, np.ndarray):
-                value = _frozen(value, value.dtype)
-            fields[field.name] = value
+        fields = _padded_fields(scene, n_c, own)
         labels = tuple(scene.link_label(int(l)) for l in self.links) + tuple(
             f"the ground contact of {scene.mass_label(int(k))}" for k in self.contact_masses) + tuple(
             f"the ground's friction grip on {scene.mass_label(int(k))}" for k in gripped)
@@ -448,6 +448,73 @@ class ModeDynamics:
         on = self.row_of >= 0
         out[on] = T_rows[self.row_of[on]]
         return out
+
+
+def _padded_fields(scene: Scene, n_virtual: int, own: dict) -> dict:
+    """The fields of a Scene with n_virtual masses appended: those in ``own`` as given (the masses' own fields and
+    every per-link field), every other per-mass field padded with zeros (no force, no drag: whatever per-mass field
+    Scene has), the rest as the scene's."""
+    import dataclasses
+
+    K = scene.K
+    fields = {}
+    for field in dataclasses.fields(Scene):
+        value = getattr(scene, field.name)
+        if field.name in own:
+            value = own[field.name]
+        elif isinstance(value, np.ndarray) and value.shape[:1] == (K,):  # a per-mass field (the per-link ones
+            value = np.concatenate([value, np.zeros((n_virtual,) + value.shape[1:], value.dtype)])  # are in ``own``)
+        elif isinstance(value, dict):
+            value = dict(value)
+        if isinstance(value, np.ndarray):
+            value = _frozen(value, value.dtype)
+        fields[field.name] = value
+    return fields
+
+
+@dataclass(frozen=True)
+class GroundModelScene(_ModeScene):
+    """What the native core runs a scene with a frictionless ground as (native_ground_scene): the scene's masses and
+    links in their order, then a virtual anchor per free mass (infinite mass, fixed) and a contact link from each
+    free mass to its anchor, a rope of length ``contact_length`` with the ground's restitution (the core places the
+    anchor above its mass before every evaluation: ModeDynamics' contact). ``contact_masses``: the free mass of
+    each contact, in order; ``size``: the scene's length scale (scene_size of the scene, not of this one);
+    ``ground_plane``: the scene's ground (this scene's own ``ground`` is None: its contacts are links)."""
+
+    contact_masses: tuple = ()
+    contact_length: float = 1.0
+    size: float = 1.0
+    ground_plane: object = None
+
+
+def native_ground_scene(scene: Scene) -> GroundModelScene:
+    """The scene the native core runs for ``scene`` with its (frictionless) ground: GroundModelScene. The anchors
+    start R_c above their masses (each contact as it is on the ground, what the structure analysis sees); the core
+    places them from every state it evaluates."""
+    ground = scene.ground
+    masses = scene.free_indices
+    n_c, K = masses.size, scene.K
+    R = scene_size(scene)
+    X0 = np.asarray(scene.X0, float)
+    anchors = X0[masses] + R * ground.normal
+    U0 = np.asarray(scene.U0, float)
+    Vc = U0[masses]
+    own = {"mass": np.concatenate([scene.mass, np.full(n_c, math.inf)]),
+           "fixed": np.concatenate([scene.fixed, np.ones(n_c, bool)]),
+           "driven": np.concatenate([scene.driven, np.zeros(n_c, bool)]),
+           "X0": np.concatenate([X0, anchors]),
+           "U0": np.concatenate([U0, Vc - (Vc @ ground.normal)[:, None] * ground.normal]),
+           "mass_names": scene.mass_names + tuple(f"ground above {scene.mass_names[k]}" for k in masses),
+           "k1": np.concatenate([scene.k1, masses]), "k2": np.concatenate([scene.k2, K + np.arange(n_c)]),
+           "length": np.concatenate([scene.length, np.full(n_c, R)]),
+           "link_names": scene.link_names + tuple(f"ground{k + 1}" for k in masses),
+           "rope": np.concatenate([scene.rope, np.ones(n_c, bool)]),
+           "restitution": np.concatenate([scene.restitution, np.full(n_c, float(ground.restitution))]),
+           "ground": None, "gravity": scene.gravity}
+    labels = tuple(scene.link_label(l) for l in range(scene.L)) + tuple(
+        f"the ground contact of {scene.mass_label(int(k))}" for k in masses)
+    return GroundModelScene(labels=labels, contact_masses=tuple(int(k) for k in masses), contact_length=R, size=R,
+                            ground_plane=ground, **_padded_fields(scene, n_c, own))
 
 
 def _tangents(normal) -> np.ndarray:
@@ -1104,7 +1171,8 @@ class UnilateralReport(InitialReport):
         if scene.ground is not None:
             what.append(f"{self.contacts} masses on the ground")
         return super().lines(scene) + [
-            "ropes and ground: event by event (the native core takes ropes, the numpy reference a ground); "
+            "ropes and ground: event by event (the native core takes ropes, and a frictionless ground on the adaptive "
+            "methods; the numpy reference the rest); "
             + ", ".join(what)]
 
 

@@ -435,3 +435,92 @@ class NativeIntegrator(Integrator):
         except SolverError:
             diagnosis = ""
         return f"{message} {diagnosis}" if diagnosis else message
+
+
+class NativeGroundIntegrator(NativeIntegrator):
+    """A scene with a frictionless ground on the native core: its model is unilateral.native_ground_scene's (a virtual
+    anchor per free mass appended to the masses, a contact link per free mass appended to the links, each a
+    unilateral link of stages/ropes.c that the core places above its mass), its state and outputs the scene's: the
+    first K masses and L links of the core's, the anchors' rows filled by the core. ``scene``: the scene itself."""
+
+    def __init__(self, model: NativeModel, scene, *args, **kwargs):
+        super().__init__(model, *args, **kwargs)
+        self.K, self.L = scene.K, scene.L
+        self._n_fixed = int(np.asarray(scene.fixed, bool).sum())
+
+    def _load(self, state, F_input) -> None:
+        K = self.K
+        if state.X is not self._out[0] or state.U is not self._out[1]:
+            self.data.X[:K], self.data.U[:K] = state.X, state.U
+        self._d.t = state.t
+        if F_input is not None:
+            self.data.F_input[:K] = F_input
+            self._input_zero = False
+        elif not self._input_zero:
+            self.data.F_input.fill(0.0)
+            self._input_zero = True
+
+    def hold(self, state) -> None:
+        self.data.X[:self.K], self.data.U[:self.K] = state.X, state.U
+        self._hand_out(state.X, state.U)
+
+    def advance(self, state, t_target: float, F_input, max_steps: int) -> None:
+        self._load(state, F_input)
+        status = lib.advance(self._model_p, self._method_p, self._data_p, t_target, max_steps)
+        self._drain()
+        if status != lib.OK:
+            self._raise_motion_error()
+            raise SolverError(self.explain(status, state.t, t_target, max_steps))
+        X, U = self.data.X[:self.K].copy(), self.data.U[:self.K].copy()
+        state.X, state.U, state.t = X, U, t_target
+        self._hand_out(X, U)
+
+    def sample(self, state, times, F_input, max_steps: int, X, U, T, diagnostics, advance_first: bool,
+               update_state: bool = True, T_peak=None, T_peak_time=None) -> None:
+        """NativeIntegrator.sample into the core's own rows (the anchors' and the contacts' too), the scene's
+        copied out."""
+        n, K, L = times.size, self.K, self.L
+        Xa, Ua = np.zeros((n, self.model.K, 3)), np.zeros((n, self.model.K, 3))
+        Ta = np.zeros((n, self.model.L))
+        try:
+            super().sample(state, times, F_input, max_steps, Xa, Ua, Ta, diagnostics, advance_first, update_state)
+        finally:
+            X[...], U[...], T[...] = Xa[:, :K], Ua[:, :K], Ta[:, :L]
+            if state.X.shape[0] != K:  # the core's rows handed out: the scene's (_hand_out kept them)
+                state.X, state.U = self._out
+
+    def _hand_out(self, X, U) -> None:
+        if X.shape[0] != self.K:  # the core's rows (NativeIntegrator.sample's): the scene's handed out
+            X, U = X[:self.K].copy(), U[:self.K].copy()
+        super()._hand_out(X, U)
+
+    def outputs(self, X, U, F_input=None):
+        """(T (L,), the force the network exerts on each of the scene's anchors) at (X, U) (K,3)."""
+        T, reaction = self.ground_outputs(X, U, F_input)[:2]
+        return T, reaction
+
+    def ground_outputs(self, X, U, F_input=None):
+        """(T (L,), the anchors' reactions, the ground's normal force on each contact's mass (n_contacts,)) at (X, U)
+        with F_input held, in the mode the state is in (ln_evaluate)."""
+        pad = self.model.K - self.K
+        X = np.concatenate([np.asarray(X, np.float64), np.zeros((pad, 3))])
+        U = np.concatenate([np.asarray(U, np.float64), np.zeros((pad, 3))])
+        F = None if F_input is None else np.concatenate([np.asarray(F_input, np.float64), np.zeros((pad, 3))])
+        T, reaction = super().outputs(X, U, F)
+        return T[:self.L], reaction[:self._n_fixed], T[self.L:]
+
+    def rope_impulses(self) -> np.ndarray:
+        """(L,) N s: each rope's impulse summed over the last advance (0 on rods)."""
+        return self.data.rope_impulse[:self.L].copy()
+
+    def ground_impulses(self) -> np.ndarray:
+        """(n_contacts,) N s: the ground's impulse on each contact's mass summed over the last advance."""
+        return self.data.rope_impulse[self.L:].copy()
+
+    def anchor_jump(self, drive, t: float, X, U, F_input=None):
+        pad = self.model.K - self.K
+        X = np.concatenate([X, np.zeros((pad, 3))])
+        U = np.concatenate([U, np.zeros((pad, 3))])
+        F = None if F_input is None else np.concatenate([F_input, np.zeros((pad, 3))])
+        Xj, Uj, impulse, dP, dV = super().anchor_jump(drive, t, X, U, F)
+        return Xj[:self.K], Uj[:self.K], impulse, dP, dV

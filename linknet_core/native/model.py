@@ -223,6 +223,12 @@ class NativeModel:
         m.short_step = events.SHORT_STEP
         m.scene_size = unilateral.scene_size(scene)
         m.gravity_norm = float(np.linalg.norm(scene.gravity))
+        contacts = getattr(scene, "contact_masses", ())
+        if contacts:  # a ground (unilateral.native_ground_scene): its size is the scene's, not the anchors'
+            m.scene_size = scene.size
+            m.n_contacts, m.contact_mass = len(contacts), i8(np.array(contacts, np.int64))
+            ground = scene.ground_plane
+            m.ground_point[:], m.ground_normal[:] = ground.point, ground.normal
 
     @property
     def scene(self):
@@ -286,6 +292,20 @@ def native_model(scene, structure) -> NativeModel:
     if structure is not analyse(scene):
         return NativeModel(scene, structure)
     return kept_per_scene(scene, "native model", lambda s: NativeModel(s, structure))
+
+
+def native_ground_model(scene) -> NativeModel:
+    """The NativeModel of ``scene`` with its ground: that of unilateral.native_ground_scene (contacts as unilateral
+    links to virtual anchors), on the 3-D path (the anchors leave any plane the masses keep), built once per scene
+    object; the model keeps the scene it is built from (its own reference to it is weak)."""
+    from linknet_core.dynamics.unilateral import native_ground_scene
+
+    def build(s):
+        padded = native_ground_scene(s)
+        model = NativeModel(padded, analyse(padded), planar=False)
+        model.ground_scene = padded
+        return model
+    return kept_per_scene(scene, "native ground model", build)
 
 
 @functools.lru_cache(maxsize=64)

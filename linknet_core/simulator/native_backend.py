@@ -8,8 +8,8 @@ import functools
 import numpy as np
 
 from linknet_core.errors import SolverError
-from linknet_core.native.integrator import NativeIntegrator
-from linknet_core.native.model import native_model
+from linknet_core.native.integrator import NativeGroundIntegrator, NativeIntegrator
+from linknet_core.native.model import native_ground_model, native_model
 from linknet_core.native.rigid import NativeRigidIntegrator
 from linknet_core.simulator.backend import Backend
 from linknet_core.simulator.settings import BACKEND_CLASSES
@@ -28,7 +28,7 @@ class NativeBackend(Backend):
     @classmethod
     def choose_specialisation(cls, scene, dyn, settings, U0):
         stepping = settings.stepping
-        if scene.rope.any():  # the modes change the links: the point-mass path, event by event
+        if scene.unilateral:  # the modes change the links: the point-mass path, event by event
             return Specialisation(NONE, "ropes: the point-mass path, one mode of taut ropes at a time"), U0
         specialisation = choose_specialisation(scene, dyn, stepping.method, enabled=settings.specialise,
                                                tolerances=(stepping.rtol, stepping.atol))
@@ -41,6 +41,10 @@ class NativeBackend(Backend):
         if specialisation.kind == RIGID:
             return NativeRigidBackend.create(scene, dyn, settings, X0, U0, t0, specialisation)
         stepping = settings.stepping
+        if scene.ground is not None:  # the contacts as unilateral links to virtual anchors (stages/ropes.c)
+            integrator = NativeGroundIntegrator(native_ground_model(scene), scene, stepping.cls, dt=stepping.dt,
+                                                rtol=stepping.rtol, atol=stepping.atol, t0=t0)
+            return cls(scene, dyn, integrator, (X0, U0))
         integrator = NativeIntegrator(native_model(scene, dyn.structure), stepping.cls, dt=stepping.dt,
                                       rtol=stepping.rtol, atol=stepping.atol, static=specialisation.kind == STATIC,
                                       t0=t0)

@@ -138,10 +138,11 @@ def _setup(scene: Scene, dyn: Dynamics, settings: RunSettings, own_dynamics: boo
         X0, U0, report = prepare_initial_state(scene, dyn, project_positions=settings.project_initial,
                                                length_tol=settings.length_tol)
     # one backend, chosen here before anything is built: the one asked for, the native core by default, the numpy
-    # reference where the right-hand side is casadi's (a variant of the numpy Dynamics) or the scene has a ground
-    # (which the native core does not take yet: backend="native" is refused there)
+    # reference where the right-hand side is casadi's (a variant of the numpy Dynamics) or the scene has what the
+    # native core does not take (unilateral.native_refusal: a ground with friction, or on a fixed-step method;
+    # backend="native" is refused there)
     backend = settings.backend
-    chosen = "numpy" if dyn.rhs_kernel != "numpy" or numpy_only(scene, backend) else \
+    chosen = "numpy" if dyn.rhs_kernel != "numpy" or numpy_only(scene, backend, stepping.cls) else \
         "native" if backend == "auto" else backend
     specialisation, U0 = BACKEND_CLASSES[chosen].choose_specialisation(scene, dyn, settings, U0)
     X0.flags.writeable = U0.flags.writeable = False

@@ -57,7 +57,8 @@ def _agree(reference, native, min_events=1):
     assert np.abs(native.X - reference.X).max() <= STATE_TOL
     assert np.abs(native.U - reference.U).max() <= 100 * STATE_TOL  # velocities: the jerks' rates divide by |d|
     assert np.array_equal(native.slack, reference.slack)
-    assert np.abs(native.T - reference.T).max() <= STATE_TOL * max(1.0, float(np.abs(reference.T).max()))
+    if reference.T.size:  # a ball on the ground alone has no links
+        assert np.abs(native.T - reference.T).max() <= STATE_TOL * max(1.0, float(np.abs(reference.T).max()))
 
 
 @pytest.mark.parametrize("name", ["rope_pendulum", "rope_crane"])
@@ -249,7 +250,7 @@ def test_an_advance_that_fails_puts_back_the_mode_and_the_events():
     assert [e.kind for e in sim.integrator.events] == ["taut", "slack", "taut"]
 
 
-def test_auto_runs_ropes_on_the_native_core_and_a_ground_on_the_reference_which_native_refuses():
+def test_auto_runs_ropes_on_the_native_core_and_a_ground_on_a_fixed_step_method_on_the_reference():
     scene = bob_scene(X0, V0)
     assert ln.Simulator(scene, "rattle", dt=1e-3).backend == "native"
     assert ln.Simulator(scene, "dop853").backend == "native"
@@ -259,8 +260,9 @@ def test_auto_runs_ropes_on_the_native_core_and_a_ground_on_the_reference_which_
                                    "links": [{"a": 1, "b": 2, "length": 1.0, "kind": "rope"}],
                                    "ground": {"point": [0, 0, -2], "normal": [0, 0, 1]}})
     with pytest.raises(ln.SolverError, match="it has a ground"):
-        ln.Simulator(grounded, "dop853", backend="native")
-    assert ln.Simulator(grounded, "dop853").backend == "numpy"
+        ln.Simulator(grounded, "rattle", dt=1e-3, backend="native")
+    assert ln.Simulator(grounded, "rattle", dt=1e-3).backend == "numpy"
+    assert ln.Simulator(grounded, "dop853").backend == "native"
 
 
 @pytest.mark.parametrize("method,step", [("dop853", {"rtol": 1e-10}), ("rattle", {"dt": 1e-3})])

@@ -108,7 +108,8 @@ def test_a_rope_at_its_length_moving_outwards_at_the_start_takes_an_inelastic_im
     assert any("largest correction 2 m/s" in line for line in sim.initial_report.lines(sim.scene))
 
 
-@pytest.mark.parametrize("method,step", [("dop853", {}), ("rattle", {"dt": 1e-3})])
+# a frictionless ground on an adaptive method runs on the native core (tests/native/test_native_ground.py)
+@pytest.mark.parametrize("method,step", [("rattle", {"dt": 1e-3}), ("yoshida4", {"dt": 1e-2})])
 def test_the_native_backend_refuses_a_ground_and_auto_takes_the_numpy_path_there_and_the_native_core_for_ropes(
         method, step):
     grounded = ln.Scene.from_dict(data(links=[{"a": 1, "b": 2, "length": 0.5}],

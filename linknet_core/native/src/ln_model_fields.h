@@ -127,7 +127,16 @@
     SCALAR(double, short_step)                          /* fixed-step methods: a part of a step shorter than this   \
                                                            fraction of dt is a Taylor step (events.SHORT_STEP) */   \
     SCALAR(double, scene_size)                          /* the scene's length scale, m (UnilateralDynamics.size) */ \
-    SCALAR(double, gravity_norm)                        /* |g|, m/s^2: the velocity and rest speed scales */
+    SCALAR(double, gravity_norm)                        /* |g|, m/s^2: the velocity and rest speed scales */        \
+    /* a ground (stages/ropes.c): the plane n . (X - p) >= 0 under every free mass, each contact a unilateral link    \
+       from its mass to a virtual anchor placed straight above it (UnilateralDynamics' ModeDynamics): the model's   \
+       last n_contacts masses are the anchors (fixed, infinite mass), its last n_contacts links the contacts (the    \
+       last n_contacts of its ropes, of length scene_size and the ground's restitution), in the order of their       \
+       masses. No ground: n_contacts = 0 and nothing of this is read */                                              \
+    SCALAR(ln_int, n_contacts)                                                                                      \
+    ARRAY(ln_int, contact_mass, s->n_contacts)          /* the free mass of each contact */                         \
+    FIXED(double, ground_point, 3)                      /* p, m */                                                  \
+    FIXED(double, ground_normal, 3)                     /* n, unit */
 
 /* ln_method: what an integrator is, the method as data. */
 #define LN_METHOD_FIELDS(SCALAR, ARRAY, FIXED, OPAQUE)                                                              \

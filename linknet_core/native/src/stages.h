@@ -51,6 +51,11 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
 int FN(ln_rope_start)(const ln_model *mm, ln_data *d, double *X, double *U, const double *F_base, double t);
 int FN(ln_rope_step_events)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X0, const double *U0,
                             const double *F_base, double t0, double *X1, double *U1, double *t1);
+/* A ground: each contact's virtual anchor placed above its mass at (X, U) (U may be NULL), before any evaluation;
+   the positions projected onto the mode's (11) and the ground, the anchors re-placed until the active contacts'
+   gaps are within tol (their unit vectors at the result in d->E0, A factored). */
+void FN(ln_contacts_place)(const ln_model *m, double *X, double *U);
+int FN(ln_contacts_project)(const ln_model *mm, const ln_method *meth, ln_data *d, double *X, double tol);
 /* Stage i (1 <= i < s) of an adaptive step's attempt has its tensions in d->T: the ropes' kept for step_events. */
 void FN(ln_rope_keep_stage)(const ln_model *mm, ln_data *d, ln_int i);
 /* A fixed-step method's step from (X, U) at t0 to t1 in place, with the events within it taken at their times. */

@@ -198,9 +198,70 @@ static int rope_gap_dips(const double *p_in, double depth, double *crossing, dou
     return count;
 }
 
+/* ---- the ground's contacts --------------------------------------------------------------------------------------- */
+/* A ground runs on the 3-D path only (the library builds its model with no plane). Contact c is the model's rope
+   n_ropes - n_contacts + c, its link L - n_contacts + c from its mass to its virtual anchor, the mass
+   K - n_contacts + c. */
+static inline int FN(is_contact)(const ln_model *m, ln_int l) { return l >= m->L - m->n_contacts; }
+
+/* The height of mass k above the ground, n . (X_k - p) (Ground.gaps). */
+static inline double FN(contact_height)(const ln_model *m, const double *X, ln_int k)
+{
+    double s = 0.0;
+    for (int e = 0; e < DIM; e++) s += (X[k * DIM + e] - m->ground_point[e]) * m->ground_normal[e];
+    return s;
+}
+
+/* Each contact's virtual anchor straight above its mass at the contact length R_c from the ground, Q = X_k +
+   (R_c - g_k) n, moving with the mass along the plane, V_Q = U_k - (n . U_k) n (ModeDynamics.pad, pad_velocity):
+   the link's E is then n, its term of (26) (n . U_k)^2 / R_c and its gap g_k. U may be NULL. */
+void FN(ln_contacts_place)(const ln_model *m, double *X, double *U)
+{
+    const ln_int first_anchor = m->K - m->n_contacts;
+    const double Rc = m->scene_size, *n = m->ground_normal;
+    for (ln_int c = 0; c < m->n_contacts; c++) {
+        const ln_int k = m->contact_mass[c], q = first_anchor + c;
+        const double lift = Rc - FN(contact_height)(m, X, k);
+        for (int e = 0; e < DIM; e++) X[q * DIM + e] = X[k * DIM + e] + lift * n[e];
+        if (!U) continue;
+        double normal = 0.0;
+        for (int e = 0; e < DIM; e++) normal += U[k * DIM + e] * n[e];
+        for (int e = 0; e < DIM; e++) U[q * DIM + e] = U[k * DIM + e] - normal * n[e];
+    }
+}
+
+/* The positions X projected onto (11) of the mode in use (d->mode_inv_R) along M^-1 C(X)^T from X itself, to tol;
+   with a ground, repeated with the anchors re-placed until every active contact's gap is within tol of the
+   contact length and 8 ulps of the largest coordinate: the projection moves a mass onto the sphere |X_k - Q| = R_c,
+   which touches the plane under Q, and a mass moved sideways by tau within it ends tau^2 / (2 R_c) off the plane
+   (ModeDynamics.project_positions). The unit vectors at the result in d->E0, A factored there. */
+int FN(ln_contacts_project)(const ln_model *mm, const ln_method *meth, ln_data *d, double *X, double tol)
+{
+    int status = LN_OK;
+    for (int pass = 0; pass < 4; pass++) {
+        if (mm->n_contacts) FN(ln_contacts_place)(mm, X, NULL);
+        FN(ln_unit_vectors)(mm, X, d->E0);
+        if ((status = FN(ln_factor_tension_matrix)(mm, d, d->E0)) != LN_OK) return status;
+        if ((status = project_positions(mm, d, X, d->E0, tol, meth->max_projection_iter)) != LN_OK) return status;
+        if (!mm->n_contacts) break;
+        double largest = 0.0;
+        for (ln_int i = 0; i < (mm->K - mm->n_contacts) * DIM; i++) largest = ln_fmax(largest, fabs(X[i]));
+        const double limit = tol * mm->scene_size + 8 * ROPE_EPS * largest;
+        int on = 1;
+        for (ln_int c = 0; c < mm->n_contacts; c++)
+            if (mm->inv_R[mm->L - mm->n_contacts + c] != 0.0
+                && !(fabs(FN(contact_height)(mm, X, mm->contact_mass[c])) <= limit))
+                on = 0;
+        if (on) break;
+    }
+    if (mm->n_contacts) FN(ln_contacts_place)(mm, X, NULL);
+    return status;
+}
+
 /* ---- the ropes' geometry, unmasked ---------------------------------------------------------------------------- */
 static inline double FN(rope_gap)(const ln_model *m, const double *X, ln_int l)
 {
+    if (FN(is_contact)(m, l)) return FN(contact_height)(m, X, m->k1[l]);
     const ln_int a = m->k1[l], b = m->k2[l];
     double dd = 0.0;
     for (int e = 0; e < DIM; e++) {
@@ -213,6 +274,11 @@ static inline double FN(rope_gap)(const ln_model *m, const double *X, ln_int l)
 
 static inline double FN(rope_rate)(const ln_model *m, const double *X, const double *U, ln_int l)
 {
+    if (FN(is_contact)(m, l)) {  /* n . U_k */
+        double s = 0.0;
+        for (int e = 0; e < DIM; e++) s += U[m->k1[l] * DIM + e] * m->ground_normal[e];
+        return s;
+    }
     const ln_int a = m->k1[l], b = m->k2[l];
     double dd = 0.0, s = 0.0;
     for (int e = 0; e < DIM; e++) {
@@ -256,7 +322,7 @@ static double FN(rope_largest_coordinate)(const ln_model *m, const double *X)
         for (int e = 0; e < 3; e++)
             s = ln_fmax(s, fabs(o[e] + P[2 * e] * X[2 * k] + P[2 * e + 1] * X[2 * k + 1]));
 #else
-    for (ln_int i = 0; i < m->K * DIM; i++) s = ln_fmax(s, fabs(X[i]));
+    for (ln_int i = 0; i < (m->K - m->n_contacts) * DIM; i++) s = ln_fmax(s, fabs(X[i]));  /* not the anchors */
 #endif
     return s;
 }
@@ -275,9 +341,11 @@ static void FN(rope_mask_of)(const ln_model *m, ln_data *d, const uint8_t *flags
     FN(rope_use_mask)(m, d, d->mask);
 }
 
-/* The driven anchors' rows of X, U and of the base force at t (a no-op without driven anchors; 3-D there). */
+/* The driven anchors' rows of X, U and of the base force at t (a no-op without driven anchors; 3-D there), and the
+   contacts' virtual anchors placed: what every evaluation at (X, U) needs first. */
 static int FN(rope_drive)(const ln_model *m, ln_data *d, double t, double *X, double *U)
 {
+    if (m->n_contacts) FN(ln_contacts_place)(m, X, U);
     return m->n_driven ? ln_drive_rows(m, d, t, X, U, d->F_base, DIM) : LN_OK;
 }
 
@@ -475,6 +543,9 @@ static int FN(rope_state_mode)(const ln_model *mm, ln_data *d, const double *X, 
 /* The integrator's mode from the state at the first advance (EventHandling._ensure_mode), and its mask in use. */
 int FN(ln_rope_start)(const ln_model *mm, ln_data *d, double *X, double *U, const double *F_base, double t)
 {
+#if DIM == 2
+    if (mm->n_contacts) return LN_BAD_ARGUMENT;  /* a ground runs on the 3-D path (the library builds no plane) */
+#endif
     if (!d->mode_chosen) {
         int status = FN(rope_drive)(mm, d, t, X, U);
         uint8_t *active = d->rope_flags + 4 * mm->n_ropes;
@@ -556,8 +627,10 @@ static int FN(rope_method_step)(const ln_model *mm, const ln_method *meth, ln_da
         if ((status = accelerations(mm, d, Yx, Yu, F_base, acc, d->T, 1)) != LN_OK) return status;
         store_stage(size, i, Yu, acc, KX, KU);
     }
-    if ((status = project_positions(mm, d, Xo, d->E1, meth->position_tol, meth->max_projection_iter)) != LN_OK)
-        return status;
+    status = mm->n_contacts ? FN(ln_contacts_project)(mm, meth, d, Xo, meth->position_tol)
+                            : project_positions(mm, d, Xo, d->E1, meth->position_tol, meth->max_projection_iter);
+    if (status != LN_OK) return status;
+    if (mm->n_contacts) FN(ln_contacts_place)(mm, Xo, Uo);
     return project_velocities(mm, d, Xo, Uo, d->E1);
 }
 
@@ -659,11 +732,25 @@ static int FN(rope_first_event)(const ln_model *mm, const ln_method *meth, ln_da
         for (ln_int r = 0; r < R; r++) {
             const ln_int l = mm->rope_link[r];
             if (d->link_active[l]) continue;
-            const double Rl = mm->R[l], tol = mm->cross_tol * ln_fmax(Rl, largest), depth = tol * (2.0 * Rl + tol);
-            /* R^2 - |d(theta)|^2 along the Hermite of X: D_i the coefficients of d = X_k2 - X_k1 */
+            const double Rl = mm->R[l], tol = mm->cross_tol * ln_fmax(Rl, largest);
+            double depth = tol * (2.0 * Rl + tol);
+            /* R^2 - |d(theta)|^2 along the Hermite of X: D_i the coefficients of d = X_k2 - X_k1; a contact's gap
+               n . (X_k(theta) - p) itself, cubic (UnilateralDynamics.gap_polynomials) */
             double D[4][DIM], P[7] = {0};
             const ln_int a = mm->k1[l], b = mm->k2[l];
-            for (int e = 0; e < DIM; e++) {
+            const int contact = FN(is_contact)(mm, l);
+            if (contact) {
+                depth = tol;
+                for (int e = 0; e < DIM; e++) {
+                    const double y0 = X0[a * DIM + e], y1 = X1[a * DIM + e], d0 = U0[a * DIM + e], d1 = U1[a * DIM + e];
+                    const double c[4] = {y0, h * d0, 3 * (y1 - y0) - h * (2 * d0 + d1), 2 * (y0 - y1) + h * (d0 + d1)};
+                    for (int i = 0; i < 4; i++) P[i] += c[i] * mm->ground_normal[e];
+                }
+                double pn = 0.0;
+                for (int e = 0; e < DIM; e++) pn += mm->ground_point[e] * mm->ground_normal[e];
+                P[0] -= pn;
+            }
+            for (int e = 0; e < DIM && !contact; e++) {
                 double c[2][4];
                 for (int end = 0; end < 2; end++) {
                     const ln_int k = end ? b : a;
@@ -675,13 +762,13 @@ static int FN(rope_first_event)(const ln_model *mm, const ln_method *meth, ln_da
                 }
                 for (int i = 0; i < 4; i++) D[i][e] = c[1][i] - c[0][i];
             }
-            for (int i = 0; i < 4; i++)
+            for (int i = 0; i < 4 && !contact; i++)
                 for (int j = 0; j < 4; j++) {
                     double s = 0.0;
                     for (int e = 0; e < DIM; e++) s += D[i][e] * D[j][e];
                     P[i + j] -= s;
                 }
-            P[0] += Rl * Rl;
+            if (!contact) P[0] += Rl * Rl;
             if (!rope_may_fall_below(P, depth)) continue;
             double cross[3], low[3];
             const int n = rope_gap_dips(P, depth, cross, low);
@@ -843,19 +930,22 @@ static int FN(rope_project)(const ln_model *mm, const ln_method *meth, ln_data *
 {
     FN(rope_mask_of)(mm, d, flags);
     int status;
-    if (X) {
-        FN(ln_unit_vectors)(mm, X, d->E0);
-        if ((status = FN(ln_factor_tension_matrix)(mm, d, d->E0)) != LN_OK) return status;
-        if ((status = project_positions(mm, d, X, d->E0, 1e-14, meth->max_projection_iter)) != LN_OK) return status;
+    if (X && (status = FN(ln_contacts_project)(mm, meth, d, X, 1e-14)) != LN_OK) return status;
+    if (U) {
+        if (mm->n_contacts) FN(ln_contacts_place)(mm, X ? X : d->Xc, U);
+        return project_velocities(mm, d, X ? X : d->Xc, U, d->E0);
     }
-    if (U) return project_velocities(mm, d, X ? X : d->Xc, U, d->E0);
     return LN_OK;
 }
 
 /* An event into the data's log (what does not fit is counted), a jerk's impulse into its rope's sum. */
-static void FN(rope_record)(ln_data *d, double t, int kind, ln_int link, double impulse)
+static void FN(rope_record)(ln_data *d, double t, int kind, ln_int link, double impulse, const ln_model *mm)
 {
     if (kind == LN_EVENT_TAUT) d->rope_impulse[link] += impulse;
+    if (FN(is_contact)(mm, link)) {  /* a contact's events name its mass */
+        kind = kind == LN_EVENT_TAUT ? LN_EVENT_CONTACT : LN_EVENT_RELEASE;
+        link = mm->k1[link];
+    }
     if (d->n_events >= LN_EVENT_LOG) {
         d->events_lost++;
         return;
@@ -953,6 +1043,7 @@ static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_da
     if (kind == 3)
         for (ln_int r = 0; r < R; r++) touching[r] |= FN(rope_gap)(mm, X, mm->rope_link[r]) < 0.0;
     if ((status = FN(rope_project)(mm, meth, d, touching, X, NULL)) != LN_OK) return status;
+    if (mm->n_contacts) FN(ln_contacts_place)(mm, X, U);
     if ((status = FN(rope_impact)(mm, meth, d, X, U, touching, impulses, took)) != LN_OK) return status;
     if ((status = FN(rope_drive)(mm, d, t, X, U)) != LN_OK) return status;
     /* the touching ropes that do not separate, or separate slower than the rest speed (an inelastic collapse) */
@@ -974,11 +1065,11 @@ static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_da
     for (ln_int r = 0; r < R; r++) {
         const ln_int l = mm->rope_link[r];
         if ((took[r] || active[r]) && (!d->link_active[l] || (kind == 3 && took[r])))
-            FN(rope_record)(d, t, LN_EVENT_TAUT, l, impulses[r]);
+            FN(rope_record)(d, t, LN_EVENT_TAUT, l, impulses[r], mm);
     }
     for (ln_int r = 0; r < R; r++) {
         const ln_int l = mm->rope_link[r];
-        if (d->link_active[l] && !active[r]) FN(rope_record)(d, t, LN_EVENT_SLACK, l, 0.0);
+        if (d->link_active[l] && !active[r]) FN(rope_record)(d, t, LN_EVENT_SLACK, l, 0.0, mm);
     }
     for (ln_int r = 0; r < R; r++) d->link_active[mm->rope_link[r]] = active[r];
     return LN_OK;
@@ -1151,6 +1242,7 @@ int FN(ln_rope_fixed_step)(const ln_model *mm, const ln_method *meth, ln_data *d
     double *Xs0 = d->event_states, *Us0 = Xs0 + K3, *Xs1 = d->event_states + 2 * K3, *Us1 = Xs1 + K3;
     double *Xe = d->event_states + 4 * K3, *Ue = Xe + K3;
     int status = LN_OK;
+    if (mm->n_contacts) return LN_BAD_ARGUMENT;  /* a composition's stages do not place the contacts' anchors */
     for (ln_int k = 0; k < mm->max_events_per_step; k++) {
         memcpy(Xs0, X, bytes);
         memcpy(Us0, U, bytes);
@@ -1191,6 +1283,7 @@ int ln_rope_anchor_jump(const ln_model *m, const ln_method *meth, ln_data *d, co
     double *X = d->X, *U = d->U, *U_jumped = d->event_states + 6 * 3 * m->K;
     const size_t bytes = (size_t)(3 * m->K) * sizeof(double);
     int status;
+    if (m->n_contacts) FN(ln_contacts_place)(m, X, U);
     if (!d->mode_chosen) {  /* the mode of the state before the jump (its anchors' accelerations not in B) */
         uint8_t *active = d->rope_flags + 4 * m->n_ropes;
         if ((status = FN(rope_state_mode)(mm, d, X, U, d->F_base, active)) != LN_OK) return status;
@@ -1247,6 +1340,14 @@ int ln_rope_evaluate(const ln_model *m, ln_data *d, const double *X, const doubl
 {
     ln_model mode = *m;
     mode.inv_R = d->mode_inv_R;
+    if (m->n_contacts) {  /* the contacts' anchors placed on a copy of the state */
+        double *Xp = d->event_states, *Up = Xp + 3 * m->K;
+        memcpy(Xp, X, (size_t)(3 * m->K) * sizeof(double));
+        memcpy(Up, U, (size_t)(3 * m->K) * sizeof(double));
+        FN(ln_contacts_place)(m, Xp, Up);
+        X = Xp;
+        U = Up;
+    }
     uint8_t *active = d->rope_flags + 4 * m->n_ropes;
     int status = FN(rope_state_mode)(&mode, d, X, U, d->F_base, active);
     if (status != LN_OK) return status;

@@ -130,6 +130,7 @@ static int starting_step(const ln_model *m, const ln_method *meth, ln_data *d, c
     d->n_rhs++;
     int status;
     if (m->n_driven && (status = ln_drive_rows(m, d, t + h0, d->Xs, d->Us, d->F_base, DIM)) != LN_OK) return status;
+    if (m->n_contacts) FN(ln_contacts_place)(m, d->Xs, d->Us);
     status = FN(ln_accelerations)(m, d, d->Xs, d->Us, F_base, d->acc1, d->T, 1);
     if (status != LN_OK) return status;
     double d2 = 0.0;
@@ -158,6 +159,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
     /* driven anchors are known functions of time: each stage's rows of X, U and of the base force (their
        accelerations) are set to the motion at the stage's time, t + c_i h */
     if (m->n_driven && (status = ln_drive_rows(m, d, t, X, U, d->F_base, DIM)) != LN_OK) return status;
+    if (m->n_contacts) FN(ln_contacts_place)(m, X, U);
     if ((status = accelerations(m, d, X, U, F_base, acc, d->T, 1)) != LN_OK) return status;
     store_stage(size, 0, U, acc, KX, KU);
     ln_peaks_begin(m, d, t);
@@ -179,6 +181,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
             if (m->n_driven
                 && (status = ln_drive_rows(m, d, i < s ? t + meth->C[i] * h : t_new, Yx, Yu, d->F_base, DIM)) != LN_OK)
                 return status;
+            if (m->n_contacts) FN(ln_contacts_place)(m, Yx, Yu);
             d->n_rhs++;
             if ((status = accelerations(m, d, Yx, Yu, F_base, acc, d->T, 1)) != LN_OK) return status;
             store_stage(size, i, Yu, acc, KX, KU);
@@ -192,7 +195,8 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
         }
         /* positions onto (11) along the directions at Xn (unit vectors E1 of the last evaluation, A(Xn)
            factored), then the velocities onto (12) at the projected positions */
-        status = project_positions(m, d, Xn, d->E1, meth->position_tol, meth->max_projection_iter);
+        status = m->n_contacts ? FN(ln_contacts_project)(m, meth, d, Xn, meth->position_tol)
+                               : project_positions(m, d, Xn, d->E1, meth->position_tol, meth->max_projection_iter);
         if (status == LN_PROJECTION_FAILED) {
             /* the new point is too far off (11) for the projection: a step too long for the motion, rejected
                like one whose error estimate is too large (a shorter step lands closer to the manifold) */
@@ -201,6 +205,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
             continue;
         }
         if (status != LN_OK) return status;
+        if (m->n_contacts) FN(ln_contacts_place)(m, Xn, Un);
         if ((status = project_velocities(m, d, Xn, Un, d->E1)) != LN_OK) return status;
         /* ropes: a step that holds an event ends just past it, in the new mode (stages/ropes.c) */
         if (m->n_ropes && (status = FN(ln_rope_step_events)(m, meth, d, X, U, F_base, t, Xn, Un, &t_new)) != LN_OK)
@@ -218,6 +223,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
             /* the first stage of the next step; A(X) is factored already (velocity projection), unless the ropes'
                events have factored others since */
             d->n_rhs++;
+            if (m->n_contacts) FN(ln_contacts_place)(m, X, U);
             if ((status = accelerations(m, d, X, U, F_base, acc, d->T, m->n_ropes != 0)) != LN_OK) return status;
             store_stage(size, 0, U, acc, KX, KU);
         }

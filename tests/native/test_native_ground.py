@@ -1,0 +1,130 @@
+"""A frictionless ground on the native core (linknet_core/native/src/stages/ropes.c) against the numpy reference
+(linknet_core.dynamics.unilateral, linknet_core.integrators.events) and against closed forms.
+
+The core takes each contact as the reference's ModeDynamics does: a unilateral link from the mass to a virtual anchor
+placed straight above it before every evaluation (its unit vector the plane's normal, its term of (26) (n . U_k)^2 /
+R_c, its gap the height above the plane), the position projection repeated with the anchors re-placed until the
+contacts are on the plane. The rules (the LCPs with the contacts after the ropes, the events 'contact' and 'release',
+Newton's restitution and the rest rule) are the reference's, so the two agree to round-off, within the bounds of
+tests/native/test_native_ropes.py (EVENT_TIME_TOL, STATE_TOL; measured here: event times 1e-15 s, positions 2e-15 m,
+impulses 5e-15 N s)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from native.test_native_ropes import _agree  # tests/ is on sys.path
+from ropes.rope_references import G
+
+import linknet_core as ln
+from linknet_core.dynamics.unilateral import UnilateralDynamics
+
+
+def _both(scene, t_end, method="dop853", n_out=31):
+    return tuple(ln.simulate(scene, t_end, method, rtol=1e-10, n_out=n_out, error_estimate=False, backend=backend)
+                 for backend in ("numpy", "native"))
+
+
+def dropped(height, e, vx=0.5, mass=2.0, friction=0.0):
+    return ln.Scene.from_dict({"name": "ball", "gravity": [0, 0, -G],
+                               "masses": [{"name": "ball", "position": [0, 0, height], "mass": mass,
+                                           "velocity": [vx, 0, 0]}],
+                               "ground": {"point": [0, 0, 0], "normal": [0, 0, 1], "restitution": e,
+                                          "friction": friction}})
+
+
+def falling_chain(N=20, a=0.05, m=0.05):
+    return ln.Scene.from_dict({"name": "falling_chain", "gravity": [0, 0, -G],
+                               "masses": [{"name": f"c{k}", "position": [0, 0, a * (k + 1)], "mass": m}
+                                          for k in range(N)],
+                               "links": [{"a": k + 1, "b": k + 2, "kind": "rope"} for k in range(N - 1)],
+                               "ground": {"point": [0, 0, 0], "normal": [0, 0, 1]}})
+
+
+@pytest.mark.parametrize("method", ["dop853", "dopri5"])
+def test_a_bouncing_ball_bounces_at_the_closed_form_times_with_the_closed_form_impulses_as_the_reference_does(method):
+    h, e, m = 1.0, 0.5, 2.0
+    reference, native = _both(dropped(h, e, mass=m), 2.0, method)
+    assert ln.Simulator(dropped(h, e), method).backend == "native"
+    _agree(reference, native, min_events=5)
+    # closed form: t_1 = sqrt(2 h / g), v_1 = sqrt(2 g h); each rebound at e v_k flies 2 e v_k / g; impulse m (1 + e) v_k
+    t, v = np.sqrt(2 * h / G), np.sqrt(2 * G * h)
+    for event in native.events[:6]:
+        assert event.kind == "contact" and event.index == 0
+        assert abs(event.t - t) <= 1e-12
+        assert abs(event.impulse - m * (1 + e) * v) <= 1e-10 * m * v
+        t, v = t + 2 * e * v / G, e * v
+    # between bounces a parabola along z, and the uniform motion along x throughout
+    assert np.abs(native.X[:, 0, 0] - 0.5 * native.t).max() <= 1e-13
+
+
+def test_a_rope_chain_falling_onto_the_ground_lands_mass_by_mass_as_the_reference_and_the_closed_form_say():
+    N, a, m = 20, 0.05, 0.05
+    reference, native = _both(falling_chain(N, a, m), 0.5, n_out=11)
+    _agree(reference, native, min_events=2 * N - 1)
+    contacts = [e for e in native.events if e.kind == "contact"]
+    assert [e.index for e in contacts] == list(range(N))
+    k = np.arange(1, N + 1)
+    assert np.abs(np.array([e.t for e in contacts]) - np.sqrt(2 * k * a / G)).max() < 1e-14
+    assert np.abs(np.array([e.impulse for e in contacts]) - m * np.sqrt(2 * G * k * a)).max() < 1e-14
+
+
+def test_a_pendulum_swinging_into_the_ground_lands_slides_and_is_jerked_off_it_as_the_reference_does():
+    scene = ln.Scene.from_dict({"name": "swing", "gravity": [0, 0, -G],
+                                "masses": [{"name": "pivot", "position": [0, 0, 0.8], "fixed": True},
+                                           {"name": "bob", "position": [1.0, 0, 0.8], "mass": 1.0}],
+                                "links": [{"a": 1, "b": 2, "kind": "rope"}],
+                                "ground": {"point": [0, 0, 0], "normal": [0, 0, 1]}})
+    reference, native = _both(scene, 1.5, n_out=151)
+    _agree(reference, native, min_events=6)
+    assert [e.kind for e in native.events] == ["contact", "slack", "taut", "release", "contact", "slack"]
+
+
+def test_the_grounds_normal_forces_and_impulses_are_the_references():
+    # a mass on a tilted plane, sliding at g sin(alpha) with the normal force m g cos(alpha); the chain partly landed:
+    # each resting mass's normal force as the reference's LCP gives it
+    alpha, m = 0.3, 1.5
+    n = [np.sin(alpha), 0.0, np.cos(alpha)]
+    tilted = ln.Scene.from_dict({"name": "tilted", "gravity": [0, 0, -G],
+                                 "masses": [{"name": "m", "position": [0, 0, 0], "mass": m}],
+                                 "ground": {"point": [0, 0, 0], "normal": n}})
+    sim = ln.Simulator(tilted, "dop853", rtol=1e-10, error_estimate=False, backend="native")
+    sim.advance(0.7)
+    assert not sim.integrator.events
+    along = np.array([np.cos(alpha), 0.0, -np.sin(alpha)])
+    assert abs(sim.state.X[0] @ along - 0.5 * G * np.sin(alpha) * 0.7 ** 2) <= 1e-12
+    normal = sim.integrator.ground_outputs(sim.state.X, sim.state.U)[2]
+    assert abs(normal[0] - m * G * np.cos(alpha)) <= 1e-12 * m * G
+
+    chain = falling_chain()
+    dyn = UnilateralDynamics(chain)
+    runs = {backend: ln.Simulator(chain, "dop853", rtol=1e-10, error_estimate=False, backend=backend)
+            for backend in ("numpy", "native")}
+    for sim in runs.values():
+        sim.advance(0.25)
+    native = runs["native"]
+    assert np.abs(native.state.X - runs["numpy"].state.X).max() <= 1e-13
+    T, _, N_native = native.integrator.ground_outputs(native.state.X, native.state.U)
+    T_ref, N_ref = dyn.resolve(native.state.X, native.state.U)
+    # the masses landed by 0.25 s (sqrt(2 k a / g) < 0.25: six) rest with their ropes slack, each on its own weight
+    assert np.count_nonzero(N_ref) == 6
+    assert np.abs(N_native[:6] - 0.05 * G).max() <= 1e-12
+    assert np.abs(N_native - N_ref[chain.free_indices]).max() <= 1e-12 * float(np.abs(N_ref).max())
+    assert np.abs(T - T_ref).max() <= 1e-12 * max(1.0, float(np.abs(T_ref).max()))
+    # the ground's impulses over the advance: each landing's m v_k, summed per mass (the FMU's Jground[k])
+    landed = [e for e in native.integrator.events if e.kind == "contact"]
+    J = native.integrator.ground_impulses()
+    for e in landed:
+        assert abs(J[e.index] - e.impulse) <= 1e-15
+    assert np.count_nonzero(J) == len(landed)
+
+
+def test_the_native_core_refuses_friction_and_the_fixed_step_methods_with_a_ground_and_auto_runs_those_on_numpy():
+    rough = dropped(1.0, 0.0, friction=0.4)
+    with pytest.raises(ln.SolverError, match="Coulomb friction"):
+        ln.Simulator(rough, "dop853", backend="native")
+    assert ln.Simulator(rough, "dop853").backend == "numpy"
+    smooth = dropped(1.0, 0.0)
+    with pytest.raises(ln.SolverError, match="adaptive methods"):
+        ln.Simulator(smooth, "rattle", dt=1e-3, backend="native")
+    assert ln.Simulator(smooth, "rattle", dt=1e-3).backend == "numpy"
+    assert ln.Simulator(smooth, "dopri5").backend == "native"
