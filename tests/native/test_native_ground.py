@@ -118,6 +118,55 @@ def test_the_grounds_normal_forces_and_impulses_are_the_references():
     assert np.count_nonzero(J) == len(landed)
 
 
+def test_a_hook_driven_by_inputs_drops_its_load_onto_the_ground_as_the_reference_does():
+    # a hook holding two bobs on ropes above a ground (restitution 0.4): jerked up, swung, dropped (the lower bob lands,
+    # its rope goes slack, the upper one jerks it), stopped; events, states and the hook's impulses per interval
+    scene = ln.Scene.from_dict({"name": "hook", "gravity": [0, 0, -G],
+                                "masses": [{"name": "hook", "position": [0, 0, 0], "driven": True,
+                                            "motion": {"kind": "input"}},
+                                           {"name": "a", "position": [0, 0, -0.5], "mass": 0.5},
+                                           {"name": "b", "position": [0, 0, -1.5], "mass": 2.0}],
+                                "links": [{"a": 1, "b": 2, "length": 0.5, "kind": "rope"},
+                                          {"a": 2, "b": 3, "length": 1.0, "kind": "rope", "restitution": 0.3}],
+                                "ground": {"point": [0, 0, -1.8], "normal": [0, 0, 1], "restitution": 0.4}})
+    holds = [((0, 0, 0), (0, 0, 1.0)), (None, (0.8, 0, 0.2)), (None, (0, 0, -2.5)), (None, (0, 0, 0))]
+    runs = {}
+    for backend in ("numpy", "native"):
+        sim = ln.Simulator(scene, "dop853", rtol=1e-10, error_estimate=False, backend=backend)
+        assert sim.backend == backend
+        out = []
+        for i, (P, V) in enumerate(holds):
+            P = sim.state.X[0] if P is None else np.array(P, float)
+            sim.advance(0.25 * (i + 1), anchors=(np.array([P]), np.array([V], float), np.zeros((1, 3))))
+            out.append((sim.state.X.copy(), sim.anchor_report()["impulse"].copy()))
+        runs[backend] = (out, list(sim.integrator.events))
+    (ref, ref_events), (nat, nat_events) = runs["numpy"], runs["native"]
+    assert ("contact", 2) in [(e.kind, e.index) for e in ref_events]
+    assert [(e.kind, e.index) for e in nat_events] == [(e.kind, e.index) for e in ref_events]
+    for a, b in zip(ref_events, nat_events):
+        assert abs(a.t - b.t) <= 1e-12 and abs(a.impulse - b.impulse) <= 1e-12 * max(1.0, a.impulse)
+    for (X_ref, J_ref), (X_nat, J_nat) in zip(ref, nat):
+        assert np.abs(X_nat - X_ref).max() <= 1e-12 and np.abs(J_nat - J_ref).max() <= 1e-12
+
+
+def test_a_snapshot_of_a_run_on_the_ground_continues_identically_and_a_reset_runs_the_same_events_again():
+    sim = ln.Simulator(falling_chain(8), "dop853", rtol=1e-10, error_estimate=False, backend="native")
+    sim.advance(0.15)  # two masses landed (sqrt(2 k a / g) < 0.15)
+    snapshot = sim.get_state()
+    sim.advance(0.3)
+    X, events = sim.state.X.copy(), list(sim.integrator.events)
+    assert [e.kind for e in events].count("contact") == 8
+    sim.set_state(snapshot)
+    assert [e.kind for e in sim.integrator.events].count("contact") == 2
+    sim.advance(0.3)
+    assert np.array_equal(sim.state.X, X) and sim.integrator.events == events
+    sim.reset()
+    assert sim.integrator.events == []
+    sim.advance(0.15)
+    sim.advance(0.3)
+    assert np.array_equal(sim.state.X, X) and sim.integrator.events == events
+
+
 def test_the_native_core_refuses_friction_and_the_fixed_step_methods_with_a_ground_and_auto_runs_those_on_numpy():
     rough = dropped(1.0, 0.0, friction=0.4)
     with pytest.raises(ln.SolverError, match="Coulomb friction"):
