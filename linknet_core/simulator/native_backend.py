@@ -29,7 +29,10 @@ class NativeBackend(Backend):
     def choose_specialisation(cls, scene, dyn, settings, U0):
         stepping = settings.stepping
         if scene.unilateral:  # the modes change the links: the point-mass path, event by event
-            return Specialisation(NONE, "ropes: the point-mass path, one mode of taut ropes at a time"), U0
+            what = "ropes and ground" if scene.rope.any() and scene.ground is not None else (
+                "ropes" if scene.rope.any() else "ground")
+            return Specialisation(NONE, f"{what}: the point-mass path, one mode (taut ropes, masses on the ground) "
+                                        "at a time"), U0
         specialisation = choose_specialisation(scene, dyn, stepping.method, enabled=settings.specialise,
                                                tolerances=(stepping.rtol, stepping.atol))
         if specialisation.kind == STATIC:
