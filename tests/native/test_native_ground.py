@@ -79,6 +79,34 @@ def test_a_pendulum_swinging_into_the_ground_lands_slides_and_is_jerked_off_it_a
     assert [e.kind for e in native.events] == ["contact", "slack", "taut", "release", "contact", "slack"]
 
 
+def _dumbbell():
+    # a rod landing flat on both ends at once (two simultaneous contacts coupled by the rod), bouncing with e = 0.6
+    return ln.Scene.from_dict({"name": "dumbbell", "gravity": [0, 0, -G],
+                               "masses": [{"name": "a", "position": [0, 0, 0.5], "mass": 1.0, "velocity": [0.2, 0, 0]},
+                                          {"name": "b", "position": [1, 0, 0.5], "mass": 2.0, "velocity": [0.2, 0, 0]}],
+                               "links": [{"a": 1, "b": 2}],
+                               "ground": {"point": [0, 0, 0], "normal": [0, 0, 1], "restitution": 0.6}})
+
+
+def _net_on_a_slope():
+    # four masses in a loop of ropes braced by one rod, dropped onto a slanted ground (restitution 0.2)
+    free = [[1, 1, 0.3], [2, 1, 0.5], [2, 2, 0.2], [1, 2, 0.4]]
+    masses = [{"name": f"m{i + 1}", "position": p, "mass": m} for i, (p, m) in enumerate(zip(free, (0.8, 1.3, 1.9, 0.6)))]
+    links = [{"a": 1, "b": 2, "kind": "rope", "length": 1.2}, {"a": 2, "b": 3, "kind": "rope", "length": 1.1},
+             {"a": 3, "b": 4, "kind": "rope", "length": 1.3}, {"a": 4, "b": 1, "kind": "rope", "length": 1.05},
+             {"a": 1, "b": 3}]
+    return ln.Scene.from_dict({"name": "net", "gravity": [0, 0, -G], "masses": masses, "links": links,
+                               "ground": {"point": [0, 0, -0.5], "normal": [0.1, 0.05, 1.0], "restitution": 0.2}})
+
+
+@pytest.mark.parametrize("make,method", [(_dumbbell, "dop853"), (_net_on_a_slope, "dop853"),
+                                         (_net_on_a_slope, "dopri5")])
+def test_several_contacts_at_once_and_ropes_on_a_slope_give_the_references_events_and_states(make, method):
+    reference, native = _both(make(), 2.0, method)
+    _agree(reference, native, min_events=15)
+    assert sum(e.kind == "contact" for e in native.events) >= 5
+
+
 def test_the_grounds_normal_forces_and_impulses_are_the_references():
     # a mass on a tilted plane, sliding at g sin(alpha) with the normal force m g cos(alpha); the chain partly landed:
     # each resting mass's normal force as the reference's LCP gives it
