@@ -46,7 +46,8 @@ def test_a_bouncing_ball_bounces_at_the_closed_form_times_with_the_closed_form_i
     reference, native = _both(dropped(h, e, mass=m), 2.0, method)
     assert ln.Simulator(dropped(h, e), method).backend == "native"
     _agree(reference, native, min_events=5)
-    # closed form: t_1 = sqrt(2 h / g), v_1 = sqrt(2 g h); each rebound at e v_k flies 2 e v_k / g; impulse m (1 + e) v_k
+    # closed form: t_1 = sqrt(2 h / g), v_1 = sqrt(2 g h); each rebound at e v_k flies 2 e v_k / g; the impulse is
+    # m (1 + e) v_k
     t, v = np.sqrt(2 * h / G), np.sqrt(2 * G * h)
     for event in native.events[:6]:
         assert event.kind == "contact" and event.index == 0
@@ -91,7 +92,8 @@ def _dumbbell():
 def _net_on_a_slope():
     # four masses in a loop of ropes braced by one rod, dropped onto a slanted ground (restitution 0.2)
     free = [[1, 1, 0.3], [2, 1, 0.5], [2, 2, 0.2], [1, 2, 0.4]]
-    masses = [{"name": f"m{i + 1}", "position": p, "mass": m} for i, (p, m) in enumerate(zip(free, (0.8, 1.3, 1.9, 0.6)))]
+    masses = [{"name": f"m{i + 1}", "position": p, "mass": m}
+              for i, (p, m) in enumerate(zip(free, (0.8, 1.3, 1.9, 0.6)))]
     links = [{"a": 1, "b": 2, "kind": "rope", "length": 1.2}, {"a": 2, "b": 3, "kind": "rope", "length": 1.1},
              {"a": 3, "b": 4, "kind": "rope", "length": 1.3}, {"a": 4, "b": 1, "kind": "rope", "length": 1.05},
              {"a": 1, "b": 3}]

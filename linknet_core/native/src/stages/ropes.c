@@ -1,7 +1,13 @@
 /* Ropes: links that pull and never push, |X_k2 - X_k1| <= R_l with T_l >= 0, their mode, impacts and events, for
  * every method. The numpy reference of every rule here is linknet_core.dynamics.unilateral (the
  * model, the impact, the mode), linknet_core.dynamics.complementarity (the LCP) and linknet_core.integrators.events
- * (detection, location, the event); this file mirrors them for ropes (the ground stays on the numpy reference).
+ * (detection, location, the event); this file mirrors them for ropes and a frictionless ground (Coulomb friction
+ * stays on the numpy reference).
+ *
+ * A ground's contact is a rope too: from its free mass to a virtual anchor (the model's last masses, fixed, of
+ * infinite mass) placed straight above it before every evaluation at the contact length R_c from the plane, so that
+ * its E is the plane's normal, its term of (26) (n . U_k)^2 / R_c and its gap the height above the plane
+ * (ModeDynamics' contact); its gap and rate are taken from the plane directly.
  *
  * A rope's gap is g_l = R_l - |X_k2 - X_k1| >= 0, its rate dg/dt = -(d . dU) / |d|. While taut a rope is a link of
  * the seed in (9), (11)-(13), (25)-(26); slack, it is out of the system: the mode's model (a copy of the model whose
@@ -24,8 +30,9 @@
  * Rajan, Computer Aided Geometric Design 5, 1988) and looked at exactly where they allow a dip, each dip confirmed on
  * the method's own step to its lowest point; the taut ropes' tensions at the step's end against -force_tol of the
  * largest |T|, and on the adaptive methods, where the end shows none, at the step's inner stages (a tension that
- * dips through zero and recovers within one step), each candidate confirmed on the method's own step. The event is taken on the method's own step: a gap's time by Newton's method on the step's length, a
- * force's by Illinois' regula falsi on it, ending just past the zero; there the positions go onto the touching ropes,
+ * dips through zero and recovers within one step), each candidate confirmed on the method's own step. The event is
+ * taken on the method's own step: a gap's time by Newton's method on the step's length, a force's by Illinois'
+ * regula falsi on it, ending just past the zero; there the positions go onto the touching ropes,
  * the impact is applied and the next mode chosen. The adaptive methods end the step at the event and go on with their
  * controller; the fixed-step ones (RATTLE and its compositions) finish the step from the event in the new mode, so
  * that their steps stay where they are (a part shorter than short_step of dt by a Taylor step).
