@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from native.test_native_ropes import _agree  # tests/ is on sys.path
+from test_native_ropes import _agree  # tests/native is on sys.path (pytest puts a test file's folder there)
 from ropes.rope_references import G
 
 import linknet_core as ln
