@@ -13,7 +13,8 @@ The FMU holds no Python. It is made of three parts:
   Zig's C compiler (PyPI's ziglang), as a tool would compile them. Since the sources are the same for every scene,
   so are the binaries: each platform's binary is built once per content of the sources, compiler and flags and then
   taken from a per-user cache (LINKNET_FMU_CACHE, default ~/.cache/linknet/native-fmu), so that a further scene
-  compiles nothing.
+  compiles nothing; its objects are kept by what each unit reads, so that the FMI 2.0 and FMI 3.0 FMUs share all
+  but their glue's.
 * resources/linknet_scene.bin: the scene as data (fmu_resource.h gives the format), read when the FMU is
   instantiated. The ln_model and every integrator's ln_method are written field by field from the structs
   linknet_core's own Simulator hands the core for this scene (the core's lists of their fields, ln_model_fields.h,
@@ -622,6 +623,40 @@ def sources_digest(sources_dir: Path) -> bytes:
     return content.digest()
 
 
+def unit_digest(sources_dir: Path, unit: str, sources: bytes) -> str:
+    """What compiling one translation unit of sources/ reads besides the C library: the unit and every file it
+    includes with quotes, transitively, found beside the including file or else in sources/ (the one include folder),
+    as the compiler looks them up; every #include line counts, whatever conditions it stands under. An #include the
+    compiler would resolve otherwise (a macro, a file in neither place) makes it the digest of all of sources/
+    (``sources``, sources_digest's)."""
+    sources_dir = Path(os.path.normpath(sources_dir))
+    content, seen, todo = hashlib.sha256(), set(), [sources_dir / unit]
+    while todo:
+        path = Path(os.path.normpath(todo.pop()))
+        if path in seen:
+            continue
+        seen.add(path)
+        text = path.read_bytes()
+        content.update(path.relative_to(sources_dir).as_posix().encode() + b"\0" + text + b"\0")
+        for line in re.findall(rb"^[ \t]*#[ \t]*include\b(.*)$", text, re.M):
+            quoted = re.match(rb'\s*"([^"]+)"', line)
+            if quoted is None:
+                if re.match(rb"\s*<[^>]+>", line):
+                    continue  # the C library's headers, which the compiler's version in the key pins
+                return hashlib.sha256(b"every source\0" + sources).hexdigest()
+            name = quoted.group(1).decode()
+            found = [p for p in (path.parent / name, sources_dir / name) if p.is_file()]
+            if not found or not Path(os.path.normpath(found[0])).is_relative_to(sources_dir):
+                return hashlib.sha256(b"every source\0" + sources).hexdigest()
+            todo.append(found[0])
+    return content.hexdigest()
+
+
+def object_name(sources_dir: Path, unit: str, sources: bytes) -> str:
+    """The cached object of a translation unit: its name and its unit_digest."""
+    return f"{unit.replace('/', '__')}.{unit_digest(sources_dir, unit, sources)[:32]}.o"
+
+
 _zig_versions: dict = {}
 
 
@@ -646,8 +681,10 @@ def compile_binaries(sources_dir: Path, units: list[str], ident: str, folders: t
 
     The sources are the same for every scene, so the binaries are too: each target's objects and its linked binary
     (which carries the model identifier in its name) are kept in a per-user cache (LINKNET_FMU_CACHE, default
-    ~/.cache/linknet/native-fmu), keyed by the compiler, the target, the flags and the content of every source file,
-    so that a further scene compiles nothing, and links nothing if its model identifier was built before."""
+    ~/.cache/linknet/native-fmu), keyed by the compiler, the target and the flags, an object also by the content of
+    what its unit reads (unit_digest) and a linked binary by that of every source file, so that a further scene
+    compiles nothing, and links nothing if its model identifier was built before; the FMI 2.0 and FMI 3.0 FMUs, whose
+    sources differ in the glue only, share every other object."""
     from concurrent.futures import ThreadPoolExecutor
 
     cc = zig_cc()
@@ -658,10 +695,14 @@ def compile_binaries(sources_dir: Path, units: list[str], ident: str, folders: t
     with tempfile.TemporaryDirectory(prefix="linknet_objects_") as tmp:
         tmp = Path(tmp)
         stores, linked, jobs, fresh = {}, {}, [], []
+        object_names = {u: object_name(sources_dir, u, digest) for u in units}
+        object_stores = {}
         for target in targets:
-            key = hashlib.sha256("\0".join(["zig cc", _zig_version(cc), target] + flags[:-2]).encode()
-                                 + digest).hexdigest()[:32]
-            stores[target] = _cache_dir() / key if cache else tmp / "objects" / target
+            compiler = hashlib.sha256("\0".join(["zig cc", _zig_version(cc), target] + flags[:-2]).encode())
+            object_stores[target] = (_cache_dir() / f"{compiler.hexdigest()[:32]}-objects" if cache
+                                     else tmp / "objects" / target)
+            compiler.update(digest)
+            stores[target] = _cache_dir() / compiler.hexdigest()[:32] if cache else tmp / "objects" / target
             binary = stores[target] / "linked" / f"{ident}{suffix[target]}"
             if binary.exists():
                 linked[target] = binary
@@ -669,11 +710,11 @@ def compile_binaries(sources_dir: Path, units: list[str], ident: str, folders: t
             work = tmp / "new" / target
             work.mkdir(parents=True)
             for u in units:
-                name = u.replace("/", "__") + ".o"
-                if not (stores[target] / name).exists():
+                name = object_names[u]
+                if not (object_stores[target] / name).exists():
                     jobs.append(([*cc, "-target", target, *flags, "-c", str(sources_dir / u), "-o", str(work / name)],
                                  work))
-                    fresh.append((work / name, stores[target]))
+                    fresh.append((work / name, object_stores[target]))
         with ThreadPoolExecutor(max_workers=os.cpu_count() or 2) as pool:
             list(pool.map(lambda job: _run_compiler(*job), jobs))
         for made, store in fresh:
@@ -683,7 +724,7 @@ def compile_binaries(sources_dir: Path, units: list[str], ident: str, folders: t
             work = tmp / "linked" / target  # its own folder: the Windows link leaves an import library beside it
             work.mkdir(parents=True)
             binary = work / f"{ident}{suffix[target]}"
-            objects = [str(stores[target] / (u.replace("/", "__") + ".o")) for u in units]
+            objects = [str(object_stores[target] / object_names[u]) for u in units]
             _run_compiler([*cc, "-target", target, "-shared", "-o", str(binary)] + objects
                           + _link_options(target, ident), work)
             return _store(binary, stores[target] / "linked")
