@@ -74,9 +74,9 @@ LOG_CATEGORIES = (("logStatusWarning", "Log messages with fmi2Warning status."),
 
 def log_categories(layout) -> tuple:
     """The FMU's log categories: LOG_CATEGORIES, and the events' where the scene has ropes (one message per event
-    of a doStep; the glue accepts it in SetDebugLogging for these FMUs only, fmi2_api.h), in the pythonfmu FMU's
-    order."""
-    if layout.rope_links.size:
+    of a doStep; the glue accepts it in SetDebugLogging for these FMUs only, fmi2_api.h) where it has ropes or a
+    ground, in the pythonfmu FMU's order."""
+    if layout.rope_links.size or layout.ground_masses.size:
         return LOG_CATEGORIES + ((EVENT_CATEGORY, EVENT_CATEGORY_DESCRIPTION),)
     return LOG_CATEGORIES
 
@@ -240,6 +240,25 @@ def library_tolerance_range() -> tuple[float, float]:
     return float(getattr(integrators, "RTOL_MIN", 1e-15)), float(getattr(integrators, "RTOL_MAX", 0.1))
 
 
+def offered_integrators(scene, cfg: dict) -> dict:
+    """cfg with the integrators the native core runs for ``scene`` (the library's native_refusal, asked here only),
+    the others in cfg["refused_integrators"] (name -> the library's reason), which the FMU does not offer and refuses
+    by that reason when its parameter integrator names one. NativeBuildError with the reason where the default
+    integrator is refused (e.g. a ground with --step or --integrator rattle) or every one is (a ground with
+    friction)."""
+    import linknet_core as ln
+    from linknet_core.dynamics.unilateral import native_refusal
+    refused = {}
+    for name in cfg["integrators"]:
+        reason = native_refusal(scene, ln.METHODS[name])
+        if reason is not None:
+            refused[name] = reason
+    offered = [name for name in cfg["integrators"] if name not in refused]
+    if not offered or cfg["integrator"] in refused:
+        raise NativeBuildError(refused[cfg["integrator"]])
+    return dict(cfg, integrators=offered, refused_integrators=refused)
+
+
 def _simulators(scene, cfg):
     """One linknet_core Simulator per integrator, as the pythonfmu FMU builds them (dt = step, or rtol =
     tolerance), sharing one Dynamics (the structure is analysed once)."""
@@ -271,7 +290,8 @@ class VariableFamily:
     vrs: str                    # the Layout's attribute of its value references: (rows, 3) or (rows,)
     masses: str | None          # the Layout's attribute of the masses its rows are; None: links or axes, in order
     among: str | None           # the rows the C side numbers them by: the mass's row in ln_model.fixed_idx ("fixed")
-    #                             or driven_idx ("driven"); None: the mass itself
+    #                             or driven_idx ("driven"), its ground contact's link in the model ("contacts"); None:
+    #                             the mass itself
     description: str            # the whole family, as the FMI 3.0 array variable describes it
     links: str | None = None    # the Layout's attribute of the links its rows are (masses None); None with masses
     #                             None: every link or axis, in order
@@ -307,6 +327,8 @@ VARIABLE_FAMILIES = (
                    "0), 0 where it is taut", links="rope_links"),
     VariableFamily("Jrope", "JROPE", "Jrope_vr", None, None, "each rope's impulse of coming taut (its jerks) within "
                    "the last communication step, summed (N.s); 0 if none", links="rope_links"),
+    VariableFamily("Jground", "JROPE", "Jground_vr", "ground_masses", "contacts", "the ground's normal impulse on "
+                   "each free mass landing within the last communication step, summed (N.s); 0 if none"),
     VariableFamily("M", "M", "M_vr", "free_indices", None, "masses of the free masses (kg, > 0)"),
     VariableFamily("R", "R", "R_vr", None, None, "lengths of the links (m, > 0; the initial positions must satisfy "
                    "them), in the scene's link order"),
@@ -330,6 +352,13 @@ def variable_table(layout, model) -> tuple[np.ndarray, np.ndarray]:
         if values is not None:
             rows[values] = np.arange(n)
         row_of[name] = rows
+    # a ground's contacts are the model's last links, one per mass of contact_mass (unilateral.native_ground_scene)
+    n_contacts = int(model.n_contacts)
+    contacts = np.full(int(model.K), -1, np.int64)
+    masses = _pointer_values(model.contact_mass, n_contacts, ctypes.c_int64)
+    if masses is not None:
+        contacts[masses] = int(model.L) - n_contacts + np.arange(n_contacts)
+    row_of["contacts"] = contacts
 
     def put(name, vrs, idx):
         vrs = np.asarray(vrs, np.int64)
@@ -375,9 +404,12 @@ def scene_resource(scene, cfg, layout) -> tuple[Resource, dict]:
         raise NativeBuildError("the Simulator does not start at t = 0")
     model = integ.model.struct
     K, L = int(model.K), int(model.L)
+    # the scene the core runs: with a ground, its masses and links then a virtual anchor and a contact link per free
+    # mass (unilateral.native_ground_scene); the FMU's variables are the scene's own rows of it (variable_table)
+    core_scene = getattr(integ.model, "ground_scene", None) or scene
     values = dict(model_identifier=cfg["model_identifier"], scene_name=str(scene.name), K=K, L=L,
-                  mass_names=list(scene.mass_names), mass=scene.mass, length=scene.length, gravity=scene.gravity,
-                  force=scene.force, X0=scene.X0, U0=scene.U0,
+                  mass_names=list(core_scene.mass_names), mass=core_scene.mass, length=core_scene.length,
+                  gravity=core_scene.gravity, force=core_scene.force, X0=core_scene.X0, U0=core_scene.U0,
                   project_initial=int(bool(scene.options.get("project_initial_positions", False))),
                   length_tol=sim.settings.length_tol)  # the run's own rule for the initial lengths
     values["tolerance_min"], values["tolerance_max"] = library_tolerance_range()
@@ -397,12 +429,20 @@ def scene_resource(scene, cfg, layout) -> tuple[Resource, dict]:
         rigid = integ.rigid.struct
         values["n_bodies"], values["Y0"] = int(rigid.n_bodies), integ.body_states()
     internals = integ.internals()["native"]
-    values.update(X_init=sim.state.X, U_init=sim.state.U, h_next_init=internals.h_next,
+    # the core's rows (the anchors' too, which the core places before each evaluation), the scene's = sim.state's
+    X_init, U_init = (integ.data.X.copy(), integ.data.U.copy()) if core_scene is not scene else (sim.state.X,
+                                                                                                sim.state.U)
+    if not (np.array_equal(X_init[:scene.K], sim.state.X) and np.array_equal(U_init[:scene.K], sim.state.U)):
+        raise NativeBuildError("the core's initial state is not the Simulator's: teach fmu_src/native/build.py")
+    values.update(X_init=X_init, U_init=U_init, h_next_init=internals.h_next,
                   planar_init=int(internals.planar), max_steps=int(sim.max_steps_per_call))
     names = list(cfg["integrators"])
     values.update(n_methods=len(names), method_names=names,
                   method_adaptive=[int(bool(ln.METHODS[n].adaptive)) for n in names],
                   method_order=[int(ln.METHODS[n].order) for n in names],
+                  n_refused_methods=len(cfg.get("refused_integrators", {})),
+                  refused_method_names=list(cfg.get("refused_integrators", {})),
+                  refused_method_reasons=list(cfg.get("refused_integrators", {}).values()),
                   default_method=names.index(cfg["integrator"]), default_step=cfg["step"],
                   default_tolerance=cfg["tolerance"], default_estimate=int(bool(cfg.get("error_estimate", True))))
     values["variable_kind"], values["variable_index"] = variable_table(layout, model)
@@ -895,6 +935,7 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
     out = Path(out)
     folders = platforms_from(platforms)
     check_settings(cfg)
+    cfg = offered_integrators(scene, cfg)
 
     def progress(stage: str) -> None:  # a large scene's build takes a while: say how far it is
         if not quiet and len(layout.reals) >= PROGRESS_VARIABLES:

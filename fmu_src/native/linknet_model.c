@@ -367,6 +367,23 @@ static int length_fits(const lnfmu_scene *s, ln_int l, double R, char *msg, cons
     return 0;
 }
 
+/* Whether parameter v may take value x in a scene with ropes or a ground (else msg says why). Their initial state
+   is the library's impact at the start (UnilateralDynamics.initial_state: ropes at their length and masses on the
+   ground lose their approach velocities, by an LCP in the mass metric), which the native core does not compute, so
+   the masses and lengths stay the scene's, whose initial state is baked; gravity does not enter it. */
+static int unilateral_parameter_fits(const lnfmu_scene *s, const lnfmu_variable *v, double x, char *msg)
+{
+    if (!s->model->n_ropes || (v->kind != LNFMU_M && v->kind != LNFMU_R)) return 1;
+    const double given = v->kind == LNFMU_M ? s->mass[v->index] : s->length[v->index];
+    if (x == given) return 1;
+    fail(msg, FMU_ERROR, "parameter %s = %.17g cannot be changed in this FMU (only its value %.17g): the scene has "
+         "ropes or a ground, whose initial state the library makes consistent by an impact (the approach velocities "
+         "of the ropes at their length and of the masses on the ground removed), which the native FMU takes from the "
+         "library for the scene's masses and lengths only; build the FMU from the scene with the value changed; "
+         "nothing set", v->name, x, given);
+    return 0;
+}
+
 /* The scene's masses (all K), lengths and gravity with the parameters of values applied. */
 static void parameter_arrays(const fmu_model *m, const double *values, double *mass, double *R, double *g)
 {
@@ -468,6 +485,13 @@ static int build_run(fmu_model *m, const double *values, ln_int integrator, char
     parameter_arrays(m, values, mass, R, g);
     if (ln_model_weights(&m->model, mass, R, g, s->force, m->weights) != LN_OK)
         return fail(msg, FMU_ERROR, "out of memory");
+    if (s->model->n_ropes) {  /* gravity alone changed (unilateral_parameter_fits): the library's initial state */
+        if (K) {
+            memcpy(m->X_init, s->X_init, (size_t)(3 * K) * sizeof(double));
+            memcpy(m->U_init, s->U_init, (size_t)(3 * K) * sizeof(double));
+        }
+        return FMU_OK;
+    }
 
     /* the initial state, as Simulator prepares it: lengths checked (or projected), velocities onto (12) */
     double *X = m->X_init, *U = m->U_init;
@@ -890,6 +914,7 @@ int fmu_model_set_real(fmu_model *m, const unsigned *vr, size_t n, const double 
             char why[256];
             const char *rule = parameter_rule(s, v->kind, x, why, sizeof why);
             if (rule) return fail(msg, FMU_ERROR, "parameter %s = %.17g %s; nothing set", v->name, x, rule);
+            if (!unilateral_parameter_fits(s, v, x, msg)) return FMU_ERROR;
             if (v->kind == LNFMU_R && !length_fits(s, v->index, x, msg, v->name)) return FMU_ERROR;
         }
     }
@@ -1104,6 +1129,10 @@ int fmu_model_set_string(fmu_model *m, const unsigned *vr, size_t n, const char 
         ln_int found = -1;
         for (ln_int k = 0; value[i] && k < s->n_methods; k++)
             if (strcmp(value[i], s->methods[k].name) == 0) found = k;
+        for (ln_int k = 0; found < 0 && value[i] && k < s->n_refused_methods; k++)
+            if (strcmp(value[i], s->refused_method_names[k]) == 0)  /* the library's reason (native_refusal) */
+                return fail(msg, FMU_ERROR, "parameter integrator = \"%s\" is not offered by this FMU: %s; nothing "
+                            "set", value[i], s->refused_method_reasons[k]);
         if (found < 0) {
             char names[512] = "";
             for (ln_int k = 0; k < s->n_methods; k++) {
@@ -1281,16 +1310,23 @@ int fmu_model_event(const fmu_model *m, size_t i, char *out, size_t n)
     const lnfmu_scene *s = m->s;
     const ln_data *d = m->d;
     if (i < (size_t)m->events_logged) {  /* rope_events.event_message's words */
+        static const char *const kinds[] = {"taut", "slack", "contact", "release"};  /* enum ln_event_kind */
         char t[40], label[512];
+        const ln_int kind = d->event_kind[i], index = d->event_link[i];
         python_repr(d->event_t[i], t, sizeof t);
-        link_label(s, d->event_link[i], label, sizeof label);
+        if (kind == LN_EVENT_CONTACT || kind == LN_EVENT_RELEASE)  /* a contact's events name its mass */
+            snprintf(label, sizeof label, "mass %lld (\"%s\")", (long long)(index + 1), mass_name(s, index));
+        else
+            link_label(s, index, label, sizeof label);
         snprintf(out, n, "event at t=%s: %s of %s, impulse %.17g N s", t,
-                 d->event_kind[i] == LN_EVENT_TAUT ? "taut" : "slack", label, d->event_impulse[i]);
+                 kind >= 0 && kind < (ln_int)(sizeof kinds / sizeof *kinds) ? kinds[kind] : "unknown", label,
+                 d->event_impulse[i]);
         return 1;
     }
     if (i == (size_t)m->events_logged && m->events_lost > 0) {
         snprintf(out, n, "%lld more events of this step were not kept (the native core keeps %d per step): their "
-                 "impulses are in Jrope, their times and kinds are not logged; take shorter communication steps",
+                 "impulses are in Jrope and Jground, their times and kinds are not logged; take shorter communication "
+                 "steps",
                  (long long)m->events_lost, LN_EVENT_LOG);
         return 1;
     }

@@ -16,7 +16,8 @@ typedef struct loaded {
     struct ln_rigid_model rigid;
     lnfmu_method *methods;
     lnfmu_variable *variables;
-    const char **mass_names, **method_names, **variable_names;  /* the texts' pointer arrays */
+    const char **mass_names, **method_names, **refused_method_names, **refused_method_reasons,
+        **variable_names;  /* the texts' pointer arrays */
 } loaded;
 
 #if defined __GNUC__
@@ -234,6 +235,8 @@ void lnfmu_scene_free(lnfmu_scene *s)
     free(l->variables);
     free(l->mass_names);
     free(l->method_names);
+    free(l->refused_method_names);
+    free(l->refused_method_reasons);
     free(l->variable_names);
     free(l);
 }

@@ -41,7 +41,9 @@ enum lnfmu_kind {
     LNFMU_T_PEAK = 15,  /* output: the largest |T| of link index over the last step, signed */
     LNFMU_T_PEAK_TIME = 16,     /* output: when it occurred */
     LNFMU_SLACK = 17,   /* output: 1 where rope link index is slack at the state (its T is 0), else 0 */
-    LNFMU_JROPE = 18    /* output: rope link index's impulse over the last step (its jerks) */
+    LNFMU_JROPE = 18    /* output: the impulse of unilateral link index of the core's model over the last step:
+                           a rope's jerks (Jrope), or a ground contact's landings (Jground: the contact links follow
+                           the scene's links in the model, unilateral.native_ground_scene) */
 };
 #define LNFMU_KINDS 19
 
@@ -94,6 +96,12 @@ enum lnfmu_specialisation { LNFMU_POINT_MASSES = 0, LNFMU_STATIC = 1, LNFMU_RIGI
     ARRAY(int, method_adaptive, s->n_methods)           /* the parameter "tolerance" applies (else "step") */       \
     ARRAY(int, method_order, s->n_methods)              /* (ln_companion_settings: a fixed step's Richardson        \
                                                            factor) */                                               \
+    SCALAR(ln_int, n_refused_methods)                   /* methods the core does not run for this scene (a ground \
+                                                           on the fixed-step methods): not offered; their names and \
+                                                           the library's reasons (native_refusal), so that choosing \
+                                                           one is refused with the reason */                         \
+    TEXTS(refused_method_names, s->n_refused_methods)                                                               \
+    TEXTS(refused_method_reasons, s->n_refused_methods)                                                             \
     SCALAR(ln_int, default_method)                                                                                  \
     SCALAR(double, default_step)                                                                                    \
     SCALAR(double, default_tolerance)                                                                               \

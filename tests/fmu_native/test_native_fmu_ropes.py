@@ -315,12 +315,15 @@ def _pendulum_changed(root, name, **changes):
     return path
 
 
-def test_a_scene_with_a_ground_is_refused_at_build_with_the_librarys_reason(tmp_path):
-    path = _pendulum_changed(tmp_path, "rope_ground", ground={"point": [0.0, 0.0, -5.0], "normal": [0.0, 0.0, 1.0]})
+def test_a_scene_with_a_ground_with_friction_is_refused_at_build_with_the_librarys_reason(tmp_path):
+    # a frictionless ground runs (test_native_fmu_ground.py); Coulomb friction stays on the numpy reference
+    path = _pendulum_changed(tmp_path, "rope_ground", ground={"point": [0.0, 0.0, -5.0], "normal": [0.0, 0.0, 1.0],
+                                                              "friction": 0.5})
     out = tmp_path / "refused.fmu"
     with pytest.raises(SystemExit) as refused:
         build_fmu.build_scene_fmu(str(path), out, native=True, quiet=True)
     assert str(refused.value) == f"build_fmu: {native_refusal(ln.load_scene(path))}"
+    assert "Coulomb friction" in str(refused.value)
     assert not out.exists()
 
 

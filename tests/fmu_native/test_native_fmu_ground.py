@@ -1,0 +1,320 @@
+"""A frictionless ground through the native FMU (`build_fmu.py --native`), driven in this process by fmpy: a ball
+bouncing (restitution 0.5) and a rope chain falling onto the ground, against linknet_core.simulate on the native
+backend with the same method and communication points: X, U, T, slack[l], Jrope[l], Jground[k] (the ground's
+impulses on each free mass within each doStep) and one message per contact and release event in the category
+logEvents, in the pythonfmu FMU's words (rope_events.event_message); and against the closed forms (the ball's
+bounce times and impulses, the chain's landing times and impulses). An FMU state taken between two contacts repeats
+the run across the next ones; the methods the core does not run with a ground (RATTLE and its compositions) are not
+offered and are refused by the library's reason when chosen, the instance staying usable; gravity may change
+(the library's run of Scene.with_parameters), a mass may not (the initial impact is the library's); a ground with
+friction, or a fixed-step default integrator, is refused at build with the library's reason, no FMU written.
+
+Tolerance: none. The FMU's binary (Zig's clang) and the library (gcc) compile the same core with the same flags and no
+C library math (test_native_fmu_equals_library), and the FMU runs the library's own model of the ground (the scene
+padded with a virtual anchor and a contact link per free mass, unilateral.native_ground_scene, baked into the
+resource): every output and every event's time and impulse are the same doubles (measured: every difference 0).
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from native_fmu_support import ROOT, built
+
+sys.path.insert(0, str(ROOT / "fmu_src"))
+import build_fmu  # noqa: E402
+import linknet_core as ln  # noqa: E402
+from linknet_core.dynamics.unilateral import native_refusal  # noqa: E402
+from linknet_fmu.layout import EVENT_CATEGORY  # noqa: E402
+from linknet_fmu.rope_events import event_message  # noqa: E402
+
+G = 9.81
+OK, ERROR = 0, 3
+TOLERANCE = 1e-8  # the FMU's default rtol (build_fmu.py); the library runs with the same
+BALL = dict(height=1.0, restitution=0.5, mass=2.0, vx=0.5)
+CHAIN = dict(N=12, a=0.05, m=0.05)
+RUNS = {"ball": (2.0, 100), "chain": (0.4, 40)}  # (seconds, communication steps): the ball's first 5 bounces; the
+#                                                  chain landed whole (its last mass at sqrt(2 N a / g) = 0.35 s)
+
+
+def ball_data(**changes):
+    b = BALL
+    return {"name": "ball", "gravity": [0, 0, -G],
+            "masses": [{"name": "ball", "position": [0, 0, b["height"]], "mass": b["mass"],
+                        "velocity": [b["vx"], 0, 0]}],
+            "ground": {"point": [0, 0, 0], "normal": [0, 0, 1], "restitution": b["restitution"], **changes}}
+
+
+def chain_data():
+    N, a, m = CHAIN["N"], CHAIN["a"], CHAIN["m"]
+    return {"name": "falling_chain", "gravity": [0, 0, -G],
+            "masses": [{"name": f"c{k}", "position": [0, 0, a * (k + 1)], "mass": m} for k in range(N)],
+            "links": [{"a": k + 1, "b": k + 2, "kind": "rope"} for k in range(N - 1)],
+            "ground": {"point": [0, 0, 0], "normal": [0, 0, 1]}}
+
+
+@pytest.fixture(scope="module")
+def scenes(tmp_path_factory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("ground_scenes")
+    paths = {}
+    for name, data in (("ball", ball_data()), ("chain", chain_data())):
+        paths[name] = root / f"{name}.json"
+        paths[name].write_text(json.dumps(data))
+    return paths
+
+
+@pytest.fixture(scope="module")
+def fmus(fmu_root, scenes):
+    return {name: built(fmu_root, path) for name, path in scenes.items()}
+
+
+class Instance:
+    """One instance of a ground scene's native FMU through fmpy's FMU2Slave, with callbacks of its own whose logger
+    keeps each message's status and category."""
+
+    def __init__(self, fmu, name="ground"):
+        from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+
+        self.fmu, self.log = fmu, []
+
+        def logger(env, instance, status, category, message):
+            self.log.append((int(status), category.decode(), message.decode("utf-8", "replace")))
+
+        self.callbacks = fmi2CallbackFunctions()
+        self.callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+        self.callbacks.allocateMemory = defaultCallbacks.allocateMemory
+        self.callbacks.freeMemory = defaultCallbacks.freeMemory
+        self.slave = FMU2Slave(guid=fmu.guid, unzipDirectory=str(fmu.dir), modelIdentifier=fmu.ident,
+                               instanceName=name)
+        self.slave.instantiate(callbacks=self.callbacks, loggingOn=False)
+        self.slave.setDebugLogging(True, [EVENT_CATEGORY])
+
+    def initialize(self, integrator=None, **reals):
+        self.slave.setupExperiment(startTime=0.0)
+        self.slave.enterInitializationMode()
+        if integrator:
+            self.slave.setString([self.fmu.vr["integrator"]], [integrator])
+        for name, value in reals.items():
+            self.slave.setReal([self.fmu.vr[name]], [value])
+        self.slave.exitInitializationMode()
+
+    def get(self, names):
+        return np.array(self.slave.getReal([self.fmu.vr[n] for n in names]))
+
+    def events(self):
+        """The messages logged in the events' category (each with fmi2OK status), and the log emptied."""
+        out = [m for s, c, m in self.log if c == EVENT_CATEGORY]
+        assert all(s == OK for s, c, _ in self.log if c == EVENT_CATEGORY)
+        self.log.clear()
+        return out
+
+    def run(self, times, names, first=0, last=None):
+        """doStep over times[first..last]; the outputs at each point after the first, and the events' messages."""
+        last = len(times) - 1 if last is None else last
+        rows = []
+        for i in range(first, last):
+            self.slave.doStep(times[i], times[i + 1] - times[i])
+            rows.append(self.get(names))
+        return np.array(rows).reshape(-1, len(names)), self.events()
+
+
+def _names(fmu):
+    return (fmu.names("X") + fmu.names("U") + fmu.names("T") + fmu.names("slack") + fmu.names("Jrope")
+            + fmu.names("Jground"))
+
+
+def _library(scene, t_end, n, method):
+    return ln.simulate(scene, t_end, method, rtol=TOLERANCE, n_out=n + 1, error_estimate=False, backend="native")
+
+
+def _library_rows(run, names):
+    """The library's outputs in the FMU's names: Jrope[l] the impulses of rope l's taut events within each
+    communication step, Jground[k] those of mass k's contact events (the first row, before any step, 0)."""
+    columns = []
+    for name in names:
+        kind, _, index = name.partition("[")
+        idx = [int(i) - 1 for i in index.rstrip("]").split(",")]
+        if kind in ("X", "U"):
+            columns.append(getattr(run, kind)[:, idx[0], idx[1]])
+        elif kind == "T":
+            columns.append(run.T[:, idx[0]])
+        elif kind == "slack":
+            columns.append(run.slack[:, idx[0]].astype(float))
+        else:
+            J = np.zeros(run.t.size)
+            event_kind = {"Jrope": "taut", "Jground": "contact"}[kind]
+            for e in run.events:
+                if e.kind == event_kind and e.index == idx[0]:
+                    J[np.searchsorted(run.t, e.t)] += e.impulse  # the step (t_i-1, t_i] that holds it
+            columns.append(J)
+    return np.column_stack(columns)
+
+
+def _parse(message: str):
+    """(t, kind, impulse) of an event's message."""
+    head, _, impulse = message.partition(", impulse ")
+    t, _, what = head.removeprefix("event at t=").partition(": ")
+    return float(t), what.partition(" of ")[0], float(impulse.removesuffix(" N s"))
+
+
+def _run_both(fmu, scene_path, name, method):
+    t_end, n = RUNS[name]
+    run = _library(scene_path, t_end, n, method)
+    names = _names(fmu)
+    instance = Instance(fmu)
+    instance.initialize(integrator=method)
+    first = instance.get(names)
+    rows, messages = instance.run(run.t, names)
+    return run, names, np.vstack([first, rows]), messages
+
+
+@pytest.mark.parametrize("method", ["dop853", "dopri5"])
+def test_the_bouncing_ball_equals_the_library_and_bounces_at_the_closed_form_times(method, fmus, scenes):
+    run, names, rows, messages = _run_both(fmus["ball"], scenes["ball"], "ball", method)
+    np.testing.assert_array_equal(rows, _library_rows(run, names))
+    scene = ln.load_scene(scenes["ball"])
+    assert messages == [event_message(e, scene) for e in run.events]
+    # closed form: t_1 = sqrt(2 h / g), v_1 = sqrt(2 g h); each rebound at e v_k flies 2 e v_k / g; the ground's
+    # impulse is m (1 + e) v_k, in Jground of the step that holds t_k
+    h, e, m = BALL["height"], BALL["restitution"], BALL["mass"]
+    t, v = np.sqrt(2 * h / G), np.sqrt(2 * G * h)
+    J = rows[:, names.index("Jground[1]")]
+    bounces = [_parse(msg) for msg in messages]
+    assert len(bounces) >= 5
+    for t_k, kind, impulse in bounces[:5]:
+        assert kind == "contact"
+        assert abs(t_k - t) <= 1e-9 and abs(impulse - m * (1 + e) * v) <= 1e-8 * m * v
+        assert J[np.searchsorted(run.t, t_k)] == impulse
+        t, v = t + 2 * e * v / G, e * v
+    total = sum(impulse for _, _, impulse in bounces)  # the landings summed, those of a step in its Jground
+    assert abs(J.sum() - total) <= 1e-14 * total
+
+
+@pytest.mark.parametrize("method", ["dop853", "dopri5"])
+def test_the_falling_chain_equals_the_library_and_lands_mass_by_mass_as_the_closed_form_says(method, fmus, scenes):
+    run, names, rows, messages = _run_both(fmus["chain"], scenes["chain"], "chain", method)
+    np.testing.assert_array_equal(rows, _library_rows(run, names))
+    scene = ln.load_scene(scenes["chain"])
+    assert messages == [event_message(e, scene) for e in run.events]
+    # the free fall of the part still in the air: mass k lands at sqrt(2 k a / g) with the momentum m sqrt(2 g k a)
+    # (the links above it go slack as it stops), the ground's impulse on it
+    N, a, m = CHAIN["N"], CHAIN["a"], CHAIN["m"]
+    contacts = [(t, impulse) for t, kind, impulse in map(_parse, messages) if kind == "contact"]
+    assert [msg.split(" of ")[1].split(",")[0] for msg in messages if ": contact of " in msg] == [
+        scene.mass_label(k) for k in range(N)]
+    k = np.arange(1, N + 1)
+    assert np.abs(np.array([t for t, _ in contacts]) - np.sqrt(2 * k * a / G)).max() <= 1e-9
+    assert np.abs(np.array([j for _, j in contacts]) - m * np.sqrt(2 * G * k * a)).max() <= 1e-9
+    J = rows[:, [names.index(f"Jground[{i}]") for i in k]]
+    np.testing.assert_array_equal(J.sum(axis=0), [j for _, j in contacts])  # one landing each
+    assert any(": slack of link" in msg for msg in messages)
+
+
+def test_a_state_taken_between_two_contacts_repeats_the_run_across_the_next(fmus):
+    """The chain's state after its first mass landed (0.10 s) and before the second (0.14 s), restored in the same
+    instance and deserialized into another that has run on, gives the same outputs and events to the last bit."""
+    fmu = fmus["chain"]
+    names = _names(fmu)
+    t_end, n = RUNS["chain"]
+    times = np.linspace(0.0, t_end, n + 1)
+    a = Instance(fmu, "a")
+    a.initialize()
+    k_between = 12  # t = 0.12 s
+    _, messages = a.run(times, names, 0, k_between)
+    assert [_parse(msg)[1] for msg in messages] == ["contact", "slack"]
+    at_state = a.get(names)
+    state = a.slave.getFMUstate()
+    serialized = a.slave.serializeFMUstate(state)
+    rows, messages = a.run(times, names, k_between)
+    assert sum(": contact of " in msg for msg in messages) == CHAIN["N"] - 1
+    a.slave.setFMUstate(state)
+    np.testing.assert_array_equal(a.get(names), at_state)
+    again, messages_again = a.run(times, names, k_between)
+    np.testing.assert_array_equal(again, rows)
+    assert messages_again == messages
+
+    b = Instance(fmu, "b")
+    b.initialize()
+    b.run(times, names, 0, 30)  # t = 0.3 s: most of the chain on the ground
+    b.slave.setFMUstate(b.slave.deSerializeFMUstate(serialized))
+    np.testing.assert_array_equal(b.get(names), at_state)
+    restored, restored_messages = b.run(times, names, k_between)
+    np.testing.assert_array_equal(restored, rows)
+    assert restored_messages == messages
+
+
+def test_the_fixed_step_methods_are_not_offered_and_refused_by_the_librarys_reason(fmus, scenes):
+    from fmpy.fmi1 import FMICallException
+
+    fmu = fmus["ball"]
+    scene = ln.load_scene(scenes["ball"])
+    integrator = next(v for v in fmu.md.modelVariables if v.name == "integrator")
+    assert integrator.description == "integration method: dop853, dopri5"
+    instance = Instance(fmu)
+    instance.slave.setupExperiment(startTime=0.0)
+    instance.slave.enterInitializationMode()
+    for method in ("rattle", "yoshida4"):
+        with pytest.raises(FMICallException):
+            instance.slave.setString([fmu.vr["integrator"]], [method])
+        status, _, message = instance.log.pop()
+        assert status == ERROR
+        assert message == (f'fmi2SetString: parameter integrator = "{method}" is not offered by this FMU: '
+                           f"{native_refusal(scene, ln.METHODS[method])}; nothing set")
+    assert instance.slave.getString([fmu.vr["integrator"]]) == [b"dop853"]  # nothing set: the default stands
+    instance.slave.setString([fmu.vr["integrator"]], ["dopri5"])
+    instance.slave.exitInitializationMode()
+    run = _library(scenes["ball"], 0.5, 5, "dopri5")
+    rows, messages = instance.run(run.t, ["X[1,3]", "Jground[1]"])
+    np.testing.assert_array_equal(rows[:, 0], run.X[1:, 0, 2])
+    assert len(messages) == 1 and rows[:, 1].max() > 0.0
+
+
+def test_gravity_may_change_a_mass_may_not(fmus, scenes):
+    from fmpy.fmi1 import FMICallException
+
+    fmu = fmus["chain"]
+    scene = ln.load_scene(scenes["chain"])
+    changed = scene.with_parameters(gravity=[0.5, 0.0, -5.0])
+    run = _library(changed, 0.4, 20, "dop853")
+    names = _names(fmu)
+    instance = Instance(fmu)
+    instance.initialize(**{"g[1]": 0.5, "g[3]": -5.0})
+    rows, messages = instance.run(run.t, names)
+    np.testing.assert_array_equal(rows, _library_rows(run, names)[1:])
+    assert messages == [event_message(e, changed) for e in run.events]
+    # the slower fall: mass k lands at sqrt(2 k a / 5)
+    first = _parse(messages[0])
+    assert first[1] == "contact" and abs(first[0] - np.sqrt(2 * CHAIN["a"] / 5.0)) <= 1e-9
+
+    other = Instance(fmu, "mass")
+    other.slave.setupExperiment(startTime=0.0)
+    other.slave.enterInitializationMode()
+    with pytest.raises(FMICallException):
+        other.slave.setReal([fmu.vr["M[2]"]], [0.2])
+    status, _, message = other.log.pop()
+    assert status == ERROR and message.startswith("fmi2SetReal: parameter M[2] = 0.20000000000000001 cannot be "
+                                                  "changed in this FMU") and "ropes or a ground" in message
+    other.slave.setReal([fmu.vr["M[2]"]], [CHAIN["m"]])  # its own value is accepted
+    other.slave.exitInitializationMode()
+    other.slave.doStep(0.0, 0.1)
+    assert other.get(["X[1,3]"])[0] == _library(scene, 0.1, 1, "dop853").X[-1, 0, 2]
+
+
+@pytest.mark.parametrize("what", ["friction", "fixed step"])
+def test_a_ground_the_core_does_not_run_is_refused_at_build_with_the_librarys_reason(what, tmp_path):
+    data = ball_data(friction=0.4) if what == "friction" else ball_data()
+    path = tmp_path / "refused.json"
+    path.write_text(json.dumps(data))
+    out = tmp_path / "refused.fmu"
+    options = dict(step=1e-3) if what == "fixed step" else {}  # a step without a method: RATTLE at that step
+    with pytest.raises(SystemExit) as refused:
+        build_fmu.build_scene_fmu(str(path), out, native=True, quiet=True, platforms="host", **options)
+    scene = ln.load_scene(path)
+    reason = native_refusal(scene, ln.METHODS["rattle" if what == "fixed step" else "dop853"])
+    assert reason is not None and str(refused.value) == f"build_fmu: {reason}"
+    assert ("Coulomb friction" in reason) == (what == "friction")
+    assert not out.exists()
