@@ -120,6 +120,10 @@ static int fail(char *msg, int result, const char *format, ...)
 
 static const char *mass_name(const lnfmu_scene *s, ln_int k) { return s->mass_names[k]; }
 
+/* The scene's own masses: the first of the model's, before a ground's virtual anchors (one per contact), whose rows
+   the core fills from their masses' and which are no part of the error estimate. */
+static ln_int scene_masses(const lnfmu_scene *s) { return s->K - s->model->n_contacts; }
+
 static void link_label(const lnfmu_scene *s, ln_int l, char *out, size_t n)
 {
     const ln_int a = s->model->k1[l], b = s->model->k2[l];
@@ -541,7 +545,8 @@ static int build(fmu_model *m, const double *values, ln_int integrator, char *ms
     } else {
         m->method_c.dt = dt_c;
     }
-    m->goal = ln_error_goal(meth->adaptive, m->method.rtol, m->method.atol, ln_scene_size(m->s->K, m->X_init));
+    m->goal = ln_error_goal(meth->adaptive, m->method.rtol, m->method.atol,
+                            ln_scene_size(scene_masses(m->s), m->X_init));
     return FMU_OK;
 }
 
@@ -1221,7 +1226,7 @@ static int companion_step(fmu_model *m, double t_fmu, double t_target, char *not
         ln_estimate_failure_text(s->scene_name, where, note, n);
         return FMU_NOTE;
     }
-    m->error = m->factor * ln_position_gap(s->K, m->d->X, m->dc->X);
+    m->error = m->factor * ln_position_gap(scene_masses(s), m->d->X, m->dc->X);
     const int over = m->error > m->goal;
     const int crossing = over && !m->over_goal;
     m->over_goal = over;

@@ -247,6 +247,25 @@ def test_a_state_taken_between_two_contacts_repeats_the_run_across_the_next(fmus
     assert restored_messages == messages
 
 
+def test_the_error_estimate_is_the_librarys(fmus, scenes):
+    """The companion run (a tenth of the tolerance) and the gap over the scene's own masses, not the core's virtual
+    anchors: Simulator.advance's error_estimate after each step, bit for bit."""
+    fmu = fmus["chain"]
+    t_end, n = RUNS["chain"]
+    times = np.linspace(0.0, t_end, n + 1)
+    sim = ln.Simulator(ln.load_scene(scenes["chain"]), "dop853", rtol=TOLERANCE, backend="native")
+    instance = Instance(fmu)
+    instance.initialize()
+    estimates, library = [], []
+    for i in range(n):
+        instance.slave.doStep(times[i], times[i + 1] - times[i])
+        estimates.append(instance.get(["error_estimate"])[0])
+        sim.advance(times[i + 1])
+        library.append(sim.error_estimate)
+    np.testing.assert_array_equal(estimates, library)
+    assert 0.0 < max(estimates) < sim.error_goal
+
+
 def test_the_fixed_step_methods_are_not_offered_and_refused_by_the_librarys_reason(fmus, scenes):
     from fmpy.fmi1 import FMICallException
 
