@@ -1269,13 +1269,15 @@ int fmu_model_do_step(fmu_model *m, double t, double h, char *msg)
         m->events_lost = m->d->events_lost;
         m->d->events_lost = 0;
     }
-    /* the step's tension peaks; where the path located none (a static scene, free rigid bodies), T at the step's end
-       under its inputs, evaluated now */
-    if (!ln_tension_peaks_located(m->d)) {
+    /* the step's tension peaks; where the path located none (a static scene, free rigid bodies), or with ropes or a
+       ground, whose modes change the tensions' meaning at the events (the library's rule, locates_peaks), T at the
+       step's end under its inputs, evaluated now */
+    const int located = !m->model.n_ropes && ln_tension_peaks_located(m->d);
+    if (!located) {
         char ignored[FMU_MESSAGE];
         evaluate_outputs(m, ignored);  /* a failure leaves T NaN, and says so when T is read */
     }
-    ln_tension_peaks(&m->model, m->d, 1, m->peak, m->peak + s->L);
+    ln_tension_peaks(&m->model, m->d, located, m->peak, m->peak + s->L);
     m->stepped = 1;
     char warning[FMU_MESSAGE] = "", note[FMU_MESSAGE - 64] = "";
     if (jumped) say_position_jump(m, t, warning, sizeof warning);

@@ -247,23 +247,25 @@ def test_a_state_taken_between_two_contacts_repeats_the_run_across_the_next(fmus
     assert restored_messages == messages
 
 
-def test_the_error_estimate_is_the_librarys(fmus, scenes):
+def test_the_error_estimate_and_the_tension_peaks_are_the_librarys(fmus, scenes):
     """The companion run (a tenth of the tolerance) and the gap over the scene's own masses, not the core's virtual
-    anchors: Simulator.advance's error_estimate after each step, bit for bit."""
+    anchors: Simulator.advance's error_estimate after each step, bit for bit; T_peak, T_peak_time its tension_peaks,
+    which with ropes or a ground are the step's end values (not located across the events)."""
     fmu = fmus["chain"]
     t_end, n = RUNS["chain"]
     times = np.linspace(0.0, t_end, n + 1)
     sim = ln.Simulator(ln.load_scene(scenes["chain"]), "dop853", rtol=TOLERANCE, backend="native")
+    names = ["error_estimate"] + fmu.names("T_peak") + fmu.names("T_peak_time")
     instance = Instance(fmu)
     instance.initialize()
-    estimates, library = [], []
+    rows, library = [], []
     for i in range(n):
         instance.slave.doStep(times[i], times[i + 1] - times[i])
-        estimates.append(instance.get(["error_estimate"])[0])
+        rows.append(instance.get(names))
         sim.advance(times[i + 1])
-        library.append(sim.error_estimate)
-    np.testing.assert_array_equal(estimates, library)
-    assert 0.0 < max(estimates) < sim.error_goal
+        library.append(np.concatenate([[sim.error_estimate], *sim.tension_peaks()]))
+    np.testing.assert_array_equal(rows, library)
+    assert 0.0 < max(row[0] for row in rows) < sim.error_goal
 
 
 def test_the_fixed_step_methods_are_not_offered_and_refused_by_the_librarys_reason(fmus, scenes):
