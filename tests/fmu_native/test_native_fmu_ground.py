@@ -2,7 +2,8 @@
 bouncing (restitution 0.5) and a rope chain falling onto the ground, against linknet_core.simulate on the native
 backend with the same method and communication points: X, U, T, slack[l], Jrope[l], Jground[k] (the ground's
 impulses on each free mass within each doStep) and one message per contact and release event in the category
-logEvents, in the pythonfmu FMU's words (rope_events.event_message); and against the closed forms (the ball's
+logEvents, in the pythonfmu FMU's words (rope_events.event_message), a hook driven by inputs dropping its load onto
+the ground against Simulator.advance(anchors=) (Jreact too); and against the closed forms (the ball's
 bounce times and impulses, the chain's landing times and impulses). An FMU state taken between two contacts repeats
 the run across the next ones; the methods the core does not run with a ground (RATTLE and its compositions) are not
 offered and are refused by the library's reason when chosen, the instance staying usable; gravity may change
@@ -57,11 +58,22 @@ def chain_data():
             "ground": {"point": [0, 0, 0], "normal": [0, 0, 1]}}
 
 
+def hook_data():
+    # a hook driven by inputs holding two bobs on ropes above a ground (restitution 0.4)
+    return {"name": "hook", "gravity": [0, 0, -G],
+            "masses": [{"name": "hook", "position": [0, 0, 0], "driven": True, "motion": {"kind": "input"}},
+                       {"name": "a", "position": [0, 0, -0.5], "mass": 0.5},
+                       {"name": "b", "position": [0, 0, -1.5], "mass": 2.0}],
+            "links": [{"a": 1, "b": 2, "length": 0.5, "kind": "rope"},
+                      {"a": 2, "b": 3, "length": 1.0, "kind": "rope", "restitution": 0.3}],
+            "ground": {"point": [0, 0, -1.8], "normal": [0, 0, 1], "restitution": 0.4}}
+
+
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("ground_scenes")
     paths = {}
-    for name, data in (("ball", ball_data()), ("chain", chain_data())):
+    for name, data in (("ball", ball_data()), ("chain", chain_data()), ("hook", hook_data())):
         paths[name] = root / f"{name}.json"
         paths[name].write_text(json.dumps(data))
     return paths
@@ -212,6 +224,36 @@ def test_the_falling_chain_equals_the_library_and_lands_mass_by_mass_as_the_clos
     J = rows[:, [names.index(f"Jground[{i}]") for i in k]]
     np.testing.assert_array_equal(J.sum(axis=0), [j for _, j in contacts])  # one landing each
     assert any(": slack of link" in msg for msg in messages)
+
+
+def test_a_hook_driven_by_inputs_drops_its_load_onto_the_ground_as_the_library_does(fmus, scenes):
+    """The hook jerked up at 1 m/s (both ropes taut at once: the jerk's impulse on the hook, Jreact), swung, dropped
+    at 2.5 m/s (the lower bob lands, its rope slack, the upper bob jerks it), stopped: X, Jreact, Jrope and Jground
+    of each quarter second and the events equal Simulator.advance(anchors=) bit for bit."""
+    fmu = fmus["hook"]
+    scene = ln.load_scene(scenes["hook"])
+    sim = ln.Simulator(scene, "dop853", rtol=TOLERANCE, error_estimate=False, backend="native")
+    instance = Instance(fmu)
+    instance.initialize()
+    names = fmu.names("X") + fmu.names("Jreact") + fmu.names("Jrope") + fmu.names("Jground")
+    axes = [f"[1,{i}]" for i in (1, 2, 3)]
+    messages = []
+    for i, V in enumerate([(0, 0, 1.0), (0.8, 0, 0.2), (0, 0, -2.5), (0, 0, 0)]):
+        P = instance.get([f"X{a}" for a in axes])  # the hook where its held motion took it
+        np.testing.assert_array_equal(P, sim.state.X[0])
+        for quantity, value in (("P", P), ("V", V), ("A", (0, 0, 0))):
+            instance.slave.setReal([fmu.vr[quantity + a] for a in axes], list(map(float, value)))
+        instance.slave.doStep(0.25 * i, 0.25)
+        messages += instance.events()
+        before = len(sim.integrator.events)
+        sim.advance(0.25 * (i + 1), anchors=(P[None], np.array([V], float), np.zeros((1, 3))))
+        step_events = sim.integrator.events[before:]  # the jerk at the step's start (the hook's jump) included
+        Jrope = [sum(e.impulse for e in step_events if e.kind == "taut" and e.index == l) for l in range(scene.L)]
+        Jground = [sum(e.impulse for e in step_events if e.kind == "contact" and e.index == k) for k in (1, 2)]
+        expected = np.concatenate([sim.state.X.ravel(), sim.anchor_report()["impulse"].ravel(), Jrope, Jground])
+        np.testing.assert_array_equal(instance.get(names), expected)
+    assert messages == [event_message(e, scene) for e in sim.integrator.events]
+    assert ": contact of mass 3" in " ".join(messages)
 
 
 def test_a_state_taken_between_two_contacts_repeats_the_run_across_the_next(fmus):
