@@ -1,14 +1,15 @@
 """A frictionless ground through the native FMU (`build_fmu.py --native`), driven in this process by fmpy: a ball
 bouncing (restitution 0.5) and a rope chain falling onto the ground, against linknet_core.simulate on the native
-backend with the same method and communication points: X, U, T, slack[l], Jrope[l], Jground[k] (the ground's
-impulses on each free mass within each doStep) and one message per contact and release event in the category
-logEvents, in the pythonfmu FMU's words (rope_events.event_message), a hook driven by inputs dropping its load onto
-the ground against Simulator.advance(anchors=) (Jreact too); and against the closed forms (the ball's
-bounce times and impulses, the chain's landing times and impulses). An FMU state taken between two contacts repeats
-the run across the next ones; the methods the core does not run with a ground (RATTLE and its compositions) are not
-offered and are refused by the library's reason when chosen, the instance staying usable; gravity may change
-(the library's run of Scene.with_parameters), a mass may not (the initial impact is the library's); a ground with
-friction, or a fixed-step default integrator, is refused at build with the library's reason, no FMU written.
+backend with the same method and communication points: X, U, T, slack[l], Jrope[l], Jground[k] (the ground's impulses
+on each free mass within each doStep) and one message per contact and release event in the category logEvents, in the
+pythonfmu FMU's words (rope_events.event_message), a hook driven by inputs dropping its load onto the ground against
+Simulator.advance(anchors=) (Jreact too), the ball's FMI 3.0 FMU against its FMI 2.0 FMU; and against the closed
+forms (the ball's bounce times and impulses, the chain's landing times and impulses). An FMU state taken between two
+contacts repeats the run across the next ones; the methods the core does not run with a ground (RATTLE and its
+compositions) are not offered and are refused by the library's reason when chosen, the instance staying usable;
+gravity may change (the library's run of Scene.with_parameters), a mass may not (the initial impact is the
+library's); a ground with friction, or a fixed-step default integrator, is refused at build with the library's
+reason, no FMU written.
 
 Tolerance: none. The FMU's binary (Zig's clang) and the library (gcc) compile the same core with the same flags and no
 C library math (test_native_fmu_equals_library), and the FMU runs the library's own model of the ground (the scene
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import json
 import sys
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -381,3 +383,44 @@ def test_a_ground_the_core_does_not_run_is_refused_at_build_with_the_librarys_re
     assert reason is not None and str(refused.value) == f"build_fmu: {reason}"
     assert ("Coulomb friction" in reason) == (what == "friction")
     assert not out.exists()
+
+
+def test_the_ball_through_the_fmi3_fmu_gives_the_fmi2_fmus_outputs_and_events(fmus, scenes, tmp_path_factory):
+    """The same model behind the FMI 3.0 glue: the arrays X and Jground equal the FMI 2.0 FMU's scalars at every
+    communication point, its events are logged in the same words, its integrator offers the same methods."""
+    from fmpy import read_model_description
+    from fmpy.fmi3 import FMU3Slave
+
+    from native.build_fmi3 import build_scene_fmi3
+
+    path = tmp_path_factory.mktemp("ball_fmi3") / "ball_fmi3.fmu"
+    build_scene_fmi3(str(scenes["ball"]), path, platforms="host", quiet=True)
+    unzipped = path.with_suffix("")
+    with zipfile.ZipFile(path) as z:
+        z.extractall(unzipped)
+    md = read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    assert next(v for v in md.modelVariables if v.name == "integrator").description == \
+        "integration method: dop853, dopri5"
+    log = []
+    slave = FMU3Slave(guid=md.guid, unzipDirectory=str(unzipped), modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName="fmi3")
+    slave.instantiate(logMessage=lambda env, status, category, message: log.append(
+        (int(status), category.decode(), message.decode())))
+    slave.setDebugLogging(True, [EVENT_CATEGORY])
+    slave.enterInitializationMode(startTime=0.0)
+    slave.exitInitializationMode()
+    fmu = fmus["ball"]
+    names = fmu.names("X") + fmu.names("Jground")
+    t_end, n = RUNS["ball"]
+    times = np.linspace(0.0, t_end, n + 1)
+    instance = Instance(fmu)
+    instance.initialize()
+    rows2, messages2 = instance.run(times, names)
+    rows3 = []
+    for i in range(n):
+        slave.doStep(times[i], times[i + 1] - times[i])
+        rows3.append(np.concatenate([slave.getFloat64([vr["X"]], 3), slave.getFloat64([vr["Jground"]], 1)]))
+    np.testing.assert_array_equal(np.array(rows3), rows2)
+    assert [m for s, c, m in log if c == EVENT_CATEGORY] == messages2 and len(messages2) >= 5
+    slave.freeInstance()
