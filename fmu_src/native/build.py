@@ -352,12 +352,13 @@ def variable_table(layout, model) -> tuple[np.ndarray, np.ndarray]:
         if values is not None:
             rows[values] = np.arange(n)
         row_of[name] = rows
-    # a ground's contacts are the model's last links, one per mass of contact_mass (unilateral.native_ground_scene)
+    # a ground's contacts are the model's links after the scene's own, one per mass of contact_mass
+    # (unilateral.native_ground_scene)
     n_contacts = int(model.n_contacts)
     contacts = np.full(int(model.K), -1, np.int64)
     masses = _pointer_values(model.contact_mass, n_contacts, ctypes.c_int64)
     if masses is not None:
-        contacts[masses] = int(model.L) - n_contacts + np.arange(n_contacts)
+        contacts[masses] = layout.L + np.arange(n_contacts)
     row_of["contacts"] = contacts
 
     def put(name, vrs, idx):
@@ -407,7 +408,7 @@ def scene_resource(scene, cfg, layout) -> tuple[Resource, dict]:
     # the scene the core runs: with a ground, its masses and links then a virtual anchor and a contact link per free
     # mass (unilateral.native_ground_scene); the FMU's variables are the scene's own rows of it (variable_table)
     core_scene = getattr(integ.model, "ground_scene", None) or scene
-    values = dict(model_identifier=cfg["model_identifier"], scene_name=str(scene.name), K=K, L=L,
+    values = dict(model_identifier=cfg["model_identifier"], scene_name=str(scene.name), K=K, L=L, own_K=scene.K,
                   mass_names=list(core_scene.mass_names), mass=core_scene.mass, length=core_scene.length,
                   gravity=core_scene.gravity, force=core_scene.force, X0=core_scene.X0, U0=core_scene.U0,
                   project_initial=int(bool(scene.options.get("project_initial_positions", False))),

@@ -120,9 +120,9 @@ static int fail(char *msg, int result, const char *format, ...)
 
 static const char *mass_name(const lnfmu_scene *s, ln_int k) { return s->mass_names[k]; }
 
-/* The scene's own masses: the first of the model's, before a ground's virtual anchors (one per contact), whose rows
-   the core fills from their masses' and which are no part of the error estimate. */
-static ln_int scene_masses(const lnfmu_scene *s) { return s->K - s->model->n_contacts; }
+/* The scene's own masses: the first of the model's, before a ground's virtual anchors, whose rows the core fills from
+   their masses' and which are no part of the error estimate. */
+static ln_int scene_masses(const lnfmu_scene *s) { return s->own_K; }
 
 static void link_label(const lnfmu_scene *s, ln_int l, char *out, size_t n)
 {

@@ -149,6 +149,7 @@ static int within(const ln_int *x, ln_int n, ln_int low, ln_int high)
 static const char *model_problem(const ln_model *m, const lnfmu_scene *s)
 {
     if (m->K != s->K || m->L != s->L) return "the model's sizes differ from the scene's";
+    if (s->own_K < 0 || s->own_K > s->K) return "the scene's own masses are not among the model's";
     if (m->K < 0 || m->L < 0 || m->n_free < 0 || m->n_fixed < 0 || m->n_elements < 0 || m->n_pairs < 0
         || m->n_driven < 0 || m->n_free + m->n_fixed != m->K)
         return "the model's counts are not possible";

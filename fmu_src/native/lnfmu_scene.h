@@ -63,6 +63,9 @@ enum lnfmu_specialisation { LNFMU_POINT_MASSES = 0, LNFMU_STATIC = 1, LNFMU_RIGI
     /* the scene as given: defaults of the parameters, and what a changed one is combined with */                   \
     SCALAR(ln_int, K)                                                                                               \
     SCALAR(ln_int, L)                                                                                               \
+    SCALAR(ln_int, own_K)                               /* the scene's own masses, the model's first: a ground's     \
+                                                           virtual anchors follow them (the FMU's variables are of  \
+                                                           these) */                                                 \
     TEXTS(mass_names, s->K)                                                                                         \
     ARRAY(double, mass, s->K)                           /* anchors' entries unused */                               \
     ARRAY(double, length, s->L)                                                                                     \
