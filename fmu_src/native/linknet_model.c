@@ -1321,10 +1321,10 @@ int fmu_model_event(const fmu_model *m, size_t i, char *out, size_t n)
         char t[40], label[512];
         const ln_int kind = d->event_kind[i], index = d->event_link[i];
         python_repr(d->event_t[i], t, sizeof t);
-        if (kind == LN_EVENT_CONTACT || kind == LN_EVENT_RELEASE)  /* a contact's events name its mass */
-            snprintf(label, sizeof label, "mass %lld (\"%s\")", (long long)(index + 1), mass_name(s, index));
-        else
+        if (kind == LN_EVENT_TAUT || kind == LN_EVENT_SLACK)  /* a rope's events name its link, the ground's a mass */
             link_label(s, index, label, sizeof label);
+        else
+            snprintf(label, sizeof label, "mass %lld (\"%s\")", (long long)(index + 1), mass_name(s, index));
         snprintf(out, n, "event at t=%s: %s of %s, impulse %.17g N s", t,
                  kind >= 0 && kind < (ln_int)(sizeof kinds / sizeof *kinds) ? kinds[kind] : "unknown", label,
                  d->event_impulse[i]);
