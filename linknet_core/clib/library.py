@@ -33,7 +33,7 @@ LEFT_PLANE, IMPLICIT_KICK_FAILED, BAD_ARGUMENT, NO_MEMORY, DRIVE_FAILED = 6, 7, 
 EVENT_CHATTER, NO_MODE, NOT_LINEARIZABLE = 11, 12, 13
 # enum ln_event_kind: the kinds of a rope's event in ln_data's log, by the names linknet_core.dynamics.unilateral.Event
 # gives them
-EVENT_KINDS = ("taut", "slack", "contact", "release")
+EVENT_KINDS = ("taut", "slack", "contact", "release", "stick", "slip")
 SOLVER_NONE, SOLVER_CHAIN, SOLVER_LDL, SOLVER_MIN_NORM = 0, 1, 2, 3
 COMPOSITION, RUNGE_KUTTA, STATIC = 0, 1, 2
 RMS_ERROR, HAIRER_ERROR = 0, 1

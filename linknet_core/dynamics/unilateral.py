@@ -87,16 +87,20 @@ class Event(NamedTuple):
 
 def native_refusal(scene: Scene, method=None) -> str | None:
     """Why the native core cannot run ``scene`` with ``method`` (an integrator class; None: every method, as the
-    native FMU offers them), or None where it can. It takes ropes on every method, and a frictionless ground on the
-    adaptive Runge-Kutta methods (linknet_core/native/src/stages/ropes.c: each contact a unilateral link to a
-    virtual anchor); Coulomb friction, and a ground on the fixed-step methods, run on the numpy reference only."""
+    native FMU offers them), or None where it can. It takes ropes on every method, and a ground on the adaptive
+    Runge-Kutta methods (linknet_core/native/src/stages/ropes.c: each contact a unilateral link to a virtual
+    anchor; stages/friction.c), with Coulomb friction where the scene has no links (masses alone on the ground);
+    Coulomb friction on masses joined by links, and a ground on the fixed-step methods, run on the numpy reference
+    only."""
     ground = scene.ground
     if ground is None:
         return None
     numpy_runs = "the numpy reference runs it (backend=\"auto\" or \"numpy\", and the pythonfmu FMU)"
-    if ground.friction > 0:
-        return (f"{scene.name}: it has a ground with Coulomb friction (mu = {ground.friction:g}), and the native core "
-                f"(backend=\"native\", the native FMU) takes a frictionless ground only; {numpy_runs}")
+    if ground.friction > 0 and scene.L > 0:
+        return (f"{scene.name}: it has a ground with Coulomb friction (mu = {ground.friction:g}) and links, and the "
+                "native core (backend=\"native\", the native FMU) takes Coulomb friction on masses without links only "
+                "(a sliding mass's friction carried through its links into the complementarity problems is not on the "
+                f"native core); {numpy_runs}")
     if method is None or not method.adaptive:
         return (f"{scene.name}: it has a ground, and the native core takes a ground on the adaptive methods (dop853, "
                 "dopri5) only, not on the fixed-step ones (RATTLE and its compositions), nor the native FMU, which "

@@ -42,7 +42,7 @@ class _Internals:
     jumps: int = 0
     drive: tuple | None = None  # driven anchors: (hold time, P, V, A, callable) of the input-driven ones
     last_jump: tuple | None = None  # driven anchors: (impulse, position jump, velocity jump) of the last advance
-    ropes: tuple | None = None  # ropes: (mode chosen, link_active, rope_impulse, the events so far)
+    ropes: tuple | None = None  # ropes: (mode chosen, link_active, rope_impulse, the events so far, slip_reference)
 
     def __deepcopy__(self, memo):
         """Numbers copy as themselves: only the driven anchors' hold and last jump and the ropes' mode and events have
@@ -50,7 +50,7 @@ class _Internals:
         drive = None if self.drive is None else copy.deepcopy(self.drive, memo)
         last_jump = None if self.last_jump is None else copy.deepcopy(self.last_jump, memo)
         ropes = None if self.ropes is None else (self.ropes[0], self.ropes[1].copy(), self.ropes[2].copy(),
-                                                 list(self.ropes[3]))
+                                                 list(self.ropes[3]), self.ropes[4].copy())
         return _Internals(self.t, self.h_next, self.planar, self.steps, self.rejected, self.n_rhs, self.split_steps,
                           self.finest_split, self.jumps, drive, last_jump, ropes)
 
@@ -129,7 +129,8 @@ class NativeIntegrator(Integrator):
         ropes = None
         if self._ropes:
             data = self.data
-            ropes = (int(d.mode_chosen), data.link_active.copy(), data.rope_impulse.copy(), list(self.events))
+            ropes = (int(d.mode_chosen), data.link_active.copy(), data.rope_impulse.copy(), list(self.events),
+                     data.slip_reference.copy())
         return {"native": _Internals(d.t, d.h_next, d.planar, d.steps, d.rejected, d.n_rhs, d.split_steps,
                                      d.finest_split, d.jumps, drive, last_jump, ropes)}
 
@@ -161,8 +162,9 @@ class NativeIntegrator(Integrator):
             self.data.impulse[...], d.jump_position, d.jump_velocity = saved.last_jump
         if saved.ropes is not None:
             self._drain()
-            d.mode_chosen, active, impulse, events = saved.ropes
+            d.mode_chosen, active, impulse, events, slip_reference = saved.ropes
             self.data.link_active[...], self.data.rope_impulse[...] = active, impulse
+            self.data.slip_reference[...] = slip_reference
             self._events = list(events)
         self._out = (None, None)  # the state may have been set from outside too: copy it in next time
 
@@ -447,6 +449,7 @@ class NativeGroundIntegrator(NativeIntegrator):
         super().__init__(model, *args, **kwargs)
         self.K, self.L = scene.K, scene.L
         self._n_fixed = int(np.asarray(scene.fixed, bool).sum())
+        self._n_contacts = len(model.ground_scene.contact_masses)  # the contact links (the grips' come after)
 
     def _load(self, state, F_input) -> None:
         K = self.K
@@ -507,7 +510,7 @@ class NativeGroundIntegrator(NativeIntegrator):
         U = np.concatenate([np.asarray(U, np.float64), np.zeros((pad, 3))])
         F = None if F_input is None else np.concatenate([np.asarray(F_input, np.float64), np.zeros((pad, 3))])
         T, reaction = super().outputs(X, U, F)
-        return T[:self.L], reaction[:self._n_fixed], T[self.L:]
+        return T[:self.L], reaction[:self._n_fixed], T[self.L:self.L + self._n_contacts]
 
     def rope_impulses(self) -> np.ndarray:
         """(L,) N s: each rope's impulse summed over the last advance (0 on rods)."""
@@ -515,7 +518,7 @@ class NativeGroundIntegrator(NativeIntegrator):
 
     def ground_impulses(self) -> np.ndarray:
         """(n_contacts,) N s: the ground's impulse on each contact's mass summed over the last advance."""
-        return self.data.rope_impulse[self.L:].copy()
+        return self.data.rope_impulse[self.L:self.L + self._n_contacts].copy()
 
     def anchor_jump(self, drive, t: float, X, U, F_input=None):
         pad = self.model.K - self.K

@@ -229,6 +229,9 @@ class NativeModel:
             m.n_contacts, m.contact_mass = len(contacts), i8(np.array(contacts, np.int64))
             ground = scene.ground_plane
             m.ground_point[:], m.ground_normal[:] = ground.point, ground.normal
+            m.friction = float(ground.friction)
+            m.ground_tangent[:] = unilateral._tangents(np.asarray(ground.normal, float)).ravel()
+            m.n_grips = 2 * len(contacts) if ground.friction > 0 else 0  # _with_grips appended them
 
     @property
     def scene(self):
@@ -302,6 +305,8 @@ def native_ground_model(scene) -> NativeModel:
 
     def build(s):
         padded = native_ground_scene(s)
+        if s.ground.friction > 0:
+            padded = _with_grips(padded)
         model = NativeModel(padded, analyse(padded), planar=False)
         model.ground_scene = padded
         return model
@@ -411,6 +416,9 @@ class NativeData:
     # ropes: the mode (1 for rods and taut ropes) and each rope's impulse over the last advance (L each)
     link_active = functools.cached_property(lambda self: self._view("link_active", self.model.L, dtype=np.uint8))
     rope_impulse = functools.cached_property(lambda self: self._view("rope_impulse", self.model.L))
+    # friction on the ground: each contact's slip reference (n_contacts, 3), part of the state
+    slip_reference = functools.cached_property(
+        lambda self: self._view("slip_reference", int(self.model.struct.n_grips) // 2, 3))
 
     def event_log(self, field: str, n: int) -> np.ndarray:
         """The first n entries of the event log's array ``field`` (event_t, event_kind, event_link, event_impulse)."""
@@ -420,3 +428,37 @@ class NativeData:
         if getattr(self, "_ptr", None):
             lib.data_free(self._ptr)
             self._ptr = None
+
+
+def _with_grips(padded):
+    """The ground scene ``padded`` (unilateral.native_ground_scene) with Coulomb friction's grips appended: per
+    contact, two rods from its mass to two virtual anchors (infinite mass, fixed) at R_c along the plane's tangents
+    t_1, t_2 beside it, at rest (ModeDynamics.pad: the core places them from every state it evaluates, and takes a
+    grip into the mode while its contact sticks): the model's last 2 n_contacts links and masses."""
+    import dataclasses
+    import math
+
+    from linknet_core.dynamics.unilateral import GroundModelScene, Scene, _padded_fields, _tangents
+
+    masses = np.repeat(np.array(padded.contact_masses, np.int64), 2)
+    n_g, K = masses.size, padded.K
+    tangents = _tangents(np.asarray(padded.ground_plane.normal, float))
+    X0 = np.asarray(padded.X0, float)
+    anchors = X0[masses] + padded.contact_length * np.tile(tangents, (n_g // 2, 1))
+    names = padded.mass_names
+    own = {"mass": np.concatenate([padded.mass, np.full(n_g, math.inf)]),
+           "fixed": np.concatenate([padded.fixed, np.ones(n_g, bool)]),
+           "driven": np.concatenate([padded.driven, np.zeros(n_g, bool)]),
+           "X0": np.concatenate([X0, anchors]), "U0": np.concatenate([padded.U0, np.zeros((n_g, 3))]),
+           "mass_names": names + tuple(f"ground grip {i % 2 + 1} of {names[k]}" for i, k in enumerate(masses)),
+           "k1": np.concatenate([padded.k1, masses]), "k2": np.concatenate([padded.k2, K + np.arange(n_g)]),
+           "length": np.concatenate([padded.length, np.full(n_g, padded.contact_length)]),
+           "link_names": padded.link_names + tuple(f"grip{i % 2 + 1}_{k + 1}" for i, k in enumerate(masses)),
+           "rope": np.concatenate([padded.rope, np.zeros(n_g, bool)]),
+           "restitution": np.concatenate([padded.restitution, np.zeros(n_g)]),
+           "ground": None, "gravity": padded.gravity}
+    labels = padded.labels + tuple(f"the ground's friction grip on {names[k]}" for k in masses)
+    extra = {f.name: getattr(padded, f.name) for f in dataclasses.fields(GroundModelScene)
+             if f.name not in {g.name for g in dataclasses.fields(Scene)} and f.name != "labels"}
+    return GroundModelScene(labels=labels, **extra, **_padded_fields(padded, n_g, own))
+

@@ -197,8 +197,12 @@ def test_a_snapshot_of_a_run_on_the_ground_continues_identically_and_a_reset_run
     assert np.array_equal(sim.state.X, X) and sim.integrator.events == events
 
 
-def test_the_native_core_refuses_friction_and_the_fixed_step_methods_with_a_ground_and_auto_runs_those_on_numpy():
-    rough = dropped(1.0, 0.0, friction=0.4)
+def test_the_native_core_refuses_friction_on_linked_masses_and_a_ground_on_fixed_steps_and_auto_runs_those_on_numpy():
+    rough = ln.Scene.from_dict({"name": "rough_rope", "gravity": [0, 0, -G],
+                                "masses": [{"name": "a", "position": [0, 0, 0.5], "mass": 1.0},
+                                           {"name": "b", "position": [0.3, 0, 0.5], "mass": 1.0}],
+                                "links": [{"a": "a", "b": "b", "length": 0.3, "kind": "rope"}],
+                                "ground": {"point": [0, 0, 0], "normal": [0, 0, 1], "friction": 0.4}})
     with pytest.raises(ln.SolverError, match="Coulomb friction"):
         ln.Simulator(rough, "dop853", backend="native")
     assert ln.Simulator(rough, "dop853").backend == "numpy"

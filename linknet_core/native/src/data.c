@@ -302,6 +302,8 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
         memcpy(d->active_start, d->link_active, (size_t)m->L);
         memcpy(d->impulse_start, d->rope_impulse, (size_t)m->L * sizeof(double));
         memset(d->rope_impulse, 0, (size_t)m->L * sizeof(double));
+        if (m->n_grips)
+            memcpy(d->slip_reference_start, d->slip_reference, (size_t)(3 * m->n_grips / 2) * sizeof(double));
     }
     memcpy(d->X_start, d->X, (size_t)n3 * sizeof(double));
     memcpy(d->U_start, d->U, (size_t)n3 * sizeof(double));
@@ -328,6 +330,8 @@ int ln_advance(const ln_model *m, const ln_method *meth, ln_data *d, double t_ta
         if (m->n_ropes) {
             memcpy(d->link_active, d->active_start, (size_t)m->L);
             memcpy(d->rope_impulse, d->impulse_start, (size_t)m->L * sizeof(double));
+            if (m->n_grips)
+                memcpy(d->slip_reference, d->slip_reference_start, (size_t)(3 * m->n_grips / 2) * sizeof(double));
             d->mode_chosen = mode_chosen;
             d->n_events = n_events;
             d->events_lost = events_lost;

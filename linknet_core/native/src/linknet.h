@@ -74,7 +74,10 @@ enum ln_status {
 
 /* What an event of a rope or the ground is (ln_data's event log: a rope's events name its link, a contact's its
    mass). Keep in step with linknet_core/clib/library.py. */
-enum ln_event_kind { LN_EVENT_TAUT = 0, LN_EVENT_SLACK = 1, LN_EVENT_CONTACT = 2, LN_EVENT_RELEASE = 3 };
+enum ln_event_kind {
+    LN_EVENT_TAUT = 0, LN_EVENT_SLACK = 1, LN_EVENT_CONTACT = 2, LN_EVENT_RELEASE = 3,
+    LN_EVENT_STICK = 4, LN_EVENT_SLIP = 5  /* friction: a sliding mass stopped and sticks; a stuck one slides */
+};
 
 /* How A of (25) is factored, chosen once per scene from its structure. */
 enum ln_solver {

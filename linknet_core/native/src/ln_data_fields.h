@@ -140,7 +140,16 @@
     /* ropes (stages/ropes.c): the mode is part of the state (an FMU state copies it); the events of the advances  \
        since the log was last drained (ln_rope_events_drained), and each rope's impulse summed over the last       \
        advance. None of it is allocated beyond one entry where the model has no ropes */                           \
-    ARRAY(uint8_t, link_active, m->n_ropes ? m->L : 0)  /* (L) 1 for rods and taut ropes: the mode */              \
+    ARRAY(uint8_t, link_active, m->n_ropes ? m->L : 0)  /* (L) 1 for rods and taut ropes: the mode; on a grip link \
+                                                           (ln_model.n_grips) 1 while its contact sticks */         \
+    ARRAY(double, slip_reference, 3 * m->n_grips / 2)   /* (n_contacts,3) with friction: each sliding contact's     \
+                                                           slip direction at the step's start (zero: none; part of  \
+                                                           the state, UnilateralDynamics.slip_reference) */         \
+    ARRAY(double, friction_work, m->n_grips ? 15 * m->K + (m->n_contacts + 2) * m->L                              \
+                                 + 7 * m->n_contacts * m->n_contacts + 20 * m->n_contacts : 0)  /* stages/friction.c */\
+    ARRAY(ln_int, friction_index, m->n_grips ? 2 * m->n_contacts : 0)                                              \
+    ARRAY(uint8_t, friction_flags, m->n_grips ? 6 * m->n_contacts : 0)  /* (6, n_contacts) sets of contacts */     \
+    ARRAY(double, friction_values, m->n_grips ? 6 * m->n_contacts : 0)  /* (6, n_contacts) per-contact values */   \
     SCALAR(int, mode_chosen)                            /* 0 until the first advance chooses the mode */            \
     SCALAR(ln_int, events_this_step)                    /* consecutive accepted steps that ended at an event */     \
     ARRAY(double, rope_impulse, m->n_ropes ? m->L : 0)  /* (L) N s: each rope's impulse over the last advance */    \
@@ -156,6 +165,7 @@
     ARRAY(double, mode_inv_R, m->n_ropes ? m->L : 0)                                                                \
     ARRAY(uint8_t, active_start, m->n_ropes ? m->L : 0)                                                             \
     ARRAY(double, impulse_start, m->n_ropes ? m->L : 0)                                                             \
+    ARRAY(double, slip_reference_start, 3 * m->n_grips / 2)                                                       \
     ARRAY(uint8_t, mask, m->n_ropes ? m->L : 0)                                                                     \
     ARRAY(uint8_t, rope_flags, m->n_ropes ? 11 * m->n_ropes : 0)  /* (11, n_ropes) sets of ropes */                   \
     ARRAY(double, rope_values, m->n_ropes ? 10 * m->n_ropes : 0)  /* (10, n_ropes) per-rope values */                 \

@@ -130,13 +130,20 @@
     SCALAR(double, gravity_norm)                        /* |g|, m/s^2: the velocity and rest speed scales */        \
     /* a ground (stages/ropes.c): the plane n . (X - p) >= 0 under every free mass, each contact a unilateral link    \
        from its mass to a virtual anchor placed straight above it (UnilateralDynamics' ModeDynamics): the model's   \
-       last n_contacts masses are the anchors (fixed, infinite mass), its last n_contacts links the contacts (the    \
-       last n_contacts of its ropes, of length scene_size and the ground's restitution), in the order of their       \
-       masses. No ground: n_contacts = 0 and nothing of this is read */                                              \
+       last n_contacts masses before the grips' are the anchors (fixed, infinite mass), its last n_contacts links  \
+       before the grips' the contacts (the last n_contacts of its ropes, of length scene_size and the ground's       \
+       restitution), in the order of their masses. No ground: n_contacts = 0 and nothing of this is read */          \
     SCALAR(ln_int, n_contacts)                                                                                      \
     ARRAY(ln_int, contact_mass, s->n_contacts)          /* the free mass of each contact */                         \
     FIXED(double, ground_point, 3)                      /* p, m */                                                  \
-    FIXED(double, ground_normal, 3)                     /* n, unit */
+    FIXED(double, ground_normal, 3)                     /* n, unit */                                               \
+    /* Coulomb friction on the ground (mu > 0): two grip links per contact from its mass to two virtual anchors at   \
+       rest beside it along the plane's tangents t_1, t_2 (ModeDynamics' grips), in the mode while the contact       \
+       sticks (ln_data.contact_stuck): the model's last n_grips links and masses, after the contacts', grip i of     \
+       contact c being link L - n_grips + 2 c + i and mass K - n_grips + 2 c + i. No friction: n_grips = 0 */       \
+    SCALAR(double, friction)                            /* mu */                                                    \
+    FIXED(double, ground_tangent, 6)                    /* t_1, t_2 (unilateral._tangents of n) */                 \
+    SCALAR(ln_int, n_grips)                             /* 2 n_contacts with friction, else 0 */
 
 /* ln_method: what an integrator is, the method as data. */
 #define LN_METHOD_FIELDS(SCALAR, ARRAY, FIXED, OPAQUE)                                                              \

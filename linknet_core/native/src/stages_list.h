@@ -6,5 +6,6 @@
 #include "stages/accelerations.c"
 #include "stages/projections.c"
 #include "stages/rattle.c"
+#include "stages/friction.c"
 #include "stages/runge_kutta.c"
 #include "stages/ropes.c"

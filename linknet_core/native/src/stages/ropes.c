@@ -1,8 +1,9 @@
 /* Ropes: links that pull and never push, |X_k2 - X_k1| <= R_l with T_l >= 0, their mode, impacts and events, for
  * every method. The numpy reference of every rule here is linknet_core.dynamics.unilateral (the
  * model, the impact, the mode), linknet_core.dynamics.complementarity (the LCP) and linknet_core.integrators.events
- * (detection, location, the event); this file mirrors them for ropes and a frictionless ground (Coulomb friction
- * stays on the numpy reference).
+ * (detection, location, the event); this file mirrors them for ropes and a ground, and Coulomb friction on masses
+ * without links (stages/friction.c has the sliding friction and the slip directions; a stuck contact's grips are
+ * links of the mode, a sliding one's impact friction is taken along its velocity after the impulse).
  *
  * A ground's contact is a rope too: from its free mass to a virtual anchor (the model's last masses, fixed, of
  * infinite mass) placed straight above it before every evaluation at the contact length R_c from the plane, so that
@@ -207,9 +208,14 @@ static int rope_gap_dips(const double *p_in, double depth, double *crossing, dou
 
 /* ---- the ground's contacts --------------------------------------------------------------------------------------- */
 /* A ground runs on the 3-D path only (the library builds its model with no plane). Contact c is the model's rope
-   n_ropes - n_contacts + c, its link L - n_contacts + c from its mass to its virtual anchor, the mass
-   K - n_contacts + c. */
-static inline int FN(is_contact)(const ln_model *m, ln_int l) { return l >= m->L - m->n_contacts; }
+   n_ropes - n_contacts + c, its link L - n_grips - n_contacts + c from its mass to its virtual anchor, the mass
+   K - n_grips - n_contacts + c; with friction grip i of contact c is link L - n_grips + 2 c + i, its anchor mass
+   K - n_grips + 2 c + i (ln_model.n_grips). */
+static inline int FN(is_contact)(const ln_model *m, ln_int l)
+{
+    return l >= m->L - m->n_grips - m->n_contacts && l < m->L - m->n_grips;
+}
+
 
 /* The height of mass k above the ground, n . (X_k - p) (Ground.gaps). */
 static inline double FN(contact_height)(const ln_model *m, const double *X, ln_int k)
@@ -221,15 +227,23 @@ static inline double FN(contact_height)(const ln_model *m, const double *X, ln_i
 
 /* Each contact's virtual anchor straight above its mass at the contact length R_c from the ground, Q = X_k +
    (R_c - g_k) n, moving with the mass along the plane, V_Q = U_k - (n . U_k) n (ModeDynamics.pad, pad_velocity):
-   the link's E is then n, its term of (26) (n . U_k)^2 / R_c and its gap g_k. U may be NULL. */
+   the link's E is then n, its term of (26) (n . U_k)^2 / R_c and its gap g_k. With friction each contact's two
+   grip anchors beside its mass at X_k + R_c t_i, at rest (a grip's E is t_i, its row of C t_i . U_k). U may be
+   NULL. */
 void FN(ln_contacts_place)(const ln_model *m, double *X, double *U)
 {
-    const ln_int first_anchor = m->K - m->n_contacts;
+    const ln_int first_anchor = m->K - m->n_grips - m->n_contacts, first_grip = m->K - m->n_grips;
     const double Rc = m->scene_size, *n = m->ground_normal;
     for (ln_int c = 0; c < m->n_contacts; c++) {
         const ln_int k = m->contact_mass[c], q = first_anchor + c;
         const double lift = Rc - FN(contact_height)(m, X, k);
         for (int e = 0; e < DIM; e++) X[q * DIM + e] = X[k * DIM + e] + lift * n[e];
+        for (ln_int i = 0; i < 2 && m->n_grips; i++) {
+            const ln_int g = first_grip + 2 * c + i;
+            for (int e = 0; e < DIM; e++) X[g * DIM + e] = X[k * DIM + e] + Rc * m->ground_tangent[3 * i + e];
+            if (U)
+                for (int e = 0; e < DIM; e++) U[g * DIM + e] = 0.0;
+        }
         if (!U) continue;
         double normal = 0.0;
         for (int e = 0; e < DIM; e++) normal += U[k * DIM + e] * n[e];
@@ -252,11 +266,12 @@ int FN(ln_contacts_project)(const ln_model *mm, const ln_method *meth, ln_data *
         if ((status = project_positions(mm, d, X, d->E0, tol, meth->max_projection_iter)) != LN_OK) return status;
         if (!mm->n_contacts) break;
         double largest = 0.0;
-        for (ln_int i = 0; i < (mm->K - mm->n_contacts) * DIM; i++) largest = ln_fmax(largest, fabs(X[i]));
+        for (ln_int i = 0; i < (mm->K - mm->n_contacts - mm->n_grips) * DIM; i++)
+            largest = ln_fmax(largest, fabs(X[i]));
         const double limit = tol * mm->scene_size + 8 * ROPE_EPS * largest;
         int on = 1;
         for (ln_int c = 0; c < mm->n_contacts; c++)
-            if (mm->inv_R[mm->L - mm->n_contacts + c] != 0.0
+            if (mm->inv_R[FN(contact_link)(mm, c)] != 0.0
                 && !(fabs(FN(contact_height)(mm, X, mm->contact_mass[c])) <= limit))
                 on = 0;
         if (on) break;
@@ -329,7 +344,8 @@ static double FN(rope_largest_coordinate)(const ln_model *m, const double *X)
         for (int e = 0; e < 3; e++)
             s = ln_fmax(s, fabs(o[e] + P[2 * e] * X[2 * k] + P[2 * e + 1] * X[2 * k + 1]));
 #else
-    for (ln_int i = 0; i < (m->K - m->n_contacts) * DIM; i++) s = ln_fmax(s, fabs(X[i]));  /* not the anchors */
+    for (ln_int i = 0; i < (m->K - m->n_contacts - m->n_grips) * DIM; i++)
+        s = ln_fmax(s, fabs(X[i]));  /* not the anchors */
 #endif
     return s;
 }
@@ -340,11 +356,12 @@ static void FN(rope_use_mask)(const ln_model *m, ln_data *d, const uint8_t *mask
     for (ln_int l = 0; l < m->L; l++) d->mode_inv_R[l] = mask[l] ? 1.0 / m->R[l] : 0.0;
 }
 
-/* The mask of the rods and the ropes r with flags[r]. */
+/* The mask of the rods, the ropes r with flags[r] and the grips of the contacts that stick in the mode. */
 static void FN(rope_mask_of)(const ln_model *m, ln_data *d, const uint8_t *flags)
 {
     for (ln_int l = 0; l < m->L; l++) d->mask[l] = 1;
     for (ln_int r = 0; r < m->n_ropes; r++) d->mask[m->rope_link[r]] = flags[r];
+    for (ln_int l = m->L - m->n_grips; l < m->L; l++) d->mask[l] = d->link_active[l];
     FN(rope_use_mask)(m, d, d->mask);
 }
 
@@ -413,7 +430,7 @@ static int FN(rope_solve_lcp)(const ln_model *mm, ln_data *d, struct FN(rope_lcp
     /* the problem's scale: its rows' largest |b| and largest diagonal entry of W, |E_l|^2 (1/M_k1 + 1/M_k2) */
     double b_scale = 0.0, diag = 0.0;
     ln_int n_rows = 0;
-    for (ln_int l = 0; l < L; l++) d->mask[l] = 1;
+    for (ln_int l = 0; l < L; l++) d->mask[l] = l < L - mm->n_grips || d->link_active[l];  /* the grips in the mode */
     for (ln_int r = 0; r < R; r++) {
         d->mask[mm->rope_link[r]] = p->rows[r];
         n_rows += p->rows[r] != 0;
@@ -519,7 +536,7 @@ static int FN(rope_select_mode)(const ln_model *mm, ln_data *d, const double *X,
 static int FN(rope_mode_tensions)(const ln_model *mm, ln_data *d, const double *X, const double *U,
                                   const double *F_base, double *acc, double *T)
 {
-    const int status = FN(ln_accelerations)(mm, d, X, U, F_base, acc, T, 1);
+    const int status = FN(stage_accelerations)(mm, d, X, U, F_base, acc, T, 1);
     for (ln_int l = 0; l < mm->L; l++)
         if (mm->inv_R[l] == 0.0) T[l] = 0.0;
     return status;
@@ -538,13 +555,114 @@ static void FN(rope_touching)(const ln_model *m, const double *X, const double *
     }
 }
 
-/* The mode of the state (X, U): the acceleration LCP on the touching ropes, every one of them started taut. */
+/* ---- Coulomb friction: which contacts stick --------------------------------------------------------------------- */
+/* The contacts whose masses do not slip, tangential speed within touch_tol of the velocity scale, into out
+   (n_contacts) (UnilateralDynamics.resting). */
+static void FN(friction_resting)(const ln_model *m, const double *U, uint8_t *out)
+{
+    const double scale = FN(rope_velocity_scale)(m, U), *n = m->ground_normal;
+    for (ln_int c = 0; c < m->n_contacts; c++) {
+        const ln_int k = m->contact_mass[c];
+        double normal = 0.0, speed = 0.0;
+        for (int e = 0; e < 3; e++) normal += U[k * DIM + e] * n[e];
+        for (int e = 0; e < 3; e++) {
+            const double v = U[k * DIM + e] - normal * n[e];
+            speed += v * v;
+        }
+        out[c] = ln_sqrt(speed) <= m->touch_tol * scale;
+    }
+}
+
+/* The grips of the contacts stuck[c] in the mode (their links' link_active). */
+static void FN(friction_set_stuck)(const ln_model *m, ln_data *d, const uint8_t *stuck)
+{
+    for (ln_int c = 0; c < m->n_contacts; c++)
+        for (int i = 0; i < 2; i++) d->link_active[FN(grip_link)(m, c, i)] = stuck[c] != 0;
+}
+
+/* mu N - |F_t| of each stuck contact of the mode in use from its tensions T (L) (N the contact's tension, F_t = T_g1
+   t_1 + T_g2 t_2 its grips' force on the mass), +inf on the others (UnilateralDynamics.stick_margins). */
+static void FN(friction_margins)(const ln_model *mm, const double *T, double *margins)
+{
+    for (ln_int c = 0; c < mm->n_contacts; c++) {
+        margins[c] = INFINITY;
+        if (!(mm->n_grips && mm->inv_R[FN(grip_link)(mm, c, 0)] != 0.0)) continue;
+        double Ft = 0.0;
+        for (int e = 0; e < 3; e++) {
+            const double f = T[FN(grip_link)(mm, c, 0)] * mm->ground_tangent[e]
+                             + T[FN(grip_link)(mm, c, 1)] * mm->ground_tangent[3 + e];
+            Ft += f * f;
+        }
+        margins[c] = mm->friction * T[FN(contact_link)(mm, c)] - ln_sqrt(Ft);
+    }
+}
+
+/* Which of the candidates (contacts) the ground holds in the mode of the ropes active (n_ropes), into the grips'
+   link_active (UnilateralDynamics.choose_stuck): all of them stuck, then the one whose tangential force is furthest
+   beyond mu N let slip, until every stuck one is within the friction cone (to force_tol of the largest force). The
+   mode's mask is the chosen one on return. */
+static int FN(friction_choose_stuck)(const ln_model *mm, ln_data *d, const double *X, const double *U,
+                                     const double *F_base, const uint8_t *active, const uint8_t *candidates)
+{
+    uint8_t *stuck = d->friction_flags + mm->n_contacts;
+    double *margins = d->friction_values + 3 * mm->n_contacts;
+    const ln_int first_contact = mm->n_ropes - mm->n_contacts;
+    for (ln_int c = 0; c < mm->n_contacts; c++) stuck[c] = candidates[c] && active[first_contact + c];
+    for (;;) {
+        FN(friction_set_stuck)(mm, d, stuck);
+        FN(rope_mask_of)(mm, d, active);
+        int any = 0;
+        for (ln_int c = 0; c < mm->n_contacts; c++) any |= stuck[c];
+        if (!any) return LN_OK;
+        const int status = FN(rope_mode_tensions)(mm, d, X, U, F_base, d->acc1, d->T);
+        if (status != LN_OK) return status;
+        FN(friction_margins)(mm, d->T, margins);
+        double largest = 0.0;
+        for (ln_int l = 0; l < mm->L; l++) largest = ln_fmax(largest, fabs(d->T[l]));
+        ln_int worst = 0;
+        for (ln_int c = 1; c < mm->n_contacts; c++)
+            if (margins[c] < margins[worst]) worst = c;
+        if (margins[worst] >= -mm->force_tol * largest) return LN_OK;
+        stuck[worst] = 0;
+    }
+}
+
+/* The sliding contacts' slip directions at (X, U) (driven rows and anchors placed) in the mode in use become the
+   step's reference, the others' cleared (UnilateralDynamics.set_slip_reference). */
+static int FN(friction_set_reference)(const ln_model *mm, ln_data *d, const double *X, const double *U,
+                                      const double *F_base)
+{
+    struct FN(friction_work) w = FN(friction_scratch)(mm, d);
+    int any = 0;
+    for (ln_int c = 0; c < mm->n_contacts; c++) any |= FN(contact_sliding)(mm, c);
+    if (any) {
+        int status = accelerations(mm, d, X, U, F_base, d->acc1, d->T, 1);  /* A(X) factored for the solves */
+        if (status == LN_OK) status = FN(slip_directions)(mm, d, &w, X, U, F_base, w.dirs);
+        if (status != LN_OK) return status;
+    } else {
+        for (ln_int i = 0; i < 3 * mm->n_contacts; i++) w.dirs[i] = 0.0;
+    }
+    memcpy(d->slip_reference, w.dirs, (size_t)(3 * mm->n_contacts) * sizeof(double));
+    return LN_OK;
+}
+
+/* The mode of the state (X, U): the acceleration LCP on the touching ropes, every one of them started taut; with
+   friction, the resting contacts' grips in it as equalities, then those the ground can hold (choose_stuck) in the
+   grips' link_active (UnilateralDynamics.state_mode). */
 static int FN(rope_state_mode)(const ln_model *mm, ln_data *d, const double *X, const double *U, const double *F_base,
                                uint8_t *active)
 {
     uint8_t *candidates = d->rope_flags + 5 * mm->n_ropes;
     FN(rope_touching)(mm, X, U, candidates);
-    return FN(rope_select_mode)(mm, d, X, U, F_base, candidates, candidates, NULL, active);
+    uint8_t *resting = d->friction_flags;
+    if (mm->n_grips) {
+        FN(friction_resting)(mm, U, resting);
+        for (ln_int c = 0; c < mm->n_contacts; c++) resting[c] &= candidates[mm->n_ropes - mm->n_contacts + c];
+        FN(friction_set_stuck)(mm, d, resting);
+    }
+    int status = FN(rope_select_mode)(mm, d, X, U, F_base, candidates, candidates, NULL, active);
+    if (status == LN_OK && mm->n_grips) status = FN(friction_choose_stuck)(mm, d, X, U, F_base, active, resting);
+    return status;
 }
 
 /* The integrator's mode from the state at the first advance (EventHandling._ensure_mode), and its mask in use. */
@@ -558,9 +676,14 @@ int FN(ln_rope_start)(const ln_model *mm, ln_data *d, double *X, double *U, cons
         uint8_t *active = d->rope_flags + 4 * mm->n_ropes;
         if (status == LN_OK) status = FN(rope_state_mode)(mm, d, X, U, F_base, active);
         if (status != LN_OK) return status;
-        for (ln_int l = 0; l < mm->L; l++) d->link_active[l] = 1;
+        for (ln_int l = 0; l < mm->L - mm->n_grips; l++) d->link_active[l] = 1;
         for (ln_int r = 0; r < mm->n_ropes; r++) d->link_active[mm->rope_link[r]] = active[r];
         d->mode_chosen = 1;
+        if (mm->n_grips) {  /* the first step's slip reference, from a cleared one */
+            for (ln_int i = 0; i < 3 * mm->n_contacts; i++) d->slip_reference[i] = 0.0;
+            FN(rope_use_mask)(mm, d, d->link_active);
+            if ((status = FN(friction_set_reference)(mm, d, X, U, F_base)) != LN_OK) return status;
+        }
     }
     d->events_this_step = 0;
     FN(rope_use_mask)(mm, d, d->link_active);
@@ -623,7 +746,7 @@ static int FN(rope_method_step)(const ln_model *mm, const ln_method *meth, ln_da
     int status;
     if ((status = FN(rope_drive)(mm, d, t0, Xa, Ua)) != LN_OK) return status;
     d->n_rhs++;
-    if ((status = accelerations(mm, d, Xa, Ua, F_base, acc, d->T, 1)) != LN_OK) return status;
+    if ((status = FN(stage_accelerations)(mm, d, Xa, Ua, F_base, acc, d->T, 1)) != LN_OK) return status;
     store_stage(size, 0, Ua, acc, KX, KU);
     const double t_end = t0 + h;
     for (ln_int i = 1; i <= s; i++) {
@@ -631,7 +754,7 @@ static int FN(rope_method_step)(const ln_model *mm, const ln_method *meth, ln_da
         combine(size, Xa, Ua, h, meth->AB + i * s, i, KX, KU, Yx, Yu);
         if ((status = FN(rope_drive)(mm, d, i < s ? t0 + meth->C[i] * h : t_end, Yx, Yu)) != LN_OK) return status;
         d->n_rhs++;
-        if ((status = accelerations(mm, d, Yx, Yu, F_base, acc, d->T, 1)) != LN_OK) return status;
+        if ((status = FN(stage_accelerations)(mm, d, Yx, Yu, F_base, acc, d->T, 1)) != LN_OK) return status;
         store_stage(size, i, Yu, acc, KX, KU);
     }
     status = mm->n_contacts ? FN(ln_contacts_project)(mm, meth, d, Xo, meth->position_tol)
@@ -648,14 +771,45 @@ struct FN(rope_event_ctx) {
     ln_data *d;
     const double *X0, *U0, *X1, *U1, *A0, *A1, *F_base;
     double t0, h;
-    ln_int link;
+    ln_int index;               /* the watched value (watched_value) */
     int status;
     double *Xt, *Ut;            /* a trial state */
     double *X_hi, *U_hi;        /* the state at the bracket's upper end */
     double hi_kept;             /* where X_hi, U_hi were taken (-1: none) */
 };
 
-/* The largest |T| of the mode's links, and the ropes' tensions, at (X, U) and t (EventHandling._forces_at). */
+/* With friction, what must stay >= 0 of each contact at the state (X, U) whose mode's tensions are in d->T and
+   whose largest |T| is scale, into d->friction_values (n_contacts), how far below 0 it may go before it is an event
+   after them (n_contacts): a stuck contact's margin mu N - |F_t| (force_tol of scale), a sliding one's velocity
+   along the step's slip reference (touch_tol of the velocity scale); +inf on a contact off the ground (the
+   friction rows of EventHandling._forces_at). */
+static void FN(friction_watch)(const ln_model *mm, ln_data *d, const double *U, double scale)
+{
+    const ln_int n_c = mm->n_contacts;
+    double *values = d->friction_values, *tols = d->friction_values + n_c;
+    FN(friction_margins)(mm, d->T, values);
+    const double vtol = mm->touch_tol * FN(rope_velocity_scale)(mm, U), *n = mm->ground_normal;
+    for (ln_int c = 0; c < n_c; c++) {
+        tols[c] = mm->force_tol * scale;
+        if (values[c] != INFINITY || mm->inv_R[FN(contact_link)(mm, c)] == 0.0) continue;
+        const ln_int k = mm->contact_mass[c];
+        double normal = 0.0, along = 0.0;
+        for (int e = 0; e < 3; e++) normal += U[k * DIM + e] * n[e];
+        for (int e = 0; e < 3; e++) along += (U[k * DIM + e] - normal * n[e]) * d->slip_reference[3 * c + e];
+        values[c] = along;
+        tols[c] = vtol;
+    }
+}
+
+/* The watched value index at the last evaluation: rope index's tension (index < n_ropes), else contact
+   index - n_ropes's friction value (friction_watch). */
+static inline double FN(watched_value)(const ln_model *mm, const ln_data *d, ln_int index)
+{
+    return index < mm->n_ropes ? d->T[mm->rope_link[index]] : d->friction_values[index - mm->n_ropes];
+}
+
+/* The largest |T| of the mode's links, and the ropes' tensions (and the contacts' friction values), at (X, U) and t
+   (EventHandling._forces_at). */
 static int FN(rope_forces_at)(const ln_model *mm, ln_data *d, double t, const double *X, const double *U,
                               const double *F_base, double *scale)
 {
@@ -667,6 +821,7 @@ static int FN(rope_forces_at)(const ln_model *mm, ln_data *d, double t, const do
     double largest = 0.0;
     for (ln_int l = 0; l < mm->L; l++) largest = ln_fmax(largest, fabs(d->T[l]));
     *scale = largest;
+    if (mm->n_grips) FN(friction_watch)(mm, d, Ut, largest);
     return status;
 }
 
@@ -688,7 +843,12 @@ static double FN(rope_force_on_interpolant)(void *vctx, double theta)
         c->status = status;
         return NAN;
     }
-    return d->T[c->link];
+    if (mm->n_grips && c->index >= mm->n_ropes) {
+        double largest = 0.0;
+        for (ln_int l = 0; l < mm->L; l++) largest = ln_fmax(largest, fabs(d->T[l]));
+        FN(friction_watch)(mm, d, c->Ut, largest);
+    }
+    return FN(watched_value)(mm, d, c->index);
 }
 
 /* Rope `link`'s tension in the mode at the end of the method's own step of length h. */
@@ -704,7 +864,7 @@ static double FN(rope_force_on_step)(void *vctx, double h)
         c->status = status;
         return NAN;
     }
-    const double f = d->T[c->link];
+    const double f = FN(watched_value)(mm, d, c->index);
     if (!(f >= 0)) {  /* the bracket's new upper end: its state kept */
         memcpy(c->X_hi, c->Xt, (size_t)(mm->K * DIM) * sizeof(double));
         memcpy(c->U_hi, c->Ut, (size_t)(mm->K * DIM) * sizeof(double));
@@ -825,12 +985,20 @@ static int FN(rope_first_event)(const ln_model *mm, const ln_method *meth, ln_da
         if ((status = FN(rope_forces_at)(mm, d, t0 + h, X1, U1, F_base, &scale)) != LN_OK) return status;
         double *forces = d->link_values + 3 * mm->L;
         memcpy(forces, d->T, (size_t)mm->L * sizeof(double));
+        const ln_int n_watched = R + (mm->n_grips ? mm->n_contacts : 0);
+        double *friction = d->friction_values + 2 * mm->n_contacts;  /* the contacts' values and tolerances, kept */
+        if (mm->n_grips) memcpy(friction, d->friction_values, (size_t)mm->n_contacts * sizeof(double));
         const double tol = mm->force_tol * scale;
         int dropped = 0;
         for (ln_int r = 0; r < R; r++) {
             const ln_int l = mm->rope_link[r];
             if (d->link_active[l] && forces[l] < -tol) dropped = 1;
         }
+        for (ln_int c = 0; c < n_watched - R; c++)
+            if (friction[c] < -d->friction_values[mm->n_contacts + c]) dropped = 1;
+        double *friction_tol = d->friction_values + 4 * mm->n_contacts;
+        if (mm->n_grips)
+            memcpy(friction_tol, d->friction_values + mm->n_contacts, (size_t)mm->n_contacts * sizeof(double));
         if (dropped) {
             double *A0 = d->event_states + 8 * K3, *A1 = A0 + K3;
             double *Xa = d->event_states + 12 * K3, *Ua = Xa + K3;
@@ -843,16 +1011,23 @@ static int FN(rope_first_event)(const ln_model *mm, const ln_method *meth, ln_da
                 if ((status = FN(rope_mode_tensions)(mm, d, Xa, Ua, F_base, end ? A1 : A0, d->T)) != LN_OK)
                     return status;
             }
-            for (ln_int r = 0; r < R; r++) {
-                const ln_int l = mm->rope_link[r];
-                if (!(d->link_active[l] && forces[l] < -tol)) continue;
-                struct FN(rope_event_ctx) c = {mm, meth, d, X0, U0, X1, U1, A0, A1, F_base, t0, h, l, LN_OK,
+            for (ln_int r = 0; r < n_watched; r++) {
+                double f1;
+                if (r < R) {
+                    const ln_int l = mm->rope_link[r];
+                    if (!(d->link_active[l] && forces[l] < -tol)) continue;
+                    f1 = forces[l];
+                } else {
+                    if (!(friction[r - R] < -friction_tol[r - R])) continue;
+                    f1 = friction[r - R];
+                }
+                struct FN(rope_event_ctx) c = {mm, meth, d, X0, U0, X1, U1, A0, A1, F_base, t0, h, r, LN_OK,
                                                Xm, Um, NULL, NULL, -1.0};
                 const double f0 = FN(rope_force_on_interpolant)(&c, 0.0);
                 double root = 0.0;
                 if (!(f0 < 0)) {
                     double lo = 0.0, hi = 1.0;
-                    rope_bracketed_root(FN(rope_force_on_interpolant), &c, &lo, &hi, f0, forces[l], 1e-6, 0, 0.0);
+                    rope_bracketed_root(FN(rope_force_on_interpolant), &c, &lo, &hi, f0, f1, 1e-6, 0, 0.0);
                     root = hi;  /* the order of the events only: the time is found on the method's steps */
                 }
                 if (c.status != LN_OK) return c.status;
@@ -873,7 +1048,7 @@ static int FN(rope_locate)(const ln_model *mm, const ln_method *meth, ln_data *d
                            double t0, double h_max, const double *X1, const double *U1, const double *F_base,
                            int kind, ln_int rope, double theta, double *Xe, double *Ue, double *h_e)
 {
-    const ln_int size = mm->K * DIM, l = mm->rope_link[rope];
+    const ln_int size = mm->K * DIM, l = rope < mm->n_ropes ? mm->rope_link[rope] : -1;
     const size_t bytes = (size_t)size * sizeof(double);
     int status;
     if (kind == 1) {
@@ -904,9 +1079,9 @@ static int FN(rope_locate)(const ln_model *mm, const ln_method *meth, ln_data *d
     /* the bracketing root find on the step's length, ending just past the zero of the force */
     double scale;
     if ((status = FN(rope_forces_at)(mm, d, t0, X0, U0, F_base, &scale)) != LN_OK) return status;
-    const double f0 = d->T[l];
+    const double f0 = FN(watched_value)(mm, d, rope);
     if ((status = FN(rope_forces_at)(mm, d, t0 + h_max, X1, U1, F_base, &scale)) != LN_OK) return status;
-    const double f1 = d->T[l];
+    const double f1 = FN(watched_value)(mm, d, rope);
     if (!(f0 >= 0)) {
         memcpy(Xe, X0, bytes);
         memcpy(Ue, U0, bytes);
@@ -914,7 +1089,7 @@ static int FN(rope_locate)(const ln_model *mm, const ln_method *meth, ln_data *d
         return LN_OK;
     }
     double *Xt = d->event_states + 10 * 3 * mm->K, *Ut = Xt + 3 * mm->K;
-    struct FN(rope_event_ctx) c = {mm, meth, d, X0, U0, X1, U1, NULL, NULL, F_base, t0, h_max, l, LN_OK,
+    struct FN(rope_event_ctx) c = {mm, meth, d, X0, U0, X1, U1, NULL, NULL, F_base, t0, h_max, rope, LN_OK,
                                    Xt, Ut, Xe, Ue, -1.0};
     memcpy(Xe, X1, bytes);
     memcpy(Ue, U1, bytes);
@@ -950,7 +1125,8 @@ static void FN(rope_record)(ln_data *d, double t, int kind, ln_int link, double 
 {
     if (kind == LN_EVENT_TAUT) d->rope_impulse[link] += impulse;
     if (FN(is_contact)(mm, link)) {  /* a contact's events name its mass */
-        kind = kind == LN_EVENT_TAUT ? LN_EVENT_CONTACT : LN_EVENT_RELEASE;
+        if (kind == LN_EVENT_TAUT || kind == LN_EVENT_SLACK)
+            kind = kind == LN_EVENT_TAUT ? LN_EVENT_CONTACT : LN_EVENT_RELEASE;
         link = mm->k1[link];
     }
     if (d->n_events >= LN_EVENT_LOG) {
@@ -964,17 +1140,19 @@ static void FN(rope_record)(ln_data *d, double t, int kind, ln_int link, double 
     d->n_events++;
 }
 
-/* The impulse at (X, U) where the ropes touching are at their length (UnilateralDynamics.impact): U becomes the
-   velocities after it, impulses (n_ropes) each rope's impulse, took whether it took one. */
-static int FN(rope_impact)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X, double *U,
-                           const uint8_t *touching, double *impulses, uint8_t *took)
+/* Moreau's impact law on the mode's rows at (X, U): the rods, the ropes touching and the grips in the mode
+   (link_active), W Lambda + q >= 0 on the ropes, = 0 on the others, q = C U + e min(C U, 0) (Newton's restitution,
+   0 below the rest speed) (UnilateralDynamics._impact_problem): Lambda into d->link_values + 2 L, the rows' rates C U
+   into d->link_values, each row's restitution into d->link_values + 5 L, the final basis into d->rope_flags + 3 R. */
+static int FN(rope_impact_lcp)(const ln_model *mm, ln_data *d, const double *X, const double *U,
+                               const uint8_t *touching)
 {
-    const ln_int L = mm->L, R = mm->n_ropes, size = mm->K * DIM;
+    const ln_int L = mm->L, R = mm->n_ropes;
     double *rates = d->link_values, *q = d->link_values + L, *lam = d->link_values + 2 * L;
     double *w = d->link_values + 4 * L, *e = d->link_values + 5 * L;
     uint8_t *basis = d->rope_flags + 3 * R;
     FN(rope_full_vectors)(mm, d, X);
-    const double scale = FN(rope_velocity_scale)(mm, U), rest = FN(rope_rest_speed)(mm, U);
+    const double rest = FN(rope_rest_speed)(mm, U);
     /* C U of the impact's rows (the rods and the touching ropes), and each row's restitution */
     for (ln_int l = 0; l < L; l++) {
         const ln_int a = mm->k1[l], b = mm->k2[l];
@@ -992,20 +1170,39 @@ static int FN(rope_impact)(const ln_model *mm, const ln_method *meth, ln_data *d
     for (ln_int l = 0; l < L; l++) q[l] = -(rates[l] + e[l] * ln_fmin(rates[l], 0.0));  /* b = -q */
     for (ln_int r = 0; r < R; r++) basis[r] = touching[r] && rates[mm->rope_link[r]] < 0;
     struct FN(rope_lcp) p = {d->E_full, q, touching, basis, NULL, lam, w, d->Uh};
-    int status = FN(rope_solve_lcp)(mm, d, &p);
-    if (status != LN_OK) return status;
-    int separating = 0;
-    for (ln_int l = 0; l < L; l++)
-        if (d->mask[l] && rates[l] > mm->touch_tol * scale) separating = 1;
-    /* an impulse that changes its rope's own rate by less than impulse_roundoff of the velocity scale is the LCP's
-       round-off, not an impulse (UnilateralDynamics.took_impulse): Lambda_l W_ll, W_ll = |E_l|^2 (1/M_k1 + 1/M_k2) */
-    for (ln_int r = 0; r < R; r++) {
+    return FN(rope_solve_lcp)(mm, d, &p);
+}
+
+/* Whether each rope's impulse in an impact at (X, U) (velocities before it, unit vectors in d->E_full) is one: an
+   impulse that changes its rope's own rate by less than impulse_roundoff of the velocity scale is the LCP's
+   round-off (UnilateralDynamics.took_impulse): Lambda_l W_ll, W_ll = |E_l|^2 (1/M_k1 + 1/M_k2). */
+static void FN(rope_took)(const ln_model *mm, ln_data *d, const double *U, const double *impulses, uint8_t *took)
+{
+    const double scale = FN(rope_velocity_scale)(mm, U);
+    for (ln_int r = 0; r < mm->n_ropes; r++) {
         const ln_int l = mm->rope_link[r];
-        impulses[r] = touching[r] ? lam[l] : 0.0;
         double sq = 0.0;
         for (int k = 0; k < DIM; k++) sq += d->E_full[l * DIM + k] * d->E_full[l * DIM + k];
         took[r] = impulses[r] * (sq * (mm->inv_m[mm->k1[l]] + mm->inv_m[mm->k2[l]])) > mm->impulse_roundoff * scale;
     }
+}
+
+/* The impulse at (X, U) where the ropes touching are at their length (UnilateralDynamics.impact): U becomes the
+   velocities after it, impulses (n_ropes) each rope's impulse, took whether it took one. */
+static int FN(rope_impact)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X, double *U,
+                           const uint8_t *touching, double *impulses, uint8_t *took)
+{
+    const ln_int L = mm->L, R = mm->n_ropes, size = mm->K * DIM;
+    double *rates = d->link_values, *lam = d->link_values + 2 * L, *e = d->link_values + 5 * L;
+    uint8_t *basis = d->rope_flags + 3 * R;
+    int status = FN(rope_impact_lcp)(mm, d, X, U, touching);
+    if (status != LN_OK) return status;
+    const double scale = FN(rope_velocity_scale)(mm, U);
+    int separating = 0;
+    for (ln_int l = 0; l < L; l++)
+        if (d->mask[l] && rates[l] > mm->touch_tol * scale) separating = 1;
+    for (ln_int r = 0; r < R; r++) impulses[r] = touching[r] ? lam[mm->rope_link[r]] : 0.0;
+    FN(rope_took)(mm, d, U, impulses, took);
     /* distinct restitutions among the approaching basis ropes */
     double first = 0.0;
     int distinct = 0;
@@ -1032,6 +1229,82 @@ static int FN(rope_impact)(const ln_model *mm, const ln_method *meth, ln_data *d
     return LN_OK;
 }
 
+/* The impact at (X, U) with Coulomb's friction on the ground (UnilateralDynamics.coulomb_impact): the frictionless
+   impact (the grips out); where a contact took an impulse, every touching contact that took one or rests starts
+   stuck (its grips equalities of the impact's LCP, their multipliers its tangential impulse P_t), the one furthest
+   outside |P_t| <= mu P_n let slide, in turn; a sliding contact's friction impulse is -mu P_n d, d its tangential
+   velocity's direction after the impact. U becomes the velocities after it, impulses and took as rope_impact's,
+   into tangential (n_contacts) each contact's |P_t|. The grips' link_active is the stuck set the impact ended with.
+   The sliding friction's coupling through other links of its mass (the reference's W - D in the impact's LCP, and
+   its slip law one level down) is not done here: a sliding mass with another link in the impact is refused
+   (LN_NO_MODE; the library runs Coulomb friction on the native core only for scenes without links). */
+static int FN(friction_impact)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X, double *U,
+                               const uint8_t *touching, double *impulses, uint8_t *took, double *tangential)
+{
+    const ln_int L = mm->L, R = mm->n_ropes, n_c = mm->n_contacts, first_contact = R - n_c, size = mm->K * DIM;
+    uint8_t *stuck = d->friction_flags + 5 * n_c, *resting = d->friction_flags;
+    double *U_before = d->event_states + 7 * 3 * mm->K, *margins = d->friction_values + 3 * n_c;
+    const double *lam = d->link_values + 2 * L, *n = mm->ground_normal, mu = mm->friction;
+    memcpy(U_before, U, (size_t)size * sizeof(double));
+    for (ln_int c = 0; c < n_c; c++) {
+        stuck[c] = 0;
+        tangential[c] = 0.0;
+    }
+    FN(friction_set_stuck)(mm, d, stuck);
+    int status = FN(rope_impact)(mm, meth, d, X, U, touching, impulses, took);
+    if (status != LN_OK) return status;
+    int any = 0;
+    for (ln_int c = 0; c < n_c; c++) any |= took[first_contact + c];
+    if (!any) return LN_OK;
+    FN(friction_resting)(mm, U_before, resting);
+    for (ln_int c = 0; c < n_c; c++) stuck[c] = touching[first_contact + c] && (took[first_contact + c] || resting[c]);
+    for (;;) {
+        FN(friction_set_stuck)(mm, d, stuck);
+        if ((status = FN(rope_impact_lcp)(mm, d, X, U_before, touching)) != LN_OK) return status;
+        double largest = 0.0;
+        for (ln_int l = 0; l < L; l++)
+            if (d->mask[l]) largest = ln_fmax(largest, fabs(lam[l]));
+        ln_int worst = -1;
+        for (ln_int c = 0; c < n_c; c++) {
+            margins[c] = INFINITY;
+            if (!stuck[c]) continue;
+            double Pt = 0.0;
+            for (int e = 0; e < 3; e++) {
+                const double f = lam[FN(grip_link)(mm, c, 0)] * mm->ground_tangent[e]
+                                 + lam[FN(grip_link)(mm, c, 1)] * mm->ground_tangent[3 + e];
+                Pt += f * f;
+            }
+            tangential[c] = ln_sqrt(Pt);
+            margins[c] = mu * lam[FN(contact_link)(mm, c)] - tangential[c];
+            if (worst < 0 || margins[c] < margins[worst]) worst = c;
+        }
+        if (worst < 0 || margins[worst] >= -mm->force_tol * largest) break;
+        stuck[worst] = 0;
+    }
+    /* U- + M^-1 C^T Lambda, then each sliding contact's friction impulse along its tangential velocity after it */
+    memcpy(U, U_before, (size_t)size * sizeof(double));
+    FN(ln_add_correction)(mm, d->E_full, lam, 1.0, U);
+    for (ln_int c = 0; c < n_c; c++) {
+        const ln_int l = FN(contact_link)(mm, c), k = mm->contact_mass[c];
+        if (!touching[first_contact + c] || stuck[c]) continue;
+        for (ln_int j = 0; j < L; j++)
+            if (d->mask[j] && j != l && (mm->k1[j] == k || mm->k2[j] == k)) return LN_NO_MODE;
+        double v[3], normal = 0.0, speed = 0.0;
+        for (int e = 0; e < 3; e++) normal += U[k * DIM + e] * n[e];
+        for (int e = 0; e < 3; e++) {
+            v[e] = U[k * DIM + e] - normal * n[e];
+            speed += v[e] * v[e];
+        }
+        speed = ln_sqrt(speed);
+        tangential[c] = mu * lam[l];
+        if (!(speed > 0.0)) continue;
+        for (int e = 0; e < 3; e++) U[k * DIM + e] += mm->inv_m[k] * (-mu * lam[l] * v[e] / speed);
+    }
+    for (ln_int r = 0; r < R; r++) impulses[r] = touching[r] ? lam[mm->rope_link[r]] : 0.0;
+    FN(rope_took)(mm, d, U_before, impulses, took);
+    return LN_OK;
+}
+
 /* At an event at t (state X, U of the old mode): positions onto the touching ropes, the impact, the next mode, the
    events recorded (EventHandling._apply_event). kind 1: rope trigger reached its length; 2: its tension fell to 0;
    3: the driven anchors' motion jumped (the ropes it stretched are put back with the touching ones, and every rope
@@ -1039,19 +1312,31 @@ static int FN(rope_impact)(const ln_model *mm, const ln_method *meth, ln_data *d
 static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_data *d, double *X, double *U,
                                 const double *F_base, double t, int kind, ln_int trigger)
 {
-    const ln_int R = mm->n_ropes;
+    const ln_int R = mm->n_ropes, n_c = mm->n_contacts, first_contact = R - n_c;
     uint8_t *touching = d->rope_flags, *took = d->rope_flags + R, *candidates = d->rope_flags + 2 * R;
     uint8_t *active = d->rope_flags + 4 * R, *release = d->rope_flags + 5 * R;
     double *impulses = d->rope_values + 9 * R;
+    /* friction: the contact whose stick margin or slip speed fell through zero (a trigger past the ropes), the
+       contacts stuck before, those that may stick after, each contact's tangential impulse */
+    const ln_int friction_contact = kind == 2 && trigger >= R ? trigger - R : -1;
+    uint8_t *stuck_before = d->friction_flags + 3 * n_c, *may_stick = d->friction_flags + 4 * n_c;
+    double *tangential = d->friction_values + 5 * n_c;
     int status;
+    for (ln_int c = 0; c < n_c && mm->n_grips; c++) stuck_before[c] = d->link_active[FN(grip_link)(mm, c, 0)];
     FN(rope_touching)(mm, X, NULL, touching);
     for (ln_int r = 0; r < R; r++) touching[r] |= d->link_active[mm->rope_link[r]];
     if (kind == 1) touching[trigger] = 1;
     if (kind == 3)
         for (ln_int r = 0; r < R; r++) touching[r] |= FN(rope_gap)(mm, X, mm->rope_link[r]) < 0.0;
+    if (mm->n_grips) {  /* the touching constraints' mode has no grips (UnilateralDynamics.mode, stuck None) */
+        for (ln_int c = 0; c < n_c; c++) may_stick[c] = 0;
+        FN(friction_set_stuck)(mm, d, may_stick);
+    }
     if ((status = FN(rope_project)(mm, meth, d, touching, X, NULL)) != LN_OK) return status;
     if (mm->n_contacts) FN(ln_contacts_place)(mm, X, U);
-    if ((status = FN(rope_impact)(mm, meth, d, X, U, touching, impulses, took)) != LN_OK) return status;
+    status = mm->n_grips ? FN(friction_impact)(mm, meth, d, X, U, touching, impulses, took, tangential)
+                         : FN(rope_impact)(mm, meth, d, X, U, touching, impulses, took);
+    if (status != LN_OK) return status;
     if ((status = FN(rope_drive)(mm, d, t, X, U)) != LN_OK) return status;
     /* the touching ropes that do not separate, or separate slower than the rest speed (an inelastic collapse) */
     const double limit = ln_fmax(mm->touch_tol * FN(rope_velocity_scale)(mm, U), FN(rope_rest_speed)(mm, U));
@@ -1059,14 +1344,29 @@ static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_da
         candidates[r] = touching[r] && FN(rope_rate)(mm, X, U, mm->rope_link[r]) <= limit;
         release[r] = kind == 2 && r == trigger;
     }
+    if (mm->n_grips) {
+        /* the contacts that may stick: those stuck before, those at rest along the plane, one whose slip stopped;
+           not one whose stick margin fell through zero; in the LCP's mode as equalities where candidates */
+        FN(friction_resting)(mm, U, may_stick);
+        for (ln_int c = 0; c < n_c; c++) may_stick[c] |= stuck_before[c];
+        if (friction_contact >= 0) may_stick[friction_contact] = !stuck_before[friction_contact];
+        uint8_t *grips = d->friction_flags + 5 * n_c;
+        for (ln_int c = 0; c < n_c; c++) grips[c] = may_stick[c] && candidates[first_contact + c];
+        FN(friction_set_stuck)(mm, d, grips);
+    }
     if ((status = FN(rope_select_mode)(mm, d, X, U, F_base, candidates, candidates, release, active)) != LN_OK)
         return status;
-    if (kind == 2 && active[trigger]) {
+    if (kind == 2 && trigger < R && active[trigger]) {
         int changed = 0;
         for (ln_int r = 0; r < R; r++)
             if (active[r] != d->link_active[mm->rope_link[r]]) changed = 1;
         if (!changed) active[trigger] = 0;  /* its force is at zero to round-off and falling: it leaves */
     }
+    if (mm->n_grips) {  /* which contacts the ground holds after the impact */
+        if ((status = FN(friction_choose_stuck)(mm, d, X, U, F_base, active, may_stick)) != LN_OK) return status;
+    }
+    double *U_before_grip = d->event_states + 7 * 3 * mm->K;
+    memcpy(U_before_grip, U, (size_t)(mm->K * DIM) * sizeof(double));
     memcpy(d->Xc, X, (size_t)(mm->K * DIM) * sizeof(double));
     if ((status = FN(rope_project)(mm, meth, d, active, NULL, U)) != LN_OK) return status;
     for (ln_int r = 0; r < R; r++) {
@@ -1078,7 +1378,25 @@ static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_da
         const ln_int l = mm->rope_link[r];
         if (d->link_active[l] && !active[r]) FN(rope_record)(d, t, LN_EVENT_SLACK, l, 0.0, mm);
     }
+    for (ln_int c = 0; c < n_c && mm->n_grips; c++) {
+        const ln_int l = FN(contact_link)(mm, c), k = mm->contact_mass[c];
+        const int stuck = d->link_active[FN(grip_link)(mm, c, 0)];
+        if (!(d->link_active[l] && active[first_contact + c] && stuck != stuck_before[c])) continue;
+        /* a stick's impulse: the tangential impulse of the impact and what the grips' projection took */
+        double grip = 0.0;
+        for (int e = 0; e < 3; e++) {
+            const double dv = U[k * DIM + e] - U_before_grip[k * DIM + e];
+            grip += dv * dv;
+        }
+        grip = ln_sqrt(grip) / mm->inv_m[k];
+        FN(rope_record)(d, t, stuck ? LN_EVENT_STICK : LN_EVENT_SLIP, l, stuck ? tangential[c] + grip : 0.0, mm);
+    }
     for (ln_int r = 0; r < R; r++) d->link_active[mm->rope_link[r]] = active[r];
+    if (mm->n_grips) {  /* the slip reference from the velocities after the event, or the accelerations at rest */
+        FN(rope_use_mask)(mm, d, d->link_active);
+        for (ln_int i = 0; i < 3 * n_c; i++) d->slip_reference[i] = 0.0;
+        if ((status = FN(friction_set_reference)(mm, d, X, U, F_base)) != LN_OK) return status;
+    }
     return LN_OK;
 }
 
@@ -1184,6 +1502,53 @@ static int FN(rope_force_dip_at_stages)(const ln_model *mm, const ln_method *met
     return LN_OK;
 }
 
+/* The accepted step from (X0, U0) at t0 of length h to (X1, U1) at *t1 with no event, checked where a sliding
+   contact started it at rest (AdaptiveEvents._young_slip_step): the friction's U_t / |U_t|, singular at rest,
+   costs the method its order in the first step of a slip from rest (the step errs as h^3, unseen by the error
+   estimate). The step is compared with two half steps of the method in the controller's norm; beyond the tolerance
+   it is replaced by the method's step of the length where that error, taken as h^3, meets it: (X1, U1, *t1). */
+static int FN(friction_young_slip)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X0,
+                                   const double *U0, const double *F_base, double t0, double h, double *X1,
+                                   double *U1, double *t1)
+{
+    const ln_int K3 = 3 * mm->K;
+    const double scale = FN(rope_velocity_scale)(mm, U0), *n = mm->ground_normal;
+    int young = 0;
+    for (ln_int c = 0; c < mm->n_contacts && !young; c++) {
+        if (!FN(contact_sliding)(mm, c)) continue;
+        const ln_int k = mm->contact_mass[c];
+        double normal = 0.0, speed = 0.0;
+        for (int e = 0; e < 3; e++) normal += U0[k * DIM + e] * n[e];
+        for (int e = 0; e < 3; e++) {
+            const double v = U0[k * DIM + e] - normal * n[e];
+            speed += v * v;
+        }
+        young = ln_sqrt(speed) <= mm->touch_tol * scale;
+    }
+    if (!young) return LN_OK;
+    double *Xh = d->event_states + 4 * K3, *Uh = Xh + K3, *X2 = d->event_states + 10 * K3, *U2 = X2 + K3;
+    int status = FN(rope_method_step)(mm, meth, d, X0, U0, F_base, t0, 0.5 * h, Xh, Uh);
+    if (status == LN_OK) status = FN(rope_method_step)(mm, meth, d, Xh, Uh, F_base, t0 + 0.5 * h, 0.5 * h, X2, U2);
+    if (status != LN_OK) return status;
+    double sum = 0.0;
+    for (int part = 0; part < 2; part++) {
+        const double *Y0 = part ? U0 : X0, *Y1 = part ? U1 : X1, *Y2 = part ? U2 : X2;
+        for (ln_int f = 0; f < mm->n_free; f++)
+            for (int e = 0; e < DIM; e++) {
+                const ln_int i = mm->free_idx[f] * DIM + e;
+                const double sc = meth->atol + meth->rtol * ln_fmax(fabs(Y0[i]), fabs(Y1[i]));
+                const double r = (Y2[i] - Y1[i]) / sc;
+                sum += r * r;
+            }
+    }
+    const double error = ln_sqrt(sum / (2.0 * DIM * (double)mm->n_free));
+    if (error <= 1.0) return LN_OK;
+    const double h_ok = h * ln_fmax(meth->safety * pow(error, -1.0 / 3.0), meth->min_factor);
+    if ((status = FN(rope_method_step)(mm, meth, d, X0, U0, F_base, t0, h_ok, X1, U1)) != LN_OK) return status;
+    *t1 = t0 + h_ok;
+    return LN_OK;
+}
+
 /* After the accepted step from (X0, U0) at t0 to (X1, U1) at *t1 (AdaptiveEvents._event_in_step): where an event lies
    within it, (X1, U1, *t1) become the state just past the event, in the new mode. The mode's mask is in use again
    on return. */
@@ -1233,6 +1598,16 @@ int FN(ln_rope_step_events)(const ln_model *mm, const ln_method *meth, ln_data *
         }
     } else if (status == LN_OK) {
         d->events_this_step = 0;
+        if (mm->n_grips) {
+            status = FN(friction_young_slip)(mm, meth, d, Xs0, Us0, F_base, t0, h_max, X1, U1, t1);
+            /* the next step's slip reference, at its start */
+            if (status == LN_OK) {
+                memcpy(Xe, X1, bytes);
+                memcpy(Ue, U1, bytes);
+                status = FN(rope_drive)(mm, d, *t1, Xe, Ue);
+            }
+            if (status == LN_OK) status = FN(friction_set_reference)(mm, d, Xe, Ue, F_base);
+        }
     }
     FN(rope_use_mask)(mm, d, d->link_active);
     return status;
@@ -1294,7 +1669,7 @@ int ln_rope_anchor_jump(const ln_model *m, const ln_method *meth, ln_data *d, co
     if (!d->mode_chosen) {  /* the mode of the state before the jump (its anchors' accelerations not in B) */
         uint8_t *active = d->rope_flags + 4 * m->n_ropes;
         if ((status = FN(rope_state_mode)(mm, d, X, U, d->F_base, active)) != LN_OK) return status;
-        for (ln_int l = 0; l < m->L; l++) d->link_active[l] = 1;
+        for (ln_int l = 0; l < m->L; l++) d->link_active[l] = l < m->L - m->n_grips;
         for (ln_int r = 0; r < m->n_ropes; r++) d->link_active[m->rope_link[r]] = active[r];
         d->mode_chosen = 1;
     }
@@ -1355,11 +1730,14 @@ int ln_rope_evaluate(const ln_model *m, ln_data *d, const double *X, const doubl
         X = Xp;
         U = Up;
     }
-    uint8_t *active = d->rope_flags + 4 * m->n_ropes;
+    uint8_t *active = d->rope_flags + 4 * m->n_ropes, *stuck_kept = d->friction_flags + 2 * m->n_contacts;
+    for (ln_int c = 0; c < m->n_contacts && m->n_grips; c++) stuck_kept[c] = d->link_active[FN(grip_link)(m, c, 0)];
     int status = FN(rope_state_mode)(&mode, d, X, U, d->F_base, active);
-    if (status != LN_OK) return status;
-    FN(rope_mask_of)(&mode, d, active);
-    status = FN(rope_mode_tensions)(&mode, d, X, U, d->F_base, d->acc, d->T);
+    if (status == LN_OK) {
+        FN(rope_mask_of)(&mode, d, active);
+        status = FN(rope_mode_tensions)(&mode, d, X, U, d->F_base, d->acc, d->T);
+    }
+    if (m->n_grips) FN(friction_set_stuck)(m, d, stuck_kept);  /* the integrator's mode, as it was */
     FN(rope_use_mask)(&mode, d, d->link_active);
     return status;
 }

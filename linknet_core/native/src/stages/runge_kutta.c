@@ -131,7 +131,7 @@ static int starting_step(const ln_model *m, const ln_method *meth, ln_data *d, c
     int status;
     if (m->n_driven && (status = ln_drive_rows(m, d, t + h0, d->Xs, d->Us, d->F_base, DIM)) != LN_OK) return status;
     if (m->n_contacts) FN(ln_contacts_place)(m, d->Xs, d->Us);
-    status = FN(ln_accelerations)(m, d, d->Xs, d->Us, F_base, d->acc1, d->T, 1);
+    status = FN(stage_accelerations)(m, d, d->Xs, d->Us, F_base, d->acc1, d->T, 1);
     if (status != LN_OK) return status;
     double d2 = 0.0;
     for (ln_int f = 0; f < m->n_free; f++)
@@ -160,7 +160,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
        accelerations) are set to the motion at the stage's time, t + c_i h */
     if (m->n_driven && (status = ln_drive_rows(m, d, t, X, U, d->F_base, DIM)) != LN_OK) return status;
     if (m->n_contacts) FN(ln_contacts_place)(m, X, U);
-    if ((status = accelerations(m, d, X, U, F_base, acc, d->T, 1)) != LN_OK) return status;
+    if ((status = FN(stage_accelerations)(m, d, X, U, F_base, acc, d->T, 1)) != LN_OK) return status;
     store_stage(size, 0, U, acc, KX, KU);
     ln_peaks_begin(m, d, t);
     if (d->h_next <= 0.0) {
@@ -183,7 +183,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
                 return status;
             if (m->n_contacts) FN(ln_contacts_place)(m, Yx, Yu);
             d->n_rhs++;
-            if ((status = accelerations(m, d, Yx, Yu, F_base, acc, d->T, 1)) != LN_OK) return status;
+            if ((status = FN(stage_accelerations)(m, d, Yx, Yu, F_base, acc, d->T, 1)) != LN_OK) return status;
             store_stage(size, i, Yu, acc, KX, KU);
             if (m->n_ropes && i < s) FN(ln_rope_keep_stage)(m, d, i);
         }
@@ -224,7 +224,8 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
                events have factored others since */
             d->n_rhs++;
             if (m->n_contacts) FN(ln_contacts_place)(m, X, U);
-            if ((status = accelerations(m, d, X, U, F_base, acc, d->T, m->n_ropes != 0)) != LN_OK) return status;
+            if ((status = FN(stage_accelerations)(m, d, X, U, F_base, acc, d->T, m->n_ropes != 0)) != LN_OK)
+                return status;
             store_stage(size, 0, U, acc, KX, KU);
         }
         /* d->T at the step's end: the next step's first stage, or after the last step its new point's (before the
