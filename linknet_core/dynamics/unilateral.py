@@ -91,18 +91,20 @@ def native_refusal(scene: Scene, method=None) -> str | None:
     Runge-Kutta methods (linknet_core/native/src/stages/ropes.c: each contact a unilateral link to a virtual
     anchor; stages/friction.c), with Coulomb friction where the scene has no links (masses alone on the ground);
     Coulomb friction on masses joined by links, and a ground on the fixed-step methods, run on the numpy reference
-    only."""
+    only. (The core's stages run friction on linked masses too, held to the reference by
+    tests/native/test_native_friction.py; the native FMU, whose build asks this rule, does not keep a sliding
+    contact's slip reference in its state.)"""
     ground = scene.ground
     if ground is None:
         return None
     numpy_runs = "the numpy reference runs it (backend=\"auto\" or \"numpy\", and the pythonfmu FMU)"
     if ground.friction > 0 and scene.L > 0:
         return (f"{scene.name}: it has a ground with Coulomb friction (mu = {ground.friction:g}) and links, and the "
-                "native core (backend=\"native\", the native FMU) takes Coulomb friction on masses without links only "
-                "(a sliding mass's friction carried through its links into the complementarity problems is not on the "
-                f"native core); {numpy_runs}")
+                "native core (backend=\"native\", the native FMU) takes Coulomb friction on masses without links only; "
+                f"{numpy_runs}")
     if method is None or not method.adaptive:
-        return (f"{scene.name}: it has a ground, and the native core takes a ground on the adaptive methods (dop853, "
+        what = f"a ground with Coulomb friction (mu = {ground.friction:g})" if ground.friction > 0 else "a ground"
+        return (f"{scene.name}: it has {what}, and the native core takes a ground on the adaptive methods (dop853, "
                 "dopri5) only, not on the fixed-step ones (RATTLE and its compositions), nor the native FMU, which "
                 f"offers every method; {numpy_runs}")
     return None

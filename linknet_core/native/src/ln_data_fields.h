@@ -145,9 +145,9 @@
     ARRAY(double, slip_reference, 3 * m->n_grips / 2)   /* (n_contacts,3) with friction: each sliding contact's     \
                                                            slip direction at the step's start (zero: none; part of  \
                                                            the state, UnilateralDynamics.slip_reference) */         \
-    ARRAY(double, friction_work, m->n_grips ? 15 * m->K + (m->n_contacts + 2) * m->L                              \
+    ARRAY(double, friction_work, m->n_grips ? 15 * m->K + (3 * m->n_contacts + 2) * m->L                          \
                                  + 7 * m->n_contacts * m->n_contacts + 20 * m->n_contacts : 0)  /* stages/friction.c */\
-    ARRAY(ln_int, friction_index, m->n_grips ? 2 * m->n_contacts : 0)                                              \
+    ARRAY(ln_int, friction_index, m->n_grips ? 3 * m->n_contacts : 0)                                              \
     ARRAY(uint8_t, friction_flags, m->n_grips ? 6 * m->n_contacts : 0)  /* (6, n_contacts) sets of contacts */     \
     ARRAY(double, friction_values, m->n_grips ? 6 * m->n_contacts : 0)  /* (6, n_contacts) per-contact values */   \
     SCALAR(int, mode_chosen)                            /* 0 until the first advance chooses the mode */            \

@@ -27,8 +27,9 @@ static void rope_bracketed_root(double (*f)(void *ctx, double x), void *ctx, dou
 
 /* The scratch of the friction (ln_data.friction_work), carved once per call. */
 struct FN(friction_work) {
-    ln_int *sliding, *starting;
+    ln_int *sliding, *starting, *impact_sliding;
     double *Fa, *Fb, *Fc, *zero, *acc, *T0, *Tf, *Y, *dirs, *matrix, *rhs, *a0, *N0, *G, *kk, *a, *N, *d2, *f, *others;
+    double *cols, *ycols;  /* the complementarity problems' friction columns and their solves (ropes.c) */
 };
 
 static struct FN(friction_work) FN(friction_scratch)(const ln_model *m, ln_data *d)
@@ -55,9 +56,12 @@ static struct FN(friction_work) FN(friction_scratch)(const ln_model *m, ln_data 
     w.N = p; p += n;
     w.d2 = p; p += 2 * n;
     w.f = p; p += 2 * n;
-    w.others = p;
+    w.others = p; p += 3 * n;
+    w.cols = p; p += n * L;
+    w.ycols = p;
     w.sliding = d->friction_index;
     w.starting = d->friction_index + n;
+    w.impact_sliding = d->friction_index + 2 * n;
     return w;
 }
 
@@ -239,54 +243,29 @@ static void FN(slip_direction)(const struct friction_law *q, const double *guess
     out[1] = sin(best);
 }
 
-/* The response of the starting contacts (their tangential accelerations on t_1, t_2 into a (2 m), normal forces
-   into N (m)) to a load of size `size` along tangent i at starting contact j (j < 0: no load), with the other
-   sliding contacts slipping along w->others (starting_slip_directions' response). */
-static int FN(starting_response)(const ln_model *mm, ln_data *d, struct FN(friction_work) *w, const double *X,
-                                 const double *U, const double *F, const ln_int *starting, ln_int m, ln_int j, int i,
-                                 double size, double *a, double *N)
-{
-    const ln_int K3 = mm->K * DIM;
-    memcpy(w->Fa, F, (size_t)K3 * sizeof(double));
-    if (j >= 0)
-        for (int e = 0; e < DIM; e++)
-            w->Fa[mm->contact_mass[starting[j]] * DIM + e] += size * mm->ground_tangent[3 * i + e];
-    int status = FN(friction_evaluate)(mm, d, w, X, U, w->Fa, w->others, w->acc, d->T, 0);
-    if (status != LN_OK) return status;
-    for (ln_int q = 0; q < m; q++) {
-        const ln_int c = starting[q], k = mm->contact_mass[c];
-        for (int t = 0; t < 2; t++) {
-            double s = 0.0;
-            for (int e = 0; e < DIM; e++) s += w->acc[k * DIM + e] * mm->ground_tangent[3 * t + e];
-            a[2 * q + t] = s;
-        }
-        N[q] = w->Tf[FN(contact_link)(mm, c)];
-    }
-    return LN_OK;
-}
+/* A response of Coulomb's law at one level (the acceleration level from rest, or an impact): for a load of size
+   `size` along tangent i at the law's contact j (j < 0: no load), the tangential quantities the law acts on at its
+   m contacts on t_1, t_2 into a (2 m) and their normal forces or impulses into N (m). */
+typedef int (*friction_response_fn)(void *ctx, ln_int j, int i, double size, double *a, double *N);
 
-/* The slip directions of the starting contacts (UnilateralDynamics.starting_slip_directions, _coulomb_directions):
-   the response measured by 1 + 2 m evaluations with loads of the friction's size, each direction the scalar law's
-   root (slip_direction), in turn until they settle. dirs (n_contacts, 3): in, the other sliding contacts'; out,
-   the starting ones' too. */
-static int FN(starting_slip_directions)(const ln_model *mm, ln_data *d, struct FN(friction_work) *w,
-                                        const double *X, const double *U, const double *F, const ln_int *starting,
-                                        ln_int m, double *dirs)
+/* The slip directions d_j (on t_1, t_2, into w->d2, 2 m) of m contacts under Coulomb's law at one level
+   (UnilateralDynamics._coulomb_directions): the response, affine in the load, measured by 1 + 2 m calls with loads
+   of the friction's size, a_j = a0_j + sum_k G_jk f_k and N_j = N0_j + sum_k k_jk . f_k; each d_j the scalar law's
+   root (slip_direction), taken in turn (Gauss-Seidel) until the directions settle. */
+static int FN(coulomb_directions)(const ln_model *mm, struct FN(friction_work) *w, friction_response_fn response,
+                                  void *ctx, ln_int m)
 {
     const double mu = mm->friction;
-    memcpy(w->others, dirs, (size_t)(3 * mm->n_contacts) * sizeof(double));
-    for (ln_int q = 0; q < m; q++)
-        for (int e = 0; e < 3; e++) w->others[3 * starting[q] + e] = 0.0;
-    int status = FN(starting_response)(mm, d, w, X, U, F, starting, m, -1, 0, 0.0, w->a0, w->N0);
+    int status = response(ctx, -1, 0, 0.0, w->a0, w->N0);
     if (status != LN_OK) return status;
     double largest = 0.0;
     for (ln_int q = 0; q < m; q++) largest = ln_fmax(largest, fabs(w->N0[q]));
+    /* loads of the size of the friction: a unit load on a heavy scene would be lost in the round-off of a0 */
     const double probe = mu * ln_fmax(largest, 2.2250738585072014e-308);
     /* G[(q, x), (j, i)] = w->G[((q * 2 + x) * m + j) * 2 + i]; kk[(q, j, i)] = w->kk[(q * m + j) * 2 + i] */
     for (ln_int j = 0; j < m; j++)
         for (int i = 0; i < 2; i++) {
-            if ((status = FN(starting_response)(mm, d, w, X, U, F, starting, m, j, i, probe, w->a, w->N)) != LN_OK)
-                return status;
+            if ((status = response(ctx, j, i, probe, w->a, w->N)) != LN_OK) return status;
             for (ln_int q = 0; q < m; q++) {
                 for (int x = 0; x < 2; x++)
                     w->G[((q * 2 + x) * m + j) * 2 + i] = (w->a[2 * q + x] - w->a0[2 * q + x]) / probe;
@@ -327,11 +306,67 @@ static int FN(starting_slip_directions)(const ln_model *mm, ln_data *d, struct F
         }
         if (moved <= 1e-15) break;
     }
+    return LN_OK;
+}
+
+/* The acceleration level's response (starting_slip_directions'): the starting contacts' tangential accelerations
+   and normal forces with the load added to F, the other sliding contacts slipping along w->others. */
+struct FN(starting_ctx) {
+    const ln_model *mm;
+    ln_data *d;
+    struct FN(friction_work) *w;
+    const double *X, *U, *F;
+    const ln_int *starting;
+    ln_int m;
+};
+
+static int FN(starting_response)(void *vctx, ln_int j, int i, double size, double *a, double *N)
+{
+    const struct FN(starting_ctx) *c = vctx;
+    const ln_model *mm = c->mm;
+    struct FN(friction_work) *w = c->w;
+    const ln_int K3 = mm->K * DIM;
+    memcpy(w->Fa, c->F, (size_t)K3 * sizeof(double));
+    if (j >= 0)
+        for (int e = 0; e < DIM; e++)
+            w->Fa[mm->contact_mass[c->starting[j]] * DIM + e] += size * mm->ground_tangent[3 * i + e];
+    int status = FN(friction_evaluate)(mm, c->d, w, c->X, c->U, w->Fa, w->others, w->acc, c->d->T, 0);
+    if (status != LN_OK) return status;
+    for (ln_int q = 0; q < c->m; q++) {
+        const ln_int cc = c->starting[q], k = mm->contact_mass[cc];
+        for (int t = 0; t < 2; t++) {
+            double s = 0.0;
+            for (int e = 0; e < DIM; e++) s += w->acc[k * DIM + e] * mm->ground_tangent[3 * t + e];
+            a[2 * q + t] = s;
+        }
+        N[q] = w->Tf[FN(contact_link)(mm, cc)];
+    }
+    return LN_OK;
+}
+
+/* The directions d on t_1, t_2 (2 m) into 3-D rows of dirs (n_contacts, 3) of the contacts `which`. */
+static void FN(friction_directions_3d)(const ln_model *mm, const double *d2, const ln_int *which, ln_int m,
+                                       double *dirs)
+{
     for (ln_int q = 0; q < m; q++)
         for (int e = 0; e < 3; e++)
-            dirs[3 * starting[q] + e] = w->d2[2 * q] * mm->ground_tangent[e]
-                                        + w->d2[2 * q + 1] * mm->ground_tangent[3 + e];
-    return LN_OK;
+            dirs[3 * which[q] + e] = d2[2 * q] * mm->ground_tangent[e] + d2[2 * q + 1] * mm->ground_tangent[3 + e];
+}
+
+/* The slip directions of the starting contacts (UnilateralDynamics.starting_slip_directions): Coulomb's law at the
+   acceleration level at the first instant of a slip from rest, the starting contacts' friction taken as loads.
+   dirs (n_contacts, 3): in, the other sliding contacts'; out, the starting ones' too. */
+static int FN(starting_slip_directions)(const ln_model *mm, ln_data *d, struct FN(friction_work) *w,
+                                        const double *X, const double *U, const double *F, const ln_int *starting,
+                                        ln_int m, double *dirs)
+{
+    memcpy(w->others, dirs, (size_t)(3 * mm->n_contacts) * sizeof(double));
+    for (ln_int q = 0; q < m; q++)
+        for (int e = 0; e < 3; e++) w->others[3 * starting[q] + e] = 0.0;
+    struct FN(starting_ctx) ctx = {mm, d, w, X, U, F, starting, m};
+    const int status = FN(coulomb_directions)(mm, w, FN(starting_response), &ctx, m);
+    if (status == LN_OK) FN(friction_directions_3d)(mm, w->d2, starting, m, dirs);
+    return status;
 }
 
 /* The slip direction of every sliding contact of the mode in use at (X, U) into dirs (n_contacts, 3; zero on the

@@ -1,9 +1,9 @@
 /* Ropes: links that pull and never push, |X_k2 - X_k1| <= R_l with T_l >= 0, their mode, impacts and events, for
  * every method. The numpy reference of every rule here is linknet_core.dynamics.unilateral (the
  * model, the impact, the mode), linknet_core.dynamics.complementarity (the LCP) and linknet_core.integrators.events
- * (detection, location, the event); this file mirrors them for ropes and a ground, and Coulomb friction on masses
- * without links (stages/friction.c has the sliding friction and the slip directions; a stuck contact's grips are
- * links of the mode, a sliding one's impact friction is taken along its velocity after the impulse).
+ * (detection, location, the event); this file mirrors them for ropes and a ground with Coulomb friction
+ * (stages/friction.c has the sliding friction and the slip law; a stuck contact's grips are links of the mode, a
+ * sliding one's friction a column of the complementarity problems' matrix).
  *
  * A ground's contact is a rope too: from its free mass to a virtual anchor (the model's last masses, fixed, of
  * infinite mass) placed straight above it before every evaluation at the contact length R_c from the plane, so that
@@ -392,6 +392,12 @@ struct FN(rope_lcp) {
     double *lam;          /* (L) out */
     double *w;            /* (L) scratch: W lambda - b */
     double *v;            /* (K, DIM) scratch */
+    /* friction: the problem's matrix is W + sum_j cols_j e_{col_row_j}^T, a sliding contact's friction carried into
+       its column (ModeDynamics.normal_system's -D; the impact's rate shift); solved in each basis from W's own
+       solves (stages/friction.c's scratch) */
+    ln_int n_cols;
+    const ln_int *col_row;  /* (n_cols) the link of each column */
+    const double *cols;     /* (n_cols, L) */
 };
 
 /* lambda of one basis: the rods and the basis ropes as equalities, solved by the tension solver on their mask. */
@@ -406,6 +412,30 @@ static int FN(rope_basis_solution)(const ln_model *mm, ln_data *d, const struct 
     FN(ln_solve_tension_system)(mm, d, rhs, p->lam);
     for (ln_int l = 0; l < mm->L; l++)
         if (!d->mask[l]) p->lam[l] = 0.0;
+    if (!p->n_cols) return LN_OK;
+    /* the friction's columns of the basis' rows: lambda = W_B^-1 b - sum_j y_j lambda_{row j}, y_j = W_B^-1 col_j,
+       and on those rows (I + Y) x = (W_B^-1 b)_rows, as the acceleration level's (I - Y_ss) N_s = T0_s */
+    struct FN(friction_work) fw = FN(friction_scratch)(mm, d);
+    const ln_int L = mm->L;
+    ln_int *on = fw.starting, n_on = 0;
+    for (ln_int j = 0; j < p->n_cols; j++) {
+        if (!d->mask[p->col_row[j]]) continue;
+        double *y = fw.ycols + n_on * L;
+        for (ln_int l = 0; l < L; l++) rhs[l] = d->mask[l] ? p->cols[j * L + l] : 0.0;
+        FN(ln_solve_tension_system)(mm, d, rhs, y);
+        for (ln_int l = 0; l < L; l++)
+            if (!d->mask[l]) y[l] = 0.0;
+        on[n_on++] = j;
+    }
+    if (!n_on) return LN_OK;
+    for (ln_int i = 0; i < n_on; i++) {
+        const ln_int row = p->col_row[on[i]];
+        for (ln_int j = 0; j < n_on; j++) fw.matrix[i * n_on + j] = (i == j) + fw.ycols[j * L + row];
+        fw.rhs[i] = p->lam[row];
+    }
+    if (friction_dense_solve(n_on, fw.matrix, fw.rhs)) return LN_SINGULAR;
+    for (ln_int j = 0; j < n_on; j++)
+        for (ln_int l = 0; l < L; l++) p->lam[l] -= fw.ycols[j * L + l] * fw.rhs[j];
     return LN_OK;
 }
 
@@ -419,6 +449,7 @@ static void FN(rope_lcp_w)(const ln_model *mm, const struct FN(rope_lcp) *p)
         const ln_int l = mm->rope_link[r], a = mm->k1[l], b = mm->k2[l];
         double s = 0.0;
         for (int e = 0; e < DIM; e++) s += p->E[l * DIM + e] * (p->v[a * DIM + e] - p->v[b * DIM + e]);
+        for (ln_int j = 0; j < p->n_cols; j++) s += p->cols[j * mm->L + l] * p->lam[p->col_row[j]];
         p->w[l] = s - p->b[l];
     }
 }
@@ -528,7 +559,41 @@ static int FN(rope_select_mode)(const ln_model *mm, ln_data *d, const double *X,
         B[l] = du2 * r + proj;
     }
     for (ln_int r = 0; r < mm->n_ropes; r++) active[r] = candidates[r] && start[r];
-    struct FN(rope_lcp) p = {d->E_full, B, candidates, active, release, lam, w, d->Uh};
+    struct FN(rope_lcp) p = {d->E_full, B, candidates, active, release, lam, w, d->Uh, 0, NULL, NULL};
+    if (mm->n_grips) {
+        /* the sliding contacts of the candidates' mode (the grips in link_active stuck): their friction -mu N d in
+           the problem's matrix, W - D, D's column c being B's response to the load -mu d_c at k_c at zero velocity
+           (ModeDynamics.normal_system) */
+        struct FN(friction_work) fw = FN(friction_scratch)(mm, d);
+        FN(rope_mask_of)(mm, d, candidates);
+        int any = 0;
+        for (ln_int c = 0; c < mm->n_contacts; c++) any |= FN(contact_sliding)(mm, c);
+        if (any) {
+            int status = accelerations(mm, d, X, U, F_base, d->acc1, d->T, 1);  /* A(X) factored for the solves */
+            if (status == LN_OK) status = FN(slip_directions)(mm, d, &fw, X, U, F_base, fw.dirs);
+            if (status != LN_OK) return status;
+            ln_int *col_row = fw.sliding;
+            for (ln_int c = 0; c < mm->n_contacts; c++) {
+                const double *dc = fw.dirs + 3 * c;
+                if (!FN(contact_sliding)(mm, c) || (dc[0] == 0.0 && dc[1] == 0.0 && dc[2] == 0.0)) continue;
+                const ln_int k = mm->contact_mass[c];
+                double *col = fw.cols + p.n_cols * L;
+                for (ln_int l = 0; l < L; l++) {
+                    col[l] = 0.0;
+                    const ln_int a = mm->k1[l], b = mm->k2[l];
+                    if (a != k && b != k) continue;
+                    const double r = 1.0 / mm->R[l], weight = b == k ? mm->accel_weight[b] : -mm->accel_weight[a];
+                    double proj = 0.0;
+                    for (int e = 0; e < DIM; e++)
+                        proj += (X[b * DIM + e] - X[a * DIM + e]) * r * (-mm->friction * dc[e]) * weight;
+                    col[l] = -proj;
+                }
+                col_row[p.n_cols++] = FN(contact_link)(mm, c);
+            }
+            p.col_row = col_row;
+            p.cols = fw.cols;
+        }
+    }
     return FN(rope_solve_lcp)(mm, d, &p);
 }
 
@@ -1169,7 +1234,7 @@ static int FN(rope_impact_lcp)(const ln_model *mm, ln_data *d, const double *X, 
     }
     for (ln_int l = 0; l < L; l++) q[l] = -(rates[l] + e[l] * ln_fmin(rates[l], 0.0));  /* b = -q */
     for (ln_int r = 0; r < R; r++) basis[r] = touching[r] && rates[mm->rope_link[r]] < 0;
-    struct FN(rope_lcp) p = {d->E_full, q, touching, basis, NULL, lam, w, d->Uh};
+    struct FN(rope_lcp) p = {d->E_full, q, touching, basis, NULL, lam, w, d->Uh, 0, NULL, NULL};
     return FN(rope_solve_lcp)(mm, d, &p);
 }
 
@@ -1229,22 +1294,123 @@ static int FN(rope_impact)(const ln_model *mm, const ln_method *meth, ln_data *d
     return LN_OK;
 }
 
+/* The rows' rates of the velocity M^-1 f, f a load `size` along v (3) at mass k alone, into shift (L): C M^-1 f,
+   nonzero on the links at k (the impact's rate shift of a friction impulse). */
+static void FN(friction_rate_shift)(const ln_model *mm, const ln_data *d, ln_int k, const double *v, double size,
+                                    double *shift)
+{
+    for (ln_int l = 0; l < mm->L; l++) {
+        shift[l] = 0.0;
+        const ln_int a = mm->k1[l], b = mm->k2[l];
+        if (a != k && b != k) continue;
+        double s = 0.0;
+        for (int e = 0; e < DIM; e++) s += d->E_full[l * DIM + e] * v[e];
+        shift[l] = (a == k ? 1.0 : -1.0) * mm->inv_m[k] * size * s;
+    }
+}
+
+/* The impact's response to a friction load (UnilateralDynamics._coulomb_impulses' response): in the impact's basis
+   (its rows as equalities) the impulses for the rates shifted by the load, the sliding contacts' tangential
+   velocities after the impact on t_1, t_2 and their normal impulses. */
+struct FN(impact_ctx) {
+    const ln_model *mm;
+    ln_data *d;
+    struct FN(friction_work) *w;
+    const double *U;        /* the velocities before the impact */
+    const uint8_t *touching, *basis;
+    const ln_int *sliding;
+    ln_int m;
+};
+
+static int FN(impact_response)(void *vctx, ln_int j, int i, double size, double *a, double *N)
+{
+    const struct FN(impact_ctx) *c = vctx;
+    const ln_model *mm = c->mm;
+    ln_data *d = c->d;
+    struct FN(friction_work) *w = c->w;
+    const ln_int L = mm->L, K3 = mm->K * DIM;
+    const double *b = d->link_values + L;  /* -q */
+    double *shifted = w->T0, *lam = w->Tf, *U_plus = w->Fa;
+    ln_int k = -1;
+    if (j >= 0) {
+        k = mm->contact_mass[c->sliding[j]];
+        FN(friction_rate_shift)(mm, d, k, mm->ground_tangent + 3 * i, size, shifted);
+        for (ln_int l = 0; l < L; l++) shifted[l] = b[l] - shifted[l];
+    } else {
+        memcpy(shifted, b, (size_t)L * sizeof(double));
+    }
+    struct FN(rope_lcp) p = {d->E_full, shifted, c->touching, NULL, NULL, lam, NULL, NULL, 0, NULL, NULL};
+    const int status = FN(rope_basis_solution)(mm, d, &p, c->basis);
+    if (status != LN_OK) return status;
+    memcpy(U_plus, c->U, (size_t)K3 * sizeof(double));
+    FN(ln_add_correction)(mm, d->E_full, lam, 1.0, U_plus);
+    if (k >= 0)
+        for (int e = 0; e < DIM; e++) U_plus[k * DIM + e] += mm->inv_m[k] * size * mm->ground_tangent[3 * i + e];
+    for (ln_int q = 0; q < c->m; q++) {
+        const ln_int cc = c->sliding[q], kk = mm->contact_mass[cc];
+        double normal = 0.0;
+        for (int e = 0; e < 3; e++) normal += U_plus[kk * DIM + e] * mm->ground_normal[e];
+        for (int t = 0; t < 2; t++) {
+            double s = 0.0;
+            for (int e = 0; e < 3; e++)
+                s += (U_plus[kk * DIM + e] - normal * mm->ground_normal[e]) * mm->ground_tangent[3 * t + e];
+            a[2 * q + t] = s;
+        }
+        N[q] = lam[FN(contact_link)(mm, cc)];
+    }
+    return LN_OK;
+}
+
+/* The impulses of the impact at (X, U) (velocities before it) with the grips of the contacts stuck in the mode
+   (link_active) and the other touching contacts sliding (UnilateralDynamics._coulomb_impulses): Lambda into
+   d->link_values + 2 L, each sliding contact's slip direction into w.dirs (zero on the others). The directions are
+   found with the sliding contacts' friction as loads in the impact's basis (Coulomb's law one level down,
+   coulomb_directions), then the impact solved with -mu P_n d carried into the columns of W (the rate shift of the
+   friction impulse); where that changes the basis, the directions are found again in the new one. */
+static int FN(friction_coulomb_impulses)(const ln_model *mm, ln_data *d, const double *X, const double *U,
+                                         const uint8_t *touching)
+{
+    const ln_int L = mm->L, R = mm->n_ropes, n_c = mm->n_contacts, first_contact = R - n_c;
+    struct FN(friction_work) w = FN(friction_scratch)(mm, d);
+    int status = FN(rope_impact_lcp)(mm, d, X, U, touching);
+    if (status != LN_OK) return status;
+    for (ln_int i = 0; i < 3 * n_c; i++) w.dirs[i] = 0.0;
+    ln_int m = 0;
+    for (ln_int c = 0; c < n_c; c++)
+        if (touching[first_contact + c] && !d->link_active[FN(grip_link)(mm, c, 0)]) w.impact_sliding[m++] = c;
+    if (!m) return LN_OK;
+    uint8_t *basis = d->rope_flags + 3 * R, *kept = d->rope_flags + 9 * R;
+    for (ln_int round = 0; round < R + 1; round++) {
+        memcpy(kept, basis, (size_t)R);
+        struct FN(impact_ctx) ctx = {mm, d, &w, U, touching, kept, w.impact_sliding, m};
+        if ((status = FN(coulomb_directions)(mm, &w, FN(impact_response), &ctx, m)) != LN_OK) return status;
+        FN(friction_directions_3d)(mm, w.d2, w.impact_sliding, m, w.dirs);
+        for (ln_int q = 0; q < m; q++) {
+            const ln_int c = w.impact_sliding[q];
+            FN(friction_rate_shift)(mm, d, mm->contact_mass[c], w.dirs + 3 * c, -mm->friction, w.cols + q * L);
+            w.sliding[q] = FN(contact_link)(mm, c);
+        }
+        struct FN(rope_lcp) p = {d->E_full, d->link_values + L, touching, basis, NULL, d->link_values + 2 * L,
+                                 d->link_values + 4 * L, d->Uh, m, w.sliding, w.cols};
+        if ((status = FN(rope_solve_lcp)(mm, d, &p)) != LN_OK) return status;
+        if (!memcmp(kept, basis, (size_t)R)) break;
+    }
+    return LN_OK;
+}
+
 /* The impact at (X, U) with Coulomb's friction on the ground (UnilateralDynamics.coulomb_impact): the frictionless
    impact (the grips out); where a contact took an impulse, every touching contact that took one or rests starts
    stuck (its grips equalities of the impact's LCP, their multipliers its tangential impulse P_t), the one furthest
-   outside |P_t| <= mu P_n let slide, in turn; a sliding contact's friction impulse is -mu P_n d, d its tangential
-   velocity's direction after the impact. U becomes the velocities after it, impulses and took as rope_impact's,
-   into tangential (n_contacts) each contact's |P_t|. The grips' link_active is the stuck set the impact ended with.
-   The sliding friction's coupling through other links of its mass (the reference's W - D in the impact's LCP, and
-   its slip law one level down) is not done here: a sliding mass with another link in the impact is refused
-   (LN_NO_MODE; the library runs Coulomb friction on the native core only for scenes without links). */
+   outside |P_t| <= mu P_n let slide, in turn; a sliding contact's friction impulse is -mu P_n d
+   (friction_coulomb_impulses). U becomes the velocities after it, impulses and took as rope_impact's, into
+   tangential (n_contacts) each contact's |P_t|. The grips' link_active is the stuck set the impact ended with. */
 static int FN(friction_impact)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X, double *U,
                                const uint8_t *touching, double *impulses, uint8_t *took, double *tangential)
 {
     const ln_int L = mm->L, R = mm->n_ropes, n_c = mm->n_contacts, first_contact = R - n_c, size = mm->K * DIM;
     uint8_t *stuck = d->friction_flags + 5 * n_c, *resting = d->friction_flags;
     double *U_before = d->event_states + 7 * 3 * mm->K, *margins = d->friction_values + 3 * n_c;
-    const double *lam = d->link_values + 2 * L, *n = mm->ground_normal, mu = mm->friction;
+    const double *lam = d->link_values + 2 * L, mu = mm->friction;
     memcpy(U_before, U, (size_t)size * sizeof(double));
     for (ln_int c = 0; c < n_c; c++) {
         stuck[c] = 0;
@@ -1260,7 +1426,7 @@ static int FN(friction_impact)(const ln_model *mm, const ln_method *meth, ln_dat
     for (ln_int c = 0; c < n_c; c++) stuck[c] = touching[first_contact + c] && (took[first_contact + c] || resting[c]);
     for (;;) {
         FN(friction_set_stuck)(mm, d, stuck);
-        if ((status = FN(rope_impact_lcp)(mm, d, X, U_before, touching)) != LN_OK) return status;
+        if ((status = FN(friction_coulomb_impulses)(mm, d, X, U_before, touching)) != LN_OK) return status;
         double largest = 0.0;
         for (ln_int l = 0; l < L; l++)
             if (d->mask[l]) largest = ln_fmax(largest, fabs(lam[l]));
@@ -1281,24 +1447,15 @@ static int FN(friction_impact)(const ln_model *mm, const ln_method *meth, ln_dat
         if (worst < 0 || margins[worst] >= -mm->force_tol * largest) break;
         stuck[worst] = 0;
     }
-    /* U- + M^-1 C^T Lambda, then each sliding contact's friction impulse along its tangential velocity after it */
+    /* U- + M^-1 C^T Lambda + M^-1 of each sliding contact's friction impulse -mu P_n d */
+    const double *dirs = FN(friction_scratch)(mm, d).dirs;
     memcpy(U, U_before, (size_t)size * sizeof(double));
     FN(ln_add_correction)(mm, d->E_full, lam, 1.0, U);
     for (ln_int c = 0; c < n_c; c++) {
         const ln_int l = FN(contact_link)(mm, c), k = mm->contact_mass[c];
         if (!touching[first_contact + c] || stuck[c]) continue;
-        for (ln_int j = 0; j < L; j++)
-            if (d->mask[j] && j != l && (mm->k1[j] == k || mm->k2[j] == k)) return LN_NO_MODE;
-        double v[3], normal = 0.0, speed = 0.0;
-        for (int e = 0; e < 3; e++) normal += U[k * DIM + e] * n[e];
-        for (int e = 0; e < 3; e++) {
-            v[e] = U[k * DIM + e] - normal * n[e];
-            speed += v[e] * v[e];
-        }
-        speed = ln_sqrt(speed);
         tangential[c] = mu * lam[l];
-        if (!(speed > 0.0)) continue;
-        for (int e = 0; e < 3; e++) U[k * DIM + e] += mm->inv_m[k] * (-mu * lam[l] * v[e] / speed);
+        for (int e = 0; e < 3; e++) U[k * DIM + e] += mm->inv_m[k] * (-mu * lam[l] * dirs[3 * c + e]);
     }
     for (ln_int r = 0; r < R; r++) impulses[r] = touching[r] ? lam[mm->rope_link[r]] : 0.0;
     FN(rope_took)(mm, d, U_before, impulses, took);
