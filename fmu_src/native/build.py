@@ -127,6 +127,26 @@ def resource_format() -> tuple[str, int]:
     return name, version
 
 
+def event_kinds() -> tuple[list[str], list[int]]:
+    """The names of the core's kinds of events (enum ln_event_kind of linknet.h, in its order) as the library names
+    them (linknet_core.clib.library.EVENT_KINDS, which gives the library's events their kinds), and for each 1 where
+    its event's index is a link, 0 a mass (rope_events.LINK_KINDS): what the native FMU's log words them by, as the
+    pythonfmu FMU's rope_events.event_message does. NativeBuildError where the enum and the library's names differ."""
+    from linknet_core.clib import library
+    from linknet_fmu.rope_events import LINK_KINDS
+    header = core_source_dir() / "linknet.h"
+    enum = re.search(r"enum\s+ln_event_kind\s*\{(.*?)\}", header.read_text(), re.S)
+    if not enum:
+        raise NativeBuildError("linknet.h no longer defines enum ln_event_kind: teach fmu_src/native/build.py")
+    codes = {name.lower(): int(code) for name, code in
+             re.findall(r"LN_EVENT_(\w+)\s*=\s*(\d+)", re.sub(r"/\*.*?\*/", " ", enum.group(1), flags=re.S))}
+    names = list(library.EVENT_KINDS)
+    if codes != {name: code for code, name in enumerate(names)}:
+        raise NativeBuildError(f"enum ln_event_kind of linknet.h ({codes}) and linknet_core.clib.library.EVENT_KINDS "
+                               f"({names}) name the events differently: keep them in step")
+    return names, [int(name in LINK_KINDS) for name in names]
+
+
 def state_format() -> int:
     """FMU_STATE_FORMAT of fmu_states.h: a part of the FMU's fingerprint, so that states of other formats are
     refused."""
@@ -416,6 +436,8 @@ def scene_resource(scene, cfg, layout) -> tuple[Resource, dict]:
     values["tolerance_min"], values["tolerance_max"] = library_tolerance_range()
     values["max_force"] = float(getattr(importlib.import_module(ln.Simulator.__module__), "MAX_FORCE", 0.0))
     values["linearization_refusal"] = linearization_refusal(scene) if scene.unilateral else ""
+    values["event_kind_names"], values["event_names_link"] = event_kinds()
+    values["n_event_kinds"] = len(values["event_kind_names"])
     # the elimination order the sparse LDL^T was analysed in (analysed again at instantiation with ln_ldl_analyse)
     values["ldl_ordering"] = []
     if model.ldl:

@@ -19,7 +19,8 @@
 
 #include "fmu_model.h"
 
-#define FMU_STATE_FORMAT 5u  /* 5: the ropes' mode and impulses are part of the model's state */
+#define FMU_STATE_FORMAT 6u  /* 5: the ropes' mode and impulses are part of the model's state; 6: friction's
+                                   slip references too */
 #define FMU_STATE_BYTE_ORDER 0x01020304u
 
 typedef struct fmu_state_header {

@@ -1316,18 +1316,17 @@ int fmu_model_event(const fmu_model *m, size_t i, char *out, size_t n)
 {
     const lnfmu_scene *s = m->s;
     const ln_data *d = m->d;
-    if (i < (size_t)m->events_logged) {  /* rope_events.event_message's words */
-        static const char *const kinds[] = {"taut", "slack", "contact", "release"};  /* enum ln_event_kind */
+    if (i < (size_t)m->events_logged) {  /* rope_events.event_message's words, the kinds by the library's names */
         char t[40], label[512];
         const ln_int kind = d->event_kind[i], index = d->event_link[i];
+        const int known = kind >= 0 && kind < s->n_event_kinds;
         python_repr(d->event_t[i], t, sizeof t);
-        if (kind == LN_EVENT_TAUT || kind == LN_EVENT_SLACK)  /* a rope's events name its link, the ground's a mass */
+        if (known && s->event_names_link[kind])  /* a rope's events name its link, the ground's a mass */
             link_label(s, index, label, sizeof label);
         else
             snprintf(label, sizeof label, "mass %lld (\"%s\")", (long long)(index + 1), mass_name(s, index));
-        snprintf(out, n, "event at t=%s: %s of %s, impulse %.17g N s", t,
-                 kind >= 0 && kind < (ln_int)(sizeof kinds / sizeof *kinds) ? kinds[kind] : "unknown", label,
-                 d->event_impulse[i]);
+        snprintf(out, n, "event at t=%s: %s of %s, impulse %.17g N s", t, known ? s->event_kind_names[kind] : "unknown",
+                 label, d->event_impulse[i]);
         return 1;
     }
     if (i == (size_t)m->events_logged && m->events_lost > 0) {
@@ -1383,17 +1382,25 @@ int fmu_model_set_boolean(fmu_model *m, const unsigned *vr, size_t n, const int 
 /* The links a data's rope state has (L with ropes, else none). */
 static ln_int rope_state_links(const fmu_model *m) { return m->model.n_ropes ? m->s->L : 0; }
 
+/* ln_data.slip_reference's entries: (n_contacts, 3) with friction (n_grips > 0), else none. */
+static size_t slip_reference_doubles(const fmu_model *m) { return (size_t)(3 * m->model.n_grips / 2); }
+
+/* Whether link l is one of friction's grips (the model's last n_grips links): in the mode while its contact sticks. */
+static int is_grip_link(const fmu_model *m, ln_int l) { return l >= m->model.L - m->model.n_grips; }
+
 /* A data's part of the state (the run's, then the companion's): t, h_next; planar, steps, rejected, n_rhs; X, U;
    body states; the driven anchors' clock (t0, start of the hold), their last jump (position, velocity, count), their
    held motion P, V, A and their impulse; with ropes, whether the mode was chosen, the mode (each link 1 where it is
-   in the system, as a double) and each rope's impulse over the last step. The ropes' event log is not state: the
+   in the system, as a double: a friction grip's while its contact sticks) and each rope's impulse over the last
+   step; with friction, each contact's slip reference (the direction of a sliding contact's slip at the last step's
+   end: its velocity along it crossing zero is its stop in the next step). The ropes' event log is not state: the
    glue logs each step's events at its end, the log is empty between steps. */
 static size_t data_state_doubles(const fmu_model *m)
 {
     const lnfmu_scene *s = m->s;
     const ln_int ropes = rope_state_links(m);
     return (size_t)(2 + 4 + 6 * s->K + LN_RIGID_STATE * m->n_bodies + 5 + 12 * s->model->n_driven
-                    + (ropes ? 1 + 2 * ropes : 0));
+                    + (ropes ? 1 + 2 * ropes : 0) + slip_reference_doubles(m));
 }
 
 /* start time; integrator, applied integrator, dirty, estimate, applied estimate, over goal, stepped; the estimate;
@@ -1458,6 +1465,7 @@ static void save_data(const fmu_model *m, const ln_data *d, unsigned char **p)
         }
         put(p, d->rope_impulse, (size_t)ropes * sizeof(double));
     }
+    put(p, d->slip_reference, slip_reference_doubles(m) * sizeof(double));
 }
 
 void fmu_model_state_save(const fmu_model *m, unsigned char *buffer)
@@ -1498,6 +1506,7 @@ typedef struct data_state {
     double *drive;  /* P, V, A, impulse: 3 n_driven each */
     ln_int mode_chosen;
     double *rope;   /* the mode (L, 0 or 1), then the ropes' impulses (L); with ropes only */
+    double *slip_reference;  /* (n_contacts, 3); with friction only */
 } data_state;
 
 static void read_data(const fmu_model *m, const unsigned char **p, data_state *ds, double *arrays)
@@ -1509,6 +1518,7 @@ static void read_data(const fmu_model *m, const unsigned char **p, data_state *d
     ds->Y = ds->U + n3;
     ds->drive = ds->Y + nb;
     ds->rope = ds->drive + 4 * nd;
+    ds->slip_reference = ds->rope + 2 * (size_t)rope_state_links(m);
     get(p, &ds->t, sizeof(double));
     get(p, &ds->h_next, sizeof(double));
     ds->planar = get_int(p);
@@ -1530,6 +1540,7 @@ static void read_data(const fmu_model *m, const unsigned char **p, data_state *d
         ds->mode_chosen = get_int(p);
         get(p, ds->rope, 2 * ropes * sizeof(double));
     }
+    get(p, ds->slip_reference, slip_reference_doubles(m) * sizeof(double));
 }
 
 /* Whether link l is a rope. */
@@ -1555,11 +1566,12 @@ static const char *data_problem(const fmu_model *m, const data_state *ds)
     const ln_int ropes = rope_state_links(m);
     if (ropes) {
         if (ds->mode_chosen != 0 && ds->mode_chosen != 1) return "an invalid mode of the ropes";
-        for (ln_int l = 0; l < ropes; l++)  /* 0 or 1, and a rod always in the system */
-            if (!(ds->rope[l] == 1.0 || (ds->rope[l] == 0.0 && is_rope_link(m, l))))
+        for (ln_int l = 0; l < ropes; l++)  /* 0 or 1; a rod always in the system, a grip while it sticks */
+            if (!(ds->rope[l] == 1.0 || (ds->rope[l] == 0.0 && (is_rope_link(m, l) || is_grip_link(m, l)))))
                 return "an invalid mode of the ropes";
         if (!finite_all(ds->rope + ropes, (size_t)ropes)) return "a non-finite impulse of a rope";
     }
+    if (!finite_all(ds->slip_reference, slip_reference_doubles(m))) return "a non-finite slip reference of friction";
     return NULL;
 }
 
@@ -1594,6 +1606,8 @@ static void apply_data(fmu_model *m, ln_data *d, const data_state *ds)
         memcpy(d->rope_impulse, ds->rope + ropes, (size_t)ropes * sizeof(double));
         d->n_events = d->events_lost = d->events_this_step = 0;
     }
+    if (slip_reference_doubles(m))
+        memcpy(d->slip_reference, ds->slip_reference, slip_reference_doubles(m) * sizeof(double));
 }
 
 int fmu_model_state_restore(fmu_model *m, const unsigned char *buffer, size_t size, char *msg)

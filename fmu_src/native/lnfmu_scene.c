@@ -16,7 +16,7 @@ typedef struct loaded {
     struct ln_rigid_model rigid;
     lnfmu_method *methods;
     lnfmu_variable *variables;
-    const char **mass_names, **method_names, **refused_method_names, **refused_method_reasons,
+    const char **mass_names, **event_kind_names, **method_names, **refused_method_names, **refused_method_reasons,
         **variable_names;  /* the texts' pointer arrays */
 } loaded;
 
@@ -174,6 +174,11 @@ static const char *model_problem(const ln_model *m, const lnfmu_scene *s)
     if (m->n_ropes < 0 || m->n_ropes > m->L || (m->n_ropes && !(m->rope_link && m->rope_restitution))
         || !within(m->rope_link, m->n_ropes, 0, m->L))
         return "the ropes do not fit the links";
+    /* a ground's contacts are ropes, and friction's grips the model's last links (the state keeps their mode) */
+    if (m->n_contacts < 0 || m->n_contacts > m->n_ropes || (m->n_contacts && !m->contact_mass)
+        || !within(m->contact_mass, m->n_contacts, 0, m->K)
+        || !(m->n_grips == 0 || m->n_grips == 2 * m->n_contacts) || m->n_grips > m->L - m->n_contacts)
+        return "the ground's contacts and grips do not fit the masses and links";
     return NULL;
 }
 
@@ -210,6 +215,16 @@ static const char *variables_problem(const lnfmu_scene *s)
     return NULL;
 }
 
+/* Why the events' names cannot name every kind of event the core logs, or NULL. */
+static const char *event_kinds_problem(const lnfmu_scene *s)
+{
+    if (s->n_event_kinds < 0) return "a negative count of events' kinds";
+    for (ln_int i = 0; i < s->n_event_kinds; i++)
+        if (s->event_names_link[i] != 0 && s->event_names_link[i] != 1)
+            return "an event's kind names neither a link nor a mass";
+    return NULL;
+}
+
 /* Why the elimination order is not a permutation of the links, or NULL. */
 static const char *ordering_problem(const lnfmu_scene *s)
 {
@@ -235,6 +250,7 @@ void lnfmu_scene_free(lnfmu_scene *s)
     free(l->methods);
     free(l->variables);
     free(l->mass_names);
+    free(l->event_kind_names);
     free(l->method_names);
     free(l->refused_method_names);
     free(l->refused_method_reasons);
@@ -262,6 +278,7 @@ lnfmu_scene *lnfmu_scene_load(const fmu_resource *r, char *msg)
         problem = "a specialisation this FMU does not know";
     if (!problem && l->model.solver == LN_SOLVER_LDL) problem = ordering_problem(s);
     if (!problem) problem = variables_problem(s);
+    if (!problem) problem = event_kinds_problem(s);
     if (problem) goto failed;
     if (s->specialisation == LNFMU_RIGID) {
         if (read_rigid(r, "rigid", &l->rigid, &l->model, msg)) goto failed;

@@ -83,6 +83,11 @@ enum lnfmu_specialisation { LNFMU_POINT_MASSES = 0, LNFMU_STATIC = 1, LNFMU_RIGI
     SCALAR(double, max_force)                           /* an input force beyond this (N) is refused; 0: no limit */\
     TEXT(linearization_refusal)                         /* why the directional derivatives are refused (the     \
                                                            library's words: a scene with ropes), or empty */        \
+    SCALAR(ln_int, n_event_kinds)                       /* the kinds of the core's events (enum ln_event_kind) */\
+    TEXTS(event_kind_names, s->n_event_kinds)           /* by the library's names (linknet_core.clib.library    \
+                                                           .EVENT_KINDS), as both FMUs log them */              \
+    ARRAY(int, event_names_link, s->n_event_kinds)      /* 1 where an event of the kind names a link, 0 a mass  \
+                                                           (rope_events.LINK_KINDS) */                          \
     OPTIONAL(ln_int, ldl_ordering, s->L)                /* LN_SOLVER_LDL: the elimination order (position -> link) */\
     SCALAR(int, specialisation)                         /* enum lnfmu_specialisation */                             \
     SCALAR(ln_int, n_bodies)                            /* LNFMU_RIGID: the bodies ("rigid.*" at the defaults) */   \
