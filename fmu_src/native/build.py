@@ -264,8 +264,7 @@ def offered_integrators(scene, cfg: dict) -> dict:
     """cfg with the integrators the native core runs for ``scene`` (the library's native_refusal, asked here only),
     the others in cfg["refused_integrators"] (name -> the library's reason), which the FMU does not offer and refuses
     by that reason when its parameter integrator names one. NativeBuildError with the reason where the default
-    integrator is refused (e.g. a ground with --step or --integrator rattle) or every one is (a ground with
-    friction)."""
+    integrator is refused (e.g. a ground with --step or --integrator rattle) or every one is."""
     import linknet_core as ln
     from linknet_core.dynamics.unilateral import native_refusal
     refused = {}

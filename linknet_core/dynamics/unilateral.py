@@ -86,28 +86,19 @@ class Event(NamedTuple):
 
 
 def native_refusal(scene: Scene, method=None) -> str | None:
-    """Why the native core cannot run ``scene`` with ``method`` (an integrator class; None: every method, as the
-    native FMU offers them), or None where it can. It takes ropes on every method, and a ground on the adaptive
-    Runge-Kutta methods (linknet_core/native/src/stages/ropes.c: each contact a unilateral link to a virtual
-    anchor; stages/friction.c), with Coulomb friction where the scene has no links (masses alone on the ground);
-    Coulomb friction on masses joined by links, and a ground on the fixed-step methods, run on the numpy reference
-    only. (The core's stages run friction on linked masses too, held to the reference by
-    tests/native/test_native_friction.py; the native FMU, whose build asks this rule, does not keep a sliding
-    contact's slip reference in its state.)"""
+    """Why the native core cannot run ``scene`` with ``method`` (an integrator class; None: every method), or None
+    where it can. It takes ropes on every method, and a ground, with or without Coulomb friction, on the adaptive
+    Runge-Kutta methods (linknet_core/native/src/stages/ropes.c: each contact a unilateral link to a virtual anchor;
+    stages/friction.c: a stuck contact's grips, a sliding one's friction carried through the links); a ground on the
+    fixed-step methods runs on the numpy reference only. The native FMU's build asks this of each method it would
+    offer: with a ground it offers the adaptive ones."""
     ground = scene.ground
-    if ground is None:
+    if ground is None or (method is not None and method.adaptive):
         return None
-    numpy_runs = "the numpy reference runs it (backend=\"auto\" or \"numpy\", and the pythonfmu FMU)"
-    if ground.friction > 0 and scene.L > 0:
-        return (f"{scene.name}: it has a ground with Coulomb friction (mu = {ground.friction:g}) and links, and the "
-                "native core (backend=\"native\", the native FMU) takes Coulomb friction on masses without links only; "
-                f"{numpy_runs}")
-    if method is None or not method.adaptive:
-        what = f"a ground with Coulomb friction (mu = {ground.friction:g})" if ground.friction > 0 else "a ground"
-        return (f"{scene.name}: it has {what}, and the native core takes a ground on the adaptive methods (dop853, "
-                "dopri5) only, not on the fixed-step ones (RATTLE and its compositions), nor the native FMU, which "
-                f"offers every method; {numpy_runs}")
-    return None
+    what = f"a ground with Coulomb friction (mu = {ground.friction:g})" if ground.friction > 0 else "a ground"
+    return (f"{scene.name}: it has {what}, and the native core (backend=\"native\", the native FMU) takes a ground on "
+            "the adaptive methods (dop853, dopri5) only, not on the fixed-step ones (RATTLE and its compositions); the "
+            "numpy reference runs it (backend=\"auto\" or \"numpy\", and the pythonfmu FMU)")
 
 
 def scene_size(scene: Scene) -> float:

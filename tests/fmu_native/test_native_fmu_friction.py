@@ -70,7 +70,7 @@ def _names(fmu):
 
 
 @pytest.mark.parametrize("method", ["dop853", "dopri5"])
-@pytest.mark.parametrize("name", ["block"])
+@pytest.mark.parametrize("name", ["block", "rod"])
 def test_a_rough_ground_through_the_native_fmu_equals_the_library(name, method, fmus, scenes):
     fmu = fmus[name]
     t_end, n = RUNS[name]

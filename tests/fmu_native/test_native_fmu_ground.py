@@ -8,8 +8,8 @@ forms (the ball's bounce times and impulses, the chain's landing times and impul
 contacts repeats the run across the next ones; the methods the core does not run with a ground (RATTLE and its
 compositions) are not offered and are refused by the library's reason when chosen, the instance staying usable;
 gravity may change (the library's run of Scene.with_parameters), a mass may not (the initial impact is the
-library's); a ground with friction, or a fixed-step default integrator, is refused at build with the library's
-reason, no FMU written.
+library's); a fixed-step default integrator (with or without friction) is refused at build with the library's reason,
+no FMU written. Friction: test_native_fmu_friction.py.
 
 Tolerance: none. The FMU's binary (Zig's clang) and the library (gcc) compile the same core with the same flags and no
 C library math (test_native_fmu_equals_library), and the FMU runs the library's own model of the ground (the scene
@@ -369,21 +369,24 @@ def test_gravity_may_change_a_mass_may_not(fmus, scenes):
     assert other.get(["X[1,3]"])[0] == _library(scene, 0.1, 1, "dop853").X[-1, 0, 2]
 
 
-@pytest.mark.parametrize("what", ["friction", "fixed step"])
-def test_a_ground_the_core_does_not_run_is_refused_at_build_with_the_librarys_reason(what, tmp_path):
-    data = chain_data() if what == "friction" else ball_data()
-    if what == "friction":  # Coulomb friction on masses joined by links
+@pytest.mark.parametrize("what", ["friction on rattle", "fixed step"])
+def test_a_ground_on_a_fixed_step_default_integrator_is_refused_at_build_with_the_librarys_reason(what, tmp_path):
+    data = chain_data() if what == "friction on rattle" else ball_data()
+    if what == "friction on rattle":  # Coulomb friction on masses joined by links, RATTLE chosen as the default
         data["ground"]["friction"] = 0.4
     path = tmp_path / "refused.json"
     path.write_text(json.dumps(data))
     out = tmp_path / "refused.fmu"
-    options = dict(step=1e-3) if what == "fixed step" else {}  # a step without a method: RATTLE at that step
+    # a step without a method: RATTLE at that step
+    options = dict(step=1e-3) if what == "fixed step" else dict(integrator="rattle", step=1e-3)
     with pytest.raises(SystemExit) as refused:
         build_fmu.build_scene_fmu(str(path), out, native=True, quiet=True, platforms="host", **options)
     scene = ln.load_scene(path)
-    reason = native_refusal(scene, ln.METHODS["rattle" if what == "fixed step" else "dop853"])
+    reason = native_refusal(scene, ln.METHODS["rattle"])
     assert reason is not None and str(refused.value) == f"build_fmu: {reason}"
-    assert ("Coulomb friction" in reason) == (what == "friction")
+    assert ("Coulomb friction" in reason) == (what == "friction on rattle")
+    assert "adaptive methods (dop853, dopri5) only" in reason
+    assert native_refusal(scene, ln.METHODS["dop853"]) is None  # the same scene builds on its default method
     assert not out.exists()
 
 

@@ -315,16 +315,19 @@ def _pendulum_changed(root, name, **changes):
     return path
 
 
-def test_a_scene_with_a_ground_with_friction_is_refused_at_build_with_the_librarys_reason(tmp_path):
-    # a frictionless ground runs (test_native_fmu_ground.py); Coulomb friction stays on the numpy reference
+def test_a_rope_scene_with_a_ground_with_friction_builds_offering_the_adaptive_methods(tmp_path):
+    # the pendulum above a rough ground (test_native_fmu_friction.py runs friction through the FMU): the adaptive
+    # methods offered, RATTLE and its compositions refused by the library's reason
     path = _pendulum_changed(tmp_path, "rope_ground", ground={"point": [0.0, 0.0, -5.0], "normal": [0.0, 0.0, 1.0],
                                                               "friction": 0.5})
-    out = tmp_path / "refused.fmu"
-    with pytest.raises(SystemExit) as refused:
-        build_fmu.build_scene_fmu(str(path), out, native=True, quiet=True)
-    assert str(refused.value) == f"build_fmu: {native_refusal(ln.load_scene(path))}"
-    assert "Coulomb friction" in str(refused.value)
-    assert not out.exists()
+    from fmpy import read_model_description
+    out = tmp_path / "rough.fmu"
+    build_fmu.build_scene_fmu(str(path), out, native=True, quiet=True, platforms="host")
+    integrator = next(v for v in read_model_description(str(out)).modelVariables if v.name == "integrator")
+    assert integrator.description == "integration method: dop853, dopri5"
+    scene = ln.load_scene(path)
+    assert native_refusal(scene, ln.METHODS["dop853"]) is None
+    assert "Coulomb friction" in native_refusal(scene, ln.METHODS["rattle"])
 
 
 def test_a_pivot_driven_by_inputs_jerks_and_slackens_the_rope_as_the_library(fmu_root, tmp_path_factory):

@@ -8,9 +8,9 @@ impulse-level law), a puck pushed across its slide (its slip direction turning),
 until it slips. Masses joined by links: a rod leaning on the ground with its foot pushed sideways and a dumbbell
 pushed at a slant (the slip from rest turned by the rod), a rod dropped at a slant landing on one end (stuck, and
 sliding until its top lands), a rod standing on the floor until its base slips, a pendulum swinging into the ground
-(its rope jerked slack, the bob sliding to a stop). The library routes Coulomb friction on linked masses to the numpy
-reference (unilateral.native_refusal, which the native FMU's build asks too); the core's handling of it is held to
-the reference here with that rule lifted for the adaptive methods (linked_friction_on_native)."""
+(its rope jerked slack, the bob sliding to a stop). backend="auto" takes every one of them to the core on the adaptive
+methods (unilateral.native_refusal, which the native FMU's build asks too); a ground on the fixed-step methods stays on
+the numpy reference."""
 from __future__ import annotations
 
 import numpy as np
@@ -104,19 +104,6 @@ LINKED = {"rod leaning, its foot pushed": (lambda: rod([[0, 0, 0], [0.6, 0, 0.8]
           "pendulum swinging into the ground": (swing, 1.5, 51, 3)}
 
 
-@pytest.fixture
-def linked_friction_on_native(monkeypatch):
-    """unilateral.native_refusal with Coulomb friction on linked masses let through to the core on the adaptive
-    methods (the library's rule keeps it on the numpy reference)."""
-    rule = unilateral.native_refusal
-
-    def lifted(scene, method=None):
-        if scene.ground is not None and scene.ground.friction > 0 and method is not None and method.adaptive:
-            return None
-        return rule(scene, method)
-    monkeypatch.setattr(unilateral, "native_refusal", lifted)
-
-
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("name", list(SCENES))
 def test_masses_alone_on_a_rough_ground_give_the_references_events_and_states_to_round_off(name, method):
@@ -131,8 +118,7 @@ def test_masses_alone_on_a_rough_ground_give_the_references_events_and_states_to
 
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("name", list(LINKED))
-def test_linked_masses_on_a_rough_ground_give_the_references_events_and_states_to_round_off(
-        name, method, linked_friction_on_native):
+def test_linked_masses_on_a_rough_ground_give_the_references_events_and_states_to_round_off(name, method):
     make, t_end, n_out, n_events = LINKED[name]
     scene = make()
     assert ln.Simulator(scene, method, backend="auto").backend == "native"
@@ -210,11 +196,9 @@ def test_a_snapshot_taken_mid_slide_continues_identically_on_native():
     assert [e.kind for e in events] == ["stick"]
 
 
-def test_friction_on_linked_masses_and_on_the_fixed_step_methods_stays_on_numpy_with_the_reason():
-    scene = dropped_rod(0.2, [3.0, 1.5, 0.0])
-    with pytest.raises(ln.SolverError, match="Coulomb friction .* and links"):
-        ln.Simulator(scene, "dop853", backend="native")
-    assert ln.Simulator(scene, "dop853").backend == "numpy"
-    with pytest.raises(ln.SolverError, match="Coulomb friction .* adaptive methods"):
-        ln.Simulator(thrown(), "rattle", dt=1e-3, backend="native")
-    assert ln.Simulator(thrown(), "rattle", dt=1e-3).backend == "numpy"
+def test_friction_on_the_fixed_step_methods_stays_on_numpy_with_the_reason():
+    for scene in (thrown(), dropped_rod(0.2, [3.0, 1.5, 0.0])):
+        with pytest.raises(ln.SolverError, match="Coulomb friction .* adaptive methods"):
+            ln.Simulator(scene, "rattle", dt=1e-3, backend="native")
+        assert ln.Simulator(scene, "rattle", dt=1e-3).backend == "numpy"
+        assert unilateral.native_refusal(scene, ln.METHODS["dop853"]) is None

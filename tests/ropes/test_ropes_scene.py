@@ -124,16 +124,18 @@ def test_the_native_backend_refuses_a_ground_and_auto_takes_the_numpy_path_there
     assert ln.Simulator(ln.Scene.from_dict(data()), method, **step).backend == "native"
 
 
-def test_the_native_fmu_build_of_a_rope_scene_with_a_ground_with_friction_fails_cleanly_and_writes_nothing(tmp_path):
-    # the native FMU takes ropes and a frictionless ground (tests/fmu_native/test_native_fmu_ropes.py,
-    # test_native_fmu_ground.py), not Coulomb friction
+def test_the_native_fmu_build_of_a_rope_scene_with_a_rough_ground_on_rattle_fails_cleanly_and_writes_nothing(tmp_path):
+    # the native FMU takes ropes and a ground, with friction too, on the adaptive methods only
+    # (tests/fmu_native/test_native_fmu_ropes.py, test_native_fmu_ground.py, test_native_fmu_friction.py)
     out = tmp_path / "rope_ground.fmu"
     scene = tmp_path / "rope_ground.json"
     scene.write_text(json.dumps(data(ground={"point": [0, 0, -5], "normal": [0, 0, 1], "friction": 0.5})))
     run = subprocess.run([sys.executable, str(ROOT / "build_fmu.py"), str(scene), "--native", "--platforms", "host",
-                          "-o", str(out)], capture_output=True, text=True, timeout=120)
+                          "--integrator", "rattle", "--step", "1e-3", "-o", str(out)],
+                         capture_output=True, text=True, timeout=120)
     assert run.returncode != 0 and "Traceback" not in run.stderr, run.stderr
     assert "build_fmu:" in run.stderr and "it has a ground with Coulomb friction" in run.stderr
+    assert "adaptive methods (dop853, dopri5) only" in run.stderr
     assert not out.exists() and list(tmp_path.iterdir()) == [scene]
 
 
