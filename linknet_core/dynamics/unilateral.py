@@ -147,11 +147,11 @@ def describe(scene: Scene) -> list[str]:
             on = [scene.mass_label(int(k)) for k in dyn.contact_masses[dyn.touching(X)[dyn.rope_links.size:]]]
             shown = ", ".join(on[:8]) + (f" and {len(on) - 8} more" if len(on) > 8 else "")
             lines.append(f"masses on the ground at the start: {len(on)}" + (f" ({shown})" if on else ""))
-    lines.append("path: the numpy reference, event by event (linknet_core.dynamics.unilateral; the native core takes "
-                 "a frictionless ground only)" if ground is not None and ground.friction > 0 else
-                 "path: the native core, event by event, on the adaptive methods (linknet_core/native/src/stages/"
-                 "ropes.c, each contact a unilateral link to a virtual anchor); the numpy reference on the fixed-step "
-                 "ones" if ground is not None else
+    friction = ("; stages/friction.c, Coulomb friction: a stuck contact's grips, a sliding one's friction"
+                if ground is not None and ground.friction > 0 else "")
+    lines.append("path: the native core, event by event, on the adaptive methods (linknet_core/native/src/stages/"
+                 f"ropes.c, each contact a unilateral link to a virtual anchor{friction}); the numpy reference on the "
+                 "fixed-step ones" if ground is not None else
                  "path: the native core, event by event (linknet_core/native/src/stages/ropes.c; the numpy reference "
                  "with backend=\"numpy\")")
     return lines
@@ -1168,8 +1168,8 @@ class UnilateralReport(InitialReport):
         if scene.ground is not None:
             what.append(f"{self.contacts} masses on the ground")
         return super().lines(scene) + [
-            "ropes and ground: event by event (the native core takes ropes, and a frictionless ground on the adaptive "
-            "methods; the numpy reference the rest); "
+            "ropes and ground: event by event (the native core takes ropes, and a ground, with or without friction, on "
+            "the adaptive methods; the numpy reference the rest); "
             + ", ".join(what)]
 
 

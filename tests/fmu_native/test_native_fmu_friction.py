@@ -1,9 +1,9 @@
 """Coulomb friction on the ground through the native FMU (`build_fmu.py --native`), driven in this process by fmpy:
-a block thrown along a rough ground (it slides to a stop and sticks) and a rod dropped at a slant onto it (masses
-joined by a link: it lands on one end, slides, its top lands), against linknet_core.simulate on the native backend
-with the same method and communication points (X, U, Jground, and one message per event in the pythonfmu FMU's
-words, rope_events.event_message: the stop is a 'stick' of the block), and against the closed form of the block's
-slide (it stops at v / (mu g) after v^2 / (2 mu g)). An FMU state taken mid-slide (the contact's slip reference part
+a block thrown along a rough ground (it slides to a stop and sticks), a rod dropped at a slant onto it (masses joined
+by a link: it lands on one end, slides, its top lands) and a rod standing on it until its base slips, against
+linknet_core.simulate on the native backend with the same method and communication points (X, U, Jground, and one
+message per event in the pythonfmu FMU's words, rope_events.event_message: the block's stop is a 'stick', the base's
+slip a 'slip'), and against the closed form of the block's slide (it stops at v / (mu g) after v^2 / (2 mu g)). An FMU state taken mid-slide (the contact's slip reference part
 of it), restored in the same instance and deserialized into another that has run past the stop, repeats the run.
 
 Tolerance: none (as test_native_fmu_ground: the FMU runs the library's own model of the ground with its grips, baked
@@ -24,7 +24,8 @@ from linknet_fmu.rope_events import event_message  # noqa: E402
 
 G = 9.81
 BLOCK = dict(v=3.0, mu=0.4, mass=2.0)
-RUNS = {"block": (1.5, 30), "rod": (0.6, 30)}  # (seconds, communication steps): the block stopped at 0.76 s
+# (seconds, communication steps): the block stops at 0.76 s, the standing rod's base slips at 0.59 s
+RUNS = {"block": (1.5, 30), "rod": (0.6, 30), "standing": (0.6, 12)}
 
 
 def block_data():
@@ -46,11 +47,21 @@ def rod_data():
             "ground": {"point": [0, 0, 0], "normal": [0, 0, 1], "friction": 0.2}}
 
 
+def standing_data():
+    # a rod standing on its base 0.1 rad off the vertical (mu 0.15): held at first, its base slips as it tips
+    angle = 0.1
+    return {"name": "standing_rod", "gravity": [0, 0, -G],
+            "masses": [{"name": "base", "position": [0, 0, 0], "mass": 1.0},
+                       {"name": "top", "position": [np.sin(angle), 0, np.cos(angle)], "mass": 1.0}],
+            "links": [{"a": 1, "b": 2, "length": 1.0}],
+            "ground": {"point": [0, 0, 0], "normal": [0, 0, 1], "friction": 0.15}}
+
+
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory):
     root = tmp_path_factory.mktemp("friction_scenes")
     paths = {}
-    for name, data in (("block", block_data()), ("rod", rod_data())):
+    for name, data in (("block", block_data()), ("rod", rod_data()), ("standing", standing_data())):
         paths[name] = root / f"{name}.json"
         paths[name].write_text(json.dumps(data))
     return paths
@@ -70,7 +81,7 @@ def _names(fmu):
 
 
 @pytest.mark.parametrize("method", ["dop853", "dopri5"])
-@pytest.mark.parametrize("name", ["block", "rod"])
+@pytest.mark.parametrize("name", ["block", "rod", "standing"])
 def test_a_rough_ground_through_the_native_fmu_equals_the_library(name, method, fmus, scenes):
     fmu = fmus[name]
     t_end, n = RUNS[name]
@@ -92,6 +103,8 @@ def test_a_rough_ground_through_the_native_fmu_equals_the_library(name, method, 
         distance = v * v / (2 * mu * G)
         np.testing.assert_allclose(rows[-1, :3], [0.6 * distance, 0.8 * distance, 0.0], rtol=0, atol=1e-9)
         assert not rows[:, names.index("Jground[1]")].any()  # no landing: the ground held it all along
+    elif name == "standing":
+        assert kinds == ["slip"] and 'slip of mass 1 ("base")' in messages[0]
     else:
         # the foot lands (its impulse in Jground[1]), the top lands later (Jground[2])
         assert kinds.count("contact") == 2

@@ -1,12 +1,12 @@
 """linknet analyze of a scene with ropes and a ground: the ropes and which are slack at the start, the ground and the
-masses on it, and the numpy reference as the path that runs it."""
+masses on it, and the path that runs it (the native core on the adaptive methods, friction included)."""
 from __future__ import annotations
 
 import linknet_core as ln
 from linknet_core.simulator.analysis import analyze_scene
 
 
-def test_analyze_describes_the_ropes_the_ground_and_the_reference_path():
+def test_analyze_describes_the_ropes_the_ground_and_the_path():
     # a taut hanging rope (pulled by the weight), a rope shorter than its length (slack), a mass on the ground
     scene = ln.Scene.from_dict({"name": "yard", "gravity": [0, 0, -9.81],
                                 "masses": [{"name": "hook", "position": [0, 0, 3], "fixed": True},
@@ -24,4 +24,5 @@ def test_analyze_describes_the_ropes_the_ground_and_the_reference_path():
     assert ("ground: the plane through [0.0, 0.0, 0.0] with normal [0.0, 0.0, 1.0], restitution 0.2, friction 0.4 "
             "(Coulomb)") in text
     assert 'masses on the ground at the start: 1 (mass 4 ("crate"))' in text
-    assert "path: the numpy reference" in text and "native path" not in text
+    assert "path: the native core, event by event, on the adaptive methods" in text and "Coulomb friction" in text
+    assert "the numpy reference on the fixed-step ones" in text and "native path" not in text
