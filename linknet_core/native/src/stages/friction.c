@@ -162,18 +162,39 @@ static int FN(friction_evaluate)(const ln_model *mm, ln_data *d, struct FN(frict
 /* ---- the slip directions ---------------------------------------------------------------------------------------- */
 struct friction_law {
     double a[2], N, G[4], k[2], mu;
+    double c[2];  /* the unit direction angles are measured from (slip_direction's guess) */
 };
 
-/* (a - s G d) x d, (a - s G d) . d and s = mu N / (1 + mu k . d) at d = (cos phi, sin phi) (_slip_direction's law). */
-static void friction_law_at(const struct friction_law *q, double phi, double *cross, double *along, double *s_out)
+/* The unit direction at angle theta from the unit vector c (2) on the plane's tangents: c turned by theta (ln_math's
+   sine and cosine: the core calls no C math library). */
+static void turned(const double *c, double theta, double *d)
 {
-    const double d0 = cos(phi), d1 = sin(phi);
+    const double cs = ln_cos(theta), sn = ln_sin(theta);
+    d[0] = c[0] * cs - c[1] * sn;
+    d[1] = c[1] * cs + c[0] * sn;
+}
+
+/* (a - s G d) x d, (a - s G d) . d and s = mu N / (1 + mu k . d) at d, the direction at angle theta from the unit
+   vector q->c (_slip_direction's law, whose angle is measured from the guess's direction). */
+static void friction_law_at(const struct friction_law *q, double theta, double *cross, double *along, double *s_out)
+{
+    double d[2];
+    turned(q->c, theta, d);
+    const double d0 = d[0], d1 = d[1];
     const double s = q->mu * q->N / (1.0 + q->mu * (q->k[0] * d0 + q->k[1] * d1));
     const double acc0 = q->a[0] - s * (q->G[0] * d0 + q->G[1] * d1);
     const double acc1 = q->a[1] - s * (q->G[2] * d0 + q->G[3] * d1);
     *cross = acc1 * d0 - acc0 * d1;
     *along = acc0 * d0 + acc1 * d1;
     *s_out = s;
+}
+
+/* |remainder(theta, 2 pi)| for theta in [-2 pi, 2 pi]: how far an angle is from 0 around the circle. */
+static double angle_distance(double theta)
+{
+    const double two_pi = 6.283185307179586;
+    theta = fabs(theta);
+    return theta > 0.5 * two_pi ? two_pi - theta : theta;
 }
 
 struct friction_law_sign {
@@ -201,7 +222,14 @@ static void FN(slip_direction)(const struct friction_law *q, const double *guess
     for (int i = 0; i < 4; i++) gmax = ln_fmax(gmax, fabs(q->G[i]));
     const double slack = 64 * 2.220446049250313e-16 * ln_fmax(ln_sqrt(q->a[0] * q->a[0] + q->a[1] * q->a[1]),
                                                               q->mu * fabs(q->N) * gmax);
-    const double angle = atan2(guess[1], guess[0]);
+    /* angles from the guess's direction: the scan's grid and the distance of a root from the guess are the
+       reference's (its angles are absolute, atan2 of the guess plus these) */
+    const double size = ln_hypot(guess[0], guess[1]);
+    struct friction_law law = *q;
+    law.c[0] = guess[0] / size;
+    law.c[1] = guess[1] / size;
+    q = &law;
+    const double angle = 0.0;
     double cross, along, s;
     friction_law_at(q, angle, &cross, &along, &s);
     if (fabs(cross) <= slack && along >= -slack && s > 0) return;
@@ -216,7 +244,7 @@ static void FN(slip_direction)(const struct friction_law *q, const double *guess
         if (values[j] != 0.0) continue;
         friction_law_at(q, grid[j], &cross, &along, &s);
         if (!(along >= -slack && s > 0)) continue;
-        const double distance = fabs(remainder(grid[j] - angle, 2 * pi));
+        const double distance = angle_distance(grid[j] - angle);
         if (!found || distance < best_distance) {
             best = grid[j];
             best_distance = distance;
@@ -231,7 +259,7 @@ static void FN(slip_direction)(const struct friction_law *q, const double *guess
         rope_bracketed_root(friction_law_fn, &ctx, &lo, &hi, ctx.sign * v_lo, ctx.sign * v_hi, 4e-16, 0, 0.0);
         friction_law_at(q, hi, &cross, &along, &s);
         if (!(along >= -slack && s > 0)) continue;
-        const double distance = fabs(remainder(hi - angle, 2 * pi));
+        const double distance = angle_distance(hi - angle);
         if (!found || distance < best_distance) {
             best = hi;
             best_distance = distance;
@@ -239,8 +267,7 @@ static void FN(slip_direction)(const struct friction_law *q, const double *guess
         }
     }
     if (!found) return;
-    out[0] = cos(best);
-    out[1] = sin(best);
+    turned(q->c, best, out);
 }
 
 /* A response of Coulomb's law at one level (the acceleration level from rest, or an impact): for a load of size

@@ -1700,7 +1700,7 @@ static int FN(friction_young_slip)(const ln_model *mm, const ln_method *meth, ln
     }
     const double error = ln_sqrt(sum / (2.0 * DIM * (double)mm->n_free));
     if (error <= 1.0) return LN_OK;
-    const double h_ok = h * ln_fmax(meth->safety * pow(error, -1.0 / 3.0), meth->min_factor);
+    const double h_ok = h * ln_fmax(meth->safety * ln_pow(error, -1.0 / 3.0), meth->min_factor);
     if ((status = FN(rope_method_step)(mm, meth, d, X0, U0, F_base, t0, h_ok, X1, U1)) != LN_OK) return status;
     *t1 = t0 + h_ok;
     return LN_OK;
