@@ -138,6 +138,8 @@ def condition_of_tension_matrix(A, self_stresses: int) -> tuple[float, str]:
     above it estimated in the 1-norm (Hager-Higham, as LAPACK's condition estimators: ||A||_1 exact, ||A^-1||_1 from
     a few solves with a sparse LU of A). The two norms' condition numbers differ by at most a factor L."""
     L = A.shape[0]
+    if L == 0:  # no links (a mass alone on a ground): no tension system
+        return float("nan"), "no links"
     if L <= DENSE_CONDITION_LIMIT:
         w = np.linalg.eigvalsh(A.toarray())
         positive = w[w > 1e-12 * max(w.max(), 1e-300)]

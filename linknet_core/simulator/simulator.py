@@ -139,8 +139,8 @@ def _setup(scene: Scene, dyn: Dynamics, settings: RunSettings, own_dynamics: boo
                                                length_tol=settings.length_tol)
     # one backend, chosen here before anything is built: the one asked for, the native core by default, the numpy
     # reference where the right-hand side is casadi's (a variant of the numpy Dynamics) or the scene has what the
-    # native core does not take (unilateral.native_refusal: a ground with friction, or on a fixed-step method;
-    # backend="native" is refused there)
+    # native core does not take (unilateral.native_refusal: a ground on a fixed-step method; backend="native" is
+    # refused there)
     backend = settings.backend
     chosen = "numpy" if dyn.rhs_kernel != "numpy" or numpy_only(scene, backend, stepping.cls) else \
         "native" if backend == "auto" else backend

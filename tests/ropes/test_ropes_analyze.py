@@ -26,3 +26,15 @@ def test_analyze_describes_the_ropes_the_ground_and_the_path():
     assert 'masses on the ground at the start: 1 (mass 4 ("crate"))' in text
     assert "path: the native core, event by event, on the adaptive methods" in text and "Coulomb friction" in text
     assert "the numpy reference on the fixed-step ones" in text and "native path" not in text
+
+
+def test_analyze_takes_a_mass_alone_on_a_rough_ground():
+    """No links, so no tension system to condition: said so, and the ground and its path are described."""
+    scene = ln.Scene.from_dict({"name": "block", "gravity": [0, 0, -9.81],
+                                "masses": [{"name": "b", "position": [0, 0, 0], "mass": 1, "velocity": [1, 0, 0]}],
+                                "links": [],
+                                "ground": {"point": [0, 0, 0], "normal": [0, 0, 1], "friction": 0.3}})
+    text = analyze_scene(scene).text()
+    assert "condition estimate of A at the initial state: nan (no links)" in text
+    assert "friction 0.3 (Coulomb)" in text
+    assert "masses on the ground at the start: 1" in text
