@@ -85,6 +85,7 @@ def wheel(tmp_path_factory) -> Path:
     return wheels[0]
 
 
+@pytest.mark.slow  # CI's slow step runs it (.ci/run): kept out of make test's 5 minutes
 def test_wheel_tag_is_any_python3_on_this_platform(wheel):
     platform = sysconfig.get_platform().replace("-", "_").replace(".", "_")
     name, version, python, abi, plat = wheel.stem.split("-")
@@ -100,6 +101,7 @@ def test_wheel_tag_is_any_python3_on_this_platform(wheel):
     assert meta["Root-Is-Purelib"] == "false"
 
 
+@pytest.mark.slow  # CI's slow step runs it (.ci/run): kept out of make test's 5 minutes
 def test_wheel_holds_every_package_the_library_and_the_c_sources(wheel):
     with zipfile.ZipFile(wheel) as z:
         names = set(z.namelist())
@@ -117,6 +119,7 @@ def test_wheel_holds_every_package_the_library_and_the_c_sources(wheel):
     assert not {n for n in names if "__pycache__" in n or n.endswith((".pyc", ".o"))}
 
 
+@pytest.mark.slow  # CI's slow step runs it (.ci/run): kept out of make test's 5 minutes
 def test_wheel_imports_and_simulates_from_its_own_files(wheel, tmp_path):
     """The wheel's files alone (on PYTHONPATH, the dependencies from this environment), from outside the checkout."""
     unpacked = tmp_path / "site"
@@ -135,6 +138,7 @@ def test_wheel_imports_and_simulates_from_its_own_files(wheel, tmp_path):
     assert "chain_10" in proc.stdout
 
 
+@pytest.mark.slow  # CI's slow step runs it (.ci/run): kept out of make test's 5 minutes
 def test_wheel_carries_the_fmu_export_and_linknet_fmu_builds_from_it(wheel, tmp_path):
     """`linknet fmu` from the wheel's files alone, outside the checkout: build_fmu.py and fmu_src/ travel in
     linknet_core/fmu_export/ (setup.py), and the FMU it builds simulates in fmpy."""

@@ -20,6 +20,7 @@ pytest.importorskip("linknet_core")
 from benchmarks import stress  # noqa: E402
 
 
+@pytest.mark.slow  # CI's slow step runs it (.ci/run): kept out of make test's 5 minutes
 def test_mass_ratios_stay_rigid_and_correct():
     c = stress.case_mass_ratios(quick=True)
     for name, m in c["measured"].items():

@@ -417,6 +417,7 @@ def test_a_repeated_discarded_step_asks_the_master_to_stop(scene_paths, fmi3_roo
     s.free()
 
 
+@pytest.mark.slow  # CI's slow step runs it (.ci/run): kept out of make test's 5 minutes
 # ---------------------------------------------------------------------------- sources/
 @pytest.mark.skipif(GCC is None, reason="no C compiler")
 def test_sources_build_a_binary_exporting_only_fmi3_with_the_shipped_results(scene_paths, fmi3_root, tmp_path):
@@ -451,6 +452,7 @@ def test_sources_build_a_binary_exporting_only_fmi3_with_the_shipped_results(sce
         np.testing.assert_array_equal(runs[1][key], runs[0][key], err_msg=key)
 
 
+@pytest.mark.slow  # CI's slow step runs it (.ci/run): kept out of make test's 5 minutes
 def test_every_platform_in_its_fmi3_folder(scene_paths, fmi3_root):
     """binaries/<FMI 3.0 platform tuple>/: each binary is of its tuple's machine (read from its header); the macOS
     universal binary is split into a thin slice per tuple; the host's binary runs (the other tests)."""

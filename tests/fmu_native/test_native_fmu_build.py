@@ -117,6 +117,7 @@ def _compile(cmd):
     assert proc.returncode == 0, " ".join(cmd[:10]) + "\n" + proc.stderr[-4000:]
 
 
+@pytest.mark.slow  # CI's slow step runs it (.ci/run): kept out of make test's 5 minutes
 @pytest.mark.parametrize("compiler", ["gcc", "clang"])
 def test_sources_rebuild_with_gcc_and_clang_and_give_the_same_results(compiler, fmu_root, host, no_python_env,
                                                                       tmp_path):

@@ -101,6 +101,7 @@ def _elf_exports(so: Path) -> set[str]:
     return {line.split()[-1] for line in nm.splitlines() if line.strip()}
 
 
+@pytest.mark.slow  # CI's slow step runs it (.ci/run): kept out of make test's 5 minutes
 @pytest.mark.skipif(shutil.which("objdump") is None or shutil.which("nm") is None,
                     reason="binutils' objdump and nm not installed (apt-get install binutils)")
 @pytest.mark.parametrize("folder", ["linux64", "aarch64-linux"])
