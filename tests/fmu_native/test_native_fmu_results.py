@@ -1,4 +1,5 @@
-"""Native FMU == pythonfmu FMU == library, on every shipped scene, every integrator, with a force input.
+"""Native FMU == library on every shipped scene and every integrator, and pythonfmu FMU == library on every scene with
+a fixed-step and an adaptive integrator, with a force input.
 
 The native FMU runs in the plain C host (tests/fmu_native/native_host.c) with no Python in its process or its
 environment; the pythonfmu FMU runs in fmpy (one client process for all scenes); the library is
@@ -23,6 +24,11 @@ FORCED = list(SCENES)
 FEW_STEPS = {("triangulated_net", "dopri5"): 2, ("triangulated_net", "dop853"): 2}
 
 
+# The pythonfmu FMU passes its integrator parameter to the library, whose every method the native FMU's comparison
+# below covers: its glue is the same for every method, so one fixed-step and one adaptive method compare it.
+PYTHONFMU_METHODS = ("rattle", "dop853")
+
+
 def steps(scene: str, method: str) -> int:
     """How many communication steps of H the runs of ``scene`` with ``method`` compare."""
     return FEW_STEPS.get((scene, method), N_STEPS)
@@ -32,14 +38,14 @@ def steps(scene: str, method: str) -> int:
 def pythonfmu_rows(fmu_root):
     """Every scene and integrator through the pythonfmu FMUs, in one fmpy client process."""
     fmus = {scene: built(fmu_root, scene, native=False) for scene in FORCED}
-    jobs = {scene: (str(f.path), output_names(f), input_mass(f), {m: steps(scene, m) for m in METHODS})
+    jobs = {scene: (str(f.path), output_names(f), input_mass(f), {m: steps(scene, m) for m in PYTHONFMU_METHODS})
             for scene, f in fmus.items()}
     code = f"""
 {FMU_CLIENT_LIB}
 import math
 jobs = {jobs!r}
 for scene, (path, names, k, n_steps) in jobs.items():
-    for method in {METHODS!r}:
+    for method in {PYTHONFMU_METHODS!r}:
         f = Fmu(path, scene + '_' + method)
         f.init(strings={{'integrator': method}})
         rows = []
@@ -94,7 +100,9 @@ def test_native_fmu_equals_library_and_pythonfmu_fmu(scene, fmu_root, host, no_p
         library = library_rows(sc, fmu, method, n=n)
         names = output_names(fmu)
         assert_round_off(native, library, f"{scene}, {method}: native FMU vs library", names)
-        assert_round_off(rows[f"{scene}__{method}"], library, f"{scene}, {method}: pythonfmu FMU vs library", names)
+        if method in PYTHONFMU_METHODS:
+            assert_round_off(rows[f"{scene}__{method}"], library, f"{scene}, {method}: pythonfmu FMU vs library",
+                             names)
         assert np.ptp(native[:, 1:], axis=0).max() > 0.0  # something responds over the run
 
 
