@@ -47,7 +47,9 @@ def test_monte_carlo_from_the_command_line(process_cluster, tmp_path):
     (["--vary", "Q[1]=1,2"], "unknown parameter 'Q[1]'"),
     (["--vary", "M[1]=1,2"], "anchored"),
     (["--vary", "M[3]=1:2"], "write start:stop:count"),
-    (["--vary", "M[3]=1,2", "--scheduler", "tcp://127.0.0.1:9"], "cannot reach the Dask scheduler"),
+    # a second of waiting says the same as the default ten (the default's own wait: test_scheduler_address_contract)
+    (["--vary", "M[3]=1,2", "--scheduler", "tcp://127.0.0.1:9", "--connect-timeout", "1"],
+     "cannot reach the Dask scheduler"),
     (["--vary", "M[3]=1,2", "--out", "/nonexistent-folder/x.nc"], "does not exist"),
     ([], "nothing to vary"),
 ])
