@@ -298,9 +298,13 @@ class NativeIntegrator(Integrator):
         if self._static and state.X is self._out[0] and state.U is self._out[1]:
             state.t = t_target  # 0 degrees of freedom: ln_advance moved t only, the arrays handed out still hold X, U
             return
-        X, U = self.data.X.copy(), self.data.U.copy()
+        X, U = self._scene_rows(self.data.X).copy(), self._scene_rows(self.data.U).copy()
         state.X, state.U, state.t = X, U, t_target
         self._hand_out(X, U)
+
+    def _scene_rows(self, A):
+        """The rows of a (K,3) array of the core's data that are the scene's masses: all of them here."""
+        return A
 
     def sample(self, state, times, F_input, max_steps: int, X, U, T, diagnostics, advance_first: bool,
                update_state: bool = True, T_peak=None, T_peak_time=None) -> None:
@@ -467,16 +471,9 @@ class NativeGroundIntegrator(NativeIntegrator):
         self.data.X[:self.K], self.data.U[:self.K] = state.X, state.U
         self._hand_out(state.X, state.U)
 
-    def advance(self, state, t_target: float, F_input, max_steps: int) -> None:
-        self._load(state, F_input)
-        status = lib.advance(self._model_p, self._method_p, self._data_p, t_target, max_steps)
-        self._drain()
-        if status != lib.OK:
-            self._raise_motion_error()
-            raise SolverError(self.explain(status, state.t, t_target, max_steps))
-        X, U = self.data.X[:self.K].copy(), self.data.U[:self.K].copy()
-        state.X, state.U, state.t = X, U, t_target
-        self._hand_out(X, U)
+    def _scene_rows(self, A):
+        """The scene's masses' rows: the virtual anchors of the contacts and grips come after them."""
+        return A[:self.K]
 
     def sample(self, state, times, F_input, max_steps: int, X, U, T, diagnostics, advance_first: bool,
                update_state: bool = True, T_peak=None, T_peak_time=None) -> None:
