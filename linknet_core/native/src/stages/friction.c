@@ -21,6 +21,14 @@ static inline int FN(contact_sliding)(const ln_model *mm, ln_int c)
     return mm->n_grips && mm->inv_R[FN(contact_link)(mm, c)] != 0.0 && mm->inv_R[FN(grip_link)(mm, c, 0)] == 0.0;
 }
 
+/* Whether any contact slides in the mode in use. */
+static inline int FN(any_sliding)(const ln_model *mm)
+{
+    for (ln_int c = 0; c < mm->n_contacts; c++)
+        if (FN(contact_sliding)(mm, c)) return 1;
+    return 0;
+}
+
 static double FN(rope_velocity_scale)(const ln_model *m, const double *U);
 static void rope_bracketed_root(double (*f)(void *ctx, double x), void *ctx, double *lo_io, double *hi_io, double f_lo,
                                 double f_hi, double xtol, int has_guess, double guess);
@@ -431,15 +439,22 @@ static int FN(slip_directions)(const ln_model *mm, ln_data *d, struct FN(frictio
     return m ? FN(starting_slip_directions)(mm, d, w, X, U, F, starting, m, dirs) : LN_OK;
 }
 
+/* The slip directions of the mode in use at (X, U) into dirs (slip_directions), with the mode's A(X) factored first
+   for the solves they take. */
+static int FN(factored_slip_directions)(const ln_model *mm, ln_data *d, struct FN(friction_work) *w, const double *X,
+                                        const double *U, const double *F, double *dirs)
+{
+    const int status = accelerations(mm, d, X, U, F, d->acc1, d->T, 1);
+    return status == LN_OK ? FN(slip_directions)(mm, d, w, X, U, F, dirs) : status;
+}
+
 /* The accelerations and tensions of the mode in use at (X, U) (driven rows and the contacts' anchors placed), F the
    base forces: with friction on the ground, the sliding contacts' friction included (ModeDynamics.accelerations);
    without, accelerations() itself. */
 static int FN(mode_accelerations)(const ln_model *mm, ln_data *d, const double *X, const double *U, const double *F,
                                   double *acc, double *T, int refactor)
 {
-    int any = 0;
-    for (ln_int c = 0; c < mm->n_contacts && mm->n_grips && !any; c++) any = FN(contact_sliding)(mm, c);
-    if (!any) return accelerations(mm, d, X, U, F, acc, T, refactor);
+    if (!FN(any_sliding)(mm)) return accelerations(mm, d, X, U, F, acc, T, refactor);
     struct FN(friction_work) w = FN(friction_scratch)(mm, d);
     if (refactor) {  /* the mode's factorisation at X, which every solve below reuses */
         const int status = accelerations(mm, d, X, U, F, acc, T, 1);

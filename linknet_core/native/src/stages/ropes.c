@@ -566,11 +566,8 @@ static int FN(rope_select_mode)(const ln_model *mm, ln_data *d, const double *X,
            (ModeDynamics.normal_system) */
         struct FN(friction_work) fw = FN(friction_scratch)(mm, d);
         FN(rope_mask_of)(mm, d, candidates);
-        int any = 0;
-        for (ln_int c = 0; c < mm->n_contacts; c++) any |= FN(contact_sliding)(mm, c);
-        if (any) {
-            int status = accelerations(mm, d, X, U, F_base, d->acc1, d->T, 1);  /* A(X) factored for the solves */
-            if (status == LN_OK) status = FN(slip_directions)(mm, d, &fw, X, U, F_base, fw.dirs);
+        if (FN(any_sliding)(mm)) {
+            const int status = FN(factored_slip_directions)(mm, d, &fw, X, U, F_base, fw.dirs);
             if (status != LN_OK) return status;
             ln_int *col_row = fw.sliding;
             for (ln_int c = 0; c < mm->n_contacts; c++) {
@@ -698,11 +695,8 @@ static int FN(friction_set_reference)(const ln_model *mm, ln_data *d, const doub
                                       const double *F_base)
 {
     struct FN(friction_work) w = FN(friction_scratch)(mm, d);
-    int any = 0;
-    for (ln_int c = 0; c < mm->n_contacts; c++) any |= FN(contact_sliding)(mm, c);
-    if (any) {
-        int status = accelerations(mm, d, X, U, F_base, d->acc1, d->T, 1);  /* A(X) factored for the solves */
-        if (status == LN_OK) status = FN(slip_directions)(mm, d, &w, X, U, F_base, w.dirs);
+    if (FN(any_sliding)(mm)) {
+        const int status = FN(factored_slip_directions)(mm, d, &w, X, U, F_base, w.dirs);
         if (status != LN_OK) return status;
     } else {
         for (ln_int i = 0; i < 3 * mm->n_contacts; i++) w.dirs[i] = 0.0;
