@@ -16,23 +16,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from test_native_ropes import _agree  # tests/native is on sys.path (pytest puts a test file's folder there)
-from ropes.rope_references import G
+from ropes.rope_references import G, slope
 
 import linknet_core as ln
 from linknet_core.dynamics import unilateral
 
 METHODS = ["dop853", "dopri5"]
-
-
-def slope(alpha, mu, v_down=0.0, mass=3.0):
-    """A block on a plane tilted by alpha about y, (its normal, its downhill direction)."""
-    n = np.array([np.sin(alpha), 0.0, np.cos(alpha)])
-    down = np.array([np.cos(alpha), 0.0, -np.sin(alpha)])
-    scene = ln.Scene.from_dict({"name": "slope", "gravity": [0, 0, -G],
-                                "masses": [{"name": "block", "position": [0, 0, 0], "mass": mass,
-                                            "velocity": (v_down * down).tolist()}],
-                                "ground": {"point": [0, 0, 0], "normal": n.tolist(), "friction": mu}})
-    return scene, down
 
 
 def thrown(v=3.0, mu=0.4, m=2.0):
@@ -132,7 +121,7 @@ def test_linked_masses_on_a_rough_ground_give_the_references_events_and_states_t
 def test_a_block_below_its_friction_angle_slides_at_g_sin_minus_mu_cos_and_above_it_stays(method):
     alpha = 0.3
     for mu, a in ((0.2, G * (np.sin(alpha) - 0.2 * np.cos(alpha))), (0.5, 0.0)):
-        scene, down = slope(alpha, mu)
+        scene, _, down = slope(alpha, mu)
         run = ln.simulate(scene, 1.0, method, n_out=21, error_estimate=False, rtol=1e-10, backend="native")
         assert run.events == []
         assert np.abs(run.X[:, 0] - 0.5 * a * run.t[:, None] ** 2 * down).max() < 1e-12

@@ -23,6 +23,17 @@ def bob_scene(X0, V0, R=1.0, mass=1.0, restitution=0.0) -> ln.Scene:
                                "links": [rope]})
 
 
+def slope(alpha, mu, v_down=0.0, mass=3.0):
+    """A block on a plane tilted by alpha about y, (its normal, its downhill direction)."""
+    n = np.array([np.sin(alpha), 0.0, np.cos(alpha)])
+    down = np.array([np.cos(alpha), 0.0, -np.sin(alpha)])
+    scene = ln.Scene.from_dict({"name": "slope", "gravity": [0, 0, -G],
+                                "masses": [{"name": "block", "position": [0, 0, 0], "mass": mass,
+                                            "velocity": (v_down * down).tolist()}],
+                                "ground": {"point": [0, 0, 0], "normal": n.tolist(), "friction": mu}})
+    return scene, n, down
+
+
 def ballistic(X, V, s):
     """Position and velocity s seconds into a free flight from (X, V) under gravity -z."""
     g = np.array([0.0, 0.0, -G])

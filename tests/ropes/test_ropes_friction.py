@@ -7,24 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from rope_references import G
+from rope_references import G, slope
 from scipy.integrate import solve_ivp
 
 import linknet_core as ln
 from linknet_core.dynamics.unilateral import UnilateralDynamics
 
 METHODS = [("dop853", {"rtol": 1e-10}), ("rattle", {"dt": 1e-2})]
-
-
-def slope(alpha, mu, v_down=0.0, mass=3.0):
-    """A block on a plane tilted by alpha about y, (its normal, its downhill direction)."""
-    n = np.array([np.sin(alpha), 0.0, np.cos(alpha)])
-    down = np.array([np.cos(alpha), 0.0, -np.sin(alpha)])
-    scene = ln.Scene.from_dict({"name": "slope", "gravity": [0, 0, -G],
-                                "masses": [{"name": "block", "position": [0, 0, 0], "mass": mass,
-                                            "velocity": (v_down * down).tolist()}],
-                                "ground": {"point": [0, 0, 0], "normal": n.tolist(), "friction": mu}})
-    return scene, n, down
 
 
 @pytest.mark.parametrize("method,kw", METHODS)

@@ -72,7 +72,7 @@ def test_a_mass_held_beyond_the_cone_fails(sliding_states, monkeypatch):
 def test_a_mass_slipping_where_the_ground_holds_it_fails(monkeypatch):
     # a block on a slope below its friction angle (0.3 rad, mu 0.5) stays; let it slip (nothing may stick) and its
     # friction mu m g cos a, larger than the weight's pull m g sin a, leaves an acceleration against the slip
-    from test_ropes_friction import slope
+    from rope_references import slope
     scene = slope(0.3, 0.5)[0]
     states, _ = checks.unilateral_states(scene, t_end=0.1, n=2)
     assert friction_result(scene, states)[FRICTION_CHECK].passed
