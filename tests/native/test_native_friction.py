@@ -94,21 +94,9 @@ LINKED = {"rod leaning, its foot pushed": (lambda: rod([[0, 0, 0], [0.6, 0, 0.8]
 
 
 @pytest.mark.parametrize("method", METHODS)
-@pytest.mark.parametrize("name", list(SCENES))
-def test_masses_alone_on_a_rough_ground_give_the_references_events_and_states_to_round_off(name, method):
-    make, t_end, n_out, n_events = SCENES[name]
-    scene = make()
-    assert ln.Simulator(scene, method, backend="auto").backend == "native"
-    reference, native = _both(scene, t_end, method, n_out)
-    assert len(reference.events) == n_events
-    _agree(reference, native, min_events=n_events)
-    assert native.stats["steps"] == reference.stats["steps"]
-
-
-@pytest.mark.parametrize("method", METHODS)
-@pytest.mark.parametrize("name", list(LINKED))
-def test_linked_masses_on_a_rough_ground_give_the_references_events_and_states_to_round_off(name, method):
-    make, t_end, n_out, n_events = LINKED[name]
+@pytest.mark.parametrize("name", list(SCENES) + list(LINKED))
+def test_masses_alone_or_linked_on_a_rough_ground_give_the_references_events_and_states_to_round_off(name, method):
+    make, t_end, n_out, n_events = {**SCENES, **LINKED}[name]
     scene = make()
     assert ln.Simulator(scene, method, backend="auto").backend == "native"
     reference, native = _both(scene, t_end, method, n_out)
