@@ -27,6 +27,7 @@ import numpy as np
 import pytest
 
 from native_fmu_support import ROOT, built
+from test_native_fmu_ropes import Instance
 
 sys.path.insert(0, str(ROOT / "fmu_src"))
 import build_fmu  # noqa: E402
@@ -36,7 +37,7 @@ from linknet_fmu.layout import EVENT_CATEGORY  # noqa: E402
 from linknet_fmu.rope_events import event_message  # noqa: E402
 
 G = 9.81
-OK, ERROR = 0, 3
+ERROR = 3
 TOLERANCE = 1e-8  # the FMU's default rtol (build_fmu.py); the library runs with the same
 BALL = dict(height=1.0, restitution=0.5, mass=2.0, vx=0.5)
 CHAIN = dict(N=12, a=0.05, m=0.05)
@@ -84,56 +85,6 @@ def scenes(tmp_path_factory) -> dict[str, Path]:
 @pytest.fixture(scope="module")
 def fmus(fmu_root, scenes):
     return {name: built(fmu_root, path) for name, path in scenes.items()}
-
-
-class Instance:
-    """One instance of a ground scene's native FMU through fmpy's FMU2Slave, with callbacks of its own whose logger
-    keeps each message's status and category."""
-
-    def __init__(self, fmu, name="ground"):
-        from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
-
-        self.fmu, self.log = fmu, []
-
-        def logger(env, instance, status, category, message):
-            self.log.append((int(status), category.decode(), message.decode("utf-8", "replace")))
-
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-        self.callbacks.allocateMemory = defaultCallbacks.allocateMemory
-        self.callbacks.freeMemory = defaultCallbacks.freeMemory
-        self.slave = FMU2Slave(guid=fmu.guid, unzipDirectory=str(fmu.dir), modelIdentifier=fmu.ident,
-                               instanceName=name)
-        self.slave.instantiate(callbacks=self.callbacks, loggingOn=False)
-        self.slave.setDebugLogging(True, [EVENT_CATEGORY])
-
-    def initialize(self, integrator=None, **reals):
-        self.slave.setupExperiment(startTime=0.0)
-        self.slave.enterInitializationMode()
-        if integrator:
-            self.slave.setString([self.fmu.vr["integrator"]], [integrator])
-        for name, value in reals.items():
-            self.slave.setReal([self.fmu.vr[name]], [value])
-        self.slave.exitInitializationMode()
-
-    def get(self, names):
-        return np.array(self.slave.getReal([self.fmu.vr[n] for n in names]))
-
-    def events(self):
-        """The messages logged in the events' category (each with fmi2OK status), and the log emptied."""
-        out = [m for s, c, m in self.log if c == EVENT_CATEGORY]
-        assert all(s == OK for s, c, _ in self.log if c == EVENT_CATEGORY)
-        self.log.clear()
-        return out
-
-    def run(self, times, names, first=0, last=None):
-        """doStep over times[first..last]; the outputs at each point after the first, and the events' messages."""
-        last = len(times) - 1 if last is None else last
-        rows = []
-        for i in range(first, last):
-            self.slave.doStep(times[i], times[i + 1] - times[i])
-            rows.append(self.get(names))
-        return np.array(rows).reshape(-1, len(names)), self.events()
 
 
 def _names(fmu):

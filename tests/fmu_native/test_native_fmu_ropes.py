@@ -46,7 +46,7 @@ FMU_STEP, FMU_TOLERANCE = 1e-3, 1e-8  # the FMUs' defaults (build_fmu.py): the l
 
 
 class Instance:
-    """One instance of a rope scene's native FMU through fmpy's FMU2Slave, with callbacks of its own (as
+    """One instance of a native FMU with ropes or a ground through fmpy's FMU2Slave, with callbacks of its own (as
     native_fmu_support.fmpy_instance makes them) whose logger keeps each message's status and category."""
 
     def __init__(self, fmu, name="ropes", logging=True):
@@ -67,11 +67,13 @@ class Instance:
         if logging:
             self.slave.setDebugLogging(True, [EVENT_CATEGORY])
 
-    def initialize(self, integrator=None):
+    def initialize(self, integrator=None, **reals):
         self.slave.setupExperiment(startTime=0.0)
         self.slave.enterInitializationMode()
         if integrator:
             self.slave.setString([self.fmu.vr["integrator"]], [integrator])
+        for name, value in reals.items():
+            self.slave.setReal([self.fmu.vr[name]], [value])
         self.slave.exitInitializationMode()
 
     def get(self, names):
