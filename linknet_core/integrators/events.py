@@ -456,6 +456,8 @@ class AdaptiveEvents(EventHandling):
     """The event-driven variant of an embedded Runge-Kutta method: an accepted step that holds an event ends at it
     (ProjectedRungeKutta.advance asks _event_in_step after every accepted step)."""
 
+    keeps_stage_tensions = True
+
     def advance(self, state, t_target, F_input, max_steps):
         self._ensure_mode(state.X, state.U, state.t, F_input)
         self._events_this_step = 0

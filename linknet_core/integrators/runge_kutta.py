@@ -37,6 +37,7 @@ class ProjectedRungeKutta(Integrator):
     error_norm_kind = "rms"
     error_estimator_order: int
     n_stages: int
+    keeps_stage_tensions = False  # the event-driven variants (integrators.events) screen the stages' forces
     def __init__(self, dynamics, rtol: float = 1e-8, atol: float | None = None, h0: float | None = None):
         super().__init__(dynamics)
         for name, value in (("rtol", rtol), ("atol", atol)):
@@ -74,13 +75,15 @@ class ProjectedRungeKutta(Integrator):
         KX = np.empty((s + 1,) + X.shape)
         KU = np.empty((s + 1,) + U.shape)
         KX[0], KU[0] = k0
-        self.stage_tensions = []  # (c_i, the tensions at stage i): where an event integrator looks inside the step
+        self.stage_tensions = []  # (c_i, the tensions at stage i), kept where an event integrator looks inside steps
+        keep = self.keeps_stage_tensions
         for i in range(1, s):
             a = self.A[i, :i]
             Xi = X + h * np.tensordot(a, KX[:i], axes=1)
             Ui = U + h * np.tensordot(a, KU[:i], axes=1)
             KX[i], KU[i] = self._f(Xi, Ui, F_input, t + self.C[i] * h)
-            self.stage_tensions.append((float(self.C[i]), self._T))
+            if keep:
+                self.stage_tensions.append((float(self.C[i]), self._T))
         X_new = X + h * np.tensordot(self.B, KX[:s], axes=1)
         U_new = U + h * np.tensordot(self.B, KU[:s], axes=1)
         t_end = t + h if t_end is None else t_end
