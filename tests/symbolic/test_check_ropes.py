@@ -107,6 +107,13 @@ def test_check_passes_on_a_rope_chain_landing_on_the_ground_and_says_why_frictio
     _, _, rough, _ = checks.run_unilateral_checks(chain_on_ground(friction=0.3), samples=2)
     lcp = by_name(rough)[COMPLEMENTARITY[2]]
     assert lcp.passed and "enumeration skipped at" in lcp.detail and "Coulomb friction (mu 0.3)" in lcp.detail
+    # every Coulomb mode of the touching rope and contacts is enumerated at those same states (the rope taut or slack,
+    # each contact off, sliding, stuck or slipping from rest), and with mu 0.3 each state has one solution
+    n_friction = counts(lcp.detail, r"enumeration skipped at (\d+) state")[0]
+    painleve = by_name(rough)["Coulomb friction: one solution (Painleve)"]
+    assert painleve.passed and not painleve.warning and not painleve.skipped, painleve.line()
+    assert f"{n_friction} state(s) with a touching contact" in painleve.detail
+    assert f"{n_friction} with one solution, 0 with several (ambiguous), 0 with none" in painleve.detail
 
 
 def test_an_lcp_returning_negative_tensions_fails_naming_the_rope(crane, monkeypatch):
