@@ -280,16 +280,14 @@ def offered_integrators(scene, cfg: dict) -> dict:
 
 def _simulators(scene, cfg):
     """One linknet_core Simulator per integrator, as the pythonfmu FMU builds them (dt = step, or rtol =
-    tolerance), sharing one Dynamics (the structure is analysed once)."""
+    tolerance), each on the scene's own Dynamics: the structure, and the initial state with its checks, are the
+    scene's and computed once for all of them (kept per scene object by the library)."""
     import linknet_core as ln
     sims = {}
-    dyn = None
     for name in [cfg["integrator"]] + [n for n in cfg["integrators"] if n != cfg["integrator"]]:
         kwargs = dict(rtol=cfg["tolerance"]) if ln.METHODS[name].adaptive else dict(dt=cfg["step"])
         # the scene data's model and methods are the run's; the companion's are made from them in C (linknet_model.c)
-        sims[name] = ln.Simulator(scene, method=name, dynamics=dyn, error_estimate=False, backend="native",
-                                   **kwargs)
-        dyn = sims[name].dyn
+        sims[name] = ln.Simulator(scene, method=name, error_estimate=False, backend="native", **kwargs)
     return sims
 
 
@@ -654,7 +652,9 @@ def zig_cc() -> list[str]:
     return [sys.executable, "-m", "ziglang", "cc"]
 
 
-def _cache_dir() -> Path:
+def cache_dir() -> Path:
+    """The per-user cache of compiled FMU code (LINKNET_FMU_CACHE, default ~/.cache/linknet/native-fmu): the native
+    FMU's objects and linked binaries, and the pythonfmu FMU's front layer (pythonfmu_front.build)."""
     root = os.environ.get("LINKNET_FMU_CACHE") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "linknet", "native-fmu")
     return Path(root)
@@ -729,7 +729,7 @@ def _zig_version(cc: list[str]) -> str:
     return _zig_versions[key]
 
 
-def _store(made: Path, store: Path) -> Path:
+def store_by_rename(made: Path, store: Path) -> Path:
     """made moved into the cache folder store (a rename: a concurrent build never sees half a file)."""
     store.mkdir(parents=True, exist_ok=True)
     os.replace(made, store / made.name)
@@ -761,10 +761,10 @@ def compile_binaries(sources_dir: Path, units: list[str], ident: str, folders: t
         object_stores = {}
         for target in targets:
             compiler = hashlib.sha256("\0".join(["zig cc", _zig_version(cc), target] + flags[:-2]).encode())
-            object_stores[target] = (_cache_dir() / f"{compiler.hexdigest()[:32]}-objects" if cache
+            object_stores[target] = (cache_dir() / f"{compiler.hexdigest()[:32]}-objects" if cache
                                      else tmp / "objects" / target)
             compiler.update(digest)
-            stores[target] = _cache_dir() / compiler.hexdigest()[:32] if cache else tmp / "objects" / target
+            stores[target] = cache_dir() / compiler.hexdigest()[:32] if cache else tmp / "objects" / target
             binary = stores[target] / "linked" / f"{ident}{suffix[target]}"
             if binary.exists():
                 linked[target] = binary
@@ -780,7 +780,7 @@ def compile_binaries(sources_dir: Path, units: list[str], ident: str, folders: t
         with ThreadPoolExecutor(max_workers=os.cpu_count() or 2) as pool:
             list(pool.map(lambda job: _run_compiler(*job), jobs))
         for made, store in fresh:
-            _store(made, store)
+            store_by_rename(made, store)
 
         def link(target: str) -> Path:
             work = tmp / "linked" / target  # its own folder: the Windows link leaves an import library beside it
@@ -789,7 +789,7 @@ def compile_binaries(sources_dir: Path, units: list[str], ident: str, folders: t
             objects = [str(object_stores[target] / object_names[u]) for u in units]
             _run_compiler([*cc, "-target", target, "-shared", "-o", str(binary)] + objects
                           + _link_options(target, ident), work)
-            return _store(binary, stores[target] / "linked")
+            return store_by_rename(binary, stores[target] / "linked")
 
         with ThreadPoolExecutor(max_workers=os.cpu_count() or 2) as pool:
             linked.update(zip([t for t in targets if t not in linked],

@@ -58,8 +58,12 @@ class Rattle(FixedStepIntegrator):
         coordinates' rounding, ulp(|X|) / h per step, would make the positions drift like ulp(|X|) N^1.5 over N
         steps, but as the normal part of X_new - X_free at X in the mass metric (what the velocity projection at X
         removes, on A(X) still factored), whose leftover rounding lies along the links. After exact Newton or
-        Gauss-Newton (A no longer factored at X): (X_new - X) / h. Anchors: (X_new - X) / h."""
-        if not factored_at_X or self.dyn.scene.L == 0:
+        Gauss-Newton (A no longer factored at X), or in a scene without any constraint: (X_new - X) / h. Anchors:
+        (X_new - X) / h. A scene with a ground has its contacts' rows (the native core's model keeps them, off while
+        a mass flies): a mass alone on a ground takes the correction too, as the rounded difference would spoil its
+        slide along the plane."""
+        scene = self.dyn.scene
+        if not factored_at_X or (scene.L == 0 and scene.ground is None):
             return (X_new - X) / h
         shift = X_new - X_free
         normal = shift - self.dyn.project_velocities(X, shift)

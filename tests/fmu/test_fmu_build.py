@@ -3,6 +3,7 @@
 These tests read the model description only (no FMU binary is loaded in this process).
 """
 import json
+import shutil
 import zipfile
 
 import numpy as np
@@ -99,6 +100,32 @@ def test_fmu_carries_scene_core_and_linked_binary(fmu_dir):
     assert "resources/linknet_core/__init__.py" in files and "resources/linknet_slave.py" in files
     assert scene == ln.load_scene(MODELS / "chain_10.json").to_dict()
     assert b"libpython3" in so  # DT_NEEDED added by build_fmu.link_libpython
+
+
+def test_the_front_layer_is_compiled_once_per_compiler_and_model_identifier(tmp_path, monkeypatch):
+    """The pythonfmu FMU's front layer comes from the per-user cache when the compiler, its flags and what it reads
+    are those of a build before: built twice, one compile and the same front; another compiler, a compile of its own."""
+    import subprocess
+
+    from pythonfmu_front import build as front_build
+
+    monkeypatch.setenv("LINKNET_FMU_CACHE", str(tmp_path / "cache"))
+    compiles = []
+    real = subprocess.run
+    monkeypatch.setattr(front_build.subprocess, "run", lambda cmd, **kw: (
+        compiles.append(cmd) if "-shared" in cmd else None, real(cmd, **kw))[1])
+    fronts = []
+    for n in range(2):
+        build_fmu.build_scene_fmu(str(MODELS / "pendulum.json"), tmp_path / f"p{n}.fmu", quiet=True)
+        with zipfile.ZipFile(tmp_path / f"p{n}.fmu") as z:
+            fronts.append(z.read("binaries/linux64/pendulum.so"))
+    assert len(compiles) == 1 and fronts[0] == fronts[1]
+    assert len(list((tmp_path / "cache" / "pythonfmu-front").glob("pendulum.*.so"))) == 1
+    other = "gcc" if front_build.compiler() != "gcc" and shutil.which("gcc") else None
+    if other:
+        monkeypatch.setenv("CC", other)
+        build_fmu.build_scene_fmu(str(MODELS / "pendulum.json"), tmp_path / "p2.fmu", quiet=True)
+        assert len(compiles) == 2
 
 
 def test_bad_scene_is_refused_with_a_message_naming_the_link(tmp_path):

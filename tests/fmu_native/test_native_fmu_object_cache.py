@@ -82,7 +82,7 @@ def test_an_fmi3_build_after_an_fmi2_build_compiles_its_glue_alone(staged, tmp_p
     every = native_build.sources_digest(staged[0])
     names = [native_build.object_name(staged[0], p.name, every) for p in staged[0].glob("*.c")]
     private = tmp_path / "cache"  # the FMI 2.0 objects copied: other builds keep the shared cache as it is
-    for store in native_build._cache_dir().glob("*-objects"):
+    for store in native_build.cache_dir().glob("*-objects"):
         if all((store / name).is_file() for name in names):
             (private / store.name).mkdir(parents=True)
             for name in names:

@@ -140,7 +140,7 @@ def test_a_new_model_identifier_is_only_linked(tmp_path, monkeypatch):
         assert calls and all("-c" not in cmd and "-shared" in cmd for cmd in calls), calls
         assert len(calls) == sum(len(native_build.PLATFORMS[f].targets) for f in native_build.platforms_from(None))
     finally:  # the cache keeps no binary of this throwaway name
-        for linked in native_build._cache_dir().glob(f"*/linked/{data['name']}.*"):
+        for linked in native_build.cache_dir().glob(f"*/linked/{data['name']}.*"):
             linked.unlink()
 
 

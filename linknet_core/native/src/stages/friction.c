@@ -448,6 +448,23 @@ static int FN(factored_slip_directions)(const ln_model *mm, ln_data *d, struct F
     return status == LN_OK ? FN(slip_directions)(mm, d, w, X, U, F, dirs) : status;
 }
 
+/* The forces RATTLE kicks with at (X, U) (the contacts' anchors placed) in the mode in use (ModeDynamics.forces):
+   the base forces F and the force elements (ln_scene_forces), plus the sliding contacts' friction -mu N_c d_c
+   (friction_loads, along slip_directions), into out (K, DIM). refactor 0: A(X) of the mode is factored at X already
+   (its solves are reused); 1: it is factored here. */
+static int FN(forces_with_friction)(const ln_model *mm, ln_data *d, const double *X, const double *U, const double *F,
+                                    double *out, int refactor)
+{
+    struct FN(friction_work) w = FN(friction_scratch)(mm, d);
+    int status = refactor ? FN(factored_slip_directions)(mm, d, &w, X, U, F, w.dirs)
+                          : FN(slip_directions)(mm, d, &w, X, U, F, w.dirs);
+    if (status == LN_OK) status = FN(friction_loads)(mm, d, &w, X, U, F, w.dirs, w.Fb, 0);
+    if (status != LN_OK) return status;
+    FN(ln_scene_forces)(mm, X, U, F, out);
+    for (ln_int i = 0; i < mm->K * DIM; i++) out[i] += w.Fb[i];
+    return LN_OK;
+}
+
 /* The accelerations and tensions of the mode in use at (X, U) (driven rows and the contacts' anchors placed), F the
    base forces: with friction on the ground, the sliding contacts' friction included (ModeDynamics.accelerations);
    without, accelerations() itself. */

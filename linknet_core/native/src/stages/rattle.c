@@ -25,6 +25,14 @@ LN_SCALAR_LOOPS_BEGIN
 
 #define IMPLICIT_KICK_ITERATIONS 60
 
+/* A ground (stages/ropes.c, stages/friction.c, later in this translation unit) */
+static inline int FN(any_sliding)(const ln_model *mm);
+static int FN(forces_with_friction)(const ln_model *mm, ln_data *d, const double *X, const double *U, const double *F,
+                                    double *out, int refactor);
+static void FN(contacts_pad_velocity)(const ln_model *m, double *V);
+static int FN(contacts_project_along)(const ln_model *mm, const ln_method *meth, ln_data *d, double *Xc,
+                                      const double *E_dir, double tol);
+
 /* Forces at (X, U): the base forces, or with drag and springs added into scratch. */
 static inline const double *rattle_forces(const ln_model *m, ln_data *d, const double *X, const double *U,
                                           const double *F_base)
@@ -33,6 +41,23 @@ static inline const double *rattle_forces(const ln_model *m, ln_data *d, const d
     FN(ln_scene_forces)(m, X, U, F_base, d->F);
     return d->F;
 }
+
+/* The forces a kick takes at (X, U) into *F: rattle_forces, and on a ground where a contact slides in the mode its
+   friction -mu N d too, which depends on U (ModeDynamics.forces; the contacts' anchors placed at (X, U)). refactor:
+   whether A(X) must be factored for the friction's solves (0: the factorisation at hand is at X). */
+static inline int kick_forces(const ln_model *m, ln_data *d, const double *X, const double *U, const double *F_base,
+                              int refactor, const double **F)
+{
+    if (!(m->n_grips && FN(any_sliding)(m))) {
+        *F = rattle_forces(m, d, X, U, F_base);
+        return LN_OK;
+    }
+    *F = d->F;
+    return FN(forces_with_friction)(m, d, X, U, F_base, d->F, refactor);
+}
+
+/* The scene's masses' coordinates: the contacts' and grips' virtual anchors come after them. */
+static inline ln_int scene_coordinates(const ln_model *m) { return (m->K - m->n_contacts - m->n_grips) * DIM; }
 
 /* U_half after the position stage of a RATTLE stage of size hs: the drift's U_half plus the position stage's
    correction M^-1 C(X)^T mu over hs (seed (9), (11)). The correction is not read off as X_new - X_drift: both are
@@ -50,17 +75,21 @@ LN_ALWAYS_INLINE void velocity_after_position_stage(const ln_model *m, ln_data *
                                                     const double *E0, double hs, int factored_at_X, double *Uh)
 {
     const ln_int K = m->K;
-    const double *X_drift = d->X_drift;
     if (!factored_at_X || m->L == 0) {
         for (ln_int i = 0; i < K * DIM; i++) Uh[i] = (Xc[i] - X[i]) / hs;
         return;
     }
+    /* the stage's shift X_new - X_drift, in place of X_drift; on a ground padded as ModeDynamics pads a velocity (a
+       contact's virtual anchor moves with its mass along the plane, the grips' stay): the anchors' own coordinates,
+       re-placed above the masses, would bring their rounding back */
+    double *shift = d->X_drift;
+    for (ln_int i = 0; i < K * DIM; i++) shift[i] = Xc[i] - shift[i];
+    if (m->n_contacts) FN(contacts_pad_velocity)(m, shift);
     double *rhs = d->phi, *mu = d->mu;
     for (ln_int l = 0; l < m->L; l++) {
         const ln_int a = m->k1[l], b = m->k2[l];
         double s = 0.0;
-        for (int e = 0; e < DIM; e++)
-            s += E0[l * DIM + e] * ((Xc[a * DIM + e] - X_drift[a * DIM + e]) - (Xc[b * DIM + e] - X_drift[b * DIM + e]));
+        for (int e = 0; e < DIM; e++) s += E0[l * DIM + e] * (shift[a * DIM + e] - shift[b * DIM + e]);
         rhs[l] = s;
     }
     FN(ln_solve_tension_system)(m, d, rhs, mu);
@@ -72,21 +101,27 @@ LN_ALWAYS_INLINE void velocity_after_position_stage(const ln_model *m, ln_data *
 
 /* One step of size h from t to t_end: the composition's RATTLE stages in turn, with A(X) factored at *E0 on
    entry and, on success, at the new X on exit (the pointers swap with every stage). Driven anchors: each stage's
-   position stage targets their P at the stage's end and its velocity stage their V there (drive.c). */
+   position stage targets their P at the stage's end and its velocity stage their V there (drive.c). On a ground
+   (a mode of stages/ropes.c with contacts) every evaluation first places the contacts' virtual anchors at the
+   state it is made at (ln_contacts_place), the position stage re-places them until the contacts are on the plane
+   (contacts_project_along), and a sliding contact's friction is a force of the kicks, implicit in the second. */
 LN_ALWAYS_INLINE int composition_step(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
                             const double *F_base, double h, double t, double t_end, double **E0_inout,
                             double **E1_inout)
 {
-    const ln_int K = m->K;
+    const ln_int K = m->K, scene_size = scene_coordinates(m);
     const double *inv_m = m->inv_m;
     double *E0 = *E0_inout, *E1 = *E1_inout, *Uh = d->Uh, *Xc = d->Xc, *U_iterate = d->U_iterate;
+    const int ground = m->n_contacts > 0;
     int status;
     double fraction = 0.0;
     for (ln_int g = 0; g < meth->n_gammas; g++) {
         const double hs = meth->gammas[g] * h;
         fraction += meth->gammas[g];
         const double stage_end = g == meth->n_gammas - 1 ? t_end : t + fraction * h;
-        const double *F = rattle_forces(m, d, X, U, F_base);
+        const double *F;
+        if (ground) FN(ln_contacts_place)(m, X, U);
+        if ((status = kick_forces(m, d, X, U, F_base, 0, &F)) != LN_OK) return status;
         for (ln_int k = 0; k < K; k++)
             for (int e = 0; e < DIM; e++) {
                 const ln_int i = k * DIM + e;
@@ -97,11 +132,13 @@ LN_ALWAYS_INLINE int composition_step(const ln_model *m, const ln_method *meth, 
         for (ln_int i = 0; i < K * DIM; i++) d->X_drift[i] = Xc[i];
         /* position stage: Xc + M^-1 C(X)^T mu on (11), simplified Newton with A(X) factored */
         const ln_int newton_projections = d->exact_newton_projections;
-        status = project_positions(m, d, Xc, E0, meth->position_tol, meth->max_projection_iter);
+        status = ground ? FN(contacts_project_along)(m, meth, d, Xc, E0, meth->position_tol)
+                        : project_positions(m, d, Xc, E0, meth->position_tol, meth->max_projection_iter);
         if (status != LN_OK) return status;
         velocity_after_position_stage(m, d, X, Xc, E0, hs, newton_projections == d->exact_newton_projections, Uh);
         /* second half kick, then the velocity projection onto (12) at the new positions */
-        F = rattle_forces(m, d, Xc, Uh, F_base);
+        if (ground) FN(ln_contacts_place)(m, Xc, Uh);
+        if ((status = kick_forces(m, d, Xc, Uh, F_base, 1, &F)) != LN_OK) return status;
         for (ln_int k = 0; k < K; k++)
             for (int e = 0; e < DIM; e++) {
                 const ln_int i = k * DIM + e;
@@ -109,31 +146,48 @@ LN_ALWAYS_INLINE int composition_step(const ln_model *m, const ln_method *meth, 
                 X[i] = Xc[i];
             }
         if (m->n_driven && (status = ln_drive_rows(m, d, stage_end, NULL, U, NULL, DIM)) != LN_OK) return status;
+        if (ground) FN(contacts_pad_velocity)(m, U);
         if ((status = project_velocities(m, d, X, U, E1)) != LN_OK) return status;
-        if (m->velocity_dependent) {
-            /* U_new = P(U_half + hs/2 M^-1 F(X_new, U_new)): contraction factor ~ hs c / (2 m) */
-            int converged = 0;
-            for (int it = 0; it < IMPLICIT_KICK_ITERATIONS && !converged; it++) {
-                FN(ln_scene_forces)(m, X, U, F_base, d->F);
-                double size = 0.0;
+        const int sliding = m->n_grips && FN(any_sliding)(m);
+        if (m->velocity_dependent || sliding) {
+            /* U_new = P(U_half + hs/2 M^-1 F(X_new, U_new)): contraction factor ~ hs c / (2 m) for a damping c, and
+               ~ hs mu N / (2 m |v_t|) for a sliding contact's friction, which a slow slip (its first steps from rest)
+               takes above 1. With friction alone an iteration that stops contracting ends with its first iterate
+               (the kick with the forces at the explicit kick's velocity, whose error O(hs^2) keeps the step second
+               order; Rattle._implicit_kick's stiff_ok) */
+            const int stiff_ok = !m->velocity_dependent;
+            double *first = d->Us, last_change = INFINITY;
+            int converged = 0, stalled = 0;
+            for (int it = 0; it < IMPLICIT_KICK_ITERATIONS && !converged && !stalled; it++) {
+                if (ground) FN(contacts_pad_velocity)(m, U);
+                if ((status = kick_forces(m, d, X, U, F_base, 0, &F)) != LN_OK) return status;
                 for (ln_int k = 0; k < K; k++)
                     for (int e = 0; e < DIM; e++) {
                         const ln_int i = k * DIM + e;
-                        U_iterate[i] = Uh[i] + 0.5 * hs * inv_m[k] * d->F[i];
-                        size = ln_fmax(size, fabs(U[i]));
+                        U_iterate[i] = Uh[i] + 0.5 * hs * inv_m[k] * F[i];
                     }
                 if (m->n_driven && (status = ln_drive_rows(m, d, stage_end, NULL, U_iterate, NULL, DIM)) != LN_OK)
                     return status;
+                if (ground) FN(contacts_pad_velocity)(m, U_iterate);
                 if ((status = FN(ln_project_velocities)(m, d, X, U_iterate, E1)) != LN_OK) return status;
-                double change = 0.0;
-                for (ln_int i = 0; i < K * DIM; i++) {
+                double change = 0.0, size = 0.0;
+                for (ln_int i = 0; i < scene_size; i++) {
                     change = ln_fmax(change, fabs(U_iterate[i] - U[i]));
-                    U[i] = U_iterate[i];
+                    size = ln_fmax(size, fabs(U_iterate[i]));
                 }
+                for (ln_int i = 0; i < K * DIM; i++) U[i] = U_iterate[i];
+                if (it == 0 && stiff_ok)
+                    for (ln_int i = 0; i < K * DIM; i++) first[i] = U[i];
                 converged = change <= 4e-16 * size || change == 0.0;
+                stalled = !converged && stiff_ok && change >= last_change;
+                last_change = change;
             }
-            if (!converged) return LN_IMPLICIT_KICK_FAILED;
+            if (!converged) {
+                if (!stiff_ok) return LN_IMPLICIT_KICK_FAILED;
+                for (ln_int i = 0; i < K * DIM; i++) U[i] = first[i];
+            }
         }
+        if (ground) FN(contacts_pad_velocity)(m, U);
         double *swap = E0;  /* the factorisation at the new X is the next stage's A(X) */
         E0 = E1;
         E1 = swap;

@@ -226,29 +226,65 @@ static inline double FN(contact_height)(const ln_model *m, const double *X, ln_i
 }
 
 /* Each contact's virtual anchor straight above its mass at the contact length R_c from the ground, Q = X_k +
-   (R_c - g_k) n, moving with the mass along the plane, V_Q = U_k - (n . U_k) n (ModeDynamics.pad, pad_velocity):
-   the link's E is then n, its term of (26) (n . U_k)^2 / R_c and its gap g_k. With friction each contact's two
-   grip anchors beside its mass at X_k + R_c t_i, at rest (a grip's E is t_i, its row of C t_i . U_k). U may be
-   NULL. */
-void FN(ln_contacts_place)(const ln_model *m, double *X, double *U)
+   (R_c - g_k) n (ModeDynamics.pad without its grips). */
+static void FN(contacts_place_anchors)(const ln_model *m, double *X)
 {
-    const ln_int first_anchor = m->K - m->n_grips - m->n_contacts, first_grip = m->K - m->n_grips;
+    const ln_int first_anchor = m->K - m->n_grips - m->n_contacts;
     const double Rc = m->scene_size, *n = m->ground_normal;
     for (ln_int c = 0; c < m->n_contacts; c++) {
         const ln_int k = m->contact_mass[c], q = first_anchor + c;
         const double lift = Rc - FN(contact_height)(m, X, k);
         for (int e = 0; e < DIM; e++) X[q * DIM + e] = X[k * DIM + e] + lift * n[e];
-        for (ln_int i = 0; i < 2 && m->n_grips; i++) {
+    }
+}
+
+/* A field V on the masses (a velocity, or a displacement) padded as the anchors move with it: each contact's virtual
+   anchor with its mass's part along the plane, V_Q = V_k - (n . V_k) n, the grips' anchors at rest
+   (ModeDynamics.pad_velocity): a contact's row of C V is then n . V_k, a grip's t_i . V_k. */
+static void FN(contacts_pad_velocity)(const ln_model *m, double *V)
+{
+    const ln_int first_anchor = m->K - m->n_grips - m->n_contacts, first_grip = m->K - m->n_grips;
+    const double *n = m->ground_normal;
+    for (ln_int c = 0; c < m->n_contacts; c++) {
+        const ln_int k = m->contact_mass[c], q = first_anchor + c;
+        double normal = 0.0;
+        for (int e = 0; e < DIM; e++) normal += V[k * DIM + e] * n[e];
+        for (int e = 0; e < DIM; e++) V[q * DIM + e] = V[k * DIM + e] - normal * n[e];
+    }
+    for (ln_int i = first_grip * DIM; i < m->K * DIM; i++) V[i] = 0.0;
+}
+
+/* Each contact's virtual anchor straight above its mass (contacts_place_anchors), moving with the mass along the
+   plane (contacts_pad_velocity): the link's E is then n, its term of (26) (n . U_k)^2 / R_c and its gap g_k. With
+   friction each contact's two grip anchors beside its mass at X_k + R_c t_i, at rest (a grip's E is t_i, its row of
+   C t_i . U_k). U may be NULL. */
+void FN(ln_contacts_place)(const ln_model *m, double *X, double *U)
+{
+    const ln_int first_grip = m->K - m->n_grips;
+    const double Rc = m->scene_size;
+    FN(contacts_place_anchors)(m, X);
+    for (ln_int c = 0; c < m->n_contacts && m->n_grips; c++) {
+        const ln_int k = m->contact_mass[c];
+        for (ln_int i = 0; i < 2; i++) {
             const ln_int g = first_grip + 2 * c + i;
             for (int e = 0; e < DIM; e++) X[g * DIM + e] = X[k * DIM + e] + Rc * m->ground_tangent[3 * i + e];
-            if (U)
-                for (int e = 0; e < DIM; e++) U[g * DIM + e] = 0.0;
         }
-        if (!U) continue;
-        double normal = 0.0;
-        for (int e = 0; e < DIM; e++) normal += U[k * DIM + e] * n[e];
-        for (int e = 0; e < DIM; e++) U[q * DIM + e] = U[k * DIM + e] - normal * n[e];
     }
+    if (U) FN(contacts_pad_velocity)(m, U);
+}
+
+/* Whether every contact of the mode in use (d->mode_inv_R) has its mass on the plane at X, within tol of the contact
+   length and 8 ulps of the largest coordinate of the scene's masses (ModeDynamics.project_positions' test). */
+static int FN(contacts_on_plane)(const ln_model *mm, const double *X, double tol)
+{
+    double largest = 0.0;
+    for (ln_int i = 0; i < (mm->K - mm->n_contacts - mm->n_grips) * DIM; i++) largest = ln_fmax(largest, fabs(X[i]));
+    const double limit = tol * mm->scene_size + 8 * ROPE_EPS * largest;
+    for (ln_int c = 0; c < mm->n_contacts; c++)
+        if (mm->inv_R[FN(contact_link)(mm, c)] != 0.0
+            && !(fabs(FN(contact_height)(mm, X, mm->contact_mass[c])) <= limit))
+            return 0;
+    return 1;
 }
 
 /* The positions X projected onto (11) of the mode in use (d->mode_inv_R) along M^-1 C(X)^T from X itself, to tol;
@@ -264,19 +300,30 @@ int FN(ln_contacts_project)(const ln_model *mm, const ln_method *meth, ln_data *
         FN(ln_unit_vectors)(mm, X, d->E0);
         if ((status = FN(ln_factor_tension_matrix)(mm, d, d->E0)) != LN_OK) return status;
         if ((status = project_positions(mm, d, X, d->E0, tol, meth->max_projection_iter)) != LN_OK) return status;
-        if (!mm->n_contacts) break;
-        double largest = 0.0;
-        for (ln_int i = 0; i < (mm->K - mm->n_contacts - mm->n_grips) * DIM; i++)
-            largest = ln_fmax(largest, fabs(X[i]));
-        const double limit = tol * mm->scene_size + 8 * ROPE_EPS * largest;
-        int on = 1;
-        for (ln_int c = 0; c < mm->n_contacts; c++)
-            if (mm->inv_R[FN(contact_link)(mm, c)] != 0.0
-                && !(fabs(FN(contact_height)(mm, X, mm->contact_mass[c])) <= limit))
-                on = 0;
-        if (on) break;
+        if (!mm->n_contacts || FN(contacts_on_plane)(mm, X, tol)) break;
     }
     if (mm->n_contacts) FN(ln_contacts_place)(mm, X, NULL);
+    return status;
+}
+
+/* RATTLE's position stage with a ground (ModeDynamics.project_positions with direction_at, seed (11)): Xc onto the
+   mode's (11) along M^-1 C(X)^T, E_dir the unit vectors at the stage's start X, A factored there on entry; each pass
+   re-places the contacts' anchors above Xc and leaves the grips where the stage's start put them (at rest through
+   the drift: a stuck mass is pulled back to where the stage began), until every active contact is on the plane.
+   A pass after one that needed exact Newton (whose solves leave another factorisation) factors A at E_dir again. */
+static int FN(contacts_project_along)(const ln_model *mm, const ln_method *meth, ln_data *d, double *Xc,
+                                      const double *E_dir, double tol)
+{
+    const ln_int exact = d->exact_newton_projections;
+    int status = LN_OK;
+    for (int pass = 0; pass < 4; pass++) {
+        FN(contacts_place_anchors)(mm, Xc);
+        if (pass > 0 && d->exact_newton_projections != exact
+            && (status = FN(ln_factor_tension_matrix)(mm, d, E_dir)) != LN_OK)
+            return status;
+        if ((status = project_positions(mm, d, Xc, E_dir, tol, meth->max_projection_iter)) != LN_OK) return status;
+        if (FN(contacts_on_plane)(mm, Xc, tol)) break;
+    }
     return status;
 }
 
@@ -772,16 +819,23 @@ static int FN(rope_plain_step)(const ln_model *mm, const ln_method *meth, ln_dat
             Uo[i] = U0[i] + h * A[i];
         }
         if ((status = FN(rope_drive)(mm, d, t1, Xo, Uo)) != LN_OK) return status;
-        FN(ln_unit_vectors)(mm, Xo, d->E0);
-        if ((status = FN(ln_factor_tension_matrix)(mm, d, d->E0)) != LN_OK) return status;
-        if ((status = project_positions(mm, d, Xo, d->E0, 1e-14, meth->max_projection_iter)) != LN_OK) return status;
+        if (mm->n_contacts) {  /* onto the mode's (11) and the ground from Xo itself (the anchors placed there) */
+            if ((status = FN(ln_contacts_project)(mm, meth, d, Xo, 1e-14)) != LN_OK) return status;
+            FN(ln_contacts_place)(mm, Xo, Uo);
+        } else {
+            FN(ln_unit_vectors)(mm, Xo, d->E0);
+            if ((status = FN(ln_factor_tension_matrix)(mm, d, d->E0)) != LN_OK) return status;
+            if ((status = project_positions(mm, d, Xo, d->E0, 1e-14, meth->max_projection_iter)) != LN_OK)
+                return status;
+        }
         return project_velocities(mm, d, Xo, Uo, d->E0);
     }
     double *E0 = d->E0, *E1 = d->E1;
     memcpy(Xo, X0, (size_t)size * sizeof(double));
     memcpy(Uo, U0, (size_t)size * sizeof(double));
-    memcpy(d->X_step, X0, (size_t)size * sizeof(double));  /* where a split step starts again */
-    memcpy(d->U_step, U0, (size_t)size * sizeof(double));
+    if (mm->n_contacts) FN(ln_contacts_place)(mm, Xo, Uo);  /* A(X) at the start with its anchors placed */
+    memcpy(d->X_step, Xo, (size_t)size * sizeof(double));  /* where a split step starts again */
+    memcpy(d->U_step, Uo, (size_t)size * sizeof(double));
     FN(ln_unit_vectors)(mm, Xo, E0);
     if ((status = FN(ln_factor_tension_matrix)(mm, d, E0)) != LN_OK) return status;
     status = composition_step(mm, meth, d, Xo, Uo, F_base, h, t0, t1, &E0, &E1);
@@ -1775,10 +1829,17 @@ int FN(ln_rope_fixed_step)(const ln_model *mm, const ln_method *meth, ln_data *d
     double *Xs0 = d->event_states, *Us0 = Xs0 + K3, *Xs1 = d->event_states + 2 * K3, *Us1 = Xs1 + K3;
     double *Xe = d->event_states + 4 * K3, *Ue = Xe + K3;
     int status = LN_OK;
-    if (mm->n_contacts) return LN_BAD_ARGUMENT;  /* a composition's stages do not place the contacts' anchors */
     for (ln_int k = 0; k < mm->max_events_per_step; k++) {
         memcpy(Xs0, X, bytes);
         memcpy(Us0, U, bytes);
+        if (mm->n_grips && FN(any_sliding)(mm)) {
+            /* the sliding contacts' slip directions at the start of the step, or of its rest after an event: the
+               reference of the friction's direction through it (EventHandling._slip_reference) */
+            memcpy(Xe, X, bytes);
+            memcpy(Ue, U, bytes);
+            if ((status = FN(rope_drive)(mm, d, t0, Xe, Ue)) != LN_OK) break;
+            if ((status = FN(friction_set_reference)(mm, d, Xe, Ue, F_base)) != LN_OK) break;
+        }
         if ((status = FN(rope_plain_step)(mm, meth, d, Xs0, Us0, F_base, t0, t1, Xs1, Us1)) != LN_OK) break;
         int found = 0;
         ln_int rope = -1;
