@@ -752,7 +752,7 @@ class LinknetNetwork(Fmi2Slave):
         lay = self._layout
         without_p = ~self._p_set & (self._va_vr >= 0)
         driven_row = {int(k): j for j, k in enumerate(lay.driven_indices)}
-        J = self._sim.anchor_report()["impulse"][[driven_row[int(k)] for k in lay.anchor_inputs]]
+        J = self._sim.anchor_report()["jump_impulse"][[driven_row[int(k)] for k in lay.anchor_inputs]]
         J_names = [[lay.reals[vr].name for vr in lay.Jreact_vr[driven_row[int(k)]]] for k in lay.anchor_inputs]
         messages = []
         moved = counted & ~without_p[:, None]

@@ -6,8 +6,9 @@ Inputs set at t whose P is not where the held motion had the anchor at t make a 
 V or A set without P, since the motion restarts from the P last set. The core takes a position jump
 (linknet_core/dynamics/drive.py anchor_jump, native drive.c ln_drive_jump) as a relocation: the anchor is put at P,
 the free masses are projected onto the link lengths (11) in the mass metric and their velocities onto (12) relative
-to the anchor's new V, and the impulse of that velocity projection is reported (Jreact), none for the displacement
-itself, which made in no time would take an unbounded impulse. The FMUs say so, naming the inputs.
+to the anchor's new V, and the impulse of that velocity projection is reported (in Jreact, which adds the impulses of
+the rope and ground events in the step), none for the displacement itself, which made in no time would take an
+unbounded impulse. The FMUs say so, naming the inputs, with the projection's impulse.
 """
 from __future__ import annotations
 
@@ -24,8 +25,9 @@ MAX_LISTED = 6  # coordinates named in one message
 RELOCATION = ("A jump of position is no motion the links can follow (made in no time it would take an unbounded "
               "impulse), so it was taken as a relocation: the anchor was put there, the free masses were moved to the "
               "nearest positions (in the mass metric) that keep the link lengths, and their velocities were projected "
-              "onto the links relative to the anchor's velocity; Jreact is the impulse of that projection alone, none "
-              "is counted for the displacement: ")
+              "onto the links relative to the anchor's velocity; the impulse of that projection is in Jreact (with "
+              "those of the rope and ground events later in the step), none is counted for the displacement; the "
+              "projection's: ")
 RULE = ("a driven anchor's position input must continue its held motion P + V tau + A tau^2/2: a jump is taken by "
         "moving the free masses onto the link lengths at once, which fails where the links cannot follow it; move the "
         "anchor there over several steps (set P, V and A together, or give V and A as P's input derivatives)")
@@ -62,7 +64,7 @@ def items(names, vrs, P, X, mask) -> str:
 
 
 def impulses(names, J, anchors) -> str:
-    """Jreact of the anchors (rows of J, (n, 3)), by name."""
+    """The jump's impulses on the anchors (rows of J, (n, 3)), by their Jreact names."""
     return ", ".join(f"{names[j][i]} = {J[j, i]:g}" for j in anchors for i in range(3))
 
 

@@ -187,9 +187,10 @@ class Layout:
                                     for i in range(3)] for k in self.fixed_indices], dtype=int).reshape(-1, 3)
         self.Jreact_vr = np.array([[self._add(f"Jreact[{k + 1},{i + 1}]", "output", "continuous", "calculated",
                                               "Impulse", f"impulse the network gave driven anchor "
-                                              f"{self._mass_label(k)}, {AXES[i]}, at the start of the last "
-                                              "communication step (a jump of its velocity input: the links take "
-                                              "it at once, as in an inelastic collision); 0 if none")
+                                              f"{self._mass_label(k)}, {AXES[i]}, over the last communication step: "
+                                              "a jump of its motion at the step's start (the links take it at once, "
+                                              "as in an inelastic collision) and every rope or ground event in the "
+                                              "step (a rope jerked taut); 0 if none")
                                     for i in range(3)] for k in self.driven_indices], dtype=int).reshape(-1, 3)
         self.error_estimate_vr = self._add(
             "error_estimate", "output", "continuous", "calculated", "Position",

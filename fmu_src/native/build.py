@@ -338,8 +338,8 @@ VARIABLE_FAMILIES = (
     VariableFamily("Freact", "FREACT", "Freact_vr", "fixed_indices", "fixed",
                    "forces the network exerts on the anchored masses (N)"),
     VariableFamily("Jreact", "JREACT", "Jreact_vr", "driven_indices", "driven",
-                   "impulses the network gave the driven anchors at the start of the last communication step (N.s; a "
-                   "jump of a velocity input); 0 if none"),
+                   "impulses the network gave the driven anchors over the last communication step (N.s): a jump of "
+                   "their motion at its start and every rope or ground event in it (a rope jerked taut); 0 if none"),
     VariableFamily("slack", "SLACK", "slack_vr", None, None, "1 where a rope is slack (carries no tension: its T is "
                    "0), 0 where it is taut", links="rope_links"),
     VariableFamily("Jrope", "JROPE", "Jrope_vr", None, None, "each rope's impulse of coming taut (its jerks) within "

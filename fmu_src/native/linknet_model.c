@@ -137,7 +137,8 @@ static const lnfmu_variable *variable(const lnfmu_scene *s, unsigned vr) { retur
 /* Inputs set at t whose P is not where the held motion had the anchor at t make a position jump there, and so does a
    V or A set without P (the held motion restarts from the P last set). The core takes it as a relocation
    (drive.c ln_drive_jump): the anchor is put at P, the free masses are projected onto the link lengths (11) in the
-   mass metric and their velocities onto (12), and the impulse of that velocity projection is reported (Jreact), none
+   mass metric and their velocities onto (12), and the impulse of that velocity projection is reported (in Jreact,
+   with the rope and ground events' of the step: ln_data.impulse; the projection's alone: jump_impulse), none
    for the displacement itself, which made in no time would take an unbounded impulse. The FMU says so, naming the
    inputs, in the pythonfmu FMU's words and by its rules (fmu_src/linknet_fmu/anchor_jumps.py): a coordinate's jump
    counts beyond JUMP_ROUND_OFF (|P| + the shortest link at the anchor); a jump of P longer than JUMP_LOGGED_ALWAYS of
@@ -149,8 +150,8 @@ static const lnfmu_variable *variable(const lnfmu_scene *s, unsigned vr) { retur
     "A jump of position is no motion the links can follow (made in no time it would take an unbounded impulse), " \
     "so it was taken as a relocation: the anchor was put there, the free masses were moved to the nearest "      \
     "positions (in the mass metric) that keep the link lengths, and their velocities were projected onto the "   \
-    "links relative to the anchor's velocity; Jreact is the impulse of that projection alone, none is counted "  \
-    "for the displacement: "
+    "links relative to the anchor's velocity; the impulse of that projection is in Jreact (with those of the "   \
+    "rope and ground events later in the step), none is counted for the displacement; the projection's: "
 #define JUMP_RULE                                                                                                 \
     "a driven anchor's position input must continue its held motion P + V tau + A tau^2/2: a jump is taken by "  \
     "moving the free masses onto the link lengths at once, which fails where the links cannot follow it; move "  \
@@ -244,7 +245,7 @@ static void jump_items(const fmu_model *m, int restarted, char *out, size_t n)
     if (more) append(out, n, "; and %d more", more);
 }
 
-/* Jreact of the anchors with listed coordinates, by name. */
+/* The jump's impulse on the anchors with listed coordinates, by their Jreact names. */
 static void jump_impulses(const fmu_model *m, int restarted, char *out, size_t n)
 {
     const lnfmu_scene *s = m->s;
@@ -255,7 +256,7 @@ static void jump_impulses(const fmu_model *m, int restarted, char *out, size_t n
             continue;
         for (int e = 0; e < 3; e++, listed++)
             append(out, n, "%s%s = %g", listed ? ", " : "", variable(s, m->jreact_vr[3 * a + e])->name,
-                   m->d->impulse[3 * a + e]);
+                   m->d->jump_impulse[3 * a + e]);
     }
 }
 
@@ -561,7 +562,10 @@ static int start_data(fmu_model *m, ln_data *d, char *msg)
     }
     d->t = m->start_time;
     d->drive_t0 = d->drive_hold_t = m->start_time;  /* scene motions run in t - t0; the hold starts now */
-    if (s->model->n_driven) memset(d->impulse, 0, (size_t)(3 * s->model->n_driven) * sizeof(double));
+    if (s->model->n_driven) {
+        memset(d->impulse, 0, (size_t)(3 * s->model->n_driven) * sizeof(double));
+        memset(d->jump_impulse, 0, (size_t)(3 * s->model->n_driven) * sizeof(double));
+    }
     d->jump_position = d->jump_velocity = 0.0;
     d->jumps = 0;
     d->h_next = s->h_next_init;

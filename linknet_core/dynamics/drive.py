@@ -42,6 +42,9 @@ class AnchorDrive:
         self.hold = (P0.copy(), np.zeros_like(P0), np.zeros_like(P0))
         self.callable: Callable | None = None
         self.last_jump = [np.zeros((self.n, 3)), 0.0, 0.0]  # impulse (n_driven, 3), position and velocity jump
+        # (n_driven, 3) what the links gave each driven anchor in impulses over the last advance: the jump's at its
+        # start, and the impacts' of the rope and ground events in it (events.EventHandling._apply_event)
+        self.advance_impulse = np.zeros((self.n, 3))
         self.jumps = 0
 
     def set_input(self, t: float, anchors) -> None:
@@ -56,12 +59,13 @@ class AnchorDrive:
     def internals(self):
         impulse, jump_position, jump_velocity = self.last_jump
         return (self.hold_t, tuple(a.copy() for a in self.hold), self.callable, self.jumps,
-                (impulse.copy(), jump_position, jump_velocity))
+                (impulse.copy(), jump_position, jump_velocity), self.advance_impulse.copy())
 
     def set_internals(self, saved) -> None:
-        self.hold_t, hold, self.callable, self.jumps, (impulse, jump_position, jump_velocity) = saved
+        self.hold_t, hold, self.callable, self.jumps, (impulse, jump_position, jump_velocity), advance = saved
         self.hold = tuple(a.copy() for a in hold)
         self.last_jump = [impulse.copy(), jump_position, jump_velocity]
+        self.advance_impulse = advance.copy()
 
     def input_at(self, t: float):
         """(P, V, A) of the input-driven anchors at t, each (n_input, 3)."""

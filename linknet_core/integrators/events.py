@@ -331,7 +331,9 @@ class EventHandling:
     # ---- the event -------------------------------------------------------------------------------------------
     def _apply_event(self, X, U, t, F_input, kind, trigger):
         """At an event at t (state X, U of the old mode): positions onto the touching constraints, the impact's
-        impulse, the next mode; the events recorded. Returns (X, U)."""
+        impulse, the next mode; the events recorded, and what the links gave the driven anchors in the impact added
+        to the advance's (AnchorDrive.advance_impulse; a jump's own is the jump's, EventHandling.anchor_jump).
+        Returns (X, U)."""
         uni = self.unilateral
         n_uni, n_ropes = uni.n_unilateral, uni.rope_links.size
         # a trigger past the unilateral constraints is a contact's friction: its stick margin (stuck -> slip) or its
@@ -387,6 +389,9 @@ class EventHandling:
             for c in np.flatnonzero(on_before & on_after & (md.stuck != stuck_before)):
                 self.events.append(Event(float(t), "stick" if md.stuck[c] else "slip", int(uni.contact_masses[c]),
                                          float(tangential[c] + grip[c]) if md.stuck[c] else 0.0))
+        if kind != "anchor" and self.drive is not None:  # what the links gave the driven anchors in the impact
+            self.drive.advance_impulse = self.drive.advance_impulse + uni.anchor_impulses(X, U, U_after,
+                                                                                          self.drive.rows)
         self._set_mode(active, X, U_after, stuck)
         if uni.friction > 0:
             uni.slip_reference[:] = 0.0  # from the velocities after the event, or the accelerations where at rest

@@ -41,7 +41,8 @@ class _Internals:
     finest_split: int
     jumps: int = 0
     drive: tuple | None = None  # driven anchors: (hold time, P, V, A, callable) of the input-driven ones
-    last_jump: tuple | None = None  # driven anchors: (impulse, position jump, velocity jump) of the last advance
+    last_jump: tuple | None = None  # driven anchors: (impulse, jump's impulse, position jump, velocity jump) of the
+    # last advance
     ropes: tuple | None = None  # ropes: (mode chosen, link_active, rope_impulse, the events so far, slip_reference)
 
     def __deepcopy__(self, memo):
@@ -125,7 +126,7 @@ class NativeIntegrator(Integrator):
             data = self.data
             drive = (d.drive_hold_t, data.drive_P.copy(), data.drive_V.copy(), data.drive_A.copy(), self._motion)
         if self.scene.motions:
-            last_jump = (self.data.impulse.copy(), d.jump_position, d.jump_velocity)
+            last_jump = (self.data.impulse.copy(), self.data.jump_impulse.copy(), d.jump_position, d.jump_velocity)
         ropes = None
         if self._ropes:
             data = self.data
@@ -159,7 +160,7 @@ class NativeIntegrator(Integrator):
             self.data.drive_P[...], self.data.drive_V[...], self.data.drive_A[...] = P, V, A
             self._follow(motion)
         if saved.last_jump is not None:
-            self.data.impulse[...], d.jump_position, d.jump_velocity = saved.last_jump
+            self.data.impulse[...], self.data.jump_impulse[...], d.jump_position, d.jump_velocity = saved.last_jump
         if saved.ropes is not None:
             self._drain()
             d.mode_chosen, active, impulse, events, slip_reference = saved.ropes
@@ -255,10 +256,12 @@ class NativeIntegrator(Integrator):
                 float(d.jump_velocity))
 
     def anchor_report(self) -> dict:
-        """The driven anchors' last jump: the impulse each got (n_driven, 3), N s; the largest position and
-        velocity change; jumps counted over the run."""
+        """What the links gave each driven anchor in impulses over the last advance (n_driven, 3), N s: its jump's
+        and, with ropes or a ground, its events'; the jump's part alone; the jump's largest position and velocity
+        change; jumps counted over the run."""
         d = self._d
-        return {"impulse": self.data.impulse.copy(), "jump_position": d.jump_position,
+        return {"impulse": self.data.impulse.copy(), "jump_impulse": self.data.jump_impulse.copy(),
+                "jump_position": d.jump_position,
                 "jump_velocity": d.jump_velocity, "jumps": int(d.jumps)}
 
     # ---- stepping -------------------------------------------------------------------------------

@@ -413,6 +413,7 @@ class NativeData:
     drive_V = functools.cached_property(lambda self: self._view("drive_V", int(self.model.struct.n_driven), 3))
     drive_A = functools.cached_property(lambda self: self._view("drive_A", int(self.model.struct.n_driven), 3))
     impulse = functools.cached_property(lambda self: self._view("impulse", int(self.model.struct.n_driven), 3))
+    jump_impulse = functools.cached_property(lambda self: self._view("jump_impulse", int(self.model.struct.n_driven), 3))
     # ropes: the mode (1 for rods and taut ropes) and each rope's impulse over the last advance (L each)
     link_active = functools.cached_property(lambda self: self._view("link_active", self.model.L, dtype=np.uint8))
     rope_impulse = functools.cached_property(lambda self: self._view("rope_impulse", self.model.L))

@@ -57,6 +57,7 @@ class NumpyBackend(Backend):
                     drive.set_input(t_before, hold)
                 state.X, state.U, *drive.last_jump = self.integrator.anchor_jump(drive, t_before, state.X, state.U, F)
                 drive.jumps += drive.last_jump[1] > 0 or drive.last_jump[2] > 0
+                drive.advance_impulse = drive.last_jump[0].copy()  # the advance's events add theirs
             self.integrator.advance(state, t_next, F, max_steps)
             if not all_finite(state.X, state.U):
                 raise SolverError(f"the state became non-finite between t = {t_before} and t = {t_next} "
@@ -85,8 +86,8 @@ class NumpyBackend(Backend):
 
     def anchor_report(self) -> dict:
         impulse, jump_position, jump_velocity = self.drive.last_jump
-        return {"impulse": impulse.copy(), "jump_position": jump_position, "jump_velocity": jump_velocity,
-                "jumps": self.drive.jumps}
+        return {"impulse": self.drive.advance_impulse.copy(), "jump_impulse": impulse.copy(),
+                "jump_position": jump_position, "jump_velocity": jump_velocity, "jumps": self.drive.jumps}
 
 
 BACKEND_CLASSES["numpy"] = NumpyBackend

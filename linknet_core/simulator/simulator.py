@@ -549,9 +549,12 @@ class Simulator:
         return self.engine.samples_in_one_call
 
     def anchor_report(self) -> dict:
-        """The driven anchors' jump at the start of the last advance: "impulse" (n_driven, 3), what the links gave
-        each (N s); "jump_position" (m) and "jump_velocity" (m/s), the largest coordinate changes; "jumps", how
-        many advances of the run began with one."""
+        """What the links gave the driven anchors in impulses over the last advance: "impulse" (n_driven, 3), N s,
+        the jump's at its start (the velocities projected onto (12)) and, with ropes or a ground, the impacts' of
+        the events in it (a rope jerked taut: C^T Lambda on the anchor's row, Lambda the minimum-norm impulses of
+        the links at their length, UnilateralDynamics.anchor_impulses); "jump_impulse", the jump's part alone;
+        "jump_position" (m) and "jump_velocity" (m/s), the jump's largest coordinate changes; "jumps", how many
+        advances of the run began with one."""
         return self.engine.anchor_report()
 
     # ---- snapshots ---------------------------------------------------------------------------

@@ -94,8 +94,8 @@ def test_simulate_with_the_anchor_held_from_the_start_reports_the_state_after_th
 @pytest.mark.parametrize("v", [V, -V], ids=["dropped", "jerked_up"])
 def test_the_fmu_takes_the_anchors_input_jumps_as_rope_events(v, tmp_path_factory):
     """The pythonfmu FMU driven through fmpy, the master setting the anchor's P and V at every communication point
-    (0.1 s): dropped, Jrope[1] is m v in the step that holds t* = 2 v / g and 0 in the others, Jreact 0 (the rope
-    went slack), the bob at -R - g t^2 / 2 before t* and R below the anchor after; jerked up, Jreact[1,3] is -m v and
+    (0.1 s): dropped, Jrope[1] is m v in the step that holds t* = 2 v / g and 0 in the others, Jreact[1,3] -m v
+    there (the jerk pulls the hook down as it pulls the bob up) and 0 in the others (going slack takes none), the bob at -R - g t^2 / 2 before t* and R below the anchor after; jerked up, Jreact[1,3] is -m v and
     Jrope[1] m v in the first step, 0 after, and the bob rides R below the anchor."""
     folder = tmp_path_factory.mktemp("rope_input_anchor")
     path = folder / "bob_on_input_anchor.json"
@@ -119,7 +119,8 @@ save(rows=np.array(rows))
         holds = (t_end - 0.1 < t_star) & (t_star <= t_end)
         assert holds.sum() == 1
         assert J_rope[holds][0] == pytest.approx(M * v, rel=1e-7) and np.all(J_rope[~holds] == 0.0)
-        assert np.all(J_react == 0.0)
+        # the jerk pulls the hook down along the rope (straight down at t*) as it pulls the bob up: -m v
+        assert J_react[holds][0] == pytest.approx(-M * v, rel=1e-7) and np.all(J_react[~holds] == 0.0)
         before = t_end < t_star
         assert np.allclose(z[before], -R - 0.5 * G * t_end[before] ** 2, atol=1e-9) and np.all(slack[before] == 1)
         assert np.allclose(z[~before], -v * t_end[~before] - R, atol=1e-7) and np.all(slack[~before] == 0)

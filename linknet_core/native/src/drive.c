@@ -108,7 +108,7 @@ int ln_drive_rows(const ln_model *m, ln_data *d, double t, double *X, double *U,
     return LN_OK;
 }
 
-int ln_drive_jump(const ln_model *m, const ln_method *meth, ln_data *d)
+static int drive_jump(const ln_model *m, const ln_method *meth, ln_data *d)
 {
     const ln_int n = m->n_driven;
     double *P = d->drive_scratch, *V = P + 3 * n, *A = V + 3 * n, *X = d->X, *U = d->U;
@@ -154,4 +154,12 @@ int ln_drive_jump(const ln_model *m, const ln_method *meth, ln_data *d)
             for (int e = 0; e < 3; e++) d->impulse[3 * a + e] -= sign * mu[l] * E[3 * l + e];
         }
     return LN_OK;
+}
+
+int ln_drive_jump(const ln_model *m, const ln_method *meth, ln_data *d)
+{
+    const int status = drive_jump(m, meth, d);
+    /* the jump's own impulse, which the advance's events (with ropes) add to in d->impulse */
+    memcpy(d->jump_impulse, d->impulse, (size_t)(3 * m->n_driven) * sizeof(double));
+    return status;
 }

@@ -10,8 +10,8 @@
 int ln_drive_rows(const ln_model *m, ln_data *d, double t, double *X, double *U, double *F, int dim);
 
 /* At the start of an advance: the state's driven rows to the motion at d->t. Where they jump, the positions are
-   projected onto (11) and the velocities onto (12) in the mass metric (an inelastic impulse); d->impulse,
-   d->jump_position, d->jump_velocity and d->jumps record it. */
+   projected onto (11) and the velocities onto (12) in the mass metric (an inelastic impulse); d->impulse (which
+   the advance's rope events add to), d->jump_impulse, d->jump_position, d->jump_velocity and d->jumps record it. */
 int ln_drive_jump(const ln_model *m, const ln_method *meth, ln_data *d);
 
 #endif

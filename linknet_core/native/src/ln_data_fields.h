@@ -81,8 +81,10 @@
     ARRAY(double, drive_A, 3 * m->n_driven)                                                                         \
     BORROWED(ln_drive_motion, drive_callback)                                                                       \
     BORROWED(void, drive_user)                                                                                      \
-    ARRAY(double, impulse, 3 * m->n_driven)             /* (n_driven,3) what the links gave each driven anchor at   \
-                                                           the last jump, N s */                                    \
+    ARRAY(double, impulse, 3 * m->n_driven)             /* (n_driven,3) what the links gave each driven anchor in   \
+                                                           impulses over the last advance, N s: the jump's at its   \
+                                                           start and, with ropes, every event's in it */            \
+    ARRAY(double, jump_impulse, 3 * m->n_driven)        /* (n_driven,3) the part of it of the jump alone */         \
     SCALAR(double, jump_position)                       /* the last advance's anchor jump: largest coordinate       \
                                                            change, 0 if none */                                     \
     SCALAR(double, jump_velocity)                                                                                   \
@@ -170,6 +172,9 @@
     ARRAY(uint8_t, rope_flags, m->n_ropes ? 11 * m->n_ropes : 0)  /* (11, n_ropes) sets of ropes */                   \
     ARRAY(double, rope_values, m->n_ropes ? 10 * m->n_ropes : 0)  /* (10, n_ropes) per-rope values */                 \
     ARRAY(double, event_states, m->n_ropes ? 16 * 3 * m->K : 0)  /* (16, K, 3) states */                           \
+    ARRAY(double, event_U_before, m->n_ropes && m->n_driven ? 3 * m->K : 0)  /* (K,3) the velocities an event     \
+                                                           began with: their change gives the driven anchors'      \
+                                                           impulse */                                               \
     ARRAY(double, link_values, m->n_ropes ? 6 * m->L : 0)        /* (6, L) per-link values */                       \
     ARRAY(double, E_full, m->n_ropes ? 3 * m->L : 0)             /* (L,3) every link's unit vector, slack or not */ \
     /* the ropes' tensions at an adaptive step's inner stages (its accepted attempt's): where a force that falls   \

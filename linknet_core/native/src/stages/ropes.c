@@ -1510,10 +1510,51 @@ static int FN(friction_impact)(const ln_model *mm, const ln_method *meth, ln_dat
     return LN_OK;
 }
 
+/* What the links gave the driven anchors in an impulse that took the free masses from U_before to U_after at X
+   (the anchors' rows at their motion), added into d->impulse: the minimum-norm impulses Lambda = A^+ C dU of the
+   links at their length (the rods, the ropes and contacts touching; any other Lambda gives the same forces, (31)),
+   and C^T Lambda on the anchors' rows, +Lambda_l E_l on k1(l) and -Lambda_l E_l on k2(l)
+   (UnilateralDynamics.anchor_impulses). The mask of the links at their length is left in use. */
+static int FN(rope_anchor_impulses)(const ln_model *mm, ln_data *d, const double *X, const double *U_before,
+                                    const double *U_after)
+{
+    const ln_int K = mm->K, L = mm->L;
+    uint8_t *at_length = d->rope_flags + 2 * mm->n_ropes;
+    double *dU = d->Uh, *rows = d->link_values, *lam = d->link_values + L;
+    int moved = 0;
+    for (ln_int k = 0; k < K; k++)
+        for (int e = 0; e < DIM; e++) {
+            dU[DIM * k + e] = mm->is_fixed[k] ? 0.0 : U_after[DIM * k + e] - U_before[DIM * k + e];
+            moved |= dU[DIM * k + e] != 0.0;
+        }
+    if (!moved) return LN_OK;
+    FN(rope_touching)(mm, X, NULL, at_length);
+    FN(rope_mask_of)(mm, d, at_length);
+    FN(ln_unit_vectors)(mm, X, d->E0);
+    const int status = FN(ln_factor_tension_matrix)(mm, d, d->E0);
+    if (status != LN_OK) return status;
+    for (ln_int l = 0; l < L; l++) {
+        const ln_int a = mm->k1[l], b = mm->k2[l];
+        double sum = 0.0;
+        for (int e = 0; e < DIM; e++) sum += d->E0[DIM * l + e] * (dU[DIM * a + e] - dU[DIM * b + e]);
+        rows[l] = sum;
+    }
+    FN(ln_solve_tension_system)(mm, d, rows, lam);
+    for (ln_int l = 0; l < L; l++)
+        for (ln_int a = 0; a < mm->n_driven; a++) {
+            const ln_int k = mm->driven_idx[a];
+            const double sign = mm->k1[l] == k ? 1.0 : mm->k2[l] == k ? -1.0 : 0.0;
+            if (sign == 0.0 || !d->mask[l]) continue;
+            for (int e = 0; e < DIM; e++) d->impulse[3 * a + e] += sign * lam[l] * d->E0[DIM * l + e];
+        }
+    return LN_OK;
+}
+
 /* At an event at t (state X, U of the old mode): positions onto the touching ropes, the impact, the next mode, the
    events recorded (EventHandling._apply_event). kind 1: rope trigger reached its length; 2: its tension fell to 0;
    3: the driven anchors' motion jumped (the ropes it stretched are put back with the touching ones, and every rope
-   it jerked, taut already or not, is a taut event). */
+   it jerked, taut already or not, is a taut event). What the links gave the driven anchors in it is added to
+   d->impulse (EventHandling._apply_event's anchor impulses). */
 static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_data *d, double *X, double *U,
                                 const double *F_base, double t, int kind, ln_int trigger)
 {
@@ -1527,6 +1568,7 @@ static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_da
     uint8_t *stuck_before = d->friction_flags + 3 * n_c, *may_stick = d->friction_flags + 4 * n_c;
     double *tangential = d->friction_values + 5 * n_c;
     int status;
+    if (mm->n_driven) memcpy(d->event_U_before, U, (size_t)(mm->K * DIM) * sizeof(double));
     for (ln_int c = 0; c < n_c && mm->n_grips; c++) stuck_before[c] = d->link_active[FN(grip_link)(mm, c, 0)];
     FN(rope_touching)(mm, X, NULL, touching);
     for (ln_int r = 0; r < R; r++) touching[r] |= d->link_active[mm->rope_link[r]];
@@ -1597,6 +1639,11 @@ static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_da
         FN(rope_record)(d, t, stuck ? LN_EVENT_STICK : LN_EVENT_SLIP, l, stuck ? tangential[c] + grip : 0.0, mm);
     }
     for (ln_int r = 0; r < R; r++) d->link_active[mm->rope_link[r]] = active[r];
+    if (mm->n_driven) {  /* the event's impulse on the driven anchors, added to the advance's (Jreact) */
+        status = FN(rope_anchor_impulses)(mm, d, X, d->event_U_before, U);
+        FN(rope_use_mask)(mm, d, d->link_active);
+        if (status != LN_OK) return status;
+    }
     if (mm->n_grips) {  /* the slip reference from the velocities after the event, or the accelerations at rest */
         FN(rope_use_mask)(mm, d, d->link_active);
         for (ln_int i = 0; i < 3 * n_c; i++) d->slip_reference[i] = 0.0;
@@ -1874,8 +1921,7 @@ int ln_rope_anchor_jump(const ln_model *m, const ln_method *meth, ln_data *d, co
     ln_model mode = *m;
     mode.inv_R = d->mode_inv_R;
     const ln_model *mm = &mode;
-    double *X = d->X, *U = d->U, *U_jumped = d->event_states + 6 * 3 * m->K;
-    const size_t bytes = (size_t)(3 * m->K) * sizeof(double);
+    double *X = d->X, *U = d->U;
     int status;
     if (m->n_contacts) FN(ln_contacts_place)(m, X, U);
     if (!d->mode_chosen) {  /* the mode of the state before the jump (its anchors' accelerations not in B) */
@@ -1890,42 +1936,7 @@ int ln_rope_anchor_jump(const ln_model *m, const ln_method *meth, ln_data *d, co
             X[3 * m->driven_idx[a] + e] = P[3 * a + e];
             U[3 * m->driven_idx[a] + e] = V[3 * a + e];
         }
-    memcpy(U_jumped, U, bytes);
     status = FN(rope_apply_event)(mm, meth, d, X, U, d->F_base, d->t, 3, -1);
-    /* what the links gave the driven anchors: the minimum-norm impulses A^+ C dU of the ropes at their length and
-       the rods (any other gives the same forces, (31)), C^T Lambda on the anchors' rows (UnilateralDynamics.
-       anchor_impulses) */
-    if (status == LN_OK) {
-        uint8_t *at_length = d->rope_flags + 2 * m->n_ropes;
-        double *dU = d->Uh, *rows = d->link_values, *lam = d->link_values + m->L;
-        int moved = 0;
-        for (ln_int k = 0; k < m->K; k++)
-            for (int e = 0; e < 3; e++) {
-                dU[3 * k + e] = m->is_fixed[k] ? 0.0 : U[3 * k + e] - U_jumped[3 * k + e];
-                moved |= dU[3 * k + e] != 0.0;
-            }
-        if (moved) {
-            FN(rope_touching)(mm, X, NULL, at_length);
-            FN(rope_mask_of)(mm, d, at_length);
-            FN(ln_unit_vectors)(mm, X, d->E0);
-            if ((status = FN(ln_factor_tension_matrix)(mm, d, d->E0)) == LN_OK) {
-                for (ln_int l = 0; l < m->L; l++) {
-                    const ln_int a = m->k1[l], b = m->k2[l];
-                    double sum = 0.0;
-                    for (int e = 0; e < 3; e++) sum += d->E0[3 * l + e] * (dU[3 * a + e] - dU[3 * b + e]);
-                    rows[l] = sum;
-                }
-                FN(ln_solve_tension_system)(mm, d, rows, lam);
-                for (ln_int l = 0; l < m->L; l++)
-                    for (ln_int a = 0; a < m->n_driven; a++) {
-                        const ln_int k = m->driven_idx[a];
-                        const double sign = m->k1[l] == k ? 1.0 : m->k2[l] == k ? -1.0 : 0.0;
-                        if (sign == 0.0 || !d->mask[l]) continue;
-                        for (int e = 0; e < 3; e++) d->impulse[3 * a + e] += sign * lam[l] * d->E0[3 * l + e];
-                    }
-            }
-        }
-    }
     FN(rope_use_mask)(mm, d, d->link_active);
     return status;
 }
