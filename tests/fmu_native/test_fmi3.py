@@ -214,7 +214,10 @@ def test_fmi3_outputs_equal_the_fmi2_fmu_bit_for_bit(name, scene_paths, fmi3_roo
     s3 = Slave3(fmu3)
     s3.initialize()
     s2 = Slave2(fmu2)
-    got, want = run(s3, fmu3, motion), run(s2, fmu3, motion)
+    # the pushed triangulated net costs more with every step (its flat braced cells near a self-stress:
+    # test_native_fmu_results): two steps hold the glue to it, as four do on the other scenes
+    n_steps = 2 if name == "triangulated_net" else N_STEPS
+    got, want = run(s3, fmu3, motion, n_steps), run(s2, fmu3, motion, n_steps)
     s3.free()
     s2.slave.freeInstance()
     assert "F" in fmu3.var, f"{name}: no force input to drive the run"
