@@ -35,8 +35,9 @@ def spinning_double_pendulum():
 
 
 @pytest.mark.parametrize("backend", ["native", "numpy"])
-@pytest.mark.parametrize("method,dts", [("rattle", [0.04, 0.02, 0.01, 0.005, 0.0025, 0.00125, 0.000625]),
-                                        ("yoshida4", [0.02, 0.01, 0.005, 0.0025, 0.00125])])
+# a coarse step that must split, and the two finest, which need no split and measure the order
+@pytest.mark.parametrize("method,dts", [("rattle", [0.04, 0.00125, 0.000625]),
+                                        ("yoshida4", [0.02, 0.0025, 0.00125])])
 def test_split_runs_converge_at_the_method_order(method, dts, backend):
     scene = spinning_double_pendulum()
     t_end = 0.5
