@@ -353,39 +353,41 @@ static const char *parameter_rule(const lnfmu_scene *s, int kind, double value, 
     }
 }
 
-/* The length R of link l against the initial positions: a relative violation beyond the scene's tolerance is
-   refused unless the scene opts in to projecting its initial positions. */
-static int length_fits(const lnfmu_scene *s, ln_int l, double R, char *msg, const char *name)
+/* Whether link l of the scene is a rope (the model's ropes past the scene's are the ground's contacts). */
+static int is_scene_rope(const lnfmu_scene *s, ln_int l)
 {
-    if (s->project_initial) return 1;
-    const double *X = s->X0;
+    for (ln_int r = 0; r < s->model->n_ropes - s->model->n_contacts; r++)
+        if (s->model->rope_link[r] == l) return 1;
+    return 0;
+}
+
+/* The relative violation of length R by link l at X: |distance / R - 1| for a rod; for a rope only its stretch
+   beyond R, a rope being free to be shorter (UnilateralDynamics.initial_state). */
+static double length_violation(const lnfmu_scene *s, const double *X, ln_int l, double R, double *distance)
+{
     const ln_int a = s->model->k1[l], b = s->model->k2[l];
     double sq = 0.0;
     for (int e = 0; e < 3; e++) sq += (X[3 * b + e] - X[3 * a + e]) * (X[3 * b + e] - X[3 * a + e]);
-    const double distance = ln_sqrt(sq), violation = fabs(distance / R - 1.0);
+    *distance = ln_sqrt(sq);
+    const double relative = *distance / R - 1.0;
+    return is_scene_rope(s, l) ? ln_fmax(relative, 0.0) : fabs(relative);
+}
+
+/* The length R of link l against the initial positions: a relative violation beyond the scene's tolerance (a rope:
+   stretched beyond it) is refused unless the scene opts in to projecting its initial positions. */
+static int length_fits(const lnfmu_scene *s, ln_int l, double R, char *msg, const char *name)
+{
+    if (s->project_initial) return 1;
+    double distance;
+    const double violation = length_violation(s, s->X0, l, R, &distance);
     if (violation <= s->length_tol) return 1;
     char label[512];
     link_label(s, l, label, sizeof label);
     fail(msg, FMU_ERROR, "%s = %.17g does not fit the initial positions: %s spans %.6g m in them (relative "
-         "violation %.3g, tolerance %g). Change the length back, or build the FMU from a scene with "
-         "\"options\": {\"project_initial_positions\": true}", name, R, label, distance, violation, s->length_tol);
-    return 0;
-}
-
-/* Whether parameter v may take value x in a scene with ropes or a ground (else msg says why). Their initial state
-   is the library's impact at the start (UnilateralDynamics.initial_state: ropes at their length and masses on the
-   ground lose their approach velocities, by an LCP in the mass metric), which the native core does not compute, so
-   the masses and lengths stay the scene's, whose initial state is baked; gravity does not enter it. */
-static int unilateral_parameter_fits(const lnfmu_scene *s, const lnfmu_variable *v, double x, char *msg)
-{
-    if (!s->model->n_ropes || (v->kind != LNFMU_M && v->kind != LNFMU_R)) return 1;
-    const double given = v->kind == LNFMU_M ? s->mass[v->index] : s->length[v->index];
-    if (x == given) return 1;
-    fail(msg, FMU_ERROR, "parameter %s = %.17g cannot be changed in this FMU (only its value %.17g): the scene has "
-         "ropes or a ground, whose initial state the library makes consistent by an impact (the approach velocities "
-         "of the ropes at their length and of the masses on the ground removed), which the native FMU takes from the "
-         "library for the scene's masses and lengths only; build the FMU from the scene with the value changed; "
-         "nothing set", v->name, x, given);
+         "violation %.3g, tolerance %g%s). Change the length back, or build the FMU from a scene with "
+         "\"options\": {\"project_initial_positions\": true}; nothing set", name, R, label, distance, violation,
+         s->length_tol,
+         is_scene_rope(s, l) ? "; a rope may be shorter than its length, never longer" : "");
     return 0;
 }
 
@@ -457,6 +459,56 @@ static int project_state(fmu_model *m, double *X, double *U, int positions, char
                 status, ln_status_name(status));
 }
 
+/* The initial state of a scene with ropes or a ground for the model built: with the scene's masses and lengths the
+   library's (gravity does not enter it); with others, the core's (ln_rope_initial_state, as UnilateralDynamics.
+   initial_state: rods within the scene's tolerance of their lengths and ropes not stretched beyond it, else refused
+   or, where the scene opts in, projected; then the inelastic impact on the ropes at their length and the masses on
+   the ground). */
+static int unilateral_initial_state(fmu_model *m, const double *values, char *msg)
+{
+    const lnfmu_scene *s = m->s;
+    const size_t n3 = (size_t)(3 * s->K);
+    int changed = 0;
+    for (ln_int vr = 0; vr < s->n_real; vr++) {
+        const lnfmu_variable *v = variable(s, (unsigned)vr);
+        changed |= (v->kind == LNFMU_M && values[vr] != s->mass[v->index])
+                   || (v->kind == LNFMU_R && values[vr] != s->length[v->index]);
+    }
+    double *X = m->X_init, *U = m->U_init;
+    if (!changed) {
+        if (n3) {
+            memcpy(X, s->X_init, n3 * sizeof(double));
+            memcpy(U, s->U_init, n3 * sizeof(double));
+        }
+        return FMU_OK;
+    }
+    if (n3) {
+        memcpy(X, s->X0, n3 * sizeof(double));
+        memcpy(U, s->U0, n3 * sizeof(double));
+    }
+    double worst = 0.0, distance;
+    ln_int worst_link = -1;
+    for (ln_int l = 0; l < s->L - s->model->n_contacts - s->model->n_grips; l++) {  /* the scene's own links */
+        const double violation = length_violation(s, X, l, m->model.R[l], &distance);
+        if (!(violation <= worst)) {
+            worst = violation;
+            worst_link = l;
+        }
+    }
+    char label[512] = "a link";
+    if (worst > s->length_tol && !s->project_initial) {
+        link_label(s, worst_link, label, sizeof label);
+        return fail(msg, FMU_ERROR, "the initial positions violate the link lengths by up to %.3g relative at %s "
+                    "(tolerance %g; a rope may be shorter than its length, never longer)", worst, label, s->length_tol);
+    }
+    const int status = ln_rope_initial_state(&m->model, &m->method, m->d, X, U, worst > s->length_tol);
+    if (status == LN_OK) return FMU_OK;
+    if (status == LN_PROJECTION_FAILED && m->d->fail_link >= 0) link_label(s, m->d->fail_link, label, sizeof label);
+    return fail(msg, FMU_ERROR, "the initial state cannot be made consistent with the lengths R and masses M (native "
+                "status %d: %s; worst: %s): the lengths do not fit the scene's geometry", status,
+                ln_status_name(status), label);
+}
+
 /* The model, method and initial state for the parameters in values and integrator. At the scene's defaults
    the baked ones; otherwise rebuilt here. On failure msg says why and the model is left half-built: the
    caller builds the previous parameters again. */
@@ -490,13 +542,7 @@ static int build_run(fmu_model *m, const double *values, ln_int integrator, char
     parameter_arrays(m, values, mass, R, g);
     if (ln_model_weights(&m->model, mass, R, g, s->force, m->weights) != LN_OK)
         return fail(msg, FMU_ERROR, "out of memory");
-    if (s->model->n_ropes) {  /* gravity alone changed (unilateral_parameter_fits): the library's initial state */
-        if (K) {
-            memcpy(m->X_init, s->X_init, (size_t)(3 * K) * sizeof(double));
-            memcpy(m->U_init, s->U_init, (size_t)(3 * K) * sizeof(double));
-        }
-        return FMU_OK;
-    }
+    if (s->model->n_ropes) return unilateral_initial_state(m, values, msg);
 
     /* the initial state, as Simulator prepares it: lengths checked (or projected), velocities onto (12) */
     double *X = m->X_init, *U = m->U_init;
@@ -923,7 +969,6 @@ int fmu_model_set_real(fmu_model *m, const unsigned *vr, size_t n, const double 
             char why[256];
             const char *rule = parameter_rule(s, v->kind, x, why, sizeof why);
             if (rule) return fail(msg, FMU_ERROR, "parameter %s = %.17g %s; nothing set", v->name, x, rule);
-            if (!unilateral_parameter_fits(s, v, x, msg)) return FMU_ERROR;
             if (v->kind == LNFMU_R && !length_fits(s, v->index, x, msg, v->name)) return FMU_ERROR;
         }
     }

@@ -147,6 +147,12 @@ int ln_rope_evaluate(const ln_model *m, ln_data *d, const double *X, const doubl
    rates (12) to zero), the mode chosen from the state after it, taut events for every rope it jerked; d->impulse
    what the links gave each driven anchor (EventHandling.anchor_jump). ln_drive_jump calls it. */
 int ln_rope_anchor_jump(const ln_model *m, const ln_method *meth, ln_data *d, const double *P, const double *V);
+/* The initial state (X, U) of a scene with ropes or a ground made consistent in place, as UnilateralDynamics.
+   initial_state makes it: where project, the positions projected onto the rods and the ropes longer than their length
+   (the closest in the mass metric); the contacts' anchors placed; then an inelastic impact on the ropes at their
+   length and the masses on the ground (their approach velocities removed, the rods' rates (12) to zero), frictionless.
+   d's mode is left to the first advance to choose. LN_OK, or the status of the projection or impact that failed. */
+int ln_rope_initial_state(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U, int project);
 /* The log of events kept since the last drain is taken: the count is returned and the log emptied (the events are
    d->event_t, event_kind, event_link, event_impulse [0, count) until the next advance). */
 LN_API ln_int ln_rope_events_drained(ln_data *d);

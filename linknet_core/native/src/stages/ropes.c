@@ -1941,6 +1941,31 @@ int ln_rope_anchor_jump(const ln_model *m, const ln_method *meth, ln_data *d, co
     return status;
 }
 
+int ln_rope_initial_state(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U, int project)
+{
+    const ln_int R = m->n_ropes, first_contact = R - m->n_contacts;
+    ln_model mode = *m;
+    mode.inv_R = d->mode_inv_R;
+    double *no_restitution = d->rope_values;  /* the initial impact is inelastic, whatever the ropes' restitution */
+    for (ln_int r = 0; r < R; r++) no_restitution[r] = 0.0;
+    mode.rope_restitution = no_restitution;
+    const ln_model *mm = &mode;
+    uint8_t *flags = d->rope_flags, *took = d->rope_flags + R;
+    double *impulses = d->rope_values + 9 * R;
+    int status;
+    for (ln_int l = 0; l < m->L; l++) d->link_active[l] = 0;  /* no grip: the initial impact is frictionless */
+    if (m->n_contacts) FN(ln_contacts_place)(m, X, U);
+    if (project) {  /* the rods and the ropes longer than their length, in the mass metric (the contacts not) */
+        for (ln_int r = 0; r < R; r++) flags[r] = r < first_contact && FN(rope_gap)(mm, X, m->rope_link[r]) < 0.0;
+        if ((status = FN(rope_project)(mm, meth, d, flags, X, NULL)) != LN_OK) return status;
+        if (m->n_contacts) FN(ln_contacts_place)(m, X, U);
+    }
+    FN(rope_touching)(mm, X, NULL, flags);
+    status = FN(rope_impact)(mm, meth, d, X, U, flags, impulses, took);
+    d->mode_chosen = 0;  /* the first advance chooses the mode from this state */
+    return status;
+}
+
 int ln_rope_evaluate(const ln_model *m, ln_data *d, const double *X, const double *U)
 {
     ln_model mode = *m;
