@@ -87,18 +87,12 @@ class Event(NamedTuple):
 
 def native_refusal(scene: Scene, method=None) -> str | None:
     """Why the native core cannot run ``scene`` with ``method`` (an integrator class; None: every method), or None
-    where it can. It takes ropes on every method, and a ground, with or without Coulomb friction, on the adaptive
-    Runge-Kutta methods (linknet_core/native/src/stages/ropes.c: each contact a unilateral link to a virtual anchor;
-    stages/friction.c: a stuck contact's grips, a sliding one's friction carried through the links); a ground on the
-    fixed-step methods runs on the numpy reference only. The native FMU's build asks this of each method it would
-    offer: with a ground it offers the adaptive ones."""
-    ground = scene.ground
-    if ground is None or (method is not None and method.adaptive):
-        return None
-    what = f"a ground with Coulomb friction (mu = {ground.friction:g})" if ground.friction > 0 else "a ground"
-    return (f"{scene.name}: it has {what}, and the native core (backend=\"native\", the native FMU) takes a ground on "
-            "the adaptive methods (dop853, dopri5) only, not on the fixed-step ones (RATTLE and its compositions); the "
-            "numpy reference runs it (backend=\"auto\" or \"numpy\", and the pythonfmu FMU)")
+    where it can: the one rule the Simulator's choice of backend (numpy_only) and the native FMU's build (the
+    integrators it offers) ask. The core takes ropes and a ground, with or without Coulomb friction, on every method
+    (linknet_core/native/src/stages/ropes.c: each contact a unilateral link to a virtual anchor; stages/friction.c:
+    a stuck contact's grips, a sliding one's friction carried through the links; stages/rattle.c: RATTLE's stages
+    on the mode, the friction implicit in its second kick), so it refuses none of them."""
+    return None
 
 
 def scene_size(scene: Scene) -> float:
@@ -149,11 +143,9 @@ def describe(scene: Scene) -> list[str]:
             lines.append(f"masses on the ground at the start: {len(on)}" + (f" ({shown})" if on else ""))
     friction = ("; stages/friction.c, Coulomb friction: a stuck contact's grips, a sliding one's friction"
                 if ground is not None and ground.friction > 0 else "")
-    lines.append("path: the native core, event by event, on the adaptive methods (linknet_core/native/src/stages/"
-                 f"ropes.c, each contact a unilateral link to a virtual anchor{friction}); the numpy reference on the "
-                 "fixed-step ones" if ground is not None else
-                 "path: the native core, event by event (linknet_core/native/src/stages/ropes.c; the numpy reference "
-                 "with backend=\"numpy\")")
+    lines.append("path: the native core, event by event, on every method (linknet_core/native/src/stages/ropes.c"
+                 + (f", each contact a unilateral link to a virtual anchor{friction}" if ground is not None else "")
+                 + "; the numpy reference with backend=\"numpy\")")
     return lines
 
 

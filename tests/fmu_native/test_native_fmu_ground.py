@@ -5,10 +5,9 @@ on each free mass within each doStep) and one message per contact and release ev
 pythonfmu FMU's words (rope_events.event_message), a hook driven by inputs dropping its load onto the ground against
 Simulator.advance(anchors=) (Jreact too), the ball's FMI 3.0 FMU against its FMI 2.0 FMU; and against the closed
 forms (the ball's bounce times and impulses, the chain's landing times and impulses). An FMU state taken between two
-contacts repeats the run across the next ones; the methods the core does not run with a ground (RATTLE and its
-compositions) are not offered and are refused by the library's reason when chosen, the instance staying usable;
-gravity, a mass and a length may change (the library's run of Scene.with_parameters); a fixed-step default integrator
-(with or without friction) is refused at build with the library's reason, no FMU written. Friction: test_native_fmu_friction.py.
+contacts repeats the run across the next ones; RATTLE and its compositions are offered as every method is (the chain on
+them equals the library too); gravity, a mass and a length may change (the library's run of Scene.with_parameters).
+Friction: test_native_fmu_friction.py.
 
 Tolerance: none. The FMU's binary (Zig's clang) and the library (gcc) compile the same core with the same flags and no
 C library math (test_native_fmu_equals_library), and the FMU runs the library's own model of the ground (the scene
@@ -29,9 +28,7 @@ from native_fmu_support import ROOT, built
 from test_native_fmu_ropes import Instance
 
 sys.path.insert(0, str(ROOT / "fmu_src"))
-import build_fmu  # noqa: E402
 import linknet_core as ln  # noqa: E402
-from linknet_core.dynamics.unilateral import native_refusal  # noqa: E402
 from linknet_fmu.layout import EVENT_CATEGORY  # noqa: E402
 from linknet_fmu.rope_events import event_message  # noqa: E402
 
@@ -262,30 +259,26 @@ def test_the_error_estimate_and_the_tension_peaks_are_the_librarys(fmus, scenes)
     assert 0.0 < max(row[0] for row in rows) < sim.error_goal
 
 
-def test_the_fixed_step_methods_are_not_offered_and_refused_by_the_librarys_reason(fmus, scenes):
-    from fmpy.fmi1 import FMICallException
-
-    fmu = fmus["ball"]
-    scene = ln.load_scene(scenes["ball"])
+@pytest.mark.parametrize("method", ["rattle", "yoshida4"])
+def test_the_chain_on_rattle_and_its_compositions_through_the_fmu_equals_the_library(method, fmus, scenes):
+    # every method is offered with a ground (unilateral.native_refusal refuses none); at the FMU's default step (1e-3
+    # s), chosen at initialization, the outputs and events are the library's on the native backend to the last bit
+    fmu = fmus["chain"]
     integrator = next(v for v in fmu.md.modelVariables if v.name == "integrator")
-    assert integrator.description == "integration method: dop853, dopri5"
+    assert {"dop853", "dopri5", "rattle", "yoshida4"} <= set(integrator.description.split(": ")[1].split(", "))
+    t_end, n = RUNS["chain"]
+    run = ln.simulate(scenes["chain"], t_end, method, dt=1e-3, n_out=n + 1, error_estimate=False, backend="native")
+    names = _names(fmu)
     instance = Instance(fmu)
-    instance.slave.setupExperiment(startTime=0.0)
-    instance.slave.enterInitializationMode()
-    for method in ("rattle", "yoshida4"):
-        with pytest.raises(FMICallException):
-            instance.slave.setString([fmu.vr["integrator"]], [method])
-        status, _, message = instance.log.pop()
-        assert status == ERROR
-        assert message == (f'fmi2SetString: parameter integrator = "{method}" is not offered by this FMU: '
-                           f"{native_refusal(scene, ln.METHODS[method])}; nothing set")
-    assert instance.slave.getString([fmu.vr["integrator"]]) == [b"dop853"]  # nothing set: the default stands
-    instance.slave.setString([fmu.vr["integrator"]], ["dopri5"])
-    instance.slave.exitInitializationMode()
-    run = _library(scenes["ball"], 0.5, 5, "dopri5")
-    rows, messages = instance.run(run.t, ["X[1,3]", "Jground[1]"])
-    np.testing.assert_array_equal(rows[:, 0], run.X[1:, 0, 2])
-    assert len(messages) == 1 and rows[:, 1].max() > 0.0
+    instance.initialize(integrator=method)
+    rows, messages = instance.run(run.t, names)
+    np.testing.assert_array_equal(rows, _library_rows(run, names)[1:])
+    scene = ln.load_scene(scenes["chain"])
+    assert messages == [event_message(e, scene) for e in run.events]
+    # the free fall, exact on these methods: mass k lands at sqrt(2 k a / g)
+    landings = [_parse(m)[0] for m in messages if ": contact of " in m]
+    k = np.arange(1, CHAIN["N"] + 1)
+    assert np.abs(np.array(landings) - np.sqrt(2 * k * CHAIN["a"] / G)).max() <= 1e-14
 
 
 def test_gravity_masses_and_lengths_may_change(fmus, scenes):
@@ -317,27 +310,6 @@ def test_gravity_masses_and_lengths_may_change(fmus, scenes):
     assert rows[:, names.index("slack[1]")][0] == 1.0  # the longer rope starts slack
 
 
-@pytest.mark.parametrize("what", ["friction on rattle", "fixed step"])
-def test_a_ground_on_a_fixed_step_default_integrator_is_refused_at_build_with_the_librarys_reason(what, tmp_path):
-    data = chain_data() if what == "friction on rattle" else ball_data()
-    if what == "friction on rattle":  # Coulomb friction on masses joined by links, RATTLE chosen as the default
-        data["ground"]["friction"] = 0.4
-    path = tmp_path / "refused.json"
-    path.write_text(json.dumps(data))
-    out = tmp_path / "refused.fmu"
-    # a step without a method: RATTLE at that step
-    options = dict(step=1e-3) if what == "fixed step" else dict(integrator="rattle", step=1e-3)
-    with pytest.raises(SystemExit) as refused:
-        build_fmu.build_scene_fmu(str(path), out, native=True, quiet=True, platforms="host", **options)
-    scene = ln.load_scene(path)
-    reason = native_refusal(scene, ln.METHODS["rattle"])
-    assert reason is not None and str(refused.value) == f"build_fmu: {reason}"
-    assert ("Coulomb friction" in reason) == (what == "friction on rattle")
-    assert "adaptive methods (dop853, dopri5) only" in reason
-    assert native_refusal(scene, ln.METHODS["dop853"]) is None  # the same scene builds on its default method
-    assert not out.exists()
-
-
 def test_the_ball_through_the_fmi3_fmu_gives_the_fmi2_fmus_outputs_and_events(fmus, scenes, tmp_path_factory):
     """The same model behind the FMI 3.0 glue: the arrays X and Jground equal the FMI 2.0 FMU's scalars at every
     communication point, its events are logged in the same words, its integrator offers the same methods."""
@@ -353,8 +325,8 @@ def test_the_ball_through_the_fmi3_fmu_gives_the_fmi2_fmus_outputs_and_events(fm
         z.extractall(unzipped)
     md = read_model_description(str(path))
     vr = {v.name: v.valueReference for v in md.modelVariables}
-    assert next(v for v in md.modelVariables if v.name == "integrator").description == \
-        "integration method: dop853, dopri5"
+    assert next(v for v in md.modelVariables if v.name == "integrator").description == next(
+        v for v in fmus["ball"].md.modelVariables if v.name == "integrator").description
     log = []
     slave = FMU3Slave(guid=md.guid, unzipDirectory=str(unzipped), modelIdentifier=md.coSimulation.modelIdentifier,
                       instanceName="fmi3")

@@ -8,9 +8,8 @@ impulse-level law), a puck pushed across its slide (its slip direction turning),
 until it slips. Masses joined by links: a rod leaning on the ground with its foot pushed sideways and a dumbbell
 pushed at a slant (the slip from rest turned by the rod), a rod dropped at a slant landing on one end (stuck, and
 sliding until its top lands), a rod standing on the floor until its base slips, a pendulum swinging into the ground
-(its rope jerked slack, the bob sliding to a stop). backend="auto" takes every one of them to the core on the adaptive
-methods (unilateral.native_refusal, which the native FMU's build asks too); a ground on the fixed-step methods stays on
-the numpy reference."""
+(its rope jerked slack, the bob sliding to a stop). backend="auto" takes every one of them to the core, on the adaptive
+methods and on RATTLE and its compositions (unilateral.native_refusal, which the native FMU's build asks too)."""
 from __future__ import annotations
 
 import numpy as np
@@ -173,9 +172,26 @@ def test_a_snapshot_taken_mid_slide_continues_identically_on_native():
     assert [e.kind for e in events] == ["stick"]
 
 
-def test_friction_on_the_fixed_step_methods_stays_on_numpy_with_the_reason():
-    for scene in (thrown(), dropped_rod(0.2, [3.0, 1.5, 0.0])):
-        with pytest.raises(ln.SolverError, match="Coulomb friction .* adaptive methods"):
-            ln.Simulator(scene, "rattle", dt=1e-3, backend="native")
-        assert ln.Simulator(scene, "rattle", dt=1e-3).backend == "numpy"
-        assert unilateral.native_refusal(scene, ln.METHODS["dop853"]) is None
+FIXED_STEP = {"block thrown along the ground": (thrown, 1.0, "rattle", 1e-2, 1),
+              "mass landing, sliding on": (lambda: slant(3.0), 1.0, "rattle", 1e-2, 2),
+              "stuck block": (lambda: slope(0.3, 0.5)[0], 1.0, "rattle", 1e-2, 0),
+              "rod landing on one end, stuck": (lambda: dropped_rod(0.8, [1.2, 0.7, 0.0]), 0.3, "yoshida4", 1e-2, 1),
+              "rod landing on one end, sliding": (lambda: dropped_rod(0.2, [3.0, 1.5, 0.0]), 0.6, "rattle", 5e-3, 2),
+              "pendulum swinging into the ground": (swing, 1.5, "rattle", 5e-3, 3)}
+
+
+@pytest.mark.parametrize("name", list(FIXED_STEP))
+def test_friction_on_rattle_and_its_compositions_runs_on_the_core_as_the_reference_does(name):
+    # the core's RATTLE kicks with the sliding contacts' friction, implicit in the second kick, with the slip reference
+    # set at each step's start, as the reference's (measured: event times and states within 3e-14)
+    make, t_end, method, dt, n_events = FIXED_STEP[name]
+    assert ln.Simulator(make(), method, dt=dt).backend == "native"
+    assert unilateral.native_refusal(make(), ln.METHODS[method]) is None
+    reference, native = (ln.simulate(make(), t_end, method, dt=dt, n_out=11, error_estimate=False, backend=backend)
+                         for backend in ("numpy", "native"))
+    assert len(reference.events) == n_events
+    _agree(reference, native, min_events=n_events)
+    if name == "block thrown along the ground":
+        # a constant deceleration mu g, which RATTLE integrates exactly: the stop at v / (mu g) to round-off
+        assert [(e.kind, e.index) for e in native.events] == [("stick", 0)]
+        assert native.events[0].t == pytest.approx(3.0 / (0.4 * G), abs=1e-14)

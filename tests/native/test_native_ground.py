@@ -7,7 +7,8 @@ R_c, its gap the height above the plane), the position projection repeated with 
 contacts are on the plane. The rules (the LCPs with the contacts after the ropes, the events 'contact' and 'release',
 Newton's restitution and the rest rule) are the reference's, so the two agree to round-off, within the bounds of
 tests/native/test_native_ropes.py (EVENT_TIME_TOL, STATE_TOL; measured here: event times 1e-15 s, positions 2e-15 m,
-impulses 5e-15 N s)."""
+impulses 5e-15 N s). The same holds on RATTLE and its compositions, whose stages place the anchors as the
+reference's do."""
 from __future__ import annotations
 
 import numpy as np
@@ -69,13 +70,16 @@ def test_a_rope_chain_falling_onto_the_ground_lands_mass_by_mass_as_the_referenc
     assert np.abs(np.array([e.impulse for e in contacts]) - m * np.sqrt(2 * G * k * a)).max() < 1e-14
 
 
+def swing_into_the_ground():
+    return ln.Scene.from_dict({"name": "swing", "gravity": [0, 0, -G],
+                               "masses": [{"name": "pivot", "position": [0, 0, 0.8], "fixed": True},
+                                          {"name": "bob", "position": [1.0, 0, 0.8], "mass": 1.0}],
+                               "links": [{"a": 1, "b": 2, "kind": "rope"}],
+                               "ground": {"point": [0, 0, 0], "normal": [0, 0, 1]}})
+
+
 def test_a_pendulum_swinging_into_the_ground_lands_slides_and_is_jerked_off_it_as_the_reference_does():
-    scene = ln.Scene.from_dict({"name": "swing", "gravity": [0, 0, -G],
-                                "masses": [{"name": "pivot", "position": [0, 0, 0.8], "fixed": True},
-                                           {"name": "bob", "position": [1.0, 0, 0.8], "mass": 1.0}],
-                                "links": [{"a": 1, "b": 2, "kind": "rope"}],
-                                "ground": {"point": [0, 0, 0], "normal": [0, 0, 1]}})
-    reference, native = _both(scene, 1.5, n_out=151)
+    reference, native = _both(swing_into_the_ground(), 1.5, n_out=151)
     _agree(reference, native, min_events=6)
     assert [e.kind for e in native.events] == ["contact", "slack", "taut", "release", "contact", "slack"]
 
@@ -197,19 +201,32 @@ def test_a_snapshot_of_a_run_on_the_ground_continues_identically_and_a_reset_run
     assert np.array_equal(sim.state.X, X) and sim.integrator.events == events
 
 
-def test_the_native_core_refuses_a_ground_on_fixed_steps_and_auto_runs_it_there_on_numpy_and_friction_natively():
-    rough = ln.Scene.from_dict({"name": "rough_rope", "gravity": [0, 0, -G],
-                                "masses": [{"name": "a", "position": [0, 0, 0.5], "mass": 1.0},
-                                           {"name": "b", "position": [0.3, 0, 0.5], "mass": 1.0}],
-                                "links": [{"a": "a", "b": "b", "length": 0.3, "kind": "rope"}],
-                                "ground": {"point": [0, 0, 0], "normal": [0, 0, 1], "friction": 0.4}})
-    # friction on linked masses: the core's on the adaptive methods (tests/native/test_native_friction.py)
-    assert ln.Simulator(rough, "dop853").backend == "native"
-    with pytest.raises(ln.SolverError, match="Coulomb friction .* adaptive methods"):
-        ln.Simulator(rough, "rattle", dt=1e-3, backend="native")
-    assert ln.Simulator(rough, "rattle", dt=1e-3).backend == "numpy"
-    smooth = dropped(1.0, 0.0)
-    with pytest.raises(ln.SolverError, match="adaptive methods"):
-        ln.Simulator(smooth, "rattle", dt=1e-3, backend="native")
-    assert ln.Simulator(smooth, "rattle", dt=1e-3).backend == "numpy"
-    assert ln.Simulator(smooth, "dopri5").backend == "native"
+FIXED_STEP = {"bouncing ball": (lambda: dropped(1.0, 0.5), 1.5, "rattle", 1e-2, 10),
+              "pendulum swinging into the ground": (swing_into_the_ground, 1.5, "rattle", 5e-3, 6),
+              "net on a slope": (_net_on_a_slope, 1.0, "rattle", 5e-3, 15),
+              "dumbbell": (_dumbbell, 1.0, "yoshida4", 1e-2, 6)}
+
+
+@pytest.mark.parametrize("name", list(FIXED_STEP))
+def test_a_ground_on_rattle_and_its_compositions_runs_on_the_core_as_the_reference_does(name):
+    # auto takes it to the core (unilateral.native_refusal); the core's RATTLE stages place the contacts' anchors and
+    # re-place them in the position stage as the reference's ModeDynamics does, so the two agree to round-off
+    # (measured: event times 4e-13 s, positions 3e-14 m)
+    make, t_end, method, dt, n_events = FIXED_STEP[name]
+    assert ln.Simulator(make(), method, dt=dt).backend == "native"
+    reference, native = (ln.simulate(make(), t_end, method, dt=dt, n_out=11, error_estimate=False, backend=backend)
+                         for backend in ("numpy", "native"))
+    _agree(reference, native, min_events=n_events)
+
+
+def test_a_rope_chain_falling_onto_the_ground_lands_at_the_closed_form_times_on_rattle():
+    # a free fall, which RATTLE integrates exactly: mass k lands at sqrt(2 k a / g) with the impulse m sqrt(2 g k a)
+    # (each contact's time by Newton on the step's length, to round-off) however long the steps
+    N, a, m = 20, 0.05, 0.05
+    run = ln.simulate(falling_chain(N, a, m), 0.5, "rattle", dt=2e-3, n_out=2, error_estimate=False)
+    contacts = [e for e in run.events if e.kind == "contact"]
+    assert [e.index for e in contacts] == list(range(N))
+    k = np.arange(1, N + 1)
+    assert np.abs(np.array([e.t for e in contacts]) - np.sqrt(2 * k * a / G)).max() < 1e-14
+    assert np.abs(np.array([e.impulse for e in contacts]) - m * np.sqrt(2 * G * k * a)).max() < 1e-14
+    assert np.abs(run.X[-1, :, 2]).max() < 1e-15 and np.abs(run.U[-1]).max() < 1e-15  # all landed by 0.45 s, at rest

@@ -1,5 +1,5 @@
 """linknet analyze of a scene with ropes and a ground: the ropes and which are slack at the start, the ground and the
-masses on it, and the path that runs it (the native core on the adaptive methods, friction included)."""
+masses on it, and the path that runs it (the native core on every method, friction included)."""
 from __future__ import annotations
 
 import linknet_core as ln
@@ -24,8 +24,8 @@ def test_analyze_describes_the_ropes_the_ground_and_the_path():
     assert ("ground: the plane through [0.0, 0.0, 0.0] with normal [0.0, 0.0, 1.0], restitution 0.2, friction 0.4 "
             "(Coulomb)") in text
     assert 'masses on the ground at the start: 1 (mass 4 ("crate"))' in text
-    assert "path: the native core, event by event, on the adaptive methods" in text and "Coulomb friction" in text
-    assert "the numpy reference on the fixed-step ones" in text and "native path" not in text
+    assert "path: the native core, event by event, on every method" in text and "Coulomb friction" in text
+    assert "native path" not in text
 
 
 def test_analyze_takes_a_mass_alone_on_a_rough_ground():

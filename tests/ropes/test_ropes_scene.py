@@ -108,35 +108,16 @@ def test_a_rope_at_its_length_moving_outwards_at_the_start_takes_an_inelastic_im
     assert any("largest correction 2 m/s" in line for line in sim.initial_report.lines(sim.scene))
 
 
-# a frictionless ground on an adaptive method runs on the native core (tests/native/test_native_ground.py)
+# a ground on the adaptive methods and on RATTLE and its compositions runs on the native core
+# (tests/native/test_native_ground.py, test_native_friction.py; the native FMU: tests/fmu_native)
 @pytest.mark.parametrize("method,step", [("rattle", {"dt": 1e-3}), ("yoshida4", {"dt": 1e-2})])
-def test_the_native_backend_refuses_a_ground_and_auto_takes_the_numpy_path_there_and_the_native_core_for_ropes(
-        method, step):
+def test_auto_takes_a_ground_and_ropes_on_the_fixed_step_methods_to_the_native_core(method, step):
     grounded = ln.Scene.from_dict(data(links=[{"a": 1, "b": 2, "length": 0.5}],
-                                       ground={"point": [0, 0, -2], "normal": [0, 0, 1]}))
-    with pytest.raises(ln.SolverError) as err:
-        ln.Simulator(grounded, method, backend="native", **step)
-    assert "s: it has a ground, and the native core" in str(err.value)
-    assert "the numpy reference runs it" in str(err.value)
+                                       ground={"point": [0, 0, -2], "normal": [0, 0, 1], "friction": 0.5}))
     sim = ln.Simulator(grounded, method, **step)
-    assert sim.backend == "numpy"
-    assert "backend numpy (ropes, ground: the numpy reference, event by event)" in sim.summary()
+    assert sim.backend == "native" and "backend native" in sim.summary()
+    assert ln.Simulator(grounded, method, backend="native", **step).backend == "native"
     assert ln.Simulator(ln.Scene.from_dict(data()), method, **step).backend == "native"
-
-
-def test_the_native_fmu_build_of_a_rope_scene_with_a_rough_ground_on_rattle_fails_cleanly_and_writes_nothing(tmp_path):
-    # the native FMU takes ropes and a ground, with friction too, on the adaptive methods only
-    # (tests/fmu_native/test_native_fmu_ropes.py, test_native_fmu_ground.py, test_native_fmu_friction.py)
-    out = tmp_path / "rope_ground.fmu"
-    scene = tmp_path / "rope_ground.json"
-    scene.write_text(json.dumps(data(ground={"point": [0, 0, -5], "normal": [0, 0, 1], "friction": 0.5})))
-    run = subprocess.run([sys.executable, str(ROOT / "build_fmu.py"), str(scene), "--native", "--platforms", "host",
-                          "--integrator", "rattle", "--step", "1e-3", "-o", str(out)],
-                         capture_output=True, text=True, timeout=120)
-    assert run.returncode != 0 and "Traceback" not in run.stderr, run.stderr
-    assert "build_fmu:" in run.stderr and "it has a ground with Coulomb friction" in run.stderr
-    assert "adaptive methods (dop853, dopri5) only" in run.stderr
-    assert not out.exists() and list(tmp_path.iterdir()) == [scene]
 
 
 def test_the_outputs_linearization_is_refused_for_ropes_and_a_ground_naming_the_rope():
