@@ -64,6 +64,7 @@ def binary(fmu: Built, folder: str) -> Path:
 
 
 # ---------------------------------------------------------------------------- what was built
+@pytest.mark.slow  # CI's slow step runs it (.ci/run): every platform's binaries, compiled cold on a fresh machine
 def test_the_default_build_holds_every_platform_and_platforms_chooses(tmp_path, monkeypatch, capsys):
     monkeypatch.delenv(PLATFORMS_VARIABLE, raising=False)
     out = tmp_path / "chain_10.fmu"
@@ -119,6 +120,7 @@ def test_linux_binaries_need_glibc_2_17_at_most_and_export_only_fmi(folder, fmu_
         assert set(re.findall(r"NEEDED\s+(\S+)", dynamic)) == {"libc.so.6"}, (scene, dynamic)
 
 
+@pytest.mark.slow  # CI's slow step runs it (.ci/run): every platform's binaries, compiled cold on a fresh machine
 @pytest.mark.skipif(shutil.which("objdump") is None, reason="binutils' objdump not installed (apt-get install binutils)")
 def test_win64_binary_is_a_dll_exporting_only_fmi(fmu_root):
     for scene in SCENES:
@@ -171,6 +173,7 @@ def mach_o_slices(data: bytes) -> dict[int, dict]:
     return slices
 
 
+@pytest.mark.slow  # CI's slow step runs it (.ci/run): every platform's binaries, compiled cold on a fresh machine
 def test_darwin64_is_one_universal_binary_for_intel_and_apple_silicon(fmu_root):
     """macOS cannot run here. Both slices are dylibs exporting the fmi2 functions only; arm64 carries the ad-hoc
     code signature Apple silicon refuses to load code without; minimum versions as PLATFORMS says."""
@@ -233,14 +236,14 @@ def _mach_o_math_imports(dylib: Path) -> set[str]:
             if _is_math(name[1:])}  # C names carry a leading underscore
 
 
+@pytest.mark.slow  # CI's slow step runs it (.ci/run): every platform's binaries, compiled cold on a fresh machine
 @pytest.mark.skipif(shutil.which("objdump") is None or shutil.which("nm") is None,
                     reason="binutils' objdump and nm not installed (apt-get install binutils)")
-def test_no_binary_and_not_the_library_calls_a_libm_function(fmu_root):
+def test_no_binary_calls_a_libm_function(fmu_root):
     """The core computes its sin, cos, pow and hypot itself (ln_math.c), the same on every platform; sqrt and fabs are
     instructions; min, max, rounding and the like are its own too. So no binary of any shipped scene, on no platform,
     imports a math function (the Universal C Runtime's math DLL on Windows, libm or a math symbol of libc on Linux,
-    libSystem's on macOS), and neither does the library setup.py builds with gcc."""
-    import linknet_core.clib.library as library
+    libSystem's on macOS)."""
     readers = {"linux64": _elf_math_imports, "aarch64-linux": _elf_math_imports, "win64": _pe_math_imports,
                "darwin64": _mach_o_math_imports}
     assert set(readers) == set(PLATFORMS)
@@ -248,8 +251,14 @@ def test_no_binary_and_not_the_library_calls_a_libm_function(fmu_root):
         fmu = fmu_of(scene, fmu_root)
         for folder, read in readers.items():
             assert not read(binary(fmu, folder)), (scene, folder, sorted(read(binary(fmu, folder))))
-    if sys.platform.startswith("linux"):
-        assert not _elf_math_imports(Path(library.lib._name)), library.lib._name
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or shutil.which("objdump") is None
+                    or shutil.which("nm") is None, reason="a Linux library read with binutils' objdump and nm")
+def test_the_library_calls_no_libm_function():
+    """Nor does the library setup.py builds with gcc (the same core as the FMUs' binaries)."""
+    import linknet_core.clib.library as library
+    assert not _elf_math_imports(Path(library.lib._name)), library.lib._name
 
 
 # ---------------------------------------------------------------------------- runs: linux64 here, others emulated
