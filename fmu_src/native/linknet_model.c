@@ -806,9 +806,13 @@ fmu_model *fmu_model_new(const fmu_resource *r, char *msg)
             return NULL;
         }
     }
-    ln_int stages = 0;
-    for (ln_int i = 0; i < s->n_methods; i++)
-        if (s->methods[i].method.n_stages > stages) stages = s->methods[i].method.n_stages;
+    ln_int stages = 0;  /* each method's own stages, or the rows its screen of the ropes' forces takes */
+    for (ln_int i = 0; i < s->n_methods; i++) {
+        const ln_method *method = &s->methods[i].method;
+        const ln_int rows = ln_midpoint_rows(s->model, method);
+        if (method->n_stages > stages) stages = method->n_stages;
+        if (rows > stages) stages = rows;
+    }
     m->model = *s->model;
     m->model.ldl = m->ldl;
     m->model.rigid = s->rigid;

@@ -11,10 +11,10 @@ Each step is checked after it is taken: the gaps of the slack constraints along 
 cubic Hermite of X from X and U at both ends: exact for a ballistic flight, O(h^4) otherwise), everywhere in the
 step however briefly they dip (their sign is a polynomial in the step's fraction, bounded by its Bernstein
 coefficients and looked at exactly where the bound allows a dip), each dip confirmed on the method's own step to its
-lowest point; and the forces of the active ones at its end and, in an adaptive step, at its inner stages, where a
-force that falls through zero and rises again within the step shows (AdaptiveEvents._force_dip_at_stages; a fixed
-step looks at its end only). The first event is located there by a bracketing root
-find (Illinois' regula falsi) and the step is taken again from its start to the event, by the method's own step; a
+lowest point; and the forces of the active ones at its end and at its inner stages, where a force that falls through
+zero and rises again within the step shows (EventHandling._force_dip_at_stages: an adaptive step's stages, a fixed
+step's RATTLE stages' midpoints, FixedStepEvents._midpoint_tensions). The first event is located there by a
+bracketing root find (Illinois' regula falsi) and the step is taken again from its start to the event, by the method's own step; a
 gap event's time is then made exact by Newton's method on that step's length (the gap and its rate at its end), so
 that the event lies on the method's own trajectory, not on the interpolant. At the event the impulse is applied and
 the next mode chosen (UnilateralDynamics.impact, select_mode), and the integration restarts from there:
@@ -310,6 +310,44 @@ class EventHandling:
             Xe, Ue = step(h) if h > 0 else (X0, U0)
         return Xe, Ue, h
 
+    def _force_dip_at_stages(self, X0, U0, t0, h, F_input, stages, step):
+        """A force event inside a step whose end _first_event found clear: an active constraint's force (a taut
+        rope's tension, the ground's normal force) that falls through zero and rises again within the step (a rope
+        barely slack at the top of a loop). The forces at the step's inner stages (nodes c_i in (0, 1): an adaptive
+        method's stage tensions, computed there at no cost; a fixed-step method's at its RATTLE stages' midpoints,
+        FixedStepEvents._midpoint_tensions) are screened: at each node below its tolerance, and at the vertex of
+        the parabola through every three consecutive nodes whose middle one is lowest (a smooth minimum between
+        nodes, found as the tension peaks are); a candidate is confirmed on the method's own step to it. Returns
+        (found, t1, X1, U1) for _take_event (the event lies in the step to the candidate), or None."""
+        if not self.mode.any():
+            return None
+        samples = sorted((c, T) for c, T in stages if 0.0 < c < 1.0 and T is not None and T.size)
+        if len(samples) < 1:
+            return None
+        nodes = np.array([c for c, _ in samples])
+        forces = np.array([self.dyn.unilateral_forces(T) for _, T in samples])  # (n_nodes, n_unilateral)
+        scale = max(float(np.abs(T).max()) for _, T in samples)
+        tol = FORCE_TOL * scale
+        candidates = []  # (theta, constraint)
+        for u in np.flatnonzero(self.mode):
+            f = forces[:, u]
+            low = np.flatnonzero(f < -tol)
+            if low.size:
+                candidates.append((float(nodes[low[0]]), int(u)))
+                continue
+            for j in range(1, nodes.size - 1):
+                if f[j] <= f[j - 1] and f[j] <= f[j + 1] and nodes[j - 1] < nodes[j] < nodes[j + 1]:
+                    theta, value = _parabola_vertex(nodes[j - 1:j + 2], f[j - 1:j + 2])
+                    if value < -tol:
+                        candidates.append((theta, int(u)))
+                        break
+        for theta, u in sorted(candidates):
+            Xc, Uc = step(theta * h)
+            values, tolerances, watched = self._forces_at(t0 + theta * h, Xc, Uc, F_input)
+            if watched[u] and values[u] < -tolerances[u]:
+                return (0.5, "force", u), t0 + theta * h, Xc, Uc
+        return None
+
     # ---- the driven anchors' jump --------------------------------------------------------------------------
     def anchor_jump(self, drive, t, X, U, F_input=None):
         """The driven anchors brought to their motion at t where it jumped (an input-driven anchor's new held motion
@@ -434,27 +472,57 @@ class FixedStepEvents(EventHandling):
         try:
             return self.step(X, U, h, F_input, t0, t1)
         except StepFailure as failure:
-            return self._split_step(X, U, h, F_input, t0, t1, failure)
+            kept = self.stage_midpoints
+            if kept is not None:  # a split step keeps no samples of the forces inside it (as the native core)
+                kept.clear()
+                self.stage_midpoints = None
+            try:
+                return self._split_step(X, U, h, F_input, t0, t1, failure)
+            finally:
+                self.stage_midpoints = kept
 
     def _step_with_events(self, X, U, t0, t1, F_input):
         for _ in range(MAX_EVENTS_PER_STEP):
             self._slip_reference(t0, X, U, F_input)
+            self.stage_midpoints = []  # the step's RATTLE stages' midpoints (Rattle.step), for the screen below
             X1, U1 = self._plain_step(X, U, t0, t1, F_input)
+            midpoints, self.stage_midpoints = self.stage_midpoints, None
 
             def step(h, X=X, U=U, t0=t0):
                 return self._plain_step(X, U, t0, t0 + h, F_input)
             found = self._first_event(X, U, t0, X1, U1, t1, F_input, step)
+            t_to = t1  # the step the event is located in: to the step's end, or to a dip inside it
             if found is None:
-                return X1, U1
+                stages = self._midpoint_tensions(t0, t1 - t0, midpoints, F_input)
+                inside = self._force_dip_at_stages(X, U, t0, t1 - t0, F_input, stages, step)
+                if inside is None:
+                    return X1, U1
+                found, t_to, X1, U1 = inside  # a force that fell through zero and rose again within the step
             _, kind, u = found
-            h_max = t1 - t0
+            h_max = t_to - t0
             Xe, Ue, h_e = self._locate(step, X, U, t0, h_max, X1, U1, F_input, found)
-            t_e = t1 if h_e >= h_max else t0 + h_e
+            t_e = t_to if h_e >= h_max else t0 + h_e
             X, U = self._apply_event(Xe, Ue, t_e, F_input, kind, u)
             if t_e >= t1:
                 return X, U
             t0 = t_e
         raise self._zeno(t0)
+
+    def _midpoint_tensions(self, t0, h, midpoints, F_input):
+        """[(c, the mode's tensions)] at the midpoints (t, X, U) of the RATTLE stages of the step of length h from t0,
+        c = (t - t0) / h: the fixed-step method's samples of the forces inside its step, which the adaptive methods'
+        stages give (_force_dip_at_stages screens both). A RATTLE stage has no state inside it but the middle of its
+        drift, X + hs/2 U_half with the half kick's velocity, within O(hs^2) of the motion there (a composition's
+        stages lie at their own fractions, the triple jump's at 0.32, 0.5 and 0.68 of the step, some of its stages'
+        ends outside the step); plain RATTLE has its midpoint alone, so a dip is seen where the force there is below
+        zero. Empty where no unilateral constraint is active (nothing to screen)."""
+        if not self.mode.any():
+            return []
+        out = []
+        for t, Xm, Um in midpoints:
+            Xd, Ud, acc = self._at(t, Xm, Um)
+            out.append(((t - t0) / h, self.dyn.tensions(Xd, Ud, F_input, acc)))
+        return out
 
 
 class AdaptiveEvents(EventHandling):
@@ -527,44 +595,6 @@ class AdaptiveEvents(EventHandling):
         h_ok = h * max(SAFETY * error ** (-1.0 / 3.0), MIN_FACTOR)
         X_ok, U_ok = step(h_ok)
         return X_ok, U_ok, t + h_ok
-
-    def _force_dip_at_stages(self, X0, U0, t0, h, F_input, stages, step):
-        """A force event inside a step whose end _first_event found clear: an active constraint's force (a taut
-        rope's tension, the ground's normal force) that falls through zero and rises again within the step (a rope
-        barely slack at the top of a loop). The forces at the step's inner stages (nodes c_i in (0, 1): the tensions
-        the method computed there, at no cost) are screened: at each node below its tolerance, and at the vertex of
-        the parabola through every three consecutive nodes whose middle one is lowest (a smooth minimum between
-        nodes, found as the tension peaks are); a candidate is confirmed on the method's own step to it. Returns
-        (found, t1, X1, U1) for _take_event (the event lies in the step to the candidate), or None."""
-        if not self.mode.any():
-            return None
-        samples = sorted((c, T) for c, T in stages if 0.0 < c < 1.0 and T is not None and T.size)
-        if len(samples) < 1:
-            return None
-        nodes = np.array([c for c, _ in samples])
-        forces = np.array([self.dyn.unilateral_forces(T) for _, T in samples])  # (n_nodes, n_unilateral)
-        scale = max(float(np.abs(T).max()) for _, T in samples)
-        tol = FORCE_TOL * scale
-        candidates = []  # (theta, constraint)
-        for u in np.flatnonzero(self.mode):
-            f = forces[:, u]
-            low = np.flatnonzero(f < -tol)
-            if low.size:
-                candidates.append((float(nodes[low[0]]), int(u)))
-                continue
-            for j in range(1, nodes.size - 1):
-                if f[j] <= f[j - 1] and f[j] <= f[j + 1] and nodes[j - 1] < nodes[j] < nodes[j + 1]:
-                    theta, value = _parabola_vertex(nodes[j - 1:j + 2], f[j - 1:j + 2])
-                    if value < -tol:
-                        candidates.append((theta, int(u)))
-                        break
-        for theta, u in sorted(candidates):
-            Xc, Uc = step(theta * h)
-            values, tolerances, watched = self._forces_at(t0 + theta * h, Xc, Uc, F_input)
-            if watched[u] and values[u] < -tolerances[u]:
-                return (0.5, "force", u), t0 + theta * h, Xc, Uc
-        return None
-
 
 def _parabola_vertex(x, y) -> tuple[float, float]:
     """(x, y) of the vertex of the parabola through three points with x[0] < x[1] < x[2] and y[1] the lowest,

@@ -24,6 +24,9 @@ class Rattle(FixedStepIntegrator):
                   "1e-14 relative and velocity constraints (12) to round-off after every step; bounded energy error")
     position_tol = 1e-14
     gammas: tuple[float, ...] = (1.0,)
+    # a list where the event-driven variant (integrators.events) screens the forces inside a step: each stage's
+    # (time, X, U) at the middle of its drift, X + h/2 U_half with the half kick's velocity U_half
+    stage_midpoints: list | None = None
 
     def step(self, X, U, h, F_input, t=0.0, t_end=None):
         dyn, drive = self.dyn, self.drive
@@ -31,6 +34,8 @@ class Rattle(FixedStepIntegrator):
         inv_m = dyn._inv_mass3
         F0 = dyn.forces(X, U, F_input)
         U_half = U + 0.5 * h * inv_m * F0
+        if self.stage_midpoints is not None:
+            self.stage_midpoints.append((t + 0.5 * (t_end - t), X + 0.5 * h * U_half, U_half))
         X_free = X + h * U_half
         if drive is not None:  # driven anchors: the position stage targets |X_k - P_a(t + h)| = R_l (11)
             X_free = drive.place(t_end, X_free)

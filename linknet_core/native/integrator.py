@@ -29,6 +29,13 @@ _explain.argtypes = [lib.Model_p, lib.Method_p, lib.Data_p, ctypes.c_int, ctypes
 _NONE = np.zeros(0, np.int64)  # no input-driven anchors (never written into)
 
 
+# ln_int ln_midpoint_rows(model, method): the stages' room a fixed-step method's screen of the ropes' forces inside
+# its steps takes (stages/rattle.c; the native FMU sizes its data by it too)
+_midpoint_rows = lib.lib.ln_midpoint_rows
+_midpoint_rows.restype = lib.ln_int
+_midpoint_rows.argtypes = [lib.Model_p, lib.Method_p]
+
+
 @dataclass
 class _Internals:
     t: float
@@ -84,7 +91,7 @@ class NativeIntegrator(Integrator):
         position_tol = getattr(method_cls, "position_tol", 1e-14)
         self.method = native_method(method_cls, dt=dt, rtol=rtol, atol=self.atol, position_tol=position_tol,
                                     static=static)
-        self.data = NativeData(model, self.method.n_stages)
+        self.data = NativeData(model, max(self.method.n_stages, _midpoint_rows(model.pointer, self.method.pointer)))
         self._static = static
         self._model_p, self._method_p, self._data_p = model.pointer, self.method.pointer, self.data._ptr
         self._d = self.data.struct

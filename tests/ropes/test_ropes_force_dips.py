@@ -4,8 +4,10 @@ circle with slightly too little speed to keep its rope taut over the top. The te
 ms: the step's ends both have the rope pulling. The event integrators screen the forces at the method's inner
 stages and find the slack there; the reference is the closed form: the slack angle where the tension vanishes,
 its time by quadrature of the pendulum's energy, then the ballistic flight to |X| = R. Both the numpy reference
-(events.py, AdaptiveEvents._force_dip_at_stages) and the native core (stages/ropes.c, rope_force_dip_at_stages)
-are held to it."""
+(events.py, EventHandling._force_dip_at_stages) and the native core (stages/ropes.c, rope_force_dip_at_stages)
+are held to it. A fixed-step composition screens the forces at its RATTLE stages' midpoints the same way
+(FixedStepEvents._midpoint_tensions, rope_keep_midpoint): Suzuki's order-4 composition finds a dip that lies inside
+one of its steps, at the closed-form times within its own order-4 error."""
 from __future__ import annotations
 
 import numpy as np
@@ -58,3 +60,26 @@ def test_a_loop_with_speed_to_spare_keeps_its_rope_taut(backend):
     run = ln.simulate(bob_scene([0, 0, -R], [v_bottom, 0, 0], R), 0.8, rtol=1e-10, n_out=5, backend=backend)
     assert [e.kind for e in run.events if e.t > 1e-3] == []
     assert np.all(run.T[:, 0] > 0)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "native"])
+def test_slack_over_the_top_inside_one_fixed_step_of_an_order_4_composition(backend):
+    # shortfall 1e-3: slack for 33 ms around the top; at 19 steps over 0.8 s (42 ms) the whole dip lies inside the
+    # step [15 h, 16 h], whose ends both have the rope pulling: it is found at the step's RATTLE stages' midpoints
+    # (Suzuki's five, at 0.21, 0.38, 0.5, 0.62, 0.79 of the step). Its events' errors are the method's own: they fall
+    # by 2^4 with the step (at 38 steps the dip spans two steps, seen at their ends). Plain RATTLE has its midpoint
+    # alone, and in this scene its own order-2 error exceeds the dip at any step long enough to hold it (it finds no
+    # slack at steps of 6.2 ms and longer).
+    t_slack, t_taut, _, v_bottom = loop_reference(1e-3)
+    h = 0.8 / 19
+    assert 15 * h < t_slack and t_taut < 16 * h
+    errors = []
+    for n in (19, 38):
+        run = ln.simulate(bob_scene([0, 0, -R], [v_bottom, 0, 0], R), 0.8, method="suzuki4", dt=0.8 / n, n_out=2,
+                          error_estimate=False, backend=backend)
+        events = [e for e in run.events if e.t > 1e-3]
+        assert [e.kind for e in events] == ["slack", "taut"]
+        errors.append(np.array([events[0].t - t_slack, events[1].t - t_taut]))
+    assert np.abs(errors[0]).max() < 2e-3  # measured: 4.8e-4 s, 1.6e-3 s
+    ratio = np.abs(errors[0] / errors[1])
+    assert np.all((12 < ratio) & (ratio < 20)), ratio  # measured: 15.8, 15.9

@@ -127,6 +127,9 @@ typedef struct ln_data {
 
 /* ---- data.c: allocation and the whole-interval advance ------------------------------------------ */
 LN_API ln_data *ln_data_new(const ln_model *m, ln_int n_stages);  /* NULL: out of memory */
+/* stages/rattle.c: the n_stages a fixed-step method of meth needs beyond its own on m (the rows its screen of the
+   ropes' forces inside a step keeps at its RATTLE stages' midpoints; 0 for the others) */
+LN_API ln_int ln_midpoint_rows(const ln_model *m, const ln_method *meth);
 LN_API void ln_data_free(ln_data *d);
 /* Put d back to what ln_data_new(m, ...) made (the state, internals, counters, diagnostics, the driven anchors'
    hold and every scratch array), keeping its allocations and its scene time origin drive_t0: a run on a reset

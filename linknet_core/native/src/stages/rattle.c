@@ -32,6 +32,9 @@ static int FN(forces_with_friction)(const ln_model *mm, ln_data *d, const double
 static void FN(contacts_pad_velocity)(const ln_model *m, double *V);
 static int FN(contacts_project_along)(const ln_model *mm, const ln_method *meth, ln_data *d, double *Xc,
                                       const double *E_dir, double tol);
+/* ropes (stages/ropes.c): the forces at a stage's midpoint kept for the screen of the forces inside a step */
+static int FN(rope_keep_midpoint)(const ln_model *mm, ln_data *d, ln_int j, double node, double t_mid, const double *X,
+                                  double *U_mid, double hs, const double *F_base);
 
 /* Forces at (X, U): the base forces, or with drag and springs added into scratch. */
 static inline const double *rattle_forces(const ln_model *m, ln_data *d, const double *X, const double *U,
@@ -104,10 +107,12 @@ LN_ALWAYS_INLINE void velocity_after_position_stage(const ln_model *m, ln_data *
    position stage targets their P at the stage's end and its velocity stage their V there (drive.c). On a ground
    (a mode of stages/ropes.c with contacts) every evaluation first places the contacts' virtual anchors at the
    state it is made at (ln_contacts_place), the position stage re-places them until the contacts are on the plane
-   (contacts_project_along), and a sliding contact's friction is a force of the kicks, implicit in the second. */
+   (contacts_project_along), and a sliding contact's friction is a force of the kicks, implicit in the second.
+   sample (ropes, the step of ln_rope_fixed_step): each stage's midpoint, X + hs/2 U_half with the half kick's
+   velocity, its forces kept for the screen of the forces inside the step (rope_keep_midpoint). */
 LN_ALWAYS_INLINE int composition_step(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
                             const double *F_base, double h, double t, double t_end, double **E0_inout,
-                            double **E1_inout)
+                            double **E1_inout, int sample)
 {
     const ln_int K = m->K, scene_size = scene_coordinates(m);
     const double *inv_m = m->inv_m;
@@ -116,7 +121,7 @@ LN_ALWAYS_INLINE int composition_step(const ln_model *m, const ln_method *meth, 
     int status;
     double fraction = 0.0;
     for (ln_int g = 0; g < meth->n_gammas; g++) {
-        const double hs = meth->gammas[g] * h;
+        const double hs = meth->gammas[g] * h, stage_start = t + fraction * h;
         fraction += meth->gammas[g];
         const double stage_end = g == meth->n_gammas - 1 ? t_end : t + fraction * h;
         const double *F;
@@ -128,6 +133,8 @@ LN_ALWAYS_INLINE int composition_step(const ln_model *m, const ln_method *meth, 
                 Uh[i] = U[i] + 0.5 * hs * inv_m[k] * F[i];
                 Xc[i] = X[i] + hs * Uh[i];
             }
+        if (sample)  /* the midpoint's velocity, kept through the position stage (which leaves d->Us alone) */
+            for (ln_int i = 0; i < K * DIM; i++) d->Us[i] = Uh[i];
         if (m->n_driven && (status = ln_drive_rows(m, d, stage_end, Xc, NULL, NULL, DIM)) != LN_OK) return status;
         for (ln_int i = 0; i < K * DIM; i++) d->X_drift[i] = Xc[i];
         /* position stage: Xc + M^-1 C(X)^T mu on (11), simplified Newton with A(X) factored */
@@ -136,6 +143,12 @@ LN_ALWAYS_INLINE int composition_step(const ln_model *m, const ln_method *meth, 
                         : project_positions(m, d, Xc, E0, meth->position_tol, meth->max_projection_iter);
         if (status != LN_OK) return status;
         velocity_after_position_stage(m, d, X, Xc, E0, hs, newton_projections == d->exact_newton_projections, Uh);
+        /* the stage's midpoint: its forces need A factored there, and A(X) is done with (the kick below and the
+           velocity projection factor their own) */
+        if (sample && (status = FN(rope_keep_midpoint)(m, d, g, (stage_start + 0.5 * (stage_end - stage_start) - t) / h,
+                                                       stage_start + 0.5 * (stage_end - stage_start), X, d->Us, hs,
+                                                       F_base)) != LN_OK)
+            return status;
         /* second half kick, then the velocity projection onto (12) at the new positions */
         if (ground) FN(ln_contacts_place)(m, Xc, Uh);
         if ((status = kick_forces(m, d, Xc, Uh, F_base, 1, &F)) != LN_OK) return status;
@@ -226,7 +239,7 @@ LN_NOINLINE int split_step(const ln_model *m, const ln_method *meth, ln_data *d,
         const double hp = h / (double)parts;
         for (ln_int part = 0; part < parts && status == LN_OK; part++)
             status = composition_step(m, meth, d, X, U, F_base, hp, t + (double)part * hp,
-                                      part == parts - 1 ? t_end : t + (double)(part + 1) * hp, E0, E1);
+                                      part == parts - 1 ? t_end : t + (double)(part + 1) * hp, E0, E1, 0);
         if (status == LN_OK) {
             d->split_steps++;
             if (parts > d->finest_split) d->finest_split = parts;
@@ -236,6 +249,16 @@ LN_NOINLINE int split_step(const ln_model *m, const ln_method *meth, ln_data *d,
     }
     return status;
 }
+
+#if DIM == 3
+/* On a scene with ropes or a ground each RATTLE stage's midpoint of a fixed step is a row of its node and the ropes'
+   tensions in ln_data.stage_tensions (rope_keep_midpoint): n_gammas (n_ropes + 1) values, within the room of
+   2 n_gammas stages of n_ropes each. */
+ln_int ln_midpoint_rows(const ln_model *m, const ln_method *meth)
+{
+    return meth->kind == LN_COMPOSITION && m->n_ropes ? 2 * meth->n_gammas : 0;
+}
+#endif
 
 /* A step that failed for good: the tensions at its start into d->T, from which the failure's message estimates the
    fastest oscillation of the masses between their links (linknet_core.dynamics.equations.fastest_oscillation)
@@ -293,7 +316,7 @@ int FN(ln_rattle_steps)(const ln_model *m, const ln_method *meth, ln_data *d, do
                 status = FN(ln_factor_tension_matrix)(m, d, E0);
             }
         } else {
-            status = composition_step(m, meth, d, X, U, F_base, h, t, end, &E0, &E1);
+            status = composition_step(m, meth, d, X, U, F_base, h, t, end, &E0, &E1, 0);
             if (status == LN_PROJECTION_FAILED || status == LN_IMPLICIT_KICK_FAILED)
                 status = split_step(m, meth, d, X, U, F_base, h, t, end, &E0, &E1, status);
         }

@@ -30,8 +30,9 @@
  * Hermite of X, whose sign is the sextic R^2 - |d(theta)|^2, screened by its Bernstein coefficients (Farouki and
  * Rajan, Computer Aided Geometric Design 5, 1988) and looked at exactly where they allow a dip, each dip confirmed on
  * the method's own step to its lowest point; the taut ropes' tensions at the step's end against -force_tol of the
- * largest |T|, and on the adaptive methods, where the end shows none, at the step's inner stages (a tension that
- * dips through zero and recovers within one step), each candidate confirmed on the method's own step. The event is
+ * largest |T|, and where the end shows none, at the step's inner stages (a tension that dips through zero and
+ * recovers within one step: an adaptive method's stages, a fixed-step method's RATTLE stages' midpoints), each
+ * candidate confirmed on the method's own step. The event is
  * taken on the method's own step: a gap's time by Newton's method on the step's length, a force's by Illinois'
  * regula falsi on it, ending just past the zero; there the positions go onto the touching ropes,
  * the impact is applied and the next mode chosen. The adaptive methods end the step at the event and go on with their
@@ -796,18 +797,44 @@ int FN(ln_rope_start)(const ln_model *mm, ln_data *d, double *X, double *U, cons
     return LN_OK;
 }
 
+/* The forces at RATTLE stage j's midpoint of a fixed step (node: its fraction of the step, at t_mid), X + hs/2 U_mid
+   from the stage's start X with its half kick's velocity U_mid (scratch: its driven rows and anchors set here), into
+   row j of d->stage_tensions: the node, then the ropes' tensions in the mode (FixedStepEvents._midpoint_tensions);
+   the largest |T| of the mode's links over the step's midpoints into d->stage_force_scale (the first starts it). */
+static int FN(rope_keep_midpoint)(const ln_model *mm, ln_data *d, ln_int j, double node, double t_mid, const double *X,
+                                  double *U_mid, double hs, const double *F_base)
+{
+    const ln_int R = mm->n_ropes;
+    double *Xm = d->Xs, *row = d->stage_tensions + j * (R + 1);
+    for (ln_int i = 0; i < mm->K * DIM; i++) Xm[i] = X[i] + 0.5 * hs * U_mid[i];
+    int status = FN(rope_drive)(mm, d, t_mid, Xm, U_mid);
+    if (status == LN_OK) status = FN(rope_mode_tensions)(mm, d, Xm, U_mid, F_base, d->acc1, d->T);
+    if (status != LN_OK) return status;
+    row[0] = node;
+    for (ln_int r = 0; r < R; r++) row[1 + r] = d->T[mm->rope_link[r]];
+    double largest = j == 0 ? 0.0 : d->stage_force_scale;
+    for (ln_int l = 0; l < mm->L; l++)
+        if (d->link_active[l]) largest = ln_fmax(largest, fabs(d->T[l]));
+    d->stage_force_scale = largest;
+    return LN_OK;
+}
+
 /* ---- the method's own step ------------------------------------------------------------------------------------ */
 /* A fixed-step method's step from (X0, U0) at t0 to t1 in the mode, into (Xo, Uo) (FixedStepEvents._plain_step): the
    composition's step (split where its position stage fails), or, for a part of a step shorter than short_step of
    dt, the second-order Taylor step X + h U + h^2 A / 2, U + h A projected onto the mode: RATTLE's velocity takes its
    position stage's correction over h, whose round-off a very short step would magnify, and the Taylor step's own
-   error, h^3 times the jerk, is below round-off there. */
+   error, h^3 times the jerk, is below round-off there. samples (NULL: none kept): the composition's RATTLE stages'
+   midpoints kept in d->stage_tensions (rope_keep_midpoint), their count into *samples (0 after a Taylor step or a
+   split one). */
 static int FN(rope_plain_step)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X0,
-                               const double *U0, const double *F_base, double t0, double t1, double *Xo, double *Uo)
+                               const double *U0, const double *F_base, double t0, double t1, double *Xo, double *Uo,
+                               ln_int *samples)
 {
     const ln_int size = mm->K * DIM;
     const double h = t1 - t0;
     int status;
+    if (samples) *samples = 0;
     if (h < mm->short_step * meth->dt) {
         double *Xa = d->event_states + 14 * 3 * mm->K, *Ua = Xa + 3 * mm->K, *A = d->acc1;
         memcpy(Xa, X0, (size_t)size * sizeof(double));
@@ -838,9 +865,12 @@ static int FN(rope_plain_step)(const ln_model *mm, const ln_method *meth, ln_dat
     memcpy(d->U_step, Uo, (size_t)size * sizeof(double));
     FN(ln_unit_vectors)(mm, Xo, E0);
     if ((status = FN(ln_factor_tension_matrix)(mm, d, E0)) != LN_OK) return status;
-    status = composition_step(mm, meth, d, Xo, Uo, F_base, h, t0, t1, &E0, &E1);
-    if (status == LN_PROJECTION_FAILED || status == LN_IMPLICIT_KICK_FAILED)
+    status = composition_step(mm, meth, d, Xo, Uo, F_base, h, t0, t1, &E0, &E1, samples != NULL);
+    if (samples) *samples = meth->n_gammas;
+    if (status == LN_PROJECTION_FAILED || status == LN_IMPLICIT_KICK_FAILED) {
+        if (samples) *samples = 0;  /* a split step keeps no samples (FixedStepEvents._plain_step) */
         status = split_step(mm, meth, d, Xo, Uo, F_base, h, t0, t1, &E0, &E1, status);
+    }
     return status;
 }
 
@@ -850,7 +880,7 @@ static int FN(rope_plain_step)(const ln_model *mm, const ln_method *meth, ln_dat
 static int FN(rope_method_step)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X0,
                                 const double *U0, const double *F_base, double t0, double h, double *Xo, double *Uo)
 {
-    if (meth->kind == LN_COMPOSITION) return FN(rope_plain_step)(mm, meth, d, X0, U0, F_base, t0, t0 + h, Xo, Uo);
+    if (meth->kind == LN_COMPOSITION) return FN(rope_plain_step)(mm, meth, d, X0, U0, F_base, t0, t0 + h, Xo, Uo, NULL);
     const ln_int size = mm->K * DIM, s = meth->n_stages;
     double *KX = d->KX, *KU = d->KU, *Xs = d->Xs, *Us = d->Us, *acc = d->acc;
     double *Xa = d->event_states + 14 * 3 * mm->K, *Ua = Xa + 3 * mm->K;
@@ -1681,28 +1711,38 @@ static void rope_parabola_vertex(const double *x, const double *y, double *xv_ou
     *yv_out = y[1] + (xv - x[1]) * (d01 + a * (xv - x[0]));
 }
 
-/* A force event inside an accepted step whose end showed none (AdaptiveEvents._force_dip_at_stages): a taut rope's
-   tension that falls through zero and rises again within the step. The tensions the method computed at its inner
-   stages (nodes c_i in (0, 1), kept by ln_rope_keep_stage) are screened at each node against -force_tol of their
-   largest |T|, and at the vertex of the parabola through three consecutive nodes (by c) whose middle one is lowest;
-   the candidates, in the order of (theta, rope), are confirmed on the method's own step to theta h. Where one is,
-   *rope is its rope, *h_dip the step to it and (Xc, Uc) the state there; else *rope = -1. */
+/* The forces a step sampled inside itself: n samples, sample j at nodes[j * node_stride] (its fraction of the step)
+   with the ropes' tensions at tensions + j * stride (n_ropes of them). An adaptive step's inner stages (the nodes c_i
+   of the tableau, the tensions ln_rope_keep_stage kept), or a fixed step's RATTLE stages' midpoints (rows of
+   d->stage_tensions: the node, then the tensions; rope_keep_midpoint). */
+struct FN(force_samples) {
+    const double *nodes, *tensions;
+    ln_int node_stride, stride, n;
+};
+
+/* A force event inside a step whose end showed none (EventHandling._force_dip_at_stages): a taut rope's tension that
+   falls through zero and rises again within the step. The samples inside the step (nodes in (0, 1)) are screened at
+   each node against -force_tol of their largest |T| (d->stage_force_scale), and at the vertex of the parabola
+   through three consecutive nodes (by node) whose middle one is lowest; the candidates, in the order of (theta,
+   rope), are confirmed on the method's own step to theta h. Where one is, *rope is its rope, *h_dip the step to it
+   and (Xc, Uc) the state there; else *rope = -1. */
 static int FN(rope_force_dip_at_stages)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X0,
-                                        const double *U0, const double *F_base, double t0, double h, double *Xc,
-                                        double *Uc, ln_int *rope, double *h_dip)
+                                        const double *U0, const double *F_base, double t0, double h,
+                                        const struct FN(force_samples) *samples, double *Xc, double *Uc,
+                                        ln_int *rope, double *h_dip)
 {
-    const ln_int R = mm->n_ropes, s = meth->n_stages;
+    const ln_int R = mm->n_ropes;
     *rope = -1;
     int any_taut = 0;
     for (ln_int r = 0; r < R; r++) any_taut |= d->link_active[mm->rope_link[r]] != 0;
-    if (!any_taut || s < 2) return LN_OK;
-    /* the inner nodes, ascending (insertion sort of stage indices by c; a method has a few dozen stages at most) */
+    if (!any_taut || samples->n < 1) return LN_OK;
+    /* the inner nodes, ascending (insertion sort of sample indices by node; a few dozen samples at most) */
     ln_int order[64], n = 0;
-    for (ln_int i = 1; i < s && n < 64; i++) {
-        const double c = meth->C[i];
+    for (ln_int i = 0; i < samples->n && n < 64; i++) {
+        const double c = samples->nodes[i * samples->node_stride];
         if (!(c > 0.0 && c < 1.0)) continue;
         ln_int j = n++;
-        while (j > 0 && meth->C[order[j - 1]] > c) {
+        while (j > 0 && samples->nodes[order[j - 1] * samples->node_stride] > c) {
             order[j] = order[j - 1];
             j--;
         }
@@ -1716,8 +1756,8 @@ static int FN(rope_force_dip_at_stages)(const ln_model *mm, const ln_method *met
         if (!d->link_active[mm->rope_link[r]]) continue;
         double nodes[64], f[64], theta = -1.0;
         for (ln_int j = 0; j < n; j++) {
-            nodes[j] = meth->C[order[j]];
-            f[j] = d->stage_tensions[(order[j] - 1) * R + r];
+            nodes[j] = samples->nodes[order[j] * samples->node_stride];
+            f[j] = samples->tensions[order[j] * samples->stride + r];
         }
         for (ln_int j = 0; j < n && theta < 0.0; j++)
             if (f[j] < -tol) theta = nodes[j];
@@ -1826,7 +1866,10 @@ int FN(ln_rope_step_events)(const ln_model *mm, const ln_method *meth, ln_data *
         /* a tension that fell through zero and rose again within the step: the event lies in the step to the
            confirmed dip, whose state takes the end's place (Xs1, Us1), its time found from the middle on */
         double h_dip = 0.0;
-        status = FN(rope_force_dip_at_stages)(mm, meth, d, Xs0, Us0, F_base, t0, h_max, Xs1, Us1, &rope, &h_dip);
+        const struct FN(force_samples) stages = {meth->C + 1, d->stage_tensions, 1, mm->n_ropes,
+                                                 meth->n_stages - 1};
+        status = FN(rope_force_dip_at_stages)(mm, meth, d, Xs0, Us0, F_base, t0, h_max, &stages, Xs1, Us1, &rope,
+                                              &h_dip);
         if (status == LN_OK && rope >= 0) {
             found = 2;
             theta = 0.5;
@@ -1867,7 +1910,8 @@ int FN(ln_rope_step_events)(const ln_model *mm, const ln_method *meth, ln_data *
 
 /* One step of a fixed-step method from (X, U) at t0 to t1, in place (FixedStepEvents._step_with_events): a step
    that holds an event is taken to the event, the event applied, and the step finished from there in the new mode,
-   so that the steps stay where they are. */
+   so that the steps stay where they are. Besides its end, the forces at its RATTLE stages' midpoints are screened
+   for a force that dips through zero within it (rope_force_dip_at_stages, as an adaptive step's stages are). */
 int FN(ln_rope_fixed_step)(const ln_model *mm, const ln_method *meth, ln_data *d, double *X, double *U,
                            const double *F_base, double t0, double t1)
 {
@@ -1887,22 +1931,46 @@ int FN(ln_rope_fixed_step)(const ln_model *mm, const ln_method *meth, ln_data *d
             if ((status = FN(rope_drive)(mm, d, t0, Xe, Ue)) != LN_OK) break;
             if ((status = FN(friction_set_reference)(mm, d, Xe, Ue, F_base)) != LN_OK) break;
         }
-        if ((status = FN(rope_plain_step)(mm, meth, d, Xs0, Us0, F_base, t0, t1, Xs1, Us1)) != LN_OK) break;
+        /* the forces inside the step are sampled at its RATTLE stages' midpoints where a rope or contact is taut
+           (FixedStepEvents._midpoint_tensions), each a row of the node and the tensions in d->stage_tensions */
+        int any_taut = 0;
+        for (ln_int r = 0; r < mm->n_ropes; r++) any_taut |= d->link_active[mm->rope_link[r]] != 0;
+        const int room = d->n_stages_allocated * mm->n_ropes >= meth->n_gammas * (mm->n_ropes + 1);
+        ln_int n_samples = 0;
+        status = FN(rope_plain_step)(mm, meth, d, Xs0, Us0, F_base, t0, t1, Xs1, Us1,
+                                     any_taut && room ? &n_samples : NULL);
+        if (status != LN_OK) break;
         int found = 0;
         ln_int rope = -1;
         double theta = 0.0, h_e = 0.0;
-        const double h_max = t1 - t0;
-        status = FN(rope_first_event)(mm, meth, d, Xs0, Us0, t0, Xs1, Us1, h_max, F_base, &found, &rope, &theta);
+        status = FN(rope_first_event)(mm, meth, d, Xs0, Us0, t0, Xs1, Us1, t1 - t0, F_base, &found, &rope, &theta);
         if (status != LN_OK) break;
+        double t_to = t1;  /* the step the event is located in: to the step's end, or to a dip inside it */
+        if (!found && n_samples) {
+            /* a force that fell through zero and rose again within the step: the event lies in the step to the
+               confirmed dip, whose state takes the end's place (Xs1, Us1), its time found from the middle on */
+            const struct FN(force_samples) midpoints = {d->stage_tensions, d->stage_tensions + 1, mm->n_ropes + 1,
+                                                        mm->n_ropes + 1, n_samples};
+            double h_dip = 0.0;
+            status = FN(rope_force_dip_at_stages)(mm, meth, d, Xs0, Us0, F_base, t0, t1 - t0, &midpoints, Xs1, Us1,
+                                                  &rope, &h_dip);
+            if (status != LN_OK) break;
+            if (rope >= 0) {
+                found = 2;
+                theta = 0.5;
+                t_to = t0 + h_dip;
+            }
+        }
         if (!found) {
             memcpy(X, Xs1, bytes);
             memcpy(U, Us1, bytes);
             FN(rope_use_mask)(mm, d, d->link_active);
             return LN_OK;
         }
+        const double h_max = t_to - t0;
         status = FN(rope_locate)(mm, meth, d, Xs0, Us0, t0, h_max, Xs1, Us1, F_base, found, rope, theta, Xe, Ue,
                                  &h_e);
-        const double t_e = h_e >= h_max ? t1 : t0 + h_e;
+        const double t_e = h_e >= h_max ? t_to : t0 + h_e;
         if (status == LN_OK) status = FN(rope_apply_event)(mm, meth, d, Xe, Ue, F_base, t_e, found, rope);
         FN(rope_use_mask)(mm, d, d->link_active);
         if (status != LN_OK) return status;
