@@ -4,6 +4,8 @@
     python -m benchmarks.moordyn_study --merge         # into the tracked docs/benchmarks/rope_peer.json
     python -m benchmarks.moordyn_study --scene rope_chain_whip --merge   # docs/benchmarks/rope_peer_chain_whip.json
     python -m benchmarks.moordyn_study --scene rope_chain_drop --quick    # the smoke run: build/moordyn_study/quick
+    python -m benchmarks.moordyn_study --scene rope_chain_seabed_landing --merge   # ..._chain_seabed_landing.json
+    python -m benchmarks.moordyn_study --scene rope_chain_seabed_slide --merge     # ..._chain_seabed_slide.json
     python -m benchmarks.moordyn_study --out /tmp/x --budget 10
 
 The work-precision benchmark compares the state at t_end only. Here every run is sampled at times that separate
@@ -18,6 +20,13 @@ rope_chain_drop (models/ropes/chains, 8 segments dropped from a slack zig-zag): 
 (54), 1.0 s (195); every jerk of one segment with the others slack. rope_chain_whip (8 segments hanging taut, the
 free end thrown): 0.1 s (the end's first flight, the rest taut: the stretch), 0.3 s (one jerk, the whole rope taut
 at it), 0.6 s (2), 1.0 s (5).
+
+The seabed scenes (models/ropes/chains, the same rope over a ground; MoorDyn's seabed through
+benchmarks/peers/moordyn_seabed.py, its contact stiffness tied to EA) have every segment slack throughout, and their
+reference is rope_reference.slack_rope_on_ground's closed form. rope_chain_seabed_landing (the drop's zig-zag, the
+seabed 0.15 m below the anchor): 0.05 s (free fall), 0.102 s (0.96 ms after the lower nodes land), 0.176 s (1.13 ms
+after the upper ones), 0.5 s (at rest: MoorDyn's error the sink m g / k). rope_chain_seabed_slide (lying on a rough
+seabed, mu 0.5, thrown sideways): 0.05 and 0.1 s (sliding), 0.2 s (all stopped, the last at 0.183 s), 0.5 s.
 
 For each stiffness EA, MoorDyn's step is halved from its stability limit until the error at the last sample time
 levels off (three halvings gain less than a factor 2) or a run would pass the budget; linknet's methods sweep their
@@ -49,7 +58,8 @@ if __package__ in (None, ""):
 
 from .output import add_output_arguments, resolve, write_text  # noqa: E402
 from .peers.moordyn_peer import MoorDynLine, moordyn_available  # noqa: E402
-from .rope_reference import solve_ropes_at  # noqa: E402
+from .peers.moordyn_seabed import MoorDynSeabedLine  # noqa: E402
+from .rope_reference import slack_rope_on_ground, solve_ropes_at  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -64,6 +74,9 @@ class Study:
     grid: float = 0.1
     folder: str = ""            # under models/ ("" for load_benchmark_scene's places)
     native_rod: bool = False    # also the native core on the same masses held by rods, up to times[0]
+    reference: str = "ropes"    # "ropes": rope_reference's event-driven run; "slack_rope": its closed form of a
+                                # rope that stays slack over a ground (rope_reference.slack_rope_on_ground)
+    peer: type = MoorDynLine    # MoorDynSeabedLine where the scene has a ground
 
 
 STUDIES = {s.scene: s for s in (
@@ -73,6 +86,11 @@ STUDIES = {s.scene: s for s in (
           "rope_peer_chain_drop.json", folder="ropes/chains"),
     Study("rope_chain_whip", (0.1, 0.3, 0.6, 1.0), (1e4, 1e6, 1e8, 1e10), (1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-9),
           "rope_peer_chain_whip.json", folder="ropes/chains"),
+    Study("rope_chain_seabed_landing", (0.05, 0.102, 0.176, 0.5), (1e4, 1e6, 1e8, 1e10),
+          (1e-2, 1e-3, 1e-4, 1e-6, 1e-9), "rope_peer_chain_seabed_landing.json", grid=0.001, folder="ropes/chains",
+          reference="slack_rope", peer=MoorDynSeabedLine),
+    Study("rope_chain_seabed_slide", (0.05, 0.1, 0.2, 0.5), (1e4, 1e6, 1e8, 1e10), (1e-2, 1e-3, 1e-4, 1e-6, 1e-9),
+          "rope_peer_chain_seabed_slide.json", folder="ropes/chains", reference="slack_rope", peer=MoorDynSeabedLine),
 )}
 LINKNET = {"dop853": [10.0 ** -e for e in range(3, 13)], "dopri5": [10.0 ** -e for e in range(3, 11)],
            "rattle": [0.01 / 2 ** i for i in range(0, 9)], "yoshida8": [0.04 / 2 ** i for i in range(0, 5)]}
@@ -91,10 +109,17 @@ def load_scene(study):
     return SceneSpec.from_core(ln.load_scene(MODELS / study.folder / f"{study.scene}.json"))
 
 
-def references(spec, times):
-    """The reference positions at the times (rtol 2.5e-14) and their distance from the reference at rtol 1e-13."""
-    fine, _ = solve_ropes_at(spec, times, 2.5e-14)
-    coarse, _ = solve_ropes_at(spec, times, 1e-13)
+def references(spec, times, kind="ropes"):
+    """The reference positions at the times and how far they are from a second determination: the event-driven
+    reference at rtol 2.5e-14 against 1e-13 ("ropes"), or the closed form of a slack rope on a ground, exact to
+    round-off ("slack_rope": 0)."""
+    if kind == "ropes":
+        fine, _ = solve_ropes_at(spec, times, 2.5e-14)
+        coarse, _ = solve_ropes_at(spec, times, 1e-13)
+    elif kind == "slack_rope":
+        fine = coarse = slack_rope_on_ground(spec, times)[0]
+    else:
+        raise ValueError(f"reference {kind!r}: one of 'ropes', 'slack_rope'")
     return [(X, float(np.abs(X - Xc).max())) for X, Xc in zip(fine, coarse)]
 
 
@@ -105,7 +130,7 @@ def errors(Xs, refs):
 def moordyn_rows(spec, refs, budget, log, study, quick=False):
     rows = []
     for EA in (QUICK_EA,) if quick else study.eas:
-        line = MoorDynLine(EA)
+        line = study.peer(EA)
         line.check_scene(spec)
         last, finals = None, []
         for dt in line.knobs(spec, quick=quick):
@@ -116,7 +141,7 @@ def moordyn_rows(spec, refs, budget, log, study, quick=False):
             Xs, cpu = line.trajectory(spec, study.times, dt)
             err = errors(Xs, refs)
             rows.append({"method": line.name, "EA": EA, "dt": dt, "errors": err, "cpu": cpu.tolist(),
-                         "X": np.asarray(Xs).tolist()})
+                         "X": np.asarray(Xs).tolist(), **seabed_settings(line, spec)})
             log(f"  {line.name:22s} dt {dt:9.3g}  errors " + " ".join(f"{e:9.2e}" for e in err)
                 + f"  cpu {cpu[-1]:.3g} s")
             last = float(cpu[-1])
@@ -124,6 +149,13 @@ def moordyn_rows(spec, refs, budget, log, study, quick=False):
             if len(finals) >= 4 and min(finals[-3:]) > 0.5 * min(finals[:-3]):
                 break
     return rows
+
+
+def seabed_settings(line, spec):
+    """The seabed's options of a MoorDynSeabedLine run (kb, cb, FricDamp, mu), none for a line alone."""
+    if not isinstance(line, MoorDynSeabedLine):
+        return {}
+    return {k: v for k, v in line.seabed(spec).items() if k in ("kb", "cb", "FricDamp", "mu")}
 
 
 def linknet_rows(spec, refs, budget, log, times, quick=False):
@@ -325,7 +357,7 @@ def main(argv=None):
     spec = load_scene(study)
     times = list(study.times[:QUICK_TIMES] if args.quick else study.times)
     load_start = _loadavg()
-    refs = references(spec, times)
+    refs = references(spec, times, study.reference)
     print(f"{study.scene}: reference agreement at {', '.join(f'{t:g}' for t in times)} s: "
           + ", ".join(f"{a:.2g}" for _, a in refs) + " m")
     md = moordyn_rows(spec, refs, args.budget, print, study, quick=args.quick)

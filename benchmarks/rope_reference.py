@@ -17,11 +17,14 @@ takes the one that satisfies every condition:
   s_i(after) <= -e_i max(s_i(before), 0), with equality where Lambda_i > 0; rods take s(after) = 0.
 
 The reference refuses (ScopeError) what it does not resolve: a ground, driven anchors, an active-set problem with
-no or several admissible solutions, more than ``MAX_ENUMERATED`` ropes at their length at once.
+no or several admissible solutions, more than ``MAX_ENUMERATED`` ropes at their length at once. A rope that stays
+slack over a ground has a closed form instead (slack_rope_on_ground: flights, inelastic landings, sliding with
+Coulomb friction to rest).
 """
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from dataclasses import replace
 
@@ -270,3 +273,79 @@ def solve_ropes(spec: SceneSpec, t_end: float, rtol: float, atol: float | None =
     ref = RopeReference(spec, rtol, atol)
     X, U = ref.run(t_end)
     return X, U, time.perf_counter() - t0, ref.steps, ref.events
+
+
+
+def slack_rope_on_ground(spec: SceneSpec, times, samples: int = 2_001):
+    """A scene whose ropes all stay slack, over an inelastic ground (restitution 0) with Coulomb friction mu >= 0,
+    in closed form: every free mass flies on its parabola X0 + U0 t + g t^2 / 2 until its height above the plane,
+    n . (X - p), reaches 0 (the later root of a quadratic). Landing takes its normal velocity v_n away and, by
+    Coulomb's law for a mass alone, up to mu |v_n| of its tangential speed. On the plane it slides: frictionless
+    under the tangential part of gravity; with friction (only on a level ground: gravity along -n) decelerating at
+    mu |g| along its velocity until it stops, then at rest. Returns (positions at each of the ``times``, each mass's
+    landing time: 0 for one lying on the ground at the start, inf for one not landed by the last time, nan for an
+    anchor). ScopeError where the scene is another: a rope that reaches its length by the last time (checked at
+    ``samples`` instants and at every landing and stop), a ground with restitution, friction on a slope, a mass
+    starting below the ground or leaving it."""
+    ground = spec.ground
+    if ground is None:
+        raise ScopeError(f"{spec.name}: no ground")
+    if float(ground.get("restitution", 0.0)) != 0.0:
+        raise ScopeError(f"{spec.name}: the closed form is for an inelastic ground (restitution 0)")
+    if spec.motions:
+        raise ScopeError(f"{spec.name}: driven anchors")
+    mu = float(ground.get("friction", 0.0))
+    p = np.asarray(ground["point"], float)
+    n = np.asarray(ground["normal"], float)
+    n = n / np.linalg.norm(n)
+    g = spec.gravity
+    a = float(g @ n)
+    g_t = g - a * n
+    if a >= 0.0:
+        raise ScopeError(f"{spec.name}: gravity not towards the ground")
+    if mu > 0.0 and np.linalg.norm(g_t) > 1e-12 * abs(a):
+        raise ScopeError(f"{spec.name}: friction on a slope (the closed form takes friction on a level ground)")
+    h0, v0 = (spec.X0 - p) @ n, spec.U0 @ n
+    free = np.flatnonzero(spec.free)
+    if np.any(h0[free] < -1e-12) or np.any((np.abs(h0[free]) <= 1e-12) & (v0[free] > 0.0)):
+        raise ScopeError(f"{spec.name}: a mass below the ground, or leaving it at the start")
+    landing = np.full(spec.K, np.nan)
+    for k in free:   # h0 + v0 t + a t^2 / 2 = 0 with a < 0: the later root
+        landing[k] = 0.0 if h0[k] <= 1e-12 else (-v0[k] - math.sqrt(v0[k] ** 2 - 2 * a * h0[k])) / a
+    t_last = float(max(times))
+
+    # where each mass lands, its tangential velocity after landing, and when it stops (inf: never)
+    X_land, U_t, stop = np.zeros((spec.K, 3)), np.zeros((spec.K, 3)), np.full(spec.K, np.inf)
+    for k in free:
+        tl = landing[k]
+        X_land[k] = spec.X0[k] + spec.U0[k] * tl + 0.5 * g * tl * tl
+        X_land[k] -= ((X_land[k] - p) @ n) * n            # on the plane, not a rounding below it
+        U = spec.U0[k] + g * tl
+        v_n, U_t[k] = U @ n, U - (U @ n) * n
+        speed = float(np.linalg.norm(U_t[k]))
+        if mu > 0.0 and speed > 0.0:
+            U_t[k] *= max(0.0, 1.0 - mu * abs(v_n) / speed)
+            stop[k] = tl + float(np.linalg.norm(U_t[k])) / (mu * abs(a))
+    speed = np.linalg.norm(U_t, axis=1)
+    along = U_t / np.where(speed > 0.0, speed, 1.0)[:, None]
+
+    def positions(t):
+        X = spec.X0 + spec.U0 * t + 0.5 * g * t * t
+        down = spec.free & (landing <= t)
+        tau = (np.minimum(t, stop) - landing)[down, None]
+        if mu > 0.0:
+            X[down] = X_land[down] + along[down] * (speed[down, None] * tau - 0.5 * mu * abs(a) * tau * tau)
+        else:
+            X[down] = X_land[down] + U_t[down] * tau + 0.5 * g_t * tau * tau
+        X[spec.fixed] = spec.X0[spec.fixed]
+        return X
+
+    events = [t for t in np.concatenate([landing[free], stop[free]]) if np.isfinite(t) and t <= t_last]
+    for t in np.union1d(np.linspace(0.0, t_last, samples), events):
+        X = positions(t)
+        r = np.linalg.norm(X[spec.k2[spec.rope]] - X[spec.k1[spec.rope]], axis=1)
+        if np.any(r >= spec.length[spec.rope]):
+            l = int(np.flatnonzero(spec.rope)[np.argmax(r - spec.length[spec.rope])])
+            raise ScopeError(f"{spec.name}: rope {l + 1} reaches its length at t = {t:g} s: its ropes are not slack")
+    landing[free[landing[free] > t_last]] = np.inf
+    return [positions(float(t)) for t in times], landing

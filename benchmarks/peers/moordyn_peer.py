@@ -40,6 +40,7 @@ from .base import Method, RunResult, Timer, Unsupported, n_steps
 STABILITY = 2.0          # dtM <= STABILITY / omega: RK4 is stable for omega dt <= 2.83 on an undamped oscillator
 DEPTH = 1.0e4            # water depth [m]: the seabed far below anything that moves
 TOUCH = 1e-12            # a rope is taut at the start within this relative distance of its length
+DIAMETER = 0.01          # the line's diameter [m]: no hydrodynamics here; the seabed's contact area (moordyn_seabed)
 
 
 def moordyn_available() -> tuple[bool, str]:
@@ -159,7 +160,7 @@ class MoorDynLine(Method):
             "---------------------- LINE TYPES ----------------------",
             "TypeName Diam Mass/m EA BA/-zeta EI Cd Ca CdAx CaAx",
             "(name) (m) (kg/m) (N) (N-s/-) (N-m^2) (-) (-) (-) (-)",
-            f"rope 0.01 0.0 {self.EA!r} {self.damping!r} 0.0 0.0 0.0 0.0 0.0",
+            f"rope {DIAMETER!r} 0.0 {self.EA!r} {self.damping!r} 0.0 0.0 0.0 0.0 0.0",
             "---------------------- POINTS ----------------------",
             "ID Attachment X Y Z Mass Volume CdA Ca",
             "(#) (-) (m) (m) (m) (kg) (m^3) (m^2) (-)",

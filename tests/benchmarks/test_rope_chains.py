@@ -136,3 +136,121 @@ def test_the_study_smoke_run_writes_its_tables(tmp_path):
     # between the jerks every node flies freely: linknet's only error is where it locates them
     numpy_rows = [r for r in saved["linknet"] if r["backend"] == "numpy"]
     assert numpy_rows and all(r["errors"][-1] < 1e-6 for r in numpy_rows)
+
+
+# ---------------------------------------------------------------------- the seabed: a rope that lands and slides
+@pytest.fixture(scope="module")
+def landing():
+    return study.load_scene(study.STUDIES["rope_chain_seabed_landing"])
+
+
+@pytest.fixture(scope="module")
+def slide():
+    return study.load_scene(study.STUDIES["rope_chain_seabed_slide"])
+
+
+def test_the_landing_rope_lands_node_by_node_at_sqrt_2h_over_g_and_lies_slack(landing):
+    """The zig-zag falls freely onto the seabed 0.15 m below its anchor: the lower nodes (0.05 m above it) land at
+    sqrt(2 x 0.05 / g), the upper ones (0.15 m) at sqrt(2 x 0.15 / g), and lie where they landed; no segment
+    reaches its length (the closed form refuses a scene where one does). linknet on both engines: a contact event
+    at each landing, to 1e-12 s, and nothing else; its positions meet the closed form to round-off."""
+    import linknet_core as ln
+    from benchmarks.rope_reference import slack_rope_on_ground
+    times = [0.05, 0.15, 0.5]
+    Xs, land = slack_rope_on_ground(landing, times)
+    lower, upper = math.sqrt(2 * 0.05 / G), math.sqrt(2 * 0.15 / G)
+    assert np.allclose(land[1::2], lower, rtol=0, atol=1e-15) and np.allclose(land[2::2], upper, rtol=0, atol=1e-15)
+    assert np.allclose(Xs[0][1:, 2], landing.X0[1:, 2] - 0.5 * G * 0.05 ** 2, atol=1e-15)
+    assert np.allclose(Xs[1][1::2, 2], -0.15, atol=1e-15) and np.all(Xs[1][2::2, 2] > -0.15)
+    assert np.allclose(Xs[2][1:, :2], landing.X0[1:, :2], atol=1e-15) and np.allclose(Xs[2][1:, 2], -0.15, atol=1e-15)
+    scene = ln.Scene.from_dict(landing.to_dict())
+    for backend in ("numpy", "native"):
+        run = ln.simulate(scene, t_end=0.5, method="dop853", rtol=1e-9, backend=backend, n_out=11,
+                          error_estimate=False)
+        assert {e.kind for e in run.events} == {"contact"}, backend
+        hit = {e.index: e.t for e in run.events}
+        assert sorted(hit) == list(range(1, 9)), backend
+        assert max(abs(t - (lower if k % 2 else upper)) for k, t in hit.items()) < 1e-12, (backend, hit)
+        for t, X in zip(times, Xs):
+            i = int(np.argmin(np.abs(run.t - t)))
+            assert abs(run.t[i] - t) < 1e-12 and np.abs(run.X[i] - X).max() < 1e-12, (backend, t)
+
+
+def test_the_sliding_rope_stops_node_by_node_at_v_over_mu_g(slide):
+    """Each node, thrown sideways at v_k = 0.5 + 0.05 k m/s on the rough seabed (mu 0.5), slides v_k^2 / (2 mu g)
+    and stops at v_k / (mu g); the segments stay slack. linknet on both engines: a stick event at each stop, to
+    1e-9 s, and the closed form's positions to round-off."""
+    import linknet_core as ln
+    from benchmarks.rope_reference import slack_rope_on_ground
+    mu, v = 0.5, 0.5 + 0.05 * np.arange(1, 9)
+    Xs, _ = slack_rope_on_ground(slide, [0.1, 0.3])
+    assert np.allclose(Xs[1][1:, 1], v ** 2 / (2 * mu * G), atol=1e-15)   # all stopped by 0.183 s
+    t = 0.1   # every node still sliding (the first stops at 0.112 s)
+    assert np.allclose(Xs[0][1:, 1], v * t - 0.5 * mu * G * t * t, atol=1e-15)
+    scene = ln.Scene.from_dict(slide.to_dict())
+    for backend in ("numpy", "native"):
+        run = ln.simulate(scene, t_end=0.3, method="dop853", rtol=1e-9, backend=backend, n_out=4,
+                          error_estimate=False)
+        stops = {e.index: e.t for e in run.events if e.kind == "stick"}
+        assert sorted(stops) == list(range(1, 9)), (backend, run.events)
+        assert max(abs(t - v[k - 1] / (mu * G)) for k, t in stops.items()) < 1e-9, (backend, stops)
+        for t, X in zip([0.1, 0.3], Xs):
+            i = int(np.argmin(np.abs(run.t - t)))
+            assert abs(run.t[i] - t) < 1e-12 and np.abs(run.X[i] - X).max() < 1e-12, (backend, t)
+
+
+def test_moordyn_sinks_into_its_seabed_by_m_g_over_its_contact_stiffness(landing):
+    """At rest on MoorDyn's seabed a point sinks m g / k, k = kb d L / 2 (L its lines' summed length): the penalty's
+    error, 1/kb. The end node, on one line, sinks the most: 0.125 g / (kb d R / 2). A hundred times the stiffness,
+    a hundredth of the sink."""
+    pytest.importorskip("moordyn")
+    from benchmarks.peers.moordyn_peer import DIAMETER
+    from benchmarks.peers.moordyn_seabed import MoorDynSeabedLine
+    X_ref = study.references(landing, [0.5], "slack_rope")[0][0]
+    sink = {}
+    for EA in (1e4, 1e6):
+        line = MoorDynSeabedLine(EA)
+        dt = line.knobs(landing, quick=True)[1]
+        dt = 0.001 / math.ceil(0.001 / dt)
+        X, _ = line.trajectory(landing, [0.5], dt)
+        kb = line.seabed(landing)["kb"]
+        sink[EA] = X_ref[8, 2] - X[0][8, 2]
+        expected = M * G / (kb * DIAMETER * R / 2)
+        assert abs(sink[EA] - expected) < 1e-3 * expected, (EA, sink[EA], expected)
+        assert np.abs(X[0][:, :2] - X_ref[:, :2]).max() < 1e-12        # it falls straight down, as the rope does
+    assert abs(sink[1e4] / sink[1e6] - 100.0) < 0.1
+
+
+def test_moordyn_slides_to_rest_on_its_seabed_friction(slide):
+    """MoorDyn's seabed friction (a damper saturated at mu |F_z|) stops each sliding node near v^2 / (2 mu g),
+    closer as the seabed stiffens with EA (its damper's creep and the sink both shrink)."""
+    pytest.importorskip("moordyn")
+    from benchmarks.peers.moordyn_seabed import MoorDynSeabedLine
+    X_ref = study.references(slide, [0.3], "slack_rope")[0][0]
+    err = {}
+    for EA in (1e4, 1e6):
+        line = MoorDynSeabedLine(EA)
+        dt = line.knobs(slide, quick=True)[1]
+        dt = 0.1 / math.ceil(0.1 / dt)
+        X, _ = line.trajectory(slide, [0.3], dt)
+        err[EA] = float(np.abs(X[0] - X_ref).max())
+    assert err[1e6] < 1e-5 and err[1e6] < 0.1 * err[1e4], err
+
+
+def test_the_seabed_peer_refuses_a_bouncing_ground(landing):
+    from dataclasses import replace
+    from benchmarks.peers.base import Unsupported
+    from benchmarks.peers.moordyn_seabed import MoorDynSeabedLine
+    bouncing = replace(landing, ground=dict(landing.ground, restitution=0.5))
+    with pytest.raises(Unsupported, match="restitution 0.5"):
+        MoorDynSeabedLine(1e6).check_scene(bouncing)
+
+
+def test_the_seabed_study_smoke_run_writes_its_tables(tmp_path):
+    pytest.importorskip("moordyn")
+    study.main(["--scene", "rope_chain_seabed_slide", "--quick", "--out", str(tmp_path)])
+    saved = json.loads((tmp_path / "rope_peer_chain_seabed_slide.json").read_text())
+    assert saved["times"] == [0.05, 0.1] and saved["reference_agreement"] == [0.0, 0.0]
+    assert all(r["mu"] == 0.5 and r["kb"] > 0 for r in saved["moordyn"])
+    # no rope is taut: linknet's work is the friction's stops, which every method meets to round-off
+    assert all(r["errors"][-1] < 1e-12 for r in saved["linknet"])
