@@ -254,3 +254,29 @@ def test_the_seabed_study_smoke_run_writes_its_tables(tmp_path):
     assert all(r["mu"] == 0.5 and r["kb"] > 0 for r in saved["moordyn"])
     # no rope is taut: linknet's work is the friction's stops, which every method meets to round-off
     assert all(r["errors"][-1] < 1e-12 for r in saved["linknet"])
+
+
+@pytest.mark.xfail(strict=True, reason="linknet's frictional impact holds a resting mass that no contact's normal "
+                                       "impulse lets the ground grip (docs/benchmarks/rope_peer.md, the seabed)")
+@pytest.mark.parametrize("backend", ["numpy", "native"])
+def test_a_rope_jerks_a_resting_mass_into_a_slide_on_a_rough_ground(backend):
+    """A rope snapping taut along a level rough ground gives no contact a normal impulse, so Coulomb's law allows
+    no friction impulse at the jerk: the masses' in-plane momentum is kept and the resting mass slides off. Two
+    0.125 kg masses, a at rest at (0, 0.1, 0), b at (0.15, 0, 0) thrown at 2 m/s along x, a 0.25 m rope of
+    restitution 1, mu 0.5 (the drag scene that rope_peer.md does not compare)."""
+    import linknet_core as ln
+    scene = ln.Scene.from_dict({
+        "name": "jerk_on_rough_ground", "gravity": [0, 0, -G],
+        "masses": [{"name": "a", "position": [0, 0.1, 0], "mass": M},
+                   {"name": "b", "position": [0.15, 0, 0], "mass": M, "velocity": [2, 0, 0]}],
+        "links": [{"a": 1, "b": 2, "length": R, "kind": "rope", "restitution": 1.0}],
+        "ground": {"point": [0, 0, 0], "normal": [0, 0, 1], "friction": 0.5}})
+    run = ln.simulate(scene, t_end=0.1, method="dop853", rtol=1e-10, backend=backend, n_out=2, error_estimate=False)
+    jerk = next(e for e in run.events if e.kind == "taut")
+    momentum = []
+    for dt in (-1e-9, 1e-9):   # friction's own impulse over 2 ns: 2 mu m g 1e-9 = 1.2e-9 N s per mass
+        sim = ln.Simulator(scene, method="dop853", rtol=1e-10, backend=backend)
+        sim.advance(jerk.t + dt)
+        momentum.append(M * sim.state.U.sum(axis=0))
+    assert jerk.impulse > 0.1
+    assert np.abs(momentum[1] - momentum[0]).max() < 1e-8 * jerk.impulse + 1e-8
