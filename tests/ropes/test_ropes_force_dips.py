@@ -7,12 +7,14 @@ its time by quadrature of the pendulum's energy, then the ballistic flight to |X
 (events.py, EventHandling._force_dip_at_stages) and the native core (stages/ropes.c, rope_force_dip_at_stages)
 are held to it. A fixed-step composition screens the forces at its RATTLE stages' midpoints the same way
 (FixedStepEvents._midpoint_tensions, rope_keep_midpoint): Suzuki's order-4 composition finds a dip that lies inside
-one of its steps, at the closed-form times within its own order-4 error."""
+one of its steps, at the closed-form times within its own order-4 error; plain RATTLE (its midpoint alone) and the
+triple jump find a bob's slack inside one step of a hand shaking it, a motion they follow exactly, to round-off."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from scipy.integrate import quad
+from scipy.optimize import brentq
 
 import linknet_core as ln
 from tests.ropes.rope_references import G, ballistic, bob_scene, first_exit
@@ -83,3 +85,35 @@ def test_slack_over_the_top_inside_one_fixed_step_of_an_order_4_composition(back
     assert np.abs(errors[0]).max() < 2e-3  # measured: 4.8e-4 s, 1.6e-3 s
     ratio = np.abs(errors[0] / errors[1])
     assert np.all((12 < ratio) & (ratio < 20)), ratio  # measured: 15.8, 15.9
+
+
+@pytest.mark.parametrize("backend", ["numpy", "native"])
+@pytest.mark.parametrize("method", ["rattle", "yoshida4"])
+def test_a_bob_shaken_slack_inside_one_step_by_its_hand_is_found_at_its_midpoint(method, backend):
+    # a bob hanging 1 m under a hand driven along z by a sine of 1 Hz whose crest accelerates it downward 2% faster
+    # than g: the rope's tension m (g + a_hand) is below zero for 63 ms around the crest at 0.25 s, inside the step
+    # [1/6, 2/6] s of six steps a second (both ends pulling); RATTLE's midpoint, at the crest, sees it. The bob
+    # follows the hand rigidly (RATTLE's projections put it at the hand's distance and speed) and then flies
+    # ballistically, both exact on these methods: slack where sin(w t) = 1 / 1.02, taut where the flight is 1 m
+    # under the hand again, with the impulse m times their relative speed there, all to round-off
+    w, a, R = 2 * np.pi, 1.02 * G / (2 * np.pi) ** 2, 1.0
+    scene = ln.Scene.from_dict({"name": "shaken", "gravity": [0, 0, -G],
+                                "masses": [{"name": "hand", "position": [0, 0, 0], "driven": True,
+                                            "motion": {"kind": "sine", "amplitude": [0, 0, a],
+                                                       "frequency": [0, 0, 1.0]}},
+                                           {"name": "bob", "position": [0, 0, -R], "mass": 1.0}],
+                                "links": [{"a": 1, "b": 2, "kind": "rope", "length": R}]})
+    t_slack = np.arcsin(1 / 1.02) / w
+    assert 1 / 6 < t_slack and t_slack + 2 * (0.25 - t_slack) < 2 / 6  # the dip inside one step
+
+    def flight(t):  # the bob's height and speed after the slack
+        s = t - t_slack
+        return (a * np.sin(w * t_slack) - R + a * w * np.cos(w * t_slack) * s - 0.5 * G * s * s,
+                a * w * np.cos(w * t_slack) - G * s)
+    t_taut = brentq(lambda t: a * np.sin(w * t) - flight(t)[0] - R, 0.3, 0.4, xtol=1e-15)
+    run = ln.simulate(scene, 1.0, method, dt=1 / 6, n_out=2, error_estimate=False, backend=backend)
+    slack, taut = run.events[:2]
+    assert (slack.kind, taut.kind) == ("slack", "taut")
+    assert abs(slack.t - t_slack) < 1e-12 and abs(taut.t - t_taut) < 1e-12  # measured: 6e-14 s, 6e-15 s
+    # measured: 3e-13 relative
+    assert taut.impulse == pytest.approx(a * w * np.cos(w * t_taut) - flight(t_taut)[1], rel=1e-11)
