@@ -7,10 +7,12 @@
  *   U_new  = U_half + h/2 M^-1 F(X_new, U_half), projected onto (12) at X_new
  * The velocity U_half after the position stage is taken from the stage's correction itself, not from the rounded
  * X_new - X (velocity_after_position_stage): that keeps the coordinates' round-off out of the velocity.
- * With velocity-dependent forces (drag, dampers) the second half kick is implicit in U_new (fixed-point
- * iteration), which keeps the step symmetric and so second order. A composition takes RATTLE steps of
- * gamma_i h in turn (method->gammas); the velocity projection's factorisation at X_new is the next stage's
- * A(X). A step whose position stage cannot converge is split into equal sub-steps (split_step).
+ * With velocity-dependent forces (drag, dampers, a sliding contact's Coulomb friction on a ground) the second half
+ * kick is implicit in U_new (fixed-point iteration), which keeps the step symmetric and so second order. A
+ * composition takes RATTLE steps of gamma_i h in turn (method->gammas); the velocity projection's factorisation at
+ * X_new is the next stage's A(X). A step whose position stage cannot converge is split into equal sub-steps
+ * (split_step). With ropes or a ground each stage's midpoint, X + h/2 U_half, is where the forces inside a step are
+ * sampled (rope_keep_midpoint): RATTLE has no other state inside its step.
  */
 #include <math.h>
 
