@@ -260,24 +260,6 @@ def library_tolerance_range() -> tuple[float, float]:
     return float(getattr(integrators, "RTOL_MIN", 1e-15)), float(getattr(integrators, "RTOL_MAX", 0.1))
 
 
-def offered_integrators(scene, cfg: dict) -> dict:
-    """cfg with the integrators the native core runs for ``scene`` (the library's native_refusal, asked here only),
-    the others in cfg["refused_integrators"] (name -> the library's reason), which the FMU does not offer and refuses
-    by that reason when its parameter integrator names one. NativeBuildError with the reason where the default
-    integrator is refused (e.g. a ground with --step or --integrator rattle) or every one is."""
-    import linknet_core as ln
-    from linknet_core.dynamics.unilateral import native_refusal
-    refused = {}
-    for name in cfg["integrators"]:
-        reason = native_refusal(scene, ln.METHODS[name])
-        if reason is not None:
-            refused[name] = reason
-    offered = [name for name in cfg["integrators"] if name not in refused]
-    if not offered or cfg["integrator"] in refused:
-        raise NativeBuildError(refused[cfg["integrator"]])
-    return dict(cfg, integrators=offered, refused_integrators=refused)
-
-
 def _simulators(scene, cfg):
     """One linknet_core Simulator per integrator, as the pythonfmu FMU builds them (dt = step, or rtol =
     tolerance), each on the scene's own Dynamics: the structure, and the initial state with its checks, are the
@@ -460,9 +442,6 @@ def scene_resource(scene, cfg, layout) -> tuple[Resource, dict]:
     values.update(n_methods=len(names), method_names=names,
                   method_adaptive=[int(bool(ln.METHODS[n].adaptive)) for n in names],
                   method_order=[int(ln.METHODS[n].order) for n in names],
-                  n_refused_methods=len(cfg.get("refused_integrators", {})),
-                  refused_method_names=list(cfg.get("refused_integrators", {})),
-                  refused_method_reasons=list(cfg.get("refused_integrators", {}).values()),
                   default_method=names.index(cfg["integrator"]), default_step=cfg["step"],
                   default_tolerance=cfg["tolerance"], default_estimate=int(bool(cfg.get("error_estimate", True))))
     values["variable_kind"], values["variable_index"] = variable_table(layout, model)
@@ -957,7 +936,6 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
     out = Path(out)
     folders = platforms_from(platforms)
     check_settings(cfg)
-    cfg = offered_integrators(scene, cfg)
 
     def progress(stage: str) -> None:  # a large scene's build takes a while: say how far it is
         if not quiet and len(layout.reals) >= PROGRESS_VARIABLES:

@@ -303,7 +303,6 @@ def build_fmi3_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, quiet:
     out = Path(out)
     folders = fmi3_platforms(platforms)
     build.check_settings(cfg)
-    cfg = build.offered_integrators(scene, cfg)
     resource, facts = build.bake(scene, cfg, layout)
     variables = fmi3_variables(layout, cfg)
     add_variable_table(resource, variables)

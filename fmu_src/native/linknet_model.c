@@ -1187,10 +1187,6 @@ int fmu_model_set_string(fmu_model *m, const unsigned *vr, size_t n, const char 
         ln_int found = -1;
         for (ln_int k = 0; value[i] && k < s->n_methods; k++)
             if (strcmp(value[i], s->methods[k].name) == 0) found = k;
-        for (ln_int k = 0; found < 0 && value[i] && k < s->n_refused_methods; k++)
-            if (strcmp(value[i], s->refused_method_names[k]) == 0)  /* the library's reason (native_refusal) */
-                return fail(msg, FMU_ERROR, "parameter integrator = \"%s\" is not offered by this FMU: %s; nothing "
-                            "set", value[i], s->refused_method_reasons[k]);
         if (found < 0) {
             char names[512] = "";
             for (ln_int k = 0; k < s->n_methods; k++) {

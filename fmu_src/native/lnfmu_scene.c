@@ -16,8 +16,7 @@ typedef struct loaded {
     struct ln_rigid_model rigid;
     lnfmu_method *methods;
     lnfmu_variable *variables;
-    const char **mass_names, **event_kind_names, **method_names, **refused_method_names, **refused_method_reasons,
-        **variable_names;  /* the texts' pointer arrays */
+    const char **mass_names, **event_kind_names, **method_names, **variable_names;  /* the texts' pointer arrays */
 } loaded;
 
 #if defined __GNUC__
@@ -252,8 +251,6 @@ void lnfmu_scene_free(lnfmu_scene *s)
     free(l->mass_names);
     free(l->event_kind_names);
     free(l->method_names);
-    free(l->refused_method_names);
-    free(l->refused_method_reasons);
     free(l->variable_names);
     free(l);
 }

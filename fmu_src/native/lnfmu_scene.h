@@ -104,12 +104,6 @@ enum lnfmu_specialisation { LNFMU_POINT_MASSES = 0, LNFMU_STATIC = 1, LNFMU_RIGI
     ARRAY(int, method_adaptive, s->n_methods)           /* the parameter "tolerance" applies (else "step") */       \
     ARRAY(int, method_order, s->n_methods)              /* (ln_companion_settings: a fixed step's Richardson        \
                                                            factor) */                                               \
-    SCALAR(ln_int, n_refused_methods)                   /* methods the core does not run for this scene (a ground \
-                                                           on the fixed-step methods): not offered; their names and \
-                                                           the library's reasons (native_refusal), so that choosing \
-                                                           one is refused with the reason */                         \
-    TEXTS(refused_method_names, s->n_refused_methods)                                                               \
-    TEXTS(refused_method_reasons, s->n_refused_methods)                                                             \
     SCALAR(ln_int, default_method)                                                                                  \
     SCALAR(double, default_step)                                                                                    \
     SCALAR(double, default_tolerance)                                                                               \

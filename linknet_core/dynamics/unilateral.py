@@ -85,16 +85,6 @@ class Event(NamedTuple):
     impulse: float
 
 
-def native_refusal(scene: Scene, method=None) -> str | None:
-    """Why the native core cannot run ``scene`` with ``method`` (an integrator class; None: every method), or None
-    where it can: the one rule the Simulator's choice of backend (numpy_only) and the native FMU's build (the
-    integrators it offers) ask. The core takes ropes and a ground, with or without Coulomb friction, on every method
-    (linknet_core/native/src/stages/ropes.c: each contact a unilateral link to a virtual anchor; stages/friction.c:
-    a stuck contact's grips, a sliding one's friction carried through the links; stages/rattle.c: RATTLE's stages
-    on the mode, the friction implicit in its second kick), so it refuses none of them."""
-    return None
-
-
 def scene_size(scene: Scene) -> float:
     """The scene's length scale, m: its extent or longest link, at least 1 m (a single mass on the ground has
     none). What the events' tolerances and the rest speed are measured against (the native core takes it too)."""
@@ -147,17 +137,6 @@ def describe(scene: Scene) -> list[str]:
                  + (f", each contact a unilateral link to a virtual anchor{friction}" if ground is not None else "")
                  + "; the numpy reference with backend=\"numpy\")")
     return lines
-
-
-def numpy_only(scene: Scene, backend: str, method=None) -> bool:
-    """Whether ``scene`` runs on the numpy reference with ``method`` (an integrator class): where the native core
-    cannot take it (native_refusal), a backend of 'native' refused with native_refusal's words."""
-    if not scene.unilateral:
-        return False
-    refusal = native_refusal(scene, method)
-    if backend == "native" and refusal is not None:
-        raise SolverError(refusal)
-    return refusal is not None
 
 
 def scene_dynamics(scene: Scene, rhs_kernel: str = "numpy") -> Dynamics:
@@ -1160,8 +1139,8 @@ class UnilateralReport(InitialReport):
         if scene.ground is not None:
             what.append(f"{self.contacts} masses on the ground")
         return super().lines(scene) + [
-            "ropes and ground: event by event (the native core takes ropes, and a ground, with or without friction, on "
-            "the adaptive methods; the numpy reference the rest); "
+            "ropes and ground: event by event (the native core on every method, the numpy reference with "
+            "backend=\"numpy\"); "
             + ", ".join(what)]
 
 

@@ -16,7 +16,7 @@ from linknet_core.accuracy import (accuracy_text, error_goal, estimate_failure_t
                                    position_gap, position_gaps, scene_size, warn_accuracy)
 from linknet_core.dynamics.drive import AnchorDrive, anchor_jump, check_step_follows_motions
 from linknet_core.dynamics.equations import Dynamics
-from linknet_core.dynamics.unilateral import event_arrays, event_counts, numpy_only, scene_dynamics, slack_links
+from linknet_core.dynamics.unilateral import event_arrays, event_counts, scene_dynamics, slack_links
 from linknet_core.errors import SceneError, SolverError
 from linknet_core.dynamics.forces import kinetic_energy
 from linknet_core.integrators import real_number
@@ -138,12 +138,9 @@ def _setup(scene: Scene, dyn: Dynamics, settings: RunSettings, own_dynamics: boo
         X0, U0, report = prepare_initial_state(scene, dyn, project_positions=settings.project_initial,
                                                length_tol=settings.length_tol)
     # one backend, chosen here before anything is built: the one asked for, the native core by default, the numpy
-    # reference where the right-hand side is casadi's (a variant of the numpy Dynamics) or the scene has what the
-    # native core does not take (unilateral.native_refusal: a ground on a fixed-step method; backend="native" is
-    # refused there)
+    # reference where the right-hand side is casadi's (a variant of the numpy Dynamics)
     backend = settings.backend
-    chosen = "numpy" if dyn.rhs_kernel != "numpy" or numpy_only(scene, backend, stepping.cls) else \
-        "native" if backend == "auto" else backend
+    chosen = "numpy" if dyn.rhs_kernel != "numpy" else "native" if backend == "auto" else backend
     specialisation, U0 = BACKEND_CLASSES[chosen].choose_specialisation(scene, dyn, settings, U0)
     X0.flags.writeable = U0.flags.writeable = False
     return X0, U0, report, chosen, specialisation

@@ -261,7 +261,7 @@ def test_the_error_estimate_and_the_tension_peaks_are_the_librarys(fmus, scenes)
 
 @pytest.mark.parametrize("method", ["rattle", "yoshida4"])
 def test_the_chain_on_rattle_and_its_compositions_through_the_fmu_equals_the_library(method, fmus, scenes):
-    # every method is offered with a ground (unilateral.native_refusal refuses none); at the FMU's default step (1e-3
+    # every method is offered with a ground; at the FMU's default step (1e-3
     # s), chosen at initialization, the outputs and events are the library's on the native backend to the last bit
     fmu = fmus["chain"]
     integrator = next(v for v in fmu.md.modelVariables if v.name == "integrator")

@@ -9,7 +9,7 @@ until it slips. Masses joined by links: a rod leaning on the ground with its foo
 pushed at a slant (the slip from rest turned by the rod), a rod dropped at a slant landing on one end (stuck, and
 sliding until its top lands), a rod standing on the floor until its base slips, a pendulum swinging into the ground
 (its rope jerked slack, the bob sliding to a stop). backend="auto" takes every one of them to the core, on the adaptive
-methods and on RATTLE and its compositions (unilateral.native_refusal, which the native FMU's build asks too)."""
+methods and on RATTLE and its compositions (the native FMU offers every method too)."""
 from __future__ import annotations
 
 import numpy as np
@@ -18,7 +18,6 @@ from test_native_ropes import _agree  # tests/native is on sys.path (pytest puts
 from ropes.rope_references import G, slope
 
 import linknet_core as ln
-from linknet_core.dynamics import unilateral
 
 METHODS = ["dop853", "dopri5"]
 
@@ -186,7 +185,6 @@ def test_friction_on_rattle_and_its_compositions_runs_on_the_core_as_the_referen
     # set at each step's start, as the reference's (measured: event times and states within 3e-14)
     make, t_end, method, dt, n_events = FIXED_STEP[name]
     assert ln.Simulator(make(), method, dt=dt).backend == "native"
-    assert unilateral.native_refusal(make(), ln.METHODS[method]) is None
     reference, native = (ln.simulate(make(), t_end, method, dt=dt, n_out=11, error_estimate=False, backend=backend)
                          for backend in ("numpy", "native"))
     assert len(reference.events) == n_events

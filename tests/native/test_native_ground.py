@@ -209,7 +209,7 @@ FIXED_STEP = {"bouncing ball": (lambda: dropped(1.0, 0.5), 1.5, "rattle", 1e-2, 
 
 @pytest.mark.parametrize("name", list(FIXED_STEP))
 def test_a_ground_on_rattle_and_its_compositions_runs_on_the_core_as_the_reference_does(name):
-    # auto takes it to the core (unilateral.native_refusal); the core's RATTLE stages place the contacts' anchors and
+    # auto takes it to the core; the core's RATTLE stages place the contacts' anchors and
     # re-place them in the position stage as the reference's ModeDynamics does, so the two agree to round-off
     # (measured: event times 4e-13 s, positions 3e-14 m)
     make, t_end, method, dt, n_events = FIXED_STEP[name]
