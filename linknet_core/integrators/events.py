@@ -394,9 +394,11 @@ class EventHandling:
         release = np.zeros(uni.n_unilateral, bool)
         if kind == "force" and friction_contact is None:
             release[trigger] = True
-        # the contacts that may stick: those stuck before, those at rest along the plane, one whose slip stopped;
-        # not one whose stick margin fell through zero
-        may_stick = stuck_before | uni.resting(Ud)
+        # the contacts that may stick: those at rest along the plane after the impact, one whose slip stopped; not one
+        # whose stick margin fell through zero. A contact stuck before that the impact set moving is not held: its
+        # grip would take the velocity the impact gave it, a friction impulse that coulomb_impact's cone |P_t| <=
+        # mu P_n refused (no normal impulse, no friction impulse: a rope jerking a resting mass along the ground)
+        may_stick = uni.resting(Ud)
         if friction_contact is not None:
             may_stick[friction_contact] = not stuck_before[friction_contact]
         # every candidate starts taut: where the LCP is degenerate (a force and a gap acceleration both zero, a rope

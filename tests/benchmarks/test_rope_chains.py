@@ -256,8 +256,6 @@ def test_the_seabed_study_smoke_run_writes_its_tables(tmp_path):
     assert all(r["errors"][-1] < 1e-12 for r in saved["linknet"])
 
 
-@pytest.mark.xfail(strict=True, reason="linknet's frictional impact holds a resting mass that no contact's normal "
-                                       "impulse lets the ground grip (docs/benchmarks/rope_peer.md, the seabed)")
 @pytest.mark.parametrize("backend", ["numpy", "native"])
 def test_a_rope_jerks_a_resting_mass_into_a_slide_on_a_rough_ground(backend):
     """A rope snapping taut along a level rough ground gives no contact a normal impulse, so Coulomb's law allows

@@ -1622,10 +1622,11 @@ static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_da
         release[r] = kind == 2 && r == trigger;
     }
     if (mm->n_grips) {
-        /* the contacts that may stick: those stuck before, those at rest along the plane, one whose slip stopped;
-           not one whose stick margin fell through zero; in the LCP's mode as equalities where candidates */
+        /* the contacts that may stick: those at rest along the plane after the impact, one whose slip stopped; not
+           one whose stick margin fell through zero; in the LCP's mode as equalities where candidates. One stuck
+           before that the impact set moving is not held: its grip would take the velocity the impact gave it, a
+           friction impulse beyond the cone mu P_n that friction_impact solved (EventHandling._apply_event) */
         FN(friction_resting)(mm, U, may_stick);
-        for (ln_int c = 0; c < n_c; c++) may_stick[c] |= stuck_before[c];
         if (friction_contact >= 0) may_stick[friction_contact] = !stuck_before[friction_contact];
         uint8_t *grips = d->friction_flags + 5 * n_c;
         for (ln_int c = 0; c < n_c; c++) grips[c] = may_stick[c] && candidates[first_contact + c];
