@@ -455,7 +455,7 @@ GCC = shutil.which("gcc") or shutil.which("cc")
 def test_sources_build_with_the_plain_command(scene, fmu_root, host, bare_host, no_python_env, tmp_path):
     """`cc -shared -fPIC sources/*.c -lm`, run from the unzipped FMU: AMD included, nothing but the fmi2 functions
     exported, libm recorded (the host without libm runs it), the shipped results."""
-    fmu = fmu_of(scene, fmu_root)
+    fmu = built(fmu_root, scene, platforms="linux64")  # the shipped binary it is compared with: no other platform
     sources = sorted(str(p.relative_to(fmu.dir)) for p in (fmu.dir / "sources").glob("*.c"))
     library = tmp_path / f"{fmu.ident}.so"
     proc = subprocess.run([GCC, "-shared", "-fPIC", *sources, "-lm", "-o", str(library)], cwd=fmu.dir,
