@@ -29,6 +29,7 @@ DefaultExperiment and ModelStructure.
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import datetime
 import hashlib
@@ -715,6 +716,27 @@ def store_by_rename(made: Path, store: Path) -> Path:
     return store / made.name
 
 
+@contextlib.contextmanager
+def _one_build_at_a_time(cache: bool):
+    """Builds that use the per-user cache compile one at a time: a second build in another process (a second test
+    worker, a second shell) waits, then finds the first one's objects in the cache instead of compiling them again.
+    Where the lock cannot be had (no fcntl on Windows, a cache folder that cannot be written) builds go on side by
+    side, as each object and binary is stored by a rename."""
+    if not cache:
+        yield
+        return
+    try:
+        import fcntl
+        cache_dir().mkdir(parents=True, exist_ok=True)
+        lock = open(cache_dir() / "build.lock", "a")
+    except (ImportError, OSError):
+        yield
+        return
+    with lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield
+
+
 def compile_binaries(sources_dir: Path, units: list[str], ident: str, folders: tuple[str, ...], out_dir: Path,
                      cache: bool = True) -> dict[str, Path]:
     """binaries/<folder>/<ident><suffix> of every platform in ``folders``, each from the FMU's sources/ alone, as a
@@ -733,7 +755,7 @@ def compile_binaries(sources_dir: Path, units: list[str], ident: str, folders: t
     digest = sources_digest(sources_dir)
     targets = [t for folder in folders for t in PLATFORMS[folder].targets]
     suffix = {t: PLATFORMS[f].suffix for f in folders for t in PLATFORMS[f].targets}
-    with tempfile.TemporaryDirectory(prefix="linknet_objects_") as tmp:
+    with _one_build_at_a_time(cache), tempfile.TemporaryDirectory(prefix="linknet_objects_") as tmp:
         tmp = Path(tmp)
         stores, linked, jobs, fresh = {}, {}, [], []
         object_names = {u: object_name(sources_dir, u, digest) for u in units}
