@@ -146,6 +146,8 @@ evaluate_repeated = _declare("ln_evaluate_repeated", ctypes.c_int, Model_p, Data
                              c_double_p, ln_int)
 rope_events_drained = _declare("ln_rope_events_drained", ln_int, Data_p)
 jump_anchors = _declare("ln_jump_anchors", ctypes.c_int, Model_p, Method_p, Data_p)
+rope_initial_state = _declare("ln_rope_initial_state", ctypes.c_int, Model_p, Method_p, Data_p, c_double_p, c_double_p,
+                              ctypes.c_int)
 model_weights_size = _declare("ln_model_weights_size", ln_int, Model_p)
 model_weights = _declare("ln_model_weights", ctypes.c_int, Model_p, c_double_p, c_double_p, c_double_p, c_double_p,
                          c_double_p)

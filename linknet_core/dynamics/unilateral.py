@@ -1061,12 +1061,17 @@ class UnilateralDynamics(Dynamics):
         return float(worst) if X.ndim == 2 else worst
 
     # ---- the initial state -------------------------------------------------------------------------------------
-    def initial_state(self, project_positions: bool | None = None, length_tol: float = 1e-6):
+    def initial_state(self, project_positions: bool | None = None, length_tol: float = 1e-6, consistent=None):
         """The scene's initial state made consistent, as simulator.prepare_initial_state does for rods: rods within
         length_tol of their lengths, ropes not longer than theirs (else refused, or projected where asked); the
         ropes at their length and the masses on the ground take the impulse of an impact (their approach velocities
         removed, as (12) removes a rod's); hypothesis (35) is checked on the mode that results. Returns (X, U,
-        report)."""
+        report).
+
+        ``consistent``: None (the projection and the impact by this reference), or a backend's own way of doing
+        those two, a callable (X, U, project) -> (X, U) that raises SolverError where it cannot (the native core's,
+        linknet_core.native.integrator.core_initial_state), so that a backend's run starts from its own state. Where
+        it fails, the reference's failure is what is said, in its words."""
         scene = self.scene
         if project_positions is None:
             project_positions = bool(scene.options.get("project_initial_positions", False))
@@ -1092,17 +1097,15 @@ class UnilateralDynamics(Dynamics):
                     f"{length_tol:g}; a rope may be shorter than its length, never longer). Fix the positions or the "
                     "lengths, or opt in to projecting them (--project-initial, or \"options\": "
                     "{\"project_initial_positions\": true})")
-            stretched = np.zeros(self.n_unilateral, bool)
-            stretched[:self.rope_links.size] = rel[self.rope_links] > 0
-            try:
-                X, _ = self.mode(stretched, X, U).project_positions(X, tol=1e-14, max_iter=200)
-            except SolverError as exc:
-                raise SceneError(f"{scene.name}: the initial positions cannot be projected onto the link lengths: "
-                                 f"{exc}") from None
             projected = True
-        # the ropes at their length and the masses on the ground take an inelastic impulse, the rods' rates (12) go
-        # to zero with it (the impact LCP's equalities): one projection
-        U_new, _, _ = self.impact(X, U, self.touching(X), inelastic=True)
+        if consistent is None:
+            X, U_new = self._consistent_start(X, U, rel, projected)
+        else:
+            try:
+                X, U_new = consistent(X, U, projected)
+            except SolverError as exc:
+                self._consistent_start(X, U, rel, projected)  # the reference's words where it fails too
+                raise SceneError(f"{scene.name}: the initial state cannot be made consistent: {exc}") from None
         correction = np.linalg.norm(U_new - U, axis=1)
         worst_mass = int(np.argmax(correction)) if correction.size else -1
         dv = float(correction.max()) if correction.size else 0.0
@@ -1119,6 +1122,24 @@ class UnilateralDynamics(Dynamics):
                 from None
         return X, U_new, UnilateralReport(worst, projected, dv, worst_mass, int(active[:self.rope_links.size].sum()),
                                           self.rope_links.size, int(active[self.rope_links.size:].sum()))
+
+    def _consistent_start(self, X, U, rel, project: bool):
+        """initial_state's positions and velocities: where ``project``, X projected onto the rods and the ropes
+        longer than their length (``rel``: each link's relative excess) in the mass metric, the contacts onto the
+        ground; then the inelastic impact at X (the ropes at their length and the masses on the ground). Returns
+        (X, U)."""
+        if project:
+            stretched = np.zeros(self.n_unilateral, bool)
+            stretched[:self.rope_links.size] = rel[self.rope_links] > 0
+            try:
+                X, _ = self.mode(stretched, X, U).project_positions(X, tol=1e-14, max_iter=200)
+            except SolverError as exc:
+                raise SceneError(f"{self.scene.name}: the initial positions cannot be projected onto the link "
+                                 f"lengths: {exc}") from None
+        # the ropes at their length and the masses on the ground take an inelastic impulse, the rods' rates (12) go
+        # to zero with it (the impact LCP's equalities): one projection
+        U_new, _, _ = self.impact(X, U, self.touching(X), inelastic=True)
+        return X, U_new
 
 
 @dataclass

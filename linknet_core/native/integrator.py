@@ -36,6 +36,42 @@ _midpoint_rows.restype = lib.ln_int
 _midpoint_rows.argtypes = [lib.Model_p, lib.Method_p]
 
 
+def integrator_method(method_cls, *, dt=None, rtol=None, atol=None, static: bool = False):
+    """The NativeMethod a NativeIntegrator of ``method_cls`` runs with these settings (atol: already defaulted)."""
+    return native_method(method_cls, dt=dt, rtol=rtol, atol=atol, position_tol=getattr(method_cls, "position_tol", 1e-14),
+                         static=static)
+
+
+def integrator_data(model: NativeModel, method) -> NativeData:
+    """A new NativeData of ``model`` sized for ``method``'s stages (and its screen of the forces inside a step)."""
+    return NativeData(model, max(method.n_stages, _midpoint_rows(model.pointer, method.pointer)))
+
+
+def core_initial_state(model: NativeModel, method, K: int):
+    """The native core's way of making a rope or ground scene's initial state consistent (ln_rope_initial_state,
+    stages/ropes.c; the native FMU calls it with changed masses or lengths), as UnilateralDynamics.initial_state
+    takes it (its ``consistent``): a callable (X, U, project) of the scene's K rows -> (X, U), the positions projected
+    where ``project`` and the inelastic impact applied; SolverError naming the core's status where it fails.
+    ``model`` is the scene's core model (with a ground, native_ground_scene's: the contacts' virtual anchors after the
+    scene's masses, placed by the core), ``method`` the NativeMethod the run's integrator has."""
+    def consistent(X, U, project: bool):
+        Xc, Uc = np.zeros((model.K, 3)), np.zeros((model.K, 3))
+        padded = getattr(model, "ground_scene", None)
+        if padded is not None:  # the anchors' rows as the native FMU's resource holds them (the core places them)
+            Xc[K:], Uc[K:] = padded.X0[K:], padded.U0[K:]
+        Xc[:K], Uc[:K] = X, U
+        data = integrator_data(model, method)
+        status = lib.rope_initial_state(model.pointer, method.pointer, data._ptr, lib.pointer(Xc), lib.pointer(Uc),
+                                        int(bool(project)))
+        if status != lib.OK:
+            d = data.struct
+            where = f" at {model.scene.link_label(int(d.fail_link))}" if 0 <= d.fail_link < model.scene.L else ""
+            raise SolverError(f"the native core's initial state failed (status {status}: "
+                              f"{lib.STATUS.get(status, 'unknown')}){where}")
+        return Xc[:K].copy(), Uc[:K].copy()
+    return consistent
+
+
 @dataclass
 class _Internals:
     t: float
@@ -88,10 +124,8 @@ class NativeIntegrator(Integrator):
         self.adaptive, self.guarantees = method_cls.adaptive, method_cls.guarantees
         self.dt, self.rtol = dt, rtol
         self.atol = atol if atol is not None else rtol
-        position_tol = getattr(method_cls, "position_tol", 1e-14)
-        self.method = native_method(method_cls, dt=dt, rtol=rtol, atol=self.atol, position_tol=position_tol,
-                                    static=static)
-        self.data = NativeData(model, max(self.method.n_stages, _midpoint_rows(model.pointer, self.method.pointer)))
+        self.method = integrator_method(method_cls, dt=dt, rtol=rtol, atol=self.atol, static=static)
+        self.data = integrator_data(model, self.method)
         self._static = static
         self._model_p, self._method_p, self._data_p = model.pointer, self.method.pointer, self.data._ptr
         self._d = self.data.struct

@@ -64,6 +64,13 @@ class Backend:
         return choose_specialisation(scene, dyn, settings.stepping.method, enabled=False), U0
 
     @classmethod
+    def consistent_initial_state(cls, scene: Scene, dyn: Dynamics, settings: "RunSettings"):
+        """How this backend makes a rope or ground scene's initial positions and velocities consistent, as
+        UnilateralDynamics.initial_state takes it (``consistent``), and a key naming it for the kept initial states;
+        (None, None): the numpy reference's own."""
+        return None, None
+
+    @classmethod
     def create(cls, scene: Scene, dyn: Dynamics, settings: "RunSettings", X0: np.ndarray, U0: np.ndarray, t0: float,
                specialisation: Specialisation) -> "Backend":
         """The backend of one Simulator: its integrator for ``settings.stepping`` (the method, its class and the

@@ -8,7 +8,7 @@ import functools
 import numpy as np
 
 from linknet_core.errors import SolverError
-from linknet_core.native.integrator import NativeGroundIntegrator, NativeIntegrator
+from linknet_core.native.integrator import NativeGroundIntegrator, NativeIntegrator, core_initial_state, integrator_method
 from linknet_core.native.model import native_ground_model, native_model
 from linknet_core.native.rigid import NativeRigidIntegrator
 from linknet_core.simulator.backend import Backend
@@ -38,6 +38,20 @@ class NativeBackend(Backend):
         if specialisation.kind == STATIC:
             U0 = np.zeros_like(U0)  # the only velocity (12) allows where nothing can move
         return specialisation, U0
+
+    @classmethod
+    def consistent_initial_state(cls, scene, dyn, settings):
+        """A rope or ground scene's initial state by the core (ln_rope_initial_state, as the native FMU computes it
+        with changed masses or lengths), with the method the run's integrator has, so that the run starts from the
+        core's own state."""
+        if not scene.unilateral:
+            return None, None
+        stepping = settings.stepping
+        atol = stepping.atol if stepping.atol is not None else stepping.rtol
+        method = integrator_method(stepping.cls, dt=stepping.dt, rtol=stepping.rtol, atol=atol)
+        model = native_ground_model(scene) if scene.ground is not None else native_model(scene, dyn.structure)
+        return core_initial_state(model, method, scene.K), ("native", stepping.cls.name, stepping.dt, stepping.rtol,
+                                                            atol)
 
     @classmethod
     def create(cls, scene, dyn, settings, X0, U0, t0, specialisation) -> "NativeBackend":

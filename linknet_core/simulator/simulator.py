@@ -48,7 +48,7 @@ class SimulationInterrupted(KeyboardInterrupt):
 
 
 def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: bool | None = None,
-                          length_tol: float = DEFAULT_LENGTH_TOL):
+                          length_tol: float = DEFAULT_LENGTH_TOL, consistent=None):
     """Validate and make consistent the scene's initial state.
 
     * positions must satisfy every link length (11) to ``length_tol`` relative, unless projection is
@@ -58,10 +58,11 @@ def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: boo
       or loads along a flex held only at second order (Dynamics.check_no_loaded_blocked_flex).
 
     A scene with ropes or a ground has its own rules (UnilateralDynamics.initial_state: ropes no longer than their
-    length, and an inelastic impulse where they are at it).
+    length, and an inelastic impulse where they are at it), its projection and impact by ``consistent`` where a
+    backend gives its own (Backend.consistent_initial_state), else by the numpy reference.
     """
     if scene.unilateral:
-        return dyn.initial_state(project_positions=project_positions, length_tol=length_tol)
+        return dyn.initial_state(project_positions=project_positions, length_tol=length_tol, consistent=consistent)
     if project_positions is None:
         project_positions = bool(scene.options.get("project_initial_positions", False))
     X, U = np.array(scene.X0), np.array(scene.U0)
@@ -103,13 +104,16 @@ def prepare_initial_state(scene: Scene, dyn: Dynamics, *, project_positions: boo
     return X, U_projected, InitialReport(worst, projected, dv, worst_mass)
 
 
-def _kept_initial_state(scene: Scene, dyn: Dynamics, project_positions: bool | None, length_tol: float):
+def _kept_initial_state(scene: Scene, dyn: Dynamics, project_positions: bool | None, length_tol: float,
+                        consistent=None, consistent_key=None):
     """prepare_initial_state with the scene's own Dynamics, kept per scene object and settings (a scene is
     immutable: a second Simulator of it, an ensemble's member or a reset FMU skips the projections and checks);
-    every caller gets its own copies of X and U. A refused state is refused again each time."""
-    X, U, report = kept_per_scene(scene, ("initial state", project_positions, length_tol, dyn.rhs_kernel),
+    every caller gets its own copies of X and U. A refused state is refused again each time. ``consistent_key``
+    names the backend's ``consistent`` (Backend.consistent_initial_state)."""
+    X, U, report = kept_per_scene(scene, ("initial state", project_positions, length_tol, dyn.rhs_kernel,
+                                          consistent_key),
                                   lambda s: prepare_initial_state(s, dyn, project_positions=project_positions,
-                                                                  length_tol=length_tol))
+                                                                  length_tol=length_tol, consistent=consistent))
     return X.copy(), U.copy(), report
 
 
@@ -132,15 +136,18 @@ def _setup(scene: Scene, dyn: Dynamics, settings: RunSettings, own_dynamics: boo
     stepping = settings.stepping
     if not stepping.cls.adaptive:
         check_step_follows_motions(scene, stepping.dt)
-    if own_dynamics:
-        X0, U0, report = _kept_initial_state(scene, dyn, settings.project_initial, settings.length_tol)
-    else:
-        X0, U0, report = prepare_initial_state(scene, dyn, project_positions=settings.project_initial,
-                                               length_tol=settings.length_tol)
     # one backend, chosen here before anything is built: the one asked for, the native core by default, the numpy
     # reference where the right-hand side is casadi's (a variant of the numpy Dynamics)
     backend = settings.backend
     chosen = "numpy" if dyn.rhs_kernel != "numpy" else "native" if backend == "auto" else backend
+    # a rope or ground scene starts from the state its backend computes (the native core's own on the native one)
+    consistent, consistent_key = BACKEND_CLASSES[chosen].consistent_initial_state(scene, dyn, settings)
+    if own_dynamics:
+        X0, U0, report = _kept_initial_state(scene, dyn, settings.project_initial, settings.length_tol, consistent,
+                                             consistent_key)
+    else:
+        X0, U0, report = prepare_initial_state(scene, dyn, project_positions=settings.project_initial,
+                                               length_tol=settings.length_tol, consistent=consistent)
     specialisation, U0 = BACKEND_CLASSES[chosen].choose_specialisation(scene, dyn, settings, U0)
     X0.flags.writeable = U0.flags.writeable = False
     return X0, U0, report, chosen, specialisation

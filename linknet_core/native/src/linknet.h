@@ -154,8 +154,10 @@ int ln_rope_anchor_jump(const ln_model *m, const ln_method *meth, ln_data *d, co
    initial_state makes it: where project, the positions projected onto the rods and the ropes longer than their length
    (the closest in the mass metric); the contacts' anchors placed; then an inelastic impact on the ropes at their
    length and the masses on the ground (their approach velocities removed, the rods' rates (12) to zero), frictionless.
-   d's mode is left to the first advance to choose. LN_OK, or the status of the projection or impact that failed. */
-int ln_rope_initial_state(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U, int project);
+   d's mode is left to the first advance to choose. LN_OK, or the status of the projection or impact that failed.
+   The library's native backend (linknet_core.native.integrator.core_initial_state) and the native FMU start from it. */
+LN_API int ln_rope_initial_state(const ln_model *m, const ln_method *meth, ln_data *d, double *X, double *U,
+                                 int project);
 /* The log of events kept since the last drain is taken: the count is returned and the log emptied (the events are
    d->event_t, event_kind, event_link, event_impulse [0, count) until the next advance). */
 LN_API ln_int ln_rope_events_drained(ln_data *d);
