@@ -38,8 +38,8 @@ _midpoint_rows.argtypes = [lib.Model_p, lib.Method_p]
 
 def integrator_method(method_cls, *, dt=None, rtol=None, atol=None, static: bool = False):
     """The NativeMethod a NativeIntegrator of ``method_cls`` runs with these settings (atol: already defaulted)."""
-    return native_method(method_cls, dt=dt, rtol=rtol, atol=atol, position_tol=getattr(method_cls, "position_tol", 1e-14),
-                         static=static)
+    return native_method(method_cls, dt=dt, rtol=rtol, atol=atol,
+                         position_tol=getattr(method_cls, "position_tol", 1e-14), static=static)
 
 
 def integrator_data(model: NativeModel, method) -> NativeData:

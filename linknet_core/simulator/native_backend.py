@@ -8,7 +8,8 @@ import functools
 import numpy as np
 
 from linknet_core.errors import SolverError
-from linknet_core.native.integrator import NativeGroundIntegrator, NativeIntegrator, core_initial_state, integrator_method
+from linknet_core.native.integrator import (NativeGroundIntegrator, NativeIntegrator, core_initial_state,
+                                           integrator_method)
 from linknet_core.native.model import native_ground_model, native_model
 from linknet_core.native.rigid import NativeRigidIntegrator
 from linknet_core.simulator.backend import Backend
