@@ -6,6 +6,7 @@
     python -m benchmarks.moordyn_study --scene rope_chain_drop --quick    # the smoke run: build/moordyn_study/quick
     python -m benchmarks.moordyn_study --scene rope_chain_seabed_landing --merge   # ..._chain_seabed_landing.json
     python -m benchmarks.moordyn_study --scene rope_chain_seabed_slide --merge     # ..._chain_seabed_slide.json
+    python -m benchmarks.moordyn_study --scene rope_chain_seabed_drag --merge      # ..._chain_seabed_drag.json
     python -m benchmarks.moordyn_study --out /tmp/x --budget 10
 
 The work-precision benchmark compares the state at t_end only. Here every run is sampled at times that separate
@@ -27,6 +28,10 @@ reference is rope_reference.slack_rope_on_ground's closed form. rope_chain_seabe
 seabed 0.15 m below the anchor): 0.05 s (free fall), 0.102 s (0.96 ms after the lower nodes land), 0.176 s (1.13 ms
 after the upper ones), 0.5 s (at rest: MoorDyn's error the sink m g / k). rope_chain_seabed_slide (lying on a rough
 seabed, mu 0.5, thrown sideways): 0.05 and 0.1 s (sliding), 0.2 s (all stopped, the last at 0.183 s), 0.5 s.
+rope_chain_seabed_drag (a zig-zag lying on the rough seabed, its end anchor driven away at 1 m/s, a MoorDyn coupled
+point): its segments jerk taut along the seabed one after another, and its reference is
+rope_reference.rope_dragged_on_ground's closed form, event by event: 0.1 s (one jerk), 0.2 s (2), 0.5 s (22),
+1.0 s (106).
 
 For each stiffness EA, MoorDyn's step is halved from its stability limit until the error at the last sample time
 levels off (three halvings gain less than a factor 2) or a run would pass the budget; linknet's methods sweep their
@@ -59,7 +64,7 @@ if __package__ in (None, ""):
 from .output import add_output_arguments, resolve, write_text  # noqa: E402
 from .peers.moordyn_peer import MoorDynLine, moordyn_available  # noqa: E402
 from .peers.moordyn_seabed import MoorDynSeabedLine  # noqa: E402
-from .rope_reference import slack_rope_on_ground, solve_ropes_at  # noqa: E402
+from .rope_reference import rope_dragged_on_ground, slack_rope_on_ground, solve_ropes_at  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -75,7 +80,8 @@ class Study:
     folder: str = ""            # under models/ ("" for load_benchmark_scene's places)
     native_rod: bool = False    # also the native core on the same masses held by rods, up to times[0]
     reference: str = "ropes"    # "ropes": rope_reference's event-driven run; "slack_rope": its closed form of a
-                                # rope that stays slack over a ground (rope_reference.slack_rope_on_ground)
+                                # rope that stays slack over a ground (rope_reference.slack_rope_on_ground);
+                                # "dragged_rope": that of a rope dragged on it (rope_reference.rope_dragged_on_ground)
     peer: type = MoorDynLine    # MoorDynSeabedLine where the scene has a ground
 
 
@@ -91,6 +97,9 @@ STUDIES = {s.scene: s for s in (
           reference="slack_rope", peer=MoorDynSeabedLine),
     Study("rope_chain_seabed_slide", (0.05, 0.1, 0.2, 0.5), (1e4, 1e6, 1e8, 1e10), (1e-2, 1e-3, 1e-4, 1e-6, 1e-9),
           "rope_peer_chain_seabed_slide.json", folder="ropes/chains", reference="slack_rope", peer=MoorDynSeabedLine),
+    Study("rope_chain_seabed_drag", (0.1, 0.2, 0.5, 1.0), (1e4, 1e6, 1e8, 1e10), (1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-9),
+          "rope_peer_chain_seabed_drag.json", folder="ropes/chains", reference="dragged_rope",
+          peer=MoorDynSeabedLine),
 )}
 LINKNET = {"dop853": [10.0 ** -e for e in range(3, 13)], "dopri5": [10.0 ** -e for e in range(3, 11)],
            "rattle": [0.01 / 2 ** i for i in range(0, 9)], "yoshida8": [0.04 / 2 ** i for i in range(0, 5)]}
@@ -111,15 +120,17 @@ def load_scene(study):
 
 def references(spec, times, kind="ropes"):
     """The reference positions at the times and how far they are from a second determination: the event-driven
-    reference at rtol 2.5e-14 against 1e-13 ("ropes"), or the closed form of a slack rope on a ground, exact to
-    round-off ("slack_rope": 0)."""
+    reference at rtol 2.5e-14 against 1e-13 ("ropes"), or a closed form, exact to round-off (0): of a slack rope on
+    a ground ("slack_rope") or of a rope dragged on a rough ground ("dragged_rope")."""
     if kind == "ropes":
         fine, _ = solve_ropes_at(spec, times, 2.5e-14)
         coarse, _ = solve_ropes_at(spec, times, 1e-13)
     elif kind == "slack_rope":
         fine = coarse = slack_rope_on_ground(spec, times)[0]
+    elif kind == "dragged_rope":
+        fine = coarse = rope_dragged_on_ground(spec, times)[0]
     else:
-        raise ValueError(f"reference {kind!r}: one of 'ropes', 'slack_rope'")
+        raise ValueError(f"reference {kind!r}: one of 'ropes', 'slack_rope', 'dragged_rope'")
     return [(X, float(np.abs(X - Xc).max())) for X, Xc in zip(fine, coarse)]
 
 

@@ -349,3 +349,110 @@ def slack_rope_on_ground(spec: SceneSpec, times, samples: int = 2_001):
             raise ScopeError(f"{spec.name}: rope {l + 1} reaches its length at t = {t:g} s: its ropes are not slack")
     landing[free[landing[free] > t_last]] = np.inf
     return [positions(float(t)) for t in times], landing
+
+
+def _first_crossing(coeffs, horizon):
+    """The first tau in (0, horizon] where the quartic sum(coeffs[i] tau^(4-i)) (a rope's |d|^2 - R^2) crosses zero
+    upwards, or inf: numpy's companion-matrix roots, polished by Newton's steps on the polynomial itself."""
+    poly = np.poly1d(coeffs)
+    slope = poly.deriv()
+    best = math.inf
+    for z in np.roots(np.trim_zeros(coeffs, "f")) if np.any(coeffs) else ():
+        if abs(z.imag) > 1e-6 * max(1.0, abs(z.real)) or z.real <= 0.0:
+            continue
+        tau = float(z.real)
+        for _ in range(3):
+            d = slope(tau)
+            if d == 0.0:
+                break
+            tau -= poly(tau) / d
+        if 1e-13 < tau <= horizon and slope(tau) > 0.0:
+            best = min(best, tau)
+    return best
+
+
+def rope_dragged_on_ground(spec: SceneSpec, times):
+    """A rope lying slack on a level rough ground (Coulomb friction mu > 0, gravity along -n), every mass on the
+    plane, dragged by anchors driven at constant velocities in the plane ("velocity" motions), in closed form,
+    event by event. Nothing ever leaves the plane: a rope's jerk is along the ground and gives no normal impulse,
+    so by Coulomb's law no friction impulse either; between events every mass slides in a straight line,
+    decelerating at mu |g| along its velocity, X0 + v t - mu |g| v_hat t^2 / 2, until it stops at |v| / (mu |g|)
+    and stays (the slack ropes put no force on it). The events are the stops and the ropes reaching their length:
+    the first root of the quartic |d(t)|^2 - R^2 crossing upwards (d = X_k2 - X_k1, quadratic in t between events).
+    At a jerk, Newton's restitution e on that rope alone: its rate of length s = E . (U_k2 - U_k1) leaves at -e s,
+    the impulse (1 + e) s / (w_k1 + w_k2) along E (w the inverse masses, 0 on an anchor). Returns (positions at each
+    of the increasing ``times``, the events [(t, "taut", link, impulse) or (t, "stop", mass, 0)]). ScopeError where
+    the scene is another: a rod, a ground with restitution or on a slope or without friction, a mass off the plane
+    or a velocity out of it, another motion than a constant velocity, two ropes at their length at one jerk."""
+    ground = spec.ground
+    if ground is None or float(ground.get("friction", 0.0)) <= 0.0:
+        raise ScopeError(f"{spec.name}: the closed form is for a rough ground (friction > 0)")
+    if float(ground.get("restitution", 0.0)) != 0.0:
+        raise ScopeError(f"{spec.name}: the closed form is for an inelastic ground (restitution 0)")
+    if not np.all(spec.rope):
+        raise ScopeError(f"{spec.name}: a rod (the closed form takes ropes only)")
+    mu = float(ground["friction"])
+    p = np.asarray(ground["point"], float)
+    n = np.asarray(ground["normal"], float)
+    n = n / np.linalg.norm(n)
+    g = spec.gravity
+    if float(g @ n) >= 0.0 or np.linalg.norm(g - (g @ n) * n) > 1e-12 * np.linalg.norm(g):
+        raise ScopeError(f"{spec.name}: gravity not along the ground's normal, towards it")
+    decel = mu * float(np.linalg.norm(g))
+    X, U = spec.X0.astype(float), spec.U0.astype(float)
+    for k, motion in spec.motions:
+        if motion.get("kind") != "velocity":
+            raise ScopeError(f"{spec.name}: mass {k + 1}'s motion {motion.get('kind')!r} (only 'velocity')")
+        U[k] = np.asarray(motion["velocity"], float)
+    if np.any(np.abs((X - p) @ n) > 1e-12) or np.any(np.abs(U @ n) > 1e-12):
+        raise ScopeError(f"{spec.name}: a mass off the ground's plane or moving out of it")
+    A = np.zeros_like(X)          # each mass's acceleration until its next event
+    free = spec.free
+    inv = spec.inv_mass
+    e_rest = spec.restitution
+    t, out, events = 0.0, [], []
+    for t_sample in times:
+        while True:
+            speed = np.linalg.norm(U, axis=1)
+            sliding = free & (speed > 0.0)
+            A[:] = 0.0
+            A[sliding] = -decel * U[sliding] / speed[sliding, None]
+            stops = np.where(sliding, speed / decel, np.inf)
+            to_sample, to_stop = max(t_sample - t, 0.0), float(stops.min())
+            D0, DV, DA = (Y[spec.k2] - Y[spec.k1] for Y in (X, U, A))
+            quartics = np.stack([np.einsum("ij,ij->i", DA, DA) / 4, np.einsum("ij,ij->i", DV, DA),
+                                 np.einsum("ij,ij->i", DV, DV) + np.einsum("ij,ij->i", D0, DA),
+                                 2 * np.einsum("ij,ij->i", D0, DV), np.einsum("ij,ij->i", D0, D0) - spec.length ** 2],
+                                axis=1)
+            to_taut = np.array([_first_crossing(q, min(to_sample, to_stop)) for q in quartics])
+            tau = min(to_sample, to_stop, float(to_taut.min()))
+            X = X + U * tau + 0.5 * A * tau * tau
+            U = U + A * tau
+            if tau == to_taut.min():              # a jerk
+                t += tau
+                l = int(np.argmin(to_taut))
+                a, b = spec.k1[l], spec.k2[l]
+                E = (X[b] - X[a]) / np.linalg.norm(X[b] - X[a])
+                impulse = (1.0 + e_rest[l]) * float(E @ (U[b] - U[a])) / (inv[a] + inv[b])
+                U[a] += inv[a] * impulse * E
+                U[b] -= inv[b] * impulse * E
+                events.append((t, "taut", l, impulse))
+                d = X[spec.k2] - X[spec.k1]
+                gap = np.linalg.norm(d, axis=1) - spec.length
+                rate = np.einsum("ij,ij->i", d, U[spec.k2] - U[spec.k1])
+                others = np.flatnonzero((np.abs(gap) < 1e-9 * spec.length) & (rate > 0.0))
+                if others.size:
+                    raise ScopeError(f"{spec.name}: ropes {l + 1} and {others[0] + 1} at their length at one jerk "
+                                     f"(t = {t:.15g} s)")
+            elif tau == to_stop:                  # a mass stops
+                t += tau
+                k = int(np.argmin(stops))
+                U[k] = 0.0
+                events.append((t, "stop", k, 0.0))
+            else:                                 # the sample time
+                t = t_sample
+                break
+            if len(events) > MAX_EVENTS:
+                raise ScopeError(f"{spec.name}: more than {MAX_EVENTS} events by t = {t:g} s")
+        out.append(X.copy())
+    return out, events

@@ -122,6 +122,9 @@ class SceneSpec:
                        **({"kind": "rope", "restitution": float(e)} if rope else {})}
                       for a, b, r, rope, e in zip(self.k1, self.k2, self.length, self.rope, self.restitution)],
         }
+        for k, motion in self.motions:   # a driven anchor takes neither a mass nor a velocity nor a fixed flag
+            out["masses"][k] = {"name": self.mass_names[k], "position": self.X0[k].tolist(), "driven": True,
+                                "motion": dict(motion)}
         if self.ground is not None:
             out["ground"] = dict(self.ground)
         return out

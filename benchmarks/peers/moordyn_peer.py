@@ -10,7 +10,12 @@ segment is taut or slack (Line::getStateDeriv: Td is computed for every segment,
 damped line does not tend to a rope as EA grows: its slack segments resist being shortened ever more strongly. The
 lines here are undamped (BA = 0); an undamped tension-only spring tends, as EA grows, to a rope whose jerks are
 perfectly elastic (Newton's restitution 1: it gives back the stretch energy), so the peer runs only scenes whose
-ropes all have restitution 1, and no rods (a line cannot push), ground or driven anchors.
+ropes all have restitution 1, and no rods (a line cannot push) or ground (benchmarks.peers.moordyn_seabed has one).
+
+A driven anchor whose motion is a constant velocity ("velocity": P = X0 + v t) is a MoorDyn "Coupled" point: each
+Step call is given its position and velocity at the call's start, and MoorDyn moves it linearly within the call
+(Point::updateFairlead: r = r_ves + rd_ves t_local), which is that motion exactly. Other motions would be a
+piecewise-linear approximation of it, which the peer does not make.
 
 Two errors: the model's, which falls as 1/EA while a rope stays taut (its stretch T R / EA) but only as 1/sqrt(EA)
 at each jerk (a jerk lasts pi sqrt(m R / EA) instead of an instant), and the time step's. One Method per EA,
@@ -79,11 +84,18 @@ class MoorDynLine(Method):
                 "also acts on slack segments), so only ropes of restitution 1 have a MoorDyn counterpart")
         if spec.ground is not None:
             raise Unsupported("a ground: MoorDyn's seabed is a penalty spring under the line nodes, not a plane")
-        if spec.motions:
-            raise Unsupported("driven anchors: would need MoorDyn's coupled points stepped from Python")
+        for k, motion in spec.motions:
+            if motion.get("kind") != "velocity":
+                raise Unsupported(f"driven anchor {spec.mass_names[k]!r}: motion {motion.get('kind')!r}: MoorDyn moves "
+                                  "a coupled point linearly within a step, so only a constant velocity is exact")
         g = spec.gravity
         if g[0] != 0.0 or g[1] != 0.0 or g[2] >= 0.0:
             raise Unsupported(f"gravity {g.tolist()}: MoorDyn's gravity is along -z")
+
+    @staticmethod
+    def driven(spec) -> list:
+        """The driven anchors, MoorDyn's coupled points in input order: [(mass index, its velocity)]."""
+        return [(k, np.asarray(m["velocity"], float)) for k, m in spec.motions]
 
     # ------------------------------------------------------------------ step sizes
     def omega(self, spec) -> float:
@@ -151,7 +163,9 @@ class MoorDynLine(Method):
         one segment per rope, the options. Numbers are written as Python floats: a numpy scalar's repr
         (np.float64(...)) is no number to MoorDyn, whose Step then never returns."""
         dt = float(dt)
-        rows = [f"{k + 1} {'Fixed' if spec.fixed[k] else 'Free'} {x[0]!r} {x[1]!r} {x[2]!r} "
+        driven = {k for k, _ in self.driven(spec)}
+        kinds = ["Coupled" if k in driven else "Fixed" if spec.fixed[k] else "Free" for k in range(spec.K)]
+        rows = [f"{k + 1} {kinds[k]} {x[0]!r} {x[1]!r} {x[2]!r} "
                 f"{0.0 if spec.fixed[k] else float(spec.mass[k])!r} 0 0 0" for k, x in enumerate(X0)]
         lines = [f"{l + 1} rope {a + 1} {b + 1} {float(R)!r} 1 -"
                  for l, (a, b, R) in enumerate(zip(spec.k1, spec.k2, spec.length))]
@@ -181,6 +195,7 @@ class _Session:
     def __init__(self, line: MoorDynLine, spec, dt):
         import moordyn
         self.spec, self.md = spec, moordyn
+        self.driven = line.driven(spec)
         self.folder = tempfile.mkdtemp(prefix="moordyn_peer_")
         try:
             X0 = line.initial_positions(spec)
@@ -189,7 +204,7 @@ class _Session:
                 fh.write(line.input_file(spec, X0, dt))
             with _Quiet():
                 self.system = moordyn.Create(path)
-                if moordyn.Init_NoIC(self.system, [], []) != 0:
+                if moordyn.Init_NoIC(self.system, *self.coupled(0.0)) != 0:
                     raise RuntimeError("MoorDyn Init_NoIC failed")
                 state = os.path.join(self.folder, "state.bin")
                 moordyn.SaveState(self.system, state)
@@ -200,12 +215,20 @@ class _Session:
             shutil.rmtree(self.folder, ignore_errors=True)
             raise
 
+    def coupled(self, t):
+        """The coupled points' positions and velocities at t, flattened in input order (MoorDyn's x and xd)."""
+        x = [float(c) for k, v in self.driven for c in self.spec.X0[k] + v * t]
+        xd = [float(c) for _, v in self.driven for c in v]
+        return x, xd
+
     def step(self, t, span):
         """Advance from t by span; the masses' positions and velocities after."""
-        self.md.Step(self.system, [], [], t, span)
+        self.md.Step(self.system, *self.coupled(t), t, span)
         X = np.array([self.md.GetPointPos(p) for p in self.points], float)
         U = np.array([self.md.GetPointVel(p) for p in self.points], float)
         X[self.spec.fixed], U[self.spec.fixed] = self.spec.X0[self.spec.fixed], 0.0
+        for k, v in self.driven:
+            X[k], U[k] = self.spec.X0[k] + v * (t + span), v
         return X, U
 
     def close(self):

@@ -278,3 +278,82 @@ def test_a_rope_jerks_a_resting_mass_into_a_slide_on_a_rough_ground(backend):
         momentum.append(M * sim.state.U.sum(axis=0))
     assert jerk.impulse > 0.1
     assert np.abs(momentum[1] - momentum[0]).max() < 1e-8 * jerk.impulse + 1e-8
+
+
+# ---------------------------------------------------------------------- the seabed: a rope dragged along it
+@pytest.fixture(scope="module")
+def drag():
+    return study.load_scene(study.STUDIES["rope_chain_seabed_drag"])
+
+
+def test_the_dragged_rope_s_first_jerk_throws_its_first_node_on_by_newton_and_coulomb(drag):
+    """The anchor, driven away along -x at V = 1 m/s, jerks the first segment taut when its distance to node 1
+    (0.15, 0.1, 0) reaches R: at t1 = (sqrt(R^2 - 0.1^2) - 0.15) / V. Restitution 1 against a driven anchor reverses
+    the segment's rate V c (c = sqrt(R^2 - 0.1^2) / R the cosine along x): impulse 2 m V c, node 1 leaving at 2 V c
+    along the segment towards the anchor. The jerk is along the ground, so no friction impulse; the node then slides
+    decelerating at mu g (mu 0.5) along its velocity. Before t1 nothing but the anchor moves."""
+    from benchmarks.rope_reference import rope_dragged_on_ground
+    V, mu = 1.0, 0.5
+    c = math.sqrt(R * R - 0.01) / R
+    t1 = (R * c - 0.15) / V
+    Xs, events = rope_dragged_on_ground(drag, [0.07, 0.1])
+    assert np.allclose(Xs[0][1:], drag.X0[1:], rtol=0, atol=0) and Xs[0][0].tolist() == [-0.07, 0.0, 0.0]
+    t, kind, link, impulse = events[0]
+    assert (kind, link) == ("taut", 0) and abs(t - t1) < 1e-14 and abs(impulse - 2 * M * V * c) < 1e-14
+    assert len(events) == 1                                        # nothing else happens by 0.1 s
+    E = np.array([R * c, 0.1, 0.0]) / R                            # from the anchor to node 1 at the jerk
+    u = -2 * V * c * E
+    tau = 0.1 - t1
+    expected = drag.X0[1] + u * tau - 0.5 * mu * G * (u / np.linalg.norm(u)) * tau * tau
+    assert np.abs(Xs[1][1] - expected).max() < 1e-15 and np.allclose(Xs[1][2:], drag.X0[2:], rtol=0, atol=0)
+
+
+def test_linknet_drags_the_rope_as_the_closed_form_on_both_engines(drag):
+    """The closed form (every jerk Newton's restitution along the ground, every slide Coulomb's deceleration, event
+    by event) against linknet: the same jerks, at the same times to 1e-12 s and with the same impulses to 1e-12 N s,
+    and the positions to 1e-12 m; on the native core to 1 s (106 jerks), on the numpy path to 0.3 s (7 jerks)."""
+    import linknet_core as ln
+    from benchmarks.rope_reference import rope_dragged_on_ground
+    scene = ln.Scene.from_dict(drag.to_dict())
+    for backend, t_end in (("native", 1.0), ("numpy", 0.3)):
+        Xs, events = rope_dragged_on_ground(drag, [t_end])
+        jerks = [(t, link, impulse) for t, kind, link, impulse in events if kind == "taut"]
+        run = ln.simulate(scene, t_end=t_end, method="dop853", rtol=1e-9, backend=backend, n_out=2,
+                          error_estimate=False)
+        found = [(e.t, e.index, e.impulse) for e in run.events if e.kind == "taut"]
+        assert len(jerks) == len(found) > 5 and [j[1] for j in jerks] == [f[1] for f in found], backend
+        assert max(abs(a[0] - b[0]) + abs(a[2] - b[2]) for a, b in zip(jerks, found)) < 1e-12, backend
+        assert np.abs(run.X[-1] - Xs[0]).max() < 1e-12, backend
+
+
+def test_moordyn_drives_its_coupled_point_as_the_anchor_and_its_jerk_error_falls_with_stiffness(drag):
+    """The peer's driven anchor is a MoorDyn coupled point, which MoorDyn moves linearly within a Step call: at
+    constant velocity exactly the scene's anchor. The first jerk (0.079 s) is a stiff line's: its error at 0.1 s
+    falls as the line and the seabed stiffen together (EA 1e4 to 1e6 N, a quarter of the stability limit)."""
+    pytest.importorskip("moordyn")
+    from benchmarks.peers.moordyn_peer import _Session
+    from benchmarks.peers.moordyn_seabed import MoorDynSeabedLine
+    session = _Session(MoorDynSeabedLine(1e4), drag, 1e-3)
+    try:
+        session.md.Step(session.system, *session.coupled(0.0), 0.0, 0.05)
+        assert np.abs(np.array(session.md.GetPointPos(session.points[0])) - [-0.05, 0, 0]).max() < 1e-15
+    finally:
+        session.close()
+    X_ref = study.references(drag, [0.1], "dragged_rope")[0][0]
+    err = {}
+    for EA in (1e4, 1e6):
+        line = MoorDynSeabedLine(EA)
+        line.check_scene(drag)
+        dt = line.knobs(drag, quick=True)[2]
+        X, _ = line.trajectory(drag, [0.1], 0.1 / math.ceil(0.1 / dt))
+        err[EA] = float(np.linalg.norm(X[0] - X_ref, axis=1).max())
+    assert err[1e6] < 0.2 * err[1e4] < 2e-3, err
+
+
+def test_the_moordyn_peer_refuses_a_driven_anchor_it_cannot_step_exactly(drag):
+    from dataclasses import replace
+    from benchmarks.peers.base import Unsupported
+    from benchmarks.peers.moordyn_seabed import MoorDynSeabedLine
+    shaken = replace(drag, motions=((0, {"kind": "sine", "amplitude": [0.1, 0, 0], "frequency": [1, 0, 0]}),))
+    with pytest.raises(Unsupported, match="anchor 'anchor': motion 'sine'"):
+        MoorDynSeabedLine(1e6).check_scene(shaken)
