@@ -7,7 +7,9 @@ from __future__ import annotations
 def bracketed_root(f, lo, hi, f_lo, f_hi, xtol=4e-16, guess=None):
     """(lo, hi): the bracket of a sign change of f, f(lo) >= 0 > f(hi), shrunk to xtol (relative) by the Illinois
     variant of regula falsi, with a bisection wherever the last three iterations did not halve it; ``guess``: the
-    first point tried."""
+    first point tried. A regula falsi point within a sixteenth of the tolerance of an end (that end at the root to
+    round-off, f there 0 or nearly) is moved that far inside it: one more value closes the bracket, where regula
+    falsi would stay at that end and the bracket close from the far one by bisections."""
     last = 0
     widths = []  # the bracket's width after each iteration
     m = guess
@@ -19,6 +21,8 @@ def bracketed_root(f, lo, hi, f_lo, f_hi, xtol=4e-16, guess=None):
                 m = 0.5 * (lo + hi)
             else:
                 m = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+                close = xtol / 16 * max(1.0, abs(lo), abs(hi))
+                m = max(min(m, hi - close), lo + close)
         if not lo < m < hi:
             m = 0.5 * (lo + hi)
             if not lo < m < hi:

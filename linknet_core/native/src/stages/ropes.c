@@ -56,7 +56,8 @@ typedef double (*rope_root_fn)(void *ctx, double x);
 
 /* (lo, hi): the bracket of a sign change of f, f(lo) >= 0 > f(hi), shrunk to xtol (relative) by the Illinois
    variant of regula falsi, with a bisection wherever the last three iterations did not halve it; the first point
-   tried is guess where has_guess (linknet_core.dynamics.roots.bracketed_root). */
+   tried is guess where has_guess; a regula falsi point within a sixteenth of the tolerance of an end is moved that
+   far inside it, so that one more value closes the bracket (linknet_core.dynamics.roots.bracketed_root). */
 static void rope_bracketed_root(rope_root_fn f, void *ctx, double *lo_io, double *hi_io, double f_lo, double f_hi,
                                 double xtol, int has_guess, double guess)
 {
@@ -66,7 +67,11 @@ static void rope_bracketed_root(rope_root_fn f, void *ctx, double *lo_io, double
         if (hi - lo <= xtol * ln_fmax(1.0, ln_fmax(fabs(lo), fabs(hi)))) break;
         if (!have_m) {
             if (n_widths >= 3 && hi - lo > 0.5 * widths[n_widths - 3]) m = 0.5 * (lo + hi);
-            else m = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
+            else {
+                const double close = xtol / 16 * ln_fmax(1.0, ln_fmax(fabs(lo), fabs(hi)));
+                m = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
+                m = ln_fmax(ln_fmin(m, hi - close), lo + close);
+            }
         }
         if (!(lo < m && m < hi)) {
             m = 0.5 * (lo + hi);
