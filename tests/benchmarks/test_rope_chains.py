@@ -1,7 +1,8 @@
 """The MoorDyn comparison's rope scenes of several segments (models/ropes/chains): the event-driven reference against
 closed forms and the energy an elastic rope keeps, linknet against that reference, the MoorDyn peer's two regimes
 (its stretch ~1/EA while taut; a jerk of the whole taut rope that a stiffer line does not bring closer to the rigid
-one), and the study's smoke run. The MoorDyn checks skip where moordyn is not installed. Quick: ~5 s of CPU."""
+one), the seabed scenes (landing, sliding, dragged by a driven anchor) against their closed forms, and the study's
+smoke runs. The MoorDyn checks skip where moordyn is not installed. Quick: ~7 s of CPU."""
 from __future__ import annotations
 
 import json
