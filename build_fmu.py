@@ -71,13 +71,14 @@ def _type_definitions(types_used):
 
 def postprocess_model_description(xml_bytes: bytes, declared_types: dict, output_deps: dict,
                                   initial_deps: dict, default_experiment: dict,
-                                  description: str | None = None) -> bytes:
+                                  description: str | None = None, directional: bool = True) -> bytes:
     """Add units, types, DefaultExperiment and a truthful ModelStructure to a modelDescription.xml (pythonfmu's):
     finish_model_description of its header and its variables.
 
     declared_types: Real variable name -> declaredType (key of linknet_fmu.layout.TYPES)
     output_deps / initial_deps: output name -> list of variable names it depends on
     ([] = no dependency, i.e. no direct feedthrough).
+    directional: whether the FMU answers fmi2GetDirectionalDerivative (finish_model_description).
     """
     # pythonfmu's pretty-print whitespace dropped while parsing, before re-indenting
     root = ET.fromstring(xml_bytes, ET.XMLParser(remove_blank_text=True))
@@ -88,7 +89,7 @@ def postprocess_model_description(xml_bytes: bytes, declared_types: dict, output
         records.append((dict(sv.attrib), value.tag, dict(value.attrib)))
     root.remove(variables)
     return finish_model_description(root, records, declared_types, output_deps, initial_deps, default_experiment,
-                                    description)
+                                    description, directional)
 
 
 _ESCAPED = re.compile(r'[&<>"\n\r\t]')
@@ -137,12 +138,15 @@ def _scalar_variables(variables: list, declared_types: dict) -> list[str]:
 
 
 def finish_model_description(root, variables: list, declared_types: dict, output_deps: dict, initial_deps: dict,
-                             default_experiment: dict, description: str | None = None) -> bytes:
+                             default_experiment: dict, description: str | None = None,
+                             directional: bool = True) -> bytes:
     """The modelDescription.xml of a header ``root`` (fmiModelDescription with CoSimulation, LogCategories, ...; no
     ModelVariables) and its variables, each (ScalarVariable's attributes, the type element's tag, its attributes),
     in value-reference order: units, types and DefaultExperiment added, every Real given its declaredType and unit,
     and a truthful ModelStructure. The header goes through lxml; the variables and the structure, millions of lines
-    for a large net, are written as text: the bytes lxml writes, many times faster."""
+    for a large net, are written as text: the bytes lxml writes, many times faster. ``directional`` False: the
+    scene's linearization is refused (unilateral.linearization_refusal), and the FMU says so with
+    providesDirectionalDerivative="false" rather than answering every call with fmi2Error."""
     from linknet_fmu.layout import TYPES
     if description:
         root.set("description", description)
@@ -153,8 +157,9 @@ def finish_model_description(root, variables: list, declared_types: dict, output
 
     # A linknet network FMU (either kind) answers fmi2GetDirectionalDerivative: its variables (linknet_fmu.layout)
     # always hold the output error_estimate and the Boolean parameter estimate_error. The component FMUs (cart, ...)
-    # do not answer it, and a master asks every FMU that declares it (cart_chain_implicit.FmuSlave).
-    if causality("error_estimate") == "output" and causality("estimate_error") == "parameter":
+    # do not answer it, and a master asks every FMU that declares it (cart_chain_implicit.FmuSlave). A network FMU
+    # whose scene's linearization is refused declares it not provided: a master trusting the flag never asks.
+    if directional and causality("error_estimate") == "output" and causality("estimate_error") == "parameter":
         root.find("CoSimulation").set("providesDirectionalDerivative", "true")
     types_used = set(declared_types.values())
     units_used = {TYPES[t][1] for t in types_used}
@@ -465,7 +470,9 @@ def _build_scene_fmu(scene_path, out, integrator, step, tolerance, inputs, outpu
         experiment = dict(startTime=0.0, stopTime=float(stop_time or fmu_opts.get("stop_time", 2.0)),
                           stepSize=float(comm_step or fmu_opts.get("comm_step", 1e-2)),
                           tolerance=cfg["tolerance"])
-        md = postprocess_model_description(xml, declared, deps, initial, experiment, cfg["description"])
+        from linknet_core.dynamics.unilateral import linearization_refusal
+        md = postprocess_model_description(xml, declared, deps, initial, experiment, cfg["description"],
+                                           directional=not linearization_refusal(scene))
         linked = rewrite_fmu(built, md, link_python, dest=out)  # out is written once, whole
     if not quiet:
         print(f"built {out} (model {ident}: {sum(v.causality == 'input' for v in layout.reals)} inputs, "

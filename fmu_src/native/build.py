@@ -415,7 +415,7 @@ def scene_resource(scene, cfg, layout) -> tuple[Resource, dict]:
                   length_tol=sim.settings.length_tol)  # the run's own rule for the initial lengths
     values["tolerance_min"], values["tolerance_max"] = library_tolerance_range()
     values["max_force"] = float(getattr(importlib.import_module(ln.Simulator.__module__), "MAX_FORCE", 0.0))
-    values["linearization_refusal"] = linearization_refusal(scene) if scene.unilateral else ""
+    values["linearization_refusal"] = linearization_refusal(scene)
     values["event_kind_names"], values["event_names_link"] = event_kinds()
     values["n_event_kinds"] = len(values["event_kind_names"])
     # the elimination order the sparse LDL^T was analysed in (analysed again at instantiation with ln_ldl_analyse)
@@ -473,7 +473,7 @@ def scene_resource(scene, cfg, layout) -> tuple[Resource, dict]:
     for i, name in enumerate(names):
         resource.struct(f"method{i}", library.METHOD_STRUCT, sims[name].integrator.method.struct, model)
     facts = dict(specialisation=kind, solver=int(model.solver), K=K, L=L, bodies=int(values["n_bodies"]),
-                 planar=bool(model.planar))
+                 planar=bool(model.planar), linearization_refusal=values["linearization_refusal"])
     return resource, facts
 
 
@@ -978,7 +978,7 @@ def build_native_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, post
         inv_mass = scene.inv_mass
         md = postprocess(header, variables, {v.name: v.declared_type for v in layout.reals},
                          layout.dependencies(inv_mass), layout.initial_dependencies(inv_mass), experiment,
-                         cfg["description"])
+                         cfg["description"], directional=not facts["linearization_refusal"])
         progress(f"packing {out}")
         pack(out, {"modelDescription.xml": md,
                    **{f"binaries/{folder}/{binary.name}": binary for folder, binary in binaries.items()},

@@ -157,7 +157,10 @@ def _array_dependencies(variables, layout, deps: dict) -> dict:
     return out
 
 
-def model_description(cfg, layout, variables, guid: str, start_values: dict, experiment: dict, inv_mass) -> bytes:
+def model_description(cfg, layout, variables, guid: str, start_values: dict, experiment: dict, inv_mass,
+                      directional: bool = True) -> bytes:
+    """The FMI 3.0 modelDescription.xml; ``directional``: whether the FMU answers fmi3GetDirectionalDerivative (False
+    where the scene's linearization is refused: the flag says so rather than every call failing)."""
     from linknet_fmu.layout import TYPES, UNITS
     now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     root = ET.Element("fmiModelDescription", dict(
@@ -168,7 +171,7 @@ def model_description(cfg, layout, variables, guid: str, start_values: dict, exp
     ET.SubElement(root, "CoSimulation", dict(
         modelIdentifier=cfg["model_identifier"], needsExecutionTool="false",
         canBeInstantiatedOnlyOncePerProcess="false",
-        canGetAndSetFMUState="true", canSerializeFMUState="true", providesDirectionalDerivatives="true",
+        canGetAndSetFMUState="true", canSerializeFMUState="true", providesDirectionalDerivatives="true" if directional else "false",
         providesAdjointDerivatives="false", providesPerElementDependencies="false",
         canHandleVariableCommunicationStepSize="true", maxOutputDerivativeOrder="0", providesIntermediateUpdate="false",
         mightReturnEarlyFromDoStep="false", canReturnEarlyAfterIntermediateUpdate="false", hasEventMode="false",
@@ -317,7 +320,7 @@ def build_fmi3_fmu(scene, cfg: dict, layout, out: Path, experiment: dict, quiet:
         data, guid = build.with_identity(resource, build.sources_digest(sources))
         binaries = fmi3_binaries(build.compile_binaries(sources, units, ident, folders, tmp / "binaries"))
         md = model_description(cfg, layout, variables, guid, build.start_values(scene, cfg, layout), experiment,
-                               scene.inv_mass)
+                               scene.inv_mass, directional=not facts["linearization_refusal"])
         build.pack(out, {"modelDescription.xml": md, **{f"binaries/{n}": d for n, d in sorted(binaries.items())},
                          **build.sources_files(sources), f"resources/{resource_name}": data})
     if not quiet:

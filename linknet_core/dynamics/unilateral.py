@@ -94,8 +94,12 @@ def scene_size(scene: Scene) -> float:
 
 def linearization_refusal(scene: Scene) -> str:
     """Why the outputs' linearization (Simulator.interface_linearization, the FMUs' directional derivatives) is not
-    given for a scene with ropes or a ground: it is the rods' (25)-(26), which holds only within one mode and has
-    no derivative where a rope goes slack or a mass leaves the ground."""
+    given for ``scene``; "" where it is given (a scene of rods: the seed's (25)-(26) everywhere). With ropes or a
+    ground it is refused: the rods' (25)-(26) holds only within one mode and has no derivative where a rope goes
+    slack or a mass leaves the ground. The FMUs declare providesDirectionalDerivative(s) from this: "true" only
+    where it is ""."""
+    if not scene.unilateral:
+        return ""
     what = (f"{scene.link_label(int(np.flatnonzero(scene.rope)[0]))} is a rope" if scene.rope.any()
             else "it has a ground")
     return (f"{scene.name}: {what}, and the outputs' linearization (interface_linearization, directional "

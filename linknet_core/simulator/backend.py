@@ -126,8 +126,9 @@ class Backend:
         from linknet_core.dynamics.interface_jacobian import ReferenceLinearization
         from linknet_core.dynamics.unilateral import linearization_refusal
 
-        if self.scene.unilateral:
-            raise SolverError(linearization_refusal(self.scene))
+        refusal = linearization_refusal(self.scene)
+        if refusal:
+            raise SolverError(refusal)
         X_at, U_at, anchor_acc = self.anchors_now(state.t, state.X, state.U, hold)
         return ReferenceLinearization(self.dyn, X_at, U_at, F, anchor_acc)
 

@@ -134,9 +134,11 @@ class NativeBackend(Backend):
     def linearization(self, state, F, hold):
         from linknet_core.native.interface import NativeLinearization
 
-        if self.scene.unilateral:  # the rods' (25)-(26): no derivative across a rope's events
-            from linknet_core.dynamics.unilateral import linearization_refusal
-            raise SolverError(linearization_refusal(self.scene))
+        from linknet_core.dynamics.unilateral import linearization_refusal
+
+        refusal = linearization_refusal(self.scene)
+        if refusal:
+            raise SolverError(refusal)
 
         with self._holding(state.t, hold) as integrator:
             try:

@@ -295,6 +295,14 @@ def _log_categories(path) -> list:
         return [c.get("name") for c in ET.fromstring(z.read("modelDescription.xml")).find("LogCategories")]
 
 
+def _provides_directional(path) -> str:
+    """The model description's providesDirectionalDerivative (FMI 2.0) or providesDirectionalDerivatives (FMI 3.0)
+    as written ("true", "false"; "false" where absent, the standard's default)."""
+    with zipfile.ZipFile(path) as z:
+        cs = ET.fromstring(z.read("modelDescription.xml")).find("CoSimulation")
+    return cs.get("providesDirectionalDerivative", cs.get("providesDirectionalDerivatives", "false"))
+
+
 def test_rope_scenes_declare_the_events_category(fmus):
     for fmu in fmus.values():
         names = _log_categories(fmu.path)
@@ -327,6 +335,8 @@ def test_a_rope_scene_with_a_ground_with_friction_builds_offering_every_method(t
     build_fmu.build_scene_fmu(str(path), out, native=True, quiet=True, platforms="host")
     integrator = next(v for v in read_model_description(str(out)).modelVariables if v.name == "integrator")
     assert {"dop853", "dopri5", "rattle", "yoshida4"} <= set(integrator.description.split(": ")[1].split(", "))
+    # its directional derivatives are refused for the whole scene, and the flag says so
+    assert linearization_refusal(ln.load_scene(path)) and _provides_directional(out) == "false"
 
 
 def test_a_pivot_driven_by_inputs_jerks_and_slackens_the_rope_as_the_library(fmu_root, tmp_path_factory):
@@ -383,6 +393,8 @@ def test_the_crane_through_the_native_and_the_pythonfmu_fmu(fmus, tmp_path_facto
     times = np.linspace(0.0, t_end, n + 1)
     python_fmu = build_cached(tmp_path_factory.mktemp("rope_crane_pythonfmu"), str(ROPES / "rope_crane.json"))
     assert _log_categories(python_fmu) == _log_categories(fmu.path)
+    # both kinds refuse the directional derivatives of a rope scene, and their flags say so
+    assert _provides_directional(python_fmu) == _provides_directional(fmu.path) == "false"
     out = run_client(FMU_CLIENT_LIB + f"""
 f = Fmu({str(python_fmu)!r})
 f.slave.setDebugLogging(True, [{EVENT_CATEGORY!r}])  # declared by both FMU kinds for rope scenes, and taken
@@ -428,6 +440,7 @@ def test_the_crane_through_the_fmi3_fmu_gives_the_fmi2_fmus_outputs_and_events(f
     with zipfile.ZipFile(path) as z:
         z.extractall(unzipped)
     md = read_model_description(str(path))
+    assert _provides_directional(path) == "false"  # as the FMI 2.0 FMU's: the rope scene's derivatives refused
     vr = {v.name: v.valueReference for v in md.modelVariables}
     log = []
     slave = FMU3Slave(guid=md.guid, unzipDirectory=str(unzipped), modelIdentifier=md.coSimulation.modelIdentifier,
