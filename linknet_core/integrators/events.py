@@ -570,6 +570,34 @@ class AdaptiveEvents(EventHandling):
         Xe, Ue = self._apply_event(Xe, Ue, t_e, F_input, kind, u)
         return Xe, Ue, t_e
 
+    def _step_cap(self, X, U, acc, T) -> float:
+        """The longest step the method may take from (X, U) while contacts slide (acc, T: the mode's accelerations and
+        tensions there). A sliding contact's friction -mu N v_t / |v_t| damps its velocity across the slip at the rate
+        mu N w / |v_t|, w the inverse mass of the contact along the plane, taken as 1/M_k (the mode's constraints only
+        lower it; exact for a mass alone and across a rod's end): a stiff mode where the slip is slow, on which an
+        explicit method is stable while h times the rate is within its stability interval on the negative real axis
+        (real_stability; a fraction stiff_safety of it). The speed counts from the slowest slip whose direction the
+        step resolves: below TOUCH_TOL of the velocity scale the friction keeps the step's reference direction
+        (UnilateralDynamics.slip_directions), and below the error control's own scale atol + rtol |U_k| the error a
+        wrong direction leaves is within the tolerance. A slip its acceleration does not turn (the sine between its
+        velocity and its acceleration along the plane at most straight_slip: in a plane, or turned by round-off) has
+        no motion across it to lose, and is spared."""
+        dyn = self.dyn
+        if not (dyn.sliding.size and self.stiff_safety > 0):
+            return math.inf
+        uni = self.unilateral
+        masses = uni.contact_masses[dyn.sliding]
+        N = T[dyn.sliding_rows]
+        n = uni.scene.ground.normal
+        v = uni.tangential_velocities(U)[dyn.sliding]
+        a = acc[masses] - np.outer(acc[masses] @ n, n)
+        speed = np.linalg.norm(v, axis=1)
+        turning = np.abs(np.cross(v, a) @ n) > self.straight_slip * np.sqrt(speed ** 2 * np.einsum("ij,ij->i", a, a))
+        resolved = self.atol + self.rtol * np.linalg.norm(U[masses], axis=1)
+        slowest = np.maximum(resolved, TOUCH_TOL * uni.velocity_scale(U))
+        rate = (uni.friction * N * uni._inv_mass3[masses, 0] / np.maximum(speed, slowest))[(N > 0) & turning]
+        return self.stiff_safety * self.real_stability / float(rate.max()) if rate.size else math.inf
+
     def _young_slip_step(self, X, U, t, k0, X_new, U_new, t_new, F_input, step):
         """None where the accepted step from (X, U) at t to (X_new, U_new) at t_new stands, else (X, U, t) of a
         shorter step that replaces it. A sliding contact's friction points along its slip velocity, U_t / |U_t|,

@@ -24,6 +24,35 @@ from linknet_core.tolerances import MAX_FACTOR, MIN_FACTOR, SAFETY
 
 
 
+# The fraction of a method's stability interval on the negative real axis that a stiff decaying mode's rate times the
+# step may reach (AdaptiveEvents._step_cap: a sliding contact's slip direction)
+STIFF_SAFETY = 0.9
+# A sliding contact whose acceleration along the plane turns its slip by a sine at most this is straight: its motion
+# across the slip is round-off (a slip in a plane: 1e-30 in the tests, a turning one's 1e-9 and more), which the stiff
+# mode across it cannot make more than the tolerance, and the cap spares it
+STRAIGHT_SLIP = 1e-12
+
+
+def real_stability_limit(A, B) -> float:
+    """x > 0 where the stability function R(z) = 1 + z b^T (I - z A)^-1 1 of the explicit tableau (A, B) first leaves
+    the unit disc on the negative real axis: |R(z)| <= 1 on [-x, 0] (Hairer and Wanner, Solving ODEs II, IV.2). R is
+    the polynomial 1 + sum_j b^T A^(j-1) 1 z^j; x is the negative real root of R^2 - 1 nearest 0 other than 0."""
+    B = np.asarray(B, float)
+    s = B.size
+    A_square = np.zeros((s, s))
+    A = np.asarray(A, float)
+    A_square[:, :min(A.shape[1], s)] = A[:s, :s]
+    coefficients = [1.0]  # lowest degree first
+    power = np.ones(s)
+    for _ in range(s):
+        coefficients.append(float(B @ power))
+        power = A_square @ power
+    R = np.polynomial.Polynomial(coefficients)
+    roots = np.concatenate([(R - 1).roots(), (R + 1).roots()])
+    real = roots[(np.abs(roots.imag) <= 1e-9 * np.abs(roots)) & (roots.real < -1e-9)].real
+    return float(-real.max())
+
+
 class ProjectedRungeKutta(Integrator):
     """A method is its tableau: A, B (n_stages), the error weights (n_stages + 1 each, the last for the
     right-hand side at the new point) and which error norm combines them ('rms': the RMS norm of
@@ -38,6 +67,9 @@ class ProjectedRungeKutta(Integrator):
     error_estimator_order: int
     n_stages: int
     keeps_stage_tensions = False  # the event-driven variants (integrators.events) screen the stages' forces
+    real_stability: float  # real_stability_limit of the tableau
+    stiff_safety = STIFF_SAFETY
+    straight_slip = STRAIGHT_SLIP
     def __init__(self, dynamics, rtol: float = 1e-8, atol: float | None = None, h0: float | None = None):
         super().__init__(dynamics)
         for name, value in (("rtol", rtol), ("atol", atol)):
@@ -145,6 +177,12 @@ class ProjectedRungeKutta(Integrator):
             X, U = self.step(X, U, h, F_input, t + i * h)
         return X, U
 
+    def _step_cap(self, X, U, acc, T) -> float:
+        """The longest step the dynamics allows this method from (X, U) at the step's start (acc, T the accelerations
+        and tensions there), whatever its error estimate: where a stiff mode would make the method unstable
+        (integrators.events: sliding friction); none for a scene of rods."""
+        return math.inf
+
     def _event_in_step(self, X, U, t, k0, X_new, U_new, t_new, acc_new, F_input):
         """An event within the accepted step from (X, U) at t to (X_new, U_new) at t_new, or None: where it ends the
         step (X, U, t) after the event's impulse (integrators.events; scenes of rods have none)."""
@@ -156,6 +194,7 @@ class ProjectedRungeKutta(Integrator):
         dyn = self.dyn
         X, U, t, t_start = state.X, state.U, state.t, state.t
         k0 = self._f(X, U, F_input, t)
+        cap = self._step_cap(X, U, k0[1], self._T)  # the controller's h stands where it is shorter
         self.peaks.begin(t, self._T)  # the tensions _f left: those at the start
         if self.h is None:
             self.h = self._initial_step(X, U, k0, F_input, t_target - t, t)
@@ -163,7 +202,7 @@ class ProjectedRungeKutta(Integrator):
         steps = 0
         while t < t_target:
             remaining = t_target - t
-            h = min(self.h, remaining)
+            h = min(self.h, cap, remaining)
             if h < remaining < 1.1 * h:  # avoid a sliver of a last step: split the rest in two
                 h = 0.5 * remaining
             if h <= 16 * np.spacing(max(abs(t), 1.0)) and h < remaining:
@@ -210,6 +249,7 @@ class ProjectedRungeKutta(Integrator):
                 if t < t_target:  # the first stage of the next step (none after the last one)
                     k0 = self._f(X, U, F_input, t)
                     T_new = self._T
+                    cap = self._step_cap(X, U, k0[1], T_new)
                 self.peaks.step(t, T_new)
             else:
                 self.stats.rejected += 1
@@ -223,6 +263,7 @@ class DOPRI5(ProjectedRungeKutta):
     error_estimator_order = 4
     n_stages = 6
     A, B, C = tableaux.DOPRI5_A, tableaux.DOPRI5_B, tableaux.DOPRI5_C
+    real_stability = real_stability_limit(A, B)
     error_weights = (tableaux.DOPRI5_E,)
     guarantees = ("order 5, adaptive (Dormand-Prince 5(4)); after every step positions are projected onto (11) "
                   "and velocities onto (12); not symplectic: energy error follows the tolerance and may drift")
@@ -234,6 +275,7 @@ class DOP853(ProjectedRungeKutta):
     error_estimator_order = 7
     n_stages = 12
     A, B, C = tableaux.DOP853_A, tableaux.DOP853_B, tableaux.DOP853_C
+    real_stability = real_stability_limit(A, B)
     error_weights = (tableaux.DOP853_E5, tableaux.DOP853_E3)
     error_norm_kind = "hairer"
     guarantees = ("order 8, adaptive (Hairer's DOP853 with its 5th/3rd-order error estimate); projected onto (11) "

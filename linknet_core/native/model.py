@@ -344,6 +344,8 @@ class NativeMethod:
             s.error_norm = lib.HAIRER_ERROR if cls.error_norm_kind == "hairer" else lib.RMS_ERROR
             s.exponent = exponent
             s.safety, s.min_factor, s.max_factor = SAFETY, MIN_FACTOR, MAX_FACTOR  # the reference's controller
+            s.real_stability, s.stiff_safety, s.straight_slip = (cls.real_stability, cls.stiff_safety,
+                                                                 cls.straight_slip)
             s.rtol, s.atol = rtol, atol
         else:
             s.kind = lib.COMPOSITION

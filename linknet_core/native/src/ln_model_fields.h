@@ -163,6 +163,10 @@
     SCALAR(double, safety)                                                                                          \
     SCALAR(double, min_factor)                                                                                      \
     SCALAR(double, max_factor)                                                                                      \
+    SCALAR(double, real_stability)                      /* |R(z)| <= 1 for -real_stability <= z <= 0: the stability \
+                                                           interval of the tableau on the negative real axis */     \
+    SCALAR(double, stiff_safety)                        /* the fraction of it a sliding contact's step cap uses */  \
+    SCALAR(double, straight_slip)                       /* the cap spares a slip turning by a smaller sine */       \
     SCALAR(double, rtol)                                                                                            \
     SCALAR(double, atol)                                                                                            \
     SCALAR(double, position_tol)                        /* relative tolerance of the position projection onto (11) */\

@@ -482,6 +482,51 @@ static int FN(mode_accelerations)(const ln_model *mm, ln_data *d, const double *
     return FN(friction_evaluate)(mm, d, &w, X, U, F, w.dirs, acc, T, 0);
 }
 
+/* The longest step an explicit method may take from (U, T: the velocities and the mode's tensions at the step's
+   start) while contacts slide (the reference's AdaptiveEvents._step_cap). A sliding contact's friction -mu N v_t/|v_t|
+   damps its velocity across the slip at the rate mu N w / |v_t| (w the inverse mass of the contact along the plane,
+   taken as 1/M_k: the constraints of the mode only lower it, and it is exact for a mass alone and across a rod's
+   end), a stiff mode where the slip is slow; an explicit method is stable on it while h times that rate is within
+   its stability interval on the negative real axis. The speed counts from the slowest slip whose direction the step
+   resolves: touch_tol of the velocity scale (below it the friction keeps the step's reference, slip_directions), and
+   the error control's own scale atol + rtol |U_k|. A slip that does not turn (the sine of the angle between its
+   velocity and its acceleration along the plane at most straight_slip) is spared: its motion across it is round-off
+   that stays so (a slip in a plane). No contact sliding: INFINITY. */
+static double FN(slip_step_cap)(const ln_model *mm, const ln_method *meth, const double *U, const double *acc,
+                                const double *T)
+{
+    double cap = INFINITY;
+    if (!mm->n_grips || !(meth->stiff_safety > 0.0)) return cap;
+    const double *n = mm->ground_normal, slowest = mm->touch_tol * FN(rope_velocity_scale)(mm, U);
+    for (ln_int c = 0; c < mm->n_contacts; c++) {
+        if (!FN(contact_sliding)(mm, c)) continue;
+        const ln_int k = mm->contact_mass[c];
+        const double N = T[FN(contact_link)(mm, c)];
+        if (!(N > 0.0)) continue;
+        double normal = 0.0, normal_acc = 0.0, speed = 0.0, size = 0.0, along = 0.0;
+        double v[3] = {0.0, 0.0, 0.0}, a[3] = {0.0, 0.0, 0.0};
+        for (int e = 0; e < DIM; e++) {
+            normal += U[k * DIM + e] * n[e];
+            normal_acc += acc[k * DIM + e] * n[e];
+        }
+        for (int e = 0; e < DIM; e++) {
+            v[e] = U[k * DIM + e] - normal * n[e];
+            a[e] = acc[k * DIM + e] - normal_acc * n[e];
+            speed += v[e] * v[e];
+            along += a[e] * a[e];
+            size += U[k * DIM + e] * U[k * DIM + e];
+        }
+        /* a slip its acceleration does not turn (in a plane, or turned by round-off) has no motion across it */
+        const double turn = (v[1] * a[2] - v[2] * a[1]) * n[0] + (v[2] * a[0] - v[0] * a[2]) * n[1]
+                            + (v[0] * a[1] - v[1] * a[0]) * n[2];
+        if (!(fabs(turn) > meth->straight_slip * ln_sqrt(speed * along))) continue;
+        const double resolved = meth->atol + meth->rtol * ln_sqrt(size);
+        const double rate = mm->friction * N * mm->inv_m[k] / ln_fmax(ln_sqrt(speed), ln_fmax(slowest, resolved));
+        cap = ln_fmin(cap, meth->stiff_safety * meth->real_stability / rate);
+    }
+    return cap;
+}
+
 /* What the step loops and the events evaluate: mode_accelerations where the model has friction, else
    accelerations() inlined. */
 LN_ALWAYS_INLINE int FN(stage_accelerations)(const ln_model *mm, ln_data *d, const double *X, const double *U,

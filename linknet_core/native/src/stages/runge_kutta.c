@@ -162,6 +162,8 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
     if (m->n_contacts) FN(ln_contacts_place)(m, X, U);
     if ((status = FN(stage_accelerations)(m, d, X, U, F_base, acc, d->T, 1)) != LN_OK) return status;
     store_stage(size, 0, U, acc, KX, KU);
+    /* the longest step the sliding contacts' stiff mode allows; the controller's own h stands where it is shorter */
+    double cap = FN(slip_step_cap)(m, meth, U, acc, d->T);
     ln_peaks_begin(m, d, t);
     if (d->h_next <= 0.0) {
         double h0;
@@ -170,7 +172,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
     }
     while (t < t_target) {
         const double remaining = t_target - t;
-        const double h = ln_controlled_step(d->h_next, t, t_target);
+        const double h = ln_controlled_step(ln_fmin(d->h_next, cap), t, t_target);
         if (h < 0.0) return LN_STEP_UNDERFLOW;
         double t_new = (h == remaining) ? t_target : t + h;
         /* the stages 1..s-1, then (row s: the weights b) the new point Xn, Un, whose evaluation also factors
@@ -227,6 +229,7 @@ int FN(ln_rk_steps)(const ln_model *m, const ln_method *meth, ln_data *d, double
             if ((status = FN(stage_accelerations)(m, d, X, U, F_base, acc, d->T, m->n_ropes != 0)) != LN_OK)
                 return status;
             store_stage(size, 0, U, acc, KX, KU);
+            cap = FN(slip_step_cap)(m, meth, U, acc, d->T);
         }
         /* d->T at the step's end: the next step's first stage, or after the last step its new point's (before the
            projections, which move it by about the step's local error) */
