@@ -280,3 +280,35 @@ class ReferenceLinearization(InterfaceLinearization):
         dacc = (dF + d_link_force) * self._inv_mass3 + d_anchor_acc
         dFreact = dyn.anchor_reactions(self.X, dT) + dyn.anchor_reactions(dX, self.T)  # bilinear in (X, T)
         return dT, dFreact, dacc
+
+
+class ModeLinearization(InterfaceLinearization):
+    """The numpy reference for a scene with ropes (UnilateralDynamics ``dyn``) at (X, U), as ReferenceLinearization
+    takes them: the derivatives of the current mode's outputs. The mode is the one the outputs are evaluated in
+    (UnilateralDynamics.state_mode: the acceleration LCP on the touching ropes, at this state and these inputs), and
+    within it the network is the seed's system with the slack ropes left out (ModeDynamics.inner), whose (25)-(26)
+    ReferenceLinearization differentiates, minimum-norm (31) where the taut set is redundant. A slack rope's T is 0
+    with derivative 0. The mode is held fixed: an input that would turn a taut rope's tension negative (or pull a
+    slack one taut) changes the mode, and the derivative there is the one-sided one of the current mode's outputs.
+    A contact would be a link to its virtual anchor (ModeDynamics), but a ground is refused
+    (unilateral.linearization_refusal), and so are the ropes' friction grips and sliding loads that only a ground
+    brings."""
+
+    def __init__(self, dyn, X, U, F_input=None, anchor_acc=None, anchors=None):
+        scene = dyn.scene
+        super().__init__(scene, scene.input_driven_indices if anchors is None else anchors)
+        md = dyn.state_mode(X, U, F_input, anchor_acc)
+        if md.n_virtual:
+            raise SolverError(f"{scene.name}: masses on the ground: the outputs' linearization is not given with a "
+                              "ground (linearization_refusal)")
+        self.mode = md
+        self.inner = ReferenceLinearization(md.inner, X, U, F_input, anchor_acc, anchors=self.anchors)
+        self.singular = self.inner.singular
+        self.T = np.zeros(scene.L)
+        self.T[md.links] = self.inner.T
+
+    def _directional(self, dF, dP, dV, dA):
+        dT_mode, dFreact, dacc = self.inner._directional(dF, dP, dV, dA)
+        dT = np.zeros(self.scene.L)
+        dT[self.mode.links] = dT_mode
+        return dT, dFreact, dacc

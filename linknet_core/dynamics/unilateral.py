@@ -94,17 +94,21 @@ def scene_size(scene: Scene) -> float:
 
 def linearization_refusal(scene: Scene) -> str:
     """Why the outputs' linearization (Simulator.interface_linearization, the FMUs' directional derivatives) is not
-    given for ``scene``; "" where it is given (a scene of rods: the seed's (25)-(26) everywhere). With ropes or a
-    ground it is refused: the rods' (25)-(26) holds only within one mode and has no derivative where a rope goes
-    slack or a mass leaves the ground. The FMUs declare providesDirectionalDerivative(s) from this: "true" only
-    where it is ""."""
-    if not scene.unilateral:
+    given for ``scene``; "" where it is given. It is given for rods (the seed's (25)-(26)) and ropes: with ropes, the
+    derivatives of the current mode's outputs (interface_jacobian.ModeLinearization: the slack ropes left out, the
+    mode held, one-sided where an input would change it). It is refused with a ground: its contacts' virtual
+    anchors are not yet in the native core's linearization, and with friction the sliding contacts' load -mu N d
+    turns with the slip direction and the stuck ones' grips switch to sliding at the friction cone's edge, which the
+    mode's rod system does not see. The FMUs declare providesDirectionalDerivative(s) from this: "true" only where
+    it is ""."""
+    if scene.ground is None:
         return ""
-    what = (f"{scene.link_label(int(np.flatnonzero(scene.rope)[0]))} is a rope" if scene.rope.any()
-            else "it has a ground")
-    return (f"{scene.name}: {what}, and the outputs' linearization (interface_linearization, directional "
-            "derivatives) is that of rods only: it would treat every rope as a rod and ignore the ground, whose "
-            "forces switch on and off at the events; it is not given for ropes or a ground")
+    what = "a rough ground (Coulomb friction)" if scene.ground.friction > 0 else "a ground"
+    return (f"{scene.name}: it has {what}, and the outputs' linearization (interface_linearization, directional "
+            "derivatives) is given for rods and ropes only (within the current mode); it is not given with a "
+            "ground, whose contacts' forces switch on and off at the events"
+            + (" and whose friction turns with the slip and switches between stick and slip"
+               if scene.ground.friction > 0 else ""))
 
 
 def describe(scene: Scene) -> list[str]:

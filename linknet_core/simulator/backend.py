@@ -123,13 +123,15 @@ class Backend:
     def linearization(self, state: State, F: np.ndarray | None, hold):
         """The outputs' linearization at ``state`` (Simulator.interface_linearization), here by the numpy
         reference at the state the outputs are evaluated at."""
-        from linknet_core.dynamics.interface_jacobian import ReferenceLinearization
+        from linknet_core.dynamics.interface_jacobian import ModeLinearization, ReferenceLinearization
         from linknet_core.dynamics.unilateral import linearization_refusal
 
         refusal = linearization_refusal(self.scene)
         if refusal:
             raise SolverError(refusal)
         X_at, U_at, anchor_acc = self.anchors_now(state.t, state.X, state.U, hold)
+        if self.scene.unilateral:  # ropes: within the mode the outputs are evaluated in
+            return ModeLinearization(self.dyn, X_at, U_at, F, anchor_acc)
         return ReferenceLinearization(self.dyn, X_at, U_at, F, anchor_acc)
 
     def anchors_now(self, t: float, X: np.ndarray, U: np.ndarray, hold):

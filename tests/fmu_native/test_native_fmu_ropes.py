@@ -272,10 +272,8 @@ def test_bad_input_is_refused_with_a_message_and_the_instance_goes_on(fmus, fmu_
             instance.slave.setReal([fmu.vr[name]], [0.0])
         status, _, message = instance.log[-1]
         assert status == ERROR and f"{name} is an output and cannot be set" in message
-    # the directional derivatives: the library's reason (the linearization is the rods')
-    with pytest.raises(FMICallException):
-        instance.slave.getDirectionalDerivative([fmu.vr["T[1]"]], [fmu.vr["F[2,1]"]], [1.0])
-    assert instance.log[-1][0] == ERROR and linearization_refusal(scene) in instance.log[-1][2]
+    # the directional derivatives, of the current mode's outputs: the rope slack at the start (T = 0, derivative 0)
+    assert instance.slave.getDirectionalDerivative([fmu.vr["T[1]"]], [fmu.vr["F[2,3]"]], [1.0]) == [0.0]
     with pytest.raises(FMICallException):
         instance.slave.setDebugLogging(True, ["logRopes"])
     assert "logRopes" in instance.log[-1][2] and EVENT_CATEGORY in instance.log[-1][2]
@@ -283,6 +281,15 @@ def test_bad_input_is_refused_with_a_message_and_the_instance_goes_on(fmus, fmu_
     instance.slave.doStep(0.0, 0.5)  # still usable: the flight and the first jerk
     assert instance.get(["slack[1]"])[0] == 0.0 and instance.get(["Jrope[1]"])[0] > 0.0
     assert [_parse(m)[1] for m in instance.events()] == ["taut"]
+    # taut: the FMU's derivative is the library's (the same core on the same state), bit for bit
+    library = ln.Simulator(scene, "dop853", rtol=FMU_TOLERANCE, backend="native")
+    library.advance(0.5)
+    np.testing.assert_array_equal(instance.get(["X[2,1]", "X[2,2]", "X[2,3]"]), library.state.X[1])
+    dF = np.zeros((2, 3))
+    dF[1, 2] = 1.0
+    expected = library.interface_linearization().directional(dF=dF)["T"][0]
+    assert expected != 0.0
+    assert instance.slave.getDirectionalDerivative([fmu.vr["T[1]"]], [fmu.vr["F[2,3]"]], [1.0]) == [expected]
     # a scene without ropes logs no events: its FMU does not take their category
     rods = Instance(built(fmu_root, "chain_10"), "rods", logging=False)
     with pytest.raises(FMICallException):
@@ -393,8 +400,8 @@ def test_the_crane_through_the_native_and_the_pythonfmu_fmu(fmus, tmp_path_facto
     times = np.linspace(0.0, t_end, n + 1)
     python_fmu = build_cached(tmp_path_factory.mktemp("rope_crane_pythonfmu"), str(ROPES / "rope_crane.json"))
     assert _log_categories(python_fmu) == _log_categories(fmu.path)
-    # both kinds refuse the directional derivatives of a rope scene, and their flags say so
-    assert _provides_directional(python_fmu) == _provides_directional(fmu.path) == "false"
+    # both kinds give the directional derivatives of a rope scene (within the current mode), and their flags say so
+    assert _provides_directional(python_fmu) == _provides_directional(fmu.path) == "true"
     out = run_client(FMU_CLIENT_LIB + f"""
 f = Fmu({str(python_fmu)!r})
 f.slave.setDebugLogging(True, [{EVENT_CATEGORY!r}])  # declared by both FMU kinds for rope scenes, and taken
@@ -440,7 +447,7 @@ def test_the_crane_through_the_fmi3_fmu_gives_the_fmi2_fmus_outputs_and_events(f
     with zipfile.ZipFile(path) as z:
         z.extractall(unzipped)
     md = read_model_description(str(path))
-    assert _provides_directional(path) == "false"  # as the FMI 2.0 FMU's: the rope scene's derivatives refused
+    assert _provides_directional(path) == "true"  # as the FMI 2.0 FMU's: the rope scene's derivatives given
     vr = {v.name: v.valueReference for v in md.modelVariables}
     log = []
     slave = FMU3Slave(guid=md.guid, unzipDirectory=str(unzipped), modelIdentifier=md.coSimulation.modelIdentifier,

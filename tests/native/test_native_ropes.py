@@ -23,6 +23,7 @@ jerk where their relative motion (uniform: gravity cancels) reaches R, with the 
 """
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -206,16 +207,19 @@ def test_a_slack_inside_one_long_step_is_found_at_the_methods_inner_stages_as_th
     assert np.linalg.norm(native.state.X[1]) < 0.9
 
 
-def test_the_cores_linearization_refuses_a_model_with_ropes_with_its_own_status():
-    # the library refuses the outputs' linearization for ropes before it asks the core; the core's own check guards
-    # any other caller (the rods' formulas would take every rope for a rod)
+def test_the_cores_linearization_refuses_a_model_with_a_ground_with_its_own_status():
+    # the library refuses the outputs' linearization with a ground before it asks the core; the core's own check
+    # guards any other caller (its contacts' virtual anchors are not linearized there)
     from linknet_core.native.interface import NativeInterface, NativeLinearization
 
-    sim = ln.Simulator(ln.load_scene(ROOT / "models" / "ropes" / "rope_pendulum.json"), "dop853", backend="native")
+    data = json.loads((ROOT / "models" / "ropes" / "rope_pendulum.json").read_text())
+    data.pop("fmu")
+    data["ground"] = {"point": [0.0, 0.0, -5.0], "normal": [0.0, 0.0, 1.0]}
+    sim = ln.Simulator(ln.Scene.from_dict(data), "dop853", backend="native")
     integrator = sim.integrator
     with pytest.raises(ln.SolverError, match="not linearizable"):
-        NativeLinearization(integrator.model, integrator.data, sim.state.X, sim.state.U,
-                            interface=NativeInterface(integrator.model))
+        NativeLinearization(integrator.model, integrator.data, integrator.model.scene.X0,
+                            integrator.model.scene.U0, interface=NativeInterface(integrator.model))
 
 
 def test_a_snapshot_continues_identically_and_a_reset_runs_the_same_events_again():

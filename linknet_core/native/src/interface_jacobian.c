@@ -14,6 +14,13 @@
  *
  * The workspace keeps its own ln_data, evaluated by ln_evaluate (the one definition of the outputs), whose
  * factorisation of A (chain sweeps, sparse LDL^T or minimum-norm) every directional derivative reuses.
+ *
+ * Ropes: the derivatives of the current mode's outputs. ln_evaluate chooses the mode of the state (the acceleration
+ * LCP on the touching ropes, stages/ropes.c) and factors that mode's A; the formulas above then run on the mode's
+ * model, a copy of the model whose 1/R_l is 0 on the slack ropes (as the core's stages run a mode): a slack rope
+ * has E_l = 0, no term of (26) and a unit diagonal in A, hence dT_l = 0. The mode is held: an input that would
+ * change it gives the one-sided derivative of the current mode's outputs. A ground (the contacts' virtual anchors)
+ * is not linearized here (LN_NOT_LINEARIZABLE; the library refuses it first).
  */
 #include <math.h>
 #include <stdlib.h>
@@ -36,6 +43,7 @@ struct ln_interface {
        anchors); E (8); T; g = M^-1 C^T T */
     double *X, *U, *F, *a, *E, *T, *g;
     double *T_solved, *inconsistent;    /* A singular: A^+ T and (I - Pi) B */
+    double *mode_inv_R;                 /* ropes: 1/R_l of the prepared state's mode, 0 on its slack ropes */
     /* scratch of one directional derivative */
     double *dX, *dU, *dF, *da, *dE, *h, *p, *q, *link, *rhs, *y, *z, *w, *dT;
 };
@@ -45,7 +53,8 @@ static double *zeros(ln_int n) { return calloc((size_t)(n > 0 ? n : 1), sizeof(d
 void ln_interface_free(ln_interface *J)
 {
     if (!J) return;
-    double *arrays[] = {J->X, J->U, J->F, J->a, J->E, J->T, J->g, J->T_solved, J->inconsistent, J->dX, J->dU, J->dF,
+    double *arrays[] = {J->X, J->U, J->F, J->a, J->E, J->T, J->g, J->T_solved, J->inconsistent, J->mode_inv_R,
+                        J->dX, J->dU, J->dF,
                         J->da, J->dE, J->h, J->p, J->q, J->link, J->rhs, J->y, J->z, J->w, J->dT};
     for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
     ln_data_free(J->d);
@@ -62,11 +71,12 @@ ln_interface *ln_interface_new(const ln_model *m)
     J->spring = ln_force_kind("spring");
     J->quadratic_drag = ln_force_kind("quadratic_drag");
     J->X = zeros(K3); J->U = zeros(K3); J->F = zeros(K3); J->a = zeros(K3); J->E = zeros(3 * L); J->T = zeros(L);
-    J->g = zeros(K3); J->T_solved = zeros(L); J->inconsistent = zeros(L);
+    J->g = zeros(K3); J->T_solved = zeros(L); J->inconsistent = zeros(L); J->mode_inv_R = zeros(L);
     J->dX = zeros(K3); J->dU = zeros(K3); J->dF = zeros(K3); J->da = zeros(K3); J->dE = zeros(3 * L);
     J->h = zeros(K3); J->p = zeros(K3); J->q = zeros(K3); J->link = zeros(K3);
     J->rhs = zeros(L); J->y = zeros(L); J->z = zeros(L); J->w = zeros(L); J->dT = zeros(L);
-    if (!(J->d && J->X && J->U && J->F && J->a && J->E && J->T && J->g && J->T_solved && J->inconsistent && J->dX
+    if (!(J->d && J->X && J->U && J->F && J->a && J->E && J->T && J->g && J->T_solved && J->inconsistent
+          && J->mode_inv_R && J->dX
           && J->dU && J->dF && J->da && J->dE && J->h && J->p && J->q && J->link && J->rhs && J->y && J->z && J->w
           && J->dT)) {
         ln_interface_free(J);
@@ -106,15 +116,25 @@ static void dA_times(const ln_model *m, ln_interface *J, const double *y, double
     for (ln_int l = 0; l < m->L; l++) out[l] = link_row(m, J->dE, J->p, l) + link_row(m, J->E, J->q, l);
 }
 
-int ln_interface_prepare(const ln_model *m, ln_interface *J, const ln_data *source, const double *X, const double *U,
-                         const double *F_input)
+/* The model the formulas run on: ``m`` itself, or with ropes its mode's copy (1/R_l 0 on the slack ropes) in *mode. */
+static const ln_model *mode_model(const ln_model *m, const ln_interface *J, ln_model *mode)
+{
+    if (!m->n_ropes) return m;
+    *mode = *m;
+    mode->inv_R = J->mode_inv_R;
+    return mode;
+}
+
+int ln_interface_prepare(const ln_model *m_scene, ln_interface *J, const ln_data *source, const double *X,
+                         const double *U, const double *F_input)
 {
     ln_data *d = J->d;
+    const ln_model *m = m_scene;
     const ln_int K3 = 3 * m->K, L = m->L, n3 = 3 * m->n_driven;
     J->prepared = 0;
-    /* the formulas are the rods' (25)-(26): with ropes they would take every rope for a rod, and the outputs have
-       no derivative where a rope goes slack (the library refuses first; this guards any other caller) */
-    if (m->n_ropes) return LN_NOT_LINEARIZABLE;
+    /* a ground's contacts (virtual anchors placed above their masses, friction grips) are not linearized here (the
+       library refuses first; this guards any other caller) */
+    if (m->n_contacts || m->n_grips) return LN_NOT_LINEARIZABLE;
     /* the caller's time and anchors' motion, and the input forces */
     d->t = source->t;
     if (F_input) memcpy(d->F_input, F_input, (size_t)K3 * sizeof(double));
@@ -133,6 +153,14 @@ int ln_interface_prepare(const ln_model *m, ln_interface *J, const ln_data *sour
     int status = ln_drive_rows(m, d, d->t, J->X, J->U, J->F, 3);
     if (status != LN_OK) return status;
     if ((status = ln_evaluate(m, d, J->X, J->U)) != LN_OK) return status;
+    ln_model mode;
+    if (m->n_ropes) {  /* the mode ln_evaluate chose (stages/ropes.c leaves its taut ropes in rope_flags' 5th set) */
+        const uint8_t *taut = d->rope_flags + 4 * m->n_ropes;
+        memcpy(J->mode_inv_R, m->inv_R, (size_t)L * sizeof(double));
+        for (ln_int r = 0; r < m->n_ropes; r++)
+            if (!taut[r]) J->mode_inv_R[m->rope_link[r]] = 0.0;
+        m = mode_model(m_scene, J, &mode);
+    }
     if (m->n_elements > 0) {
         memcpy(J->dF, J->F, (size_t)K3 * sizeof(double));  /* dF as scratch: the base forces */
         ln_scene_forces_3d(m, J->X, J->U, J->dF, J->F);
@@ -210,10 +238,12 @@ static void element_derivatives(const ln_model *m, const ln_interface *J, const 
     }
 }
 
-int ln_interface_directional(const ln_model *m, ln_interface *J, const double *dF_in, const double *dP,
+int ln_interface_directional(const ln_model *m_scene, ln_interface *J, const double *dF_in, const double *dP,
                              const double *dV, const double *dA, double *dT_out, double *dFreact, double *dacc)
 {
     if (!J->prepared) return LN_BAD_ARGUMENT;
+    ln_model mode;
+    const ln_model *m = mode_model(m_scene, J, &mode);
     ln_data *d = J->d;
     const ln_int K = m->K, L = m->L, K3 = 3 * K;
     double *dX = J->dX, *dU = J->dU, *dF = J->dF, *da = J->da, *dE = J->dE, *dT = J->dT;
