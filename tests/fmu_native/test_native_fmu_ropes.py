@@ -398,6 +398,7 @@ def test_the_crane_through_the_native_and_the_pythonfmu_fmu(fmus, tmp_path_facto
     names = fmu.names("X") + fmu.names("slack") + fmu.names("Jrope")
     t_end, n = RUNS["rope_crane"]
     times = np.linspace(0.0, t_end, n + 1)
+    seed_names = ["F[2,1]", "F[2,2]", "F[2,3]"]
     python_fmu = build_cached(tmp_path_factory.mktemp("rope_crane_pythonfmu"), str(ROPES / "rope_crane.json"))
     assert _log_categories(python_fmu) == _log_categories(fmu.path)
     # both kinds give the directional derivatives of a rope scene (within the current mode), and their flags say so
@@ -411,13 +412,22 @@ rows = [f.get({names!r})]
 for i in range({n}):
     f.step(times[i], times[i + 1] - times[i])
     rows.append(f.get({names!r}))
-save(rows=np.array(rows), messages=np.array([m for s, m in LOG if m.startswith("event at")]))
+seed = [f.vr[n] for n in {seed_names!r}]
+derivative = f.slave.getDirectionalDerivative([f.vr["T[1]"]], seed, [1.0] * len(seed))
+save(rows=np.array(rows), messages=np.array([m for s, m in LOG if m.startswith("event at")]),
+     derivative=np.array(derivative))
 """, tmp_path_factory.mktemp("rope_crane_client"))
     instance = Instance(fmu)
     instance.initialize()
     first = instance.get(names)
     rows, messages = instance.run(times, names)
     rows = np.vstack([first, rows])
+    # taut again at the end: the tension's derivative along the load's force (1, 1, 1) N, the same within the run's
+    # tolerance from both kinds (their states agree to it)
+    derivative = instance.slave.getDirectionalDerivative([fmu.vr["T[1]"]], [fmu.vr[n] for n in seed_names],
+                                                          [1.0] * len(seed_names))
+    assert rows[-1, names.index("slack[1]")] == 0.0 and derivative[0] != 0.0
+    assert abs(derivative[0] - out["derivative"][0]) <= FMU_TOLERANCE * abs(derivative[0])
     python_rows = out["rows"]
     slack = [j for j, name in enumerate(names) if name.startswith("slack[")]
     np.testing.assert_array_equal(rows[:, slack], python_rows[:, slack])
