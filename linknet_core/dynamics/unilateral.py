@@ -99,8 +99,8 @@ def linearization_refusal(scene: Scene) -> str:
     mode held, one-sided where an input would change it). It is refused with a ground: its contacts' virtual
     anchors are not yet in the native core's linearization, and with friction the sliding contacts' load -mu N d
     enters the mode's system as non-symmetric columns (ModeDynamics.normal_system) that the linearization's solves
-    with the factorisation of A do not carry, and a stuck contact leaves its mode at the friction cone's edge. The FMUs declare providesDirectionalDerivative(s) from this: "true" only where
-    it is ""."""
+    with the factorisation of A do not carry, and a stuck contact leaves its mode at the friction cone's edge. The
+    FMUs declare providesDirectionalDerivative(s) from this: "true" only where it is ""."""
     if scene.ground is None:
         return ""
     what = "a rough ground (Coulomb friction)" if scene.ground.friction > 0 else "a ground"
