@@ -282,33 +282,55 @@ class ReferenceLinearization(InterfaceLinearization):
         return dT, dFreact, dacc
 
 
-class ModeLinearization(InterfaceLinearization):
-    """The numpy reference for a scene with ropes (UnilateralDynamics ``dyn``) at (X, U), as ReferenceLinearization
-    takes them: the derivatives of the current mode's outputs. The mode is the one the outputs are evaluated in
-    (UnilateralDynamics.state_mode: the acceleration LCP on the touching ropes, at this state and these inputs), and
-    within it the network is the seed's system with the slack ropes left out (ModeDynamics.inner), whose (25)-(26)
-    ReferenceLinearization differentiates, minimum-norm (31) where the taut set is redundant. A slack rope's T is 0
-    with derivative 0. The mode is held fixed: an input that would turn a taut rope's tension negative (or pull a
-    slack one taut) changes the mode, and the derivative there is the one-sided one of the current mode's outputs.
-    A contact would be a link to its virtual anchor (ModeDynamics), but a ground is refused
-    (unilateral.linearization_refusal), and so are the ropes' friction grips and sliding loads that only a ground
-    brings."""
+class SceneRowsLinearization(InterfaceLinearization):
+    """A linearization of a larger network read back on ``scene``'s rows: ``inner`` linearizes a network whose first
+    masses are the scene's and whose further masses are virtual anchors (a ground's contacts: links from their masses
+    to anchors above them, unilateral.native_ground_scene, ModeDynamics' mode scene). ``links``: the scene's link of
+    each of the inner network's first links.size links (the others, the contacts', come after). The inputs are the
+    scene's: the anchors are fixed, so no force acts on them and none is an input, their rows of the seeds are 0.
+    The outputs are the scene's: T of its links (0 where ``links`` leaves one out), Freact of its anchored masses
+    (the inner network's first anchored rows, the virtual anchors' following), acc of its masses."""
+
+    def __init__(self, scene: Scene, inner: InterfaceLinearization, links: np.ndarray):
+        super().__init__(scene, inner.anchors)
+        self.inner = inner
+        self.links = np.asarray(links, np.int64)
+        self.singular = inner.singular
+        self._virtual = np.zeros((inner.scene.K - scene.K, 3))
+
+    def _directional(self, dF, dP, dV, dA):
+        dT_inner, dFreact, dacc = self.inner._directional(np.concatenate([dF, self._virtual]), dP, dV, dA)
+        dT = np.zeros(self.scene.L)
+        dT[self.links] = dT_inner[:self.links.size]
+        return dT, dFreact[:self.anchored.size], dacc[:self.scene.K]
+
+
+class ModeLinearization(SceneRowsLinearization):
+    """The numpy reference for a scene with ropes or a frictionless ground (UnilateralDynamics ``dyn``) at (X, U), as
+    ReferenceLinearization takes them: the derivatives of the current mode's outputs. The mode is the one the outputs
+    are evaluated in (UnilateralDynamics.state_mode: the acceleration LCP on the touching ropes and contacts, at this
+    state and these inputs), and within it the network is the seed's system with the slack ropes left out and each
+    active contact a link of length R_c to a virtual anchor straight above its mass (ModeDynamics.inner), whose
+    (25)-(26) ReferenceLinearization differentiates, minimum-norm (31) where the mode is redundant. A contact's link
+    has E along the plane's normal n and the term (n . U_k)^2 / R_c in (26); its anchor is placed from the state
+    alone (ModeDynamics.pad, pad_velocity), so it does not move with the inputs, and its acceleration (its mass's
+    along the plane) would enter (26) only as E . a_Q = 0: the anchor is fixed in the linearization, exactly. The
+    contact's tension, the ground's normal force, answers the inputs and moves the accelerations, but is no output.
+    A slack rope's T is 0 with derivative 0. The mode is held fixed: an input that would turn a taut rope's tension
+    or a contact's normal force negative (or pull a slack rope taut) changes the mode, and the derivative there is
+    the one-sided one of the current mode's outputs. A rough ground's grips and sliding loads are refused
+    (unilateral.linearization_refusal)."""
 
     def __init__(self, dyn, X, U, F_input=None, anchor_acc=None, anchors=None):
         scene = dyn.scene
-        super().__init__(scene, scene.input_driven_indices if anchors is None else anchors)
         md = dyn.state_mode(X, U, F_input, anchor_acc)
-        if md.n_virtual:
-            raise SolverError(f"{scene.name}: masses on the ground: the outputs' linearization is not given with a "
-                              "ground (linearization_refusal)")
+        if md.stuck_masses.size or md.sliding.size:
+            raise SolverError(f"{scene.name}: masses on a rough ground: the outputs' linearization is not given with "
+                              "friction (linearization_refusal)")
+        inner = ReferenceLinearization(md.inner, md.pad(X), md.pad_velocity(X, U), md._pad_zero(F_input),
+                                       md._pad_zero(anchor_acc),
+                                       anchors=scene.input_driven_indices if anchors is None else anchors)
+        super().__init__(scene, inner, md.links)
         self.mode = md
-        self.inner = ReferenceLinearization(md.inner, X, U, F_input, anchor_acc, anchors=self.anchors)
-        self.singular = self.inner.singular
         self.T = np.zeros(scene.L)
-        self.T[md.links] = self.inner.T
-
-    def _directional(self, dF, dP, dV, dA):
-        dT_mode, dFreact, dacc = self.inner._directional(dF, dP, dV, dA)
-        dT = np.zeros(self.scene.L)
-        dT[self.mode.links] = dT_mode
-        return dT, dFreact, dacc
+        self.T[md.links] = inner.T[:md.links.size]

@@ -94,21 +94,19 @@ def scene_size(scene: Scene) -> float:
 
 def linearization_refusal(scene: Scene) -> str:
     """Why the outputs' linearization (Simulator.interface_linearization, the FMUs' directional derivatives) is not
-    given for ``scene``; "" where it is given. It is given for rods (the seed's (25)-(26)) and ropes: with ropes, the
-    derivatives of the current mode's outputs (interface_jacobian.ModeLinearization: the slack ropes left out, the
-    mode held, one-sided where an input would change it). It is refused with a ground: its contacts' virtual
-    anchors are not yet in the native core's linearization, and with friction the sliding contacts' load -mu N d
+    given for ``scene``; "" where it is given. It is given for rods (the seed's (25)-(26)), ropes and a frictionless
+    ground: with ropes or a ground, the derivatives of the current mode's outputs (interface_jacobian.ModeLinearization:
+    the slack ropes and the masses off the ground left out, each contact a link to its virtual anchor, the mode held,
+    one-sided where an input would change it). It is refused with a rough ground: the sliding contacts' load -mu N d
     enters the mode's system as non-symmetric columns (ModeDynamics.normal_system) that the linearization's solves
     with the factorisation of A do not carry, and a stuck contact leaves its mode at the friction cone's edge. The
     FMUs declare providesDirectionalDerivative(s) from this: "true" only where it is ""."""
-    if scene.ground is None:
+    if scene.ground is None or scene.ground.friction == 0:
         return ""
-    what = "a rough ground (Coulomb friction)" if scene.ground.friction > 0 else "a ground"
-    return (f"{scene.name}: it has {what}, and the outputs' linearization (interface_linearization, directional "
-            "derivatives) is given for rods and ropes only (within the current mode); it is not given with a "
-            "ground, whose contacts' forces switch on and off at the events"
-            + (" and whose friction turns with the slip and switches between stick and slip"
-               if scene.ground.friction > 0 else ""))
+    return (f"{scene.name}: it has a rough ground (Coulomb friction, mu = {scene.ground.friction:g}), and the "
+            "outputs' linearization (interface_linearization, directional derivatives) is given for rods, ropes and "
+            "a frictionless ground only (within the current mode); it is not given with friction, which turns with "
+            "the slip and switches between stick and slip")
 
 
 def describe(scene: Scene) -> list[str]:

@@ -130,7 +130,7 @@ class Backend:
         if refusal:
             raise SolverError(refusal)
         X_at, U_at, anchor_acc = self.anchors_now(state.t, state.X, state.U, hold)
-        if self.scene.unilateral:  # ropes: within the mode the outputs are evaluated in
+        if self.scene.unilateral:  # ropes, a ground: within the mode the outputs are evaluated in
             return ModeLinearization(self.dyn, X_at, U_at, F, anchor_acc)
         return ReferenceLinearization(self.dyn, X_at, U_at, F, anchor_acc)
 

@@ -132,6 +132,7 @@ class NativeBackend(Backend):
         return self.integrator.tension_peaks()
 
     def linearization(self, state, F, hold):
+        from linknet_core.dynamics.interface_jacobian import SceneRowsLinearization
         from linknet_core.native.interface import NativeLinearization
 
         from linknet_core.dynamics.unilateral import linearization_refusal
@@ -142,7 +143,15 @@ class NativeBackend(Backend):
 
         with self._holding(state.t, hold) as integrator:
             try:
-                return NativeLinearization(integrator.model, integrator.data, state.X, state.U, F)
+                if self.scene.ground is None:
+                    return NativeLinearization(integrator.model, integrator.data, state.X, state.U, F)
+                # the ground's model: the contacts' virtual anchors after the scene's masses (the core places them
+                # from the state), the contacts' links after its links; the scene's rows read back
+                pad = np.zeros((integrator.model.K - self.scene.K, 3))
+                return SceneRowsLinearization(self.scene, NativeLinearization(
+                    integrator.model, integrator.data, np.concatenate([state.X, pad]),
+                    np.concatenate([state.U, pad]), None if F is None else np.concatenate([F, pad])),
+                    np.arange(self.scene.L))
             except SolverError:
                 integrator._raise_motion_error()  # a callable's own failure, where it was one
                 raise

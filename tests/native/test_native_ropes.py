@@ -207,14 +207,14 @@ def test_a_slack_inside_one_long_step_is_found_at_the_methods_inner_stages_as_th
     assert np.linalg.norm(native.state.X[1]) < 0.9
 
 
-def test_the_cores_linearization_refuses_a_model_with_a_ground_with_its_own_status():
-    # the library refuses the outputs' linearization with a ground before it asks the core; the core's own check
-    # guards any other caller (its contacts' virtual anchors are not linearized there)
+def test_the_cores_linearization_refuses_a_model_with_a_rough_ground_with_its_own_status():
+    # the library refuses the outputs' linearization with friction before it asks the core; the core's own check
+    # guards any other caller (its friction grips and sliding loads are not linearized there)
     from linknet_core.native.interface import NativeInterface, NativeLinearization
 
     data = json.loads((ROOT / "models" / "ropes" / "rope_pendulum.json").read_text())
     data.pop("fmu")
-    data["ground"] = {"point": [0.0, 0.0, -5.0], "normal": [0.0, 0.0, 1.0]}
+    data["ground"] = {"point": [0.0, 0.0, -5.0], "normal": [0.0, 0.0, 1.0], "friction": 0.5}
     sim = ln.Simulator(ln.Scene.from_dict(data), "dop853", backend="native")
     integrator = sim.integrator
     with pytest.raises(ln.SolverError, match="not linearizable"):

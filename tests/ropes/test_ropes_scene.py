@@ -120,15 +120,18 @@ def test_auto_takes_a_ground_and_ropes_on_the_fixed_step_methods_to_the_native_c
     assert ln.Simulator(ln.Scene.from_dict(data()), method, **step).backend == "native"
 
 
-def test_the_outputs_linearization_is_given_for_ropes_and_refused_for_a_ground():
-    # ropes: that of the current mode (tests/ropes/test_rope_interface_jacobian.py checks it); here the bob is
-    # within the rope's length, so the rope is slack and its T has no derivative
+def test_the_outputs_linearization_is_given_for_ropes_and_a_frictionless_ground_and_refused_with_friction():
+    # ropes and a frictionless ground: that of the current mode (tests/ropes/test_rope_interface_jacobian.py and
+    # test_ground_interface_jacobian.py check it); here the bob is within the rope's length, so the rope is slack and
+    # its T has no derivative, and above the ground, so it falls freely: d acc / dF = 1/m
     dF = np.zeros((2, 3))
     dF[1, 2] = 1.0
     assert ln.Simulator(ln.Scene.from_dict(data()), "dop853").interface_linearization().directional(dF=dF)["T"] == 0.0
-    grounded = ln.Scene.from_dict(data(links=[], ground={"point": [0, 0, -2], "normal": [0, 0, 1]}))
-    with pytest.raises(ln.SolverError, match="it has a ground"):
-        ln.Simulator(grounded, "dop853").interface_linearization()
+    smooth = ln.Scene.from_dict(data(links=[], ground={"point": [0, 0, -2], "normal": [0, 0, 1]}))
+    assert ln.Simulator(smooth, "dop853").interface_linearization().directional(dF=dF)["acc"][1, 2] == 1.0
+    rough = ln.Scene.from_dict(data(links=[], ground={"point": [0, 0, -2], "normal": [0, 0, 1], "friction": 0.5}))
+    with pytest.raises(ln.SolverError, match=r"it has a rough ground \(Coulomb friction, mu = 0.5\)"):
+        ln.Simulator(rough, "dop853").interface_linearization()
 
 
 def test_a_run_reports_slack_ropes_per_sample_and_its_events_and_a_snapshot_restores_the_mode():

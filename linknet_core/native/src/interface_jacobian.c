@@ -19,8 +19,19 @@
  * LCP on the touching ropes, stages/ropes.c) and factors that mode's A; the formulas above then run on the mode's
  * model, a copy of the model whose 1/R_l is 0 on the slack ropes (as the core's stages run a mode): a slack rope
  * has E_l = 0, no term of (26) and a unit diagonal in A, hence dT_l = 0. The mode is held: an input that would
- * change it gives the one-sided derivative of the current mode's outputs. A ground (the contacts' virtual anchors)
- * is not linearized here (LN_NOT_LINEARIZABLE; the library refuses it first).
+ * change it gives the one-sided derivative of the current mode's outputs.
+ *
+ * A frictionless ground: each contact is one of those unilateral links, from its mass to a virtual anchor placed
+ * straight above it (ln_contacts_place: Q = X_k + (R_c - g_k) n, moving with the mass along the plane), so that its
+ * E is along n, its term of (26) is (n . U_k)^2 / R_c and its tension is the ground's normal force; an active
+ * contact is taut in the mode, a mass in flight's is slack. The anchors are placed from the state alone (the
+ * mass's X_k and U_k, no input), so their dX and dU along any seed are 0; an anchor is fixed (infinite mass), so
+ * its da is 0 here, where the mode's anchor accelerates with its mass along the plane: that acceleration enters
+ * (26) only as E . a_Q, zero since E is along n, so its derivative contributes nothing either. The normal force
+ * still answers the inputs (dT of the contact's link), and through it the masses' accelerations. The model's extra
+ * rows (the contacts' links, the anchors' masses) come after the scene's; the caller keeps the scene's. A rough
+ * ground's grips and sliding loads are not linearized (LN_NOT_LINEARIZABLE; the library refuses it first): the
+ * sliding contacts' friction -mu N d carries non-symmetric columns into the system that these solves do not.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -132,9 +143,9 @@ int ln_interface_prepare(const ln_model *m_scene, ln_interface *J, const ln_data
     const ln_model *m = m_scene;
     const ln_int K3 = 3 * m->K, L = m->L, n3 = 3 * m->n_driven;
     J->prepared = 0;
-    /* a ground's contacts (virtual anchors placed above their masses, friction grips) are not linearized here (the
-       library refuses first; this guards any other caller) */
-    if (m->n_contacts || m->n_grips) return LN_NOT_LINEARIZABLE;
+    /* a rough ground's friction (its grips, the sliding contacts' loads) is not linearized here (the library
+       refuses first; this guards any other caller) */
+    if (m->n_grips) return LN_NOT_LINEARIZABLE;
     /* the caller's time and anchors' motion, and the input forces */
     d->t = source->t;
     if (F_input) memcpy(d->F_input, F_input, (size_t)K3 * sizeof(double));
@@ -149,6 +160,7 @@ int ln_interface_prepare(const ln_model *m_scene, ln_interface *J, const ln_data
     /* the state as the outputs see it: the driven rows at P, V, and the base forces with their rows at A */
     memcpy(J->X, X, (size_t)K3 * sizeof(double));
     memcpy(J->U, U, (size_t)K3 * sizeof(double));
+    if (m->n_contacts) ln_contacts_place_3d(m, J->X, J->U);  /* each contact's anchor above its mass, from the state */
     if (!ln_base_forces(m, d, J->F)) return LN_NON_FINITE;
     int status = ln_drive_rows(m, d, d->t, J->X, J->U, J->F, 3);
     if (status != LN_OK) return status;

@@ -18,7 +18,8 @@ LN_API void ln_interface_free(ln_interface *J);
 
 /* Linearize at the state X, U (K,3) with the input forces F_input (K,3; NULL: none; d->F_input for the held ones)
    and what the caller's data d holds: its time and its driven anchors' motion at d->t (their rows of X and U are
-   set from it, as ln_evaluate does). Evaluates the outputs there (the tensions, with the factorisation of A they
+   set from it, as ln_evaluate does). With a frictionless ground the model's contacts' virtual anchors are placed
+   from X, U here (their rows of X and U are not read); LN_NOT_LINEARIZABLE with a rough one (its grips). Evaluates the outputs there (the tensions, with the factorisation of A they
    need, kept in J). LN_OK, or ln_evaluate's status (then J is not prepared). d is only read. */
 LN_API int ln_interface_prepare(const ln_model *m, ln_interface *J, const ln_data *d, const double *X,
                                 const double *U, const double *F_input);
