@@ -262,7 +262,7 @@ def test_a_rope_jerks_a_resting_mass_into_a_slide_on_a_rough_ground(backend):
     """A rope snapping taut along a level rough ground gives no contact a normal impulse, so Coulomb's law allows
     no friction impulse at the jerk: the masses' in-plane momentum is kept and the resting mass slides off. Two
     0.125 kg masses, a at rest at (0, 0.1, 0), b at (0.15, 0, 0) thrown at 2 m/s along x, a 0.25 m rope of
-    restitution 1, mu 0.5 (the drag scene that rope_peer.md does not compare)."""
+    restitution 1, mu 0.5: the first jerk of a line dragged along a rough seabed (rope_chain_seabed_drag)."""
     import linknet_core as ln
     scene = ln.Scene.from_dict({
         "name": "jerk_on_rough_ground", "gravity": [0, 0, -G],
