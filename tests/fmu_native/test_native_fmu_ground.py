@@ -205,6 +205,45 @@ def test_a_hook_driven_by_inputs_drops_its_load_onto_the_ground_as_the_library_d
     assert ": contact of mass 3" in " ".join(messages)
 
 
+def test_a_frictionless_grounds_fmus_give_the_librarys_directional_derivatives_bit_for_bit(fmus, scenes):
+    """A frictionless ground's FMUs declare providesDirectionalDerivative (the library linearizes the current mode:
+    tests/ropes/test_ground_interface_jacobian.py; a rough ground's say "false": test_native_fmu_ropes). The hook
+    lowered at 0.2 m/s for 1.75 s and held for 0.25 s: the lower bob lands at 1.5 s and lies on the ground, its rope
+    slack, the upper bob hangs from the still hook. Every derivative of T and Freact along each input F, P, V, A equals the library's Jacobian there bit for
+    bit (the same core on the same state and inputs)."""
+    from test_native_fmu_ropes import _provides_directional
+
+    assert all(_provides_directional(fmu.path) == "true" for fmu in fmus.values())
+    fmu = fmus["hook"]
+    scene = ln.load_scene(scenes["hook"])
+    sim = ln.Simulator(scene, "dop853", rtol=TOLERANCE, error_estimate=False, backend="native")
+    instance = Instance(fmu, logging=False)
+    instance.initialize()
+    axes = [f"[1,{i}]" for i in (1, 2, 3)]
+    for i, V in enumerate([(0, 0, -0.2)] * 7 + [(0, 0, 0)]):
+        P = instance.get([f"X{a}" for a in axes])
+        for quantity, value in (("P", P), ("V", V), ("A", (0, 0, 0))):
+            instance.slave.setReal([fmu.vr[quantity + a] for a in axes], list(map(float, value)))
+        instance.slave.doStep(0.25 * i, 0.25)
+        sim.advance(0.25 * (i + 1), anchors=(P[None], np.array([V], float), np.zeros((1, 3))))
+    np.testing.assert_array_equal(instance.get(fmu.names("X")), sim.state.X.ravel())
+    assert sim.state.X[2, 2] == pytest.approx(-1.8, abs=1e-12) and abs(sim.state.U[2]).max() < 1e-12
+    assert list(instance.get(["slack[1]", "slack[2]"])) == [0.0, 1.0]
+    J = sim.interface_jacobian(anchors=(sim.state.X[:1], np.zeros((1, 3)), np.zeros((1, 3))))
+    unknowns = ["T[1]", "T[2]"] + fmu.names("Freact")
+    for name in INPUT_NAMES:
+        quantity, _, index = name.partition("[")
+        k, i = (int(j) - 1 for j in index.rstrip("]").split(","))
+        expected = np.concatenate([J["T", quantity][:, k, i], J["Freact", quantity][0, :, k, i]])
+        got = instance.slave.getDirectionalDerivative([fmu.vr[u] for u in unknowns], [fmu.vr[name]], [1.0])
+        np.testing.assert_array_equal(got, expected, err_msg=name)
+    assert J["T", "F"][0, 1, 2] != 0.0 and not J["T", "F"][1].any()  # the taut rope answers, the slack one not
+
+
+INPUT_NAMES = [f"{q}[{k},{i}]" for q, ks in (("F", (2, 3)), ("P", (1,)), ("V", (1,)), ("A", (1,))) for k in ks
+               for i in (1, 2, 3)]
+
+
 def test_a_state_taken_between_two_contacts_repeats_the_run_across_the_next(fmus):
     """The chain's state after its first mass landed (0.10 s) and before the second (0.14 s), restored in the same
     instance and deserialized into another that has run on, gives the same outputs and events to the last bit."""
