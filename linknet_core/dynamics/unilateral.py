@@ -812,7 +812,7 @@ class UnilateralDynamics(Dynamics):
         speed = np.linalg.norm(self.tangential_velocities(U), axis=1)
         return speed <= TOUCH_TOL * self.velocity_scale(U)
 
-    def coulomb_impact(self, X, U, touching):
+    def coulomb_impact(self, X, U, touching, tangential_vectors: bool = False):
         """The impact at a state where the unilateral constraints ``touching`` are at contact, with Coulomb's
         friction on the ground: Moreau's impact law with Coulomb friction as one problem in the normal and the
         tangential impulses (Pfeiffer and Glocker, Multibody Dynamics with Unilateral Contacts, 1996; Glocker,
@@ -832,11 +832,13 @@ class UnilateralDynamics(Dynamics):
         v_t+ = -mu P_n |v_t+| <= 0 and the kinetic energy changes by P . v+ - P . W P / 2 <= 0 (Newton's restitution
         with friction on coupled masses can add energy where a slip reverses: Stronge, J. Appl. Mech. 58, 1991).
         Where no contact takes a normal impulse the frictionless impact is the solution. Returns (U after, normal
-        impulses (n_unilateral,) N s, the constraints that took one, |P_t| (n_contacts,) N s)."""
+        impulses (n_unilateral,) N s, the constraints that took one, |P_t| (n_contacts,) N s, or with
+        ``tangential_vectors`` the tangential impulses P_t themselves (n_contacts, 3))."""
         U_free, impulses, took = self.impact(X, U, touching)
         n_ropes = self.rope_links.size
         if self.friction == 0 or not took[n_ropes:].any():
-            return U_free, impulses, took, np.zeros(self.contact_masses.size)
+            none = np.zeros((self.contact_masses.size, 3) if tangential_vectors else self.contact_masses.size)
+            return U_free, impulses, took, none
         touching = np.asarray(touching, bool)
         stuck = touching[n_ropes:] & (took[n_ropes:] | self.resting(U))
         while True:
@@ -853,7 +855,8 @@ class UnilateralDynamics(Dynamics):
         U_after = U + md.link_impulse_velocities(X, lam) + self._inv_mass3 * friction
         P_t[md.sliding] = friction[self.contact_masses[md.sliding]]
         impulses = md.unilateral_forces(lam)
-        return U_after, impulses, self.took_impulse(X, U, impulses), np.linalg.norm(P_t, axis=1)
+        return U_after, impulses, self.took_impulse(X, U, impulses), P_t if tangential_vectors else np.linalg.norm(
+            P_t, axis=1)
 
     def _coulomb_impulses(self, md: ModeDynamics, X, U):
         """(Lambda in md's row order, the sliding contacts' friction impulses (K, 3)) of the impact with md's stuck
@@ -978,15 +981,21 @@ class UnilateralDynamics(Dynamics):
         e[e * np.maximum(-rates, 0.0) < self.rest_speed(U)] = 0.0
         return W, rates, rates + e * np.minimum(rates, 0.0), e, rows_uni
 
-    def anchor_impulses(self, X, U_before, U_after, rows) -> np.ndarray:
+    def anchor_impulses(self, X, U_before, U_after, rows, ground=None, stuck=None) -> np.ndarray:
         """(len(rows), 3): what the links gave the driven anchors ``rows`` in an impact that took the free masses from
         U_before to U_after at X (both with the anchors' rows at their motion): the link impulses Lambda with
-        M dU = C^T Lambda on the free masses (9), the minimum-norm ones A^+ C dU of the mode of the links that
-        carried them (any other gives the same forces, (31)), and C^T Lambda on the anchors' rows."""
-        dU = np.where(self.scene.fixed[:, None], 0.0, U_after - U_before)
+        M dU = C^T Lambda + P on the free masses (9), P the ground's impulses along its plane (``ground`` (K, 3),
+        a friction or grip impulse the impact solved: not the links'), the minimum-norm ones A^+ C M^-1 (M dU - P)
+        of the mode of the links that carried them (the touching links, contacts along n, and the grips of the
+        contacts ``stuck``, whose impulse is the mode's; any other Lambda gives the same forces, (31)), and
+        C^T Lambda on the anchors' rows."""
+        dU = U_after - U_before
+        if ground is not None:
+            dU = dU - self._inv_mass3 * ground
+        dU = np.where(self.scene.fixed[:, None], 0.0, dU)
         if not rows.size or not dU.any():
             return np.zeros((rows.size, 3))
-        md = self.mode(self.touching(X), X, U_after)
+        md = self.mode(self.touching(X), X, U_after, stuck)
         Xa = md.pad(X)
         inner = md.inner
         A = inner.tension_matrix(Xa).toarray()

@@ -362,16 +362,15 @@ class EventHandling:
             return X, U, np.zeros((drive.rows.size, 3)), 0.0, 0.0
         if self.mode is None:  # before the first advance: the mode of the state before the jump
             self._choose_mode(X, U, None, F_input, X, U)
-        X_after, U_after = self._apply_event(Xj, Uj, t, F_input, "anchor", None)
-        impulse = self.unilateral.anchor_impulses(X_after, Uj, U_after, drive.rows)
-        return X_after, U_after, impulse, dP, dV
+        X_after, U_after = self._apply_event(Xj, Uj, t, F_input, "anchor", None, drive.rows)
+        return X_after, U_after, self.event_anchor_impulse, dP, dV
 
     # ---- the event -------------------------------------------------------------------------------------------
-    def _apply_event(self, X, U, t, F_input, kind, trigger):
+    def _apply_event(self, X, U, t, F_input, kind, trigger, anchor_rows=None):
         """At an event at t (state X, U of the old mode): positions onto the touching constraints, the impact's
-        impulse, the next mode; the events recorded, and what the links gave the driven anchors in the impact added
-        to the advance's (AnchorDrive.advance_impulse; a jump's own is the jump's, EventHandling.anchor_jump).
-        Returns (X, U)."""
+        impulse, the next mode; the events recorded, and what the links gave the driven anchors in the impact
+        (event_anchor_impulse, on ``anchor_rows``, default the drive's) added to the advance's (AnchorDrive.
+        advance_impulse; a jump's own is the jump's, EventHandling.anchor_jump). Returns (X, U)."""
         uni = self.unilateral
         n_uni, n_ropes = uni.n_unilateral, uni.rope_links.size
         # a trigger past the unilateral constraints is a contact's friction: its stick margin (stuck -> slip) or its
@@ -384,7 +383,7 @@ class EventHandling:
             touching |= uni.gaps(X) < 0.0
         stuck_before = self.stuck
         X, _ = uni.mode(touching, X, U).project_positions(X, tol=1e-14)
-        U_after, impulses, took, tangential = uni.coulomb_impact(X, U, touching)
+        U_after, impulses, took, tangential = uni.coulomb_impact(X, U, touching, tangential_vectors=True)
         Xd, Ud, acc = self._at(t, X, U_after)
         # the touching constraints that do not separate, or separate slower than the rest speed (an inelastic
         # collapse: neighbouring ropes jerking each other slack in turn, the speeds shrinking by a factor per turn,
@@ -428,15 +427,33 @@ class EventHandling:
                 uni.contact_masses, 0]
             for c in np.flatnonzero(on_before & on_after & (md.stuck != stuck_before)):
                 self.events.append(Event(float(t), "stick" if md.stuck[c] else "slip", int(uni.contact_masses[c]),
-                                         float(tangential[c] + grip[c]) if md.stuck[c] else 0.0))
-        if kind != "anchor" and self.drive is not None:  # what the links gave the driven anchors in the impact
-            self.drive.advance_impulse = self.drive.advance_impulse + uni.anchor_impulses(X, U, U_after,
-                                                                                          self.drive.rows)
+                                         float(np.linalg.norm(tangential[c]) + grip[c]) if md.stuck[c] else 0.0))
+        if anchor_rows is None and self.drive is not None:
+            anchor_rows = self.drive.rows
+        if anchor_rows is not None:  # what the links gave the driven anchors in the impact
+            self.event_anchor_impulse = self._event_anchor_impulse(X, U, U_before_grip, U_after, tangential,
+                                                                   md.stuck, anchor_rows)
+            if kind != "anchor":
+                self.drive.advance_impulse = self.drive.advance_impulse + self.event_anchor_impulse
         self._set_mode(active, X, U_after, stuck)
         if uni.friction > 0:
             uni.slip_reference[:] = 0.0  # from the velocities after the event, or the accelerations where at rest
             self._slip_reference(t, X, U_after, F_input)
         return X, U_after
+
+    def _event_anchor_impulse(self, X, U_before, U_impact, U_after, tangential, stuck, rows):
+        """(len(rows), 3): what the links gave the driven anchors ``rows`` in an event at X that took the velocities
+        from U_before through the impact (U_impact) to the projection onto the next mode (U_after): the impact's
+        link impulses, the ground's tangential impulses ``tangential`` (n_contacts, 3: the sliding contacts'
+        friction, the stuck ones' grips) taken out of its velocity change, and the projection's, whose mode holds
+        the contacts ``stuck`` by their grips (UnilateralDynamics.anchor_impulses)."""
+        uni = self.unilateral
+        if uni.friction == 0:  # no impulse along the plane: the whole velocity change is the links' and contacts'
+            return uni.anchor_impulses(X, U_before, U_after, rows)
+        ground = np.zeros_like(U_before)
+        np.add.at(ground, uni.contact_masses, tangential)
+        return (uni.anchor_impulses(X, U_before, U_impact, rows, ground=ground)
+                + uni.anchor_impulses(X, U_impact, U_after, rows, stuck=stuck))
 
     def _zeno(self, t):
         return SolverError(f"more than {MAX_EVENTS_PER_STEP} rope or ground events within one step at t = {t:g} "

@@ -175,6 +175,9 @@
     ARRAY(double, event_U_before, m->n_ropes && m->n_driven ? 3 * m->K : 0)  /* (K,3) the velocities an event     \
                                                            began with: their change gives the driven anchors'      \
                                                            impulse */                                               \
+    ARRAY(double, event_ground_impulse, m->n_grips && m->n_driven ? 3 * m->K : 0)  /* (K,3) the ground's impulse  \
+                                                           along its plane on each mass in an event's impact (the  \
+                                                           friction's, the grips'): not the links' */              \
     ARRAY(double, link_values, m->n_ropes ? 6 * m->L : 0)        /* (6, L) per-link values */                       \
     ARRAY(double, E_full, m->n_ropes ? 3 * m->L : 0)             /* (L,3) every link's unit vector, slack or not */ \
     /* the ropes' tensions at an adaptive step's inner stages (its accepted attempt's): where a force that falls   \

@@ -1486,7 +1486,8 @@ static int FN(friction_coulomb_impulses)(const ln_model *mm, ln_data *d, const d
    stuck (its grips equalities of the impact's LCP, their multipliers its tangential impulse P_t), the one furthest
    outside |P_t| <= mu P_n let slide, in turn; a sliding contact's friction impulse is -mu P_n d
    (friction_coulomb_impulses). U becomes the velocities after it, impulses and took as rope_impact's, into
-   tangential (n_contacts) each contact's |P_t|. The grips' link_active is the stuck set the impact ended with. */
+   tangential (n_contacts) each contact's |P_t| and, with driven anchors, into d->event_ground_impulse (K, 3) the
+   vectors P_t on the contacts' masses. The grips' link_active is the stuck set the impact ended with. */
 static int FN(friction_impact)(const ln_model *mm, const ln_method *meth, ln_data *d, const double *X, double *U,
                                const uint8_t *touching, double *impulses, uint8_t *took, double *tangential)
 {
@@ -1494,11 +1495,13 @@ static int FN(friction_impact)(const ln_model *mm, const ln_method *meth, ln_dat
     uint8_t *stuck = d->friction_flags + 5 * n_c, *resting = d->friction_flags;
     double *U_before = d->event_states + 7 * 3 * mm->K, *margins = d->friction_values + 3 * n_c;
     const double *lam = d->link_values + 2 * L, mu = mm->friction;
+    double *ground = mm->n_driven ? d->event_ground_impulse : NULL;
     memcpy(U_before, U, (size_t)size * sizeof(double));
     for (ln_int c = 0; c < n_c; c++) {
         stuck[c] = 0;
         tangential[c] = 0.0;
     }
+    for (ln_int i = 0; ground && i < size; i++) ground[i] = 0.0;
     FN(friction_set_stuck)(mm, d, stuck);
     int status = FN(rope_impact)(mm, meth, d, X, U, touching, impulses, took);
     if (status != LN_OK) return status;
@@ -1522,6 +1525,7 @@ static int FN(friction_impact)(const ln_model *mm, const ln_method *meth, ln_dat
                 const double f = lam[FN(grip_link)(mm, c, 0)] * mm->ground_tangent[e]
                                  + lam[FN(grip_link)(mm, c, 1)] * mm->ground_tangent[3 + e];
                 Pt += f * f;
+                if (ground) ground[mm->contact_mass[c] * DIM + e] = f;
             }
             tangential[c] = ln_sqrt(Pt);
             margins[c] = mu * lam[FN(contact_link)(mm, c)] - tangential[c];
@@ -1538,7 +1542,10 @@ static int FN(friction_impact)(const ln_model *mm, const ln_method *meth, ln_dat
         const ln_int l = FN(contact_link)(mm, c), k = mm->contact_mass[c];
         if (!touching[first_contact + c] || stuck[c]) continue;
         tangential[c] = mu * lam[l];
-        for (int e = 0; e < 3; e++) U[k * DIM + e] += mm->inv_m[k] * (-mu * lam[l] * dirs[3 * c + e]);
+        for (int e = 0; e < 3; e++) {
+            U[k * DIM + e] += mm->inv_m[k] * (-mu * lam[l] * dirs[3 * c + e]);
+            if (ground) ground[k * DIM + e] = -mu * lam[l] * dirs[3 * c + e];
+        }
     }
     for (ln_int r = 0; r < R; r++) impulses[r] = touching[r] ? lam[mm->rope_link[r]] : 0.0;
     FN(rope_took)(mm, d, U_before, impulses, took);
@@ -1546,12 +1553,14 @@ static int FN(friction_impact)(const ln_model *mm, const ln_method *meth, ln_dat
 }
 
 /* What the links gave the driven anchors in an impulse that took the free masses from U_before to U_after at X
-   (the anchors' rows at their motion), added into d->impulse: the minimum-norm impulses Lambda = A^+ C dU of the
-   links at their length (the rods, the ropes and contacts touching; any other Lambda gives the same forces, (31)),
-   and C^T Lambda on the anchors' rows, +Lambda_l E_l on k1(l) and -Lambda_l E_l on k2(l)
+   (the anchors' rows at their motion), added into d->impulse: with M dU = C^T Lambda + P, P the ground's impulses
+   along its plane (ground (K, 3) or NULL: a friction or grip impulse the impact solved, not the links'), the
+   minimum-norm impulses Lambda = A^+ C M^-1 (M dU - P) of the links at their length (the rods, the ropes and
+   contacts touching, and with grips the grips of the contacts stuck in link_active; any other Lambda gives the
+   same forces, (31)), and C^T Lambda on the anchors' rows, +Lambda_l E_l on k1(l) and -Lambda_l E_l on k2(l)
    (UnilateralDynamics.anchor_impulses). The mask of the links at their length is left in use. */
 static int FN(rope_anchor_impulses)(const ln_model *mm, ln_data *d, const double *X, const double *U_before,
-                                    const double *U_after)
+                                    const double *U_after, const double *ground, int grips)
 {
     const ln_int K = mm->K, L = mm->L;
     uint8_t *at_length = d->rope_flags + 2 * mm->n_ropes;
@@ -1559,12 +1568,17 @@ static int FN(rope_anchor_impulses)(const ln_model *mm, ln_data *d, const double
     int moved = 0;
     for (ln_int k = 0; k < K; k++)
         for (int e = 0; e < DIM; e++) {
-            dU[DIM * k + e] = mm->is_fixed[k] ? 0.0 : U_after[DIM * k + e] - U_before[DIM * k + e];
+            const double change = U_after[DIM * k + e] - U_before[DIM * k + e];
+            dU[DIM * k + e] = mm->is_fixed[k] ? 0.0 : ground ? change - mm->inv_m[k] * ground[DIM * k + e] : change;
             moved |= dU[DIM * k + e] != 0.0;
         }
     if (!moved) return LN_OK;
     FN(rope_touching)(mm, X, NULL, at_length);
     FN(rope_mask_of)(mm, d, at_length);
+    if (!grips && mm->n_grips) {
+        for (ln_int l = L - mm->n_grips; l < L; l++) d->mask[l] = 0;
+        FN(rope_use_mask)(mm, d, d->mask);
+    }
     FN(ln_unit_vectors)(mm, X, d->E0);
     const int status = FN(ln_factor_tension_matrix)(mm, d, d->E0);
     if (status != LN_OK) return status;
@@ -1675,8 +1689,15 @@ static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_da
         FN(rope_record)(d, t, stuck ? LN_EVENT_STICK : LN_EVENT_SLIP, l, stuck ? tangential[c] + grip : 0.0, mm);
     }
     for (ln_int r = 0; r < R; r++) d->link_active[mm->rope_link[r]] = active[r];
-    if (mm->n_driven) {  /* the event's impulse on the driven anchors, added to the advance's (Jreact) */
-        status = FN(rope_anchor_impulses)(mm, d, X, d->event_U_before, U);
+    if (mm->n_driven && mm->n_grips) {
+        /* the event's impulse on the driven anchors, added to the advance's (Jreact): the impact's, the ground's
+           impulse along its plane taken out, and the projection's onto the next mode, its stuck contacts' grips in */
+        status = FN(rope_anchor_impulses)(mm, d, X, d->event_U_before, U_before_grip, d->event_ground_impulse, 0);
+        if (status == LN_OK) status = FN(rope_anchor_impulses)(mm, d, X, U_before_grip, U, NULL, 1);
+        FN(rope_use_mask)(mm, d, d->link_active);
+        if (status != LN_OK) return status;
+    } else if (mm->n_driven) {  /* the event's impulse on the driven anchors, added to the advance's (Jreact) */
+        status = FN(rope_anchor_impulses)(mm, d, X, d->event_U_before, U, NULL, 1);
         FN(rope_use_mask)(mm, d, d->link_active);
         if (status != LN_OK) return status;
     }
