@@ -104,3 +104,27 @@ class BobReference:
                 theta = data(t)[0]
                 return self.R * np.array([np.sin(theta), 0.0, -np.cos(theta)])
         raise ValueError(t)
+
+
+def central_differences(outputs, inputs: dict, fixed, names: tuple, h: float) -> dict:
+    """{(output, input): block} as InterfaceJacobian holds them: the derivatives of the first len(names) values of
+    ``outputs(**inputs)`` (arrays, named ``names``) by each entry (k, i) of each input array, by central differences
+    of step h; a force on an anchored mass (``fixed[k]``, input "F") is no input and its columns stay 0."""
+    base = outputs(**inputs)
+    blocks = {}
+    for name, value in inputs.items():
+        out = [np.zeros(np.shape(base[j]) + value.shape) for j in range(len(names))]
+        for k in range(value.shape[0]):
+            if name == "F" and fixed[k]:
+                continue
+            for i in range(3):
+                sides = []
+                for sign in (1.0, -1.0):
+                    moved = {n: v.copy() for n, v in inputs.items()}
+                    moved[name][k, i] += sign * h
+                    sides.append(outputs(**moved))
+                for j in range(len(names)):
+                    out[j][..., k, i] = (sides[0][j] - sides[1][j]) / (2 * h)
+        for j, o in enumerate(names):
+            blocks[o, name] = out[j]
+    return blocks

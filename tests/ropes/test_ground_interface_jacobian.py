@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import linknet_core as ln
+from rope_references import central_differences
 
 H = 1e-6
 FD_TOL = 1e-7
@@ -113,23 +114,7 @@ def finite_differences(scene, X, U, F, P, V, A, taut, on_ground, normal):
         return mode_outputs(scene, Xa, Ua, F, acc, taut, on_ground, normal)
 
     inputs = {"F": F, "P": P, "V": V, "A": A}
-    shapes = {"T": (scene.L,), "Freact": (scene.fixed_indices.size, 3), "acc": (scene.K, 3)}
-    blocks = {}
-    for name, value in inputs.items():
-        out = {o: np.zeros(shape + value.shape) for o, shape in shapes.items()}
-        for k in range(value.shape[0]):
-            if name == "F" and scene.fixed[k]:
-                continue
-            for i in range(3):
-                sides = []
-                for sign in (1.0, -1.0):
-                    moved = {n: v.copy() for n, v in inputs.items()}
-                    moved[name][k, i] += sign * H
-                    sides.append(outputs(**moved))
-                for j, o in enumerate(("T", "Freact", "acc")):
-                    out[o][..., k, i] = (sides[0][j] - sides[1][j]) / (2 * H)
-        for o in shapes:
-            blocks[o, name] = out[o]
+    blocks = central_differences(outputs, inputs, scene.fixed, ("T", "Freact", "acc"), H)
     return blocks, outputs(F, P, V, A)
 
 

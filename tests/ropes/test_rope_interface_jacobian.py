@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import linknet_core as ln
+from rope_references import central_differences
 
 H = 1e-6
 FD_TOL = 1e-7
@@ -95,22 +96,7 @@ def finite_differences(scene, X, U, F, P, V, A, taut):
         return mode_outputs(scene, Xa, Ua, F, acc, taut)
 
     inputs = {"F": F, "P": P, "V": V, "A": A}
-    blocks = {}
-    for name, value in inputs.items():
-        T_block = np.zeros((scene.L,) + value.shape)
-        acc_block = np.zeros((scene.K, 3) + value.shape)
-        for k in range(value.shape[0]):
-            if name == "F" and scene.fixed[k]:
-                continue
-            for i in range(3):
-                sides = []
-                for sign in (1.0, -1.0):
-                    moved = {n: v.copy() for n, v in inputs.items()}
-                    moved[name][k, i] += sign * H
-                    sides.append(outputs(**moved))
-                T_block[:, k, i] = (sides[0][0] - sides[1][0]) / (2 * H)
-                acc_block[:, :, k, i] = (sides[0][1] - sides[1][1]) / (2 * H)
-        blocks["T", name], blocks["acc", name] = T_block, acc_block
+    blocks = central_differences(outputs, inputs, scene.fixed, ("T", "acc"), H)
     return blocks, outputs(F, P, V, A)
 
 
