@@ -183,9 +183,13 @@ def test_check_animate_view_ensemble_refuse_bad_options_in_one_line(argv, words,
 
 def test_ctrl_c_writes_what_was_computed_and_exits_130(tmp_path):
     out = tmp_path / "partial.npz"
+    # Ctrl-C as a terminal gives it: SIGINT at its default in the command, whatever this process inherited (a runner
+    # started in the background by a non-interactive shell ignores SIGINT, and an ignored signal stays ignored
+    # across exec: Python then installs no KeyboardInterrupt handler)
     proc = subprocess.Popen([sys.executable, "-m", "linknet_core.cli", "simulate", MODELS / "chain_100.json",
                              "--t-end", "1000", "--dt", "1e-4", "--out", out], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=ROOT)
+                            stderr=subprocess.PIPE, text=True, cwd=ROOT,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:   # interrupt once the run has started computing
         time.sleep(0.5)
