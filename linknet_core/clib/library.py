@@ -148,6 +148,9 @@ rope_events_drained = _declare("ln_rope_events_drained", ln_int, Data_p)
 jump_anchors = _declare("ln_jump_anchors", ctypes.c_int, Model_p, Method_p, Data_p)
 rope_initial_state = _declare("ln_rope_initial_state", ctypes.c_int, Model_p, Method_p, Data_p, c_double_p, c_double_p,
                               ctypes.c_int)
+# the stages' room a fixed-step method's screen of the ropes' forces inside its steps takes (stages/rattle.c; the
+# native FMU sizes its data by it too)
+midpoint_rows = _declare("ln_midpoint_rows", ln_int, Model_p, Method_p)
 model_weights_size = _declare("ln_model_weights_size", ln_int, Model_p)
 model_weights = _declare("ln_model_weights", ctypes.c_int, Model_p, c_double_p, c_double_p, c_double_p, c_double_p,
                          c_double_p)

@@ -29,13 +29,6 @@ _explain.argtypes = [lib.Model_p, lib.Method_p, lib.Data_p, ctypes.c_int, ctypes
 _NONE = np.zeros(0, np.int64)  # no input-driven anchors (never written into)
 
 
-# ln_int ln_midpoint_rows(model, method): the stages' room a fixed-step method's screen of the ropes' forces inside
-# its steps takes (stages/rattle.c; the native FMU sizes its data by it too)
-_midpoint_rows = lib.lib.ln_midpoint_rows
-_midpoint_rows.restype = lib.ln_int
-_midpoint_rows.argtypes = [lib.Model_p, lib.Method_p]
-
-
 def integrator_method(method_cls, *, dt=None, rtol=None, atol=None, static: bool = False):
     """The NativeMethod a NativeIntegrator of ``method_cls`` runs with these settings (atol: already defaulted)."""
     return native_method(method_cls, dt=dt, rtol=rtol, atol=atol,
@@ -44,7 +37,7 @@ def integrator_method(method_cls, *, dt=None, rtol=None, atol=None, static: bool
 
 def integrator_data(model: NativeModel, method) -> NativeData:
     """A new NativeData of ``model`` sized for ``method``'s stages (and its screen of the forces inside a step)."""
-    return NativeData(model, max(method.n_stages, _midpoint_rows(model.pointer, method.pointer)))
+    return NativeData(model, max(method.n_stages, lib.midpoint_rows(model.pointer, method.pointer)))
 
 
 def core_initial_state(model: NativeModel, method, K: int):
