@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_native_ropes import _agree  # tests/native is on sys.path (pytest puts a test file's folder there)
+from test_native_ropes import _agree, _both  # tests/native is on sys.path (pytest puts a test file's folder there)
 from ropes.rope_references import G, slope
 
 import linknet_core as ln
@@ -66,13 +66,6 @@ def swing(mu=0.5):
                                "ground": {"point": [0, 0, 0], "normal": [0, 0, 1], "friction": mu}})
 
 
-def _both(scene, t_end, method, n_out):
-    kw = dict(n_out=n_out, error_estimate=False, rtol=1e-10)
-    reference = ln.simulate(scene, t_end, method, backend="numpy", **kw)
-    native = ln.simulate(scene, t_end, method, backend="native", **kw)
-    return reference, native
-
-
 SCENES = {"sliding block": (lambda: slope(0.3, 0.2)[0], 1.0, 21, 0),
           "stuck block": (lambda: slope(0.3, 0.5)[0], 1.0, 21, 0),
           "block thrown up a slope": (lambda: slope(0.5, 0.2, v_down=-2.0)[0], 1.5, 31, 0),
@@ -97,7 +90,7 @@ def test_masses_alone_or_linked_on_a_rough_ground_give_the_references_events_and
     make, t_end, n_out, n_events = {**SCENES, **LINKED}[name]
     scene = make()
     assert ln.Simulator(scene, method, backend="auto").backend == "native"
-    reference, native = _both(scene, t_end, method, n_out)
+    reference, native = _both(scene, t_end, method, n_out=n_out)
     assert len(reference.events) == n_events
     _agree(reference, native, min_events=n_events)
     assert native.stats["steps"] == reference.stats["steps"]
@@ -185,8 +178,7 @@ def test_friction_on_rattle_and_its_compositions_runs_on_the_core_as_the_referen
     # set at each step's start, as the reference's (measured: event times and states within 3e-14)
     make, t_end, method, dt, n_events = FIXED_STEP[name]
     assert ln.Simulator(make(), method, dt=dt).backend == "native"
-    reference, native = (ln.simulate(make(), t_end, method, dt=dt, n_out=11, error_estimate=False, backend=backend)
-                         for backend in ("numpy", "native"))
+    reference, native = _both(make(), t_end, method, n_out=11, dt=dt)
     assert len(reference.events) == n_events
     _agree(reference, native, min_events=n_events)
     if name == "block thrown along the ground":

@@ -13,16 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_native_ropes import _agree  # tests/native is on sys.path (pytest puts a test file's folder there)
+from test_native_ropes import _agree, _both  # tests/native is on sys.path (pytest puts a test file's folder there)
 from ropes.rope_references import G
 
 import linknet_core as ln
 from linknet_core.dynamics.unilateral import UnilateralDynamics
-
-
-def _both(scene, t_end, method="dop853", n_out=31):
-    return tuple(ln.simulate(scene, t_end, method, rtol=1e-10, n_out=n_out, error_estimate=False, backend=backend)
-                 for backend in ("numpy", "native"))
 
 
 def dropped(height, e, vx=0.5, mass=2.0, friction=0.0):
@@ -214,8 +209,7 @@ def test_a_ground_on_rattle_and_its_compositions_runs_on_the_core_as_the_referen
     # (measured: event times 4e-13 s, positions 3e-14 m)
     make, t_end, method, dt, n_events = FIXED_STEP[name]
     assert ln.Simulator(make(), method, dt=dt).backend == "native"
-    reference, native = (ln.simulate(make(), t_end, method, dt=dt, n_out=11, error_estimate=False, backend=backend)
-                         for backend in ("numpy", "native"))
+    reference, native = _both(make(), t_end, method, n_out=11, dt=dt)
     _agree(reference, native, min_events=n_events)
 
 
