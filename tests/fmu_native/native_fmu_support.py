@@ -2,6 +2,7 @@
 plain C host with no Python anywhere in its environment, and the same runs on linknet_core's Simulator."""
 from __future__ import annotations
 
+import json
 import math
 import shutil
 import subprocess
@@ -77,6 +78,15 @@ def built(root: Path, scene: str | Path, native: bool = True, **options) -> Buil
         _cache[key] = Built(out, where, md.coSimulation.modelIdentifier, md.guid,
                             {v.name: v.valueReference for v in md.modelVariables}, md)
     return _cache[key]
+
+
+def write_scenes(root: Path, scenes: dict) -> dict[str, Path]:
+    """Each scene's data (name: dict) written to root/<name>.json; the paths by name."""
+    paths = {}
+    for name, data in scenes.items():
+        paths[name] = root / f"{name}.json"
+        paths[name].write_text(json.dumps(data))
+    return paths
 
 
 def fmpy_instance(fmu: Built, name: str, log: list):

@@ -12,13 +12,12 @@ into the resource, on the same core compiled with the same flags).
 """
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 
-from native_fmu_support import built
-from test_native_fmu_ground import TOLERANCE, Instance, _library, _library_rows, _parse
+from native_fmu_support import built, write_scenes
+from test_native_fmu_ground import _library, _library_rows, _parse
+from test_native_fmu_ropes import Instance
 
 import linknet_core as ln  # noqa: E402
 from linknet_fmu.rope_events import event_message  # noqa: E402
@@ -60,12 +59,8 @@ def standing_data():
 
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory):
-    root = tmp_path_factory.mktemp("friction_scenes")
-    paths = {}
-    for name, data in (("block", block_data()), ("rod", rod_data()), ("standing", standing_data())):
-        paths[name] = root / f"{name}.json"
-        paths[name].write_text(json.dumps(data))
-    return paths
+    return write_scenes(tmp_path_factory.mktemp("friction_scenes"),
+                        {"block": block_data(), "rod": rod_data(), "standing": standing_data()})
 
 
 @pytest.fixture(scope="module")

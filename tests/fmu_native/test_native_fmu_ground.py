@@ -16,7 +16,6 @@ resource): every output and every event's time and impulse are the same doubles 
 """
 from __future__ import annotations
 
-import json
 import sys
 import zipfile
 from pathlib import Path
@@ -24,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from native_fmu_support import ROOT, built
+from native_fmu_support import ROOT, built, write_scenes
 from test_native_fmu_ropes import Instance
 
 sys.path.insert(0, str(ROOT / "fmu_src"))
@@ -70,12 +69,8 @@ def hook_data():
 
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory) -> dict[str, Path]:
-    root = tmp_path_factory.mktemp("ground_scenes")
-    paths = {}
-    for name, data in (("ball", ball_data()), ("chain", chain_data()), ("hook", hook_data())):
-        paths[name] = root / f"{name}.json"
-        paths[name].write_text(json.dumps(data))
-    return paths
+    return write_scenes(tmp_path_factory.mktemp("ground_scenes"),
+                        {"ball": ball_data(), "chain": chain_data(), "hook": hook_data()})
 
 
 @pytest.fixture(scope="module")
