@@ -30,8 +30,8 @@ _NONE = np.zeros(0, np.int64)  # no input-driven anchors (never written into)
 
 
 def integrator_method(method_cls, *, dt=None, rtol=None, atol=None, static: bool = False):
-    """The NativeMethod a NativeIntegrator of ``method_cls`` runs with these settings (atol: already defaulted)."""
-    return native_method(method_cls, dt=dt, rtol=rtol, atol=atol,
+    """The NativeMethod a NativeIntegrator of ``method_cls`` runs with these settings (atol None: rtol's value)."""
+    return native_method(method_cls, dt=dt, rtol=rtol, atol=atol if atol is not None else rtol,
                          position_tol=getattr(method_cls, "position_tol", 1e-14), static=static)
 
 
@@ -117,7 +117,7 @@ class NativeIntegrator(Integrator):
         self.adaptive, self.guarantees = method_cls.adaptive, method_cls.guarantees
         self.dt, self.rtol = dt, rtol
         self.atol = atol if atol is not None else rtol
-        self.method = integrator_method(method_cls, dt=dt, rtol=rtol, atol=self.atol, static=static)
+        self.method = integrator_method(method_cls, dt=dt, rtol=rtol, atol=atol, static=static)
         self.data = integrator_data(model, self.method)
         self._static = static
         self._model_p, self._method_p, self._data_p = model.pointer, self.method.pointer, self.data._ptr

@@ -48,11 +48,10 @@ class NativeBackend(Backend):
         if not scene.unilateral:
             return None, None
         stepping = settings.stepping
-        atol = stepping.atol if stepping.atol is not None else stepping.rtol
-        method = integrator_method(stepping.cls, dt=stepping.dt, rtol=stepping.rtol, atol=atol)
+        method = integrator_method(stepping.cls, dt=stepping.dt, rtol=stepping.rtol, atol=stepping.atol)
         model = native_ground_model(scene) if scene.ground is not None else native_model(scene, dyn.structure)
         return core_initial_state(model, method, scene.K), ("native", stepping.cls.name, stepping.dt, stepping.rtol,
-                                                            atol)
+                                                            stepping.atol)
 
     @classmethod
     def create(cls, scene, dyn, settings, X0, U0, t0, specialisation) -> "NativeBackend":
