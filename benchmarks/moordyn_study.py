@@ -138,6 +138,11 @@ def errors(Xs, refs):
     return [float(np.max(np.linalg.norm(X - R[0], axis=1))) for X, R in zip(Xs, refs)]
 
 
+def whole_steps(grid: float, dt: float) -> float:
+    """The longest step not over dt that makes a whole number of steps between sample times grid apart."""
+    return grid / math.ceil(grid / dt - 1e-9)
+
+
 def moordyn_rows(spec, refs, budget, log, study, quick=False):
     rows = []
     for EA in (QUICK_EA,) if quick else study.eas:
@@ -145,7 +150,7 @@ def moordyn_rows(spec, refs, budget, log, study, quick=False):
         line.check_scene(spec)
         last, finals = None, []
         for dt in line.knobs(spec, quick=quick):
-            dt = study.grid / math.ceil(study.grid / dt - 1e-9)   # a whole number of steps between the sample times
+            dt = whole_steps(study.grid, dt)
             if last is not None and 2.0 * last > budget:
                 log(f"  MoorDyn EA {EA:.0e}: dt {dt:.3g} s not run (predicted {2 * last:.3g} s > budget {budget:g} s)")
                 break

@@ -117,8 +117,7 @@ def test_moordyn_stretches_the_taut_rope_then_misses_the_rigid_jerk_at_any_stiff
     err = {}
     for EA in (1e6, 1e8):
         line = MoorDynLine(EA)
-        dt = line.knobs(whip, quick=True)[2]
-        dt = 0.1 / math.ceil(0.1 / dt)
+        dt = study.whole_steps(0.1, line.knobs(whip, quick=True)[2])
         Xs, _ = line.trajectory(whip, [0.1, 0.3], dt)
         err[EA] = [float(np.abs(X - Xr).max()) for X, Xr in zip(Xs, X_ref)]
         stretch = 28 * M * G * R / EA
@@ -211,8 +210,7 @@ def test_moordyn_sinks_into_its_seabed_by_m_g_over_its_contact_stiffness(landing
     sink = {}
     for EA in (1e4, 1e6):
         line = MoorDynSeabedLine(EA)
-        dt = line.knobs(landing, quick=True)[1]
-        dt = 0.001 / math.ceil(0.001 / dt)
+        dt = study.whole_steps(0.001, line.knobs(landing, quick=True)[1])
         X, _ = line.trajectory(landing, [0.5], dt)
         kb = line.seabed(landing)["kb"]
         sink[EA] = X_ref[8, 2] - X[0][8, 2]
@@ -231,8 +229,7 @@ def test_moordyn_slides_to_rest_on_its_seabed_friction(slide):
     err = {}
     for EA in (1e4, 1e6):
         line = MoorDynSeabedLine(EA)
-        dt = line.knobs(slide, quick=True)[1]
-        dt = 0.1 / math.ceil(0.1 / dt)
+        dt = study.whole_steps(0.1, line.knobs(slide, quick=True)[1])
         X, _ = line.trajectory(slide, [0.3], dt)
         err[EA] = float(np.abs(X[0] - X_ref).max())
     assert err[1e6] < 1e-5 and err[1e6] < 0.1 * err[1e4], err
@@ -345,8 +342,7 @@ def test_moordyn_drives_its_coupled_point_as_the_anchor_and_its_jerk_error_falls
     for EA in (1e4, 1e6):
         line = MoorDynSeabedLine(EA)
         line.check_scene(drag)
-        dt = line.knobs(drag, quick=True)[2]
-        X, _ = line.trajectory(drag, [0.1], 0.1 / math.ceil(0.1 / dt))
+        X, _ = line.trajectory(drag, [0.1], study.whole_steps(0.1, line.knobs(drag, quick=True)[2]))
         err[EA] = float(np.linalg.norm(X[0] - X_ref, axis=1).max())
     assert err[1e6] < 0.2 * err[1e4] < 2e-3, err
 
