@@ -353,11 +353,11 @@ static const char *parameter_rule(const lnfmu_scene *s, int kind, double value, 
     }
 }
 
-/* Whether link l of the scene is a rope (the model's ropes past the scene's are the ground's contacts). */
-static int is_scene_rope(const lnfmu_scene *s, ln_int l)
+/* Whether link l of the model is a rope (a ground's contacts are ropes too, linked after the scene's links). */
+static int is_rope_link(const ln_model *model, ln_int l)
 {
-    for (ln_int r = 0; r < s->model->n_ropes - s->model->n_contacts; r++)
-        if (s->model->rope_link[r] == l) return 1;
+    for (ln_int r = 0; r < model->n_ropes; r++)
+        if (model->rope_link[r] == l) return 1;
     return 0;
 }
 
@@ -370,7 +370,7 @@ static double length_violation(const lnfmu_scene *s, const double *X, ln_int l, 
     for (int e = 0; e < 3; e++) sq += (X[3 * b + e] - X[3 * a + e]) * (X[3 * b + e] - X[3 * a + e]);
     *distance = ln_sqrt(sq);
     const double relative = *distance / R - 1.0;
-    return is_scene_rope(s, l) ? ln_fmax(relative, 0.0) : fabs(relative);
+    return is_rope_link(s->model, l) ? ln_fmax(relative, 0.0) : fabs(relative);
 }
 
 /* The length R of link l against the initial positions: a relative violation beyond the scene's tolerance (a rope:
@@ -387,7 +387,7 @@ static int length_fits(const lnfmu_scene *s, ln_int l, double R, char *msg, cons
          "violation %.3g, tolerance %g%s). Change the length back, or build the FMU from a scene with "
          "\"options\": {\"project_initial_positions\": true}; nothing set", name, R, label, distance, violation,
          s->length_tol,
-         is_scene_rope(s, l) ? "; a rope may be shorter than its length, never longer" : "");
+         is_rope_link(s->model, l) ? "; a rope may be shorter than its length, never longer" : "");
     return 0;
 }
 
@@ -1592,14 +1592,6 @@ static void read_data(const fmu_model *m, const unsigned char **p, data_state *d
     get(p, ds->slip_reference, slip_reference_doubles(m) * sizeof(double));
 }
 
-/* Whether link l is a rope. */
-static int is_rope_link(const fmu_model *m, ln_int l)
-{
-    for (ln_int r = 0; r < m->model.n_ropes; r++)
-        if (m->model.rope_link[r] == l) return 1;
-    return 0;
-}
-
 /* What a data's state says that is not possible, or NULL. */
 static const char *data_problem(const fmu_model *m, const data_state *ds)
 {
@@ -1616,7 +1608,7 @@ static const char *data_problem(const fmu_model *m, const data_state *ds)
     if (ropes) {
         if (ds->mode_chosen != 0 && ds->mode_chosen != 1) return "an invalid mode of the ropes";
         for (ln_int l = 0; l < ropes; l++)  /* 0 or 1; a rod always in the system, a grip while it sticks */
-            if (!(ds->rope[l] == 1.0 || (ds->rope[l] == 0.0 && (is_rope_link(m, l) || is_grip_link(m, l)))))
+            if (!(ds->rope[l] == 1.0 || (ds->rope[l] == 0.0 && (is_rope_link(&m->model, l) || is_grip_link(m, l)))))
                 return "an invalid mode of the ropes";
         if (!finite_all(ds->rope + ropes, (size_t)ropes)) return "a non-finite impulse of a rope";
     }
