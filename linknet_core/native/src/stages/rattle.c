@@ -147,9 +147,8 @@ LN_ALWAYS_INLINE int composition_step(const ln_model *m, const ln_method *meth, 
         velocity_after_position_stage(m, d, X, Xc, E0, hs, newton_projections == d->exact_newton_projections, Uh);
         /* the stage's midpoint: its forces need A factored there, and A(X) is done with (the kick below and the
            velocity projection factor their own) */
-        if (sample && (status = FN(rope_keep_midpoint)(m, d, g, (stage_start + 0.5 * (stage_end - stage_start) - t) / h,
-                                                       stage_start + 0.5 * (stage_end - stage_start), X, d->Us, hs,
-                                                       F_base)) != LN_OK)
+        const double t_mid = stage_start + 0.5 * (stage_end - stage_start);
+        if (sample && (status = FN(rope_keep_midpoint)(m, d, g, (t_mid - t) / h, t_mid, X, d->Us, hs, F_base)) != LN_OK)
             return status;
         /* second half kick, then the velocity projection onto (12) at the new positions */
         if (ground) FN(ln_contacts_place)(m, Xc, Uh);
