@@ -1689,15 +1689,15 @@ static int FN(rope_apply_event)(const ln_model *mm, const ln_method *meth, ln_da
         FN(rope_record)(d, t, stuck ? LN_EVENT_STICK : LN_EVENT_SLIP, l, stuck ? tangential[c] + grip : 0.0, mm);
     }
     for (ln_int r = 0; r < R; r++) d->link_active[mm->rope_link[r]] = active[r];
-    if (mm->n_driven && mm->n_grips) {
-        /* the event's impulse on the driven anchors, added to the advance's (Jreact): the impact's, the ground's
-           impulse along its plane taken out, and the projection's onto the next mode, its stuck contacts' grips in */
-        status = FN(rope_anchor_impulses)(mm, d, X, d->event_U_before, U_before_grip, d->event_ground_impulse, 0);
-        if (status == LN_OK) status = FN(rope_anchor_impulses)(mm, d, X, U_before_grip, U, NULL, 1);
-        FN(rope_use_mask)(mm, d, d->link_active);
-        if (status != LN_OK) return status;
-    } else if (mm->n_driven) {  /* the event's impulse on the driven anchors, added to the advance's (Jreact) */
-        status = FN(rope_anchor_impulses)(mm, d, X, d->event_U_before, U, NULL, 1);
+    if (mm->n_driven) {
+        /* the event's impulse on the driven anchors, added to the advance's (Jreact); with friction in two parts:
+           the impact's, the ground's impulse along its plane taken out, then the projection's onto the next mode,
+           its stuck contacts' grips in */
+        const double *U_projected_from = mm->n_grips ? U_before_grip : d->event_U_before;
+        status = mm->n_grips ? FN(rope_anchor_impulses)(mm, d, X, d->event_U_before, U_before_grip,
+                                                        d->event_ground_impulse, 0)
+                             : LN_OK;
+        if (status == LN_OK) status = FN(rope_anchor_impulses)(mm, d, X, U_projected_from, U, NULL, 1);
         FN(rope_use_mask)(mm, d, d->link_active);
         if (status != LN_OK) return status;
     }
