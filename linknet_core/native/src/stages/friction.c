@@ -237,22 +237,21 @@ static void FN(slip_direction)(const struct friction_law *q, const double *guess
     law.c[0] = guess[0] / size;
     law.c[1] = guess[1] / size;
     q = &law;
-    const double angle = 0.0;
     double cross, along, s;
-    friction_law_at(q, angle, &cross, &along, &s);
+    friction_law_at(q, 0.0, &cross, &along, &s);
     if (fabs(cross) <= slack && along >= -slack && s > 0) return;
     const double pi = 3.141592653589793;
     double grid[65], values[65], best = 0.0, best_distance = INFINITY;
     int found = 0;
     for (int j = 0; j < 65; j++) {
-        grid[j] = angle - pi + 2 * pi * ((double)j + 0.5) / 64;
+        grid[j] = -pi + 2 * pi * ((double)j + 0.5) / 64;
         friction_law_at(q, grid[j], &values[j], &along, &s);
     }
     for (int j = 0; j < 65; j++) {  /* exact zeros first, as the reference lists them */
         if (values[j] != 0.0) continue;
         friction_law_at(q, grid[j], &cross, &along, &s);
         if (!(along >= -slack && s > 0)) continue;
-        const double distance = angle_distance(grid[j] - angle);
+        const double distance = angle_distance(grid[j]);
         if (!found || distance < best_distance) {
             best = grid[j];
             best_distance = distance;
@@ -267,7 +266,7 @@ static void FN(slip_direction)(const struct friction_law *q, const double *guess
         rope_bracketed_root(friction_law_fn, &ctx, &lo, &hi, ctx.sign * v_lo, ctx.sign * v_hi, 4e-16, 0, 0.0);
         friction_law_at(q, hi, &cross, &along, &s);
         if (!(along >= -slack && s > 0)) continue;
-        const double distance = angle_distance(hi - angle);
+        const double distance = angle_distance(hi);
         if (!found || distance < best_distance) {
             best = hi;
             best_distance = distance;
